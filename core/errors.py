@@ -1,0 +1,57 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Error types raised by the core pipeline.
+
+Every error a user can cause (bad file, bad mesh, bad parameter) derives from
+``PolycubeInputError`` so the CLI can map it to exit code 2; everything else is an
+internal failure (exit code 1).
+"""
+
+
+class PolycubeError(Exception):
+    """Base class of every error raised on purpose by this project."""
+
+
+class PolycubeInputError(PolycubeError, ValueError):
+    """The user's input (file, mesh or parameter) is unusable; the message says why."""
+
+
+class InvalidMeshError(PolycubeInputError):
+    """A mesh failed validation.
+
+    Attributes
+    ----------
+    reason : str
+        Machine-readable kind: ``empty``, ``unreadable``, ``format``, ``open``,
+        ``non_manifold``, ``orientation``, ``degenerate_faces``, ``duplicate_faces``,
+        ``non_finite``, ``self_intersecting``, ``multiple_components``.
+    count : int
+        How many offending items were found.
+    examples : list
+        A few offending indices (faces, edges or vertices, per ``reason``).
+    """
+
+    def __init__(self, message, reason, count=0, examples=()):
+        super().__init__(message)
+        self.reason = reason
+        self.count = int(count)
+        self.examples = list(examples)
+
+
+class ParameterError(PolycubeInputError):
+    """A stage parameter is out of range or inconsistent."""
+
+
+class StageNotAvailableError(PolycubeError, NotImplementedError):
+    """A pipeline stage is not implemented yet; the message names the stage."""
+
+
+class LabelingError(PolycubeError):
+    """Polycube labeling could not produce a usable result."""
+
+
+class ExportError(PolycubeError):
+    """B-spline or B-rep export failed (e.g. the shell does not close)."""
+
+
+class Cancelled(PolycubeError):
+    """The user cancelled a long-running stage."""

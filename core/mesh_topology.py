@@ -1,0 +1,99 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Edge and adjacency tables of triangle meshes (vectorised, no per-face loops).
+
+All functions take ``faces`` as an (m, 3) int64 array and return plain numpy /
+scipy.sparse data, so every stage can share them.
+"""
+import numpy as np
+import scipy.sparse as sp
+
+
+def directed_edges(faces):
+    """(3m, 2) int64 directed half-edges (a, b) of each face, face-major order.
+
+    Row ``3 * f + k`` is the edge from corner ``k`` to corner ``k + 1`` of face ``f``.
+    """
+    faces = np.asarray(faces, dtype=np.int64)
+    return np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
+
+
+def unique_edges(faces):
+    """Undirected edges and the map from half-edges to them.
+
+    Returns
+    -------
+    edges : (e, 2) int64, sorted vertex pairs (a < b), lexicographic order.
+    halfedge_edge : (3m,) int64, index into ``edges`` of each half-edge of
+        :func:`directed_edges`.
+    """
+    half = np.sort(directed_edges(faces), axis=1)
+    n = int(half.max()) + 1 if len(half) else 1
+    code, halfedge_edge = np.unique(half[:, 0] * n + half[:, 1], return_inverse=True)
+    edges = np.stack([code // n, code % n], axis=1)
+    return edges, halfedge_edge.reshape(-1)
+
+
+def edge_faces(faces):
+    """Faces on each side of every undirected edge of a 2-manifold mesh.
+
+    Returns
+    -------
+    edges : (e, 2) int64 sorted vertex pairs.
+    faces_of_edge : (e, 2) int64, the two faces sharing each edge; ``-1`` where an
+        edge has only one face (open mesh). Edges with more than two faces keep
+        the first two (check manifoldness before relying on this).
+    """
+    faces = np.asarray(faces, dtype=np.int64)
+    edges, he_edge = unique_edges(faces)
+    face_of_half = np.repeat(np.arange(len(faces)), 3)
+    order = np.argsort(he_edge, kind="stable")
+    sorted_edges = he_edge[order]
+    first = np.searchsorted(sorted_edges, np.arange(len(edges)), side="left")
+    count = np.bincount(he_edge, minlength=len(edges))
+    result = np.full((len(edges), 2), -1, dtype=np.int64)
+    result[:, 0] = face_of_half[order[first]]
+    has_two = count >= 2
+    result[has_two, 1] = face_of_half[order[first[has_two] + 1]]
+    return edges, result
+
+
+def face_adjacency(faces):
+    """(p, 2) int64 pairs of faces sharing an edge (each interior edge once)."""
+    _, faces_of_edge = edge_faces(faces)
+    return faces_of_edge[(faces_of_edge >= 0).all(axis=1)]
+
+
+def face_adjacency_matrix(faces):
+    """(m, m) CSR bool matrix, True where two faces share an edge."""
+    pairs = face_adjacency(faces)
+    m = len(faces)
+    data = np.ones(2 * len(pairs), dtype=bool)
+    rows = np.concatenate([pairs[:, 0], pairs[:, 1]])
+    cols = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    return sp.csr_matrix((data, (rows, cols)), shape=(m, m))
+
+
+def vertex_face_matrix(faces, n_vertices):
+    """(n, m) CSR int8 incidence matrix, 1 where vertex ``i`` is a corner of face ``j``."""
+    faces = np.asarray(faces, dtype=np.int64)
+    m = len(faces)
+    rows = faces.reshape(-1)
+    cols = np.repeat(np.arange(m), 3)
+    return sp.csr_matrix((np.ones(3 * m, dtype=np.int8), (rows, cols)), shape=(n_vertices, m))
+
+
+def vertex_adjacency_matrix(faces, n_vertices):
+    """(n, n) CSR bool matrix, True where two vertices share an edge."""
+    edges, _ = unique_edges(faces)
+    data = np.ones(2 * len(edges), dtype=bool)
+    rows = np.concatenate([edges[:, 0], edges[:, 1]])
+    cols = np.concatenate([edges[:, 1], edges[:, 0]])
+    return sp.csr_matrix((data, (rows, cols)), shape=(n_vertices, n_vertices))
+
+
+def connected_face_components(faces):
+    """(m,) int64 component id of each face (faces connected through shared edges)."""
+    from scipy.sparse.csgraph import connected_components
+
+    _, labels = connected_components(face_adjacency_matrix(faces), directed=False)
+    return labels.astype(np.int64)

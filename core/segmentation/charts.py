@@ -1,0 +1,264 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Charts, boundaries and corners of a polycube labeling, as plain arrays.
+
+Definitions (issue 5, the ones polycube codes use):
+
+- a *chart* is a connected set of faces (through shared edges) with the same part and label;
+- a *chart-separating edge* is an edge whose two faces lie in different charts (edges between
+  parts are always separating);
+- a *corner* is a vertex with three or more chart-separating edges;
+- a *boundary* is a maximal chain of separating edges joined at non-corner vertices, i.e. the
+  chain between two corners, or a closed loop that passes no corner.
+
+At a non-corner vertex with two separating edges the face fan holds exactly two charts, so every
+boundary separates one fixed pair of charts.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from core.mesh_topology import unique_edges
+
+OPPOSITE = np.array([1, 0, 3, 2, 5, 4], dtype=np.int64)
+"""Label opposite to each label 0..5 (+X <-> -X, +Y <-> -Y, +Z <-> -Z)."""
+
+
+@dataclass(frozen=True)
+class MeshTopology:
+    """Edge tables of a closed triangle mesh, computed once and shared by the labeling stages.
+
+    edges : (e, 2) int64 sorted vertex pairs.
+    edge_faces : (e, 2) int64 the two faces of each edge (``-1`` where missing).
+    face_edges : (m, 3) int64 edge of corner ``k -> k+1`` of each face.
+    neighbours : (m, 3) int64 face across edge ``k`` of each face (``-1`` where missing).
+    n_vertices : int
+    """
+
+    edges: np.ndarray
+    edge_faces: np.ndarray
+    face_edges: np.ndarray
+    neighbours: np.ndarray
+    n_vertices: int
+
+
+def build_topology(F, n_vertices=None):
+    """Edge tables of ``F``.
+
+    Parameters
+    ----------
+    F : (m, 3) int array of vertex indices.
+    n_vertices : int, optional; defaults to ``F.max() + 1``.
+
+    Returns
+    -------
+    MeshTopology
+    """
+    F = np.asarray(F, dtype=np.int64)
+    m = len(F)
+    edges, he_edge = unique_edges(F)
+    face_edges = he_edge.reshape(m, 3)
+    order = np.argsort(he_edge, kind="stable")
+    sorted_e = he_edge[order]
+    first = np.searchsorted(sorted_e, np.arange(len(edges)), side="left")
+    count = np.bincount(he_edge, minlength=len(edges))
+    face_of_half = order // 3
+    edge_faces = np.full((len(edges), 2), -1, dtype=np.int64)
+    edge_faces[:, 0] = face_of_half[first]
+    two = count >= 2
+    edge_faces[two, 1] = face_of_half[first[two] + 1]
+    ef = edge_faces[face_edges]
+    own = np.arange(m)[:, None]
+    neighbours = np.where(ef[:, :, 0] == own, ef[:, :, 1], ef[:, :, 0])
+    if n_vertices is None:
+        n_vertices = int(F.max()) + 1 if m else 0
+    return MeshTopology(edges, edge_faces, face_edges, neighbours, int(n_vertices))
+
+
+@dataclass(frozen=True)
+class ChartLayout:
+    """Charts, boundaries and corners of one labeling.
+
+    face_chart : (m,) int64 chart of each face.
+    chart_label : (c,) int64 label 0..5 of each chart.
+    chart_part : (c,) int64 part of each chart.
+    chart_size : (c,) int64 number of faces of each chart.
+    chart_first_face : (c,) int64 lowest face index of each chart (an example face).
+    sep_edges : (k,) int64 indices into ``topology.edges`` of the chart-separating edges.
+    sep_boundary : (k,) int64 boundary of each separating edge.
+    boundary_charts : (b, 2) int64 the two charts of each boundary (smaller id first).
+    boundary_size : (b,) int64 number of edges of each boundary.
+    boundary_first_edge : (b,) int64 one edge (index into ``topology.edges``) of each boundary.
+    chart_boundary_count : (c,) int64 number of distinct boundaries around each chart.
+    chart_neighbours : (c, c) CSR int64, entry = number of boundaries between two charts.
+    vertex_sep_degree : (n,) int64 number of separating edges at each vertex.
+    corners : (q,) int64 corner vertices, ascending.
+    """
+
+    face_chart: np.ndarray
+    chart_label: np.ndarray
+    chart_part: np.ndarray
+    chart_size: np.ndarray
+    chart_first_face: np.ndarray
+    sep_edges: np.ndarray
+    sep_boundary: np.ndarray
+    boundary_charts: np.ndarray
+    boundary_size: np.ndarray
+    boundary_first_edge: np.ndarray
+    chart_boundary_count: np.ndarray
+    chart_neighbours: sp.csr_matrix
+    vertex_sep_degree: np.ndarray
+    corners: np.ndarray
+
+    @property
+    def n_charts(self):
+        return len(self.chart_label)
+
+    @property
+    def n_boundaries(self):
+        return len(self.boundary_charts)
+
+
+def find_charts(topology, face_part, face_label):
+    """(m,) int64 chart id of each face, ids numbered by lowest face index.
+
+    Parameters
+    ----------
+    topology : MeshTopology
+    face_part, face_label : (m,) int arrays.
+    """
+    ef = topology.edge_faces
+    ok = (ef >= 0).all(axis=1)
+    a, b = ef[ok, 0], ef[ok, 1]
+    same = (face_part[a] == face_part[b]) & (face_label[a] == face_label[b])
+    m = len(face_label)
+    graph = sp.csr_matrix((np.ones(int(same.sum()), dtype=np.int8), (a[same], b[same])),
+                          shape=(m, m))
+    _, comp = connected_components(graph, directed=False)
+    # renumber so chart ids follow the lowest face index (independent of scipy's numbering)
+    _, first, inverse = np.unique(comp, return_index=True, return_inverse=True)
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+    return rank[inverse.reshape(-1)]
+
+
+def extract_layout(topology, face_part, face_label):
+    """Charts, boundaries and corners of a labeling (vectorised).
+
+    Parameters
+    ----------
+    topology : MeshTopology of the mesh.
+    face_part : (m,) int part of each face.
+    face_label : (m,) int label 0..5 of each face.
+
+    Returns
+    -------
+    ChartLayout
+    """
+    face_part = np.asarray(face_part, dtype=np.int64)
+    face_label = np.asarray(face_label, dtype=np.int64)
+    m = len(face_label)
+    face_chart = find_charts(topology, face_part, face_label)
+    n_charts = int(face_chart.max()) + 1 if m else 0
+    chart_size = np.bincount(face_chart, minlength=n_charts)
+    _, chart_first = np.unique(face_chart, return_index=True)
+    chart_label = face_label[chart_first]
+    chart_part = face_part[chart_first]
+
+    ef = topology.edge_faces
+    ok = (ef >= 0).all(axis=1)
+    ca = np.where(ok, face_chart[np.maximum(ef[:, 0], 0)], -1)
+    cb = np.where(ok, face_chart[np.maximum(ef[:, 1], 0)], -1)
+    sep_edges = np.flatnonzero(ok & (ca != cb))
+    k = len(sep_edges)
+    ev = topology.edges[sep_edges]
+    n = topology.n_vertices
+    degree = np.bincount(ev.reshape(-1), minlength=n)
+
+    # join separating edges at vertices with exactly two of them
+    ends_v = ev.T.reshape(-1)
+    ends_e = np.tile(np.arange(k), 2)
+    order = np.lexsort((ends_e, ends_v))
+    ends_v, ends_e = ends_v[order], ends_e[order]
+    two = degree[ends_v] == 2
+    v2, e2 = ends_v[two], ends_e[two]
+    pa, pb = e2[0::2], e2[1::2]
+    graph = sp.csr_matrix((np.ones(len(pa), dtype=np.int8), (pa, pb)), shape=(k, k))
+    if k:
+        _, comp = connected_components(graph, directed=False)
+    else:
+        comp = np.zeros(0, dtype=np.int64)
+    _, first_edge, comp = np.unique(comp, return_index=True, return_inverse=True)
+    n_b = len(first_edge)
+    rank = np.empty(n_b, dtype=np.int64)
+    rank[np.argsort(first_edge, kind="stable")] = np.arange(n_b)
+    sep_boundary = rank[comp.reshape(-1)]
+    first_edge = np.sort(first_edge)
+    bc = np.sort(np.stack([ca[sep_edges[first_edge]], cb[sep_edges[first_edge]]], axis=1), axis=1)
+    boundary_size = np.bincount(sep_boundary, minlength=n_b)
+
+    pairs = np.concatenate([np.stack([np.arange(n_b), bc[:, 0]], 1),
+                            np.stack([np.arange(n_b), bc[:, 1]], 1)])
+    chart_boundary_count = np.bincount(pairs[:, 1], minlength=n_charts)
+    nb = sp.csr_matrix((np.ones(2 * n_b, dtype=np.int64),
+                        (np.concatenate([bc[:, 0], bc[:, 1]]), np.concatenate([bc[:, 1], bc[:, 0]]))),
+                       shape=(n_charts, n_charts))
+    nb.sum_duplicates()
+    corners = np.flatnonzero(degree >= 3)
+    return ChartLayout(face_chart, chart_label, chart_part, chart_size, chart_first, sep_edges,
+                       sep_boundary, bc, boundary_size, sep_edges[first_edge],
+                       chart_boundary_count, nb, degree, corners)
+
+
+def boundary_chains(topology, layout):
+    """Ordered vertex chains of every boundary.
+
+    Returns
+    -------
+    list of (b,) entries; entry ``i`` is ``(vertices, edges, closed)`` with ``vertices`` a
+    (len+1,) int64 array of vertex indices along boundary ``i`` (first == last when closed),
+    ``edges`` the (len,) int64 edge indices in walking order and ``closed`` a bool.
+    Walks start at a corner (lowest corner vertex) or, for corner-free loops, at the lowest vertex.
+    """
+    sep = layout.sep_edges
+    ev = topology.edges[sep]
+    degree = layout.vertex_sep_degree
+    # incidence: for each vertex the separating edges (local ids) at it
+    inc_v = ev.reshape(-1)
+    inc_e = np.repeat(np.arange(len(sep)), 2)
+    order = np.lexsort((inc_e, inc_v))
+    inc_v, inc_e = inc_v[order], inc_e[order]
+    start = np.searchsorted(inc_v, np.arange(topology.n_vertices + 1))
+    members = [[] for _ in range(layout.n_boundaries)]
+    for local, b in enumerate(layout.sep_boundary.tolist()):
+        members[b].append(local)
+    chains = []
+    ev_list = ev.tolist()
+    for b, local_edges in enumerate(members):
+        verts = {v for e in local_edges for v in ev_list[e]}
+        corner_verts = sorted(v for v in verts if degree[v] != 2)
+        closed = not corner_verts
+        v0 = corner_verts[0] if corner_verts else min(verts)
+        bset = set(local_edges)
+        cand = [e for e in inc_e[start[v0]:start[v0 + 1]].tolist() if e in bset]
+        e_cur = cand[0]
+        chain_v = [v0]
+        chain_e = [e_cur]
+        used = {e_cur}
+        v = v0
+        while True:
+            a, c = ev_list[e_cur]
+            v = c if a == v else a
+            chain_v.append(v)
+            if degree[v] != 2 or len(used) == len(local_edges):
+                break
+            nxt = [e for e in inc_e[start[v]:start[v + 1]].tolist() if e not in used and e in bset]
+            if not nxt:
+                break
+            e_cur = nxt[0]
+            used.add(e_cur)
+            chain_e.append(e_cur)
+        chains.append((np.array(chain_v, dtype=np.int64), sep[np.array(chain_e, dtype=np.int64)],
+                       closed))
+    return chains

@@ -1,0 +1,437 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Automatic repair of an invalid polycube labeling (deterministic operator loop).
+
+Ideas from "validity-first polycube labeling" (Mestrallet, Bourcier, Ledoux 2025): apply local
+operators, each aimed at one kind of invalid item, and re-judge after every round until the
+labeling is valid, nothing changes, a state repeats or the round cap is hit. Operators, in order
+of priority (one kind per round, so every round works on a fresh judgement):
+
+1. *Opposite-label boundaries* (+X next to -X): trial candidates for the first such boundary
+   are merging either of its two charts into one of that chart's neighbouring labels, and the strip
+   insertion below for all of them; the candidate with the fewest invalid items (then smallest mean
+   angle, within the angle budget) is kept if it lowers the invalid count, else the strip insertion
+   is applied anyway. Strip insertion: the faces of both charts touching the boundary's
+   vertices form a strip; the strip takes the perpendicular label (axis different from the two
+   opposite labels) of least normal cost ``sum ||n - c_l||^2`` and not opposite to a label the
+   strip already touches, so the two charts end up separated by a chart of a third axis.
+2. *Labels parallel to an interface x-axis* (multi-part only): the offending side's faces touching
+   the interface boundary take the least-cost label that is not parallel to the interface axis.
+3. *Invalid charts* (three or fewer boundaries), smallest first, an independent set per round
+   (no two chosen charts touch, so each decision sees its neighbours' final labels): the chart is
+   relabelled to the neighbouring chart label of least normal cost among those that are not
+   opposite to any label around the chart, so the chart merges into that neighbour without
+   creating an opposite boundary. Without such a label it takes the least-cost neighbour label.
+4. *Invalid corners* left after 1-3 (at part interfaces): the faces of the part around the corner
+   vertex whose labels break the parity rule take the label of their largest neighbouring chart.
+
+After each merge round a boundary-smoothing pass runs the HBECVT sweeps restricted to the faces
+that touch a separating edge, with the extra rule that a face may only take a label already present
+among its neighbours (boundaries move, charts are neither created nor split off by it); this undoes
+the jagged edges merges leave. Everything is vectorised per round; the loop is deterministic.
+"""
+import numpy as np
+
+from core.errors import ParameterError
+from core.segmentation.charts import OPPOSITE, build_topology
+from core.segmentation.labeling import (LAMBDA, PENALTY, check_frames, face_colouring,
+                                        face_normals, hbecvt_sweeps, interface_penalty,
+                                        label_cost, part_neighbours)
+from core.segmentation.validity import check_validity, interface_loops
+
+
+def _chart_costs(cost, face_chart, n_charts):
+    """(c, 6) summed label cost of every chart."""
+    return np.stack([np.bincount(face_chart, weights=cost[:, l], minlength=n_charts)
+                     for l in range(6)], axis=1)
+
+
+def _faces_at_vertices(F, vertex_mask):
+    return vertex_mask[F].any(axis=1)
+
+
+def _fix_opposite(F, topology, val, labels, cost):
+    lay = val.layout
+    bad = np.flatnonzero(val.boundary_reason == 1)
+    edge_bad = np.isin(lay.sep_boundary, bad)
+    vmask = np.zeros(topology.n_vertices, dtype=bool)
+    vmask[topology.edges[lay.sep_edges[edge_bad]].reshape(-1)] = True
+    charts = lay.boundary_charts[bad]
+    chart_of_b = np.full(lay.n_charts, -1, dtype=np.int64)
+    # each chart joins the strip of the first (lowest id) opposite boundary it lies on
+    for col in (1, 0):
+        chart_of_b[charts[::-1, col]] = bad[::-1]
+    strip_b = chart_of_b[lay.face_chart]
+    in_strip = _faces_at_vertices(F, vmask) & (strip_b >= 0)
+    faces = np.flatnonzero(in_strip)
+    group = strip_b[faces]
+    new = labels.copy()
+    groups, inv = np.unique(group, return_inverse=True)
+    gcost = _chart_costs(cost[faces], inv.reshape(-1), len(groups))
+    axis_ab = lay.chart_label[lay.boundary_charts[groups, 0]] // 2
+    allowed = np.ones((len(groups), 6), dtype=bool)
+    allowed[np.arange(len(groups)), 2 * axis_ab] = False
+    allowed[np.arange(len(groups)), 2 * axis_ab + 1] = False
+    # labels touching the strip from outside: avoid their opposites
+    nb = topology.neighbours[faces]
+    outside = (nb >= 0) & ~in_strip[np.maximum(nb, 0)]
+    touch = np.zeros((len(groups), 6), dtype=bool)
+    touch[np.repeat(inv, 3)[outside.reshape(-1)], labels[nb[outside]]] = True
+    soft = allowed & ~touch[:, OPPOSITE]
+    use = np.where(soft.any(axis=1)[:, None], soft, allowed)
+    choice = np.argmin(np.where(use, gcost, np.inf), axis=1)
+    new[faces] = choice[inv]
+    return new, len(groups)
+
+
+def _fix_interface(F, topology, val, labels, cost, face_part, face_frame, iface_pen):
+    lay = val.layout
+    bad = np.flatnonzero(val.boundary_reason == 2)
+    edge_bad = np.isin(lay.sep_boundary, bad)
+    vmask = np.zeros(topology.n_vertices, dtype=bool)
+    vmask[topology.edges[lay.sep_edges[edge_bad]].reshape(-1)] = True
+    faces = np.flatnonzero(_faces_at_vertices(F, vmask) & (iface_pen[np.arange(len(F)),
+                                                                     labels] > 0))
+    new = labels.copy()
+    new[faces] = np.argmin(cost[faces] + 1e3 * iface_pen[faces], axis=1)
+    return new, len(bad)
+
+
+def _merge_charts(val, labels, cost, which):
+    lay = val.layout
+    bad = np.flatnonzero(which)
+    order = bad[np.lexsort((bad, lay.chart_size[bad]))]
+    nbm = lay.chart_neighbours
+    ccost = _chart_costs(cost, lay.face_chart, lay.n_charts)
+    blocked = np.zeros(lay.n_charts, dtype=bool)
+    target = np.full(lay.n_charts, -1, dtype=np.int64)
+    indptr, indices = nbm.indptr, nbm.indices
+    for c in order.tolist():
+        if blocked[c]:
+            continue
+        nbrs = indices[indptr[c]:indptr[c + 1]]
+        nbrs = nbrs[lay.chart_part[nbrs] == lay.chart_part[c]]
+        if len(nbrs) == 0:
+            continue
+        nl = np.unique(lay.chart_label[nbrs])
+        ok = nl[~np.isin(OPPOSITE[nl], nl)]
+        cand = ok if len(ok) else nl
+        target[c] = cand[np.argmin(ccost[c, cand])]
+        blocked[c] = True
+        blocked[indices[indptr[c]:indptr[c + 1]]] = True
+    chosen = np.flatnonzero(target >= 0)
+    new = labels.copy()
+    sel = target[lay.face_chart]
+    move = sel >= 0
+    new[move] = sel[move]
+    return new, len(chosen)
+
+
+def _fix_corners(F, topology, val, labels, face_part):
+    lay = val.layout
+    vmask = np.zeros(topology.n_vertices, dtype=bool)
+    vmask[val.invalid_corners] = True
+    faces = np.flatnonzero(_faces_at_vertices(F, vmask))
+    new = labels.copy()
+    size = lay.chart_size
+    nb = topology.neighbours[faces]
+    okn = (nb >= 0) & (face_part[np.maximum(nb, 0)] == face_part[faces][:, None])
+    nb_chart = np.where(okn, lay.face_chart[np.maximum(nb, 0)], -1)
+    nb_size = np.where(okn, size[np.maximum(nb_chart, 0)], -1)
+    own = size[lay.face_chart[faces]]
+    best = np.argmax(nb_size, axis=1)
+    big = nb_size[np.arange(len(faces)), best] > own
+    f = faces[big]
+    new[f] = lay.chart_label[nb_chart[big, best[big]]]
+    return new, int(big.sum())
+
+
+def _smooth_boundaries(topology, val, labels, unary, nb, colour, lam, penalty):
+    """HBECVT sweeps on faces next to separating edges, labels limited to neighbours' labels."""
+    lay = val.layout
+    active = np.zeros(len(labels), dtype=bool)
+    active[topology.edge_faces[lay.sep_edges].reshape(-1)] = True
+    has = nb >= 0
+    present = np.zeros((len(labels), 6), dtype=bool)
+    rows = np.repeat(np.arange(len(labels)), nb.shape[1])[has.reshape(-1)]
+    present[rows, labels[nb[has]]] = True
+    present[np.arange(len(labels)), labels] = True
+    restricted = np.where(present, unary, unary + 4.0 * penalty)
+    out, _ = hbecvt_sweeps(restricted, nb, labels, colour, lam, penalty, max_sweeps=3,
+                           active=active)
+    return out.astype(np.int64)
+
+
+def _local_resegment(labels, unary, nb, colour, region, lam, penalty):
+    """Re-run the HBECVT sweeps inside ``region`` from nearest-direction labels with ``lam``."""
+    start = labels.copy()
+    start[region] = np.argmin(unary[region], axis=1)
+    out, _ = hbecvt_sweeps(unary, nb, start, colour, lam, penalty, max_sweeps=50, active=region)
+    return out.astype(np.int64)
+
+
+class _Judge:
+    """Validity and mean-angle bookkeeping for candidate labelings."""
+
+    def __init__(self, V, F, face_part, face_frame, topology, cost, area):
+        self.args = (V, F, face_part)
+        self.face_frame = face_frame
+        self.topology = topology
+        self.cost = cost
+        self.area = area / area.sum()
+
+    def validity(self, labels):
+        V, F, part = self.args
+        return check_validity(V, F, part, labels, self.face_frame, self.topology, turning=False)
+
+    def angle(self, labels):
+        c = self.cost[np.arange(len(labels)), labels]
+        return float(np.degrees(np.arccos(np.clip(1.0 - 0.5 * c, -1.0, 1.0))) @ self.area)
+
+
+def _chart_candidates(val, labels, c, cost, unary, nb, colour, penalty, lams):
+    """Candidate labelings that change invalid chart ``c``: merges into each neighbouring label;
+    for each label of another axis missing around the chart, the faces of the chart and its
+    neighbouring charts that fit that label better than their own take it; local
+    re-segmentations of the chart and its neighbours at coarser ``lam``."""
+    lay = val.layout
+    nbrs = lay.chart_neighbours[c].indices
+    nbrs = nbrs[lay.chart_part[nbrs] == lay.chart_part[c]]
+    in_c = lay.face_chart == c
+    out = []
+    for lab in np.unique(lay.chart_label[nbrs]).tolist():
+        cand = labels.copy()
+        cand[in_c] = lab
+        out.append((f"merge_into_{lab}", cand))
+    region = in_c | np.isin(lay.face_chart, nbrs)
+    a = int(lay.chart_label[c])
+    present = set(lay.chart_label[nbrs].tolist())
+    cur_cost = cost[np.arange(len(labels)), labels]
+    for lab in range(6):
+        if lab // 2 == a // 2 or lab in present:
+            continue
+        grow = region & (cost[:, lab] < cur_cost)
+        if grow.any():
+            cand = labels.copy()
+            cand[grow] = lab
+            out.append((f"grow_missing_{lab}", cand))
+    for lam in lams:
+        out.append((f"resegment_lambda_{lam:g}", _local_resegment(labels, unary, nb, colour,
+                                                                   region, lam, penalty)))
+    return out
+
+
+def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis=None,
+                    max_rounds=60, smooth=True, max_angle_increase=4.0, small_chart=None,
+                    lam=LAMBDA, penalty=PENALTY, topology=None):
+    """Drive the invalid charts, boundaries and corners of a labeling towards zero.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 vertices.
+    F : (m, 3) int faces.
+    face_part : (m,) int part of each face.
+    face_label : (m,) int labels 0..5 to repair (not modified).
+    face_frame : (m, 3, 3) float64 per-face frames (rows x, y, z).
+    face_interface_axis : (m, 3) float64, optional interface x-axis next to interfaces, NaN
+        elsewhere (Eq. 3 term 4 in smoothing and re-segmentation); derived from the interface
+        loops (PCA) when omitted.
+    max_rounds : int, cap on operator rounds.
+    smooth : bool, run the restricted boundary smoothing after merges.
+    max_angle_increase : float, degrees; no chart operation may raise the area-weighted mean
+        angle between normals and label directions above the input's plus this.
+    small_chart : int, charts with at most this many faces are merged in batches without a
+        per-chart trial (default ``max(10, m // 2000)``).
+    lam, penalty : float, Eq. 3 parameters used by smoothing and re-segmentation.
+    topology : MeshTopology, optional.
+
+    Returns
+    -------
+    labels : (m,) int32 repaired labels.
+    report : dict with ``rounds``, ``valid``, ``stopped`` (``valid``, ``stuck`` or
+        ``round_cap``), ``operations`` (per-round operator and item count), ``before`` and
+        ``after`` (the validity reports, turning points included), ``angle_before`` /
+        ``angle_after`` (area-weighted mean degrees), ``gave_up`` (charts no candidate
+        improved: example face, label, faces) and ``unfixed`` (the remaining invalid items with
+        examples, empty when valid).
+
+    Notes
+    -----
+    Invalid charts are handled in two ways. Small ones (``small_chart``) are merged in batches as
+    in operator 3 of the module docstring; a batch is kept only if it lowers the invalid count.
+    Otherwise each invalid chart, smallest first, gets trial candidates: merging it into each
+    neighbouring label, and re-running the HBECVT sweeps on the chart plus its neighbouring charts
+    from nearest-direction labels with lambda = 1, 2, 4, 8 (a coarser local segmentation). The
+    candidate with the fewest invalid items (then the smallest mean angle) is kept if it has fewer
+    invalid items than now and respects the angle budget; a chart with no such candidate is given
+    up and reported.
+    """
+    F = np.asarray(F, dtype=np.int64)
+    m = len(F)
+    if int(max_rounds) < 0:
+        raise ParameterError(f"max_rounds must be >= 0, got {max_rounds}")
+    if not max_angle_increase >= 0:
+        raise ParameterError(f"max_angle_increase must be >= 0, got {max_angle_increase}")
+    face_part = np.asarray(face_part, dtype=np.int64)
+    labels = np.asarray(face_label, dtype=np.int64).copy()
+    if labels.shape != (m,) or face_part.shape != (m,):
+        raise ParameterError(f"face_label and face_part must have shape ({m},)")
+    if len(labels) and (labels.min() < 0 or labels.max() > 5):
+        bad = np.flatnonzero((labels < 0) | (labels > 5))
+        raise ParameterError(f"face_label has {len(bad)} values outside 0..5 "
+                             f"(e.g. face {int(bad[0])}: {int(labels[bad[0]])})")
+    face_frame = check_frames(face_frame, m)
+    if topology is None:
+        topology = build_topology(F, len(V))
+    if small_chart is None:
+        small_chart = max(10, m // 2000)
+    V = np.asarray(V, dtype=np.float64)
+    normals = face_normals(V, F)
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    cost = label_cost(normals, face_frame)
+    if face_interface_axis is None and face_part.max(initial=0) > 0:
+        face_interface_axis = _interface_axis_from_loops(V, F, topology, face_part)
+    iface_pen = interface_penalty(face_frame, face_interface_axis)
+    unary = cost + penalty * iface_pen
+    nb = part_neighbours(topology, face_part)
+    colour = face_colouring(nb)
+    judge = _Judge(V, F, face_part, face_frame, topology, cost, area)
+    angle0 = judge.angle(labels)
+    angle_cap = angle0 + max_angle_increase
+
+    def smoothed(cand):
+        if not smooth:
+            return cand, judge.validity(cand)
+        v_c = judge.validity(cand)
+        s = _smooth_boundaries(topology, v_c, cand, unary, nb, colour, lam, penalty)
+        v_s = judge.validity(s)
+        return (s, v_s) if v_s.n_invalid <= v_c.n_invalid else (cand, v_c)
+
+    before = check_validity(V, F, face_part, labels, face_frame, topology)
+    val = before
+    ops = []
+    gave_up = {}
+    seen = {hash(labels.tobytes())}
+    stopped = "round_cap"
+    rounds = 0
+    for rounds in range(1, max_rounds + 1):
+        if val.is_valid:
+            stopped = "valid"
+            rounds -= 1
+            break
+        accepted = None
+        sideways = None
+        if (val.boundary_reason == 1).any():
+            lay = val.layout
+            b = int(np.flatnonzero(val.boundary_reason == 1)[0])
+            strip, count = _fix_opposite(F, topology, val, labels, cost)
+            cands = [("split_opposite_boundaries", strip)]
+            for c in lay.boundary_charts[b].tolist():
+                nbrs = lay.chart_neighbours[c].indices
+                nbrs = nbrs[lay.chart_part[nbrs] == lay.chart_part[c]]
+                for lab in np.unique(lay.chart_label[nbrs]).tolist():
+                    cand = labels.copy()
+                    cand[lay.face_chart == c] = lab
+                    cands.append((f"merge_opposite_chart_into_{lab}", cand))
+            best = None
+            for name, cand in cands:
+                if judge.angle(cand) > angle_cap and name != cands[0][0]:
+                    continue
+                v_c = judge.validity(cand)
+                score = (v_c.n_invalid, judge.angle(cand))
+                if best is None or score < best[0]:
+                    best = (score, name, cand, v_c)
+            s_cand, s_val = smoothed(best[2])
+            if s_val.n_invalid <= best[0][0]:
+                best = ((s_val.n_invalid, judge.angle(s_cand)), best[1], s_cand, s_val)
+            if best[0][0] >= val.n_invalid:
+                best = (None, cands[0][0], strip, judge.validity(strip))
+            accepted = (best[1], count if best[1] == cands[0][0] else 1, best[2], best[3])
+        elif (val.boundary_reason == 2).any():
+            new, count = _fix_interface(F, topology, val, labels, cost, face_part, face_frame,
+                                        iface_pen)
+            accepted = ("relabel_interface_parallel", count, new, judge.validity(new))
+        elif val.invalid_chart.any():
+            lay = val.layout
+            small = val.invalid_chart & (lay.chart_size <= small_chart)
+            if small.any():
+                new, count = _merge_charts(val, labels, cost, small)
+                new, v_new = smoothed(new)
+                if v_new.n_invalid < val.n_invalid:
+                    accepted = ("merge_small_charts", count, new, v_new)
+            if accepted is None:
+                bad = np.flatnonzero(val.invalid_chart)
+                for c in bad[np.lexsort((bad, lay.chart_size[bad]))].tolist():
+                    key = (int(lay.chart_first_face[c]), int(lay.chart_label[c]))
+                    if key in gave_up:
+                        continue
+                    best = None
+                    for name, cand in _chart_candidates(val, labels, c, cost, unary, nb, colour,
+                                                        penalty, (1.0, 2.0, 4.0, 8.0)):
+                        if np.array_equal(cand, labels) or judge.angle(cand) > angle_cap:
+                            continue
+                        v_c = judge.validity(cand)
+                        for _ in range(2):
+                            if not (v_c.boundary_reason == 1).any():
+                                break
+                            cand, _n = _fix_opposite(F, topology, v_c, cand, cost)
+                            v_c = judge.validity(cand)
+                            name += "+split_opposite"
+                        if judge.angle(cand) > angle_cap:
+                            continue
+                        score = (v_c.n_invalid, judge.angle(cand))
+                        if best is None or score < best[0]:
+                            best = (score, name, cand, v_c)
+                    if best is not None:
+                        s_cand, s_val = smoothed(best[2])
+                        if s_val.n_invalid <= best[0][0]:
+                            best = ((s_val.n_invalid, judge.angle(s_cand)), best[1], s_cand,
+                                    s_val)
+                    if best is not None and best[0][0] < val.n_invalid:
+                        accepted = (f"chart_{best[1]}", 1, best[2], best[3])
+                        break
+                    if (best is not None and best[0][0] == val.n_invalid
+                            and hash(best[2].tobytes()) not in seen):
+                        sideways = sideways or (f"chart_{best[1]}_sideways", 1, best[2], best[3])
+                    gave_up[key] = {"face": key[0], "label": key[1],
+                                    "faces": int(lay.chart_size[c])}
+                if accepted is None and sideways is not None:
+                    accepted = sideways
+                    gave_up.clear()
+        else:
+            new, count = _fix_corners(F, topology, val, labels, face_part)
+            accepted = ("relabel_corner_faces", count, new, judge.validity(new))
+        if accepted is None or np.array_equal(accepted[2], labels):
+            stopped = "stuck"
+            break
+        op, count, labels, val = accepted
+        seen.add(hash(labels.tobytes()))
+        ops.append({"round": rounds, "operator": op, "items": int(count),
+                    "invalid_after": int(val.n_invalid)})
+    else:
+        if val.is_valid:
+            stopped = "valid"
+    final = check_validity(V, F, face_part, labels, face_frame, topology)
+    r = final.report
+    unfixed = {k: r[k] for k in ("invalid_charts", "invalid_boundaries", "invalid_corners")
+               if r[k]["count"]}
+    report = {"rounds": int(rounds), "valid": bool(r["valid"]), "stopped": stopped,
+              "operations": ops, "before": before.report, "after": r,
+              "angle_before": angle0, "angle_after": judge.angle(labels),
+              "gave_up": list(gave_up.values()), "unfixed": unfixed}
+    return labels.astype(np.int32), report
+
+
+def _interface_axis_from_loops(V, F, topology, face_part):
+    """(m, 3) interface x-axis (PCA of the loop) for faces touching an interface, NaN elsewhere."""
+    iface, loop, axes = interface_loops(V, topology, face_part)
+    out = np.full((len(F), 3), np.nan)
+    if len(iface) == 0:
+        return out
+    vert_axis = np.full((topology.n_vertices, 3), np.nan)
+    ev = topology.edges[iface]
+    vert_axis[ev[:, 0]] = axes[loop]
+    vert_axis[ev[:, 1]] = axes[loop]
+    va = vert_axis[F]
+    first = np.argmax(np.isfinite(va[:, :, 0]), axis=1)
+    out = va[np.arange(len(F)), first]
+    return out

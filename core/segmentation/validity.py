@@ -1,0 +1,310 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Validity of a polycube labeling: invalid charts, boundaries, corners and turning points.
+
+Rules (issue 5; charts, boundaries and corners as in :mod:`core.segmentation.charts`):
+
+- a chart with three or fewer boundaries is invalid;
+- a boundary between opposite labels (e.g. +X / -X) of one part is invalid;
+- the *axis* of a boundary between labels ``a`` and ``b`` of one part is the frame axis
+  perpendicular to both (a +X/+Y boundary runs along Z);
+- a corner is valid when, for every part that meets at it, the axes of the separating edges at
+  the corner pair up, or form one X, Y, Z group plus pairs: the counts of X, Y and Z edges are all
+  even or all odd, and none of the edges is invalid. Inside one part without opposite labels this
+  always holds (around a vertex of degree ``D`` with ``n_k`` charts of axis ``k`` the count of axis
+  ``k`` edges is ``D - 2 n_k``), so inside a part corners fail only through opposite labels; the rule
+  bites at part interfaces.
+
+Interface rules (edges between two parts): the interface loops are the connected chains of edges
+between two parts; each loop's x-axis is the smallest-eigenvalue eigenvector of the covariance of
+its vertices (the paper's Eq. 1 on the interface). On each side an interface edge of a chart with
+label direction ``d`` gets the axis of that side's frame nearest to ``d x x_interface``; an
+interface boundary is invalid when a side's label direction is within 45 degrees of the interface
+x-axis (the situation Eq. 3's term 4 forbids). A corner on an interface is judged per part with
+those axes, so a boundary of part P that ends on the interface forms an X, Y, Z group with the two
+interface edges on P's side, and the other side sees a plain pair.
+
+Turning points (monotonicity): along a boundary of one part with axis ``k``, walk its vertex chain
+and accumulate ``s`` = displacement projected on the frame's ``k`` axis (the frame of the face on
+the edge's first side). A turning point is a vertex where ``s`` reverses by more than ``tau``
+(hysteresis; default ``tau`` = mean edge length, so the zig-zag of a boundary that follows triangle
+edges does not count) from its running extreme; the vertex at the extreme is the turning point.
+Interface boundaries are not checked for monotonicity (they are planar cuts by construction).
+A corner-free closed boundary is walked from its lowest point, and that point counts as a turning
+point when the walk comes back down to it, so a closed loop of extent above ``tau`` along its axis
+has at least two turning points.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from core.segmentation.charts import boundary_chains, build_topology, extract_layout
+
+COS_45 = float(np.sqrt(0.5))
+
+
+@dataclass
+class Validity:
+    """Result of :func:`check_validity` (arrays for the repair loop plus a JSON report).
+
+    layout : ChartLayout
+    invalid_chart : (c,) bool
+    invalid_boundary : (b,) bool
+    boundary_reason : (b,) int8, 0 valid, 1 opposite labels, 2 label parallel to interface x-axis
+    boundary_axis : (b,) int64 axis 0..2 of within-part boundaries, -1 opposite, -2 interface
+    invalid_corners : (q,) int64 invalid corner vertices
+    turning_points : (t, 2) int64 rows (boundary, vertex)
+    report : dict (JSON-serialisable), see :func:`check_validity`
+    """
+
+    layout: object
+    invalid_chart: np.ndarray
+    invalid_boundary: np.ndarray
+    boundary_reason: np.ndarray
+    boundary_axis: np.ndarray
+    invalid_corners: np.ndarray
+    turning_points: np.ndarray
+    report: dict
+
+    @property
+    def is_valid(self):
+        return bool(self.report["valid"])
+
+    @property
+    def n_invalid(self):
+        """Invalid charts + boundaries + corners."""
+        r = self.report
+        return (r["invalid_charts"]["count"] + r["invalid_boundaries"]["count"]
+                + r["invalid_corners"]["count"])
+
+
+def interface_loops(V, topology, face_part):
+    """Interface loops between parts and their PCA x-axes.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 vertices.
+    topology : MeshTopology.
+    face_part : (m,) int part of each face.
+
+    Returns
+    -------
+    iface_edges : (j,) int64 edges (indices into ``topology.edges``) between two parts.
+    edge_loop : (j,) int64 loop id of each such edge.
+    loop_axis : (nloops, 3) float64 unit x-axis (smallest-eigenvalue eigenvector) of each loop.
+    """
+    ef = topology.edge_faces
+    ok = (ef >= 0).all(axis=1)
+    fa, fb = np.maximum(ef[:, 0], 0), np.maximum(ef[:, 1], 0)
+    iface = np.flatnonzero(ok & (face_part[fa] != face_part[fb]))
+    if len(iface) == 0:
+        return iface, np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+    ev = topology.edges[iface]
+    n = topology.n_vertices
+    j = len(iface)
+    rows = np.concatenate([np.arange(j), np.arange(j)])
+    inc = sp.csr_matrix((np.ones(2 * j, dtype=np.int8), (rows, ev.T.reshape(-1))), shape=(j, n))
+    _, loop = connected_components(inc @ inc.T, directed=False)
+    loop = loop.astype(np.int64)
+    n_loops = int(loop.max()) + 1
+    axes = np.zeros((n_loops, 3))
+    for i in range(n_loops):
+        verts = np.unique(ev[loop == i])
+        P = V[verts] - V[verts].mean(axis=0)
+        w, vec = np.linalg.eigh(P.T @ P)
+        axes[i] = vec[:, 0]
+    return iface, loop, axes
+
+
+def _label_direction(face_frame, faces, labels):
+    sign = np.where(labels % 2 == 0, 1.0, -1.0)
+    return face_frame[faces, labels // 2] * sign[:, None]
+
+
+def _interface_side_axis(face_frame, face, label, ix):
+    """Axis (0..2, or -1 if the label is parallel to ``ix``) of interface edges seen from ``face``."""
+    d = _label_direction(face_frame, face, label)
+    parallel = np.abs((d * ix).sum(axis=1)) > COS_45
+    t = np.cross(d, ix)
+    local = np.abs(np.einsum("fij,fj->fi", face_frame[face], t))
+    local[np.arange(len(face)), label // 2] = -1.0
+    axis = np.argmax(local, axis=1)
+    return np.where(parallel, -1, axis).astype(np.int64)
+
+
+def _turning_points(V, topology, layout, face_frame, boundary_axis, tau):
+    rows = []
+    chains = boundary_chains(topology, layout)
+    for b, (verts, edges, closed) in enumerate(chains):
+        k = boundary_axis[b]
+        if k < 0 or len(edges) < 2:
+            continue
+        f = topology.edge_faces[edges, 0]
+        step = ((V[verts[1:]] - V[verts[:-1]]) * face_frame[f, k]).sum(axis=1)
+        if closed:
+            # start a loop at its lowest point so the turn there is seen when the walk closes
+            low = int(np.argmin(np.concatenate([[0.0], np.cumsum(step)])[:-1]))
+            step = np.roll(step, -low)
+            verts = np.concatenate([np.roll(verts[:-1], -low), [verts[low]]])
+        s = np.concatenate([[0.0], np.cumsum(step)]).tolist()
+        found = len(rows)
+        direction, ext, ext_i = 0, 0.0, 0
+        lo = hi = 0.0
+        for i, si in enumerate(s):
+            if direction == 0:
+                lo, hi = min(lo, si), max(hi, si)
+                if si - lo > tau:
+                    direction, ext, ext_i = 1, si, i
+                elif hi - si > tau:
+                    direction, ext, ext_i = -1, si, i
+            elif direction * (si - ext) > 0:
+                ext, ext_i = si, i
+            elif direction * (ext - si) > tau:
+                rows.append((b, int(verts[ext_i])))
+                direction, ext, ext_i = -direction, si, i
+        if closed and len(rows) > found and direction < 0:
+            rows.append((b, int(verts[0])))
+    return np.array(rows, dtype=np.int64).reshape(-1, 2)
+
+
+def _example_point(V, F, face):
+    return [float(x) for x in V[F[face]].mean(axis=0)]
+
+
+def check_validity(V, F, face_part, face_label, face_frame, topology=None, turning=True,
+                   turning_tolerance=None, max_examples=5):
+    """Judge a labeling by the polycube validity rules (see module docstring).
+
+    Parameters
+    ----------
+    V : (n, 3) float64 vertices.
+    F : (m, 3) int faces.
+    face_part : (m,) int part of each face.
+    face_label : (m,) int label 0..5 of each face (+X, -X, +Y, -Y, +Z, -Z of its frame).
+    face_frame : (m, 3, 3) float64 rows x, y, z of each face's frame (world coordinates).
+    topology : MeshTopology, optional (computed from ``F`` when omitted).
+    turning : bool, also find turning points (walks every boundary; off inside repair loops).
+    turning_tolerance : float, hysteresis ``tau`` in mesh units (default mean edge length).
+    max_examples : int, examples per category in the report.
+
+    Returns
+    -------
+    Validity
+        ``report`` holds ``valid`` (no invalid charts, boundaries or corners), ``monotone``,
+        ``charts``, ``boundaries``, ``corners`` and, for ``invalid_charts``,
+        ``invalid_boundaries``, ``invalid_corners`` and ``turning_points``, a ``count`` and a few
+        ``examples`` (ids, labels, an example face or vertex and its coordinates).
+    """
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64)
+    face_part = np.asarray(face_part, dtype=np.int64)
+    face_label = np.asarray(face_label, dtype=np.int64)
+    face_frame = np.asarray(face_frame, dtype=np.float64)
+    if topology is None:
+        topology = build_topology(F, len(V))
+    lay = extract_layout(topology, face_part, face_label)
+    ef = topology.edge_faces
+
+    # boundaries
+    ca, cb = lay.boundary_charts[:, 0], lay.boundary_charts[:, 1]
+    la, lb = lay.chart_label[ca], lay.chart_label[cb]
+    same_part = lay.chart_part[ca] == lay.chart_part[cb]
+    opposite = same_part & (la // 2 == lb // 2)
+    boundary_axis = np.where(same_part, np.where(opposite, -1, 3 - la // 2 - lb // 2), -2)
+    reason = np.where(opposite, 1, 0).astype(np.int8)
+
+    iface_edges, edge_loop, loop_axis = interface_loops(V, topology, face_part)
+    edge_ix = np.zeros((len(topology.edges), 3))
+    edge_ix[iface_edges] = loop_axis[edge_loop]
+    # per separating edge and side: the axis seen from that side's part
+    sep = lay.sep_edges
+    f0, f1 = ef[sep, 0], ef[sep, 1]
+    is_iface = face_part[f0] != face_part[f1]
+    side_axis = np.empty((len(sep), 2), dtype=np.int64)
+    inner_axis = boundary_axis[lay.sep_boundary]
+    side_axis[:, 0] = inner_axis
+    side_axis[:, 1] = inner_axis
+    if is_iface.any():
+        fi0, fi1, ix = f0[is_iface], f1[is_iface], edge_ix[sep[is_iface]]
+        side_axis[is_iface, 0] = _interface_side_axis(face_frame, fi0, face_label[fi0], ix)
+        side_axis[is_iface, 1] = _interface_side_axis(face_frame, fi1, face_label[fi1], ix)
+        bad_edge = (side_axis[is_iface] < 0).any(axis=1)
+        bad_b = np.unique(lay.sep_boundary[is_iface][bad_edge])
+        reason[bad_b] = 2
+    invalid_boundary = reason > 0
+
+    # charts
+    invalid_chart = lay.chart_boundary_count <= 3
+
+    # corners, judged per part meeting at the vertex
+    ev = topology.edges[sep]
+    inc_v, inc_part, inc_axis = [], [], []
+    for end in (0, 1):
+        v = ev[:, end]
+        at_corner = lay.vertex_sep_degree[v] >= 3
+        for side, fs in ((0, f0), (1, f1)):
+            keep = at_corner & (is_iface | (side == 0))
+            inc_v.append(v[keep])
+            inc_part.append(face_part[fs[keep]])
+            inc_axis.append(side_axis[keep, side])
+    inc_v = np.concatenate(inc_v)
+    inc_part = np.concatenate(inc_part)
+    inc_axis = np.concatenate(inc_axis)
+    n_parts = int(face_part.max()) + 1 if len(face_part) else 1
+    key, group = np.unique(inc_v * n_parts + inc_part, return_inverse=True)
+    slot = group.reshape(-1) * 4 + np.where(inc_axis >= 0, inc_axis, 3)
+    counts = np.bincount(slot, minlength=4 * len(key)).reshape(len(key), 4)
+    parity = counts[:, :3] % 2
+    group_ok = (counts[:, 3] == 0) & (parity == parity[:, :1]).all(axis=1)
+    bad_vertex = np.unique(key[~group_ok] // n_parts)
+    invalid_corners = bad_vertex
+
+    mean_edge = float(np.linalg.norm(V[topology.edges[:, 0]] - V[topology.edges[:, 1]],
+                                     axis=1).mean()) if len(topology.edges) else 0.0
+    tau = mean_edge if turning_tolerance is None else float(turning_tolerance)
+    if turning:
+        tp = _turning_points(V, topology, lay, face_frame, boundary_axis, tau)
+    else:
+        tp = np.zeros((0, 2), dtype=np.int64)
+
+    names = ["+X", "-X", "+Y", "-Y", "+Z", "-Z"]
+    chart_ex = []
+    for c in np.flatnonzero(invalid_chart)[:max_examples]:
+        f = int(lay.chart_first_face[c])
+        chart_ex.append({"chart": int(c), "part": int(lay.chart_part[c]),
+                         "label": names[lay.chart_label[c]], "faces": int(lay.chart_size[c]),
+                         "boundaries": int(lay.chart_boundary_count[c]), "face": f,
+                         "point": _example_point(V, F, f)})
+    bnd_ex = []
+    reasons = {1: "opposite_labels", 2: "label_parallel_to_interface"}
+    for b in np.flatnonzero(invalid_boundary)[:max_examples]:
+        e = int(lay.boundary_first_edge[b])
+        bnd_ex.append({"boundary": int(b), "charts": [int(ca[b]), int(cb[b])],
+                       "labels": [names[la[b]], names[lb[b]]], "reason": reasons[int(reason[b])],
+                       "edges": int(lay.boundary_size[b]), "edge": e,
+                       "point": [float(x) for x in V[topology.edges[e]].mean(axis=0)]})
+    corner_ex = []
+    for v in invalid_corners[:max_examples]:
+        sel = inc_v == v
+        corner_ex.append({"vertex": int(v), "point": [float(x) for x in V[v]],
+                          "edges": int(lay.vertex_sep_degree[v]),
+                          "axes": ["XYZ?"[a] for a in inc_axis[sel].tolist()],
+                          "parts": sorted({int(p) for p in inc_part[sel].tolist()})})
+    tp_ex = [{"boundary": int(b), "vertex": int(v), "point": [float(x) for x in V[v]]}
+             for b, v in tp[:max_examples].tolist()]
+    n_ic, n_ib, n_iq = int(invalid_chart.sum()), int(invalid_boundary.sum()), len(invalid_corners)
+    report = {
+        "valid": n_ic + n_ib + n_iq == 0,
+        "monotone": len(tp) == 0 if turning else None,
+        "charts": lay.n_charts,
+        "boundaries": lay.n_boundaries,
+        "corners": len(lay.corners),
+        "invalid_charts": {"count": n_ic, "examples": chart_ex},
+        "invalid_boundaries": {"count": n_ib, "examples": bnd_ex},
+        "invalid_corners": {"count": n_iq, "examples": corner_ex},
+        "turning_points": {"count": len(tp) if turning else None, "examples": tp_ex,
+                           "tolerance": tau},
+    }
+    return Validity(lay, invalid_chart, invalid_boundary, reason, boundary_axis, invalid_corners,
+                    tp, report)

@@ -1,0 +1,134 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Triangle-triangle intersection test for whole meshes (vectorised).
+
+Broad phase: a bounding-box hierarchy traversed against itself finds the face
+pairs whose boxes overlap. Narrow phase: two non-coplanar triangles
+intersect exactly when an edge of one crosses the other; for triangles sharing a
+vertex only the edges opposite that vertex can cross. Edge-adjacent pairs cannot
+cross without a fold that the orientation check already rejects, so they are skipped.
+Touching contacts within ``1e-9`` of the bounding-box diagonal and exactly coplanar
+overlaps are not reported.
+"""
+import numpy as np
+
+_CHUNK = 400_000
+
+
+def find_self_intersections(vertices, faces):
+    """Pairs of faces that intersect each other.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    faces : (m, 3) int64
+
+    Returns
+    -------
+    pairs : (k, 2) int64, ``pairs[:, 0] < pairs[:, 1]``, sorted.
+    """
+    tri = vertices[faces]
+    pairs = _candidate_pairs(tri)
+    eps = 1e-9 * float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+    chunks = [pairs[s:s + _CHUNK] for s in range(0, len(pairs), _CHUNK)]
+    hits = [chunk[_pairs_intersect(tri, faces, chunk, eps)] for chunk in chunks]
+    hits = np.concatenate(hits) if hits else np.zeros((0, 2), dtype=np.int64)
+    return hits[np.lexsort((hits[:, 1], hits[:, 0]))]
+
+
+def _candidate_pairs(tri):
+    """(p, 2) int64 face pairs whose bounding boxes overlap (i < j).
+
+    A bounding-volume hierarchy over the faces in Morton (Z-curve) order, a complete
+    binary tree stored level by level, is traversed against itself breadth-first:
+    every level keeps only the node pairs whose boxes overlap, so the work follows
+    the number of truly overlapping pairs, whatever the spread of triangle sizes.
+    """
+    lo, hi = tri.min(axis=1), tri.max(axis=1)
+    order = np.argsort(_morton_codes(tri.mean(axis=1)), kind="stable")
+    depth = max(int(np.ceil(np.log2(max(len(tri), 2)))), 1)
+    size = 1 << depth
+    leaf_lo = np.full((size, 3), np.inf)
+    leaf_hi = np.full((size, 3), -np.inf)
+    leaf_lo[:len(tri)], leaf_hi[:len(tri)] = lo[order], hi[order]
+    levels = [(leaf_lo, leaf_hi)]
+    while len(levels[0][0]) > 1:
+        child_lo, child_hi = levels[0]
+        levels.insert(0, (np.minimum(child_lo[0::2], child_lo[1::2]),
+                          np.maximum(child_hi[0::2], child_hi[1::2])))
+    pairs = np.zeros((1, 2), dtype=np.int64)
+    for level_lo, level_hi in levels[1:]:
+        a, b = pairs[:, 0], pairs[:, 1]
+        self_pair = a == b
+        sa, da, db = a[self_pair], a[~self_pair], b[~self_pair]
+        pairs = np.concatenate([
+            np.stack([2 * sa, 2 * sa], axis=1), np.stack([2 * sa + 1, 2 * sa + 1], axis=1),
+            np.stack([2 * sa, 2 * sa + 1], axis=1),
+            np.stack([2 * da, 2 * db], axis=1), np.stack([2 * da, 2 * db + 1], axis=1),
+            np.stack([2 * da + 1, 2 * db], axis=1), np.stack([2 * da + 1, 2 * db + 1], axis=1)])
+        keep = ((level_lo[pairs[:, 0]] <= level_hi[pairs[:, 1]])
+                & (level_lo[pairs[:, 1]] <= level_hi[pairs[:, 0]])).all(axis=1)
+        pairs = pairs[keep]
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    return np.sort(order[pairs], axis=1)
+
+
+def _morton_codes(points):
+    """(n,) int64 Z-order codes of points quantised to 2^10 cells per axis."""
+    span = np.maximum(points.max(axis=0) - points.min(axis=0), 1e-300)
+    cells = np.minimum(((points - points.min(axis=0)) / span * 1024).astype(np.int64), 1023)
+    code = np.zeros(len(points), dtype=np.int64)
+    for bit in range(10):
+        for axis in range(3):
+            code |= ((cells[:, axis] >> bit) & 1) << (3 * bit + axis)
+    return code
+
+
+def _pairs_intersect(tri, faces, pairs, eps):
+    """(p,) bool: does each candidate pair really intersect."""
+    fa, fb = faces[pairs[:, 0]], faces[pairs[:, 1]]
+    shared = (fa[:, :, None] == fb[:, None, :])
+    n_shared = shared.sum(axis=(1, 2))
+    result = np.zeros(len(pairs), dtype=bool)
+
+    disjoint = np.flatnonzero(n_shared == 0)
+    if len(disjoint):
+        ta, tb = tri[pairs[disjoint, 0]], tri[pairs[disjoint, 1]]
+        hit = np.zeros(len(disjoint), dtype=bool)
+        for k in range(3):
+            hit |= _segment_crosses_triangle(ta[:, k], ta[:, (k + 1) % 3], tb, eps)
+            hit |= _segment_crosses_triangle(tb[:, k], tb[:, (k + 1) % 3], ta, eps)
+        result[disjoint] = hit
+
+    touching = np.flatnonzero(n_shared == 1)
+    if len(touching):
+        ta, tb = tri[pairs[touching, 0]], tri[pairs[touching, 1]]
+        corner_a = shared[touching].any(axis=2).argmax(axis=1)
+        corner_b = shared[touching].any(axis=1).argmax(axis=1)
+        rows = np.arange(len(touching))
+        a1, a2 = ta[rows, (corner_a + 1) % 3], ta[rows, (corner_a + 2) % 3]
+        b1, b2 = tb[rows, (corner_b + 1) % 3], tb[rows, (corner_b + 2) % 3]
+        result[touching] = (_segment_crosses_triangle(a1, a2, tb, eps)
+                            | _segment_crosses_triangle(b1, b2, ta, eps))
+    return result
+
+
+def _segment_crosses_triangle(p0, p1, triangle, eps):
+    """(p,) bool: segment p0-p1 passes strictly through the interior of the triangle.
+
+    p0, p1 : (p, 3); triangle : (p, 3, 3).
+    """
+    a, b, c = triangle[:, 0], triangle[:, 1], triangle[:, 2]
+    normal = np.cross(b - a, c - a)
+    length = np.linalg.norm(normal, axis=1)
+    normal = normal / np.where(length > 0, length, 1.0)[:, None]
+    d0 = np.einsum("ij,ij->i", p0 - a, normal)
+    d1 = np.einsum("ij,ij->i", p1 - a, normal)
+    crosses = ((d0 > eps) & (d1 < -eps)) | ((d0 < -eps) & (d1 > eps))
+    t = d0 / np.where(crosses, d0 - d1, 1.0)
+    q = p0 + t[:, None] * (p1 - p0)
+    inside = np.ones(len(p0), dtype=bool)
+    for u, v in ((a, b), (b, c), (c, a)):
+        edge = v - u
+        side = np.einsum("ij,ij->i", np.cross(edge, q - u), normal)
+        inside &= side > eps * np.linalg.norm(edge, axis=1)
+    return crosses & inside & (length > 0)

@@ -1,0 +1,315 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Intake validation of target meshes: every check the pipeline relies on, once, up front.
+
+Each failed check raises ``InvalidMeshError`` naming what is wrong, how many items,
+and an example (index and coordinates). Repairs are made only where they are
+unambiguous (merging bit-identical vertices, flipping a consistently inward mesh,
+re-orienting an orientable mesh) and are listed in the returned warnings.
+"""
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from core.errors import InvalidMeshError, ParameterError
+from core.mesh_topology import directed_edges, unique_edges
+from core.self_intersection import find_self_intersections
+from core.types import TriMesh
+
+COMPONENT_POLICIES = ("largest", "all", "error")
+
+
+def _fmt(point):
+    return "(" + ", ".join(f"{c:.6g}" for c in point) + ")"
+
+
+def check_finite(vertices, name="mesh"):
+    """Raise ``non_finite`` if any coordinate is NaN or infinite."""
+    bad = ~np.isfinite(vertices).all(axis=1)
+    if bad.any():
+        idx = np.flatnonzero(bad)
+        raise InvalidMeshError(
+            f"{name}: {len(idx)} vertices have NaN or infinite coordinates, "
+            f"e.g. vertex {idx[0]} = {_fmt(vertices[idx[0]])}",
+            reason="non_finite", count=len(idx), examples=idx[:5].tolist())
+
+
+MERGE_TOLERANCE = 1e-8
+"""Vertices closer than this fraction of the bounding-box diagonal (per coordinate,
+after rounding to that grid) are one vertex: STL stores every triangle's corners
+separately, often printed with a few digits of noise."""
+
+
+def merge_identical_vertices(vertices, faces):
+    """Merge vertices that coincide up to ``MERGE_TOLERANCE`` and drop unreferenced ones.
+
+    Returns
+    -------
+    vertices : (n', 3) float64, in order of first use by the faces.
+    faces : (m, 3) int64 re-indexed.
+    n_merged : int, how many input vertices were merged away or dropped.
+    """
+    diag = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))) or 1.0
+    grid = np.round(vertices / (MERGE_TOLERANCE * diag)).astype(np.int64)
+    _, first_of_key, inverse = np.unique(grid, axis=0, return_index=True, return_inverse=True)
+    unique = vertices[first_of_key]
+    faces = inverse.reshape(-1)[faces]
+    used, first = np.unique(faces.reshape(-1), return_index=True)
+    order = used[np.argsort(first, kind="stable")]
+    remap = np.full(len(unique), -1, dtype=np.int64)
+    remap[order] = np.arange(len(order))
+    return unique[order], remap[faces], len(vertices) - len(order)
+
+
+def check_degenerate_faces(vertices, faces, name="mesh"):
+    """Raise ``degenerate_faces`` for faces with a repeated vertex or (near) zero area."""
+    repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
+    tri = vertices[faces]
+    double_area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    diag = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
+    bad = repeated | (double_area <= 1e-14 * diag * diag)
+    if bad.any():
+        idx = np.flatnonzero(bad)
+        f = idx[0]
+        raise InvalidMeshError(
+            f"{name}: {len(idx)} degenerate (zero-area) faces, e.g. face {f} with corners "
+            f"{faces[f].tolist()} at {_fmt(tri[f].mean(axis=0))}",
+            reason="degenerate_faces", count=len(idx), examples=idx[:5].tolist())
+
+
+def check_duplicate_faces(vertices, faces, name="mesh"):
+    """Raise ``duplicate_faces`` for faces using the same three vertices as another face."""
+    key = np.sort(faces, axis=1)
+    _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
+    keep = np.zeros(len(faces), dtype=bool)
+    keep[first] = True
+    idx = np.flatnonzero(~keep)
+    if len(idx):
+        f = idx[0]
+        raise InvalidMeshError(
+            f"{name}: {len(idx)} duplicate faces, e.g. face {f} repeats vertices "
+            f"{faces[f].tolist()} at {_fmt(vertices[faces[f]].mean(axis=0))}",
+            reason="duplicate_faces", count=len(idx), examples=idx[:5].tolist())
+
+
+def check_edges(vertices, faces, name="mesh"):
+    """Raise ``open`` for boundary edges and ``non_manifold`` for edges with > 2 faces."""
+    edges, he_edge = unique_edges(faces)
+    count = np.bincount(he_edge, minlength=len(edges))
+    for wanted, reason, what in ((count == 1, "open", "boundary edges (the mesh is not closed)"),
+                                 (count > 2, "non_manifold", "non-manifold edges (shared by more than two faces)")):
+        if wanted.any():
+            idx = np.flatnonzero(wanted)
+            a, b = edges[idx[0]]
+            face = int(np.flatnonzero(he_edge == idx[0])[0] // 3)
+            raise InvalidMeshError(
+                f"{name}: {len(idx)} {what}, e.g. edge ({a}, {b}) of face {face} at "
+                f"{_fmt((vertices[a] + vertices[b]) / 2)}",
+                reason=reason, count=len(idx), examples=[tuple(map(int, edges[i])) for i in idx[:5]])
+
+
+def check_manifold_vertices(vertices, faces, name="mesh"):
+    """Raise ``non_manifold`` for vertices whose faces form more than one fan.
+
+    Assumes every edge has exactly two faces (run :func:`check_edges` first).
+    """
+    m = len(faces)
+    half = directed_edges(faces)
+    _, he_edge = unique_edges(faces)
+    order = np.argsort(he_edge, kind="stable")
+    h1, h2 = order[0::2], order[1::2]
+    f1, f2 = h1 // 3, h2 // 3
+    corner_of = np.full((m, 3), -1, dtype=np.int64)
+    corner_of[:] = np.arange(3 * m).reshape(m, 3)
+
+    def corner(face, vertex):
+        position = np.argmax(faces[face] == vertex[:, None], axis=1)
+        return corner_of[face, position]
+
+    links = []
+    for end in (0, 1):
+        v = half[h1, end]
+        links.append((corner(f1, v), corner(f2, v)))
+    rows = np.concatenate([a for a, _ in links])
+    cols = np.concatenate([b for _, b in links])
+    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
+    _, fan = connected_components(graph, directed=False)
+    corner_vertex = faces.reshape(-1)
+    pairs = np.unique(np.stack([corner_vertex, fan], axis=1), axis=0)
+    fans_per_vertex = np.bincount(pairs[:, 0], minlength=len(vertices))
+    bad = np.flatnonzero(fans_per_vertex > 1)
+    if len(bad):
+        v = bad[0]
+        raise InvalidMeshError(
+            f"{name}: {len(bad)} non-manifold vertices (two surface sheets touch at a point), "
+            f"e.g. vertex {v} at {_fmt(vertices[v])}",
+            reason="non_manifold", count=len(bad), examples=bad[:5].tolist())
+
+
+def orient_consistently(vertices, faces, name="mesh"):
+    """Make the winding consistent and the normals point outwards.
+
+    Every edge must have two faces. Returns ``(faces, n_flipped)``. Raises
+    ``orientation`` if the surface is not orientable (no consistent winding exists).
+    """
+    m = len(faces)
+    half = directed_edges(faces)
+    _, he_edge = unique_edges(faces)
+    order = np.argsort(he_edge, kind="stable")
+    h1, h2 = order[0::2], order[1::2]
+    f1, f2 = h1 // 3, h2 // 3
+    same_direction = (half[h1, 0] == half[h2, 0]).astype(np.int8)
+    flip = np.zeros(m, dtype=np.int8)
+    if same_direction.any():
+        flip = _solve_flip_parity(m, f1, f2, same_direction)
+        if ((flip[f1] ^ flip[f2]) != same_direction).any():
+            raise InvalidMeshError(
+                f"{name}: the surface is not orientable (no consistent face winding exists)",
+                reason="orientation", count=int(same_direction.sum()))
+    faces = np.where(flip[:, None].astype(bool), faces[:, ::-1], faces)
+    _, component = connected_components(_face_graph(m, f1, f2), directed=False)
+    volume = np.bincount(component, weights=_signed_volumes(vertices, faces))
+    inward = volume[component] < 0
+    faces = np.where(inward[:, None], faces[:, ::-1], faces)
+    return faces, int(np.count_nonzero(flip.astype(bool) ^ inward))
+
+
+def _face_graph(m, f1, f2):
+    return sp.coo_matrix((np.ones(len(f1)), (f1, f2)), shape=(m, m)).tocsr()
+
+
+def _solve_flip_parity(m, f1, f2, same_direction):
+    """Per-face flip bit so that adjacent faces agree, from a spanning forest (vectorised).
+
+    Walks each face to its tree root by pointer doubling, accumulating the xor of the
+    ``same_direction`` bits along the tree edges.
+    """
+    from scipy.sparse.csgraph import breadth_first_order
+
+    weights = sp.coo_matrix((same_direction.astype(np.float64) + 1.0, (f1, f2)), shape=(m, m)).tocsr()
+    weights = weights.maximum(weights.T)
+    _, component = connected_components(weights, directed=False)
+    _, roots = np.unique(component, return_index=True)
+    parent = np.arange(m)
+    bit = np.zeros(m, dtype=np.int8)
+    for root in roots:
+        nodes, pred = breadth_first_order(weights, root, directed=False, return_predecessors=True)
+        child = nodes[1:]
+        parent[child] = pred[child]
+        bit[child] = (np.asarray(weights[child, pred[child]]).reshape(-1) - 1.0).astype(np.int8)
+    while True:
+        grand = parent[parent]
+        if np.array_equal(grand, parent):
+            return bit
+        bit = bit ^ bit[parent]
+        parent = grand
+
+
+def _signed_volumes(vertices, faces):
+    tri = vertices[faces]
+    return np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0
+
+
+def genus_of(n_vertices, faces, n_components):
+    """Total genus of a closed manifold mesh from the Euler characteristic."""
+    edges, _ = unique_edges(faces)
+    chi = n_vertices - len(edges) + len(faces)
+    return int(round((2 * n_components - chi) / 2))
+
+
+def select_components(vertices, faces, policy, name="mesh"):
+    """Apply the multiple-components policy.
+
+    Returns ``(vertices, faces, n_components_in_input, warnings)``.
+    """
+    if policy not in COMPONENT_POLICIES:
+        raise ParameterError(f"components must be one of {', '.join(COMPONENT_POLICIES)}, got {policy!r}")
+    from core.mesh_topology import connected_face_components
+
+    component = connected_face_components(faces)
+    n = int(component.max()) + 1
+    if n == 1 or policy == "all":
+        return vertices, faces, n, []
+    volume = np.abs(np.bincount(component, weights=_signed_volumes(vertices, faces)))
+    largest = int(np.argmax(volume))
+    if policy == "error":
+        others = [c for c in range(n) if c != largest]
+        f = int(np.flatnonzero(component == others[0])[0])
+        raise InvalidMeshError(
+            f"{name}: {n} separate components (expected one solid), e.g. face {f} at "
+            f"{_fmt(vertices[faces[f]].mean(axis=0))} is not connected to the largest one; "
+            "use components='largest' to keep only the largest",
+            reason="multiple_components", count=n, examples=[f])
+    keep = component == largest
+    dropped = int((~keep).sum())
+    vertices, faces, _ = merge_identical_vertices(vertices, faces[keep])
+    return vertices, faces, n, [f"kept the largest of {n} components by volume; "
+                                f"dropped {dropped} faces of the other {n - 1}"]
+
+
+def validate_target(vertices, faces, components="largest", check_self_intersections=True,
+                    name="mesh"):
+    """Validate raw triangle data and return a clean closed mesh plus a summary.
+
+    Parameters
+    ----------
+    vertices : (n, 3) array_like of float
+    faces : (m, 3) array_like of int
+    components : {'largest', 'all', 'error'}
+        What to do when the mesh has several connected components.
+    check_self_intersections : bool
+        Run the triangle-triangle intersection test (on by default).
+    name : str
+        Used in error messages (usually the file name).
+
+    Returns
+    -------
+    mesh : TriMesh, watertight, 2-manifold, outward oriented.
+    summary : dict, JSON-serialisable: triangles, vertices, genus, components,
+        bbox_diagonal, merged_vertices, reoriented_faces, warnings (list of str).
+
+    Raises
+    ------
+    InvalidMeshError
+        See ``InvalidMeshError.reason`` for the kinds.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if len(faces) == 0:
+        raise InvalidMeshError(f"{name}: the mesh has no faces", reason="empty")
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise InvalidMeshError(f"{name}: face indices outside 0..{len(vertices) - 1}", reason="unreadable")
+    check_finite(vertices[np.unique(faces)], name)
+    warnings = []
+    vertices, faces, merged = merge_identical_vertices(vertices, faces)
+    check_degenerate_faces(vertices, faces, name)
+    check_duplicate_faces(vertices, faces, name)
+    check_edges(vertices, faces, name)
+    check_manifold_vertices(vertices, faces, name)
+    faces, flipped = orient_consistently(vertices, faces, name)
+    if flipped:
+        warnings.append(f"re-oriented {flipped} faces so that all normals point outwards "
+                        "(the fix is unambiguous for a closed orientable surface)")
+    vertices, faces, n_components, component_warnings = select_components(
+        vertices, faces, components, name)
+    warnings.extend(component_warnings)
+    if check_self_intersections:
+        pairs = find_self_intersections(vertices, faces)
+        if len(pairs):
+            a, b = pairs[0]
+            raise InvalidMeshError(
+                f"{name}: {len(pairs)} pairs of intersecting faces, e.g. faces {a} and {b} near "
+                f"{_fmt(vertices[faces[a]].mean(axis=0))}",
+                reason="self_intersecting", count=len(pairs), examples=[tuple(map(int, p)) for p in pairs[:5]])
+    kept_components = n_components if components == "all" else 1
+    summary = {
+        "triangles": int(len(faces)),
+        "vertices": int(len(vertices)),
+        "genus": genus_of(len(vertices), faces, kept_components),
+        "components": int(n_components),
+        "bbox_diagonal": float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))),
+        "volume": float(_signed_volumes(vertices, faces).sum()),
+        "merged_vertices": int(merged),
+        "reoriented_faces": int(flipped),
+        "warnings": warnings,
+    }
+    return TriMesh(vertices, faces), summary

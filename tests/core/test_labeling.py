@@ -1,0 +1,179 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""HBECVT labeling (Eqs. 2-3) and the repair loop."""
+import os
+
+import numpy as np
+import pytest
+import trimesh
+
+from core.errors import InvalidMeshError, ParameterError
+from core.segmentation.charts import OPPOSITE, build_topology
+from core.segmentation.labeling import (face_colouring, face_normals, hbecvt_labeling,
+                                        label_directions, mean_label_angle,
+                                        nearest_direction_labels, part_neighbours)
+from core.segmentation.repair import repair_labeling
+from core.segmentation.validity import check_validity
+
+MESHES = os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data", "meshes")
+
+
+def cube(levels=3):
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    V, F = np.asarray(box.vertices) + 0.5, np.asarray(box.faces)
+    for _ in range(levels):
+        V, F = trimesh.remesh.subdivide(V, F)
+    return np.asarray(V, dtype=np.float64), np.asarray(F, dtype=np.int64)
+
+
+def identity_frames(m):
+    return np.broadcast_to(np.eye(3), (m, 3, 3)).copy()
+
+
+def rotation(ax, ay, az):
+    cx, sx, cy, sy, cz, sz = np.cos(ax), np.sin(ax), np.cos(ay), np.sin(ay), np.cos(az), np.sin(az)
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def pca_frame(V):
+    P = V - V.mean(axis=0)
+    _, vec = np.linalg.eigh(P.T @ P)
+    R = vec.T.copy()
+    if np.linalg.det(R) < 0:
+        R[2] *= -1
+    return R
+
+
+def no_opposite_neighbours(F, labels):
+    nb = build_topology(F).neighbours
+    return not (labels[nb] == OPPOSITE[labels][:, None]).any()
+
+
+def test_rotated_cube_in_its_own_frame_gives_six_exact_charts():
+    V, F = cube()
+    R = rotation(0.3, -0.5, 1.1)
+    Vr = V @ R.T
+    frame = np.broadcast_to(R.T, (len(F), 3, 3)).copy()  # rows = rotated x, y, z axes
+    labels, info = hbecvt_labeling(Vr, F, np.zeros(len(F)), frame)
+    n = face_normals(Vr, F)
+    assert info["converged"]
+    assert np.allclose(label_directions(labels, frame), n, atol=1e-9)
+    assert mean_label_angle(n, labels, frame) == pytest.approx(0.0, abs=1e-5)
+    r = check_validity(Vr, F, np.zeros(len(F)), labels, frame).report
+    assert r["valid"] and (r["charts"], r["corners"]) == (6, 8)
+
+
+def test_smoothing_removes_noise_and_is_deterministic():
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    V, F = np.asarray(sphere.vertices), np.asarray(sphere.faces, dtype=np.int64)
+    rng = np.random.default_rng(0)
+    V = V * (1.0 + 0.03 * rng.standard_normal(len(V)))[:, None]
+    m = len(F)
+    frame = identity_frames(m)
+    n = face_normals(V, F)
+    near = nearest_direction_labels(n, frame)
+    a, info = hbecvt_labeling(V, F, np.zeros(m), frame)
+    b, _ = hbecvt_labeling(V, F, np.zeros(m), frame)
+    assert np.array_equal(a, b)
+    assert a.dtype == np.int32 and a.min() >= 0 and a.max() <= 5
+    assert info["converged"] and info["sweeps"] < 200
+    topo = build_topology(F)
+    before = check_validity(V, F, np.zeros(m), near, frame, topo).report
+    after = check_validity(V, F, np.zeros(m), a, frame, topo).report
+    assert after["charts"] < before["charts"]
+    assert after["invalid_charts"]["count"] < before["invalid_charts"]["count"]
+    # term 3 (p = 1e5): no face ends next to its opposite label
+    assert no_opposite_neighbours(F, a)
+    # term 1 keeps labels close to the normals
+    assert mean_label_angle(n, a, frame) < mean_label_angle(n, near, frame) + 5.0
+
+
+def test_interface_term_forbids_labels_parallel_to_interface_axis():
+    V, F = cube()
+    m = len(F)
+    frame = identity_frames(m)
+    c = V[F].mean(axis=1)
+    iface = np.full((m, 3), np.nan)
+    near_plane = c[:, 2] < 0.3
+    iface[near_plane] = [0.2, 0.1, 0.97]  # interface x-axis close to world Z
+    labels, _ = hbecvt_labeling(V, F, np.zeros(m), frame, face_interface_axis=iface)
+    assert not np.isin(labels[near_plane], [4, 5]).any()
+    assert np.isin(labels[~near_plane], [4, 5]).any()
+
+
+def test_neighbours_of_other_parts_do_not_count():
+    V, F = cube(1)
+    m = len(F)
+    parts = (V[F].mean(axis=1)[:, 0] > 0.5).astype(np.int64)
+    nb = part_neighbours(build_topology(F), parts)
+    ok = nb >= 0
+    assert (parts[np.where(ok, nb, 0)][ok] == np.repeat(parts, 3).reshape(m, 3)[ok]).all()
+    assert (~ok).any()
+
+
+def test_colouring_is_proper():
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    nb = build_topology(np.asarray(sphere.faces)).neighbours
+    colour = face_colouring(nb)
+    assert (colour >= 0).all() and colour.max() <= 3
+    assert not (colour[nb] == colour[:, None]).any()
+
+
+def test_bad_input_raises_clear_errors():
+    V, F = cube(0)
+    m = len(F)
+    with pytest.raises(ParameterError, match="shape"):
+        hbecvt_labeling(V, F, np.zeros(m), np.zeros((m, 3)))
+    bad = identity_frames(m)
+    bad[3] *= 2.0
+    with pytest.raises(ParameterError, match="1 frames.*face 3"):
+        hbecvt_labeling(V, F, np.zeros(m), bad)
+    F2 = F.copy()
+    F2[5] = [F[5, 0], F[5, 0], F[5, 1]]
+    with pytest.raises(InvalidMeshError) as err:
+        hbecvt_labeling(V, F2, np.zeros(m), identity_frames(m))
+    assert err.value.reason == "degenerate_faces" and err.value.examples == [5]
+    with pytest.raises(ParameterError, match="outside 0..5"):
+        repair_labeling(V, F, np.zeros(m), np.full(m, 7), identity_frames(m))
+
+
+def test_repair_removes_island_and_opposite_boundary():
+    V, F = cube()
+    m = len(F)
+    frame = identity_frames(m)
+    labels = nearest_direction_labels(face_normals(V, F), frame).astype(np.int64)
+    corner = V[F]
+    top = (corner[:, :, 2] > 0.99).all(axis=1)
+    island = top & ((np.abs(corner[:, :, :2] - 0.5) < 0.26).all(axis=2)).all(axis=1)
+    labels[island] = 1  # -X island on the +Z face
+    strip = ((np.abs(corner[:, :, 0] - 1.0) < 1e-9).all(axis=1)
+             & (corner[:, :, 2] < 0.26).all(axis=1))
+    labels[strip] = 1  # -X strip on the +X face: an opposite boundary
+    before = check_validity(V, F, np.zeros(m), labels, frame).report
+    assert not before["valid"]
+    out, rep = repair_labeling(V, F, np.zeros(m), labels, frame)
+    assert rep["valid"] and rep["after"]["valid"] and rep["stopped"] == "valid"
+    assert rep["unfixed"] == {}
+    assert rep["after"]["charts"] == 6
+    assert np.array_equal(out, nearest_direction_labels(face_normals(V, F), frame))
+
+
+@pytest.mark.parametrize("name", ["to_simp_cantilever.stl", "polycube_bone.obj"])
+def test_dev_mesh_ends_valid_with_few_charts(name):
+    path = os.path.join(MESHES, name)
+    if not os.path.exists(path):
+        pytest.skip(f"dev mesh {name} not available")
+    mesh = trimesh.load(path, process=True)
+    V, F = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+    m = len(F)
+    frame = np.broadcast_to(pca_frame(V), (m, 3, 3)).copy()
+    parts = np.zeros(m, dtype=np.int64)
+    n = face_normals(V, F)
+    labels, _ = hbecvt_labeling(V, F, parts, frame)
+    out, rep = repair_labeling(V, F, parts, labels, frame)
+    assert rep["valid"], rep["unfixed"]
+    assert rep["after"]["charts"] <= 30
+    near = nearest_direction_labels(n, frame)
+    assert mean_label_angle(n, out, frame) <= mean_label_angle(n, near, frame) + 5.0

@@ -1,0 +1,151 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Charts, boundaries, corners and validity rules on hand-checkable labelings of a cube."""
+import numpy as np
+import pytest
+import trimesh
+
+from core.segmentation.charts import boundary_chains, build_topology, extract_layout
+from core.segmentation.labeling import face_normals, nearest_direction_labels
+from core.segmentation.validity import check_validity
+
+IDENTITY = np.eye(3)
+
+
+def cube(levels=3):
+    """Unit cube [0, 1]^3 with 12 * 4**levels triangles."""
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    V, F = np.asarray(box.vertices) + 0.5, np.asarray(box.faces)
+    for _ in range(levels):
+        V, F = trimesh.remesh.subdivide(V, F)
+    return np.asarray(V, dtype=np.float64), np.asarray(F, dtype=np.int64)
+
+
+def frames(m):
+    return np.broadcast_to(IDENTITY, (m, 3, 3)).copy()
+
+
+def centroids(V, F):
+    return V[F].mean(axis=1)
+
+
+def judge(V, F, labels, parts=None, **kw):
+    m = len(F)
+    parts = np.zeros(m, dtype=np.int64) if parts is None else parts
+    return check_validity(V, F, parts, labels, frames(m), **kw)
+
+
+def test_cube_by_normals_is_valid_polycube():
+    V, F = cube()
+    labels = nearest_direction_labels(face_normals(V, F), frames(len(F)))
+    v = judge(V, F, labels)
+    r = v.report
+    assert r["valid"] and r["monotone"]
+    assert (r["charts"], r["boundaries"], r["corners"]) == (6, 12, 8)
+    assert r["turning_points"]["count"] == 0
+    lay = v.layout
+    assert (lay.chart_boundary_count == 4).all()
+    assert np.array_equal(np.sort(lay.chart_label), np.arange(6))
+    # every cube edge's axis is the one perpendicular to both labels
+    ca, cb = lay.boundary_charts.T
+    la, lb = lay.chart_label[ca], lay.chart_label[cb]
+    assert np.array_equal(v.boundary_axis, 3 - la // 2 - lb // 2)
+    # each boundary is a straight cube edge along its axis: 8 mesh edges of length 1/8
+    topo = build_topology(F, len(V))
+    for b, (verts, _edges, closed) in enumerate(boundary_chains(topo, lay)):
+        assert not closed and len(verts) == 9
+        span = np.ptp(V[verts], axis=0)
+        assert span[v.boundary_axis[b]] == pytest.approx(1.0)
+        assert np.delete(span, v.boundary_axis[b]) == pytest.approx([0.0, 0.0])
+
+
+def test_island_chart_is_invalid_and_turns():
+    V, F = cube()
+    labels = nearest_direction_labels(face_normals(V, F), frames(len(F)))
+    corner = V[F]
+    island = ((corner[:, :, 2] > 0.99) & (np.abs(corner[:, :, 0] - 0.5) < 0.26)
+              & (np.abs(corner[:, :, 1] - 0.5) < 0.26)).all(axis=1)
+    labels[island] = 0  # +X inside the +Z face
+    r = judge(V, F, labels).report
+    assert r["charts"] == 7
+    assert r["invalid_charts"]["count"] == 1
+    ex = r["invalid_charts"]["examples"][0]
+    assert ex["label"] == "+X" and ex["boundaries"] == 1 and ex["faces"] == int(island.sum())
+    assert r["invalid_boundaries"]["count"] == 0 and r["invalid_corners"]["count"] == 0
+    # the island's boundary is a closed loop around a +X/+Z boundary with axis Y: it must turn
+    assert r["turning_points"]["count"] >= 2
+    assert not r["valid"]
+
+
+def test_three_boundary_chart_is_invalid():
+    V, F = cube()
+    labels = nearest_direction_labels(face_normals(V, F), frames(len(F)))
+    corner = V[F]
+    top_half = ((corner[:, :, 2] > 0.99) & (corner[:, :, 0] >= corner[:, :, 1] - 1e-9)).all(axis=1)
+    labels[top_half] = 0  # the +X chart takes the triangle x > y of the top face
+    v = judge(V, F, labels)
+    r = v.report
+    bad = np.flatnonzero(v.invalid_chart)
+    # the +Z triangle keeps -X, +Y and +X around it; the -Y face now meets the grown +X chart
+    # along one bent boundary (the bend at (1, 0, 1) is no corner: only two charts meet there)
+    assert sorted(v.layout.chart_label[bad].tolist()) == [3, 4]
+    assert (v.layout.chart_boundary_count[bad] == 3).all()
+    assert r["invalid_boundaries"]["count"] == 0
+
+
+def test_opposite_boundary_and_its_corners_are_invalid():
+    V, F = cube()
+    labels = nearest_direction_labels(face_normals(V, F), frames(len(F)))
+    c = centroids(V, F)
+    labels[(c[:, 2] > 0.99)] = 0  # the top face joins +X, so +X now touches -X along x = 0
+    v = judge(V, F, labels)
+    r = v.report
+    assert r["invalid_boundaries"]["count"] == 1
+    ex = r["invalid_boundaries"]["examples"][0]
+    assert sorted(ex["labels"]) == ["+X", "-X"] and ex["reason"] == "opposite_labels"
+    assert ex["point"][0] == pytest.approx(0.0) and ex["point"][2] == pytest.approx(1.0)
+    # the two ends of that boundary are corners with an axis-less edge
+    assert r["invalid_corners"]["count"] == 2
+    assert all(e["point"][0] == pytest.approx(0.0) for e in r["invalid_corners"]["examples"])
+
+
+def two_part_cube():
+    V, F = cube()
+    c = centroids(V, F)
+    parts = (c[:, 0] > 0.5).astype(np.int64)
+    labels = nearest_direction_labels(face_normals(V, F), frames(len(F)))
+    return V, F, parts, labels, c
+
+
+def test_part_interface_edges_are_boundaries_and_corners_follow_interface_rules():
+    V, F, parts, labels, _ = two_part_cube()
+    v = judge(V, F, labels, parts)
+    r = v.report
+    # 6 charts per half-cube minus the missing cap on the interface side: 5 + 5
+    assert r["charts"] == 10
+    assert r["valid"], r
+    # interface boundaries (between parts) are marked and counted for both charts
+    assert (v.boundary_axis == -2).sum() == 4
+    assert (v.layout.chart_boundary_count >= 4).all()
+    # corners where cube edges cross the interface: 4 (plus the 8 cube corners)
+    assert r["corners"] == 12
+
+
+def test_label_parallel_to_interface_axis_is_invalid():
+    V, F, parts, labels, c = two_part_cube()
+    near_iface = (parts == 1) & (c[:, 0] < 0.5 + 1.0 / 8) & (c[:, 1] > 0.99)
+    labels[near_iface] = 0  # +X faces touching the interface (its x-axis is world X)
+    r = judge(V, F, labels, parts).report
+    reasons = {e["reason"] for e in r["invalid_boundaries"]["examples"]}
+    assert "label_parallel_to_interface" in reasons
+    assert not r["valid"]
+
+
+def test_single_chart_and_layout_bookkeeping():
+    V, F = cube(1)
+    m = len(F)
+    topo = build_topology(F, len(V))
+    lay = extract_layout(topo, np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64))
+    assert lay.n_charts == 1 and lay.n_boundaries == 0 and len(lay.corners) == 0
+    assert lay.chart_boundary_count.tolist() == [0]
+    r = judge(V, F, np.zeros(m, dtype=np.int64)).report
+    assert r["invalid_charts"]["count"] == 1 and not r["valid"]
