@@ -1,0 +1,78 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Pipeline parameters with the paper's defaults and range checks."""
+from dataclasses import asdict, dataclass, fields
+
+from core.errors import ParameterError
+
+PART_MODES = ("single", "auto")
+COMPONENT_POLICIES = ("largest", "all", "error")
+UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
+
+
+@dataclass(frozen=True)
+class ReconstructionParams:
+    """Every user-settable parameter of :func:`core.pipeline.reconstruct`.
+
+    units : length unit of the target file's coordinates (``mm``, ``cm``, ``m``, ``in``);
+        the solid is written in millimetres, FreeCAD's and STEP's usual unit.
+    components : what to do with several connected components (``largest``, ``all``, ``error``).
+    check_self_intersections : run the triangle-triangle test at intake.
+    parts : ``single`` (whole mesh one part) or ``auto`` (curve-skeleton based).
+    blend_factor : frame blending distance in mean edge lengths (paper: 4).
+    lam : Eq. 3 lambda, weight of neighbours with a different label (paper: 0.5).
+    penalty : Eq. 3 p, weight of opposite labels and interface-parallel labels (paper: 1e5).
+    max_sweeps : cap on HBECVT sweeps.
+    repair : run the validity repair loop after HBECVT.
+    subdivision_levels : Catmull-Clark levels used by the fit (paper: 2).
+    fit_iterations : shape-optimisation iterations (paper: 100).
+    """
+
+    units: str = "mm"
+    components: str = "largest"
+    check_self_intersections: bool = True
+    parts: str = "single"
+    blend_factor: float = 4.0
+    lam: float = 0.5
+    penalty: float = 1e5
+    max_sweeps: int = 200
+    repair: bool = True
+    subdivision_levels: int = 2
+    fit_iterations: int = 100
+
+    def __post_init__(self):
+        _choice("units", self.units, tuple(UNIT_TO_MM))
+        _choice("components", self.components, COMPONENT_POLICIES)
+        _choice("parts", self.parts, PART_MODES)
+        _range("blend_factor", self.blend_factor, 0.0, 1000.0)
+        _range("lam", self.lam, 0.0, 1e3)
+        _range("penalty", self.penalty, 0.0, 1e12)
+        _range("max_sweeps", self.max_sweeps, 1, 100_000)
+        _range("subdivision_levels", self.subdivision_levels, 1, 5)
+        _range("fit_iterations", self.fit_iterations, 0, 100_000)
+
+    @classmethod
+    def from_dict(cls, values):
+        """Build from a dict, rejecting unknown keys with a clear message."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ParameterError(f"unknown parameter(s): {', '.join(unknown)}; "
+                                 f"known: {', '.join(sorted(known))}")
+        return cls(**values)
+
+    def to_dict(self):
+        return asdict(self)
+
+
+def _choice(name, value, allowed):
+    if value not in allowed:
+        raise ParameterError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
+
+
+def _range(name, value, low, high):
+    try:
+        ok = low <= value <= high
+    except TypeError:
+        ok = False
+    if not ok or value != value:
+        raise ParameterError(f"{name} must be between {low} and {high}, got {value!r}")

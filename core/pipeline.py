@@ -1,0 +1,240 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""The reconstruction pipeline: runs the core stages in order and builds the report.
+
+Each stage is a function ``stage(state, params) -> dict`` that reads earlier results
+from ``state`` (a dict) and returns its own results (merged into ``state``) plus a
+``"report"`` entry. A stage that is not built yet raises ``StageNotAvailableError``;
+the runner records it as ``not_available`` and marks the later stages ``skipped``.
+User errors (``PolycubeInputError``) propagate unchanged; any other exception
+is recorded as ``failed`` and the run stops there.
+"""
+import resource
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from core.errors import PolycubeInputError, StageNotAvailableError
+from core.params import ReconstructionParams
+from core.progress import NO_PROGRESS
+
+CORE_STAGES = ("intake", "parts", "frames", "labeling", "polycube", "basemesh", "fit", "patches")
+STOP_AFTER_CHOICES = ("intake", "parts", "labeling", "basemesh", "fit", "solid")
+
+
+@dataclass
+class PipelineResult:
+    """Everything a run produced.
+
+    state : dict of stage outputs (``target``, ``face_part``, ``frames``, ``face_label``,
+        ``validity``, ``base_mesh``, ``patches``, ...), present for the stages that ran.
+    report : dict, the JSON report (see README, "Report").
+    failed : the exception of a stage that failed unexpectedly, else None.
+    """
+
+    state: dict
+    report: dict
+    failed: Exception = None
+    timings: dict = field(default_factory=dict)
+
+
+def peak_memory_mb():
+    """Peak resident memory of this process so far, in MiB."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def stage_intake(state, params):
+    from core.mesh_io import read_triangle_soup
+    from core.validate import validate_target
+
+    path = state["input_path"]
+    vertices, faces = read_triangle_soup(path)
+    mesh, summary = validate_target(vertices, faces, components=params.components,
+                                    check_self_intersections=params.check_self_intersections,
+                                    name=str(path))
+    report = {"file": str(path), "units": params.units, **summary}
+    message = "; ".join(summary["warnings"])
+    return {"target": mesh, "report": report, "message": message}
+
+
+def stage_parts(state, params):
+    from core.segmentation.parts import single_part, skeleton_segmentation
+
+    mesh = state["target"]
+    if params.parts == "single":
+        return {"face_part": single_part(mesh), "report": {"mode": "single", "parts": 1}}
+    result = skeleton_segmentation(mesh)
+    return {"face_part": result.face_part, "report": {"mode": "auto", **result.info}}
+
+
+def stage_frames(state, params):
+    from core.segmentation.frames import compute_frames, mean_edge_length
+
+    mesh = state["target"]
+    blend = params.blend_factor * mean_edge_length(mesh.vertices, mesh.faces)
+    field = compute_frames(mesh, state["face_part"], blend_distance=blend if blend > 0 else None)
+    report = {"parts": int(len(field.part_frames)), "interfaces": len(field.interfaces),
+              "blend_distance": float(field.blend_distance)}
+    return {"frames": field, "report": report}
+
+
+def stage_labeling(state, params):
+    from core.segmentation.labeling import (face_normals, hbecvt_labeling, mean_label_angle,
+                                            nearest_direction_labels)
+    from core.segmentation.repair import repair_labeling
+    from core.segmentation.validity import check_validity
+
+    mesh, field = state["target"], state["frames"]
+    face_part = state["face_part"]
+    labels, info = hbecvt_labeling(mesh.vertices, mesh.faces, face_part, field.face_frame,
+                                   field.face_interface_axis, lam=params.lam,
+                                   penalty=params.penalty, max_sweeps=params.max_sweeps)
+    repair_report = None
+    if params.repair:
+        labels, repair_report = repair_labeling(mesh.vertices, mesh.faces, face_part, labels,
+                                                field.face_frame, field.face_interface_axis,
+                                                lam=params.lam, penalty=params.penalty)
+    validity = check_validity(mesh.vertices, mesh.faces, face_part, labels, field.face_frame)
+    normals = face_normals(mesh.vertices, mesh.faces)
+    nearest = nearest_direction_labels(normals, field.face_frame)
+    v = validity.report
+    report = {
+        "valid": bool(v["valid"]),
+        "parts": int(face_part.max()) + 1,
+        "charts": int(v["charts"]),
+        "corners": int(v["corners"]),
+        "invalid_charts": int(v["invalid_charts"]["count"]),
+        "invalid_boundaries": int(v["invalid_boundaries"]["count"]),
+        "invalid_corners": int(v["invalid_corners"]["count"]),
+        "turning_points": int(v["turning_points"]["count"]),
+        "mean_angle_deg": float(mean_label_angle(normals, labels, field.face_frame)),
+        "nearest_direction_mean_angle_deg": float(mean_label_angle(normals, nearest, field.face_frame)),
+        "hbecvt": info,
+        "unfixed": repair_report["unfixed"] if repair_report else None,
+        "examples": {k: v[k]["examples"] for k in
+                     ("invalid_charts", "invalid_boundaries", "invalid_corners", "turning_points")},
+    }
+    message = "valid polycube labeling" if report["valid"] else (
+        f"labeling still has {report['invalid_charts']} invalid charts, "
+        f"{report['invalid_boundaries']} invalid boundaries, {report['invalid_corners']} invalid corners")
+    return {"face_label": labels, "validity": validity, "report": report, "message": message}
+
+
+def stage_polycube(state, params):
+    raise StageNotAvailableError(
+        "polycube deformation and wireframe straightening (paper Sect. 2.3) are not implemented yet")
+
+
+def stage_basemesh(state, params):
+    raise StageNotAvailableError(
+        "coarse quad base-mesh generation (paper Sect. 2.3) is not implemented yet")
+
+
+def stage_fit(state, params):
+    raise StageNotAvailableError(
+        "shape optimisation of the base mesh (paper Sect. 2.5) is not implemented yet")
+
+
+def stage_patches(state, params):
+    from core.export.bspline import limit_surface_patches
+
+    patches = limit_surface_patches(state["base_mesh"])
+    return {"patches": patches, "report": dict(patches.info)}
+
+
+STAGE_FUNCTIONS = {
+    "intake": stage_intake, "parts": stage_parts, "frames": stage_frames,
+    "labeling": stage_labeling, "polycube": stage_polycube, "basemesh": stage_basemesh,
+    "fit": stage_fit, "patches": stage_patches,
+}
+
+_LAST_CORE_STAGE = {"intake": "intake", "parts": "frames", "labeling": "labeling",
+                    "basemesh": "basemesh", "fit": "fit", "solid": "patches"}
+
+
+def run_stages(state, stages, params, progress=NO_PROGRESS, report=None):
+    """Run ``stages`` in order on ``state``; returns ``(state, report, failed_exception)``."""
+    report = report if report is not None else {"stages": {}}
+    report.setdefault("stages", {})
+    blocked_by = None
+    failed = None
+    for index, name in enumerate(stages):
+        if blocked_by is not None:
+            report["stages"][name] = {"status": "skipped", "seconds": 0.0,
+                                      "message": f"needs the '{blocked_by}' stage"}
+            continue
+        progress.check_cancel()
+        progress.report(name, index / len(stages))
+        start = time.perf_counter()
+        try:
+            output = STAGE_FUNCTIONS[name](state, params)
+        except StageNotAvailableError as exc:
+            entry = {"status": "not_available", "message": str(exc)}
+            blocked_by = name
+        except PolycubeInputError:
+            raise
+        except Exception as exc:  # recorded, then reported as an internal failure
+            entry = {"status": "failed", "message": f"{type(exc).__name__}: {exc}"}
+            blocked_by, failed = name, exc
+        else:
+            entry = {"status": "ok", "message": output.pop("message", "")}
+            stage_report = output.pop("report", {})
+            state.update(output)
+            report[name] = stage_report
+        entry["seconds"] = round(time.perf_counter() - start, 4)
+        report["stages"][name] = entry
+    progress.report("done", 1.0)
+    return state, report, failed
+
+
+def reconstruct(input_path, params=None, progress=NO_PROGRESS, stop_after="solid"):
+    """Run the core stages on a target mesh file.
+
+    Parameters
+    ----------
+    input_path : str or path of the target mesh (STL, OBJ, PLY, OFF).
+    params : ReconstructionParams or dict, defaults are the paper's values.
+    progress : core.progress.Progress for feedback and cancelling.
+    stop_after : one of ``STOP_AFTER_CHOICES``; core stages after it are not run.
+
+    Returns
+    -------
+    PipelineResult; ``report`` has ``input`` and per-stage sections and ``stages``.
+
+    Raises
+    ------
+    PolycubeInputError (InvalidMeshError, ParameterError) for bad input.
+    """
+    from core.errors import ParameterError
+
+    if params is None:
+        params = ReconstructionParams()
+    elif isinstance(params, dict):
+        params = ReconstructionParams.from_dict(params)
+    if stop_after not in STOP_AFTER_CHOICES:
+        raise ParameterError(f"stop_after must be one of {', '.join(STOP_AFTER_CHOICES)}, "
+                             f"got {stop_after!r}")
+    last = CORE_STAGES.index(_LAST_CORE_STAGE[stop_after])
+    started = time.perf_counter()
+    state = {"input_path": str(input_path), "params": params}
+    report = {"parameters": params.to_dict(), "stages": {}}
+    state, report, failed = run_stages(state, CORE_STAGES[:last + 1], params, progress, report)
+    report["input"] = report.pop("intake")
+    report["total_seconds"] = round(time.perf_counter() - started, 4)
+    report["peak_memory_mb"] = round(peak_memory_mb(), 1)
+    return PipelineResult(state, _json_safe(report), failed)
+
+
+def _json_safe(value):
+    """Convert numpy scalars/arrays inside a report to plain Python types."""
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _json_safe(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, float) and value != value:
+        return None
+    return value

@@ -1,0 +1,368 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Quality checks of a result mesh against a target mesh (no FreeCAD).
+
+- watertight, 2-manifold and consistently oriented (manifold3d and trimesh);
+- containment: volumes of (result - target) and (target - result) from manifold3d
+  booleans, as fractions of the target volume;
+- two-sided surface distances: exact point-to-triangle distances from area-weighted
+  samples (plus all vertices for the maxima) of one surface to the other, found with a
+  scipy cKDTree over triangle centroids and an exact pruning bound (trimesh's
+  ``proximity`` needs the optional ``rtree`` package, which is not a dependency).
+
+trimesh and manifold3d are imported only when a check needs them, so this module
+imports in FreeCAD's own Python (which lacks both); a missing one gives an ImportError
+with an install hint.
+"""
+import importlib
+from itertools import chain
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from core.errors import InvalidMeshError, ParameterError
+
+INSTALL_HINT = (
+    "the {name} package is needed for the mesh quality checks; install it into the Python "
+    "that runs this code with `python -m pip install {name}` (for the FreeCAD GUI: "
+    "`python -m pip install --target <UserAppData>/AdditionalPythonPackages {name}`, where "
+    "<UserAppData> is FreeCAD.getUserAppDataDir())")
+
+_NEAREST_TRIANGLES = 8
+_RADIUS_CLASSES = 12
+_POINT_BLOCK = 4096
+
+
+def validate_triangles(V, F, name="mesh"):
+    """Check and coerce a triangle mesh's arrays.
+
+    Parameters
+    ----------
+    V : array_like, (n, 3)
+        Vertex coordinates, finite.
+    F : array_like, (m, 3)
+        Triangle corner indices into ``V``, integers in ``[0, n)``.
+    name : str
+        What to call the mesh in error messages.
+
+    Returns
+    -------
+    V : (n, 3) float64, C-contiguous
+    F : (m, 3) int64, C-contiguous
+
+    Raises
+    ------
+    InvalidMeshError
+        ``reason`` is ``format`` (wrong shape, dtype or index range), ``empty`` or
+        ``non_finite``; the message gives the count and examples.
+    """
+    V = np.asarray(V)
+    F = np.asarray(F)
+    if V.ndim != 2 or V.shape[1] != 3 or not np.issubdtype(V.dtype, np.number):
+        raise InvalidMeshError(f"{name}: vertices must be a numeric (n, 3) array, got shape "
+                               f"{V.shape} dtype {V.dtype}", "format")
+    if F.ndim != 2 or F.shape[1] != 3:
+        raise InvalidMeshError(f"{name}: faces must be an (m, 3) array, got shape {F.shape}",
+                               "format")
+    if len(V) == 0 or len(F) == 0:
+        raise InvalidMeshError(f"{name}: mesh is empty ({len(V)} vertices, {len(F)} faces)",
+                               "empty")
+    integral = np.issubdtype(F.dtype, np.integer) or (
+        np.issubdtype(F.dtype, np.floating) and np.all(F == np.round(F)))
+    if not integral:
+        raise InvalidMeshError(f"{name}: face indices must be integers, got dtype {F.dtype}",
+                               "format")
+    V = np.ascontiguousarray(V, dtype=np.float64)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    bad_v = np.flatnonzero(~np.isfinite(V).all(axis=1))
+    if len(bad_v):
+        raise InvalidMeshError(f"{name}: {len(bad_v)} vertices have non-finite coordinates, "
+                               f"e.g. {bad_v[:5].tolist()}", "non_finite", len(bad_v), bad_v[:5])
+    bad_f = np.flatnonzero(((F < 0) | (F >= len(V))).any(axis=1))
+    if len(bad_f):
+        raise InvalidMeshError(f"{name}: {len(bad_f)} faces index vertices outside [0, {len(V)}), "
+                               f"e.g. faces {bad_f[:5].tolist()}", "format", len(bad_f),
+                               bad_f[:5])
+    return V, F
+
+
+def manifold_report(V, F):
+    """Watertightness and manifoldness figures of a triangle mesh.
+
+    Parameters
+    ----------
+    V : (n, 3) float
+    F : (m, 3) int
+
+    Returns
+    -------
+    dict
+        ``edges_watertight`` (bool, trimesh: every edge has exactly two faces),
+        ``winding_consistent`` (bool, trimesh), ``manifold_status`` (str, manifold3d
+        ``Error`` name, ``"NoError"`` when the mesh is an oriented closed 2-manifold),
+        ``volume`` (float, signed, manifold3d; 0 when not a manifold) and ``genus``
+        (int, None when not a manifold).
+    """
+    trimesh = _optional_module("trimesh")
+    V, F = validate_triangles(V, F)
+    mesh = trimesh.Trimesh(V, F, process=False)
+    solid = _to_manifold(V, F)
+    status = solid.status().name
+    return {
+        "edges_watertight": bool(mesh.is_watertight),
+        "winding_consistent": bool(mesh.is_winding_consistent),
+        "manifold_status": status,
+        "volume": float(solid.volume()),
+        "genus": int(solid.genus()) if status == "NoError" else None,
+    }
+
+
+def is_watertight_manifold(V, F):
+    """True if a triangle mesh is closed, 2-manifold and consistently oriented.
+
+    Both trimesh (every edge shared by exactly two faces, consistent winding) and
+    manifold3d (``Manifold(Mesh64(V, F)).status() == NoError`` and not empty) must agree.
+
+    Parameters
+    ----------
+    V : (n, 3) float
+    F : (m, 3) int
+
+    Raises
+    ------
+    InvalidMeshError
+        The arrays are malformed (see ``validate_triangles``).
+    ImportError
+        manifold3d is not installed (the message says how to install it).
+    """
+    report = manifold_report(V, F)
+    return (report["edges_watertight"] and report["winding_consistent"]
+            and report["manifold_status"] == "NoError" and report["volume"] != 0)
+
+
+def containment(result_V, result_F, target_V, target_F):
+    """How much of the result lies outside the target and how much of the target it misses.
+
+    Parameters
+    ----------
+    result_V, target_V : (n, 3) float
+    result_F, target_F : (m, 3) int
+        Closed, outward-oriented 2-manifold triangle meshes.
+
+    Returns
+    -------
+    dict
+        ``target_volume``, ``result_volume``, ``outside_volume`` = vol(result - target),
+        ``uncovered_volume`` = vol(target - result) (model units cubed), and
+        ``outside_volume_fraction``, ``uncovered_volume_fraction``: those two divided by
+        the target volume.
+
+    Raises
+    ------
+    InvalidMeshError
+        A mesh is not a closed oriented 2-manifold (``non_manifold``) or encloses a
+        negative or zero volume (``orientation``); the message names which mesh.
+    ImportError
+        manifold3d is not installed.
+    """
+    result = _checked_manifold(result_V, result_F, "result")
+    target = _checked_manifold(target_V, target_F, "target")
+    target_volume = float(target.volume())
+    outside = float((result - target).volume())
+    uncovered = float((target - result).volume())
+    return {
+        "target_volume": target_volume,
+        "result_volume": float(result.volume()),
+        "outside_volume": outside,
+        "uncovered_volume": uncovered,
+        "outside_volume_fraction": outside / target_volume,
+        "uncovered_volume_fraction": uncovered / target_volume,
+    }
+
+
+def surface_distances(result_V, result_F, target_V, target_F, samples=20000, seed=0):
+    """Two-sided distances between two triangle surfaces, as fractions of the target size.
+
+    Parameters
+    ----------
+    result_V, target_V : (n, 3) float
+    result_F, target_F : (m, 3) int
+    samples : int
+        Area-weighted random points drawn on each surface (deterministic for a seed).
+    seed : int
+
+    Returns
+    -------
+    dict
+        ``result_to_target_mean`` / ``_max``: distance from points of the result to the
+        target surface; ``target_to_result_mean`` / ``_max`` the other way; ``hausdorff``
+        the larger maximum. All divided by ``bbox_diagonal``, the target's bounding-box
+        diagonal (model units, also returned). Means are area-weighted averages over
+        the random samples; maxima are over the samples and all vertices, so they are
+        lower bounds of the true one-sided Hausdorff distances.
+    """
+    samples = int(samples)
+    if samples < 1:
+        raise ParameterError(f"samples must be a positive integer, got {samples}")
+    result_V, result_F = validate_triangles(result_V, result_F, "result")
+    target_V, target_F = validate_triangles(target_V, target_F, "target")
+    diagonal = float(np.linalg.norm(target_V.max(axis=0) - target_V.min(axis=0)))
+    if not diagonal > 0:
+        raise InvalidMeshError("target: all vertices coincide (zero bounding box)",
+                               "degenerate_faces")
+    rng = np.random.default_rng(seed)
+    result_points = sample_surface(result_V, result_F, samples, rng)
+    target_points = sample_surface(target_V, target_F, samples, rng)
+    forward = point_surface_distance(result_points, target_V, target_F) / diagonal
+    forward_vertices = point_surface_distance(result_V, target_V, target_F) / diagonal
+    backward = point_surface_distance(target_points, result_V, result_F) / diagonal
+    backward_vertices = point_surface_distance(target_V, result_V, result_F) / diagonal
+    report = {
+        "result_to_target_mean": float(forward.mean()),
+        "result_to_target_max": float(max(forward.max(), forward_vertices.max())),
+        "target_to_result_mean": float(backward.mean()),
+        "target_to_result_max": float(max(backward.max(), backward_vertices.max())),
+        "bbox_diagonal": diagonal,
+        "samples": samples,
+        "method": "exact point-to-triangle distance (scipy cKDTree pruning + "
+                  "trimesh.triangles.closest_point) at area-weighted samples and vertices",
+    }
+    report["hausdorff"] = max(report["result_to_target_max"], report["target_to_result_max"])
+    return report
+
+
+def sample_surface(V, F, count, rng):
+    """Uniform area-weighted random points on a triangle mesh.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+    F : (m, 3) int64
+    count : int
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    (count, 3) float64
+    """
+    tri = V[F]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    total = area.sum()
+    if not total > 0:
+        raise InvalidMeshError("mesh has zero surface area", "degenerate_faces", len(F))
+    face = rng.choice(len(F), size=count, p=area / total)
+    a, b = rng.random((2, count))
+    flip = a + b > 1
+    a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
+    t = tri[face]
+    return t[:, 0] + a[:, None] * (t[:, 1] - t[:, 0]) + b[:, None] * (t[:, 2] - t[:, 0])
+
+
+def point_surface_distance(points, V, F):
+    """Exact Euclidean distance from each point to a triangle mesh.
+
+    Parameters
+    ----------
+    points : (p, 3) float
+    V : (n, 3) float64
+    F : (m, 3) int64
+
+    Returns
+    -------
+    (p,) float64
+
+    Notes
+    -----
+    An upper bound ``U`` comes from the nearest triangles by centroid. A triangle with
+    centroid ``c`` and circumscribing radius ``r`` (about ``c``) can only be closer than
+    ``U`` if ``|q - c| <= U + r``; triangles are grouped into radius classes (halving
+    radii) and each class's centroid tree is searched with radius ``U + r_class_max``.
+    Candidates whose lower bound ``max(|q - c| - r, distance to the triangle's plane)``
+    exceeds ``U`` are dropped; every remaining triangle is tested exactly.
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    tri = V[F]
+    centroids = tri.mean(axis=1)
+    radius = np.linalg.norm(tri - centroids[:, None, :], axis=2).max(axis=1)
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    length = np.linalg.norm(normal, axis=1)
+    normal = np.divide(normal, length[:, None], out=np.zeros_like(normal),
+                       where=length[:, None] > 0)
+    classes = _radius_classes(radius)
+    trees = [(members, cKDTree(centroids[members]), radius[members].max()) for members in classes]
+    nearest = cKDTree(centroids)
+    k = min(_NEAREST_TRIANGLES, len(F))
+    out = np.empty(len(points), dtype=np.float64)
+    for start in range(0, len(points), _POINT_BLOCK):
+        block = points[start:start + _POINT_BLOCK]
+        _, near = nearest.query(block, k=k)
+        near = near.reshape(len(block), k)
+        owner = np.repeat(np.arange(len(block)), k)
+        best = _pair_distance(tri[near.ravel()], block[owner]).reshape(len(block), k).min(axis=1)
+        for members, tree, class_radius in trees:
+            lists = tree.query_ball_point(block, r=best + class_radius)
+            lengths = np.fromiter(map(len, lists), np.int64, len(lists))
+            if not lengths.any():
+                continue
+            candidates = members[np.fromiter(chain.from_iterable(lists), np.int64, lengths.sum())]
+            owner = np.repeat(np.arange(len(block)), lengths)
+            # exact lower bounds (bounding sphere, supporting plane) drop most candidates
+            offset = block[owner] - centroids[candidates]
+            lower = np.maximum(np.linalg.norm(offset, axis=1) - radius[candidates],
+                               np.abs(np.einsum("ij,ij->i", offset, normal[candidates])))
+            keep = lower <= best[owner]
+            candidates, owner = candidates[keep], owner[keep]
+            if not len(owner):
+                continue
+            distance = _pair_distance(tri[candidates], block[owner])
+            starts = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
+            hit = owner[starts]
+            best[hit] = np.minimum(best[hit], np.minimum.reduceat(distance, starts))
+        out[start:start + len(block)] = best
+    return out
+
+
+def _pair_distance(triangles, points):
+    """(k,) distance from ``points[i]`` to ``triangles[i]``, both (k, ...) float64."""
+    closest = _optional_module("trimesh.triangles").closest_point(triangles, points)
+    return np.linalg.norm(closest - points, axis=1)
+
+
+def _radius_classes(radius):
+    """Index arrays of triangles grouped by radius: (r_max/2, r_max], (r_max/4, r_max/2], ..."""
+    r_max = radius.max()
+    if not r_max > 0:
+        return [np.arange(len(radius))]
+    level = np.floor(-np.log2(np.maximum(radius, np.finfo(float).tiny) / r_max))
+    level = np.minimum(level, _RADIUS_CLASSES - 1).astype(np.int64)
+    return [np.flatnonzero(level == value) for value in np.unique(level)]
+
+
+def _optional_module(name):
+    """Import ``name`` (a module of trimesh or manifold3d) or raise ImportError with a hint."""
+    try:
+        return importlib.import_module(name)
+    except ImportError as exc:
+        raise ImportError(INSTALL_HINT.format(name=name.split(".")[0])) from exc
+
+
+def _to_manifold(V, F):
+    """``manifold3d.Manifold`` of validated float64 / int64 arrays (double precision)."""
+    manifold3d = _optional_module("manifold3d")
+    mesh = manifold3d.Mesh64(np.ascontiguousarray(V, dtype=np.float64),
+                             np.ascontiguousarray(F, dtype=np.uint64))
+    return manifold3d.Manifold(mesh)
+
+
+def _checked_manifold(V, F, name):
+    """Manifold of a mesh that must be a closed, outward-oriented 2-manifold."""
+    V, F = validate_triangles(V, F, name)
+    solid = _to_manifold(V, F)
+    status = solid.status().name
+    if status != "NoError" or solid.is_empty():
+        raise InvalidMeshError(f"{name}: not a closed oriented 2-manifold (manifold3d: {status})",
+                               "non_manifold")
+    volume = solid.volume()
+    if not volume > 0:
+        raise InvalidMeshError(f"{name}: encloses volume {volume:.6g}; faces must be oriented "
+                               "outward", "orientation")
+    return solid

@@ -1,0 +1,278 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""B-spline patches -> FreeCAD B-rep solid (Part.BSplineSurface faces, shell, solid).
+
+FreeCAD 0.20.2 cannot sew with a chosen tolerance (``sewShape(tol)`` ignores it), so a closed
+shell relies on neighbouring patches having bit-identical boundary poles; ``Part.Shell``
+then merges the coincident boundaries. When the shell does not close, the patches'
+boundary pole rows are matched in numpy to name the patches whose sides have no
+identical partner and the size of the gap to the nearest candidate.
+"""
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+import FreeCAD
+import Part
+
+from core.errors import ExportError
+from core.progress import NO_PROGRESS
+from polycube_wb.convert import shape_to_arrays
+
+_MAX_DEGREE = 25  # OpenCascade's Geom_BSplineSurface::MaxDegree()
+_SIDE_NAMES = ("u=min", "u=max", "v=min", "v=max")
+_MAX_EXAMPLES = 5
+
+
+def patches_to_solid(patchset, progress=NO_PROGRESS):
+    """Build a closed, valid, outward-oriented ``Part.Solid`` from a PatchSet.
+
+    Parameters
+    ----------
+    patchset : core.types.PatchSet
+        ``patches`` is a list of BSplinePatch (poles (nu, nv, 3) float64, OpenCascade-style
+        distinct knots + multiplicities). Neighbouring patches must have bit-identical
+        boundary poles; ``d/du x d/dv`` should point outward (the solid is reversed if
+        its volume comes out negative either way).
+    progress : core.progress.Progress
+        Receives ``report("brep", fraction)``; ``check_cancel()`` is called between steps.
+
+    Returns
+    -------
+    Part.Solid
+        One B-rep face per patch, one closed shell, ``isValid()`` true, volume > 0.
+
+    Raises
+    ------
+    ExportError
+        A patch is malformed (the message names the patch and the field), the faces
+        do not form one closed shell (the message gives the number of free edges and
+        examples of patch sides without an identical partner, with the gap size), or
+        OpenCascade reports the solid invalid.
+    """
+    patches = list(patchset.patches)
+    if not patches:
+        raise ExportError("cannot build a solid: the PatchSet has no patches")
+    for index, patch in enumerate(patches):
+        _check_patch(index, patch)
+    faces = [Part.Face(_surface(patch)) for patch in patches]
+    progress.report("brep", 0.1, "sewing faces into a shell")
+    progress.check_cancel()
+    try:
+        shell = Part.Shell(faces)
+    except Part.OCCError as exc:
+        raise ExportError(_open_shell_message(patches, None, f"Part.Shell failed ({exc})")) from exc
+    if not shell.isClosed():
+        raise ExportError(_open_shell_message(patches, _free_edge_count(shell),
+                                              "the shell is not closed"))
+    progress.report("brep", 0.5, "making the solid")
+    progress.check_cancel()
+    solid = Part.Solid(shell)
+    volume = solid.Volume
+    if volume < 0:
+        solid.reverse()
+        volume = -volume
+    progress.report("brep", 0.8, "checking the solid")
+    progress.check_cancel()
+    if len(solid.Faces) != len(patches):
+        raise ExportError(f"the solid has {len(solid.Faces)} B-rep faces for {len(patches)} "
+                          "patches; expected one face per patch")
+    if len(solid.Shells) != 1 or not solid.Shells[0].isClosed():
+        raise ExportError(f"the solid has {len(solid.Shells)} shells; expected one closed shell")
+    if not volume > 0:
+        raise ExportError(f"the solid encloses no volume ({volume:.6g})")
+    if not solid.isValid():
+        raise ExportError("OpenCascade reports the solid as invalid (BRepCheck_Analyzer); "
+                          f"{len(patches)} patches, volume {volume:.6g}")
+    progress.report("brep", 1.0)
+    return solid
+
+
+def solid_report(solid):
+    """Plain-Python figures about a solid (JSON-serialisable).
+
+    Returns
+    -------
+    dict
+        ``faces`` (int), ``edges`` (int), ``shells`` (int), ``valid`` (bool, from
+        ``isValid()``), ``closed`` (bool, every shell closed), ``volume`` and ``area``
+        (float, model units cubed / squared).
+    """
+    shells = solid.Shells
+    return {
+        "faces": len(solid.Faces),
+        "edges": len(solid.Edges),
+        "shells": len(shells),
+        "valid": bool(solid.isValid()),
+        "closed": bool(shells) and all(shell.isClosed() for shell in shells),
+        "volume": float(solid.Volume),
+        "area": float(solid.Area),
+    }
+
+
+def tessellate(solid, tolerance, angular_deflection=0.5):
+    """Triangulate a solid's faces (see ``polycube_wb.convert.shape_to_arrays``).
+
+    Parameters
+    ----------
+    solid : Part.Shape
+    tolerance : float
+        Maximum linear deviation of the triangles from the surface, model units.
+    angular_deflection : float
+        Maximum angle between neighbouring triangles' normals along a face, radians.
+
+    Returns
+    -------
+    V : (n, 3) float64
+        Vertices, shared between faces along B-rep edges.
+    F : (m, 3) int64
+        Triangles, counter-clockwise seen from outside for an outward solid.
+    """
+    return shape_to_arrays(solid, tolerance, angular_deflection)
+
+
+def _surface(patch):
+    """``Part.BSplineSurface`` of one (already checked) patch."""
+    surface = Part.BSplineSurface()
+    poles = [[FreeCAD.Vector(*p) for p in row] for row in np.asarray(patch.poles).tolist()]
+    surface.buildFromPolesMultsKnots(
+        poles,
+        [int(m) for m in patch.u_mults], [int(m) for m in patch.v_mults],
+        [float(k) for k in patch.u_knots], [float(k) for k in patch.v_knots],
+        False, False, int(patch.degree_u), int(patch.degree_v))
+    return surface
+
+
+def _check_patch(index, patch):
+    """Raise ExportError naming the patch if its arrays cannot define a B-spline surface."""
+    poles = np.asarray(patch.poles)
+    if poles.ndim != 3 or poles.shape[2] != 3 or poles.shape[0] < 2 or poles.shape[1] < 2:
+        raise ExportError(f"patch {index}: poles must have shape (nu, nv, 3) with nu, nv >= 2, "
+                          f"got {poles.shape}")
+    if not np.issubdtype(poles.dtype, np.number) or not np.all(np.isfinite(poles)):
+        bad = int(np.count_nonzero(~np.isfinite(poles.astype(np.float64)).all(axis=2)))
+        raise ExportError(f"patch {index}: {bad} poles are not finite")
+    for direction, count, knots, mults, degree in (
+            ("u", poles.shape[0], patch.u_knots, patch.u_mults, patch.degree_u),
+            ("v", poles.shape[1], patch.v_knots, patch.v_mults, patch.degree_v)):
+        _check_direction(index, direction, count, np.asarray(knots), np.asarray(mults), degree)
+
+
+def _check_direction(index, direction, count, knots, mults, degree):
+    """Validate the knots, multiplicities and degree of one parameter direction."""
+    where = f"patch {index}, {direction} direction"
+    if int(degree) != degree or not 1 <= degree <= _MAX_DEGREE:
+        raise ExportError(f"{where}: degree must be an integer in 1..{_MAX_DEGREE}, got {degree}")
+    degree = int(degree)
+    if knots.ndim != 1 or mults.shape != knots.shape or len(knots) < 2:
+        raise ExportError(f"{where}: knots and mults must be 1-D of equal length >= 2, got "
+                          f"shapes {knots.shape} and {mults.shape}")
+    if not np.all(np.isfinite(knots)) or not np.all(np.diff(knots) > 0):
+        raise ExportError(f"{where}: knots must be finite and strictly increasing, got "
+                          f"{knots.tolist()}")
+    if np.any(mults != np.round(mults)) or np.any(mults < 1) or np.any(mults > degree + 1) \
+            or np.any(mults[1:-1] > degree):
+        raise ExportError(f"{where}: multiplicities must be integers in 1..{degree + 1} "
+                          f"(interior 1..{degree}), got {mults.tolist()}")
+    if int(mults.sum()) != count + degree + 1:
+        raise ExportError(f"{where}: sum of multiplicities {int(mults.sum())} must equal "
+                          f"number of poles + degree + 1 = {count + degree + 1}")
+    if mults[0] != degree + 1 or mults[-1] != degree + 1:
+        raise ExportError(f"{where}: end multiplicities must be degree + 1 = {degree + 1} "
+                          f"(clamped), got {mults[0]} and {mults[-1]}")
+
+
+def _free_edge_count(shell):
+    """Number of non-degenerate edges of ``shell`` bounding only one face."""
+    buckets = {}
+    for face in shell.Faces:
+        for edge in face.Edges:
+            if edge.Degenerated:
+                continue
+            bucket = buckets.setdefault(edge.hashCode(), [])
+            for entry in bucket:
+                if entry[0].isSame(edge):
+                    entry[1] += 1
+                    break
+            else:
+                bucket.append([edge, 1])
+    return sum(1 for bucket in buckets.values() for _, uses in bucket if uses == 1)
+
+
+def _open_shell_message(patches, free_edges, what):
+    """Explain an open shell from the patches' boundary pole rows."""
+    matching = _side_matching(patches)
+    parts = [f"cannot build a closed solid from {len(patches)} patches: {what}"]
+    if free_edges is not None:
+        parts.append(f"{free_edges} free (open) B-rep edges")
+    parts.append(f"{matching['unmatched']} patch sides have no partner side with bit-identical "
+                 "poles")
+    if matching["examples"]:
+        texts = []
+        for patch, side, other, other_side, gap in matching["examples"]:
+            text = f"patch {patch} side {_SIDE_NAMES[side]}"
+            if other is not None:
+                text += (f" (nearest: patch {other} side {_SIDE_NAMES[other_side]}, "
+                         f"max pole distance {gap:.3g})")
+            texts.append(text)
+        parts.append("e.g. " + "; ".join(texts))
+    if matching["overmatched"]:
+        parts.append(f"{matching['overmatched']} boundary curves are shared by more than two "
+                     "patch sides (non-manifold)")
+    if matching["components"] > 1:
+        parts.append(f"the patches form {matching['components']} separate pieces")
+    parts.append("neighbouring patches must share bit-identical boundary poles "
+                 "(FreeCAD 0.20 cannot sew gaps)")
+    return "; ".join(parts)
+
+
+def _side_poles(patch):
+    """The four boundary pole rows of a patch, order of ``_SIDE_NAMES``."""
+    poles = np.asarray(patch.poles, dtype=np.float64)
+    return (poles[0, :], poles[-1, :], poles[:, 0], poles[:, -1])
+
+
+def _side_matching(patches):
+    """Match patch sides by bit-identical boundary poles (in either direction).
+
+    Returns
+    -------
+    dict
+        ``unmatched`` (int): sides whose pole row equals no other side's row;
+        ``examples``: the first few as (patch, side, nearest_patch, nearest_side,
+        max_pole_distance), nearest among other patches' sides with as many poles
+        (None and NaN when there is none); ``overmatched`` (int): rows shared by more
+        than two sides; ``components`` (int): connected pieces of patches joined
+        through matched sides.
+    """
+    sides = [(p, s, row) for p, patch in enumerate(patches)
+             for s, row in enumerate(_side_poles(patch))]
+    groups = {}
+    for index, (_, _, row) in enumerate(sides):
+        key = (len(row), min(row.tobytes(), row[::-1].tobytes()))
+        groups.setdefault(key, []).append(index)
+    lonely = [members[0] for members in groups.values() if len(members) == 1]
+    lonely.sort()
+    pairs = np.array([(sides[members[0]][0], sides[other][0])
+                      for members in groups.values() for other in members[1:]],
+                     dtype=np.int64).reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                       shape=(len(patches), len(patches)))
+    components = connected_components(graph, directed=False)[0]
+    examples = []
+    for i in lonely[:_MAX_EXAMPLES]:
+        patch, side, row = sides[i]
+        others = [j for j, (p, _, r) in enumerate(sides) if p != patch and len(r) == len(row)]
+        if not others:
+            examples.append((patch, side, None, None, float("nan")))
+            continue
+        rows = np.stack([sides[j][2] for j in others])
+        gaps = np.minimum(np.linalg.norm(rows - row, axis=2).max(axis=1),
+                          np.linalg.norm(rows - row[::-1], axis=2).max(axis=1))
+        best = others[int(np.argmin(gaps))]
+        examples.append((patch, side, sides[best][0], sides[best][1], float(gaps.min())))
+    return {
+        "unmatched": len(lonely),
+        "examples": examples,
+        "overmatched": sum(1 for members in groups.values() if len(members) > 2),
+        "components": int(components),
+    }

@@ -1,0 +1,189 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""STEP files: atomic write, read, and a write/read round-trip check.
+
+FreeCAD 0.20.2's ``Part.read`` picks the reader from the file extension, so STEP files
+must end in ``.step`` or ``.stp`` (any case); the temporary file written next to the
+target gets a ``.step`` suffix for the same reason.
+"""
+import os
+import tempfile
+
+import FreeCAD  # noqa: F401  (importing Part before FreeCAD segfaults in 0.20.2)
+import Part
+
+from core.errors import ExportError, PolycubeInputError
+
+STEP_SUFFIXES = (".step", ".stp")
+
+
+class StepPathError(ExportError, PolycubeInputError):
+    """A STEP path is unusable (missing folder, not writable, wrong suffix, is an input)."""
+
+
+def write_step(shape, path, input_paths=(), overwrite=True):
+    """Write ``shape`` to a STEP file atomically.
+
+    The file is written to a temporary file in the target folder, flushed to disk, then
+    moved over ``path`` with ``os.replace``; on any failure the temporary file is removed
+    and an existing ``path`` is left untouched.
+
+    Parameters
+    ----------
+    shape : Part.Shape
+        Non-null shape to export (units: model units, written as millimetres).
+    path : str or os.PathLike
+        Target file, ending in ``.step`` or ``.stp``.
+    input_paths : iterable of str or os.PathLike
+        Files the result was computed from; writing over any of them is refused.
+    overwrite : bool
+        If False, an existing ``path`` is an error.
+
+    Returns
+    -------
+    str
+        Absolute path of the written file.
+
+    Raises
+    ------
+    StepPathError
+        Wrong suffix, folder missing or not writable, ``path`` is a folder, an input
+        file or (with ``overwrite=False``) exists.
+    ExportError
+        The shape is null or OpenCascade fails to write it.
+    """
+    target = _step_path(path)
+    folder = os.path.dirname(target)
+    if not os.path.isdir(folder):
+        raise StepPathError(f"cannot write {target}: folder {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise StepPathError(f"cannot write {target}: folder {folder} is not writable")
+    if os.path.isdir(target):
+        raise StepPathError(f"cannot write {target}: it is a folder")
+    if isinstance(input_paths, (str, bytes, os.PathLike)):
+        input_paths = (input_paths,)
+    for source in input_paths:
+        if _same_file(target, source):
+            raise StepPathError(f"refusing to overwrite the input file {os.fspath(source)} "
+                                f"with the STEP output {target}")
+    if os.path.exists(target) and not overwrite:
+        raise StepPathError(f"{target} exists and overwrite=False")
+    if shape is None or shape.isNull():
+        raise ExportError("cannot write a null shape to STEP")
+    handle, temp = tempfile.mkstemp(prefix="." + os.path.basename(target) + ".",
+                                    suffix=".tmp.step", dir=folder)
+    os.close(handle)
+    try:
+        try:
+            shape.exportStep(temp)
+        except Part.OCCError as exc:
+            raise ExportError(f"OpenCascade failed to write STEP for {target}: {exc}") from exc
+        if os.path.getsize(temp) == 0:
+            raise ExportError(f"OpenCascade wrote an empty STEP file for {target}")
+        with open(temp, "rb+") as stream:
+            os.fsync(stream.fileno())
+        os.chmod(temp, _new_file_mode(target))
+        os.replace(temp, target)
+    finally:
+        if os.path.exists(temp):
+            os.remove(temp)
+    return target
+
+
+def read_step(path):
+    """Read a STEP file into a Part shape.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Existing file ending in ``.step`` or ``.stp``.
+
+    Returns
+    -------
+    Part.Shape
+        A ``Solid`` for a one-solid file, otherwise a ``Compound``.
+
+    Raises
+    ------
+    StepPathError
+        Wrong suffix, or the file does not exist or is not readable.
+    PolycubeInputError
+        The file is not valid STEP or contains no shape.
+    """
+    source = _step_path(path)
+    if not os.path.isfile(source):
+        raise StepPathError(f"cannot read {source}: no such file")
+    if not os.access(source, os.R_OK):
+        raise StepPathError(f"cannot read {source}: not readable")
+    try:
+        shape = Part.read(source)
+    except (RuntimeError, OSError) as exc:
+        raise PolycubeInputError(f"cannot read STEP file {source}: {exc}") from exc
+    if shape.isNull():
+        raise PolycubeInputError(f"STEP file {source} contains no shape")
+    return shape
+
+
+def step_round_trip(shape, path, rel_volume_tol=1e-6):
+    """Compare a shape with what a STEP file holds (faces, validity, volume).
+
+    Parameters
+    ----------
+    shape : Part.Shape
+        The shape that was written.
+    path : str or os.PathLike
+        The STEP file to read back.
+    rel_volume_tol : float
+        Allowed ``|V_read - V_written| / |V_written|``.
+
+    Returns
+    -------
+    dict
+        ``faces_written``, ``faces_read``, ``solids_read`` (int), ``valid_read`` (bool),
+        ``volume_written``, ``volume_read``, ``volume_rel_error`` (float) and ``ok``
+        (bool: same face count, one valid solid per written solid, volume within
+        ``rel_volume_tol``).
+    """
+    read = read_step(path)
+    written_volume = float(shape.Volume)
+    read_volume = float(read.Volume)
+    scale = abs(written_volume) if written_volume else 1.0
+    rel_error = abs(read_volume - written_volume) / scale
+    report = {
+        "faces_written": len(shape.Faces),
+        "faces_read": len(read.Faces),
+        "solids_written": len(shape.Solids),
+        "solids_read": len(read.Solids),
+        "valid_read": bool(read.isValid()),
+        "volume_written": written_volume,
+        "volume_read": read_volume,
+        "volume_rel_error": rel_error,
+    }
+    report["ok"] = (report["faces_read"] == report["faces_written"]
+                    and report["solids_read"] == report["solids_written"]
+                    and report["valid_read"] and rel_error <= rel_volume_tol)
+    return report
+
+
+def _step_path(path):
+    """Absolute path with a STEP suffix, or StepPathError."""
+    text = os.path.abspath(os.fspath(path))
+    if not text.lower().endswith(STEP_SUFFIXES):
+        raise StepPathError(f"STEP file name must end in .step or .stp, got {text}")
+    return text
+
+
+def _same_file(a, b):
+    """True if paths ``a`` and ``b`` name the same file (or the same path if one is missing)."""
+    b = os.fspath(b)
+    if os.path.exists(a) and os.path.exists(b):
+        return os.path.samefile(a, b)
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
+def _new_file_mode(target):
+    """Permission bits for the output: those of the file replaced, else 0o666 minus umask."""
+    if os.path.exists(target):
+        return os.stat(target).st_mode & 0o777
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
