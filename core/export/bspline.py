@@ -1,0 +1,542 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Catmull-Clark limit surface -> bicubic B-spline patches (one per quad).
+
+Method
+------
+The patch mesh ``P`` is the base mesh if it is all quads, else its first
+Catmull-Clark refinement (one patch per level-1 quad, so every patch edge is shared
+by exactly two patches and the B-rep closes without T-junctions).
+
+On a quad of ``P`` the limit surface is a piecewise bicubic polynomial on the dyadic
+"graded" grid with knots ``0, 2^-d, ..., 1/4, 1/2, 3/4, ..., 1 - 2^-d, 1``, C2 across
+every knot line, except in the ``2^-d x 2^-d`` cells at extraordinary corners, where
+it is not polynomial at all. So a clamped bicubic B-spline on that knot vector
+reproduces the limit surface exactly outside those corner cells, and approximates it
+inside them (the error shrinks with ``d``). A quad whose corners all have valence 4
+is one bicubic polynomial (the uniform B-spline of its 16-point 1-ring), reproduced
+exactly by a single Bezier patch.
+
+Knot vectors are per "edge ring" (the strips of quads crossing opposite edges): a
+ring gets the graded knot vector if any of its quads has an extraordinary corner, a
+single Bezier span otherwise, so opposite edges of a quad always carry the same knots
+and neighbours agree on every shared edge.
+
+Poles are fitted to exact limit points (:class:`core.subdivision.limit.LimitEvaluator`)
+at dyadic parameters: first every edge curve once (ends fixed at the exact limit
+points, the pole next to an extraordinary end projected onto the exact limit tangent
+plane so all patches share the normal there), written bit-identically into both
+patches; then the interior poles by a tensor-product least-squares fit with the
+boundary fixed. Where the limit surface lies in the spline space the fit is exact.
+"""
+import numpy as np
+from scipy.interpolate import BSpline
+from scipy.sparse.csgraph import connected_components
+import scipy.sparse as sp
+
+from core.subdivision.catmull_clark import mesh_topology, subdivision_operator
+from core.subdivision.limit import LimitEvaluator, limit_matrices
+from core.types import BSplinePatch, PatchSet, PolyMesh
+
+DEFAULT_DEPTH = 8
+BEZIER = 0
+GRADED = 1
+
+
+# ------------------------------------------------------------------ knots ---
+
+def graded_knots(depth):
+    """(2 depth + 1,) float64 distinct knots 0, 2^-depth, ..., 1/2, ..., 1 - 2^-depth, 1.
+
+    All values are dyadic, so ``1 - t`` is exact and the vector is bit-symmetric.
+    """
+    small = np.ldexp(1.0, -np.arange(depth, 0, -1))
+    return np.concatenate([[0.0], small, 1.0 - small[::-1][1:], [1.0]])
+
+
+def knot_vector(kind, depth):
+    """(knots, mults) of a knot kind (BEZIER or GRADED) in OpenCascade form."""
+    if kind == BEZIER:
+        return np.array([0.0, 1.0]), np.array([4, 4], dtype=np.int64)
+    k = graded_knots(depth)
+    mults = np.ones(len(k), dtype=np.int64)
+    mults[0] = mults[-1] = 4
+    return k, mults
+
+
+def full_knots(knots, mults):
+    """Flat knot vector (sum(mults),) from distinct knots and multiplicities."""
+    return np.repeat(np.asarray(knots, dtype=np.float64), np.asarray(mults, dtype=np.int64))
+
+
+def basis_matrix(knots, mults, t, deriv=0, degree=3):
+    """(len(t), n_poles) float64 values (or derivatives) of the B-spline basis at ``t``."""
+    tk = full_knots(knots, mults)
+    n = len(tk) - degree - 1
+    t = np.asarray(t, dtype=np.float64)
+    return BSpline(tk, np.eye(n), degree, extrapolate=True)(t, nu=deriv)
+
+
+def sample_params(kind, depth, per_span=2):
+    """(s,) float64 dyadic fitting parameters: each knot span split into ``per_span``."""
+    knots = knot_vector(kind, depth)[0]
+    frac = np.arange(per_span) / per_span
+    inner = (knots[:-1, None] + frac[None, :] * np.diff(knots)[:, None]).reshape(-1)
+    return np.concatenate([inner, [1.0]])
+
+
+# ----------------------------------------------------------- patch mesh ---
+
+def patch_mesh(base):
+    """The quad mesh whose faces become patches, and the base face of each.
+
+    Returns
+    -------
+    quads : PolyMesh, ``base`` if all its faces are quads, else its level-1 refinement.
+    face_of_patch : (m_quads,) int64 base face of each quad.
+    level : int, 0 or 1.
+    """
+    sizes = base.face_sizes
+    if (sizes == 4).all():
+        return base, np.arange(base.n_faces, dtype=np.int64), 0
+    fv, fo, S, _ = subdivision_operator(base.face_vertices, base.face_offsets,
+                                        len(base.vertices))
+    quads = PolyMesh(S @ base.vertices, fv, fo)
+    return quads, np.repeat(np.arange(base.n_faces, dtype=np.int64), sizes), 1
+
+
+def _edge_param(corner, t):
+    """Face parameters (u, v) of the point ``t`` along the edge leaving local corner."""
+    one = np.ones_like(t)
+    zero = np.zeros_like(t)
+    u = np.select([corner == 0, corner == 1, corner == 2], [t, one, 1.0 - t], zero)
+    v = np.select([corner == 0, corner == 1, corner == 2], [zero, t, one], 1.0 - t)
+    return u, v
+
+
+class _PatchContext:
+    """Topology and exact-evaluation data shared by fitting and measurement."""
+
+    def __init__(self, base, depth):
+        self.base = base
+        self.depth = int(depth)
+        self.quads, self.face_of_patch, self.level = patch_mesh(base)
+        q = self.quads
+        self.topo = mesh_topology(q.face_vertices, q.face_offsets, len(q.vertices))
+        self.evaluator = LimitEvaluator(q)
+        L, Tu, Tv = limit_matrices(q)
+        self.limit = L @ q.vertices
+        nrm = np.cross(Tu @ q.vertices, Tv @ q.vertices)
+        self.normal = nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
+        self.valence = np.bincount(q.face_vertices, minlength=len(q.vertices))
+        self.is_ev = self.valence != 4
+        m = q.n_faces
+        corner_edge = self.topo.corner_edge.reshape(m, 4)
+        self.corner_edge = corner_edge
+        self.face_has_ev = self.is_ev[q.face_vertices.reshape(m, 4)].any(axis=1)
+        n_edges = len(self.topo.edges)
+        pairs = np.concatenate([corner_edge[:, [0, 2]], corner_edge[:, [1, 3]]])
+        graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                              shape=(n_edges, n_edges))
+        _, ring = connected_components(graph, directed=False)
+        graded_ring = np.zeros(ring.max() + 1, dtype=bool)
+        graded_ring[ring[corner_edge[self.face_has_ev].reshape(-1)]] = True
+        self.edge_kind = np.where(graded_ring[ring], GRADED, BEZIER)
+        self.kind_u = self.edge_kind[corner_edge[:, 0]]
+        self.kind_v = self.edge_kind[corner_edge[:, 3]]
+        # one representative half-edge (corner) per undirected edge
+        first = np.full(n_edges, -1, dtype=np.int64)
+        c = np.arange(len(q.face_vertices), dtype=np.int64)
+        first[self.topo.corner_edge[::-1]] = c[::-1]
+        self.edge_corner = first
+        lo, hi = q.vertices.min(axis=0), q.vertices.max(axis=0)
+        limit_lo, limit_hi = self.limit.min(axis=0), self.limit.max(axis=0)
+        self.bbox_diagonal = float(np.linalg.norm(np.maximum(hi, limit_hi)
+                                                  - np.minimum(lo, limit_lo)))
+
+
+# ------------------------------------------------------------------ fitting ---
+
+def _fit_edge_curves(ctx):
+    """List, per patch-mesh edge, of its (n_poles, 3) curve poles, running from the
+    start vertex of the edge's representative corner (ctx.edge_corner)."""
+    q = ctx.quads
+    curves = {}
+    for kind in (BEZIER, GRADED):
+        edges = np.flatnonzero(ctx.edge_kind == kind)
+        if not len(edges):
+            continue
+        knots, mults = knot_vector(kind, ctx.depth)
+        t = sample_params(kind, ctx.depth, per_span=4 if kind == BEZIER else 2)
+        B = basis_matrix(knots, mults, t)
+        corner = ctx.edge_corner[edges]
+        face = ctx.topo.face_of_corner[corner]
+        local = corner - 4 * face
+        tt = np.broadcast_to(t, (len(edges), len(t)))
+        u, v = _edge_param(np.repeat(local, len(t)), tt.reshape(-1))
+        X = ctx.evaluator.evaluate(np.repeat(face, len(t)), u, v).reshape(len(edges), len(t), 3)
+        start = q.face_vertices[corner]
+        end = q.face_vertices[ctx.topo.next_corner[corner]]
+        Q = np.empty((len(edges), B.shape[1], 3))
+        Q[:, 0] = ctx.limit[start]
+        Q[:, -1] = ctx.limit[end]
+        R = X - B[None, :, 0, None] * Q[:, None, 0] - B[None, :, -1, None] * Q[:, None, -1]
+        Q[:, 1:-1] = np.einsum("it,etk->eik", np.linalg.pinv(B[:, 1:-1]), R)
+        for end_idx, near_idx, vert in ((0, 1, start), (-1, -2, end)):
+            ev = ctx.is_ev[vert]
+            nrm = ctx.normal[vert[ev]]
+            d = Q[ev, near_idx] - Q[ev, end_idx]
+            Q[ev, near_idx] -= np.sum(d * nrm, axis=1, keepdims=True) * nrm
+        curves[kind] = (edges, Q)
+    poles = [None] * len(ctx.topo.edges)
+    for edges, Q in curves.values():
+        for e, qe in zip(edges.tolist(), Q):
+            poles[e] = qe
+    return poles
+
+
+def _boundary_rows(ctx, edge_poles, faces):
+    """Boundary curves of ``faces`` in patch orientation: list of 4 (len(faces), n, 3)."""
+    q = ctx.quads
+    out = []
+    for k in range(4):
+        e = ctx.corner_edge[faces, k]
+        start = q.face_vertices[4 * faces + k]
+        rep_start = q.face_vertices[ctx.edge_corner[e]]
+        rows = np.stack([edge_poles[i] for i in e.tolist()])
+        same = rep_start == start
+        rows = np.where(same[:, None, None], rows, rows[:, ::-1])
+        out.append(rows)
+    return out
+
+
+def _fit_patches(ctx, edge_poles):
+    q = ctx.quads
+    m = q.n_faces
+    patches = [None] * m
+    for ku in (BEZIER, GRADED):
+        for kv in (BEZIER, GRADED):
+            faces = np.flatnonzero((ctx.kind_u == ku) & (ctx.kind_v == kv))
+            if not len(faces):
+                continue
+            knu, mu = knot_vector(ku, ctx.depth)
+            knv, mv = knot_vector(kv, ctx.depth)
+            su = sample_params(ku, ctx.depth, per_span=4 if ku == BEZIER else 2)
+            sv = sample_params(kv, ctx.depth, per_span=4 if kv == BEZIER else 2)
+            Bu = basis_matrix(knu, mu, su)
+            Bv = basis_matrix(knv, mv, sv)
+            nu, nv = Bu.shape[1], Bv.shape[1]
+            rows = _boundary_rows(ctx, edge_poles, faces)
+            P = np.zeros((len(faces), nu, nv, 3))
+            P[:, :, 0] = rows[0]
+            P[:, -1, :] = rows[1]
+            P[:, :, -1] = rows[2][:, ::-1]
+            P[:, 0, :] = rows[3][:, ::-1]
+            U, V = np.meshgrid(su, sv, indexing="ij")
+            Au = np.linalg.pinv(Bu[:, 1:-1])
+            Av = np.linalg.pinv(Bv[:, 1:-1])
+            for chunk in np.array_split(np.arange(len(faces)), max(1, len(faces) // 256)):
+                f = faces[chunk]
+                X = ctx.evaluator.evaluate(np.repeat(f, U.size), np.tile(U.reshape(-1), len(f)),
+                                           np.tile(V.reshape(-1), len(f)))
+                X = X.reshape(len(f), len(su), len(sv), 3)
+                Pb = P[chunk]
+                R = X - _tensor_apply(Bu, Pb, Bv)
+                P[chunk, 1:-1, 1:-1] = _tensor_apply(Au, R, Av)
+            for idx, f in enumerate(faces.tolist()):
+                patches[f] = BSplinePatch(P[idx], knu, mu, knv, mv)
+    return patches
+
+
+def limit_surface_patches(base, depth=DEFAULT_DEPTH, measure=True):
+    """Bicubic B-spline patches of the Catmull-Clark limit surface of ``base``.
+
+    Parameters
+    ----------
+    base : PolyMesh, closed 2-manifold polygon mesh (validated by the caller).
+    depth : int >= 1, grading depth ``d``: corner cells at extraordinary vertices
+        are ``2^-d`` of a patch wide (default 8).
+    measure : bool, if True fill ``info`` with the approximation and continuity
+        figures (costs about as much as the fit).
+
+    Returns
+    -------
+    PatchSet
+        ``patches[i]`` covers face ``i`` of the patch mesh (:func:`patch_mesh`);
+        ``face_of_patch[i]`` is its base face. ``d/du x d/dv`` points outward.
+        ``info`` holds ``patch_level``, ``n_patches``, ``n_extraordinary_vertices``,
+        ``n_graded_patches``, ``n_poles``, ``depth``, ``bbox_diagonal`` and, if
+        ``measure``, ``max_error``, ``max_error_rel``, ``max_ev_error``,
+        ``max_ev_error_rel``, ``normal_jump_max_deg``, ``normal_jump_p95_deg``,
+        ``normal_jump_ev_max_deg``.
+    """
+    if depth < 1:
+        raise ValueError(f"depth must be >= 1, got {depth}")
+    ctx = _PatchContext(base, depth)
+    edge_poles = _fit_edge_curves(ctx)
+    patches = _fit_patches(ctx, edge_poles)
+    info = {
+        "patch_level": int(ctx.level),
+        "n_patches": len(patches),
+        "n_extraordinary_vertices": int(ctx.is_ev.sum()),
+        "n_graded_patches": int(((ctx.kind_u == GRADED) | (ctx.kind_v == GRADED)).sum()),
+        "n_poles": int(sum(p.poles.shape[0] * p.poles.shape[1] for p in patches)),
+        "depth": int(depth),
+        "bbox_diagonal": ctx.bbox_diagonal,
+    }
+    result = PatchSet(patches, ctx.face_of_patch, info)
+    if measure:
+        info.update(patch_deviation(result, base, _context=ctx))
+        info.update(normal_jumps(result, base, _context=ctx))
+    return result
+
+
+# ---------------------------------------------------------------- evaluation ---
+
+def evaluate_patches(patches, u, v, du=0, dv=0):
+    """Points (or partial derivatives) of patches sharing one knot layout.
+
+    Parameters
+    ----------
+    patches : list of BSplinePatch with identical knots and multiplicities.
+    u, v : (s,) float64 parameters, evaluated on every patch.
+    du, dv : derivative orders.
+
+    Returns
+    -------
+    (len(patches), s, 3) float64
+    """
+    p0 = patches[0]
+    Bu = basis_matrix(p0.u_knots, p0.u_mults, u, du)
+    Bv = basis_matrix(p0.v_knots, p0.v_mults, v, dv)
+    P = np.stack([p.poles for p in patches])
+    n, nu, nv, _ = P.shape
+    tmp = np.matmul(np.swapaxes(P, 1, 2).reshape(n, nv, nu * 3).swapaxes(1, 2), Bv.T)
+    tmp = tmp.reshape(n, nu, 3, len(v))
+    return np.einsum("si,niks->nsk", Bu, tmp)
+
+
+def evaluate_patch_grid(patches, su, sv, du=0, dv=0):
+    """(len(patches), len(su), len(sv), 3) points of same-layout patches on a grid."""
+    p0 = patches[0]
+    Bu = basis_matrix(p0.u_knots, p0.u_mults, su, du)
+    Bv = basis_matrix(p0.v_knots, p0.v_mults, sv, dv)
+    return _tensor_apply(Bu, np.stack([p.poles for p in patches]), Bv)
+
+
+def _tensor_apply(A, P, B):
+    """(n, a, b, 3) = A @ P[n, :, :, k] @ B.T for every patch n and coordinate k."""
+    n, nu, nv, _ = P.shape
+    tmp = np.matmul(A, P.reshape(n, nu, nv * 3)).reshape(n, A.shape[0], nv, 3)
+    return np.matmul(np.swapaxes(tmp, 2, 3), B.T).swapaxes(2, 3)
+
+
+def _layout_groups(patches):
+    groups = {}
+    for i, p in enumerate(patches):
+        key = (p.u_knots.tobytes(), p.u_mults.tobytes(), p.v_knots.tobytes(),
+               p.v_mults.tobytes())
+        groups.setdefault(key, []).append(i)
+    return [np.array(g, dtype=np.int64) for g in groups.values()]
+
+
+def _measure_params(patch_knots, per_span=3, depth_extra=4):
+    """Parameters in every span plus geometric points into the end spans."""
+    k = np.asarray(patch_knots, dtype=np.float64)
+    frac = np.arange(per_span) / per_span
+    t = (k[:-1, None] + frac[None, :] * np.diff(k)[:, None]).reshape(-1)
+    first = k[1]
+    geo = first * np.ldexp(1.0, -np.arange(1, depth_extra + 1))
+    geo = np.concatenate([geo, 0.75 * geo])
+    return np.unique(np.concatenate([t, [1.0], geo, 1.0 - geo]))
+
+
+def patch_deviation(patchset, base, dense="ev", _context=None):
+    """Largest distance between patches and the exact limit surface at equal parameters.
+
+    Patch points are compared with exact limit points at the same (u, v), which
+    bounds the geometric distance from above.
+
+    Parameters
+    ----------
+    patchset : PatchSet from :func:`limit_surface_patches` for ``base``.
+    base : PolyMesh
+    dense : ``"ev"`` (default) samples patches with an extraordinary corner in every
+        knot span and geometrically into their end spans, and the other patches on
+        a 5 x 5 grid (they are exact); ``"all"`` samples every patch densely.
+
+    Returns
+    -------
+    dict with ``max_error`` (model units), ``max_error_rel`` (fraction of the bounding
+    box diagonal), ``max_ev_error`` / ``max_ev_error_rel`` over patches with an
+    extraordinary corner (0 if none), and ``rms_error``.
+    """
+    ctx = _context or _PatchContext(base, 1)
+    patches = patchset.patches
+    worst = np.zeros(len(patches))
+    sq_sum, count = 0.0, 0
+    dense_mask = ctx.face_has_ev if dense == "ev" else np.ones(len(patches), dtype=bool)
+    for g in _layout_groups(patches):
+        p0 = patches[g[0]]
+        for is_dense in (True, False):
+            sub = g[dense_mask[g] == is_dense]
+            if not len(sub):
+                continue
+            if is_dense:
+                su, sv = _measure_params(p0.u_knots), _measure_params(p0.v_knots)
+            else:
+                su = sv = np.linspace(0.0, 1.0, 5)
+            U, V = np.meshgrid(su, sv, indexing="ij")
+            U, V = U.reshape(-1), V.reshape(-1)
+            for chunk in np.array_split(sub, max(1, len(sub) * len(U) // 200000)):
+                S = evaluate_patch_grid([patches[i] for i in chunk], su, sv)
+                S = S.reshape(len(chunk), -1, 3)
+                X = ctx.evaluator.evaluate(np.repeat(chunk, len(U)), np.tile(U, len(chunk)),
+                                           np.tile(V, len(chunk))).reshape(S.shape)
+                d = np.linalg.norm(S - X, axis=2)
+                worst[chunk] = d.max(axis=1)
+                sq_sum += float(np.sum(d ** 2))
+                count += d.size
+    diag = ctx.bbox_diagonal
+    ev_worst = float(worst[ctx.face_has_ev].max()) if ctx.face_has_ev.any() else 0.0
+    return {
+        "max_error": float(worst.max()),
+        "max_error_rel": float(worst.max() / diag),
+        "max_ev_error": ev_worst,
+        "max_ev_error_rel": ev_worst / diag,
+        "rms_error": float(np.sqrt(sq_sum / max(count, 1))),
+    }
+
+
+def _patch_normals_on_edges(patches, faces, corner, t):
+    """Unit normals of patches ``faces`` on their boundary edge leaving ``corner``."""
+    out = np.empty((len(faces), len(t), 3))
+    for g in _layout_groups([patches[f] for f in faces]):
+        sel = [patches[faces[i]] for i in g]
+        for k in range(4):
+            mask = corner[g] == k
+            if not mask.any():
+                continue
+            u, v = _edge_param(np.full(len(t), k), t)
+            sub = [sel[i] for i in np.flatnonzero(mask)]
+            Su = evaluate_patches(sub, u, v, 1, 0)
+            Sv = evaluate_patches(sub, u, v, 0, 1)
+            out[g[mask]] = np.cross(Su, Sv)
+    nrm = np.linalg.norm(out, axis=2, keepdims=True)
+    return out / np.maximum(nrm, 1e-300)
+
+
+def normal_jumps(patchset, base, samples=None, _context=None):
+    """Angles between the two patches' normals along every shared patch edge.
+
+    Parameters
+    ----------
+    patchset : PatchSet from :func:`limit_surface_patches` for ``base``.
+    base : PolyMesh
+    samples : optional (s,) parameters along each edge in [0, 1]; default: the
+        measuring parameters of a graded knot vector (dense near both ends).
+
+    Returns
+    -------
+    dict with ``normal_jump_max_deg``, ``normal_jump_p95_deg`` (over all samples on
+    all edges) and ``normal_jump_ev_max_deg`` (edges with an extraordinary end).
+    """
+    ctx = _context or _PatchContext(base, 1)
+    q = ctx.quads
+    topo = ctx.topo
+    c0 = ctx.edge_corner
+    c1 = topo.twin[c0]
+    ev_edge = ctx.is_ev[q.face_vertices[c0]] | ctx.is_ev[q.face_vertices[c1]]
+    if samples is None:
+        dense_t = _measure_params(graded_knots(max(ctx.depth, DEFAULT_DEPTH)))
+        plain_t = np.linspace(0.0, 1.0, 9)
+    else:
+        dense_t = plain_t = np.asarray(samples, dtype=np.float64)
+    angles, ev_angles = [], []
+    for mask, t in ((ev_edge, dense_t), (~ev_edge, plain_t)):
+        if not mask.any():
+            continue
+        e0, e1 = c0[mask], c1[mask]
+        f0, f1 = topo.face_of_corner[e0], topo.face_of_corner[e1]
+        n0 = _patch_normals_on_edges(patchset.patches, f0, e0 - 4 * f0, t)
+        n1 = _patch_normals_on_edges(patchset.patches, f1, e1 - 4 * f1, 1.0 - t)
+        ang = np.degrees(np.arccos(np.clip(np.sum(n0 * n1, axis=2), -1.0, 1.0)))
+        angles.append(ang.reshape(-1))
+        if mask is ev_edge:
+            ev_angles.append(ang.reshape(-1))
+    ang = np.concatenate(angles)
+    ev_ang = np.concatenate(ev_angles) if ev_angles else np.zeros(1)
+    return {
+        "normal_jump_max_deg": float(ang.max()),
+        "normal_jump_p95_deg": float(np.percentile(ang, 95)),
+        "normal_jump_ev_max_deg": float(ev_ang.max()),
+    }
+
+
+# --------------------------------------------------------------- tessellation ---
+
+def _tessellation_params(patch_knots, resolution):
+    """Every knot span split into ceil(span * resolution) equal parts (symmetric, exact
+    on dyadic knots for power-of-two ``resolution``)."""
+    k = np.asarray(patch_knots, dtype=np.float64)
+    parts = np.maximum(1, np.ceil(np.diff(k) * resolution)).astype(np.int64)
+    pieces = [k[i] + (k[i + 1] - k[i]) * np.arange(p) / p for i, p in enumerate(parts)]
+    return np.concatenate(pieces + [[1.0]])
+
+
+def tessellate_patches(patchset, resolution=16, weld_tolerance=1e-9):
+    """Watertight triangle mesh of a PatchSet.
+
+    Each patch is sampled on a grid (every knot span split into
+    ``ceil(span * resolution)`` parts); neighbouring patches share their knots along
+    common edges, so their boundary samples coincide and are welded.
+
+    Parameters
+    ----------
+    patchset : PatchSet
+    resolution : int, samples per unit of patch parameter (about ``2 resolution**2``
+        triangles per patch).
+    weld_tolerance : float, relative to the bounding-box diagonal of the samples.
+
+    Returns
+    -------
+    vertices : (n, 3) float64
+    faces : (t, 3) int64, counter-clockwise seen from outside.
+    """
+    from scipy.spatial import cKDTree
+
+    pts, tris = [], []
+    base = 0
+    for g in _layout_groups(patchset.patches):
+        p0 = patchset.patches[g[0]]
+        su = _tessellation_params(p0.u_knots, resolution)
+        sv = _tessellation_params(p0.v_knots, resolution)
+        S = evaluate_patch_grid([patchset.patches[i] for i in g], su, sv)
+        a, b = len(su), len(sv)
+        idx = np.arange(a * b).reshape(a, b)
+        c00, c10 = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel()
+        c11, c01 = idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+        local = np.concatenate([np.stack([c00, c10, c11], 1), np.stack([c00, c11, c01], 1)])
+        offs = base + a * b * np.arange(len(g))
+        tris.append((local[None] + offs[:, None, None]).reshape(-1, 3))
+        pts.append(S.reshape(-1, 3))
+        base += a * b * len(g)
+    P = np.concatenate(pts)
+    T = np.concatenate(tris)
+    diag = float(np.linalg.norm(P.max(axis=0) - P.min(axis=0)))
+    pairs = cKDTree(P).query_pairs(weld_tolerance * diag, output_type="ndarray")
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                          shape=(len(P), len(P)))
+    _, label = connected_components(graph, directed=False)
+    uniq, first = np.unique(label, return_index=True)
+    V = P[first]
+    F = np.searchsorted(uniq, label)[T]
+    keep = (F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])
+    return V, F[keep]
+
+
+def triangle_mesh_volume(vertices, faces):
+    """Enclosed volume of a closed, outward-oriented triangle mesh (divergence theorem)."""
+    V = np.asarray(vertices, dtype=np.float64)
+    V = V - V.mean(axis=0)
+    a, b, c = V[faces[:, 0]], V[faces[:, 1]], V[faces[:, 2]]
+    return float(np.sum(a * np.cross(b, c))) / 6.0

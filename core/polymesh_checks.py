@@ -1,0 +1,127 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Validation of closed polygon base meshes (subdivision cages).
+
+:func:`check_polymesh` raises :class:`core.errors.InvalidMeshError` naming the first
+problem found, how many items have it and a few examples; it returns nothing.
+"""
+import numpy as np
+from scipy.sparse.csgraph import connected_components
+import scipy.sparse as sp
+
+from core.errors import InvalidMeshError
+
+AREA_TOLERANCE = 1e-14
+"""Faces with area below this times the squared bounding-box diagonal are degenerate."""
+
+
+def _fail(what, reason, bad, examples):
+    bad = np.asarray(bad)
+    count = int(bad.sum()) if bad.dtype == bool else int(len(bad))
+    ex = [e.tolist() if hasattr(e, "tolist") else e for e in list(examples)[:5]]
+    raise InvalidMeshError(f"base mesh {what}: {count} found, e.g. {ex}", reason=reason,
+                           count=count, examples=ex)
+
+
+def check_polymesh(mesh):
+    """Check that ``mesh`` is a closed, 2-manifold, consistently outward-oriented polygon mesh.
+
+    Parameters
+    ----------
+    mesh : core.types.PolyMesh
+
+    Raises
+    ------
+    InvalidMeshError
+        with ``reason`` one of ``empty`` (no faces or vertices), ``format`` (bad
+        offsets or vertex indices out of range), ``non_finite`` (NaN/inf
+        coordinates), ``degenerate_faces`` (fewer than 3 corners, a repeated corner or
+        zero area), ``open`` (an edge with one face), ``non_manifold`` (an edge with
+        more than two faces, or a vertex whose faces form several fans),
+        ``orientation`` (neighbouring faces disagree, or all faces point inward).
+    """
+    V = np.asarray(mesh.vertices, dtype=np.float64)
+    fv = np.asarray(mesh.face_vertices, dtype=np.int64)
+    fo = np.asarray(mesh.face_offsets, dtype=np.int64)
+    if V.ndim != 2 or V.shape[1] != 3 or len(V) == 0 or len(fo) < 2 or len(fv) == 0:
+        raise InvalidMeshError("base mesh is empty: it needs vertices (n, 3) and faces",
+                               reason="empty")
+    if fo[0] != 0 or fo[-1] != len(fv) or (np.diff(fo) < 0).any():
+        raise InvalidMeshError("base mesh face offsets do not describe face_vertices",
+                               reason="format")
+    out_of_range = (fv < 0) | (fv >= len(V))
+    if out_of_range.any():
+        _fail("has corner indices outside 0..n_vertices-1", "format",
+              out_of_range, np.flatnonzero(out_of_range))
+    finite = np.isfinite(V).all(axis=1)
+    if not finite.all():
+        _fail("has vertices with NaN or infinite coordinates", "non_finite", ~finite,
+              np.flatnonzero(~finite))
+    sizes = np.diff(fo)
+    small = sizes < 3
+    if small.any():
+        _fail("has faces with fewer than 3 corners", "degenerate_faces", small,
+              np.flatnonzero(small))
+    m = len(sizes)
+    face = np.repeat(np.arange(m), sizes)
+    key = face * len(V) + fv
+    order = np.argsort(key, kind="stable")
+    dup = np.zeros(len(fv), dtype=bool)
+    dup[order[1:]] = key[order[1:]] == key[order[:-1]]
+    if dup.any():
+        faces_dup = np.unique(face[dup])
+        _fail("has faces that repeat a corner vertex", "degenerate_faces", faces_dup, faces_dup)
+    nxt = np.arange(len(fv)) + 1
+    nxt[fo[1:] - 1] = fo[:-1]
+    newell = np.zeros((m, 3))
+    np.add.at(newell, face, np.cross(V[fv], V[fv[nxt]]))
+    area = 0.5 * np.linalg.norm(newell, axis=1)
+    diag2 = float(np.sum((V.max(axis=0) - V.min(axis=0)) ** 2))
+    zero = area <= AREA_TOLERANCE * max(diag2, 1e-300)
+    if zero.any():
+        _fail("has faces of zero area", "degenerate_faces", zero, np.flatnonzero(zero))
+
+    a, b = fv, fv[nxt]
+    n = np.int64(len(V))
+    und = np.minimum(a, b) * n + np.maximum(a, b)
+    uniq, counts = np.unique(und, return_counts=True)
+    edges = np.stack([uniq // n, uniq % n], axis=1)
+    if (counts == 1).any():
+        bad = counts == 1
+        _fail("is open (edges with a single face)", "open", bad, edges[bad])
+    if (counts > 2).any():
+        bad = counts > 2
+        _fail("has non-manifold edges (more than two faces)", "non_manifold", bad, edges[bad])
+    directed = a * n + b
+    d_sorted = np.sort(directed)
+    same_dir = d_sorted[1:] == d_sorted[:-1]
+    if same_dir.any():
+        dups = d_sorted[1:][same_dir]
+        _fail("has inconsistently oriented neighbouring faces (edges used twice in the "
+              "same direction)", "orientation", dups,
+              np.stack([dups // n, dups % n], axis=1))
+    # vertex fans: rotate half-edges around their start vertex, count cycles per vertex
+    order = np.argsort(directed)
+    twin_key = b * n + a
+    twin = order[np.searchsorted(directed[order], twin_key)]
+    prev = np.arange(len(fv)) - 1
+    prev[fo[:-1]] = fo[1:] - 1
+    rot = twin[prev]
+    graph = sp.coo_matrix((np.ones(len(fv)), (np.arange(len(fv)), rot)),
+                          shape=(len(fv), len(fv)))
+    _, comp = connected_components(graph, directed=False)
+    fans = np.unique(np.stack([fv, comp], axis=1), axis=0)
+    fan_count = np.bincount(fans[:, 0], minlength=len(V))
+    if (fan_count > 1).any():
+        bad = fan_count > 1
+        _fail("has non-manifold vertices (faces meet only at the vertex)", "non_manifold",
+              bad, np.flatnonzero(bad))
+    centroid = V.mean(axis=0)
+    tri_a = V[fv[fo[:-1]][face]] - centroid
+    tri_b = V[fv] - centroid
+    tri_c = V[fv[nxt]] - centroid
+    volume = float(np.sum(tri_a * np.cross(tri_b, tri_c))) / 6.0
+    if volume < 0:
+        raise InvalidMeshError(
+            f"base mesh faces point inward: all {m} faces are clockwise seen from outside "
+            f"(enclosed volume {volume:.6g} < 0); reverse the corner order of every face",
+            reason="orientation", count=m, examples=[0])
