@@ -1,0 +1,2 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Polycube segmentation of a target mesh: parts, frames, labels and their validity."""

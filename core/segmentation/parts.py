@@ -1,0 +1,526 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Part segmentation of a closed triangle mesh (paper Sect. 2.1).
+
+A segmentation is a per-face array ``face_part`` (m,) int32 with parts 0 .. P-1, each
+part non-empty and edge-connected. Three ways to get one:
+
+- :func:`single_part`: the whole mesh is one part;
+- :func:`parts_from_user`: a per-face array, face-index groups or cutting planes;
+- :func:`automatic_parts`: curve-skeleton pieces merged while one frame fits them.
+
+:func:`interfaces` extracts the edge loops between parts.
+"""
+import heapq
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from core.errors import ParameterError
+from core.mesh_topology import edge_faces, unique_edges
+from core.segmentation.frames import cubic_energy, frame_from_moments, group_moments
+from core.segmentation.skeleton import choose_pitch, skeleton_pieces
+
+MIN_PART_FACES = 12
+"""Fewest faces an automatic part may have (five or six charts of two triangles)."""
+
+
+def _arrays(mesh):
+    return (np.asarray(mesh.vertices, dtype=np.float64),
+            np.asarray(mesh.faces, dtype=np.int64))
+
+
+def face_neighbours(faces):
+    """(m, 3) int64 face across each edge (corner k to k+1) of every face, -1 on open edges."""
+    faces = np.asarray(faces, dtype=np.int64)
+    _, he_edge = unique_edges(faces)
+    _, faces_of_edge = edge_faces(faces)
+    own = np.repeat(np.arange(len(faces)), 3)
+    fe = faces_of_edge[he_edge]
+    return np.where(fe[:, 0] == own, fe[:, 1], fe[:, 0]).reshape(-1, 3)
+
+
+def adjacent_face_pairs(faces):
+    """(p, 2) int64 pairs of faces sharing an edge (each interior edge once)."""
+    _, fe = edge_faces(np.asarray(faces, dtype=np.int64))
+    return fe[(fe >= 0).all(axis=1)]
+
+
+def part_components(pairs, face_part):
+    """(m,) int64 id of the edge-connected component of each face within its part,
+    and the number of components; ``pairs`` from :func:`adjacent_face_pairs`."""
+    face_part = np.asarray(face_part)
+    same = pairs[face_part[pairs[:, 0]] == face_part[pairs[:, 1]]]
+    m = len(face_part)
+    graph = csr_matrix((np.ones(len(same)), (same[:, 0], same[:, 1])), shape=(m, m))
+    n, comp = connected_components(graph, directed=False)
+    return comp.astype(np.int64), n
+
+
+def canonical_order(face_part):
+    """Renumber parts 0 .. P-1 by the smallest face index each contains; (m,) int32."""
+    face_part = np.asarray(face_part, dtype=np.int64)
+    uniq, first = np.unique(face_part, return_index=True)
+    rank = np.empty(len(uniq), dtype=np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(uniq))
+    return rank[np.searchsorted(uniq, face_part)].astype(np.int32)
+
+
+def validate_face_part(mesh, face_part):
+    """Check a per-face part array and return it as (m,) int32.
+
+    Raises
+    ------
+    ParameterError
+        Wrong length, non-integer values, negative ids, an empty part id (ids must be
+        0 .. P-1) or a part that is not edge-connected; the message names the part
+        and the counts.
+    """
+    _, faces = _arrays(mesh)
+    m = len(faces)
+    arr = np.asarray(face_part)
+    if arr.ndim != 1 or len(arr) != m:
+        raise ParameterError(f"face_part must have one entry per face ({m}), got shape {arr.shape}")
+    if arr.dtype.kind not in "iu":
+        bad = (np.flatnonzero(~np.isfinite(arr) | (arr != np.round(arr)))
+               if arr.dtype.kind == "f" else np.arange(m))
+        if len(bad):
+            raise ParameterError(f"face_part must hold integers; {len(bad)} entries are not "
+                                 f"(e.g. face {bad[0]})")
+    arr = arr.astype(np.int64)
+    if m and arr.min() < 0:
+        neg = np.flatnonzero(arr < 0)
+        raise ParameterError(f"face_part has {len(neg)} negative part ids (e.g. face {neg[0]})")
+    n_parts = int(arr.max()) + 1 if m else 0
+    counts = np.bincount(arr, minlength=n_parts)
+    empty = np.flatnonzero(counts == 0)
+    if len(empty):
+        raise ParameterError(f"part ids must be 0..{n_parts - 1} without gaps; {len(empty)} "
+                             f"parts are empty (e.g. part {empty[0]})")
+    comp, _ = part_components(adjacent_face_pairs(faces), arr)
+    n_comp = np.bincount(arr[np.unique(comp, return_index=True)[1]], minlength=n_parts)
+    split = np.flatnonzero(n_comp > 1)
+    if len(split):
+        p = split[0]
+        raise ParameterError(f"{len(split)} parts are not edge-connected: part {p} has "
+                             f"{n_comp[p]} separate pieces")
+    return arr.astype(np.int32)
+
+
+def single_part(mesh):
+    """(m,) int32 zeros: the whole mesh is one part."""
+    return np.zeros(len(np.asarray(mesh.faces)), dtype=np.int32)
+
+
+def split_disconnected(faces, face_part):
+    """Give every edge-connected piece of every part its own part; canonical (m,) int32."""
+    comp, _ = part_components(adjacent_face_pairs(faces), np.asarray(face_part, dtype=np.int64))
+    return canonical_order(comp)
+
+
+def parts_from_face_groups(mesh, groups):
+    """Parts from a list of face-index lists (group k -> part k); every face exactly once."""
+    _, faces = _arrays(mesh)
+    m = len(faces)
+    if len(groups) == 0:
+        raise ParameterError("face groups are empty: give at least one group")
+    out = np.full(m, -1, dtype=np.int64)
+    seen = np.zeros(m, dtype=np.int64)
+    for k, grp in enumerate(groups):
+        idx = np.asarray(grp)
+        if idx.ndim != 1 or (len(idx) and idx.dtype.kind not in "iu"):
+            raise ParameterError(f"face group {k} must be a flat list of integer face indices")
+        idx = idx.astype(np.int64)
+        if len(idx) == 0:
+            raise ParameterError(f"face group {k} is empty")
+        bad = idx[(idx < 0) | (idx >= m)]
+        if len(bad):
+            raise ParameterError(f"face group {k} has {len(bad)} indices outside 0..{m - 1} "
+                                 f"(e.g. {bad[0]})")
+        np.add.at(seen, idx, 1)
+        out[idx] = k
+    twice = np.flatnonzero(seen > 1)
+    if len(twice):
+        raise ParameterError(f"{len(twice)} faces are listed more than once (e.g. face {twice[0]})")
+    missing = np.flatnonzero(seen == 0)
+    if len(missing):
+        raise ParameterError(f"{len(missing)} faces are in no group (e.g. face {missing[0]}); "
+                             f"every face must belong to exactly one group")
+    return validate_face_part(mesh, out)
+
+
+def parts_from_planes(mesh, planes):
+    """Parts from cutting planes ``[(point, normal), ...]``.
+
+    A face goes to the cell given by the signs of ``(centroid - point) . normal`` over all
+    planes; every cell is then split into edge-connected parts. Canonical numbering.
+    """
+    vertices, faces = _arrays(mesh)
+    centroid = vertices[faces].mean(axis=1)
+    code = np.zeros(len(faces), dtype=np.int64)
+    for k, plane in enumerate(planes):
+        try:
+            point, normal = (np.asarray(x, dtype=np.float64) for x in plane)
+        except (TypeError, ValueError) as exc:
+            raise ParameterError(f"plane {k} must be (point, normal), got {plane!r}") from exc
+        if point.shape != (3,) or normal.shape != (3,) or not np.isfinite([point, normal]).all():
+            raise ParameterError(f"plane {k} needs a finite 3-D point and normal")
+        if np.linalg.norm(normal) == 0:
+            raise ParameterError(f"plane {k} has a zero normal")
+        code = code * 2 + ((centroid - point) @ normal >= 0)
+    return split_disconnected(faces, code)
+
+
+def parts_from_user(mesh, spec):
+    """Parts chosen by the user.
+
+    Parameters
+    ----------
+    mesh : object with ``vertices`` (n, 3) and ``faces`` (m, 3).
+    spec : one of
+        - a per-face part array (m,) of integers 0 .. P-1 (each part edge-connected);
+        - a list of face-index lists (group k is part k; each face in exactly one group);
+        - a list of cutting planes ``(point, normal)`` (see :func:`parts_from_planes`).
+
+    Returns
+    -------
+    (m,) int32 face_part.
+    """
+    if isinstance(spec, np.ndarray) and spec.ndim == 1:
+        return validate_face_part(mesh, spec)
+    seq = list(spec)
+    if seq and all(np.ndim(x) == 0 for x in seq):
+        return validate_face_part(mesh, np.asarray(seq))
+    if seq and all(map(_is_pair, seq)):
+        return parts_from_planes(mesh, seq)
+    return parts_from_face_groups(mesh, seq)
+
+
+def _is_pair(x):
+    try:
+        return len(x) == 2 and all(np.shape(y) == (3,) for y in x)
+    except TypeError:
+        return False
+
+
+# ----------------------------------------------------------------------------------------
+# interfaces
+
+@dataclass
+class Interface:
+    """Boundary between two parts (one connected piece of it).
+
+    parts : (i, j) with i < j.
+    loops : list of (k,) int64 vertex chains along the boundary; a closed loop does not
+        repeat its first vertex.
+    closed : list of bool, one per loop.
+    vertices : (v,) int64 sorted vertices on the boundary.
+    edges : (e, 2) int64 boundary edges (sorted vertex pairs).
+    frame : (3, 3) float64 rows x, y, z, set by :func:`core.segmentation.frames.compute_frames`.
+    """
+
+    parts: tuple
+    loops: list
+    closed: list
+    vertices: np.ndarray
+    edges: np.ndarray
+    frame: np.ndarray = field(default=None)
+
+
+def _chains(edges):
+    """Walk undirected edges (k, 2) into chains; deterministic (smallest indices first)."""
+    incident = {}
+    for e, (a, b) in enumerate(edges.tolist()):
+        incident.setdefault(a, []).append(e)
+        incident.setdefault(b, []).append(e)
+    used = np.zeros(len(edges), dtype=bool)
+    starts = sorted(v for v, es in incident.items() if len(es) % 2 == 1)
+    starts += sorted(incident)
+    chains, closed = [], []
+    for s in starts:
+        while any(not used[e] for e in incident[s]):
+            chain, v = [s], s
+            while True:
+                nxt = [e for e in incident[v] if not used[e]]
+                if not nxt:
+                    break
+                e = min(nxt)
+                used[e] = True
+                a, b = edges[e]
+                v = int(b if a == v else a)
+                chain.append(v)
+                if v == s:
+                    break
+            is_closed = len(chain) > 2 and chain[-1] == chain[0]
+            chains.append(np.array(chain[:-1] if is_closed else chain, dtype=np.int64))
+            closed.append(is_closed)
+    return chains, closed
+
+
+def interfaces(mesh, face_part):
+    """Interfaces between parts.
+
+    One record per connected piece of the boundary between two parts (normally one
+    closed loop per adjacent pair; open chains where three parts meet).
+
+    Returns
+    -------
+    list of :class:`Interface`, ordered by (i, j) then smallest vertex.
+    """
+    vertices, faces = _arrays(mesh)
+    face_part = np.asarray(face_part, dtype=np.int64)
+    edges, fe = edge_faces(faces)
+    ok = (fe >= 0).all(axis=1)
+    pa, pb = face_part[fe[:, 0]], face_part[np.maximum(fe[:, 1], 0)]
+    cut = np.flatnonzero(ok & (pa != pb))
+    pair = np.sort(np.stack([pa[cut], pb[cut]], axis=1), axis=1)
+    out = []
+    n = len(vertices)
+    for i, j in np.unique(pair, axis=0).tolist():
+        e = edges[cut[(pair[:, 0] == i) & (pair[:, 1] == j)]]
+        graph = csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+        _, comp = connected_components(graph, directed=False)
+        ce = comp[e[:, 0]]
+        pieces = sorted(np.unique(ce).tolist(), key=lambda c: e[ce == c].min())
+        for c in pieces:
+            ec = e[ce == c]
+            loops, closed = _chains(ec)
+            out.append(Interface((i, j), loops, closed, np.unique(ec), ec))
+    return out
+
+
+# ----------------------------------------------------------------------------------------
+# automatic parts
+
+@dataclass
+class AutomaticParts:
+    """Result of :func:`skeleton_segmentation`.
+
+    face_part : (m,) int32 canonical parts.
+    info : dict of figures (pitch, skeleton points, junctions, branches, pieces, parts).
+    skeleton : :class:`core.segmentation.skeleton.SkeletonPieces`.
+    """
+
+    face_part: np.ndarray
+    info: dict
+    skeleton: object
+
+
+def majority_smooth(neighbours, label, max_iter=20):
+    """Give each face the label that at least two of its three neighbours share.
+
+    neighbours : (m, 3) int64; label : (m,) int64. Returns the smoothed (m,) int64.
+    """
+    label = np.asarray(label, dtype=np.int64).copy()
+    for _ in range(max_iter):
+        nb = label[neighbours]
+        a, b, c = nb[:, 0], nb[:, 1], nb[:, 2]
+        vote = np.where(a == b, a, np.where(b == c, b, np.where(a == c, a, label)))
+        change = vote != label
+        if not change.any():
+            break
+        label = np.where(change, vote, label)
+    return label
+
+
+def absorb_fragments(pairs, neighbours, label, max_rounds=50):
+    """Make every label edge-connected: pieces other than a label's largest move to the
+    neighbouring label they share most edges with. Returns (m,) int64."""
+    label = np.asarray(label, dtype=np.int64).copy()
+    for _ in range(max_rounds):
+        comp, n_comp = part_components(pairs, label)
+        size = np.bincount(comp, minlength=n_comp)
+        comp_label = np.zeros(n_comp, dtype=np.int64)
+        comp_label[comp] = label
+        order = np.lexsort((-size, comp_label))
+        keep = np.zeros(n_comp, dtype=bool)
+        keep[order[np.unique(comp_label[order], return_index=True)[1]]] = True
+        if keep.all():
+            break
+        own = np.repeat(np.arange(len(label)), 3)
+        other = neighbours.reshape(-1)
+        sel = ~keep[comp[own]] & (comp[other] != comp[own])
+        votes = np.unique(np.stack([comp[own[sel]], label[other[sel]]], axis=1),
+                          axis=0, return_counts=True)
+        (cc, lab), cnt = votes[0].T, votes[1]
+        best = np.lexsort((lab, -cnt, cc))
+        first = best[np.unique(cc[best], return_index=True)[1]]
+        target = np.full(n_comp, -1)
+        target[cc[first]] = lab[first]
+        move = ~keep & (target >= 0)
+        label = np.where(move[comp], target[comp], label)
+    return label
+
+
+def _merge_pieces(moments, counts, adjacency, min_area, max_parts, tol, align_degenerate):
+    """Greedy agglomeration of pieces; returns (K,) int64 group of each piece.
+
+    1. Adjacent groups merge, cheapest first, while the frame of their union raises
+       neither group's area-mean cubic misalignment of normals by more than ``tol``.
+    2. Groups with area below ``min_area`` or fewer than :data:`MIN_PART_FACES` faces
+       (``counts``) merge, smallest first, with their cheapest neighbour.
+    3. The cheapest merges continue until at most ``max_parts`` groups remain.
+    """
+    k = len(moments)
+    parent = np.arange(k)
+    mom = list(moments)
+    count = np.asarray(counts, dtype=np.int64).copy()
+    own = [cubic_energy(mo.normal4, frame_from_moments(mo, align_degenerate)) for mo in mom]
+    nbrs = [set() for _ in range(k)]
+    for a, b in adjacency:
+        nbrs[a].add(b)
+        nbrs[b].add(a)
+    alive = set(range(k))
+    version = np.zeros(k, dtype=np.int64)
+
+    def cost(a, b):
+        frame = frame_from_moments(mom[a] + mom[b], align_degenerate)
+        ca = (cubic_energy(mom[a].normal4, frame) - own[a]) / mom[a].area
+        cb = (cubic_energy(mom[b].normal4, frame) - own[b]) / mom[b].area
+        return max(ca, cb)
+
+    def merge(a, b):
+        a, b = min(a, b), max(a, b)
+        mom[a] = mom[a] + mom[b]
+        count[a] += count[b]
+        own[a] = cubic_energy(mom[a].normal4, frame_from_moments(mom[a], align_degenerate))
+        alive.discard(b)
+        parent[parent == b] = a
+        nbrs[a] = (nbrs[a] | nbrs[b]) - {a, b}
+        for x in nbrs[b]:
+            nbrs[x].discard(b)
+            if x != a:
+                nbrs[x].add(a)
+        version[a] += 1
+        return a
+
+    def run(limit):
+        """Merge cheapest pairs while cost <= limit or too many groups remain."""
+        heap = [(cost(a, b), a, b, version[a], version[b])
+                for a in sorted(alive) for b in sorted(nbrs[a]) if a < b]
+        heapq.heapify(heap)
+        while heap:
+            c, a, b, va, vb = heapq.heappop(heap)
+            if a not in alive or b not in alive or (va, vb) != (version[a], version[b]):
+                continue
+            if c > limit and len(alive) <= max_parts:
+                break
+            a = merge(a, b)
+            for x in sorted(nbrs[a]):
+                lo, hi = min(a, x), max(a, x)
+                heapq.heappush(heap, (cost(lo, hi), lo, hi, version[lo], version[hi]))
+
+    run(tol)
+    while True:
+        small = [g for g in alive if (mom[g].area < min_area or count[g] < MIN_PART_FACES)
+                 and nbrs[g]]
+        if not small:
+            break
+        g = min(small, key=lambda x: (mom[x].area, x))
+        merge(g, min(nbrs[g], key=lambda x: (cost(g, x), x)))
+    run(-np.inf)
+    return parent
+
+
+def skeleton_segmentation(mesh, resolution=160, voxels_across=4.0, max_voxels=3_000_000,
+                          spur_factor=2.0, segment_factor=4.0, merge_angle=10.0,
+                          min_area_fraction=0.01, max_parts=None, align_degenerate=True):
+    """Automatic parts from the curve skeleton (paper Sect. 2.1), with figures.
+
+    1. Voxelise the solid and thin it to a curve skeleton
+       (:func:`core.segmentation.skeleton.skeleton_pieces`): junction clusters and
+       segments of every branch are pieces.
+    2. Each face goes to the piece of its nearest skeleton point; pieces are split into
+       edge-connected components.
+    3. Adjacent pieces merge, cheapest first, while one PCA frame fits both: the union's
+       frame may raise neither piece's area-mean cubic misalignment of normals
+       (``sum A (1 - sum_k (n.a_k)^4) / 2``, 0 when normals lie on axes) by more than
+       ``sin^2(2 merge_angle) / 4`` (the misalignment of a normal tilted by
+       ``merge_angle`` in an axis plane). Pieces below ``min_area_fraction`` of the
+       area (or below :data:`MIN_PART_FACES` faces) merge with their best neighbour.
+    4. Part boundaries are smoothed by a majority vote over face neighbours and every
+       part is made edge-connected.
+
+    Parameters
+    ----------
+    mesh : closed, outward-oriented triangle mesh (``vertices``, ``faces``).
+    resolution : int >= 16, voxels along the longest extent (upper bound of the pitch).
+    voxels_across : float >= 1, voxels across the mean thickness 2 V / A.
+    max_voxels : int, grid size cap.
+    spur_factor, segment_factor : see :func:`core.segmentation.skeleton.skeleton_pieces`.
+    merge_angle : float in (0, 45) degrees.
+    min_area_fraction : float in [0, 0.5).
+    max_parts : int >= 1 or None (no cap).
+    align_degenerate : frames resolve PCA-free rotations by normals (see frames module).
+
+    Returns
+    -------
+    AutomaticParts
+    """
+    vertices, faces = _arrays(mesh)
+    m = len(faces)
+    _check_range("resolution", resolution, 16, 4096)
+    _check_range("voxels_across", voxels_across, 1.0, 64.0)
+    _check_range("max_voxels", max_voxels, 4096, 2e8)
+    _check_range("spur_factor", spur_factor, 0.0, 100.0)
+    _check_range("segment_factor", segment_factor, 0.5, 1000.0)
+    _check_range("merge_angle", merge_angle, 0.0, 45.0, open_low=True, open_high=True)
+    _check_range("min_area_fraction", min_area_fraction, 0.0, 0.5, open_high=True)
+    if max_parts is None:
+        max_parts = max(1, m // MIN_PART_FACES)
+    elif int(max_parts) != max_parts or max_parts < 1:
+        raise ParameterError(f"max_parts must be an integer >= 1, got {max_parts}")
+    if m < MIN_PART_FACES * max_parts and max_parts > 1:
+        raise ParameterError(f"the mesh has {m} faces, too few for max_parts={max_parts} "
+                             f"(each part needs at least {MIN_PART_FACES} faces)")
+    if m < MIN_PART_FACES:
+        raise ParameterError(f"the mesh has {m} faces; a part needs at least {MIN_PART_FACES}")
+
+    pitch = choose_pitch(vertices, faces, resolution, voxels_across, max_voxels)
+    skel = skeleton_pieces(vertices, faces, pitch, spur_factor, segment_factor)
+    centroid = vertices[faces].mean(axis=1)
+    _, nearest = cKDTree(skel.points).query(centroid)
+    neighbours = face_neighbours(faces)
+    piece = majority_smooth(neighbours, skel.piece[nearest])
+    adj = adjacent_face_pairs(faces)
+    piece = absorb_fragments(adj, neighbours, piece)
+    piece = canonical_order(part_components(adj, piece)[0]).astype(np.int64)
+    n_pieces = int(piece.max()) + 1
+    moments = group_moments(vertices, faces, piece, n_pieces)
+    pp = np.unique(np.sort(piece[adj], axis=1), axis=0)
+    pp = pp[pp[:, 0] != pp[:, 1]]
+    counts = np.bincount(piece, minlength=n_pieces)
+    total_area = sum(mo.area for mo in moments)
+    min_area = min_area_fraction * total_area
+    tol = np.sin(np.radians(2.0 * merge_angle)) ** 2 / 4.0
+    parent = _merge_pieces(moments, counts, pp.tolist(), min_area, max_parts, tol,
+                           align_degenerate)
+    label = parent[piece]
+    label = majority_smooth(neighbours, label)
+    label = absorb_fragments(adj, neighbours, label)
+    face_part = canonical_order(label)
+    info = {"pitch": skel.pitch, "skeleton_points": int(len(skel.points)),
+            "junctions": skel.n_junctions, "branches": skel.n_branches,
+            "vanished_components": skel.vanished, "pieces": n_pieces,
+            "parts": int(face_part.max()) + 1}
+    return AutomaticParts(face_part, info, skel)
+
+
+def automatic_parts(mesh, **params):
+    """(m,) int32 face_part from the curve skeleton; see :func:`skeleton_segmentation`."""
+    return skeleton_segmentation(mesh, **params).face_part
+
+
+def _check_range(name, value, low, high, open_low=False, open_high=False):
+    try:
+        v = float(value)
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"{name} must be a number, got {value!r}") from exc
+    bad = not np.isfinite(v) or v < low or v > high or (open_low and v == low) \
+        or (open_high and v == high)
+    if bad:
+        lo = "(" if open_low else "["
+        hi = ")" if open_high else "]"
+        raise ParameterError(f"{name} must be in {lo}{low}, {high}{hi}, got {value!r}")

@@ -1,0 +1,295 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Scripting API: the same operations as the CLI, as functions for FreeCADCmd scripts.
+
+Functions that build solids import FreeCAD themselves, so ``import polycube_wb.api``
+works in any Python; call them where ``import FreeCAD`` works (freecadcmd, the GUI,
+or the project's .venv).
+"""
+import os
+import time
+
+import numpy as np
+
+from core.errors import StageNotAvailableError
+from core.output_files import check_output_path, write_json_atomic
+from core.pipeline import STOP_AFTER_CHOICES, peak_memory_mb, reconstruct as run_pipeline
+from core.progress import NO_PROGRESS
+
+DEFAULT_EXPORT_DEPTH = 8
+"""Grading depth of B-spline patches at extraordinary vertices (see core.export.bspline)."""
+
+
+def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_path=None,
+                        labels_path=None, stop_after="solid", progress=NO_PROGRESS, **params):
+    """Run the whole pipeline on a target mesh file and write the requested outputs.
+
+    Parameters
+    ----------
+    mesh_path : path of the target mesh (STL, OBJ, PLY, OFF).
+    step_path : path of the STEP file to write (needed when ``stop_after='solid'``).
+    base_mesh_path, report_path, labels_path : optional paths for the base-mesh OBJ, the
+        JSON report and the per-face labeling PLY.
+    stop_after : one of ``intake, parts, labeling, basemesh, fit, solid``.
+    progress : core.progress.Progress.
+    **params : fields of ``core.params.ReconstructionParams``.
+
+    Returns
+    -------
+    dict, the report (also written to ``report_path``); ``report['outputs']`` lists the
+    files written.
+
+    Raises
+    ------
+    PolycubeInputError for bad input (nothing is written);
+    StageNotAvailableError when an output needs a stage that is not built yet (the report
+    and the outputs that exist are written first).
+    """
+    inputs = (mesh_path,)
+    for path, what in ((step_path, "STEP file"), (base_mesh_path, "base mesh"),
+                       (report_path, "report"), (labels_path, "labels file")):
+        if path is not None:
+            check_output_path(path, inputs, what)
+    result = run_pipeline(mesh_path, params, progress, stop_after)
+    report, state = result.report, result.state
+    outputs = {}
+    missing = []
+    if labels_path is not None:
+        if "face_label" in state:
+            from core.segmentation.labels_file import write_labels_ply
+
+            mesh = state["target"]
+            write_labels_ply(labels_path, mesh.vertices, mesh.faces, state["face_part"],
+                             state["face_label"], state["frames"].face_frame, protect=inputs)
+            outputs["labels"] = os.path.abspath(labels_path)
+        else:
+            missing.append(("labels file", "labeling"))
+    if base_mesh_path is not None:
+        if "base_mesh" in state:
+            from core.polymesh_io import write_polymesh
+
+            write_polymesh(base_mesh_path, state["base_mesh"])
+            outputs["base_mesh"] = os.path.abspath(base_mesh_path)
+        else:
+            missing.append(("base mesh", "basemesh"))
+    if stop_after == "solid":
+        if "patches" in state:
+            started = time.perf_counter()
+            solid_section = _solid_and_step(state["patches"], step_path, inputs, report)
+            report["stages"]["solid"] = {"status": "ok", "message": "",
+                                         "seconds": round(time.perf_counter() - started, 4)}
+            report["brep"] = solid_section
+            if step_path is not None:
+                outputs["step"] = solid_section["step_path"]
+        else:
+            report["stages"]["solid"] = {"status": "skipped", "seconds": 0.0,
+                                         "message": "needs B-spline patches of the fitted base mesh"}
+            if step_path is not None:
+                missing.append(("STEP file", _first_unavailable(report)))
+    report["outputs"] = outputs
+    report["peak_memory_mb"] = round(peak_memory_mb(), 1)
+    if report_path is not None:
+        write_json_atomic(report_path, report, inputs)
+        outputs["report"] = os.path.abspath(report_path)
+    if result.failed is not None:
+        raise result.failed
+    if missing:
+        what, stage = missing[0]
+        raise StageNotAvailableError(
+            f"cannot write the {what}: the '{stage}' stage is not available yet "
+            f"({report['stages'].get(stage, {}).get('message', 'see the report')}); "
+            f"use --stop-after with one of {', '.join(_available_stops(report))} for what exists")
+    return report
+
+
+def _first_unavailable(report):
+    for name, entry in report["stages"].items():
+        if entry["status"] in ("not_available", "failed"):
+            return name
+    return "solid"
+
+
+def _available_stops(report):
+    done = {name for name, entry in report["stages"].items() if entry["status"] == "ok"}
+    mapping = {"intake": "intake", "parts": "frames", "labeling": "labeling",
+               "basemesh": "basemesh", "fit": "fit", "solid": "patches"}
+    return [stop for stop in STOP_AFTER_CHOICES if mapping[stop] in done]
+
+
+def _solid_and_step(patches, step_path, inputs, report):
+    """Build the solid from patches, write STEP if asked; returns the report's ``brep`` section."""
+    from polycube_wb.brep import patches_to_solid, solid_report
+    from polycube_wb.step_io import write_step
+
+    solid = patches_to_solid(patches)
+    section = solid_report(solid)
+    section["max_normal_jump_deg"] = patches.info.get("normal_jump_max_deg")
+    section["step_path"] = None
+    if step_path is not None:
+        section["step_path"] = write_step(solid, step_path, input_paths=inputs)
+    return section
+
+
+def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=DEFAULT_EXPORT_DEPTH,
+                  measure=True, progress=NO_PROGRESS):
+    """Turn a closed polygon base mesh (a SubD cage, OBJ) into a FreeCAD solid.
+
+    The solid's faces are bicubic B-spline patches of the Catmull-Clark limit surface.
+
+    Parameters
+    ----------
+    base_mesh_path : path of a closed, 2-manifold, consistently oriented polygon OBJ.
+    step_path, report_path : optional outputs (STEP written atomically, JSON report).
+    depth : grading depth of patches at extraordinary vertices (accuracy vs pole count).
+    measure : compute the approximation error and continuity figures (costs about as
+        much as the export).
+    progress : core.progress.Progress.
+
+    Returns
+    -------
+    (Part.Solid, dict report)
+    """
+    from core.export.bspline import limit_surface_patches
+    from core.polymesh_checks import check_polymesh
+    from core.polymesh_io import read_polymesh
+    from core.subdivision.limit import limit_volume
+    from polycube_wb.brep import patches_to_solid, solid_report
+    from polycube_wb.step_io import write_step
+
+    inputs = (base_mesh_path,)
+    for path, what in ((step_path, "STEP file"), (report_path, "report")):
+        if path is not None:
+            check_output_path(path, inputs, what)
+    started = time.perf_counter()
+    stages = {}
+    clock = time.perf_counter()
+    base = read_polymesh(base_mesh_path)
+    check_polymesh(base)
+    stages["intake"] = _ok(clock)
+    progress.report("patches", 0.1)
+    clock = time.perf_counter()
+    patches = limit_surface_patches(base, depth=depth, measure=measure)
+    stages["patches"] = _ok(clock)
+    progress.check_cancel()
+    progress.report("solid", 0.5)
+    clock = time.perf_counter()
+    solid = patches_to_solid(patches, progress)
+    brep = solid_report(solid)
+    stages["solid"] = _ok(clock)
+    brep["step_path"] = None
+    if step_path is not None:
+        clock = time.perf_counter()
+        brep["step_path"] = write_step(solid, step_path, input_paths=inputs)
+        stages["step"] = _ok(clock)
+    clock = time.perf_counter()
+    reference = limit_volume(base)
+    stages["limit_volume"] = _ok(clock)
+    brep["limit_volume"] = float(reference)
+    brep["volume_error_rel"] = float(abs(brep["volume"] - reference) / abs(reference))
+    brep["max_normal_jump_deg"] = patches.info.get("normal_jump_max_deg")
+    report = {
+        "input": {"file": os.path.abspath(base_mesh_path)},
+        "base_mesh": base_mesh_summary(base),
+        "patches": _plain(patches.info),
+        "brep": brep,
+        "stages": stages,
+        "total_seconds": round(time.perf_counter() - started, 4),
+        "peak_memory_mb": round(peak_memory_mb(), 1),
+    }
+    if report_path is not None:
+        write_json_atomic(report_path, report, inputs)
+    progress.report("done", 1.0)
+    return solid, report
+
+
+def _ok(clock):
+    return {"status": "ok", "seconds": round(time.perf_counter() - clock, 4), "message": ""}
+
+
+def _plain(info):
+    return {k: (v.item() if isinstance(v, np.generic) else v) for k, v in info.items()}
+
+
+def base_mesh_summary(mesh):
+    """The report's ``base_mesh`` section for a closed polygon mesh."""
+    from core.subdivision.catmull_clark import mesh_topology
+
+    sizes = mesh.face_sizes
+    topology = mesh_topology(mesh.face_vertices, mesh.face_offsets, len(mesh.vertices))
+    n_edges = len(topology.edges)
+    valence = np.bincount(topology.edges.reshape(-1), minlength=len(mesh.vertices))
+    chi = len(mesh.vertices) - n_edges + mesh.n_faces
+    return {
+        "faces": int(mesh.n_faces),
+        "quads": int((sizes == 4).sum()),
+        "triangles": int((sizes == 3).sum()),
+        "other": int((sizes > 4).sum()),
+        "vertices": int(len(mesh.vertices)),
+        "extraordinary_vertices": int((valence != 4).sum()),
+        "genus": int(round((2 - chi) / 2)),
+    }
+
+
+def check(target_path, result_path, components="largest"):
+    """Compare a result solid (STEP) with a target mesh.
+
+    Returns a dict: ``watertight`` (manifold3d and trimesh on a tessellation of the solid),
+    ``outside_volume_fraction`` and ``uncovered_volume_fraction`` (fractions of the target
+    volume), ``mean_distance`` / ``max_distance`` (fractions of the target's bounding-box
+    diagonal, result samples to target), solid validity and face count.
+    """
+    from core.mesh_io import read_triangle_soup
+    from core.quality import containment, is_watertight_manifold, surface_distances
+    from core.validate import validate_target
+    from polycube_wb.brep import tessellate
+    from polycube_wb.step_io import read_step
+
+    target, summary = validate_target(*read_triangle_soup(target_path), components=components,
+                                      check_self_intersections=False, name=str(target_path))
+    shape = read_step(result_path)
+    if len(shape.Solids) != 1:
+        from core.errors import InvalidMeshError
+
+        raise InvalidMeshError(f"{result_path}: expected one solid, found {len(shape.Solids)}",
+                               reason="format", count=len(shape.Solids))
+    solid = shape.Solids[0]
+    V, F = tessellate(solid, 1e-4 * summary["bbox_diagonal"])
+    inside = containment(V, F, target.vertices, target.faces)
+    distances = surface_distances(V, F, target.vertices, target.faces)
+    return {
+        "target": os.path.abspath(target_path),
+        "result": os.path.abspath(result_path),
+        "valid": bool(solid.isValid()),
+        "faces": len(solid.Faces),
+        "watertight": bool(is_watertight_manifold(V, F)),
+        "outside_volume_fraction": inside["outside_volume_fraction"],
+        "uncovered_volume_fraction": inside["uncovered_volume_fraction"],
+        "distances": distances,
+    }
+
+
+def reconstruct(doc, mesh_path, progress=NO_PROGRESS, **params):
+    """Run the pipeline into document ``doc``; returns the result solid's object.
+
+    The validated target is added as a mesh object first, so the user sees what was
+    read; when the pipeline can build the solid it is added as a ``Part::Feature``.
+
+    Raises
+    ------
+    PolycubeInputError for bad input (nothing is added);
+    StageNotAvailableError while a stage the solid needs is not built yet.
+    """
+    from polycube_wb.document import add_solid, add_target_mesh
+
+    result = run_pipeline(mesh_path, params, progress, "solid")
+    name = os.path.splitext(os.path.basename(mesh_path))[0]
+    add_target_mesh(doc, result.state["target"], name + "_target")
+    if result.failed is not None:
+        raise result.failed
+    if "patches" not in result.state:
+        stage = _first_unavailable(result.report)
+        raise StageNotAvailableError(
+            f"the solid needs the '{stage}' stage, which is not available yet: "
+            f"{result.report['stages'][stage]['message']}")
+    from polycube_wb.brep import patches_to_solid
+
+    return add_solid(doc, patches_to_solid(result.state["patches"]), name + "_solid")

@@ -1,0 +1,170 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Command line: ``python -m polycube_wb {reconstruct, subd-to-step, check} ...``.
+
+Exit codes: 0 success; 2 bad input (one line on stderr starting ``error:``);
+1 internal failure or a stage that is not available yet (message; the traceback
+only with ``--debug``).
+"""
+import argparse
+import json
+import sys
+import traceback
+
+from core.errors import PolycubeInputError
+from core.params import COMPONENT_POLICIES, PART_MODES, UNIT_TO_MM, ReconstructionParams
+from core.pipeline import STOP_AFTER_CHOICES
+
+EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT = 0, 1, 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose errors are one ``error:`` line and exit code 2."""
+
+    def error(self, message):
+        sys.stderr.write(f"error: {message} (see '{self.prog} --help')\n")
+        sys.exit(EXIT_BAD_INPUT)
+
+
+def build_parser():
+    defaults = ReconstructionParams()
+    parser = _Parser(prog="python -m polycube_wb",
+                     description="Turn a watertight triangle mesh into a CAD solid made of "
+                                 "B-spline patches (polycube labeling + Catmull-Clark).")
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    rec = commands.add_parser("reconstruct", help="target mesh -> STEP solid (whole pipeline)",
+                              description="Run the pipeline on a target mesh (STL, OBJ, PLY, OFF).")
+    rec.add_argument("target", help="target mesh file")
+    rec.add_argument("-o", "--output", help="STEP file to write (needs --stop-after solid)")
+    rec.add_argument("--base-mesh", help="write the base mesh (polygon OBJ) here")
+    rec.add_argument("--report", help="write the JSON report here")
+    rec.add_argument("--labels", help="write the per-face parts and polycube labels (binary PLY)")
+    rec.add_argument("--stop-after", choices=STOP_AFTER_CHOICES, default="solid",
+                     help="run the pipeline up to this stage (default: solid)")
+    rec.add_argument("--units", choices=tuple(UNIT_TO_MM), default=defaults.units,
+                     help="length unit of the target's coordinates (default: mm)")
+    rec.add_argument("--components", choices=COMPONENT_POLICIES, default=defaults.components,
+                     help="several connected components: keep the largest (with a warning), "
+                          "keep all, or reject (default: largest)")
+    rec.add_argument("--parts", choices=PART_MODES, default=defaults.parts,
+                     help="part segmentation: whole mesh one part, or curve-skeleton based")
+    rec.add_argument("--blend-factor", type=float, default=defaults.blend_factor,
+                     help="frame blending distance in mean edge lengths (paper: 4)")
+    rec.add_argument("--lam", type=float, default=defaults.lam,
+                     help="HBECVT neighbour weight lambda (paper: 0.5)")
+    rec.add_argument("--penalty", type=float, default=defaults.penalty,
+                     help="HBECVT penalty p (paper: 1e5)")
+    rec.add_argument("--no-repair", action="store_true", help="skip the labeling repair loop")
+    rec.add_argument("--skip-self-intersection-check", action="store_true",
+                     help="do not run the triangle-triangle intersection test at intake")
+    rec.add_argument("--debug", action="store_true", help="print tracebacks")
+
+    sub = commands.add_parser("subd-to-step", help="Catmull-Clark cage (OBJ) -> STEP solid",
+                              description="Turn a closed polygon base mesh (SubD cage) into a "
+                                          "STEP solid of its Catmull-Clark limit surface.")
+    sub.add_argument("base_mesh", help="closed polygon mesh, OBJ")
+    sub.add_argument("-o", "--output", required=True, help="STEP file to write")
+    sub.add_argument("--report", help="write the JSON report here")
+    sub.add_argument("--depth", type=int, default=8,
+                     help="patch grading depth at extraordinary vertices (default 8)")
+    sub.add_argument("--no-measure", action="store_true",
+                     help="skip measuring approximation error and continuity (faster)")
+    sub.add_argument("--debug", action="store_true", help="print tracebacks")
+
+    chk = commands.add_parser("check", help="compare a result STEP with the target mesh",
+                              description="Watertightness, containment and distances of a "
+                                          "result solid against the target mesh.")
+    chk.add_argument("target", help="target mesh file")
+    chk.add_argument("result", help="result STEP file")
+    chk.add_argument("--report", help="write the JSON result here")
+    chk.add_argument("--debug", action="store_true", help="print tracebacks")
+    return parser
+
+
+def main(argv=None):
+    args = build_parser().parse_args(argv)
+    try:
+        return _COMMANDS[args.command](args)
+    except PolycubeInputError as exc:
+        if args.debug:
+            traceback.print_exc()
+        sys.stderr.write(f"error: {exc}\n")
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        sys.stderr.write("error: interrupted\n")
+        return EXIT_INTERNAL
+    except Exception as exc:  # internal failure: message, traceback only with --debug
+        if args.debug:
+            traceback.print_exc()
+        sys.stderr.write(f"failed: {type(exc).__name__}: {exc}\n")
+        return EXIT_INTERNAL
+
+
+def _reconstruct(args):
+    from core.errors import StageNotAvailableError
+    from polycube_wb.api import reconstruct_to_step
+
+    params = dict(units=args.units, components=args.components, parts=args.parts,
+                  blend_factor=args.blend_factor, lam=args.lam, penalty=args.penalty,
+                  repair=not args.no_repair,
+                  check_self_intersections=not args.skip_self_intersection_check)
+    if args.stop_after == "solid" and args.output is None:
+        raise PolycubeInputError("reconstruct needs -o OUT.step (or --stop-after an earlier stage)")
+    try:
+        report = reconstruct_to_step(args.target, args.output, args.base_mesh, args.report,
+                                     args.labels, args.stop_after, **params)
+    except StageNotAvailableError as exc:
+        sys.stderr.write(f"failed: {exc}\n")
+        return EXIT_INTERNAL
+    _print_summary(report)
+    return EXIT_OK
+
+
+def _print_summary(report):
+    source = report.get("input", {})
+    print(f"input: {source.get('file')}: {source.get('triangles')} triangles, genus "
+          f"{source.get('genus')}, bbox diagonal {source.get('bbox_diagonal', 0):.4g} {source.get('units')}")
+    for warning in source.get("warnings", []):
+        print(f"  warning: {warning}")
+    for name, entry in report.get("stages", {}).items():
+        message = f" - {entry['message']}" if entry.get("message") else ""
+        print(f"  {name:<10} {entry['status']:<14} {entry['seconds']:8.2f} s{message}")
+    labeling = report.get("labeling")
+    if labeling:
+        print(f"labeling: valid={labeling['valid']} parts={labeling['parts']} charts="
+              f"{labeling['charts']} corners={labeling['corners']} invalid charts/boundaries/corners="
+              f"{labeling['invalid_charts']}/{labeling['invalid_boundaries']}/{labeling['invalid_corners']}")
+    for kind, path in report.get("outputs", {}).items():
+        print(f"wrote {kind}: {path}")
+
+
+def _subd_to_step(args):
+    from polycube_wb.api import subd_to_solid
+
+    _, report = subd_to_solid(args.base_mesh, args.output, args.report, depth=args.depth,
+                              measure=not args.no_measure)
+    base, brep, patches = report["base_mesh"], report["brep"], report["patches"]
+    print(f"base mesh: {base['faces']} faces ({base['quads']} quads, {base['triangles']} triangles, "
+          f"{base['other']} other), {base['extraordinary_vertices']} extraordinary vertices, genus {base['genus']}")
+    print(f"solid: {brep['faces']} B-spline faces, valid={brep['valid']} closed={brep['closed']} "
+          f"volume={brep['volume']:.6g} (limit surface {brep['limit_volume']:.6g}, "
+          f"rel. error {brep['volume_error_rel']:.1e})")
+    if patches.get("max_error_rel") is not None:
+        print(f"patches: max deviation from the limit surface {patches['max_error_rel']:.1e} of the "
+              f"bbox diagonal, normal jump max {patches['normal_jump_max_deg']:.3f} deg")
+    print(f"wrote STEP: {brep['step_path']}  ({report['total_seconds']:.2f} s)")
+    return EXIT_OK
+
+
+def _check(args):
+    from core.output_files import write_json_atomic
+    from polycube_wb.api import check
+
+    result = check(args.target, args.result)
+    if args.report:
+        write_json_atomic(args.report, result, (args.target, args.result))
+    print(json.dumps(result, indent=2))
+    return EXIT_OK
+
+
+_COMMANDS = {"reconstruct": _reconstruct, "subd-to-step": _subd_to_step, "check": _check}

@@ -1,0 +1,163 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Part segmentation: single part, user parts (validation), interfaces, automatic parts."""
+from pathlib import Path
+
+import manifold3d as m3
+import numpy as np
+import pytest
+import trimesh
+
+from core.errors import ParameterError
+from core.segmentation.parts import (
+    MIN_PART_FACES, automatic_parts, interfaces, parts_from_user, single_part,
+    skeleton_segmentation, validate_face_part,
+)
+from core.types import TriMesh
+
+MESHES = Path("/work/shared/data/meshes")
+
+
+def _mesh(manifold):
+    out = manifold.to_mesh()
+    return TriMesh(np.asarray(out.vert_properties[:, :3], dtype=np.float64),
+                   np.asarray(out.tri_verts, dtype=np.int64))
+
+
+def _load(name):
+    tm = trimesh.load(MESHES / name, process=True)
+    tm.merge_vertices()
+    return TriMesh(np.asarray(tm.vertices, dtype=np.float64), np.asarray(tm.faces, dtype=np.int64))
+
+
+@pytest.fixture(scope="module")
+def bar():
+    """10 x 2 x 2 box, vertex planes at x = 0, 2.5, 5, 7.5, 10."""
+    return _mesh(m3.Manifold.cube([10.0, 2.0, 2.0]).refine(4))
+
+
+def _centroids(mesh):
+    return mesh.vertices[mesh.faces].mean(axis=1)
+
+
+def test_single_part(bar):
+    part = single_part(bar)
+    assert part.dtype == np.int32 and part.shape == (len(bar.faces),) and not part.any()
+    assert interfaces(bar, part) == []
+
+
+def test_user_array_accepted_and_validated(bar):
+    half = (_centroids(bar)[:, 0] > 5.0).astype(np.int64)
+    assert np.array_equal(parts_from_user(bar, half), half)
+    assert np.array_equal(parts_from_user(bar, half.tolist()), half)
+    with pytest.raises(ParameterError, match="one entry per face"):
+        parts_from_user(bar, half[:-1])
+    with pytest.raises(ParameterError, match="integers"):
+        parts_from_user(bar, half + 0.5)
+    with pytest.raises(ParameterError, match="part 1"):
+        parts_from_user(bar, half * 2)  # ids 0 and 2: part 1 empty
+    ends = ((_centroids(bar)[:, 0] < 2.5) | (_centroids(bar)[:, 0] > 7.5)).astype(np.int64)
+    with pytest.raises(ParameterError, match="part 1 has 2 separate pieces"):
+        parts_from_user(bar, ends)
+
+
+def test_face_groups(bar):
+    x = _centroids(bar)[:, 0]
+    groups = [np.flatnonzero(x < 5.0).tolist(), np.flatnonzero(x >= 5.0).tolist()]
+    part = parts_from_user(bar, groups)
+    assert np.array_equal(part, (x >= 5.0).astype(np.int32))
+    missing = [groups[0], groups[1][:-3]]
+    with pytest.raises(ParameterError, match="3 faces are in no group"):
+        parts_from_user(bar, missing)
+    with pytest.raises(ParameterError, match="more than once"):
+        parts_from_user(bar, [groups[0], groups[1] + groups[0][:2]])
+    with pytest.raises(ParameterError, match="outside"):
+        parts_from_user(bar, [groups[0], groups[1] + [len(x) + 5]])
+
+
+def test_cutting_planes_give_connected_parts(bar):
+    part = parts_from_user(bar, [((2.5, 0, 0), (1, 0, 0)), ((7.5, 0, 0), (1, 0, 0))])
+    assert part.max() == 2
+    validate_face_part(bar, part)
+    x = _centroids(bar)[:, 0]
+    for p in range(3):
+        lo, hi = x[part == p].min(), x[part == p].max()
+        assert hi - lo <= 5.0 + 1e-9
+    # a plane that splits one sign-cell into two separate pieces still gives connected parts
+    ring = _mesh(m3.Manifold.cube([6.0, 6.0, 1.0], center=True)
+                 - m3.Manifold.cube([4.0, 4.0, 2.0], center=True))
+    part = parts_from_user(ring, [((0, 0, 0), (1, 0, 0))])
+    assert part.max() == 1
+    validate_face_part(ring, part)
+    with pytest.raises(ParameterError, match="zero normal"):
+        parts_from_user(bar, [((0, 0, 0), (0, 0, 0))])
+
+
+def test_interfaces_are_closed_loops_on_the_cut(bar):
+    part = parts_from_user(bar, [((2.5, 0, 0), (1, 0, 0)), ((7.5, 0, 0), (1, 0, 0))])
+    itfs = interfaces(bar, part)
+    assert [i.parts for i in itfs] == [(0, 1), (1, 2)]
+    for itf, x_cut in zip(itfs, (2.5, 7.5)):
+        assert itf.closed == [True] and len(itf.loops) == 1
+        loop = itf.loops[0]
+        assert len(loop) == len(itf.vertices) == len(itf.edges)
+        assert np.allclose(bar.vertices[loop, 0], x_cut)
+        consecutive = np.sort(np.stack([loop, np.roll(loop, -1)], axis=1), axis=1)
+        assert {tuple(e) for e in consecutive} == {tuple(e) for e in np.sort(itf.edges, axis=1)}
+
+
+def _assert_legs_split(mesh, part, reach):
+    """Two parts, each holding all faces of one leg beyond ``reach`` from the corner
+    (leg a along +x, leg b along +z) and none of the other leg's."""
+    assert part.max() + 1 == 2
+    validate_face_part(mesh, part)
+    c = _centroids(mesh)
+    far = [c[:, 0] > reach, c[:, 2] > reach]
+    owner = [np.unique(part[f]) for f in far]
+    assert [len(o) for o in owner] == [1, 1] and owner[0][0] != owner[1][0]
+    itfs = interfaces(mesh, part)
+    assert len(itfs) == 1 and itfs[0].closed == [True]
+
+
+def test_automatic_parts_split_an_l_of_boxes_at_the_corner():
+    mesh = _mesh((m3.Manifold.cube([10, 2, 2]) + m3.Manifold.cube([2, 2, 10])).refine(4))
+    part = automatic_parts(mesh)
+    _assert_legs_split(mesh, part, reach=4.0)
+    assert np.array_equal(automatic_parts(mesh), part)  # deterministic
+
+
+def test_automatic_parts_split_two_cylinders_at_right_angles():
+    tube = m3.Manifold.cylinder(10.0, 1.0, 1.0, 32)
+    mesh = _mesh((tube + tube.rotate([0, 90, 0])).refine(2))
+    _assert_legs_split(mesh, automatic_parts(mesh), reach=4.0)
+
+
+def test_automatic_parts_on_genus_two_frame():
+    """A plate with two windows (genus 2): the skeleton has loops."""
+    plate = m3.Manifold.cube([12.0, 6.0, 1.0])
+    holes = (m3.Manifold.cube([4.0, 4.0, 3.0]).translate([1.0, 1.0, -1.0])
+             + m3.Manifold.cube([4.0, 4.0, 3.0]).translate([7.0, 1.0, -1.0]))
+    mesh = _mesh((plate - holes).refine(3))
+    result = skeleton_segmentation(mesh)
+    validate_face_part(mesh, result.face_part)
+    assert result.info["parts"] == 1  # one frame fits the whole plate
+    assert result.info["junctions"] >= 2
+
+
+def test_automatic_parameter_errors(bar):
+    with pytest.raises(ParameterError, match="merge_angle"):
+        automatic_parts(bar, merge_angle=0.0)
+    with pytest.raises(ParameterError, match="resolution"):
+        automatic_parts(bar, resolution=2)
+    with pytest.raises(ParameterError, match="too few"):
+        automatic_parts(bar, max_parts=len(bar.faces) // MIN_PART_FACES + 1)
+
+
+@pytest.mark.parametrize("name, low, high", [("to_simp_lbracket.stl", 2, 8),
+                                             ("polycube_bone.obj", 1, 4)])
+def test_automatic_parts_on_dev_meshes(name, low, high):
+    mesh = _load(name)
+    result = skeleton_segmentation(mesh)
+    part = validate_face_part(mesh, result.face_part)
+    n_parts = part.max() + 1
+    assert low <= n_parts <= high
+    assert np.bincount(part).min() >= MIN_PART_FACES
