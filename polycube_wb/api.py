@@ -93,7 +93,7 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
     if result.failed is not None:
         raise result.failed
     if missing:
-        what, stage = missing[0]
+        what, stage = missing[-1]
         raise StageNotAvailableError(
             f"cannot write the {what}: the '{stage}' stage is not available yet "
             f"({report['stages'].get(stage, {}).get('message', 'see the report')}); "

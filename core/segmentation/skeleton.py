@@ -123,12 +123,9 @@ def thin(grid):
     ijk : (k, 3) int64 skeleton voxel indices (lexicographic order).
     vanished : int, number of components that needed that fallback.
     """
-    try:
-        from skimage.morphology import skeletonize
-    except ImportError as exc:
-        raise ImportError("automatic parts need scikit-image (3-D thinning); install it with "
-                          "'pip install scikit-image' or give the parts by hand") from exc
+    from core.optional_imports import import_skeletonize
 
+    skeletonize = import_skeletonize()
     skel = skeletonize(grid.occupied) > 0
     comp, n_comp = ndimage.label(grid.occupied, structure=np.ones((3, 3, 3)))
     has = np.zeros(n_comp + 1, dtype=bool)

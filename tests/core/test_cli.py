@@ -1,0 +1,118 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""The command line: exit codes, messages, outputs, and that bad input writes nothing."""
+import hashlib
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import trimesh
+
+REPO = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+SAMPLE = os.path.join(REPO, "examples", "to_simp_cantilever.stl")
+
+
+def run(*args):
+    return subprocess.run([sys.executable, "-m", "polycube_wb", *map(str, args)], cwd=REPO,
+                          capture_output=True, text=True, timeout=300)
+
+
+def digest(path):
+    return hashlib.sha256(open(path, "rb").read()).hexdigest()
+
+
+@pytest.mark.parametrize("command", ["reconstruct", "subd-to-step", "check"])
+def test_help(command):
+    result = run(command, "--help")
+    assert result.returncode == 0 and "usage:" in result.stdout
+
+
+def test_labeling_run_writes_labels_and_report(tmp_path):
+    before = digest(SAMPLE)
+    result = run("reconstruct", SAMPLE, "--stop-after", "labeling", "--labels",
+                 tmp_path / "l.ply", "--report", tmp_path / "r.json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["input"]["triangles"] == 15388 and report["input"]["genus"] == 0
+    assert report["stages"]["labeling"]["status"] == "ok"
+    assert report["labeling"]["valid"] is True
+    for key in ("charts", "corners", "invalid_charts", "invalid_boundaries", "invalid_corners",
+                "turning_points", "parts"):
+        assert key in report["labeling"]
+    assert report["peak_memory_mb"] > 0 and report["total_seconds"] > 0
+    labels = trimesh.load(tmp_path / "l.ply", process=False)
+    assert len(labels.faces) == 15388
+    assert digest(SAMPLE) == before
+    again = run("reconstruct", SAMPLE, "--stop-after", "labeling", "--labels", tmp_path / "m.ply")
+    assert again.returncode == 0 and digest(tmp_path / "l.ply") == digest(tmp_path / "m.ply")
+
+
+def test_full_run_says_which_stage_is_missing(tmp_path):
+    result = run("reconstruct", SAMPLE, "-o", tmp_path / "out.step", "--report", tmp_path / "r.json")
+    assert result.returncode == 1
+    assert "not available" in result.stderr and "polycube" in result.stderr
+    assert not (tmp_path / "out.step").exists()
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["stages"]["polycube"]["status"] == "not_available"
+    assert report["stages"]["basemesh"]["status"] == "skipped"
+
+
+def assert_rejected(result, *words):
+    assert result.returncode == 2, (result.returncode, result.stderr)
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:"), result.stderr
+    for word in words:
+        assert word in lines[0]
+
+
+def test_open_mesh_exits_2_and_writes_nothing(tmp_path):
+    mesh = trimesh.creation.box()
+    path = tmp_path / "open.stl"
+    trimesh.Trimesh(mesh.vertices, mesh.faces[:-2], process=False).export(path)
+    before = digest(path)
+    out = tmp_path / "out"
+    out.mkdir()
+    result = run("reconstruct", path, "--stop-after", "labeling", "--labels", out / "l.ply",
+                 "--report", out / "r.json")
+    assert_rejected(result, "boundary edges")
+    assert list(out.iterdir()) == [] and digest(path) == before
+
+
+def test_wrong_format_and_missing_file(tmp_path):
+    path = tmp_path / "mesh.step"
+    path.write_text("ISO-10303-21;")
+    assert_rejected(run("reconstruct", path, "--stop-after", "intake"), "unsupported file type")
+    assert_rejected(run("reconstruct", tmp_path / "none.stl", "--stop-after", "intake"), "no such file")
+
+
+@pytest.mark.parametrize("option, value, words", [
+    ("--lam", "-1", ["lam"]), ("--blend-factor", "nan", ["blend_factor"]),
+    ("--penalty", "1e30", ["penalty"]), ("--units", "furlong", ["invalid choice"]),
+])
+def test_absurd_parameters_exit_2(option, value, words):
+    assert_rejected(run("reconstruct", SAMPLE, "--stop-after", "intake", option, value), *words)
+
+
+def test_output_over_the_input_is_refused(tmp_path):
+    copy = tmp_path / "target.stl"
+    copy.write_bytes(open(SAMPLE, "rb").read())
+    before = digest(copy)
+    assert_rejected(run("reconstruct", copy, "--stop-after", "labeling", "--report", copy),
+                    "over the input")
+    assert digest(copy) == before
+
+
+def test_output_folder_missing(tmp_path):
+    assert_rejected(run("reconstruct", SAMPLE, "--stop-after", "intake", "--report",
+                        tmp_path / "nope" / "r.json"), "does not exist")
+
+
+def test_self_intersecting_mesh_exits_2(tmp_path):
+    mesh = trimesh.creation.box()
+    V = np.asarray(mesh.vertices).copy()
+    V[int(np.argmax(V.sum(axis=1)))] = [-0.9, 0.3, 0.2]
+    path = tmp_path / "crossed.stl"
+    trimesh.Trimesh(V, mesh.faces, process=False).export(path)
+    assert_rejected(run("reconstruct", path, "--stop-after", "intake"), "intersecting faces")
