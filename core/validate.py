@@ -79,7 +79,7 @@ def check_degenerate_faces(vertices, faces, name="mesh"):
 def check_duplicate_faces(vertices, faces, name="mesh"):
     """Raise ``duplicate_faces`` for faces using the same three vertices as another face."""
     key = np.sort(faces, axis=1)
-    _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
+    _, first = np.unique(key, axis=0, return_index=True)
     keep = np.zeros(len(faces), dtype=bool)
     keep[first] = True
     idx = np.flatnonzero(~keep)
@@ -107,16 +107,24 @@ def check_edges(vertices, faces, name="mesh"):
                 reason=reason, count=len(idx), examples=[tuple(map(int, edges[i])) for i in idx[:5]])
 
 
+def _paired_halfedges(faces):
+    """Half-edges (see ``directed_edges``) and, per edge, its two half-edge indices.
+
+    Assumes every edge has exactly two faces. Returns ``(half (3m, 2), h1 (e,), h2 (e,))``;
+    half-edge ``h`` belongs to face ``h // 3``.
+    """
+    _, he_edge = unique_edges(faces)
+    order = np.argsort(he_edge, kind="stable")
+    return directed_edges(faces), order[0::2], order[1::2]
+
+
 def check_manifold_vertices(vertices, faces, name="mesh"):
     """Raise ``non_manifold`` for vertices whose faces form more than one fan.
 
     Assumes every edge has exactly two faces (run :func:`check_edges` first).
     """
     m = len(faces)
-    half = directed_edges(faces)
-    _, he_edge = unique_edges(faces)
-    order = np.argsort(he_edge, kind="stable")
-    h1, h2 = order[0::2], order[1::2]
+    half, h1, h2 = _paired_halfedges(faces)
     f1, f2 = h1 // 3, h2 // 3
     corner_of = np.full((m, 3), -1, dtype=np.int64)
     corner_of[:] = np.arange(3 * m).reshape(m, 3)
@@ -152,10 +160,7 @@ def orient_consistently(vertices, faces, name="mesh"):
     ``orientation`` if the surface is not orientable (no consistent winding exists).
     """
     m = len(faces)
-    half = directed_edges(faces)
-    _, he_edge = unique_edges(faces)
-    order = np.argsort(he_edge, kind="stable")
-    h1, h2 = order[0::2], order[1::2]
+    half, h1, h2 = _paired_halfedges(faces)
     f1, f2 = h1 // 3, h2 // 3
     same_direction = (half[h1, 0] == half[h2, 0]).astype(np.int8)
     flip = np.zeros(m, dtype=np.int8)
