@@ -29,10 +29,27 @@ def find_self_intersections(vertices, faces):
     tri = vertices[faces]
     pairs = _candidate_pairs(tri)
     eps = 1e-9 * float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
-    chunks = [pairs[s:s + _CHUNK] for s in range(0, len(pairs), _CHUNK)]
-    hits = [chunk[_pairs_intersect(tri, faces, chunk, eps)] for chunk in chunks]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+    offset = np.einsum("ij,ij->i", normal, tri[:, 0])
+    hits = []
+    for start in range(0, len(pairs), _CHUNK):
+        chunk = pairs[start:start + _CHUNK]
+        chunk = chunk[_straddle(tri, normal, offset, chunk[:, 0], chunk[:, 1], eps)
+                      & _straddle(tri, normal, offset, chunk[:, 1], chunk[:, 0], eps)]
+        hits.append(chunk[_pairs_intersect(tri, faces, chunk, eps)])
     hits = np.concatenate(hits) if hits else np.zeros((0, 2), dtype=np.int64)
     return hits[np.lexsort((hits[:, 1], hits[:, 0]))]
+
+
+def _straddle(tri, normal, offset, a, b, eps):
+    """(p,) bool: triangle ``a`` has corners strictly on both sides of triangle ``b``'s plane.
+
+    Pairs failing this for either order cannot cross (they at most touch), so this cheap
+    test removes most candidates before the edge tests.
+    """
+    side = np.einsum("pkd,pd->pk", tri[a], normal[b]) - offset[b][:, None]
+    return (side.max(axis=1) > eps) & (side.min(axis=1) < -eps)
 
 
 def _candidate_pairs(tri):
@@ -55,18 +72,16 @@ def _candidate_pairs(tri):
         child_lo, child_hi = levels[0]
         levels.insert(0, (np.minimum(child_lo[0::2], child_lo[1::2]),
                           np.maximum(child_hi[0::2], child_hi[1::2])))
+    self_children = np.array([[0, 0], [1, 1], [0, 1]], dtype=np.int64)
+    cross_children = np.array([[0, 0], [0, 1], [1, 0], [1, 1]], dtype=np.int64)
     pairs = np.zeros((1, 2), dtype=np.int64)
     for level_lo, level_hi in levels[1:]:
-        a, b = pairs[:, 0], pairs[:, 1]
-        self_pair = a == b
-        sa, da, db = a[self_pair], a[~self_pair], b[~self_pair]
+        same = pairs[:, 0] == pairs[:, 1]
         pairs = np.concatenate([
-            np.stack([2 * sa, 2 * sa], axis=1), np.stack([2 * sa + 1, 2 * sa + 1], axis=1),
-            np.stack([2 * sa, 2 * sa + 1], axis=1),
-            np.stack([2 * da, 2 * db], axis=1), np.stack([2 * da, 2 * db + 1], axis=1),
-            np.stack([2 * da + 1, 2 * db], axis=1), np.stack([2 * da + 1, 2 * db + 1], axis=1)])
-        keep = ((level_lo[pairs[:, 0]] <= level_hi[pairs[:, 1]])
-                & (level_lo[pairs[:, 1]] <= level_hi[pairs[:, 0]])).all(axis=1)
+            (2 * pairs[same][:, None, :] + self_children).reshape(-1, 2),
+            (2 * pairs[~same][:, None, :] + cross_children).reshape(-1, 2)])
+        a, b = pairs[:, 0], pairs[:, 1]
+        keep = ((level_lo[a] <= level_hi[b]) & (level_lo[b] <= level_hi[a])).all(axis=1)
         pairs = pairs[keep]
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     return np.sort(order[pairs], axis=1)

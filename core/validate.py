@@ -39,6 +39,25 @@ after rounding to that grid) are one vertex: STL stores every triangle's corners
 separately, often printed with a few digits of noise."""
 
 
+def _unique_rows(rows):
+    """First occurrence of each distinct row and the row -> distinct-row map.
+
+    rows : (n, k) int64. Returns ``first (u,) int64`` (index of each distinct row's first
+    occurrence, in lexicographic order of the rows) and ``inverse (n,) int64``. Faster than
+    ``np.unique(axis=0)``, which sorts a structured view.
+    """
+    order = np.lexsort(rows.T[::-1])
+    ordered = rows[order]
+    new = np.ones(len(rows), dtype=bool)
+    new[1:] = (ordered[1:] != ordered[:-1]).any(axis=1)
+    group = np.cumsum(new) - 1
+    inverse = np.empty(len(rows), dtype=np.int64)
+    inverse[order] = group
+    first = np.full(int(group[-1]) + 1 if len(rows) else 0, len(rows), dtype=np.int64)
+    np.minimum.at(first, group, order)
+    return first, inverse
+
+
 def merge_identical_vertices(vertices, faces):
     """Merge vertices that coincide up to ``MERGE_TOLERANCE`` and drop unreferenced ones.
 
@@ -50,7 +69,7 @@ def merge_identical_vertices(vertices, faces):
     """
     diag = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))) or 1.0
     grid = np.round(vertices / (MERGE_TOLERANCE * diag)).astype(np.int64)
-    _, first_of_key, inverse = np.unique(grid, axis=0, return_index=True, return_inverse=True)
+    first_of_key, inverse = _unique_rows(grid)
     unique = vertices[first_of_key]
     faces = inverse.reshape(-1)[faces]
     used, first = np.unique(faces.reshape(-1), return_index=True)
@@ -78,8 +97,7 @@ def check_degenerate_faces(vertices, faces, name="mesh"):
 
 def check_duplicate_faces(vertices, faces, name="mesh"):
     """Raise ``duplicate_faces`` for faces using the same three vertices as another face."""
-    key = np.sort(faces, axis=1)
-    _, first = np.unique(key, axis=0, return_index=True)
+    first, _ = _unique_rows(np.sort(faces, axis=1))
     keep = np.zeros(len(faces), dtype=bool)
     keep[first] = True
     idx = np.flatnonzero(~keep)
@@ -142,8 +160,8 @@ def check_manifold_vertices(vertices, faces, name="mesh"):
     graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
     _, fan = connected_components(graph, directed=False)
     corner_vertex = faces.reshape(-1)
-    pairs = np.unique(np.stack([corner_vertex, fan], axis=1), axis=0)
-    fans_per_vertex = np.bincount(pairs[:, 0], minlength=len(vertices))
+    first, _ = _unique_rows(np.stack([corner_vertex, fan], axis=1))
+    fans_per_vertex = np.bincount(corner_vertex[first], minlength=len(vertices))
     bad = np.flatnonzero(fans_per_vertex > 1)
     if len(bad):
         v = bad[0]
