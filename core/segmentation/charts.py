@@ -129,18 +129,29 @@ def find_charts(topology, face_part, face_label):
     face_part, face_label : (m,) int arrays.
     """
     ef = topology.edge_faces
-    ok = (ef >= 0).all(axis=1)
+    ok = (ef[:, 0] >= 0) & (ef[:, 1] >= 0)
     a, b = ef[ok, 0], ef[ok, 1]
     same = (face_part[a] == face_part[b]) & (face_label[a] == face_label[b])
     m = len(face_label)
     graph = sp.csr_matrix((np.ones(int(same.sum()), dtype=np.int8), (a[same], b[same])),
                           shape=(m, m))
-    _, comp = connected_components(graph, directed=False)
+    n, comp = connected_components(graph, directed=False)
     # renumber so chart ids follow the lowest face index (independent of scipy's numbering)
-    _, first, inverse = np.unique(comp, return_index=True, return_inverse=True)
-    rank = np.empty(len(first), dtype=np.int64)
-    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
-    return rank[inverse.reshape(-1)]
+    return _rank_by_first(comp, n)
+
+
+def _first_index(ids, n):
+    """(n,) int64 lowest position of each id 0..n-1 in ``ids`` (every id must occur)."""
+    first = np.empty(n, dtype=np.int64)
+    first[ids[::-1]] = np.arange(len(ids) - 1, -1, -1)
+    return first
+
+
+def _rank_by_first(ids, n):
+    """Renumber ids 0..n-1 (all present) in the order of their first occurrence."""
+    rank = np.empty(n, dtype=np.int64)
+    rank[np.argsort(_first_index(ids, n), kind="stable")] = np.arange(n)
+    return rank[ids]
 
 
 def extract_layout(topology, face_part, face_label):
@@ -162,12 +173,12 @@ def extract_layout(topology, face_part, face_label):
     face_chart = find_charts(topology, face_part, face_label)
     n_charts = int(face_chart.max()) + 1 if m else 0
     chart_size = np.bincount(face_chart, minlength=n_charts)
-    _, chart_first = np.unique(face_chart, return_index=True)
+    chart_first = _first_index(face_chart, n_charts)
     chart_label = face_label[chart_first]
     chart_part = face_part[chart_first]
 
     ef = topology.edge_faces
-    ok = (ef >= 0).all(axis=1)
+    ok = (ef[:, 0] >= 0) & (ef[:, 1] >= 0)
     ca = np.where(ok, face_chart[np.maximum(ef[:, 0], 0)], -1)
     cb = np.where(ok, face_chart[np.maximum(ef[:, 1], 0)], -1)
     sep_edges = np.flatnonzero(ok & (ca != cb))
@@ -186,15 +197,11 @@ def extract_layout(topology, face_part, face_label):
     pa, pb = e2[0::2], e2[1::2]
     graph = sp.csr_matrix((np.ones(len(pa), dtype=np.int8), (pa, pb)), shape=(k, k))
     if k:
-        _, comp = connected_components(graph, directed=False)
+        n_b, comp = connected_components(graph, directed=False)
     else:
-        comp = np.zeros(0, dtype=np.int64)
-    _, first_edge, comp = np.unique(comp, return_index=True, return_inverse=True)
-    n_b = len(first_edge)
-    rank = np.empty(n_b, dtype=np.int64)
-    rank[np.argsort(first_edge, kind="stable")] = np.arange(n_b)
-    sep_boundary = rank[comp.reshape(-1)]
-    first_edge = np.sort(first_edge)
+        n_b, comp = 0, np.zeros(0, dtype=np.int64)
+    sep_boundary = _rank_by_first(comp.astype(np.int64), n_b)
+    first_edge = _first_index(sep_boundary, n_b)
     bc = np.sort(np.stack([ca[sep_edges[first_edge]], cb[sep_edges[first_edge]]], axis=1), axis=1)
     boundary_size = np.bincount(sep_boundary, minlength=n_b)
 

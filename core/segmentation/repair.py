@@ -15,7 +15,8 @@ of priority (one kind per round, so every round works on a fresh judgement):
    opposite labels) of least normal cost ``sum ||n - c_l||^2`` and not opposite to a label the
    strip already touches, so the two charts end up separated by a chart of a third axis.
 2. *Labels parallel to an interface x-axis* (multi-part only): the offending side's faces touching
-   the interface boundary take the least-cost label that is not parallel to the interface axis.
+   the interface boundary take the least-cost label that is not parallel to the interface axis
+   (kept only if it lowers the invalid count; otherwise the next operators run).
 3. *Invalid charts* (three or fewer boundaries), smallest first, an independent set per round
    (no two chosen charts touch, so each decision sees its neighbours' final labels): the chart is
    relabelled to the neighbouring chart label of least normal cost among those that are not
@@ -28,6 +29,11 @@ After each merge round a boundary-smoothing pass runs the HBECVT sweeps restrict
 that touch a separating edge, with the extra rule that a face may only take a label already present
 among its neighbours (boundaries move, charts are neither created nor split off by it); this undoes
 the jagged edges merges leave. Everything is vectorised per round; the loop is deterministic.
+
+Candidates are scored on the submesh around the faces they change (exact; see
+:func:`core.segmentation.validity.local_invalid_count`); only accepted states are judged whole.
+Per-chart trials are capped (``max_trials``) and so are consecutive sideways moves
+(``max_sideways``), so the work stays bounded on meshes with many invalid charts.
 """
 import numpy as np
 
@@ -35,8 +41,9 @@ from core.errors import ParameterError
 from core.segmentation.charts import OPPOSITE, build_topology
 from core.segmentation.labeling import (LAMBDA, PENALTY, check_frames, face_colouring,
                                         face_normals, hbecvt_sweeps, interface_penalty,
-                                        label_cost, part_neighbours)
-from core.segmentation.validity import check_validity, interface_loops
+                                        label_cost, label_vectors, part_neighbours)
+from core.segmentation.validity import (COS_45, check_validity, edge_interface_axes, interface_loops,
+                                         local_invalid_count)
 
 
 def _chart_costs(cost, face_chart, n_charts):
@@ -46,7 +53,7 @@ def _chart_costs(cost, face_chart, n_charts):
 
 
 def _faces_at_vertices(F, vertex_mask):
-    return vertex_mask[F].any(axis=1)
+    return vertex_mask[F[:, 0]] | vertex_mask[F[:, 1]] | vertex_mask[F[:, 2]]
 
 
 def _fix_opposite(F, topology, val, labels, cost):
@@ -83,16 +90,33 @@ def _fix_opposite(F, topology, val, labels, cost):
     return new, len(groups)
 
 
-def _fix_interface(F, topology, val, labels, cost, face_part, face_frame, iface_pen):
+def _fix_interface(F, topology, val, labels, cost, face_part, face_frame, iface_pen, edge_ix):
+    """Relabel faces whose label is parallel to a part interface's x-axis.
+
+    Two sets of faces change: faces next to the invalid interface boundaries whose label carries
+    Eq. 3's interface penalty, and the faces on interface edges whose label direction lies within
+    45 degrees of that edge's loop axis (the rule of :func:`check_validity`). Each takes its
+    least-cost label that is neither penalised nor within 45 degrees of the axis.
+    """
     lay = val.layout
+    m = len(F)
     bad = np.flatnonzero(val.boundary_reason == 2)
     edge_bad = np.isin(lay.sep_boundary, bad)
     vmask = np.zeros(topology.n_vertices, dtype=bool)
     vmask[topology.edges[lay.sep_edges[edge_bad]].reshape(-1)] = True
-    faces = np.flatnonzero(_faces_at_vertices(F, vmask) & (iface_pen[np.arange(len(F)),
-                                                                     labels] > 0))
+    forbid = iface_pen > 0
+    sep = lay.sep_edges[edge_bad]
+    sides = topology.edge_faces[sep]
+    iface = face_part[sides[:, 0]] != face_part[sides[:, 1]]
+    faces_e = sides[iface].reshape(-1)
+    ix = np.repeat(edge_ix[sep[iface]], 2, axis=0)
+    dirs = label_vectors(face_frame[faces_e])
+    par = np.abs(np.einsum("fld,fd->fl", dirs, ix)) > COS_45
+    np.logical_or.at(forbid, faces_e, par)
+    wrong = forbid[np.arange(m), labels] & _faces_at_vertices(F, vmask)
+    faces = np.flatnonzero(wrong)
     new = labels.copy()
-    new[faces] = np.argmin(cost[faces] + 1e3 * iface_pen[faces], axis=1)
+    new[faces] = np.argmin(cost[faces] + 1e3 * forbid[faces], axis=1)
     return new, len(bad)
 
 
@@ -145,11 +169,18 @@ def _fix_corners(F, topology, val, labels, face_part):
     return new, int(big.sum())
 
 
-def _smooth_boundaries(topology, val, labels, unary, nb, colour, lam, penalty):
-    """HBECVT sweeps on faces next to separating edges, labels limited to neighbours' labels."""
-    lay = val.layout
-    active = np.zeros(len(labels), dtype=bool)
-    active[topology.edge_faces[lay.sep_edges].reshape(-1)] = True
+def _boundary_faces(topology, face_part, labels):
+    """(m,) bool faces with an edge neighbour in another chart (other label or other part)."""
+    tn = topology.neighbours
+    ok = tn >= 0
+    other = np.maximum(tn, 0)
+    diff = ok & ((labels[other] != labels[:, None]) | (face_part[other] != face_part[:, None]))
+    return diff[:, 0] | diff[:, 1] | diff[:, 2]
+
+
+def _smooth_boundaries(labels, active, unary, nb, colour, lam, penalty):
+    """HBECVT sweeps on the ``active`` faces (those next to separating edges), labels limited to
+    the labels of each face's neighbours."""
     has = nb >= 0
     present = np.zeros((len(labels), 6), dtype=bool)
     rows = np.repeat(np.arange(len(labels)), nb.shape[1])[has.reshape(-1)]
@@ -170,18 +201,52 @@ def _local_resegment(labels, unary, nb, colour, region, lam, penalty):
 
 
 class _Judge:
-    """Validity and mean-angle bookkeeping for candidate labelings."""
+    """Validity and mean-angle bookkeeping for candidate labelings.
+
+    :meth:`validity` judges a whole labeling; :meth:`delta` judges a candidate against the current
+    labeling on the submesh around the faces it changes (see
+    :func:`core.segmentation.validity.local_invalid_count`), which is exact and much cheaper on
+    large meshes. The interface axes depend on the parts only and are computed once.
+    """
 
     def __init__(self, V, F, face_part, face_frame, topology, cost, area):
-        self.args = (V, F, face_part)
+        self.V, self.F, self.part = V, F, face_part
         self.face_frame = face_frame
         self.topology = topology
         self.cost = cost
         self.area = area / area.sum()
+        self.edge_ix = edge_interface_axes(V, topology, face_part)
 
     def validity(self, labels):
-        V, F, part = self.args
-        return check_validity(V, F, part, labels, self.face_frame, self.topology, turning=False)
+        return check_validity(self.V, self.F, self.part, labels, self.face_frame, self.topology,
+                              turning=False, edge_interface_axis=self.edge_ix)
+
+    def zone(self, labels, lay, cand):
+        """Submesh faces (sorted) and changed-vertex mask for judging ``cand`` against
+        ``labels`` (whose layout is ``lay``): the charts touching a changed vertex plus the faces
+        around their vertices."""
+        F = self.F
+        vmask = np.zeros(self.topology.n_vertices, dtype=bool)
+        vmask[F[cand != labels]] = True
+        charts = np.zeros(lay.n_charts, dtype=bool)
+        charts[lay.face_chart[_faces_at_vertices(F, vmask)]] = True
+        vz = np.zeros_like(vmask)
+        vz[F[charts[lay.face_chart]]] = True
+        return np.flatnonzero(_faces_at_vertices(F, vz)), vmask
+
+    def delta(self, labels, val, cand):
+        """(change of the invalid-item count from ``labels`` (judged as ``val``) to ``cand``,
+        opposite-label boundaries of ``cand`` near its changes). Zones of more than half the
+        mesh are judged whole (one check instead of two)."""
+        lay = val.layout
+        faces, vmask = self.zone(labels, lay, cand)
+        if 2 * len(faces) > len(labels):
+            full = self.validity(cand)
+            return full.n_invalid - val.n_invalid, int((full.boundary_reason == 1).sum())
+        args = (self.F, self.topology, self.part)
+        old = local_invalid_count(*args, labels, self.face_frame, self.edge_ix, faces, vmask)
+        new = local_invalid_count(*args, cand, self.face_frame, self.edge_ix, faces, vmask)
+        return sum(new[:3]) - sum(old[:3]), new[3]
 
     def angle(self, labels):
         c = self.cost[np.arange(len(labels)), labels]
@@ -222,7 +287,8 @@ def _chart_candidates(val, labels, c, cost, unary, nb, colour, penalty, lams):
 
 def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis=None,
                     max_rounds=60, smooth=True, max_angle_increase=4.0, small_chart=None,
-                    lam=LAMBDA, penalty=PENALTY, topology=None):
+                    lam=LAMBDA, penalty=PENALTY, topology=None, max_trials=None,
+                    max_sideways=4):
     """Drive the invalid charts, boundaries and corners of a labeling towards zero.
 
     Parameters
@@ -243,6 +309,9 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
         per-chart trial (default ``max(10, m // 2000)``).
     lam, penalty : float, Eq. 3 parameters used by smoothing and re-segmentation.
     topology : MeshTopology, optional.
+    max_trials : int, cap on per-chart candidate evaluations over the whole repair (default
+        ``max(40, 1000000 // m)``: roughly a constant amount of work per mesh).
+    max_sideways : int, cap on consecutive moves that keep the invalid count (new states only).
 
     Returns
     -------
@@ -284,6 +353,8 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
         topology = build_topology(F, len(V))
     if small_chart is None:
         small_chart = max(10, m // 2000)
+    if max_trials is None:
+        max_trials = max(40, 1000000 // max(m, 1))
     V = np.asarray(V, dtype=np.float64)
     normals = face_normals(V, F)
     area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
@@ -302,17 +373,33 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
         if not smooth:
             return cand, judge.validity(cand)
         v_c = judge.validity(cand)
-        s = _smooth_boundaries(topology, v_c, cand, unary, nb, colour, lam, penalty)
+        s = _smooth_boundaries(cand, _boundary_faces(topology, face_part, cand), unary, nb,
+                               colour, lam, penalty)
         v_s = judge.validity(s)
         return (s, v_s) if v_s.n_invalid <= v_c.n_invalid else (cand, v_c)
 
-    before = check_validity(V, F, face_part, labels, face_frame, topology)
+    def smoothed_local(cand, n_cand, lay):
+        """Smooth ``cand`` near its changes; returns (labels, invalid count) of the better."""
+        if not smooth:
+            return cand, n_cand
+        faces, _ = judge.zone(labels, lay, cand)
+        active = np.zeros(m, dtype=bool)
+        active[faces] = True
+        s = _smooth_boundaries(cand, active & _boundary_faces(topology, face_part, cand), unary,
+                               nb, colour, lam, penalty)
+        n_s = val.n_invalid + judge.delta(labels, val, s)[0]
+        return (s, n_s) if n_s <= n_cand else (cand, n_cand)
+
+    before = check_validity(V, F, face_part, labels, face_frame, topology,
+                            edge_interface_axis=judge.edge_ix)
     val = before
     ops = []
     gave_up = {}
     seen = {hash(labels.tobytes())}
     stopped = "round_cap"
     rounds = 0
+    n_sideways = 0
+    trials = 0
     for rounds in range(1, max_rounds + 1):
         if val.is_valid:
             stopped = "valid"
@@ -336,21 +423,22 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
             for name, cand in cands:
                 if judge.angle(cand) > angle_cap and name != cands[0][0]:
                     continue
-                v_c = judge.validity(cand)
-                score = (v_c.n_invalid, judge.angle(cand))
+                score = (val.n_invalid + judge.delta(labels, val, cand)[0], judge.angle(cand))
                 if best is None or score < best[0]:
-                    best = (score, name, cand, v_c)
-            s_cand, s_val = smoothed(best[2])
-            if s_val.n_invalid <= best[0][0]:
-                best = ((s_val.n_invalid, judge.angle(s_cand)), best[1], s_cand, s_val)
+                    best = (score, name, cand)
+            s_cand, n_s = smoothed_local(best[2], best[0][0], lay)
+            best = ((n_s, judge.angle(s_cand)), best[1], s_cand)
             if best[0][0] >= val.n_invalid:
-                best = (None, cands[0][0], strip, judge.validity(strip))
-            accepted = (best[1], count if best[1] == cands[0][0] else 1, best[2], best[3])
-        elif (val.boundary_reason == 2).any():
+                best = (None, cands[0][0], strip)
+            accepted = (best[1], count if best[1] == cands[0][0] else 1, best[2],
+                        judge.validity(best[2]))
+        if accepted is None and (val.boundary_reason == 2).any():
             new, count = _fix_interface(F, topology, val, labels, cost, face_part, face_frame,
-                                        iface_pen)
-            accepted = ("relabel_interface_parallel", count, new, judge.validity(new))
-        elif val.invalid_chart.any():
+                                        iface_pen, judge.edge_ix)
+            v_new = judge.validity(new)
+            if v_new.n_invalid < val.n_invalid:
+                accepted = ("relabel_interface_parallel", count, new, v_new)
+        if accepted is None and val.invalid_chart.any():
             lay = val.layout
             small = val.invalid_chart & (lay.chart_size <= small_chart)
             if small.any():
@@ -362,55 +450,61 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
                 bad = np.flatnonzero(val.invalid_chart)
                 for c in bad[np.lexsort((bad, lay.chart_size[bad]))].tolist():
                     key = (int(lay.chart_first_face[c]), int(lay.chart_label[c]))
-                    if key in gave_up:
+                    if key in gave_up or trials >= max_trials:
                         continue
                     best = None
                     for name, cand in _chart_candidates(val, labels, c, cost, unary, nb, colour,
                                                         penalty, (1.0, 2.0, 4.0, 8.0)):
                         if np.array_equal(cand, labels) or judge.angle(cand) > angle_cap:
                             continue
-                        v_c = judge.validity(cand)
-                        for _ in range(2):
-                            if not (v_c.boundary_reason == 1).any():
-                                break
-                            cand, _n = _fix_opposite(F, topology, v_c, cand, cost)
+                        trials += 1
+                        d, opp = judge.delta(labels, val, cand)
+                        n_c = val.n_invalid + d
+                        if opp:
                             v_c = judge.validity(cand)
-                            name += "+split_opposite"
-                        if judge.angle(cand) > angle_cap:
-                            continue
-                        score = (v_c.n_invalid, judge.angle(cand))
+                            for _ in range(2):
+                                if not (v_c.boundary_reason == 1).any():
+                                    break
+                                cand, _n = _fix_opposite(F, topology, v_c, cand, cost)
+                                v_c = judge.validity(cand)
+                                name += "+split_opposite"
+                            if judge.angle(cand) > angle_cap:
+                                continue
+                            n_c = v_c.n_invalid
+                        score = (n_c, judge.angle(cand))
                         if best is None or score < best[0]:
-                            best = (score, name, cand, v_c)
+                            best = (score, name, cand)
                     if best is not None:
-                        s_cand, s_val = smoothed(best[2])
-                        if s_val.n_invalid <= best[0][0]:
-                            best = ((s_val.n_invalid, judge.angle(s_cand)), best[1], s_cand,
-                                    s_val)
+                        s_cand, n_s = smoothed_local(best[2], best[0][0], lay)
+                        best = ((n_s, judge.angle(s_cand)), best[1], s_cand)
                     if best is not None and best[0][0] < val.n_invalid:
-                        accepted = (f"chart_{best[1]}", 1, best[2], best[3])
+                        accepted = (f"chart_{best[1]}", 1, best[2], judge.validity(best[2]))
                         break
                     if (best is not None and best[0][0] == val.n_invalid
                             and hash(best[2].tobytes()) not in seen):
-                        sideways = sideways or (f"chart_{best[1]}_sideways", 1, best[2], best[3])
+                        sideways = sideways or (f"chart_{best[1]}_sideways", 1, best[2])
                     gave_up[key] = {"face": key[0], "label": key[1],
                                     "faces": int(lay.chart_size[c])}
-                if accepted is None and sideways is not None:
-                    accepted = sideways
+                if accepted is None and sideways is not None and n_sideways < max_sideways:
+                    accepted = sideways + (judge.validity(sideways[2]),)
                     gave_up.clear()
-        else:
+        if accepted is None and len(val.invalid_corners):
             new, count = _fix_corners(F, topology, val, labels, face_part)
-            accepted = ("relabel_corner_faces", count, new, judge.validity(new))
+            if hash(new.tobytes()) not in seen:
+                accepted = ("relabel_corner_faces", count, new, judge.validity(new))
         if accepted is None or np.array_equal(accepted[2], labels):
             stopped = "stuck"
             break
         op, count, labels, val = accepted
+        n_sideways = n_sideways + 1 if op.endswith("_sideways") else 0
         seen.add(hash(labels.tobytes()))
         ops.append({"round": rounds, "operator": op, "items": int(count),
                     "invalid_after": int(val.n_invalid)})
     else:
         if val.is_valid:
             stopped = "valid"
-    final = check_validity(V, F, face_part, labels, face_frame, topology)
+    final = check_validity(V, F, face_part, labels, face_frame, topology,
+                           edge_interface_axis=judge.edge_ix)
     r = final.report
     unfixed = {k: r[k] for k in ("invalid_charts", "invalid_boundaries", "invalid_corners")
                if r[k]["count"]}

@@ -39,7 +39,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from core.segmentation.charts import boundary_chains, build_topology, extract_layout
+from core.segmentation.charts import MeshTopology, boundary_chains, build_topology, extract_layout
 
 COS_45 = float(np.sqrt(0.5))
 
@@ -95,7 +95,7 @@ def interface_loops(V, topology, face_part):
     loop_axis : (nloops, 3) float64 unit x-axis (smallest-eigenvalue eigenvector) of each loop.
     """
     ef = topology.edge_faces
-    ok = (ef >= 0).all(axis=1)
+    ok = (ef[:, 0] >= 0) & (ef[:, 1] >= 0)
     fa, fb = np.maximum(ef[:, 0], 0), np.maximum(ef[:, 1], 0)
     iface = np.flatnonzero(ok & (face_part[fa] != face_part[fb]))
     if len(iface) == 0:
@@ -172,37 +172,28 @@ def _example_point(V, F, face):
     return [float(x) for x in V[F[face]].mean(axis=0)]
 
 
-def check_validity(V, F, face_part, face_label, face_frame, topology=None, turning=True,
-                   turning_tolerance=None, max_examples=5):
-    """Judge a labeling by the polycube validity rules (see module docstring).
+def edge_interface_axes(V, topology, face_part):
+    """(e, 3) float64 x-axis of the interface loop of every edge between two parts (0 elsewhere).
 
     Parameters
     ----------
     V : (n, 3) float64 vertices.
-    F : (m, 3) int faces.
+    topology : MeshTopology.
     face_part : (m,) int part of each face.
-    face_label : (m,) int label 0..5 of each face (+X, -X, +Y, -Y, +Z, -Z of its frame).
-    face_frame : (m, 3, 3) float64 rows x, y, z of each face's frame (world coordinates).
-    topology : MeshTopology, optional (computed from ``F`` when omitted).
-    turning : bool, also find turning points (walks every boundary; off inside repair loops).
-    turning_tolerance : float, hysteresis ``tau`` in mesh units (default mean edge length).
-    max_examples : int, examples per category in the report.
-
-    Returns
-    -------
-    Validity
-        ``report`` holds ``valid`` (no invalid charts, boundaries or corners), ``monotone``,
-        ``charts``, ``boundaries``, ``corners`` and, for ``invalid_charts``,
-        ``invalid_boundaries``, ``invalid_corners`` and ``turning_points``, a ``count`` and a few
-        ``examples`` (ids, labels, an example face or vertex and its coordinates).
     """
-    V = np.asarray(V, dtype=np.float64)
-    F = np.asarray(F, dtype=np.int64)
-    face_part = np.asarray(face_part, dtype=np.int64)
-    face_label = np.asarray(face_label, dtype=np.int64)
-    face_frame = np.asarray(face_frame, dtype=np.float64)
-    if topology is None:
-        topology = build_topology(F, len(V))
+    iface_edges, edge_loop, loop_axis = interface_loops(V, topology, face_part)
+    edge_ix = np.zeros((len(topology.edges), 3))
+    edge_ix[iface_edges] = loop_axis[edge_loop]
+    return edge_ix
+
+
+def _judge(topology, face_part, face_label, face_frame, edge_ix):
+    """Layout and invalid items of a labeling (the rules of the module docstring).
+
+    ``edge_ix`` : (e, 3) interface x-axis per edge of ``topology`` (:func:`edge_interface_axes`).
+    Returns a dict with ``layout``, ``boundary_axis``, ``reason``, ``invalid_chart``,
+    ``invalid_corners`` and the corner incidences ``inc_v``, ``inc_part``, ``inc_axis``.
+    """
     lay = extract_layout(topology, face_part, face_label)
     ef = topology.edge_faces
 
@@ -214,9 +205,6 @@ def check_validity(V, F, face_part, face_label, face_frame, topology=None, turni
     boundary_axis = np.where(same_part, np.where(opposite, -1, 3 - la // 2 - lb // 2), -2)
     reason = np.where(opposite, 1, 0).astype(np.int8)
 
-    iface_edges, edge_loop, loop_axis = interface_loops(V, topology, face_part)
-    edge_ix = np.zeros((len(topology.edges), 3))
-    edge_ix[iface_edges] = loop_axis[edge_loop]
     # per separating edge and side: the axis seen from that side's part
     sep = lay.sep_edges
     f0, f1 = ef[sep, 0], ef[sep, 1]
@@ -232,7 +220,6 @@ def check_validity(V, F, face_part, face_label, face_frame, topology=None, turni
         bad_edge = (side_axis[is_iface] < 0).any(axis=1)
         bad_b = np.unique(lay.sep_boundary[is_iface][bad_edge])
         reason[bad_b] = 2
-    invalid_boundary = reason > 0
 
     # charts
     invalid_chart = lay.chart_boundary_count <= 3
@@ -257,12 +244,128 @@ def check_validity(V, F, face_part, face_label, face_frame, topology=None, turni
     counts = np.bincount(slot, minlength=4 * len(key)).reshape(len(key), 4)
     parity = counts[:, :3] % 2
     group_ok = (counts[:, 3] == 0) & (parity == parity[:, :1]).all(axis=1)
-    bad_vertex = np.unique(key[~group_ok] // n_parts)
-    invalid_corners = bad_vertex
+    invalid_corners = np.unique(key[~group_ok] // n_parts)
+    return {"layout": lay, "boundary_axis": boundary_axis, "reason": reason,
+            "invalid_chart": invalid_chart, "invalid_corners": invalid_corners,
+            "inc_v": inc_v, "inc_part": inc_part, "inc_axis": inc_axis}
 
-    mean_edge = float(np.linalg.norm(V[topology.edges[:, 0]] - V[topology.edges[:, 1]],
-                                     axis=1).mean()) if len(topology.edges) else 0.0
-    tau = mean_edge if turning_tolerance is None else float(turning_tolerance)
+
+def sub_topology(topology, faces):
+    """Topology of the submesh made of ``faces`` (sorted (s,) int64), global vertex ids kept.
+
+    Returns
+    -------
+    sub : MeshTopology of the submesh (faces numbered 0..s-1 in the order of ``faces``; edges
+        whose other face lies outside are open, ``-1``).
+    edge_ids : (e_s,) int64 global edge of each submesh edge.
+    """
+    m = len(topology.face_edges)
+    local = np.full(m + 1, -1, dtype=np.int64)
+    local[faces] = np.arange(len(faces))
+    fe = topology.face_edges[faces]
+    used = np.zeros(len(topology.edges), dtype=bool)
+    used[fe] = True
+    edge_ids = np.flatnonzero(used)
+    edge_local = np.cumsum(used) - 1
+    edges = topology.edges[edge_ids]
+    edge_faces = local[topology.edge_faces[edge_ids]]
+    open_first = edge_faces[:, 0] < 0
+    edge_faces[open_first] = edge_faces[open_first][:, ::-1]
+    face_edges = edge_local[fe]
+    neighbours = local[topology.neighbours[faces]]
+    sub = MeshTopology(edges, edge_faces, face_edges, neighbours, topology.n_vertices)
+    return sub, edge_ids
+
+
+def local_invalid_count(F, topology, face_part, face_label, face_frame, edge_ix, faces,
+                        vertex_mask):
+    """Invalid items touching ``vertex_mask``, judged on the submesh ``faces`` only.
+
+    Exact when ``faces`` holds every face of every chart that has a vertex in ``vertex_mask`` and
+    every face around each vertex of those charts (then those charts, their boundaries and the
+    corners in ``vertex_mask`` are the same as on the whole mesh). The difference of this count
+    between two labelings that differ only on faces whose vertices are all in ``vertex_mask`` is
+    the difference of their :attr:`Validity.n_invalid`.
+
+    Parameters
+    ----------
+    F : (m, 3) int64 faces.
+    topology : MeshTopology of the whole mesh.
+    face_part, face_label : (m,) int64.
+    face_frame : (m, 3, 3) float64.
+    edge_ix : (e, 3) float64, :func:`edge_interface_axes`.
+    faces : (s,) int64 sorted submesh faces.
+    vertex_mask : (n,) bool.
+
+    Returns
+    -------
+    (charts, boundaries, corners, opposite) : int counts of invalid charts with a vertex in
+    ``vertex_mask``, invalid boundaries with a vertex there, invalid corners there, and of those
+    boundaries the ones between opposite labels.
+    """
+    sub, edge_ids = sub_topology(topology, faces)
+    j = _judge(sub, face_part[faces], face_label[faces], face_frame[faces], edge_ix[edge_ids])
+    lay = j["layout"]
+    fv = F[faces]
+    touch_face = vertex_mask[fv[:, 0]] | vertex_mask[fv[:, 1]] | vertex_mask[fv[:, 2]]
+    charts = np.zeros(lay.n_charts, dtype=bool)
+    charts[lay.face_chart[touch_face]] = True
+    ev = sub.edges[lay.sep_edges]
+    bnd = np.zeros(lay.n_boundaries, dtype=bool)
+    bnd[lay.sep_boundary[vertex_mask[ev[:, 0]] | vertex_mask[ev[:, 1]]]] = True
+    reason = j["reason"]
+    return (int((charts & j["invalid_chart"]).sum()), int((bnd & (reason > 0)).sum()),
+            int(vertex_mask[j["invalid_corners"]].sum()), int((bnd & (reason == 1)).sum()))
+
+
+def check_validity(V, F, face_part, face_label, face_frame, topology=None, turning=True,
+                   turning_tolerance=None, max_examples=5, edge_interface_axis=None):
+    """Judge a labeling by the polycube validity rules (see module docstring).
+
+    Parameters
+    ----------
+    V : (n, 3) float64 vertices.
+    F : (m, 3) int faces.
+    face_part : (m,) int part of each face.
+    face_label : (m,) int label 0..5 of each face (+X, -X, +Y, -Y, +Z, -Z of its frame).
+    face_frame : (m, 3, 3) float64 rows x, y, z of each face's frame (world coordinates).
+    topology : MeshTopology, optional (computed from ``F`` when omitted).
+    turning : bool, also find turning points (walks every boundary; off inside repair loops).
+    turning_tolerance : float, hysteresis ``tau`` in mesh units (default mean edge length).
+    max_examples : int, examples per category in the report.
+    edge_interface_axis : (e, 3) float64, optional interface x-axes per edge of ``topology``
+        (:func:`edge_interface_axes`, which computes them when omitted; they depend on the parts
+        only, so loops over labelings pass them once).
+
+    Returns
+    -------
+    Validity
+        ``report`` holds ``valid`` (no invalid charts, boundaries or corners), ``monotone``,
+        ``charts``, ``boundaries``, ``corners`` and, for ``invalid_charts``,
+        ``invalid_boundaries``, ``invalid_corners`` and ``turning_points``, a ``count`` and a few
+        ``examples`` (ids, labels, an example face or vertex and its coordinates).
+    """
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64)
+    face_part = np.asarray(face_part, dtype=np.int64)
+    face_label = np.asarray(face_label, dtype=np.int64)
+    face_frame = np.asarray(face_frame, dtype=np.float64)
+    if topology is None:
+        topology = build_topology(F, len(V))
+    if edge_interface_axis is None:
+        edge_interface_axis = edge_interface_axes(V, topology, face_part)
+    j = _judge(topology, face_part, face_label, face_frame, edge_interface_axis)
+    lay, boundary_axis, reason = j["layout"], j["boundary_axis"], j["reason"]
+    invalid_chart, invalid_corners = j["invalid_chart"], j["invalid_corners"]
+    inc_v, inc_part, inc_axis = j["inc_v"], j["inc_part"], j["inc_axis"]
+    invalid_boundary = reason > 0
+    ca, cb = lay.boundary_charts[:, 0], lay.boundary_charts[:, 1]
+    la, lb = lay.chart_label[ca], lay.chart_label[cb]
+
+    tau = None if turning_tolerance is None else float(turning_tolerance)
+    if tau is None and turning:
+        tau = float(np.linalg.norm(V[topology.edges[:, 0]] - V[topology.edges[:, 1]],
+                                   axis=1).mean()) if len(topology.edges) else 0.0
     if turning:
         tp = _turning_points(V, topology, lay, face_frame, boundary_axis, tau)
     else:

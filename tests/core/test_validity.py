@@ -149,3 +149,35 @@ def test_single_chart_and_layout_bookkeeping():
     assert lay.chart_boundary_count.tolist() == [0]
     r = judge(V, F, np.zeros(m, dtype=np.int64)).report
     assert r["invalid_charts"]["count"] == 1 and not r["valid"]
+
+
+def test_local_count_matches_whole_mesh_judgement():
+    """Judging a change on the submesh around it gives the same invalid-count change as judging
+    the whole mesh (random patches relabelled on a two-part cube, interface rules included)."""
+    from core.segmentation.validity import edge_interface_axes, local_invalid_count
+
+    V, F = cube()
+    m = len(F)
+    parts = (centroids(V, F)[:, 0] > 0.5).astype(np.int64)
+    labels = nearest_direction_labels(face_normals(V, F), frames(m)).astype(np.int64)
+    topo = build_topology(F, len(V))
+    edge_ix = edge_interface_axes(V, topo, parts)
+    base = judge(V, F, labels, parts)
+    rng = np.random.default_rng(7)
+    for _ in range(25):
+        cand = labels.copy()
+        patch = np.flatnonzero(np.linalg.norm(centroids(V, F) - V[rng.integers(len(V))], axis=1)
+                               < rng.uniform(0.05, 0.3))
+        cand[patch] = rng.integers(6)
+        vmask = np.zeros(len(V), dtype=bool)
+        vmask[F[cand != labels]] = True
+        touched = np.unique(base.layout.face_chart[vmask[F].any(axis=1)])
+        vz = np.zeros(len(V), dtype=bool)
+        vz[F[np.isin(base.layout.face_chart, touched)]] = True
+        faces = np.flatnonzero(vz[F].any(axis=1))
+        args = (F, topo, parts)
+        old = local_invalid_count(*args, labels, frames(m), edge_ix, faces, vmask)
+        new = local_invalid_count(*args, cand, frames(m), edge_ix, faces, vmask)
+        full = judge(V, F, cand, parts)
+        assert base.n_invalid + sum(new[:3]) - sum(old[:3]) == full.n_invalid
+        assert new[3] == (full.boundary_reason == 1).sum()
