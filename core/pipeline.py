@@ -121,8 +121,35 @@ def stage_labeling(state, params):
 
 
 def stage_polycube(state, params):
-    raise StageNotAvailableError(
-        "polycube deformation and wireframe straightening (paper Sect. 2.3) are not implemented yet")
+    from core.errors import LabelingError
+    from core.polycube.deform import polycube_deformation
+    from core.polycube.wireframe import extract_wireframe, straighten_wireframe
+
+    labeling = state["validity"].report
+    if not labeling["valid"]:
+        raise LabelingError(
+            "the polycube needs a valid labeling; it still has "
+            f"{labeling['invalid_charts']['count']} invalid charts, "
+            f"{labeling['invalid_boundaries']['count']} invalid boundaries and "
+            f"{labeling['invalid_corners']['count']} invalid corners (see the labeling section)")
+    mesh, field = state["target"], state["frames"]
+    deformed = polycube_deformation(mesh.vertices, mesh.faces, state["face_label"],
+                                    field.face_frame, state["face_part"], field.part_frames)
+    wireframe, layout = extract_wireframe(mesh.faces, state["face_part"], state["face_label"],
+                                          len(mesh.vertices))
+    _, _, extent = straighten_wireframe(deformed.local, wireframe, layout, deformed.chart_plane)
+    info = deformed.info
+    report = {
+        "charts": info["charts"], "flipped_triangles": info["flipped"],
+        "degenerate_triangles": info["degenerate"],
+        "max_chart_planarity": info["max_chart_planarity"],
+        "corners": int(len(wireframe.corners)), "wireframe_edges": int(len(wireframe.edges)),
+        "collapsed_wireframe_edges": int((np.abs(extent) <= 1e-12).sum()),
+        "seconds": info["seconds"],
+    }
+    message = (f"{info['flipped']} flipped triangles after deformation" if info["flipped"]
+               else "no flipped triangles")
+    return {"polycube": deformed, "wireframe": wireframe, "report": report, "message": message}
 
 
 def stage_basemesh(state, params):

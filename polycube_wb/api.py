@@ -12,7 +12,8 @@ import numpy as np
 
 from core.errors import StageNotAvailableError
 from core.output_files import check_output_path, write_json_atomic
-from core.pipeline import STOP_AFTER_CHOICES, peak_memory_mb, reconstruct as run_pipeline
+from core.pipeline import (_LAST_CORE_STAGE, STOP_AFTER_CHOICES, peak_memory_mb,
+                           reconstruct as run_pipeline)
 from core.progress import NO_PROGRESS
 
 DEFAULT_EXPORT_DEPTH = 8
@@ -42,7 +43,7 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
     ------
     PolycubeInputError for bad input (nothing is written);
     StageNotAvailableError when an output needs a stage that is not built yet (the report
-    and the outputs that exist are written first).
+    and the outputs that exist are written first; the exception's ``report`` holds it).
     """
     inputs = (mesh_path,)
     for path, what in ((step_path, "STEP file"), (base_mesh_path, "base mesh"),
@@ -85,6 +86,9 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
                                          "message": "needs B-spline patches of the fitted base mesh"}
             if step_path is not None:
                 missing.append(("STEP file", _first_unavailable(report)))
+    last_stage = _LAST_CORE_STAGE[stop_after]
+    if stop_after != "solid" and report["stages"].get(last_stage, {}).get("status") != "ok":
+        missing.insert(0, (f"result of --stop-after {stop_after}", _first_unavailable(report)))
     report["outputs"] = outputs
     report["peak_memory_mb"] = round(peak_memory_mb(), 1)
     if report_path is not None:
@@ -94,10 +98,12 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
         raise result.failed
     if missing:
         what, stage = missing[-1]
-        raise StageNotAvailableError(
+        error = StageNotAvailableError(
             f"cannot write the {what}: the '{stage}' stage is not available yet "
             f"({report['stages'].get(stage, {}).get('message', 'see the report')}); "
             f"use --stop-after with one of {', '.join(_available_stops(report))} for what exists")
+        error.report = report
+        raise error
     return report
 
 
@@ -110,9 +116,7 @@ def _first_unavailable(report):
 
 def _available_stops(report):
     done = {name for name, entry in report["stages"].items() if entry["status"] == "ok"}
-    mapping = {"intake": "intake", "parts": "frames", "labeling": "labeling",
-               "basemesh": "basemesh", "fit": "fit", "solid": "patches"}
-    return [stop for stop in STOP_AFTER_CHOICES if mapping[stop] in done]
+    return [stop for stop in STOP_AFTER_CHOICES if _LAST_CORE_STAGE[stop] in done]
 
 
 def _solid_and_step(patches, step_path, inputs, report):

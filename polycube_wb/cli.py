@@ -114,6 +114,8 @@ def _reconstruct(args):
         report = reconstruct_to_step(args.target, args.output, args.base_mesh, args.report,
                                      args.labels, args.stop_after, **params)
     except StageNotAvailableError as exc:
+        if getattr(exc, "report", None):
+            _print_summary(exc.report)
         sys.stderr.write(f"failed: {exc}\n")
         return EXIT_INTERNAL
     _print_summary(report)

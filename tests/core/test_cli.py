@@ -52,11 +52,18 @@ def test_labeling_run_writes_labels_and_report(tmp_path):
 def test_full_run_says_which_stage_is_missing(tmp_path):
     result = run("reconstruct", SAMPLE, "-o", tmp_path / "out.step", "--report", tmp_path / "r.json")
     assert result.returncode == 1
-    assert "not available" in result.stderr and "polycube" in result.stderr
-    assert not (tmp_path / "out.step").exists()
     report = json.loads((tmp_path / "r.json").read_text())
-    assert report["stages"]["polycube"]["status"] == "not_available"
-    assert report["stages"]["basemesh"]["status"] == "skipped"
+    missing = [name for name, entry in report["stages"].items() if entry["status"] == "not_available"]
+    assert missing and f"'{missing[0]}' stage is not available" in result.stderr
+    assert not (tmp_path / "out.step").exists()
+    assert report["stages"]["solid"]["status"] == "skipped"
+
+
+def test_stop_after_an_unavailable_stage_exits_1(tmp_path):
+    result = run("reconstruct", SAMPLE, "--stop-after", "fit", "--report", tmp_path / "r.json")
+    assert result.returncode == 1 and "not available" in result.stderr
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["stages"]["labeling"]["status"] == "ok"
 
 
 def assert_rejected(result, *words):
