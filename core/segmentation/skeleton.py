@@ -232,11 +232,16 @@ class SkeletonPieces:
     """points : (k, 3) world coordinates of the skeleton voxels kept.
     piece : (k,) int64 piece of each point (junction clusters and branch segments).
     radius : (k,) float64 distance to the surface (mesh units).
+    edges : (e, 2) int64 pairs (a < b) of 26-adjacent points; lengths : (e,) float64
+    their distances (mesh units). junction : (k,) bool, point of a junction cluster.
     n_junctions : int; n_branches : int; pitch : float; vanished : int (see :func:`thin`)."""
 
     points: np.ndarray
     piece: np.ndarray
     radius: np.ndarray
+    edges: np.ndarray
+    lengths: np.ndarray
+    junction: np.ndarray
     n_junctions: int
     n_branches: int
     pitch: float
@@ -302,5 +307,9 @@ def skeleton_pieces(vertices, faces, pitch, spur_factor=2.0, segment_factor=4.0)
         piece[inb] = offset[b] + seg
     keep = piece >= 0
     _, piece_kept = np.unique(piece[keep], return_inverse=True)
+    new_id = np.cumsum(keep) - 1
+    both = keep[pairs[:, 0]] & keep[pairs[:, 1]]
     return SkeletonPieces(grid.centres(ijk[keep]), piece_kept.astype(np.int64),
-                          radius_vox[keep] * grid.pitch, n_cl, n_br, grid.pitch, vanished)
+                          radius_vox[keep] * grid.pitch, new_id[pairs[both]],
+                          weights[both] * grid.pitch, (cluster >= 0)[keep], n_cl, n_br,
+                          grid.pitch, vanished)

@@ -9,8 +9,8 @@ import trimesh
 
 from core.errors import ParameterError
 from core.segmentation.parts import (
-    MIN_PART_FACES, automatic_parts, interfaces, parts_from_user, single_part,
-    skeleton_segmentation, validate_face_part,
+    MIN_PART_FACES, absorb_patches, automatic_parts, close_interfaces, interfaces,
+    parts_from_user, single_part, skeleton_segmentation, smooth_boundaries, validate_face_part,
 )
 from core.types import TriMesh
 
@@ -125,6 +125,45 @@ def test_automatic_parts_split_an_l_of_boxes_at_the_corner():
     assert np.array_equal(automatic_parts(mesh), part)  # deterministic
 
 
+def test_automatic_cut_of_an_l_is_planar_at_the_other_legs_surface():
+    """The corner stays with one leg; the cut is the plane of the other leg's side face
+    (x = 2 or z = 2), not an oblique or staircase cut through the corner."""
+    mesh = _mesh((m3.Manifold.cube([10, 2, 2]) + m3.Manifold.cube([2, 2, 10])).refine(4))
+    itf = interfaces(mesh, automatic_parts(mesh))[0]
+    x = mesh.vertices[itf.vertices]
+    assert np.allclose(x[:, 0], 2.0, atol=1e-9) or np.allclose(x[:, 2], 2.0, atol=1e-9)
+
+
+def test_smooth_boundaries_straightens_a_jagged_cut():
+    bar = _mesh(m3.Manifold.cube([10.0, 2.0, 2.0]).refine(8))
+    c = _centroids(bar)
+    jagged = (c[:, 0] + 0.6 * np.sign(np.sin(7 * c[:, 1] + 5 * c[:, 2])) > 5).astype(np.int64)
+    before = interfaces(bar, jagged)
+    assert np.ptp(bar.vertices[before[0].vertices, 0]) > 2.0
+    part = smooth_boundaries(bar.vertices, bar.faces, jagged, width=0.5)
+    itfs = interfaces(bar, part)
+    assert len(itfs) == 1 and itfs[0].closed == [True]
+    assert np.ptp(bar.vertices[itfs[0].vertices, 0]) < 1e-9  # one cross-section
+
+
+def test_close_interfaces_removes_three_part_junctions(bar):
+    c = _centroids(bar)
+    part = np.where(c[:, 0] < 5.0, 0, np.where(c[:, 1] < 1.0, 1, 2))
+    assert any(itf.closed != [True] for itf in interfaces(bar, part))
+    closed = close_interfaces(bar.vertices, bar.faces, part)
+    assert len(np.unique(closed)) == 2
+    assert all(itf.closed == [True] and len(itf.loops) == 1 for itf in interfaces(bar, closed))
+
+
+def test_absorb_patches_merges_a_patch_on_a_wall(bar):
+    c = _centroids(bar)
+    part = (c[:, 0] > 5.0).astype(np.int64)
+    patch = (c[:, 2] > 2.0 - 1e-9) & (c[:, 0] > 1.0) & (c[:, 0] < 3.0)  # on the top face
+    part[patch] = 2
+    out = absorb_patches(bar.vertices, bar.faces, part)
+    assert np.array_equal(out, (c[:, 0] > 5.0).astype(np.int64))
+
+
 def test_automatic_parts_split_two_cylinders_at_right_angles():
     tube = m3.Manifold.cylinder(10.0, 1.0, 1.0, 32)
     mesh = _mesh((tube + tube.rotate([0, 90, 0])).refine(2))
@@ -161,3 +200,4 @@ def test_automatic_parts_on_dev_meshes(name, low, high):
     n_parts = part.max() + 1
     assert low <= n_parts <= high
     assert np.bincount(part).min() >= MIN_PART_FACES
+    assert all(itf.closed == [True] for itf in interfaces(mesh, part))
