@@ -175,7 +175,8 @@ STAGE_FUNCTIONS = {
     "fit": stage_fit, "patches": stage_patches,
 }
 
-_LAST_CORE_STAGE = {"intake": "intake", "parts": "frames", "labeling": "labeling",
+# The last core stage that each --stop-after choice runs ("solid" is built by polycube_wb).
+LAST_CORE_STAGE = {"intake": "intake", "parts": "frames", "labeling": "labeling",
                     "basemesh": "basemesh", "fit": "fit", "solid": "patches"}
 
 
@@ -241,7 +242,7 @@ def reconstruct(input_path, params=None, progress=NO_PROGRESS, stop_after="solid
     if stop_after not in STOP_AFTER_CHOICES:
         raise ParameterError(f"stop_after must be one of {', '.join(STOP_AFTER_CHOICES)}, "
                              f"got {stop_after!r}")
-    last = CORE_STAGES.index(_LAST_CORE_STAGE[stop_after])
+    last = CORE_STAGES.index(LAST_CORE_STAGE[stop_after])
     started = time.perf_counter()
     state = {"input_path": str(input_path), "params": params}
     report = {"parameters": params.to_dict(), "stages": {}}

@@ -12,7 +12,7 @@ import numpy as np
 
 from core.errors import StageNotAvailableError
 from core.output_files import check_output_path, write_json_atomic
-from core.pipeline import (_LAST_CORE_STAGE, STOP_AFTER_CHOICES, peak_memory_mb,
+from core.pipeline import (LAST_CORE_STAGE, STOP_AFTER_CHOICES, peak_memory_mb,
                            reconstruct as run_pipeline)
 from core.progress import NO_PROGRESS
 
@@ -86,7 +86,7 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
                                          "message": "needs B-spline patches of the fitted base mesh"}
             if step_path is not None:
                 missing.append(("STEP file", _first_unavailable(report)))
-    last_stage = _LAST_CORE_STAGE[stop_after]
+    last_stage = LAST_CORE_STAGE[stop_after]
     if stop_after != "solid" and report["stages"].get(last_stage, {}).get("status") != "ok":
         missing.insert(0, (f"result of --stop-after {stop_after}", _first_unavailable(report)))
     report["outputs"] = outputs
@@ -116,7 +116,7 @@ def _first_unavailable(report):
 
 def _available_stops(report):
     done = {name for name, entry in report["stages"].items() if entry["status"] == "ok"}
-    return [stop for stop in STOP_AFTER_CHOICES if _LAST_CORE_STAGE[stop] in done]
+    return [stop for stop in STOP_AFTER_CHOICES if LAST_CORE_STAGE[stop] in done]
 
 
 def _solid_and_step(patches, step_path, inputs, report):
