@@ -121,11 +121,10 @@ def _available_stops(report):
 
 def _solid_and_step(patches, step_path, inputs, report):
     """Build the solid from patches, write STEP if asked; returns the report's ``brep`` section."""
-    from polycube_wb.brep import patches_to_solid, solid_report
+    from polycube_wb.brep import build_solid
     from polycube_wb.step_io import write_step
 
-    solid = patches_to_solid(patches)
-    section = solid_report(solid)
+    solid, section = build_solid(patches)
     section["max_normal_jump_deg"] = patches.info.get("normal_jump_max_deg")
     section["step_path"] = None
     if step_path is not None:
@@ -144,8 +143,8 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=DEFAUL
     base_mesh_path : path of a closed, 2-manifold, consistently oriented polygon OBJ.
     step_path, report_path : optional outputs (STEP written atomically, JSON report).
     depth : grading depth of patches at extraordinary vertices (accuracy vs pole count).
-    measure : compute the approximation error and continuity figures (costs about as
-        much as the export).
+    measure : compute the approximation error, continuity figures and the limit-surface
+        volume the solid is compared with (costs about as much as the export).
     progress : core.progress.Progress.
 
     Returns
@@ -156,7 +155,7 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=DEFAUL
     from core.polymesh_checks import check_polymesh
     from core.polymesh_io import read_polymesh
     from core.subdivision.limit import limit_volume
-    from polycube_wb.brep import patches_to_solid, solid_report
+    from polycube_wb.brep import build_solid
     from polycube_wb.step_io import write_step
 
     inputs = (base_mesh_path,)
@@ -176,19 +175,20 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=DEFAUL
     progress.check_cancel()
     progress.report("solid", 0.5)
     clock = time.perf_counter()
-    solid = patches_to_solid(patches, progress)
-    brep = solid_report(solid)
+    solid, brep = build_solid(patches, progress)
     stages["solid"] = _ok(clock)
     brep["step_path"] = None
     if step_path is not None:
         clock = time.perf_counter()
         brep["step_path"] = write_step(solid, step_path, input_paths=inputs)
         stages["step"] = _ok(clock)
-    clock = time.perf_counter()
-    reference = limit_volume(base)
-    stages["limit_volume"] = _ok(clock)
-    brep["limit_volume"] = float(reference)
-    brep["volume_error_rel"] = float(abs(brep["volume"] - reference) / abs(reference))
+    brep["limit_volume"] = brep["volume_error_rel"] = None
+    if measure:
+        clock = time.perf_counter()
+        reference = limit_volume(base, level=_reference_level(base.n_faces))
+        stages["limit_volume"] = _ok(clock)
+        brep["limit_volume"] = float(reference)
+        brep["volume_error_rel"] = float(abs(brep["volume"] - reference) / abs(reference))
     brep["max_normal_jump_deg"] = patches.info.get("normal_jump_max_deg")
     report = {
         "input": {"file": os.path.abspath(base_mesh_path)},
@@ -203,6 +203,12 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=DEFAUL
         write_json_atomic(report_path, report, inputs)
     progress.report("done", 1.0)
     return solid, report
+
+
+def _reference_level(n_faces, budget=500_000):
+    """Subdivision level for the reference limit volume: at most ``budget`` faces, 3..5."""
+    level = int(np.floor(np.log(budget / max(n_faces, 1)) / np.log(4.0)))
+    return min(5, max(3, level))
 
 
 def _ok(clock):

@@ -26,6 +26,14 @@ _MAX_EXAMPLES = 5
 def patches_to_solid(patchset, progress=NO_PROGRESS):
     """Build a closed, valid, outward-oriented ``Part.Solid`` from a PatchSet.
 
+    Same as ``build_solid(patchset, progress)[0]``; see :func:`build_solid`.
+    """
+    return build_solid(patchset, progress)[0]
+
+
+def build_solid(patchset, progress=NO_PROGRESS):
+    """Build a closed, valid, outward-oriented ``Part.Solid`` and the figures checked on it.
+
     Parameters
     ----------
     patchset : core.types.PatchSet
@@ -38,8 +46,12 @@ def patches_to_solid(patchset, progress=NO_PROGRESS):
 
     Returns
     -------
-    Part.Solid
+    solid : Part.Solid
         One B-rep face per patch, one closed shell, ``isValid()`` true, volume > 0.
+    figures : dict
+        What was checked, so callers need not recompute it (OpenCascade's volume and
+        validity checks take seconds on thousands of faces): ``faces``, ``shells``,
+        ``valid``, ``closed``, ``volume`` (model units cubed).
 
     Raises
     ------
@@ -84,7 +96,9 @@ def patches_to_solid(patchset, progress=NO_PROGRESS):
         raise ExportError("OpenCascade reports the solid as invalid (BRepCheck_Analyzer); "
                           f"{len(patches)} patches, volume {volume:.6g}")
     progress.report("brep", 1.0)
-    return solid
+    figures = {"faces": len(solid.Faces), "shells": len(solid.Shells), "valid": True,
+               "closed": True, "volume": float(volume)}
+    return solid, figures
 
 
 def solid_report(solid):

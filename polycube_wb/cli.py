@@ -148,9 +148,10 @@ def _subd_to_step(args):
     base, brep, patches = report["base_mesh"], report["brep"], report["patches"]
     print(f"base mesh: {base['faces']} faces ({base['quads']} quads, {base['triangles']} triangles, "
           f"{base['other']} other), {base['extraordinary_vertices']} extraordinary vertices, genus {base['genus']}")
+    reference = ("" if brep["limit_volume"] is None else
+                 f" (limit surface {brep['limit_volume']:.6g}, rel. error {brep['volume_error_rel']:.1e})")
     print(f"solid: {brep['faces']} B-spline faces, valid={brep['valid']} closed={brep['closed']} "
-          f"volume={brep['volume']:.6g} (limit surface {brep['limit_volume']:.6g}, "
-          f"rel. error {brep['volume_error_rel']:.1e})")
+          f"volume={brep['volume']:.6g}{reference}")
     if patches.get("max_error_rel") is not None:
         print(f"patches: max deviation from the limit surface {patches['max_error_rel']:.1e} of the "
               f"bbox diagonal, normal jump max {patches['normal_jump_max_deg']:.3f} deg")
