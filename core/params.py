@@ -43,7 +43,7 @@ class ReconstructionParams:
         _choice("units", self.units, tuple(UNIT_TO_MM))
         _choice("components", self.components, COMPONENT_POLICIES)
         _choice("parts", self.parts, PART_MODES)
-        _range("blend_factor", self.blend_factor, 0.0, 1000.0)
+        _range("blend_factor", self.blend_factor, 1e-3, 1000.0)
         _range("lam", self.lam, 0.0, 1e3)
         _range("penalty", self.penalty, 0.0, 1e12)
         _range("max_sweeps", self.max_sweeps, 1, 100_000)

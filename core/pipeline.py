@@ -72,7 +72,7 @@ def stage_frames(state, params):
 
     mesh = state["target"]
     blend = params.blend_factor * mean_edge_length(mesh.vertices, mesh.faces)
-    field = compute_frames(mesh, state["face_part"], blend_distance=blend if blend > 0 else None)
+    field = compute_frames(mesh, state["face_part"], blend_distance=blend)
     report = {"parts": int(len(field.part_frames)), "interfaces": len(field.interfaces),
               "blend_distance": float(field.blend_distance)}
     return {"frames": field, "report": report}

@@ -418,39 +418,56 @@ def interface_distances(vertices, faces, face_part, interfaces, limit):
     return out
 
 
-def face_interface_axes(faces, face_part, interfaces):
+def interface_x_axis(points):
+    """Unit x-axis of an interface for Eq. 3 term 4 and the validity rules (Eq. 1 literally).
+
+    The eigenvector of the smallest eigenvalue of the covariance of the interface's vertices
+    ``points`` ((k, 3) float64); for a planar loop, the normal of its plane. Shared with
+    :func:`core.segmentation.validity.interface_loops` so that the labeling and the validity
+    judgement use the same axis.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    p = p - p.mean(axis=0)
+    return np.linalg.eigh(p.T @ p)[1][:, 0]
+
+
+def face_interface_axes(faces, face_part, interfaces, vertices):
     """Faces next to an interface and that interface's x-axis (term 4 of Eq. 3).
 
-    A face is next to an interface when one of its edges lies on it; where a face
-    touches several interfaces the lowest interface index is used.
+    A face is next to an interface when one of its vertices lies on it (so the faces along an
+    interface form a connected band and no chart of a label parallel to the axis reaches the
+    interface, not even at a vertex); where a face touches several interfaces the lowest
+    interface index is used. The axis is :func:`interface_x_axis` of the interface's vertices,
+    the axis :func:`core.segmentation.validity.check_validity` judges interface edges with.
 
     Parameters
     ----------
     faces : (m, 3) int64; face_part : (m,) int.
-    interfaces : list of :class:`core.segmentation.parts.Interface` with ``frame`` set.
+    interfaces : list of :class:`core.segmentation.parts.Interface`.
+    vertices : (n, 3) float64.
 
     Returns
     -------
     face_interface : (m,) int64 interface index, -1 where the face touches none.
     axis : (m, 3) float64 unit x-axis of that interface, NaN rows where none.
     """
+    faces = np.asarray(faces, dtype=np.int64)
     face_part = np.asarray(face_part, dtype=np.int64)
     m = len(face_part)
-    edges, faces_of_edge = edge_faces(faces)
-    face_interface = np.full(m, np.iinfo(np.int64).max)
-    if interfaces:
-        n_v = int(edges.max()) + 1
-        keys = edges[:, 0] * n_v + edges[:, 1]
-        order = np.argsort(keys)
-        for k, itf in enumerate(interfaces):
-            e = np.sort(itf.edges, axis=1)
-            idx = order[np.searchsorted(keys[order], e[:, 0] * n_v + e[:, 1])]
-            np.minimum.at(face_interface, faces_of_edge[idx].reshape(-1), k)
-    face_interface[face_interface == np.iinfo(np.int64).max] = -1
+    none = np.iinfo(np.int64).max
+    face_interface = np.full(m, none)
+    n_v = len(vertices)
+    for k, itf in enumerate(interfaces):
+        on = np.zeros(n_v, dtype=bool)
+        on[itf.vertices] = True
+        touch = on[faces].any(axis=1) & np.isin(face_part, itf.parts)
+        face_interface[touch] = np.minimum(face_interface[touch], k)
+    face_interface[face_interface == none] = -1
     axis = np.full((m, 3), np.nan)
     has = face_interface >= 0
     if has.any():
-        xs = np.array([itf.frame[0] for itf in interfaces])
+        pts = np.asarray(vertices, dtype=np.float64)
+        xs = np.array([interface_x_axis(pts[itf.vertices]) for itf in interfaces])
         axis[has] = xs[face_interface[has]]
     return face_interface, axis
 
@@ -462,8 +479,9 @@ class FrameField:
     face_frame : (m, 3, 3) float64 blended frame of each face (rows x, y, z).
     part_frames : (P, 3, 3) float64 PCA frame of each part.
     interfaces : list of Interface records with ``frame`` (3, 3) set.
-    face_interface : (m,) int64 interface next to each face, -1 where none.
-    face_interface_axis : (m, 3) float64 x-axis of that interface, NaN rows where none.
+    face_interface : (m,) int64 interface next to each face (a vertex on it), -1 where none.
+    face_interface_axis : (m, 3) float64 x-axis of that interface (:func:`interface_x_axis`,
+        Eq. 3 term 4), NaN rows where none.
     face_interface_distance : (m,) float64 geodesic distance to the nearest interface of
         the face's part (inf beyond the blend distance or without interface).
     blend_distance : float, in mesh units.
@@ -544,6 +562,6 @@ def compute_frames(mesh, face_part, blend_distance=None, mode="area", align_dege
                 acc[sel] += w_int[sel, k][:, None, None] * np.outer(q, q)[None]
         _, vecs = np.linalg.eigh(acc)
         face_frame[touched] = quaternion_to_rotation(vecs[:, :, -1])
-    face_interface, axis = face_interface_axes(faces, face_part, itfs)
+    face_interface, axis = face_interface_axes(faces, face_part, itfs, vertices)
     nearest = dist.min(axis=1) if itfs else np.full(len(faces), np.inf)
     return FrameField(face_frame, frames, itfs, face_interface, axis, nearest, blend_distance)

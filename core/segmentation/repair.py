@@ -430,13 +430,14 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
             best = ((n_s, judge.angle(s_cand)), best[1], s_cand)
             if best[0][0] >= val.n_invalid:
                 best = (None, cands[0][0], strip)
-            accepted = (best[1], count if best[1] == cands[0][0] else 1, best[2],
-                        judge.validity(best[2]))
+            if hash(best[2].tobytes()) not in seen:
+                accepted = (best[1], count if best[1] == cands[0][0] else 1, best[2],
+                            judge.validity(best[2]))
         if accepted is None and (val.boundary_reason == 2).any():
             new, count = _fix_interface(F, topology, val, labels, cost, face_part, face_frame,
                                         iface_pen, judge.edge_ix)
             v_new = judge.validity(new)
-            if v_new.n_invalid < val.n_invalid:
+            if v_new.n_invalid < val.n_invalid and hash(new.tobytes()) not in seen:
                 accepted = ("relabel_interface_parallel", count, new, v_new)
         if accepted is None and val.invalid_chart.any():
             lay = val.layout

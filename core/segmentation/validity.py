@@ -15,8 +15,9 @@ Rules (issue 5; charts, boundaries and corners as in :mod:`core.segmentation.cha
   bites at part interfaces.
 
 Interface rules (edges between two parts): the interface loops are the connected chains of edges
-between two parts; each loop's x-axis is the smallest-eigenvalue eigenvector of the covariance of
-its vertices (the paper's Eq. 1 on the interface). On each side an interface edge of a chart with
+between one pair of parts; each loop's x-axis is the smallest-eigenvalue eigenvector of the
+covariance of its vertices (the paper's Eq. 1 on the interface; the same axis the labeling's term 4
+uses, :func:`core.segmentation.frames.interface_x_axis`). On each side an interface edge of a chart with
 label direction ``d`` gets the axis of that side's frame nearest to ``d x x_interface``; an
 interface boundary is invalid when a side's label direction is within 45 degrees of the interface
 x-axis (the situation Eq. 3's term 4 forbids). A corner on an interface is judged per part with
@@ -39,7 +40,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from core.segmentation.charts import MeshTopology, boundary_chains, build_topology, extract_layout
+from core.segmentation.charts import (MeshTopology, _rank_by_first, boundary_chains, build_topology,
+                                      extract_layout)
+from core.segmentation.frames import interface_x_axis
 
 COS_45 = float(np.sqrt(0.5))
 
@@ -80,7 +83,12 @@ class Validity:
 
 
 def interface_loops(V, topology, face_part):
-    """Interface loops between parts and their PCA x-axes.
+    """Interface loops between parts and their x-axes.
+
+    A loop is a connected set of edges between one pair of parts (edges joined at shared
+    vertices), the same pieces as :func:`core.segmentation.parts.interfaces`; its x-axis is
+    :func:`core.segmentation.frames.interface_x_axis` of its vertices, the axis the labeling's
+    Eq. 3 term 4 uses.
 
     Parameters
     ----------
@@ -92,7 +100,7 @@ def interface_loops(V, topology, face_part):
     -------
     iface_edges : (j,) int64 edges (indices into ``topology.edges``) between two parts.
     edge_loop : (j,) int64 loop id of each such edge.
-    loop_axis : (nloops, 3) float64 unit x-axis (smallest-eigenvalue eigenvector) of each loop.
+    loop_axis : (nloops, 3) float64 unit x-axis of each loop.
     """
     ef = topology.edge_faces
     ok = (ef[:, 0] >= 0) & (ef[:, 1] >= 0)
@@ -103,17 +111,20 @@ def interface_loops(V, topology, face_part):
     ev = topology.edges[iface]
     n = topology.n_vertices
     j = len(iface)
-    rows = np.concatenate([np.arange(j), np.arange(j)])
-    inc = sp.csr_matrix((np.ones(2 * j, dtype=np.int8), (rows, ev.T.reshape(-1))), shape=(j, n))
+    pa, pb = face_part[fa[iface]], face_part[fb[iface]]
+    _, pair = np.unique(np.stack([np.minimum(pa, pb), np.maximum(pa, pb)], axis=1), axis=0,
+                        return_inverse=True)
+    node = pair.reshape(-1)[:, None] * n + ev
+    _, node = np.unique(node.reshape(-1), return_inverse=True)
+    rows = np.repeat(np.arange(j), 2)
+    inc = sp.csr_matrix((np.ones(2 * j, dtype=np.int8), (rows, node.reshape(-1))),
+                        shape=(j, int(node.max()) + 1))
     _, loop = connected_components(inc @ inc.T, directed=False)
-    loop = loop.astype(np.int64)
+    loop = _rank_by_first(loop.astype(np.int64), int(loop.max()) + 1)
     n_loops = int(loop.max()) + 1
     axes = np.zeros((n_loops, 3))
     for i in range(n_loops):
-        verts = np.unique(ev[loop == i])
-        P = V[verts] - V[verts].mean(axis=0)
-        w, vec = np.linalg.eigh(P.T @ P)
-        axes[i] = vec[:, 0]
+        axes[i] = interface_x_axis(V[np.unique(ev[loop == i])])
     return iface, loop, axes
 
 
