@@ -23,6 +23,8 @@ class ReconstructionParams:
     penalty : Eq. 3 p, weight of opposite labels and interface-parallel labels (paper: 1e5).
     max_sweeps : cap on HBECVT sweeps.
     repair : run the validity repair loop after HBECVT.
+    target_faces : approximate number of base-mesh faces (the coarse polycube grid is refined
+        to about this many; a grid that is already finer is kept).
     subdivision_levels : Catmull-Clark levels used by the fit (paper: 2).
     fit_iterations : shape-optimisation iterations (paper: 100).
     """
@@ -36,6 +38,7 @@ class ReconstructionParams:
     penalty: float = 1e5
     max_sweeps: int = 200
     repair: bool = True
+    target_faces: int = 300
     subdivision_levels: int = 2
     fit_iterations: int = 100
 
@@ -47,6 +50,7 @@ class ReconstructionParams:
         _range("lam", self.lam, 0.0, 1e3)
         _range("penalty", self.penalty, 0.0, 1e12)
         _range("max_sweeps", self.max_sweeps, 1, 100_000)
+        _range("target_faces", self.target_faces, 6, 200_000)
         _range("subdivision_levels", self.subdivision_levels, 1, 5)
         _range("fit_iterations", self.fit_iterations, 0, 100_000)
 

@@ -153,8 +153,15 @@ def stage_polycube(state, params):
 
 
 def stage_basemesh(state, params):
-    raise StageNotAvailableError(
-        "coarse quad base-mesh generation (paper Sect. 2.3) is not implemented yet")
+    from core.quadmesh import base_mesh_from_polycube
+
+    base, info = base_mesh_from_polycube(state["target"], state["polycube"], state["face_label"],
+                                         state["face_part"], state["frames"].part_frames,
+                                         target_faces=params.target_faces)
+    keys = ("faces", "quads", "triangles", "other", "vertices", "extraordinary_vertices", "genus",
+            "coarse_faces", "located_in_flipped", "inverted_cells", "volume", "seconds")
+    report = {key: info[key] for key in keys if key in info}
+    return {"base_mesh": base, "report": report}
 
 
 def stage_fit(state, params):
@@ -248,6 +255,8 @@ def reconstruct(input_path, params=None, progress=NO_PROGRESS, stop_after="solid
     report = {"parameters": params.to_dict(), "stages": {}}
     state, report, failed = run_stages(state, CORE_STAGES[:last + 1], params, progress, report)
     report["input"] = report.pop("intake")
+    if "basemesh" in report:
+        report["base_mesh"] = report.pop("basemesh")
     report["total_seconds"] = round(time.perf_counter() - started, 4)
     report["peak_memory_mb"] = round(peak_memory_mb(), 1)
     return PipelineResult(state, _json_safe(report), failed)

@@ -216,7 +216,8 @@ def hbecvt_labeling(V, F, face_part, face_frame, face_interface_axis=None, lam=L
     face_part : (m,) int part of each face.
     face_frame : (m, 3, 3) float64 rows x, y, z of each face's frame (world coordinates).
     face_interface_axis : (m, 3) float64, optional; the interface x-axis for faces next to a part
-        interface, NaN rows elsewhere (Eq. 3 term 4).
+        interface (a vertex on it, see :func:`core.segmentation.frames.face_interface_axes`), NaN
+        rows elsewhere (Eq. 3 term 4).
     lam : float, lambda (default 0.5); penalty : float, p (default 1e5).
     max_sweeps : int, iteration cap.
     topology : MeshTopology, optional.
