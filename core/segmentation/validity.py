@@ -16,12 +16,12 @@ Rules (issue 5; charts, boundaries and corners as in :mod:`core.segmentation.cha
 
 Interface rules (edges between two parts): the interface loops are the connected chains of edges
 between one pair of parts; each loop's x-axis is the smallest-eigenvalue eigenvector of the
-covariance of its vertices (the paper's Eq. 1 on the interface; the same axis the labeling's
-term 4 uses, :func:`core.segmentation.frames.interface_x_axis`). On each side an interface edge of
-a chart with label direction ``d`` gets the axis of that side's frame nearest to
-``d x x_interface``; an interface boundary is invalid when a side's label direction is within
-45 degrees of the interface x-axis (the situation Eq. 3's term 4 forbids). A corner on an
-interface is judged per part with those axes, so a boundary of part P that ends on the interface forms an X, Y, Z group with the two
+covariance of its vertices (the paper's Eq. 1 on the interface; the same axis the labeling's term 4
+uses, :func:`core.segmentation.frames.interface_x_axis`). On each side an interface edge of a chart
+with label direction ``d`` gets the axis of that side's frame nearest to ``d x x_interface``; an
+interface boundary is invalid when a side's label direction is within 45 degrees of the interface
+x-axis (the situation Eq. 3's term 4 forbids). A corner on an interface is judged per part with
+those axes, so a boundary of part P that ends on the interface forms an X, Y, Z group with the two
 interface edges on P's side, and the other side sees a plain pair.
 
 Turning points (monotonicity): along a boundary of one part with axis ``k``, walk its vertex chain

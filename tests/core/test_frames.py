@@ -151,8 +151,9 @@ def test_face_interface_axis_is_the_loop_normal():
     assert nxt.sum() > 0
     assert np.isnan(field.face_interface_axis[~nxt]).all()
     assert np.allclose(np.abs(field.face_interface_axis[nxt] @ [0, 0, 1]), 1.0, atol=1e-9)
-    centroid_z = mesh.vertices[mesh.faces].mean(axis=1)[:, 2]
-    assert np.abs(centroid_z[nxt] - 5.0).max() < 1.0
+    # next to the interface = a vertex on the cut ring (Eq. 3 term 4 band)
+    on_ring = (np.abs(mesh.vertices[mesh.faces][:, :, 2] - 5.0) < 1e-9).any(axis=1)
+    assert np.array_equal(nxt, on_ring)
 
 
 def test_compute_frames_rejects_bad_blend_distance():
@@ -161,3 +162,28 @@ def test_compute_frames_rejects_bad_blend_distance():
         compute_frames(mesh, face_part, blend_distance=0.0)
     with pytest.raises(ParameterError, match="mode"):
         compute_frames(mesh, face_part, mode="median")
+
+
+def test_face_interface_axis_is_the_axis_validity_judges_with():
+    # a saddle-shaped (non-planar) interface: the x-axis is not obvious, so both stages must use
+    # the same definition (Eq. 1 over the interface vertices)
+    from core.segmentation.charts import build_topology
+    from core.segmentation.frames import interface_x_axis
+    from core.segmentation.validity import edge_interface_axes
+
+    mesh = _mesh(m3.Manifold.cylinder(10.0, 2.0, 2.0, 48).refine(4))
+    c = mesh.vertices[mesh.faces].mean(axis=1)
+    face_part = (c[:, 2] > 5.0 + 0.8 * c[:, 0] * c[:, 1]).astype(np.int64)
+    field = compute_frames(mesh, face_part, blend_distance=1.0)
+    assert len(field.interfaces) == 1
+    itf = field.interfaces[0]
+    x = interface_x_axis(mesh.vertices[itf.vertices])
+    nxt = field.face_interface >= 0
+    assert np.allclose(np.abs(field.face_interface_axis[nxt] @ x), 1.0, atol=1e-12)
+    topo = build_topology(mesh.faces, len(mesh.vertices))
+    edge_ix = edge_interface_axes(mesh.vertices, topo, face_part)
+    on = np.linalg.norm(edge_ix, axis=1) > 0
+    assert on.sum() == len(itf.edges)
+    assert np.allclose(np.abs(edge_ix[on] @ x), 1.0, atol=1e-12)
+    # every face of an interface edge is in the term-4 band
+    assert nxt[topo.edge_faces[on].reshape(-1)].all()

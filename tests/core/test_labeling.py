@@ -177,3 +177,33 @@ def test_dev_mesh_ends_valid_with_few_charts(name):
     assert rep["after"]["charts"] <= 30
     near = nearest_direction_labels(n, frame)
     assert mean_label_angle(n, out, frame) <= mean_label_angle(n, near, frame) + 5.0
+
+
+@pytest.mark.parametrize("name", ["idler_riser.stl", "to_simp_cantilever.stl"])
+def test_dev_mesh_with_automatic_parts_ends_valid(name):
+    # the interface x-axis of Eq. 3 term 4 and of the validity rules is one and the same
+    from core.segmentation.frames import compute_frames, mean_edge_length
+    from core.segmentation.parts import skeleton_segmentation
+    from core.types import TriMesh
+
+    path = os.path.join(MESHES, name)
+    if not os.path.exists(path):
+        pytest.skip(f"dev mesh {name} not available")
+    mesh = trimesh.load(path, process=True)
+    tm = TriMesh(np.asarray(mesh.vertices, dtype=np.float64),
+                 np.asarray(mesh.faces, dtype=np.int64))
+    V, F = tm.vertices, tm.faces
+    parts = skeleton_segmentation(tm).face_part
+    assert parts.max() >= 1
+    field = compute_frames(tm, parts, blend_distance=4.0 * mean_edge_length(V, F))
+    labels, _ = hbecvt_labeling(V, F, parts, field.face_frame, field.face_interface_axis)
+    band = np.isfinite(field.face_interface_axis).all(axis=1)
+    d = label_directions(labels, field.face_frame)
+    assert (np.abs((d[band] * field.face_interface_axis[band]).sum(axis=1)) < 0.8).all()
+    out, rep = repair_labeling(V, F, parts, labels, field.face_frame, field.face_interface_axis)
+    assert rep["valid"], rep["unfixed"]
+    assert check_validity(V, F, parts, out, field.face_frame).is_valid
+    n = face_normals(V, F)
+    near = nearest_direction_labels(n, field.face_frame)
+    limit = mean_label_angle(n, near, field.face_frame) + 5.0
+    assert mean_label_angle(n, out, field.face_frame) <= limit
