@@ -268,7 +268,37 @@ def labeling_speed_case(spec):
             "peak_memory_mb": peak_mb()}
 
 
-CASES = {"mesh": mesh_case, "cage": cage_case, "step_speed": cage_case,
+def reconstruction_case(spec):
+    """The whole pipeline (one part) to STEP, then the check against the target."""
+    from core.errors import PolycubeError, PolycubeInputError
+    from polycube_wb.api import check, reconstruct_to_step
+
+    _preload()
+    started = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="polycube-bench-") as tmp:
+        step = os.path.join(tmp, "result.step")
+        try:
+            report = reconstruct_to_step(spec["path"], step, parts="single")
+            status, error = "ok", ""
+        except PolycubeInputError as exc:
+            return {"status": "rejected", "error": _error_line(exc), "peak_memory_mb": peak_mb()}
+        except PolycubeError as exc:
+            report = getattr(exc, "report", None) or {}
+            status, error = "incomplete", _error_line(exc)
+        seconds = round(time.perf_counter() - started, 3)
+        out = {"status": status, "error": error, "seconds": seconds,
+               "stages": report.get("stages", {}), "peak_memory_mb": peak_mb()}
+        for key in ("polycube", "base_mesh", "fit", "brep"):
+            if key in report:
+                out[key] = report[key]
+        if os.path.exists(step):
+            clock = time.perf_counter()
+            out["check"] = check(spec["path"], step)
+            out["check_seconds"] = round(time.perf_counter() - clock, 3)
+    return out
+
+
+CASES = {"reconstruction": reconstruction_case, "mesh": mesh_case, "cage": cage_case, "step_speed": cage_case,
          "subdivision_speed": subdivision_speed_case, "labeling_speed": labeling_speed_case}
 
 

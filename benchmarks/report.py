@@ -297,7 +297,7 @@ def _labeling_section(results):
 
 
 def _images_section(results):
-    lines = ["## 5. Renderings", "",
+    lines = ["## 6. Renderings", "",
              "Faces coloured by label (colours of `labels_file.LABEL_COLOURS`: +X red, −X orange, "
              "+Y green, −Y lime, +Z blue, −Z purple, in each face's own frame) and by automatic "
              "part; two opposite views, headlight shading. Files in `images/`.", ""]
@@ -335,7 +335,7 @@ def _cage_rows(cages):
 
 
 def _export_section(results):
-    lines = ["## 4. Subdivision and export", "",
+    lines = ["## 5. Subdivision and export", "",
              "Sample cages (`core.subdivision.sample_cages`) written as OBJ, then "
              "`polycube_wb.api.subd_to_solid` (default depth, with measurement) to a STEP file, "
              "then `step_round_trip`. EV error: largest distance between the B-spline patches and "
@@ -393,12 +393,44 @@ def _speed_detail(key, case):
             f"{_fmt(case['frames_seconds'])} s; peak {case['peak_memory_mb']} MiB")
 
 
+def _reconstruction_section(results):
+    """Whole pipeline per mesh (one part): stages reached, base mesh, fit, solid, check."""
+    cases = results.get("reconstruction", {})
+    if not cases:
+        return []
+    lines = ["## 4. Whole pipeline to STEP (one part)", "",
+             "`reconstruct_to_step` with default parameters, then `check` of the STEP against the "
+             "target. 'Reached' is the last stage that ran; distances are fractions of the bounding-box "
+             "diagonal (samples of the result to the target); volumes are fractions of the target volume.",
+             ""]
+    header = ["mesh", "reached", "flipped (polycube)", "base faces", "EVs", "fit iterations",
+              "B-rep faces", "valid", "mean dist", "max dist", "outside vol", "uncovered vol",
+              "total s", "note"]
+    rows = []
+    for name, case in sorted(cases.items()):
+        stages = case.get("stages", {})
+        reached = [k for k, v in stages.items() if v.get("status") == "ok"]
+        base = case.get("base_mesh", {})
+        chk = case.get("check", {})
+        dist = chk.get("distances", {})
+        rows.append([f"`{name}`", reached[-1] if reached else case.get("status", "?"),
+                     case.get("polycube", {}).get("flipped_triangles"), base.get("faces"),
+                     base.get("extraordinary_vertices"), case.get("fit", {}).get("iterations"),
+                     case.get("brep", {}).get("faces"), chk.get("valid"),
+                     dist.get("result_to_target_mean"), dist.get("result_to_target_max"),
+                     chk.get("outside_volume_fraction"), chk.get("uncovered_volume_fraction"),
+                     case.get("seconds"), (case.get("error") or "")[:90]])
+    lines += _table(header, rows) + [""]
+    return lines
+
+
 def markdown(results):
     """The whole RESULTS.md text."""
     lines = _header(results)
     lines += _intake_section(results)
     lines += _parts_section(results)
     lines += _labeling_section(results)
+    lines += _reconstruction_section(results)
     lines += _export_section(results)
     lines += _images_section(results)
     return "\n".join(lines).rstrip() + "\n"

@@ -129,6 +129,9 @@ def plan(args, meshes):
             cases.append(("meshes", name, mode, {"kind": "mesh", "path": path, "mode": mode,
                                                   "stem": name.replace("/", "_"),
                                                   "images": images}))
+    for name, path in meshes.items():
+        if wanted(name):
+            cases.append(("reconstruction", name, None, {"kind": "reconstruction", "path": path}))
     for cage in (QUICK_CAGES if args.quick else CAGES):
         if wanted(cage):
             cases.append(("cages", cage, None, {"kind": "cage", "cage": cage}))
@@ -213,7 +216,8 @@ def main(argv=None):
     started = time.perf_counter()
     results = {"machine": machine_info(), "quick": bool(args.quick), "only": args.only,
                "mesh_dirs": [os.path.relpath(d, REPO) for d in folders],
-               "timeout": args.timeout, "meshes": {}, "cages": {}, "speed": {}}
+               "timeout": args.timeout, "meshes": {}, "reconstruction": {}, "cages": {},
+               "speed": {}}
     cases = plan(args, meshes)
     print(f"{len(cases)} cases; output in {args.out}", flush=True)
     with tempfile.TemporaryDirectory(prefix="polycube-bench-") as tmp:
