@@ -201,6 +201,43 @@ def label_polycube(doc, target, progress=None):
     return group, report
 
 
+def build_base_mesh(doc, target, progress=None):
+    """Run the pipeline to the coarse quad base mesh and show its cage.
+
+    Adds a ``Part::Feature`` with the base mesh's edges (replacing an earlier one of this
+    target) and prints its figures.
+
+    Returns
+    -------
+    (Part::Feature, dict) the cage object and the report's ``base_mesh`` section.
+
+    Raises
+    ------
+    StageNotAvailableError when the base mesh cannot be built yet (e.g. several parts).
+    """
+    from core.errors import StageNotAvailableError
+    from polycube_wb.document import add_base_mesh
+
+    result = _run_to(target, "basemesh", progress, parts=getattr(target, PARTS_PROPERTY))
+    if "base_mesh" not in result.state:
+        stage, entry = next((name, entry) for name, entry in result.report["stages"].items()
+                            if entry["status"] != "ok")
+        raise StageNotAvailableError(f"the '{stage}' stage did not run: {entry['message']}")
+    section = result.report["base_mesh"]
+    name = f"{target.Name}_BaseMesh"
+    with transaction(doc, "Build base mesh"):
+        old = doc.getObject(name)
+        if old is not None:
+            doc.removeObject(old.Name)
+        obj = add_base_mesh(doc, result.state["base_mesh"], name)
+        obj.Label = f"{target.Label} base mesh"
+    FreeCAD.Console.PrintMessage(
+        f"Polycube: {target.Label}: base mesh {section['faces']} faces ({section['quads']} quads), "
+        f"{section['vertices']} vertices, {section['extraordinary_vertices']} extraordinary "
+        f"vertices, genus {section['genus']}\n")
+    return obj, section
+
+
 def print_labeling_report(name, report):
     """Write the labeling validity figures to the Report view."""
     line = (f"Polycube: {name}: labeling {'valid' if report['valid'] else 'INVALID'}: "
@@ -599,12 +636,20 @@ class _UnavailableCommand(_Command):
                                      f"{self.REASON}\n")
 
 
-class BuildBaseMeshCommand(_UnavailableCommand):
+class BuildBaseMeshCommand(_Command):
     ID = "PolyCube_BuildBaseMesh"
     MENU_TEXT = "Build polycube + base mesh"
-    TOOLTIP = "Deform the labeled target into a polycube and build the coarse quad base mesh"
-    REASON = ("polycube deformation and base-mesh generation (paper Sect. 2.3) are not "
-              "implemented")
+    TOOLTIP = ("Deform the labeled target into a polycube and build the coarse quad base mesh "
+               "(one part); shows its cage")
+
+    def Activated(self):
+        doc = FreeCAD.ActiveDocument
+        target = find_target(doc, _selection())
+        if target is None:
+            _no_target(self.MENU_TEXT)
+            return
+        run_guarded(self.MENU_TEXT, lambda progress: build_base_mesh(doc, target, progress),
+                    with_progress=True)
 
 
 class FitTargetCommand(_UnavailableCommand):

@@ -17,6 +17,7 @@ REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 OUTPUT = os.environ.get("POLYCUBE_GUI_OUTPUT") or os.path.join(REPO, "tests", "gui", "output")
 TARGET_MESH = os.path.normpath(os.path.join(REPO, "..", "shared", "data", "meshes",
                                             "to_simp_lbracket.stl"))
+SAMPLE_MESH = os.path.join(REPO, "examples", "to_simp_cantilever.stl")
 WORKBENCH = "PolycubeWorkbench"
 SCREENSHOT_SIZE = (1024, 768)
 MIN_COVERED = 0.03
@@ -128,8 +129,7 @@ class WorkbenchTest(unittest.TestCase):
     def test_unavailable_stages_are_inactive_with_tooltip(self):
         commands = _commands()
         FreeCADGui.activateWorkbench(WORKBENCH)
-        self.assertEqual(set(commands.UNAVAILABLE),
-                         {"PolyCube_BuildBaseMesh", "PolyCube_FitTarget"})
+        self.assertEqual(set(commands.UNAVAILABLE), {"PolyCube_FitTarget"})
         doc = FreeCAD.newDocument("PolycubeGuiInactive")
         try:
             for command_id in commands.UNAVAILABLE:
@@ -274,6 +274,17 @@ class TargetMeshTest(_DocumentCase):
         _, report = self.commands.label_polycube(self.doc, obj)
         self.assertEqual(report["parts"], section["parts"])
 
+    def test_base_mesh_cage_is_shown_and_undoable(self):
+        obj, _ = self.commands.import_target_mesh(self.doc, SAMPLE_MESH,
+                                                  check_self_intersections=False)
+        cage, section = self.commands.build_base_mesh(self.doc, obj)
+        self.assertGreater(section["faces"], 6)
+        self.assertEqual(section["faces"], section["quads"])
+        self.assertGreater(len(cage.Shape.Edges), section["faces"])
+        name = cage.Name
+        self.doc.undo()
+        self.assertIsNone(self.doc.getObject(name))
+
     def test_bad_target_is_rejected_through_the_command(self):
         path = os.path.join(self.tmp, "open.stl")
         with open(path, "w", encoding="utf-8") as handle:
@@ -298,14 +309,14 @@ class TargetMeshTest(_DocumentCase):
         from core.errors import StageNotAvailableError
 
         with self.assertRaises(StageNotAvailableError) as raised:
-            self.commands.reconstruct_all(self.doc, TARGET_MESH)
+            self.commands.reconstruct_all(self.doc, SAMPLE_MESH)
         self.assertRegex(str(raised.exception), r"needs the '\w+' stage, which is not available yet")
         targets = [obj for obj in self.doc.Objects if self.commands.is_target(obj)]
         self.assertEqual(len(targets), 1)
         self.doc.undo()
         self.assertEqual(len(self.doc.Objects), 0)
 
-        self.answer_open_dialog(TARGET_MESH)
+        self.answer_open_dialog(SAMPLE_MESH)
         FreeCADGui.runCommand("PolyCube_ReconstructAll")
         self.assertEqual([kind for kind, _ in self.boxes], ["information"])
         self.assertIn("not available yet", self.boxes[0][1])

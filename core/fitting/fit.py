@@ -1,0 +1,173 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Fit a subdivision base mesh to a target mesh (paper Sect. 2.5).
+
+The base vertices are moved by relaxed gradient projection so that the Catmull-Clark
+surface of level ``levels`` grows (volume) while it stays inside the target
+(packaging penalty) and keeps a minimal wall thickness. The responses are evaluated
+on the limit positions of the level-``levels`` vertices (``X = L S_i V0``, ``L`` the
+exact limit masks of :func:`core.subdivision.limit.limit_matrices`), so the surface
+that is fitted is the one exported later; ``surface='control'`` uses the level-i
+control points ``S_i V0`` as in the paper's Eq. 10.
+"""
+import time
+
+import numpy as np
+
+from core.errors import InvalidMeshError, ParameterError
+from core.fitting.closest_point import TargetSurface
+from core.fitting.responses import thickness, triangulate, volume
+from core.fitting.rgp import FitProblem, run_rgp
+from core.progress import NO_PROGRESS
+from core.quality import containment
+from core.subdivision.catmull_clark import build_hierarchy
+from core.subdivision.limit import limit_matrices
+from core.types import PolyMesh
+
+MODES = ("inside", "nearest")
+SURFACES = ("limit", "control")
+
+
+def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="inside",
+                  progress=None, penalty=1e5, step_fraction=0.05, surface="limit"):
+    """Move the base-mesh vertices so the subdivision surface fills the target.
+
+    Parameters
+    ----------
+    base : PolyMesh, closed 2-manifold, outward oriented (model units).
+    target : TriMesh, closed, outward oriented.
+    levels : int in 1..4, subdivision level ``i`` on which the responses live.
+    iterations : int >= 0, maximum RGP iterations (paper: 100).
+    t_min : float or None, minimal wall thickness (model units) at every fine vertex;
+        ``None`` picks ``min(0.1 * mean base edge, 0.5 * thinnest initial wall)``;
+        0 disables the constraint.
+    mode : ``'inside'`` (paper: stay inside the target) or ``'nearest'`` (penalise
+        the distance on both sides).
+    progress : core.progress.Progress or None
+    penalty : float > 0, ``p`` of Eq. 6 (dimensionless, see :mod:`core.fitting.rgp`).
+    step_fraction : float in (0, 1], largest base-vertex move per iteration as a
+        fraction of the mean base edge length.
+    surface : ``'limit'`` or ``'control'``, which fine positions the responses use.
+
+    Returns
+    -------
+    fitted : PolyMesh, the base mesh with moved vertices (same faces).
+    info : dict with ``iterations``, ``stopped`` ('iterations' or 'stalled'),
+        ``best_iteration``, ``objective`` (list per iteration), ``volume`` (list),
+        ``mean_distance`` / ``max_distance`` (distance of the fine limit points to the
+        target over the target's bounding-box diagonal) and their ``initial_``
+        counterparts, ``outside_volume_fraction`` and ``initial_outside_volume_fraction``
+        (triangulated fine limit mesh minus target, over the target volume), ``t_min``,
+        ``step`` (model units), ``seconds``.
+
+    Raises
+    ------
+    ParameterError
+        A parameter is out of range; the message names it and the value.
+    InvalidMeshError
+        The target is not a valid closed, outward-oriented triangle mesh, or the base
+        mesh is not closed.
+    """
+    started = time.perf_counter()
+    progress = NO_PROGRESS if progress is None else progress
+    _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface)
+    V0 = _check_base(base)
+    target_surface = TargetSurface(target.vertices, target.faces)
+    target_volume, _ = volume(target_surface.vertices, target_surface.faces)
+    if not target_volume > 0:
+        raise InvalidMeshError(f"target encloses a non-positive volume ({target_volume:g}); "
+                               "its faces must be counter-clockwise seen from outside",
+                               "orientation")
+    hierarchy = build_hierarchy(base, levels)
+    fine = hierarchy.meshes[levels]
+    S = hierarchy.composite(levels - 1)
+    L, _, _ = limit_matrices(fine)
+    limit_map = (L @ S).tocsr()
+    mapping = limit_map if surface == "limit" else S
+    T = triangulate(fine.face_vertices, fine.face_offsets)
+    X0 = mapping @ V0
+    edge = _mean_edge_length(base)
+    step = step_fraction * edge
+    if t_min is None:
+        t_min = _default_t_min(X0, T, edge)
+    area = _area(X0, T)
+    problem = FitProblem(mapping, T, target_surface, penalty, mode, t_min, area)
+    result = run_rgp(problem, V0, step, iterations=iterations, progress=progress)
+    info = {
+        "iterations": result.iterations,
+        "stopped": result.stopped,
+        "best_iteration": result.best_iteration,
+        "objective": result.history["objective"],
+        "volume": result.history["volume"],
+        "t_min": float(t_min),
+        "step": float(step),
+        "levels": levels,
+        "surface": surface,
+        "mode": mode,
+    }
+    for prefix, vertices in (("initial_", V0), ("", result.vertices)):
+        info.update({prefix + k: v for k, v in
+                     _figures(limit_map @ vertices, T, target_surface).items()})
+    info["seconds"] = time.perf_counter() - started
+    return PolyMesh(result.vertices, base.face_vertices, base.face_offsets), info
+
+
+def _figures(X, T, target):
+    """Distance and containment figures of fine limit points against the target."""
+    signed, *_ = target.signed_distance(X)
+    distance = np.abs(signed) / target.diagonal
+    report = containment(X, T, target.vertices, target.faces)
+    return {"mean_distance": float(distance.mean()),
+            "max_distance": float(distance.max()),
+            "outside_volume_fraction": report["outside_volume_fraction"]}
+
+
+def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface):
+    if not isinstance(levels, (int, np.integer)) or not 1 <= levels <= 4:
+        raise ParameterError(f"levels must be an integer in 1..4, got {levels!r}")
+    if not isinstance(iterations, (int, np.integer)) or iterations < 0:
+        raise ParameterError(f"iterations must be an integer >= 0, got {iterations!r}")
+    if t_min is not None and not (np.isfinite(t_min) and t_min >= 0):
+        raise ParameterError(f"t_min must be None or a finite number >= 0, got {t_min!r}")
+    if mode not in MODES:
+        raise ParameterError(f"mode must be one of {MODES}, got {mode!r}")
+    if not (np.isfinite(penalty) and penalty > 0):
+        raise ParameterError(f"penalty must be a finite number > 0, got {penalty!r}")
+    if not (np.isfinite(step_fraction) and 0 < step_fraction <= 1):
+        raise ParameterError(f"step_fraction must be in (0, 1], got {step_fraction!r}")
+    if surface not in SURFACES:
+        raise ParameterError(f"surface must be one of {SURFACES}, got {surface!r}")
+
+
+def _check_base(base):
+    if not isinstance(base, PolyMesh):
+        raise ParameterError(f"base must be a PolyMesh, got {type(base).__name__}")
+    V = np.asarray(base.vertices, dtype=np.float64)
+    if V.ndim != 2 or V.shape[1] != 3 or len(V) == 0:
+        raise InvalidMeshError(f"base: vertices must be a non-empty (n, 3) array, got shape "
+                               f"{V.shape}", "format")
+    bad = np.flatnonzero(~np.isfinite(V).all(axis=1))
+    if len(bad):
+        raise InvalidMeshError(f"base: {len(bad)} vertices have non-finite coordinates, "
+                               f"e.g. {bad[:5].tolist()}", "non_finite", len(bad), bad[:5])
+    return V
+
+
+def _mean_edge_length(mesh):
+    fv, fo = mesh.face_vertices, mesh.face_offsets
+    nxt = np.arange(len(fv)) + 1
+    nxt[fo[1:] - 1] = fo[:-1]
+    pairs = np.unique(np.sort(np.stack([fv, fv[nxt]], axis=1), axis=1), axis=0)
+    V = mesh.vertices
+    return float(np.linalg.norm(V[pairs[:, 0]] - V[pairs[:, 1]], axis=1).mean())
+
+
+def _area(X, T):
+    a, b, c = X[T[:, 0]], X[T[:, 1]], X[T[:, 2]]
+    return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+
+
+def _default_t_min(X, T, edge):
+    """``min(0.1 * edge, 0.5 * thinnest wall)``, walls measured up to ``0.2 * edge``."""
+    cap = 0.1 * edge
+    found = thickness(X, T, 2.0 * cap).thickness.min()
+    return float(min(cap, 0.5 * found))

@@ -1,0 +1,194 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Fit stage (paper Sect. 2.5): closest points, responses, gradient mapping, RGP fit."""
+import numpy as np
+import pytest
+import trimesh
+
+from core.errors import InvalidMeshError, ParameterError
+from core.fitting import TargetSurface, fit_base_mesh
+from core.fitting.closest_point import closest_on_triangles
+from core.fitting.responses import (packaging, thickness, thickness_constraint, triangulate,
+                                    volume)
+from core.subdivision.catmull_clark import build_hierarchy
+from core.subdivision.limit import limit_matrices
+from core.subdivision.sample_cages import cube, grid_sphere
+from core.types import PolyMesh, TriMesh
+
+
+def sphere_target(radius, subdivisions=4):
+    mesh = trimesh.creation.icosphere(subdivisions, radius=radius)
+    return TriMesh(np.asarray(mesh.vertices), np.asarray(mesh.faces, dtype=np.int64))
+
+
+def centred_cube(size):
+    c = cube(size)
+    return PolyMesh(c.vertices - 0.5 * size, c.face_vertices, c.face_offsets)
+
+
+def fine_mesh(base, levels):
+    h = build_hierarchy(base, levels)
+    fine = h.meshes[levels]
+    return h, fine, triangulate(fine.face_vertices, fine.face_offsets)
+
+
+def limit_points(base, levels):
+    h, fine, T = fine_mesh(base, levels)
+    L, _, _ = limit_matrices(fine)
+    return L @ h.composite(levels - 1) @ base.vertices, T
+
+
+def test_closest_points_match_brute_force():
+    mesh = trimesh.creation.icosphere(2)
+    target = TargetSurface(mesh.vertices, mesh.faces)
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(300, 3)) * 0.9
+    closest, face, normal, _ = target.query(points)
+    tri = np.asarray(mesh.triangles)
+    k = len(tri)
+    every, _, _ = closest_on_triangles(np.tile(tri, (len(points), 1, 1)),
+                                       np.repeat(points, k, axis=0))
+    brute = np.linalg.norm(every - np.repeat(points, k, axis=0), axis=1).reshape(-1, k).min(1)
+    assert np.allclose(np.linalg.norm(closest - points, axis=1), brute, atol=1e-12)
+    assert np.allclose(np.linalg.norm(normal, axis=1), 1.0)
+    # sign of (q - cpp) . pseudo-normal is the exact inside/outside test
+    radius = np.linalg.norm(points, axis=1)
+    clear = np.abs(radius - 0.97) > 0.04
+    signed = target.signed_distance(points)[0]
+    assert np.array_equal((signed < 0)[clear], (radius < 0.97)[clear])
+
+
+def test_volume_gradient_matches_finite_differences():
+    _, fine, T = fine_mesh(grid_sphere(2), 1)
+    rng = np.random.default_rng(0)
+    X = fine.vertices + 0.05 * rng.normal(size=fine.vertices.shape)
+    value, grad = volume(X, T)
+    assert value == pytest.approx(trimesh.Trimesh(X, T, process=False).volume, rel=1e-12)
+    h = 1e-3  # volume is linear in one coordinate of one vertex: no truncation error
+    for j in rng.choice(len(X), 8, replace=False):
+        for k in range(3):
+            Xp, Xm = X.copy(), X.copy()
+            Xp[j, k] += h
+            Xm[j, k] -= h
+            fd = (volume(Xp, T)[0] - volume(Xm, T)[0]) / (2 * h)
+            assert fd == pytest.approx(grad[j, k], rel=1e-6, abs=1e-9)
+
+
+def test_packaging_gradient_matches_finite_differences_where_active():
+    sphere = sphere_target(1.0, 3)
+    target = TargetSurface(sphere.vertices, sphere.faces)
+    rng = np.random.default_rng(1)
+    X = rng.normal(size=(400, 3))
+    X *= (rng.uniform(0.7, 1.3, 400) / np.linalg.norm(X, axis=1))[:, None]
+    value, grad, signed = packaging(X, target)
+    assert value == pytest.approx(signed[signed > 0].sum())
+    active = np.flatnonzero(signed > 1e-3)
+    assert len(active) > 50
+    inactive = np.flatnonzero(signed < -1e-3)
+    assert np.all(grad[inactive] == 0)
+    h = 1e-7
+    for k in range(3):
+        # the sum is separable per vertex: perturb all active vertices at once
+        Xp, Xm = X.copy(), X.copy()
+        Xp[active, k] += h
+        Xm[active, k] -= h
+        fd = (target.signed_distance(Xp)[0] - target.signed_distance(Xm)[0]) / (2 * h)
+        assert np.allclose(fd[active], grad[active, k], rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("with_limit", [False, True])
+def test_transpose_mapping_is_the_base_gradient(with_limit):
+    base = grid_sphere(2)
+    h, fine, T = fine_mesh(base, 2)
+    M = h.composite(1)
+    if with_limit:
+        M = limit_matrices(fine)[0] @ M
+    rng = np.random.default_rng(2)
+    V0 = base.vertices + 0.03 * rng.normal(size=base.vertices.shape)
+    _, grad_fine = volume(M @ V0, T)
+    grad_base = M.T @ grad_fine
+    step = 1e-3  # volume is quadratic along one base coordinate: central FD is exact
+    for j in rng.choice(len(V0), 6, replace=False):
+        for k in range(3):
+            Vp, Vm = V0.copy(), V0.copy()
+            Vp[j, k] += step
+            Vm[j, k] -= step
+            fd = (volume(M @ Vp, T)[0] - volume(M @ Vm, T)[0]) / (2 * step)
+            assert fd == pytest.approx(grad_base[j, k], rel=1e-6, abs=1e-9)
+
+
+def test_thickness_of_a_sphere_and_a_slab():
+    sphere = trimesh.creation.icosphere(3)
+    result = thickness(np.asarray(sphere.vertices), np.asarray(sphere.faces), 5.0)
+    assert np.all(result.hit_face >= 0)
+    assert np.allclose(result.thickness, 2.0, atol=5e-3)
+    slab = trimesh.creation.box(extents=(2.0, 2.0, 0.1))
+    slab = slab.subdivide().subdivide()
+    V, F = np.asarray(slab.vertices), np.asarray(slab.faces)
+    result = thickness(V, F, 1.0)
+    inner = (np.abs(V[:, 0]) < 0.9) & (np.abs(V[:, 1]) < 0.9)
+    assert np.allclose(result.thickness[inner], 0.1, atol=1e-9)
+    g, _, t_found = thickness_constraint(V, F, t_min=0.05)
+    assert g < 0 and t_found <= 0.1 + 1e-9
+    g, grad, _ = thickness_constraint(V, F, t_min=0.2)
+    assert g >= (0.2 - 0.1) / 0.2 - 1e-9
+    # raising a top vertex (moving it outward) thickens the wall there
+    top = np.flatnonzero(inner & (V[:, 2] > 0))
+    assert np.all(grad[top, 2] <= 0)
+
+
+def test_cube_cage_fills_a_sphere_from_inside():
+    target = sphere_target(1.0)
+    base = centred_cube(1.0)
+    fitted, info = fit_base_mesh(base, target, levels=2, iterations=60)
+    assert info["volume"][info["best_iteration"]] > 2.0 * info["volume"][0]
+    assert info["outside_volume_fraction"] <= 1e-3
+    assert info["mean_distance"] < 0.1 * info["initial_mean_distance"]
+    assert np.array_equal(fitted.face_vertices, base.face_vertices)
+    again, info2 = fit_base_mesh(base, target, levels=2, iterations=60)
+    assert np.array_equal(again.vertices, fitted.vertices)
+    assert info2["objective"] == info["objective"]
+
+
+def test_grid_sphere_converges_into_a_slightly_larger_sphere():
+    base = grid_sphere(3)
+    X, _ = limit_points(base, 2)
+    target = sphere_target(1.1 * np.linalg.norm(X, axis=1).max())
+    _, info = fit_base_mesh(base, target, levels=2, iterations=100)
+    assert info["initial_mean_distance"] > 0.04
+    assert info["mean_distance"] < 2e-3
+    assert info["max_distance"] < 5e-3
+    assert info["outside_volume_fraction"] <= 1e-3
+
+
+def test_thickness_constraint_holds_when_the_target_is_thin():
+    # a flat ellipsoid: the packaging squeezes the cage, the constraint keeps t >= t_min
+    mesh = trimesh.creation.icosphere(4)
+    mesh.apply_scale((1.0, 1.0, 0.12))
+    target = TriMesh(np.asarray(mesh.vertices), np.asarray(mesh.faces, dtype=np.int64))
+    base = PolyMesh(grid_sphere(2).vertices * [0.7, 0.7, 0.3], grid_sphere(2).face_vertices,
+                    grid_sphere(2).face_offsets)
+    t_min = 0.15
+    walls = []
+    for limit in (t_min, 0.0):
+        fitted, _ = fit_base_mesh(base, target, levels=2, iterations=40, t_min=limit)
+        X, T = limit_points(fitted, 2)
+        walls.append(thickness(X, T, 1.0).thickness.min())
+    assert walls[0] >= 0.95 * t_min
+    assert walls[1] < 0.9 * t_min  # without the constraint the walls do get thinner
+
+
+@pytest.mark.parametrize("kwargs", [
+    {"levels": 0}, {"levels": 5}, {"levels": 1.5}, {"iterations": -1},
+    {"t_min": -0.1}, {"t_min": float("nan")}, {"mode": "outside"}, {"penalty": 0.0},
+    {"step_fraction": 0.0}, {"step_fraction": 2.0}, {"surface": "cage"},
+])
+def test_bad_parameters_raise(kwargs):
+    with pytest.raises(ParameterError):
+        fit_base_mesh(centred_cube(1.0), sphere_target(1.0, 1), **kwargs)
+
+
+def test_inverted_target_is_rejected():
+    target = sphere_target(1.0, 1)
+    flipped = TriMesh(target.vertices, target.faces[:, ::-1].copy())
+    with pytest.raises(InvalidMeshError):
+        fit_base_mesh(centred_cube(1.0), flipped, iterations=1)
