@@ -165,8 +165,16 @@ def stage_basemesh(state, params):
 
 
 def stage_fit(state, params):
-    raise StageNotAvailableError(
-        "shape optimisation of the base mesh (paper Sect. 2.5) is not implemented yet")
+    from core.fitting import fit_base_mesh
+
+    base = state["base_mesh"]
+    fitted, info = fit_base_mesh(base, state["target"], levels=params.subdivision_levels,
+                                 iterations=params.fit_iterations, mode="inside")
+    report = {"mode": "inside", **{key: info[key] for key in (
+        "iterations", "stopped", "mean_distance", "max_distance", "outside_volume_fraction",
+        "initial_mean_distance", "initial_max_distance", "initial_outside_volume_fraction",
+        "seconds") if key in info}}
+    return {"initial_base_mesh": base, "base_mesh": fitted, "report": report}
 
 
 def stage_patches(state, params):

@@ -202,10 +202,7 @@ def label_polycube(doc, target, progress=None):
 
 
 def build_base_mesh(doc, target, progress=None):
-    """Run the pipeline to the coarse quad base mesh and show its cage.
-
-    Adds a ``Part::Feature`` with the base mesh's edges (replacing an earlier one of this
-    target) and prints its figures.
+    """Run the pipeline to the coarse quad base mesh (one part) and show its cage.
 
     Returns
     -------
@@ -215,27 +212,54 @@ def build_base_mesh(doc, target, progress=None):
     ------
     StageNotAvailableError when the base mesh cannot be built yet (e.g. several parts).
     """
-    from core.errors import StageNotAvailableError
-    from polycube_wb.document import add_base_mesh
-
-    result = _run_to(target, "basemesh", progress, parts=getattr(target, PARTS_PROPERTY))
-    if "base_mesh" not in result.state:
-        stage, entry = next((name, entry) for name, entry in result.report["stages"].items()
-                            if entry["status"] != "ok")
-        raise StageNotAvailableError(f"the '{stage}' stage did not run: {entry['message']}")
-    section = result.report["base_mesh"]
-    name = f"{target.Name}_BaseMesh"
-    with transaction(doc, "Build base mesh"):
-        old = doc.getObject(name)
-        if old is not None:
-            doc.removeObject(old.Name)
-        obj = add_base_mesh(doc, result.state["base_mesh"], name)
-        obj.Label = f"{target.Label} base mesh"
+    obj, report = _run_and_show_cage(doc, target, "basemesh", "BaseMesh", "base mesh", progress)
+    section = report["base_mesh"]
     FreeCAD.Console.PrintMessage(
         f"Polycube: {target.Label}: base mesh {section['faces']} faces ({section['quads']} quads), "
         f"{section['vertices']} vertices, {section['extraordinary_vertices']} extraordinary "
         f"vertices, genus {section['genus']}\n")
     return obj, section
+
+
+def fit_to_target(doc, target, progress=None, **params):
+    """Run the pipeline through the shape optimisation and show the fitted base mesh's cage.
+
+    ``params`` are pipeline parameters (e.g. ``fit_iterations``).
+
+    Returns
+    -------
+    (Part::Feature, dict) the cage object and the report's ``fit`` section.
+    """
+    obj, report = _run_and_show_cage(doc, target, "fit", "FittedBaseMesh", "fitted base mesh",
+                                     progress, **params)
+    fit = report["fit"]
+    FreeCAD.Console.PrintMessage(
+        f"Polycube: {target.Label}: fit {fit['iterations']} iterations ({fit['stopped']}); mean "
+        f"distance {fit['mean_distance']:.2e}, max {fit['max_distance']:.2e} of the bounding-box "
+        f"diagonal; outside volume {fit['outside_volume_fraction']:.2e} of the target\n")
+    return obj, fit
+
+
+def _run_and_show_cage(doc, target, stop_after, suffix, what, progress, **params):
+    """Run to ``stop_after`` and show ``state['base_mesh']`` as ``<target>_<suffix>``."""
+    from core.errors import StageNotAvailableError
+    from polycube_wb.document import add_base_mesh
+
+    params.setdefault("parts", getattr(target, PARTS_PROPERTY))
+    result = _run_to(target, stop_after, progress, **params)
+    stages = result.report["stages"]
+    if any(entry["status"] != "ok" for entry in stages.values()):
+        stage, entry = next((name, entry) for name, entry in stages.items()
+                            if entry["status"] != "ok")
+        raise StageNotAvailableError(f"the '{stage}' stage did not run: {entry['message']}")
+    name = f"{target.Name}_{suffix}"
+    with transaction(doc, f"Build {what}"):
+        old = doc.getObject(name)
+        if old is not None:
+            doc.removeObject(old.Name)
+        obj = add_base_mesh(doc, result.state["base_mesh"], name)
+        obj.Label = f"{target.Label} {what}"
+    return obj, result.report
 
 
 def print_labeling_report(name, report):
@@ -617,25 +641,6 @@ class LabelPolycubeCommand(_Command):
                     with_progress=True)
 
 
-class _UnavailableCommand(_Command):
-    """A pipeline stage that is not built yet: always inactive, the tooltip says so."""
-
-    REASON = ""
-
-    def GetResources(self):
-        resources = super().GetResources()
-        resources["MenuText"] = f"{self.MENU_TEXT} ({NOT_AVAILABLE})"
-        resources["ToolTip"] = f"{self.TOOLTIP}. Not available yet: {self.REASON}."
-        return resources
-
-    def IsActive(self):
-        return False
-
-    def Activated(self):
-        FreeCAD.Console.PrintWarning(f"Polycube: {self.MENU_TEXT}: {NOT_AVAILABLE}: "
-                                     f"{self.REASON}\n")
-
-
 class BuildBaseMeshCommand(_Command):
     ID = "PolyCube_BuildBaseMesh"
     MENU_TEXT = "Build polycube + base mesh"
@@ -652,11 +657,20 @@ class BuildBaseMeshCommand(_Command):
                     with_progress=True)
 
 
-class FitTargetCommand(_UnavailableCommand):
+class FitTargetCommand(_Command):
     ID = "PolyCube_FitTarget"
     MENU_TEXT = "Fit to target"
-    TOOLTIP = "Optimise the base mesh so its Catmull-Clark limit surface fits the target"
-    REASON = "shape optimisation of the base mesh (paper Sect. 2.5) is not implemented"
+    TOOLTIP = ("Optimise the base mesh so its Catmull-Clark limit surface fits the target "
+               "from inside (volume, packaging and thickness; relaxed gradient projection)")
+
+    def Activated(self):
+        doc = FreeCAD.ActiveDocument
+        target = find_target(doc, _selection())
+        if target is None:
+            _no_target(self.MENU_TEXT)
+            return
+        run_guarded(self.MENU_TEXT, lambda progress: fit_to_target(doc, target, progress),
+                    with_progress=True)
 
 
 class ReconstructAllCommand(_Command):
@@ -756,8 +770,6 @@ TOOLBAR = tuple(command.ID for command in COMMANDS)
 MENU = (ImportTargetCommand.ID, "Separator", SegmentPartsCommand.ID, LabelPolycubeCommand.ID,
         BuildBaseMeshCommand.ID, FitTargetCommand.ID, "Separator", ReconstructAllCommand.ID,
         "Separator", ImportSubDCommand.ID, ExportStepCommand.ID, CheckResultCommand.ID)
-UNAVAILABLE = tuple(command.ID for command in COMMANDS
-                    if issubclass(command, _UnavailableCommand))
 
 
 def register():

@@ -49,21 +49,29 @@ def test_labeling_run_writes_labels_and_report(tmp_path):
     assert again.returncode == 0 and digest(tmp_path / "l.ply") == digest(tmp_path / "m.ply")
 
 
-def test_full_run_says_which_stage_is_missing(tmp_path):
-    result = run("reconstruct", SAMPLE, "-o", tmp_path / "out.step", "--report", tmp_path / "r.json")
-    assert result.returncode == 1
+def test_full_run_writes_a_step_solid_and_every_report_section(tmp_path):
+    result = run("reconstruct", SAMPLE, "-o", tmp_path / "out.step", "--report", tmp_path / "r.json",
+                 "--base-mesh", tmp_path / "base.obj", "--fit-iterations", "5")
+    assert result.returncode == 0, result.stderr
     report = json.loads((tmp_path / "r.json").read_text())
-    missing = [name for name, entry in report["stages"].items() if entry["status"] == "not_available"]
-    assert missing and f"'{missing[0]}' stage is not available" in result.stderr
-    assert not (tmp_path / "out.step").exists()
-    assert report["stages"]["solid"]["status"] == "skipped"
+    assert all(entry["status"] == "ok" for entry in report["stages"].values()), report["stages"]
+    base = report["base_mesh"]
+    assert base["faces"] == base["quads"] + base["triangles"] + base["other"] and base["genus"] == 0
+    fit = report["fit"]
+    assert fit["iterations"] == 5 and fit["mode"] == "inside"
+    assert fit["outside_volume_fraction"] < fit["initial_outside_volume_fraction"]
+    brep = report["brep"]
+    assert brep["valid"] and brep["closed"] and brep["faces"] == base["faces"]
+    assert (tmp_path / "out.step").stat().st_size > 0 and (tmp_path / "base.obj").exists()
 
 
 def test_stop_after_an_unavailable_stage_exits_1(tmp_path):
-    result = run("reconstruct", SAMPLE, "--stop-after", "fit", "--report", tmp_path / "r.json")
-    assert result.returncode == 1 and "not available" in result.stderr
+    result = run("reconstruct", SAMPLE, "--parts", "auto", "--stop-after", "basemesh",
+                 "--report", tmp_path / "r.json")
+    assert result.returncode == 1 and "'basemesh' stage is not available" in result.stderr
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["stages"]["labeling"]["status"] == "ok"
+    assert report["stages"]["basemesh"]["status"] == "not_available"
 
 
 def assert_rejected(result, *words):

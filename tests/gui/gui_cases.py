@@ -126,20 +126,17 @@ class WorkbenchTest(unittest.TestCase):
         self.assertTrue(bars[0].isVisible())
         self.assertEqual(len(bars[0].actions()), len(ids))
 
-    def test_unavailable_stages_are_inactive_with_tooltip(self):
-        commands = _commands()
+    def test_stage_commands_are_active_with_a_document(self):
         FreeCADGui.activateWorkbench(WORKBENCH)
-        self.assertEqual(set(commands.UNAVAILABLE), {"PolyCube_FitTarget"})
-        doc = FreeCAD.newDocument("PolycubeGuiInactive")
+        doc = FreeCAD.newDocument("PolycubeGuiActive")
         try:
-            for command_id in commands.UNAVAILABLE:
+            for command_id in ("PolyCube_ImportTarget", "PolyCube_SegmentParts",
+                               "PolyCube_LabelPolycube", "PolyCube_BuildBaseMesh",
+                               "PolyCube_FitTarget", "PolyCube_ReconstructAll",
+                               "PolyCube_ImportSubD"):
                 command = FreeCADGui.Command.get(command_id)
-                self.assertFalse(command.isActive(), command_id)
-                info = command.getInfo()
-                self.assertIn("not available yet", info["toolTip"].lower())
-                self.assertIn("not available yet", info["menuText"].lower())
-            self.assertTrue(FreeCADGui.Command.get("PolyCube_ImportSubD").isActive())
-            self.assertTrue(FreeCADGui.Command.get("PolyCube_ImportTarget").isActive())
+                self.assertTrue(command.isActive(), command_id)
+                self.assertNotIn("not available", command.getInfo()["menuText"].lower())
         finally:
             FreeCAD.closeDocument(doc.Name)
 
@@ -284,6 +281,10 @@ class TargetMeshTest(_DocumentCase):
         name = cage.Name
         self.doc.undo()
         self.assertIsNone(self.doc.getObject(name))
+        fitted, fit = self.commands.fit_to_target(self.doc, obj, fit_iterations=3)
+        self.assertEqual(fit["iterations"], 3)
+        self.assertLess(fit["outside_volume_fraction"], fit["initial_outside_volume_fraction"])
+        self.assertGreater(len(fitted.Shape.Edges), section["faces"])
 
     def test_bad_target_is_rejected_through_the_command(self):
         path = os.path.join(self.tmp, "open.stl")
@@ -305,21 +306,31 @@ class TargetMeshTest(_DocumentCase):
         self.assertEqual([kind for kind, _ in self.boxes], ["warning"])
         self.assertIn(os.path.basename(path), self.boxes[0][1])
 
-    def test_reconstruct_all_names_the_missing_stage(self):
+    def test_reconstruct_all_names_a_missing_stage(self):
         from core.errors import StageNotAvailableError
 
         with self.assertRaises(StageNotAvailableError) as raised:
-            self.commands.reconstruct_all(self.doc, SAMPLE_MESH)
-        self.assertRegex(str(raised.exception), r"needs the '\w+' stage, which is not available yet")
+            self.commands.reconstruct_all(self.doc, SAMPLE_MESH, parts="auto")
+        self.assertIn("'basemesh' stage, which is not available yet", str(raised.exception))
         targets = [obj for obj in self.doc.Objects if self.commands.is_target(obj)]
         self.assertEqual(len(targets), 1)
         self.doc.undo()
         self.assertEqual(len(self.doc.Objects), 0)
 
-        self.answer_open_dialog(SAMPLE_MESH)
-        FreeCADGui.runCommand("PolyCube_ReconstructAll")
-        self.assertEqual([kind for kind, _ in self.boxes], ["information"])
-        self.assertIn("not available yet", self.boxes[0][1])
+    def test_reconstruct_all_builds_the_solid(self):
+        solid = self.commands.reconstruct_all(self.doc, SAMPLE_MESH, fit_iterations=3)
+        shape = solid.Shape
+        self.assertTrue(shape.isValid())
+        self.assertEqual(len(shape.Solids), 1)
+        self.assertGreater(len(shape.Faces), 6)
+        self.assertGreater(shape.Volume, 0)
+        for obj in self.doc.Objects:
+            if self.commands.is_target(obj) and obj.ViewObject is not None:
+                obj.ViewObject.Visibility = False
+        self.assert_screenshot_shows_model(save_screenshot(self.doc, "polycube_reconstructed.png"))
+        name = solid.Name
+        self.doc.undo()
+        self.assertIsNone(self.doc.getObject(name))
 
 
 class ProgressTest(unittest.TestCase):

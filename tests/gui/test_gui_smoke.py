@@ -20,7 +20,8 @@ import pytest
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 OUTPUT = os.environ.get("POLYCUBE_GUI_OUTPUT") or os.path.join(REPO, "tests", "gui", "output")
-SCREENSHOTS = ("polycube_torus_solid.png", "polycube_target_mesh.png", "polycube_labels.png")
+SCREENSHOTS = ("polycube_torus_solid.png", "polycube_target_mesh.png", "polycube_labels.png",
+               "polycube_reconstructed.png")
 MIN_CASES = 10
 TIMEOUT = 300
 MIN_PNG_BYTES = 10_000
