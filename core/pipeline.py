@@ -172,7 +172,7 @@ def stage_fit(state, params):
                                  iterations=params.fit_iterations, mode="inside")
     report = {"mode": "inside", **{key: info[key] for key in (
         "iterations", "stopped", "mean_distance", "max_distance", "outside_volume_fraction",
-        "initial_mean_distance", "initial_max_distance", "initial_outside_volume_fraction",
+        "uncovered_volume_fraction", "initial_mean_distance", "initial_max_distance", "initial_outside_volume_fraction",
         "seconds") if key in info}}
     return {"initial_base_mesh": base, "base_mesh": fitted, "report": report}
 

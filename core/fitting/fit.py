@@ -118,7 +118,8 @@ def _figures(X, T, target):
     report = containment(X, T, target.vertices, target.faces)
     return {"mean_distance": float(distance.mean()),
             "max_distance": float(distance.max()),
-            "outside_volume_fraction": report["outside_volume_fraction"]}
+            "outside_volume_fraction": report["outside_volume_fraction"],
+            "uncovered_volume_fraction": report["uncovered_volume_fraction"]}
 
 
 def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface):

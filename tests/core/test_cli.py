@@ -59,6 +59,9 @@ def test_full_run_writes_a_step_solid_and_every_report_section(tmp_path):
     assert base["faces"] == base["quads"] + base["triangles"] + base["other"] and base["genus"] == 0
     fit = report["fit"]
     assert fit["iterations"] == 5 and fit["mode"] == "inside"
+    for key in ("mean_distance", "max_distance", "outside_volume_fraction",
+                "uncovered_volume_fraction"):
+        assert 0 <= fit[key] < 1, key
     assert fit["outside_volume_fraction"] < fit["initial_outside_volume_fraction"]
     brep = report["brep"]
     assert brep["valid"] and brep["closed"] and brep["faces"] == base["faces"]
