@@ -33,6 +33,7 @@ CAGES = ("cube", "torus", "mixed_prism", "genus3_block")
 QUICK_MESHES = ("to_levelset_cantilever_tiny", "idler_riser", "polycube_bone")
 QUICK_CAGES = ("cube", "torus")
 LABELING_SPEED_SOURCE = "to_simp_mbb"
+RECONSTRUCTION_TIMEOUT = 300.0
 
 
 def machine_info():
@@ -131,7 +132,8 @@ def plan(args, meshes):
                                                   "images": images}))
     for name, path in meshes.items():
         if wanted(name):
-            cases.append(("reconstruction", name, None, {"kind": "reconstruction", "path": path}))
+            cases.append(("reconstruction", name, None, {"kind": "reconstruction", "path": path,
+                                                         "timeout": RECONSTRUCTION_TIMEOUT}))
     for cage in (QUICK_CAGES if args.quick else CAGES):
         if wanted(cage):
             cases.append(("cages", cage, None, {"kind": "cage", "cage": cage}))
@@ -226,7 +228,7 @@ def main(argv=None):
             if single is not None and single.get("status") == "rejected":
                 result = {**single, "process_wall_seconds": 0.0}
             else:
-                result = run_case(spec, args.timeout, tmp)
+                result = run_case(spec, min(args.timeout, spec.get("timeout", args.timeout)), tmp)
             if sub is None:
                 results[section][key] = result
             else:

@@ -25,6 +25,8 @@ class ReconstructionParams:
     repair : run the validity repair loop after HBECVT.
     target_faces : approximate number of base-mesh faces (the coarse polycube grid is refined
         to about this many; a grid that is already finer is kept).
+    max_base_faces : a base mesh with more faces stops the run with a message (its fit would
+        take many minutes, and such a model is not the few-patch result the tool is for).
     subdivision_levels : Catmull-Clark levels used by the fit (paper: 2).
     fit_iterations : shape-optimisation iterations (paper: 100).
     """
@@ -39,6 +41,7 @@ class ReconstructionParams:
     max_sweeps: int = 200
     repair: bool = True
     target_faces: int = 300
+    max_base_faces: int = 2500
     subdivision_levels: int = 2
     fit_iterations: int = 100
 
@@ -51,6 +54,7 @@ class ReconstructionParams:
         _range("penalty", self.penalty, 0.0, 1e12)
         _range("max_sweeps", self.max_sweeps, 1, 100_000)
         _range("target_faces", self.target_faces, 6, 200_000)
+        _range("max_base_faces", self.max_base_faces, 6, 1_000_000)
         _range("subdivision_levels", self.subdivision_levels, 1, 5)
         _range("fit_iterations", self.fit_iterations, 0, 100_000)
 

@@ -54,7 +54,7 @@ def stage_intake(state, params):
                                     name=str(path))
     report = {"file": str(path), "units": params.units, **summary}
     message = "; ".join(summary["warnings"])
-    return {"target": mesh, "report": report, "message": message}
+    return {"target": mesh, "input_genus": summary["genus"], "report": report, "message": message}
 
 
 def stage_parts(state, params):
@@ -161,16 +161,42 @@ def stage_basemesh(state, params):
     keys = ("faces", "quads", "triangles", "other", "vertices", "extraordinary_vertices", "genus",
             "coarse_faces", "located_in_flipped", "inverted_cells", "volume", "seconds")
     report = {key: info[key] for key in keys if key in info}
+    if info["faces"] > params.max_base_faces:
+        from core.errors import LabelingError
+
+        raise LabelingError(
+            f"the base mesh has {info['faces']} faces, more than max_base_faces="
+            f"{params.max_base_faces}: its {info.get('coarse_faces', '?')}-face polycube grid is "
+            "too fine (many charts); coarser quad layouts are not built yet")
+    target_genus = state["input_genus"]
+    if info["genus"] != target_genus:
+        from core.errors import LabelingError
+
+        raise LabelingError(
+            f"the base mesh has genus {info['genus']} but the target has genus {target_genus}: "
+            "the polycube lost or gained handles (thin members collapsed in the deformation)")
     return {"base_mesh": base, "report": report}
+
+
+FIT_FACE_BUDGET = 40_000
+"""Most faces of the subdivided mesh the fit works on: above it, fewer levels are used
+(the closest-point queries and thickness rays of every iteration scale with it)."""
+
+
+def fit_levels(n_base_faces, wanted):
+    """Subdivision levels for the fit: ``wanted``, fewer if the fine mesh would exceed the budget."""
+    affordable = int(np.floor(np.log(FIT_FACE_BUDGET / max(n_base_faces, 1)) / np.log(4.0)))
+    return int(max(1, min(wanted, affordable)))
 
 
 def stage_fit(state, params):
     from core.fitting import fit_base_mesh
 
     base = state["base_mesh"]
-    fitted, info = fit_base_mesh(base, state["target"], levels=params.subdivision_levels,
+    levels = fit_levels(base.n_faces, params.subdivision_levels)
+    fitted, info = fit_base_mesh(base, state["target"], levels=levels,
                                  iterations=params.fit_iterations, mode="inside")
-    report = {"mode": "inside", **{key: info[key] for key in (
+    report = {"mode": "inside", "levels": levels, **{key: info[key] for key in (
         "iterations", "stopped", "mean_distance", "max_distance", "outside_volume_fraction",
         "uncovered_volume_fraction", "initial_mean_distance", "initial_max_distance", "initial_outside_volume_fraction",
         "seconds") if key in info}}

@@ -56,6 +56,8 @@ def build_parser():
                      help="HBECVT penalty p (paper: 1e5)")
     rec.add_argument("--target-faces", type=int, default=defaults.target_faces,
                      help="approximate number of base-mesh faces (default 300)")
+    rec.add_argument("--max-base-faces", type=int, default=defaults.max_base_faces,
+                     help="stop when the base mesh has more faces than this (default 2500)")
     rec.add_argument("--fit-iterations", type=int, default=defaults.fit_iterations,
                      help="shape-optimisation iterations (paper: 100; 0 skips the fit)")
     rec.add_argument("--no-repair", action="store_true", help="skip the labeling repair loop")
@@ -111,7 +113,7 @@ def _reconstruct(args):
     params = dict(units=args.units, components=args.components, parts=args.parts,
                   blend_factor=args.blend_factor, lam=args.lam, penalty=args.penalty,
                   repair=not args.no_repair, target_faces=args.target_faces,
-                  fit_iterations=args.fit_iterations,
+                  fit_iterations=args.fit_iterations, max_base_faces=args.max_base_faces,
                   check_self_intersections=not args.skip_self_intersection_check)
     if args.stop_after == "solid" and args.output is None:
         raise PolycubeInputError("reconstruct needs -o OUT.step (or --stop-after an earlier stage)")
