@@ -4,7 +4,7 @@ from dataclasses import asdict, dataclass, fields
 
 from core.errors import ParameterError
 
-PART_MODES = ("single", "auto")
+PART_MODES = ("single", "auto", "file")
 COMPONENT_POLICIES = ("largest", "all", "error")
 UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 
@@ -17,7 +17,12 @@ class ReconstructionParams:
         the solid is written in millimetres, FreeCAD's and STEP's usual unit.
     components : what to do with several connected components (``largest``, ``all``, ``error``).
     check_self_intersections : run the triangle-triangle test at intake.
-    parts : ``single`` (whole mesh one part) or ``auto`` (curve-skeleton based).
+    parts : ``single`` (whole mesh one part), ``auto`` (curve-skeleton based) or ``file``
+        (chosen by the user, read from ``parts_file``).
+    parts_file : JSON file with one of ``{"face_part": [p_0, ..., p_m-1]}``, ``{"groups":
+        [[face, ...], ...]}`` or ``{"planes": [[[px, py, pz], [nx, ny, nz]], ...]}``; face
+        indices are in the order of the mesh after intake (the ``--labels`` file's order,
+        which is the file's own order for a single-component mesh).
     blend_factor : frame blending distance in mean edge lengths (paper: 4).
     lam : Eq. 3 lambda, weight of neighbours with a different label (paper: 0.5).
     penalty : Eq. 3 p, weight of opposite labels and interface-parallel labels (paper: 1e5).
@@ -35,6 +40,7 @@ class ReconstructionParams:
     components: str = "largest"
     check_self_intersections: bool = True
     parts: str = "single"
+    parts_file: str = ""
     blend_factor: float = 4.0
     lam: float = 0.5
     penalty: float = 1e5
@@ -49,6 +55,9 @@ class ReconstructionParams:
         _choice("units", self.units, tuple(UNIT_TO_MM))
         _choice("components", self.components, COMPONENT_POLICIES)
         _choice("parts", self.parts, PART_MODES)
+        if (self.parts == "file") != bool(self.parts_file):
+            raise ParameterError("parts='file' and parts_file go together: give the JSON file "
+                                 "of user parts with parts='file'")
         _range("blend_factor", self.blend_factor, 1e-3, 1000.0)
         _range("lam", self.lam, 0.0, 1e3)
         _range("penalty", self.penalty, 0.0, 1e12)

@@ -58,13 +58,37 @@ def stage_intake(state, params):
 
 
 def stage_parts(state, params):
-    from core.segmentation.parts import single_part, skeleton_segmentation
+    from core.segmentation.parts import parts_from_user, single_part, skeleton_segmentation
 
     mesh = state["target"]
     if params.parts == "single":
         return {"face_part": single_part(mesh), "report": {"mode": "single", "parts": 1}}
+    if params.parts == "file":
+        face_part = parts_from_user(mesh, read_parts_file(params.parts_file))
+        return {"face_part": face_part,
+                "report": {"mode": "file", "file": params.parts_file,
+                           "parts": int(face_part.max()) + 1}}
     result = skeleton_segmentation(mesh)
     return {"face_part": result.face_part, "report": {"mode": "auto", **result.info}}
+
+
+def read_parts_file(path):
+    """The user's part specification from a JSON file (see ``ReconstructionParams.parts_file``)."""
+    import json
+
+    from core.errors import ParameterError
+
+    try:
+        with open(path, encoding="utf-8") as handle:
+            data = json.load(handle)
+    except (OSError, ValueError) as exc:
+        raise ParameterError(f"cannot read the parts file {path}: {exc}") from exc
+    kinds = [key for key in ("face_part", "groups", "planes") if isinstance(data, dict) and key in data]
+    if len(kinds) != 1:
+        raise ParameterError(f"the parts file {path} must hold exactly one of the keys "
+                             "'face_part', 'groups' or 'planes'")
+    value = data[kinds[0]]
+    return np.asarray(value) if kinds[0] == "face_part" else value
 
 
 def stage_frames(state, params):

@@ -48,6 +48,9 @@ def build_parser():
                           "keep all, or reject (default: largest)")
     rec.add_argument("--parts", choices=PART_MODES, default=defaults.parts,
                      help="part segmentation: whole mesh one part, or curve-skeleton based")
+    rec.add_argument("--parts-file", metavar="JSON",
+                     help="user parts: JSON with 'face_part' (per-face part ids), 'groups' "
+                          "(face-index lists) or 'planes' ([point, normal] pairs); implies --parts file")
     rec.add_argument("--blend-factor", type=float, default=defaults.blend_factor,
                      help="frame blending distance in mean edge lengths (paper: 4)")
     rec.add_argument("--lam", type=float, default=defaults.lam,
@@ -110,7 +113,9 @@ def _reconstruct(args):
     from core.errors import StageNotAvailableError
     from polycube_wb.api import reconstruct_to_step
 
-    params = dict(units=args.units, components=args.components, parts=args.parts,
+    parts = "file" if args.parts_file else args.parts
+    params = dict(units=args.units, components=args.components, parts=parts,
+                  parts_file=args.parts_file or "",
                   blend_factor=args.blend_factor, lam=args.lam, penalty=args.penalty,
                   repair=not args.no_repair, target_faces=args.target_faces,
                   fit_iterations=args.fit_iterations, max_base_faces=args.max_base_faces,

@@ -134,3 +134,20 @@ def test_self_intersecting_mesh_exits_2(tmp_path):
     path = tmp_path / "crossed.stl"
     trimesh.Trimesh(V, mesh.faces, process=False).export(path)
     assert_rejected(run("reconstruct", path, "--stop-after", "intake"), "intersecting faces")
+
+
+def test_user_parts_from_a_file(tmp_path):
+    planes = tmp_path / "planes.json"
+    planes.write_text(json.dumps({"planes": [[[80.0, 0.0, 0.0], [1.0, 0.0, 0.0]]]}))
+    result = run("reconstruct", SAMPLE, "--parts-file", planes, "--stop-after", "labeling",
+                 "--report", tmp_path / "r.json", "--labels", tmp_path / "l.ply")
+    assert result.returncode == 0, result.stderr
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["parts"]["mode"] == "file" and report["parts"]["parts"] >= 2
+    assert report["labeling"]["parts"] == report["parts"]["parts"]
+    short = tmp_path / "short.json"
+    short.write_text(json.dumps({"face_part": [0, 0, 1]}))
+    assert_rejected(run("reconstruct", SAMPLE, "--parts-file", short, "--stop-after", "parts"),
+                    "face_part")
+    assert_rejected(run("reconstruct", SAMPLE, "--parts-file", tmp_path / "none.json",
+                        "--stop-after", "parts"), "cannot read the parts file")
