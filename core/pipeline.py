@@ -224,7 +224,24 @@ def stage_fit(state, params):
         "iterations", "stopped", "mean_distance", "max_distance", "outside_volume_fraction",
         "uncovered_volume_fraction", "initial_mean_distance", "initial_max_distance", "initial_outside_volume_fraction",
         "seconds") if key in info}}
-    return {"initial_base_mesh": base, "base_mesh": fitted, "report": report}
+    report["self_intersections"] = count_limit_self_intersections(fitted, levels)
+    message = ("" if report["self_intersections"] == 0 else
+               f"warning: the fitted limit surface intersects itself "
+               f"({report['self_intersections']} triangle pairs at level {levels})")
+    return {"initial_base_mesh": base, "base_mesh": fitted, "report": report, "message": message}
+
+
+def count_limit_self_intersections(base, levels):
+    """Intersecting triangle pairs of the level-``levels`` limit mesh of ``base`` (0 = clean)."""
+    from core.fitting.responses import triangulate
+    from core.self_intersection import find_self_intersections
+    from core.subdivision.catmull_clark import build_hierarchy
+    from core.subdivision.limit import limit_matrices
+
+    fine = build_hierarchy(base, levels).meshes[levels]
+    limit, _, _ = limit_matrices(fine)
+    triangles = triangulate(fine.face_vertices, fine.face_offsets)
+    return int(len(find_self_intersections(limit @ fine.vertices, triangles)))
 
 
 def stage_patches(state, params):

@@ -58,7 +58,7 @@ def test_full_run_writes_a_step_solid_and_every_report_section(tmp_path):
     base = report["base_mesh"]
     assert base["faces"] == base["quads"] + base["triangles"] + base["other"] and base["genus"] == 0
     fit = report["fit"]
-    assert fit["iterations"] == 5 and fit["mode"] == "inside"
+    assert fit["iterations"] == 5 and fit["mode"] == "inside" and fit["self_intersections"] == 0
     for key in ("mean_distance", "max_distance", "outside_volume_fraction",
                 "uncovered_volume_fraction"):
         assert 0 <= fit[key] < 1, key
