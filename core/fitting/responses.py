@@ -164,13 +164,8 @@ def thickness(X, T, max_length):
     e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     face_normal = np.cross(e1, e2)
     face_normal /= np.maximum(np.linalg.norm(face_normal, axis=1, keepdims=True), 1e-300)
-    tree = cKDTree(centroid)
-    lists = tree.query_ball_point(X + 0.5 * max_length * direction,
-                                  r=0.5 * max_length + radius.max())
-    lengths = np.fromiter(map(len, lists), np.int64, n)
-    cand = np.concatenate([np.asarray(item, dtype=np.int64) for item in lists]) \
-        if lengths.sum() else np.zeros(0, np.int64)
-    owner = np.repeat(np.arange(n), lengths)
+    cand, owner = _ray_candidates(X + 0.5 * max_length * direction, 0.5 * max_length,
+                                  centroid, radius)
     best = np.full(n, np.inf)
     best_face = np.full(n, -1, dtype=np.int64)
     best_uv = np.zeros((n, 2))
@@ -199,6 +194,34 @@ def thickness(X, T, max_length):
     slope = np.zeros(n)
     slope[hit] = 1.0 / np.einsum("ij,ij->i", direction[hit], hit_normal[hit])
     return Thickness(value, best_face, bary, normal, slope, hit_normal)
+
+
+def _ray_candidates(centre, reach, centroid, radius):
+    """Triangles whose bounding sphere meets the sphere ``(centre_j, reach)`` of each ray.
+
+    Triangles are split at the 90th percentile of their bounding radius; each class gets
+    its own k-d tree searched with its own largest radius, so a few large triangles do
+    not widen the search for all.
+
+    Returns
+    -------
+    candidates : (p,) int64 triangle ids; owners : (p,) int64 ray ids.
+    """
+    split = float(np.quantile(radius, 0.9))
+    found_t, found_o = [], []
+    for members in (np.flatnonzero(radius <= split), np.flatnonzero(radius > split)):
+        if not len(members):
+            continue
+        lists = cKDTree(centroid[members]).query_ball_point(
+            centre, r=reach + float(radius[members].max()))
+        lengths = np.fromiter(map(len, lists), np.int64, len(centre))
+        if lengths.sum():
+            found_t.append(members[np.concatenate([np.asarray(item, dtype=np.int64)
+                                                   for item in lists if item])])
+            found_o.append(np.repeat(np.arange(len(centre)), lengths))
+    if not found_t:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return np.concatenate(found_t), np.concatenate(found_o)
 
 
 def thickness_gradient(X, T, result):
