@@ -609,75 +609,59 @@ class ImportTargetCommand(_Command):
             _view_fit()
 
 
-class SegmentPartsCommand(_Command):
+class _TargetStageCommand(_Command):
+    """Runs ``STAGE(doc, target, progress)`` on the selected (or last imported) target."""
+
+    STAGE = None
+
+    def Activated(self):
+        doc = FreeCAD.ActiveDocument
+        target = find_target(doc, _selection())
+        if target is None:
+            _no_target(self.MENU_TEXT)
+            return
+        stage = type(self).STAGE
+        run_guarded(self.MENU_TEXT, lambda progress: stage(doc, target, progress),
+                    with_progress=True)
+
+
+class SegmentPartsCommand(_TargetStageCommand):
     ID = "PolyCube_SegmentParts"
     MENU_TEXT = "Segment parts"
     TOOLTIP = ("Split the selected (or last imported) target into parts along its curve "
                "skeleton and show each part in its own colour")
-
-    def Activated(self):
-        doc = FreeCAD.ActiveDocument
-        target = find_target(doc, _selection())
-        if target is None:
-            _no_target(self.MENU_TEXT)
-            return
-        run_guarded(self.MENU_TEXT, lambda progress: segment_parts(doc, target, progress),
-                    with_progress=True)
+    STAGE = segment_parts
 
 
-class LabelPolycubeCommand(_Command):
+class LabelPolycubeCommand(_TargetStageCommand):
     ID = "PolyCube_LabelPolycube"
     MENU_TEXT = "Label polycube"
     TOOLTIP = ("Compute the polycube labeling (HBECVT) of the selected (or last imported) "
                "target, show the six labels in colour and report its validity")
-
-    def Activated(self):
-        doc = FreeCAD.ActiveDocument
-        target = find_target(doc, _selection())
-        if target is None:
-            _no_target(self.MENU_TEXT)
-            return
-        run_guarded(self.MENU_TEXT, lambda progress: label_polycube(doc, target, progress),
-                    with_progress=True)
+    STAGE = label_polycube
 
 
-class BuildBaseMeshCommand(_Command):
+class BuildBaseMeshCommand(_TargetStageCommand):
     ID = "PolyCube_BuildBaseMesh"
     MENU_TEXT = "Build polycube + base mesh"
     TOOLTIP = ("Deform the labeled target into a polycube and build the coarse quad base mesh "
                "(one part); shows its cage")
-
-    def Activated(self):
-        doc = FreeCAD.ActiveDocument
-        target = find_target(doc, _selection())
-        if target is None:
-            _no_target(self.MENU_TEXT)
-            return
-        run_guarded(self.MENU_TEXT, lambda progress: build_base_mesh(doc, target, progress),
-                    with_progress=True)
+    STAGE = build_base_mesh
 
 
-class FitTargetCommand(_Command):
+class FitTargetCommand(_TargetStageCommand):
     ID = "PolyCube_FitTarget"
     MENU_TEXT = "Fit to target"
     TOOLTIP = ("Optimise the base mesh so its Catmull-Clark limit surface fits the target "
                "from inside (volume, packaging and thickness; relaxed gradient projection)")
-
-    def Activated(self):
-        doc = FreeCAD.ActiveDocument
-        target = find_target(doc, _selection())
-        if target is None:
-            _no_target(self.MENU_TEXT)
-            return
-        run_guarded(self.MENU_TEXT, lambda progress: fit_to_target(doc, target, progress),
-                    with_progress=True)
+    STAGE = fit_to_target
 
 
 class ReconstructAllCommand(_Command):
     ID = "PolyCube_ReconstructAll"
     MENU_TEXT = "Reconstruct all..."
     TOOLTIP = ("Run every stage on a target mesh file, from validation to the B-spline solid; "
-               "reports which stage is not available yet")
+               "reports the stage that stops it, if any")
 
     def IsActive(self):
         return True
