@@ -281,6 +281,11 @@ class TargetMeshTest(_DocumentCase):
         name = cage.Name
         self.doc.undo()
         self.assertIsNone(self.doc.getObject(name))
+        FreeCADGui.Selection.clearSelection()
+        FreeCADGui.Selection.addSelection(obj)
+        FreeCADGui.runCommand("PolyCube_BuildBaseMesh")
+        self.assertIsNotNone(self.doc.getObject(name), "the command builds the cage again")
+        self.assertEqual(self.boxes, [])
         fitted, fit = self.commands.fit_to_target(self.doc, obj, fit_iterations=3)
         self.assertEqual(fit["iterations"], 3)
         self.assertLess(fit["outside_volume_fraction"], fit["initial_outside_volume_fraction"])
