@@ -8,15 +8,22 @@ plane coordinates of the charts whose label axis is ``k`` (values closer than a 
 merged), a chart with label axis ``a`` is a rectilinear polygon whose edges lie on the lines
 ``u_b = x`` (``x`` in ``X_b``) and ``u_d = y`` (``y`` in ``X_d``) of its in-plane axes ``b``,
 ``d``. Cutting each chart along all of these lines gives rectangles; a rectangle belongs to the
-chart when the chart boundary winds once around its centre. Because every chart uses the same
-global coordinates, two charts cut their shared boundary at the same points: the quads
-conform (no T-junctions) and a grid vertex is named by three integer indices. Optionally the
-gaps between neighbouring coordinates are split evenly (the same split for every chart, so
-conformity is kept) until the mesh has about ``target_faces`` quads.
+chart when the chart boundary winds once around its centre. Every chart vertex is snapped to
+the merged coordinate of each chart plane it lies on, so chains of nearly coincident planes
+merge consistently. Because every chart uses the same global coordinates, two charts cut
+their shared boundary at the same points: the quads conform (no T-junctions). A grid vertex
+is named by three integer indices and the group of charts meeting there that are
+neighbours on the target; sheets of a folded polycube that merely touch in the grid stay
+apart. Optionally the gaps between neighbouring coordinates are split evenly (the same split
+for every chart, so conformity is kept) until the mesh has about ``target_faces`` quads.
 
 Each grid vertex is then located among the deformed triangles of one chart it belongs to
 (2D, the chart's plane) and mapped to the target surface with the same barycentric
 coordinates applied to the original triangle.
+
+A folded polycube (flipped triangles, members collapsed to zero thickness, charts wound
+backwards) can give a grid that is not a closed 2-manifold or has another genus than the
+target; both raise a ``LabelingError`` naming the charts at fault.
 """
 import time
 
@@ -25,7 +32,8 @@ import numpy as np
 from core.errors import InvalidMeshError, LabelingError, ParameterError, StageNotAvailableError
 from core.polymesh_checks import check_polymesh
 from core.quadmesh.locate import locate_points, winding_numbers
-from core.quadmesh.quad_ops import chord_pieces, chord_refine, free_loop_merge
+from core.quadmesh.quad_ops import (chord_pieces, chord_refine, components, free_loop_merge,
+                                     unmatched_half_edges)
 from core.types import PolyMesh
 
 MERGE_TOLERANCE = 1e-6
@@ -63,19 +71,11 @@ def merge_coordinates(values, tolerance):
     return grid, index
 
 
-def _snap(values, grid, tolerance):
-    """Index of the nearest grid coordinate of each value and whether it is within tolerance."""
-    pos = np.clip(np.searchsorted(grid, values), 1, max(len(grid) - 1, 1))
-    lo = np.maximum(pos - 1, 0)
-    hi = np.minimum(pos, len(grid) - 1)
-    pick = np.where(np.abs(values - grid[lo]) <= np.abs(values - grid[hi]), lo, hi)
-    return pick, np.abs(values - grid[pick]) <= tolerance
-
-
 def _chart_half_edges(F, face_chart):
     """Half-edges ``(face, corner)`` whose opposite half-edge lies in another chart.
 
-    Returns (h,) int64 face and (h,) int64 corner ``k`` of edge ``F[f, k] -> F[f, k+1]``.
+    Returns (h,) int64 face, (h,) int64 corner ``k`` of edge ``F[f, k] -> F[f, k+1]`` and
+    (h,) int64 face of the opposite half-edge.
     """
     m = len(F)
     a = F.reshape(-1)
@@ -93,7 +93,7 @@ def _chart_half_edges(F, face_chart):
                                count=int((~found).sum()), examples=_example(~found))
     face = np.repeat(np.arange(m), 3)
     boundary = face_chart[face] != face_chart[face[twin]]
-    return face[boundary], np.tile(np.arange(3), m)[boundary]
+    return face[boundary], np.tile(np.arange(3), m)[boundary], face[twin][boundary]
 
 
 def _chart_grids(grids, lo_idx, hi_idx):
@@ -160,8 +160,9 @@ def base_mesh_from_polycube(target, polycube, face_label, face_part=None, part_f
     Raises
     ------
     ParameterError for malformed arguments; StageNotAvailableError for several parts;
-    LabelingError when a chart is not a rectilinear polygon on the plane grid or the grid
-    does not close into a 2-manifold.
+    LabelingError when a chart is not a rectilinear polygon on the plane grid, the grid
+    does not close into a 2-manifold or its genus differs from the target's (the message
+    names the charts at fault: coincident, wound backwards or with non-manifold cells).
     """
     started = time.perf_counter()
     V = np.asarray(target.vertices, dtype=np.float64)
@@ -213,43 +214,55 @@ def base_mesh_from_polycube(target, polycube, face_label, face_part=None, part_f
         grids.append(g)
         plane_index[sel] = idx
 
-    # chart boundaries must lie on grid lines: check every boundary vertex of every chart
-    bface, bcorner = _chart_half_edges(F, face_chart)
-    b_ax = (chart_axis + 1) % 3
-    d_ax = (chart_axis + 2) % 3
-    bchart = face_chart[bface]
-    va, vb = F[bface, bcorner], F[bface, (bcorner + 1) % 3]
-    inplane = np.stack([b_ax[bchart], d_ax[bchart]], axis=1)
-    pa = np.take_along_axis(U[va], inplane, axis=1)
-    pb = np.take_along_axis(U[vb], inplane, axis=1)
-    on_line = np.zeros(len(bface), dtype=bool)
+    # every vertex lies on the plane of each chart around it: snap it to that grid coordinate
+    grid_value = np.zeros(n_charts)
     for k in range(3):
-        for col in range(2):
-            sel = inplane[:, col] == k
-            _, ok_a = _snap(pa[sel, col], grids[k], snap_tol)
-            _, ok_b = _snap(pb[sel, col], grids[k], snap_tol)
-            on_line[np.flatnonzero(sel)[ok_a & ok_b]] = True
-    if not on_line.all():
-        bad_charts = np.unique(bchart[~on_line])
+        sel = np.flatnonzero(chart_axis == k)
+        grid_value[sel] = grids[k][plane_index[sel]]
+    corner_chart = np.repeat(face_chart, 3)
+    corner_vertex = F.reshape(-1)
+    corner_axis = chart_axis[corner_chart]
+    off_plane = np.abs(U[corner_vertex, corner_axis] - plane[corner_chart]) > snap_tol
+    bface, bcorner, nface = _chart_half_edges(F, face_chart)
+    bchart, nchart = face_chart[bface], face_chart[nface]
+    same_axis = chart_axis[bchart] == chart_axis[nchart]
+    if off_plane.any() or same_axis.any():
+        bad_charts = np.unique(np.concatenate([corner_chart[off_plane], bchart[same_axis]]))
+        bad_faces = np.unique(np.concatenate([np.repeat(np.arange(m), 3)[off_plane],
+                                              bface[same_axis]]))
         raise LabelingError(
             f"{len(bad_charts)} polycube charts are not rectilinear polygons on the plane grid "
-            f"({int((~on_line).sum())} boundary edges lie on no neighbouring chart plane), "
-            f"e.g. charts {bad_charts[:5].tolist()} at target faces "
-            f"{np.unique(bface[~on_line])[:5].tolist()}")
+            f"({int(off_plane.sum())} triangle corners off their chart plane, "
+            f"{int(same_axis.sum())} boundary edges between charts of the same axis), "
+            f"e.g. charts {bad_charts[:5].tolist()} at target faces {bad_faces[:5].tolist()}")
+    adjacent = np.unique(np.minimum(bchart, nchart) * n_charts + np.maximum(bchart, nchart))
+    snapped = U.copy()
+    snapped[corner_vertex, corner_axis] = grid_value[corner_chart]
 
-    # extent of each chart in its in-plane axes, as grid indices
+    # chart boundary edges in the in-plane coordinates of their chart
+    b_ax = (chart_axis + 1) % 3
+    d_ax = (chart_axis + 2) % 3
+    va, vb = F[bface, bcorner], F[bface, (bcorner + 1) % 3]
+    inplane = np.stack([b_ax[bchart], d_ax[bchart]], axis=1)
+    pa = np.take_along_axis(snapped[va], inplane, axis=1)
+    pb = np.take_along_axis(snapped[vb], inplane, axis=1)
+
+    # extent of each chart in its in-plane axes, as grid indices (enclosing)
     lo_idx = np.zeros((n_charts, 2), dtype=np.int64)
     hi_idx = np.zeros((n_charts, 2), dtype=np.int64)
     for col in range(2):
         lo = np.full(n_charts, np.inf)
         hi = np.full(n_charts, -np.inf)
-        np.minimum.at(lo, bchart, pa[:, col])
-        np.maximum.at(hi, bchart, pa[:, col])
+        np.minimum.at(lo, bchart, np.minimum(pa[:, col], pb[:, col]))
+        np.maximum.at(hi, bchart, np.maximum(pa[:, col], pb[:, col]))
         for k in range(3):
             charts_k = np.flatnonzero((b_ax if col == 0 else d_ax) == k)
             charts_k = charts_k[np.isfinite(lo[charts_k])]
-            lo_idx[charts_k, col] = _snap(lo[charts_k], grids[k], snap_tol)[0]
-            hi_idx[charts_k, col] = _snap(hi[charts_k], grids[k], snap_tol)[0]
+            g = grids[k]
+            lo_idx[charts_k, col] = np.clip(np.searchsorted(g, lo[charts_k], side="right") - 1,
+                                            0, len(g) - 1)
+            hi_idx[charts_k, col] = np.clip(np.searchsorted(g, hi[charts_k], side="left"),
+                                            0, len(g) - 1)
     cell_chart, cell_i, cell_j = _chart_grids(grids, lo_idx, hi_idx)
 
     # keep the cells the chart boundary winds around; the sign gives their orientation
@@ -278,7 +291,15 @@ def base_mesh_from_polycube(target, polycube, face_label, face_part=None, part_f
     # cells -> quads named by integer grid triples
     quads, cell_vertex_triples = _rectangle_quads(
         cell_chart, cell_i, cell_i + 1, cell_j, cell_j + 1, cell_sign * handed, chart_axis,
-        plane_index, grids)
+        plane_index, grids, adjacent)
+    cells = (cell_chart, cell_i, cell_j, cell_sign, label_sign, plane_index)
+    bad_half, _ = unmatched_half_edges(quads)
+    if bad_half.any():
+        bad_charts = np.unique(cell_chart[bad_half.reshape(-1, 4).any(axis=1)])
+        raise LabelingError(
+            f"the polycube grid does not close into a 2-manifold: {int(bad_half.sum())} cell "
+            f"sides are not matched by exactly one opposite cell side (a folded or "
+            f"self-overlapping polycube); {_fault_report(polycube, face_chart, cells, bad_charts)}")
     n_loops = 0
     if coarsen:
         try:
@@ -299,7 +320,8 @@ def base_mesh_from_polycube(target, polycube, face_label, face_part=None, part_f
                                 "is not a rectangle")
         cell_chart, cell_sign = cell_chart[first], cell_sign[first]
         quads, cell_vertex_triples = _rectangle_quads(
-            cell_chart, i0, i1, j0, j1, cell_sign * handed, chart_axis, plane_index, grids)
+            cell_chart, i0, i1, j0, j1, cell_sign * handed, chart_axis, plane_index, grids,
+            adjacent)
     local_pos = np.stack([grids[k][cell_vertex_triples[:, k]] for k in range(3)], axis=1)
     coarse_faces = len(quads)
     quad_chart = cell_chart
@@ -328,6 +350,12 @@ def base_mesh_from_polycube(target, polycube, face_label, face_part=None, part_f
         raise LabelingError(f"the polycube grid does not give a valid base mesh: {exc}") from exc
     poly_local = PolyMesh(local_pos * handed, mesh.face_vertices, mesh.face_offsets)
     info = mesh_statistics(mesh)
+    target_chi = _euler_characteristic(F)
+    if info["vertices"] - info["edges"] + info["faces"] != target_chi:
+        raise LabelingError(
+            f"the polycube grid has genus {info['genus']} but the target has genus "
+            f"{(2 - target_chi) // 2}: the polycube lost or gained handles; "
+            + _fault_report(polycube, face_chart, cells, np.zeros(0, dtype=np.int64)))
     info.update({
         "grid": [int(len(g)) for g in grids],
         "grid_cells": int(grid_cells),
@@ -346,15 +374,88 @@ def base_mesh_from_polycube(target, polycube, face_label, face_part=None, part_f
     return mesh, info
 
 
-def _rectangle_quads(chart, i0, i1, j0, j1, sign, chart_axis, plane_index, grids):
-    """Quads of grid rectangles, welded by integer grid position.
+def _euler_characteristic(F):
+    """Euler characteristic (int) of a closed triangle mesh (m, 3) int64."""
+    edges = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    n = np.int64(F.max()) + 1
+    return len(np.unique(F)) - len(np.unique(edges[:, 0] * n + edges[:, 1])) + len(F)
+
+
+def _chart_names(charts, polycube, face_chart):
+    """'chart 4 (-X, x = 31.15, 162/3145 flipped triangles, e.g. target face 112)' list."""
+    label = np.asarray(polycube.chart_label)
+    flipped = np.asarray(polycube.flipped, dtype=bool)
+    n_charts = len(label)
+    total = np.bincount(face_chart, minlength=n_charts)
+    n_flipped = np.bincount(face_chart[flipped], minlength=n_charts)
+    example = np.full(n_charts, -1, dtype=np.int64)
+    example[face_chart[::-1]] = np.arange(len(face_chart))[::-1]
+    flip_example = np.full(n_charts, -1, dtype=np.int64)
+    fl = np.flatnonzero(flipped)
+    flip_example[face_chart[fl][::-1]] = fl[::-1]
+    example = np.where(flip_example >= 0, flip_example, example)
+    names = []
+    for c in charts[:8]:
+        sign, axis = "+-"[label[c] % 2], "XYZ"[label[c] // 2]
+        names.append(f"chart {c} ({sign}{axis}, {axis.lower()} = "
+                     f"{float(polycube.chart_plane[c]):.6g}, {n_flipped[c]}/{total[c]} flipped "
+                     f"triangles, e.g. target face {example[c]})")
+    more = f" and {len(charts) - 8} more" if len(charts) > 8 else ""
+    return "; ".join(names) + more
+
+
+def _fault_report(polycube, face_chart, cells, bad_charts):
+    """Text naming the charts that break the grid: coincident, wound backwards, non-manifold.
+
+    ``cells`` is ``(cell_chart, cell_i, cell_j, cell_sign, label_sign, plane_index)`` of the
+    kept grid cells; ``bad_charts`` (k,) int64 charts where the grid is not manifold.
+    """
+    cell_chart, cell_i, cell_j, cell_sign, label_sign, plane_index = cells
+    label = np.asarray(polycube.chart_label)
+    parts = []
+    # charts of one axis on the same grid plane covering the same cells: collapsed members
+    span = np.int64(max(int(cell_i.max(initial=0)), int(cell_j.max(initial=0))) + 1)
+    key = (((label[cell_chart] // 2) * (plane_index.max() + 1) + plane_index[cell_chart])
+           * span + cell_i) * span + cell_j
+    order = np.lexsort((cell_chart, key))
+    dup = np.flatnonzero((key[order][1:] == key[order][:-1])
+                         & (cell_chart[order][1:] != cell_chart[order][:-1]))
+    if len(dup):
+        pairs, count = np.unique(np.stack([cell_chart[order][dup], cell_chart[order][dup + 1]], 1),
+                                 axis=0, return_counts=True)
+        text = ", ".join(f"{a} and {b} ({n} cells)" for (a, b), n in zip(pairs[:5], count[:5]))
+        coincident = np.unique(pairs)
+        parts.append(f"charts on one plane cover the same grid cells (a member collapsed to "
+                     f"zero thickness): {text}; {_chart_names(coincident, polycube, face_chart)}")
+    inverted = np.unique(cell_chart[cell_sign != label_sign[cell_chart]])
+    if len(inverted):
+        parts.append(f"{len(inverted)} charts are wound backwards on the grid (folded "
+                     f"polycube): {_chart_names(inverted, polycube, face_chart)}")
+    if len(bad_charts):
+        parts.append(f"non-manifold grid edges in {len(bad_charts)} charts: "
+                     f"{_chart_names(bad_charts, polycube, face_chart)}")
+    if not parts:
+        return "no chart is individually at fault (check the polycube for self-intersections)"
+    return " | ".join(parts)
+
+
+def _rectangle_quads(chart, i0, i1, j0, j1, sign, chart_axis, plane_index, grids, adjacent):
+    """Quads of grid rectangles, welded by integer grid position and chart adjacency.
 
     Rectangle ``r`` lies in the plane of ``chart[r]`` and spans grid indices ``i0..i1`` of the
     chart's first in-plane axis and ``j0..j1`` of the second; ``sign`` +1 orders its corners
-    counter-clockwise about the positive label axis, -1 clockwise.
+    counter-clockwise about the positive label axis, -1 clockwise. Corners at the same grid
+    position are one vertex when they belong to the same chart or to charts that are
+    neighbours on the target (``adjacent``), joined transitively; so sheets of a folded
+    polycube that only touch or overlap in the grid are not glued together.
+
+    Parameters
+    ----------
+    adjacent : (p,) int64 sorted keys ``a * n_charts + b`` (a < b) of neighbouring charts.
 
     Returns quads (r, 4) int64 vertex ids and triples (v, 3) int64 grid indices per vertex.
     """
+    n_charts = len(plane_index)
     axis = chart_axis[chart]
     b, d = (axis + 1) % 3, (axis + 2) % 3
     ci = np.stack([i0, i1, i1, i0], axis=1)
@@ -369,9 +470,35 @@ def _rectangle_quads(chart, i0, i1, j0, j1, sign, chart_axis, plane_index, grids
     triple[rows, corner, b[:, None]] = ci
     triple[rows, corner, d[:, None]] = cj
     sizes = np.array([len(g) for g in grids], dtype=np.int64)
-    key = (triple[..., 0] * sizes[1] + triple[..., 1]) * sizes[2] + triple[..., 2]
-    _, first, inverse = np.unique(key.reshape(-1), return_index=True, return_inverse=True)
-    return inverse.reshape(r, 4).astype(np.int64), triple.reshape(-1, 3)[first]
+    position = ((triple[..., 0] * sizes[1] + triple[..., 1]) * sizes[2]
+                + triple[..., 2]).reshape(-1)
+    # nodes: distinct (grid position, chart); union neighbouring charts at one position
+    node_key = position * n_charts + np.repeat(chart, 4)
+    node, first_corner, corner_node = np.unique(node_key, return_index=True, return_inverse=True)
+    node_pos, node_chart = node // n_charts, node % n_charts
+    group_start = np.flatnonzero(np.concatenate([[True], node_pos[1:] != node_pos[:-1]]))
+    group_size = np.diff(np.concatenate([group_start, [len(node)]]))
+    pa, pb = [], []
+    for offset in range(1, int(group_size.max())):
+        i = np.arange(len(node) - offset)
+        same = node_pos[i] == node_pos[i + offset]
+        i = i[same]
+        lo = np.minimum(node_chart[i], node_chart[i + offset])
+        hi = np.maximum(node_chart[i], node_chart[i + offset])
+        key = lo * n_charts + hi
+        pos = np.minimum(np.searchsorted(adjacent, key), max(len(adjacent) - 1, 0))
+        joined = adjacent[pos] == key if len(adjacent) else np.zeros(len(key), dtype=bool)
+        pa.append(i[joined])
+        pb.append(i[joined] + offset)
+    none = [np.zeros(0, dtype=np.int64)]
+    component = components(len(node), np.concatenate(pa + none), np.concatenate(pb + none))
+    # number vertices by their first corner (deterministic)
+    first = np.full(component.max() + 1, len(position), dtype=np.int64)
+    np.minimum.at(first, component, first_corner)
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+    vertex = rank[component[corner_node]]
+    return vertex.reshape(r, 4), triple.reshape(-1, 3)[np.sort(first)]
 
 
 def _spacing_for(quads, positions, target_faces):

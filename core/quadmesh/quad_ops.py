@@ -14,10 +14,36 @@ from scipy.sparse.csgraph import connected_components
 from core.errors import InvalidMeshError
 
 
-def _components(n, a, b):
+def components(n, a, b):
     """(n,) int64 connected component of each node of the graph with edges ``a``-``b``."""
     g = sp.csr_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(n, n))
     return connected_components(g, directed=False)[1].astype(np.int64)
+
+
+def unmatched_half_edges(quads):
+    """Half-edges of a quad mesh that do not have exactly one opposite half-edge.
+
+    Parameters
+    ----------
+    quads : (q, 4) int64 vertex ids.
+
+    Returns
+    -------
+    bad : (4q,) bool, half-edge ``4 f + k`` (``quads[f, k] -> quads[f, k+1]``) occurs more
+        than once or has no unique opposite.
+    twin : (4q,) int64 an opposite half-edge (meaningful where ``bad`` is False).
+    """
+    a = quads.reshape(-1)
+    b = np.roll(quads, -1, axis=1).reshape(-1)
+    n = np.int64(quads.max()) + 1
+    key = a * n + b
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    lo = np.searchsorted(sorted_key, b * n + a, side="left")
+    hi = np.searchsorted(sorted_key, b * n + a, side="right")
+    twin = order[np.minimum(lo, len(key) - 1)]
+    count = np.searchsorted(sorted_key, key, side="right") - np.searchsorted(sorted_key, key)
+    return (hi - lo != 1) | (count > 1), twin.astype(np.int64)
 
 
 def half_edges(quads):
@@ -40,12 +66,7 @@ def half_edges(quads):
     a = quads.reshape(-1)
     b = np.roll(quads, -1, axis=1).reshape(-1)
     n = np.int64(quads.max()) + 1
-    key = a * n + b
-    order = np.argsort(key, kind="stable")
-    pos = np.minimum(np.searchsorted(key[order], b * n + a), len(key) - 1)
-    twin = order[pos]
-    _, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
-    bad = (key[twin] != b * n + a) | (count[inverse] > 1)
+    bad, twin = unmatched_half_edges(quads)
     if bad.any():
         raise InvalidMeshError(f"quad mesh is not a closed oriented 2-manifold: {int(bad.sum())} "
                                f"half-edges without a unique opposite, e.g. "
@@ -53,7 +74,7 @@ def half_edges(quads):
                                reason="non_manifold", count=int(bad.sum()),
                                examples=np.flatnonzero(bad)[:5].tolist())
     _, edge = np.unique(np.minimum(a, b) * n + np.maximum(a, b), return_inverse=True)
-    return edge.astype(np.int64), twin.astype(np.int64), int(edge.max()) + 1
+    return edge.astype(np.int64), twin, int(edge.max()) + 1
 
 
 def free_loop_merge(quads, face_group):
@@ -83,7 +104,7 @@ def free_loop_merge(quads, face_group):
     rot = twin[prev]
     opposite = rot[rot]
     straight = valence[start] == 4
-    line = _components(n_edges, edge[h[straight]], edge[opposite[straight]])
+    line = components(n_edges, edge[h[straight]], edge[opposite[straight]])
     face = h // 4
     interior = face_group[face] == face_group[face[twin]]
     ok_half = straight & interior & (valence[quads[face, (h + 1) % 4].reshape(-1)] == 4)
@@ -91,7 +112,7 @@ def free_loop_merge(quads, face_group):
     removed = ~bad_line[line]
     n_loops = len(np.unique(line[removed]))
     rh = h[removed[edge]]
-    merged = _components(nq, face[rh], face[twin[rh]])
+    merged = components(nq, face[rh], face[twin[rh]])
     first = np.full(nq, nq, dtype=np.int64)
     np.minimum.at(first, merged, np.arange(nq))
     rank = np.empty(nq, dtype=np.int64)
@@ -116,7 +137,7 @@ def chord_pieces(quads, positions, h):
     edge, _, n_edges = half_edges(quads)
     hh = np.arange(4 * nq)
     opp = (hh // 4) * 4 + (hh + 2) % 4
-    chord = _components(n_edges, edge, edge[opp])
+    chord = components(n_edges, edge, edge[opp])
     a = quads.reshape(-1)
     b = np.roll(quads, -1, axis=1).reshape(-1)
     length = np.linalg.norm(positions[b] - positions[a], axis=1)

@@ -11,7 +11,7 @@ from core.errors import LabelingError, ParameterError, StageNotAvailableError
 from core.polycube.deform import polycube_deformation
 from core.polymesh_checks import check_polymesh
 from core.quadmesh import base_mesh_from_polycube, mesh_statistics
-from core.quadmesh.quad_ops import chord_pieces, chord_refine, free_loop_merge
+from core.quadmesh.quad_ops import chord_pieces, chord_refine, free_loop_merge, unmatched_half_edges
 from core.types import TriMesh
 
 MESHES = Path("/work/shared/data/meshes")
@@ -212,3 +212,75 @@ def test_real_mesh_bone():
     assert len(patches.patches) >= info["faces"]
     ratio = limit_volume(base, 4) / triangle_mesh_volume(target.vertices, target.faces)
     assert 0.8 <= ratio <= 1.2
+
+
+def test_near_coincident_planes_merge_transitively():
+    # four posts of equal height; their top planes drift apart by 0.9 merge tolerances each,
+    # so the merged coordinate is more than one tolerance from the outer planes
+    boxes = [[(0, 0, 0), (7, 1, 1)]] + [[(2 * k, 0, 0), (2 * k + 1, 1, 2)] for k in range(4)]
+    V, F = union_of_boxes(boxes, 0.25)
+    labels = nearest_labels(V, F)
+    pc = polycube_deformation(V, F, labels, np.eye(3))
+    top = np.flatnonzero((np.abs(pc.chart_plane - 2.0) < 1e-9) & (pc.chart_label == 4))
+    assert len(top) == 4
+    tol = 1e-6 * np.linalg.norm(np.ptp(pc.local, axis=0))
+    local, plane = pc.local.copy(), pc.chart_plane.copy()
+    for k, c in enumerate(top):
+        local[np.unique(F[pc.face_chart == c]), 2] += 0.9 * k * tol
+        plane[c] += 0.9 * k * tol
+    drifted = dataclasses.replace(pc, local=local, chart_plane=plane)
+    base, info = base_mesh_from_polycube(TriMesh(V, F), drifted, labels)
+    check_polymesh(base)
+    assert info["genus"] == 0 and info["grid"][2] == 3 and t_junctions(base) == 0
+    assert info["volume"] == pytest.approx(11.0, rel=1e-5)
+
+
+def test_collapsed_member_is_reported_with_its_charts():
+    # a square ring whose hole is squeezed to zero width in the polycube: the two hole walls
+    # facing +X and -X lie on one plane over the same cells
+    boxes = [[(0, 0, 0), (3, 1, 1)], [(0, 2, 0), (3, 3, 1)], [(0, 0, 0), (1, 3, 1)],
+             [(2, 0, 0), (3, 3, 1)]]
+    V, F = union_of_boxes(boxes, 0.25)
+    labels = nearest_labels(V, F)
+    pc = polycube_deformation(V, F, labels, np.eye(3))
+    (_, info), _, _ = build(V, F)
+    assert info["genus"] == 1
+
+    def squeeze(x):
+        return np.where(x <= 1, x + 0.5, np.where(x >= 2, x - 0.5, 1.5))
+
+    local = pc.local.copy()
+    local[:, 0] = squeeze(local[:, 0])
+    plane = np.where(pc.chart_label // 2 == 0, squeeze(pc.chart_plane), pc.chart_plane)
+    walls = np.flatnonzero((pc.chart_label // 2 == 0) & (np.abs(plane - 1.5) < 1e-9))
+    assert len(walls) == 2
+    collapsed = dataclasses.replace(pc, local=local, chart_plane=plane)
+    with pytest.raises(LabelingError, match="collapsed to zero thickness") as error:
+        base_mesh_from_polycube(TriMesh(V, F), collapsed, labels)
+    assert f"{walls[0]} and {walls[1]}" in str(error.value)
+
+
+def test_unmatched_half_edges():
+    cube = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6],
+                     [3, 0, 4, 7]], dtype=np.int64)
+    bad, twin = unmatched_half_edges(cube)
+    assert not bad.any() and np.array_equal(twin[twin], np.arange(24))
+    bad, _ = unmatched_half_edges(np.concatenate([cube, cube[:1]]))
+    assert bad.reshape(-1, 4)[[0, 6]].all() and bad.sum() == 12
+
+
+def test_real_mesh_octagonal_pocket():
+    # many pocket-floor charts on planes within ~1e-6 of each other; polycube sheets touch
+    from core.pipeline import reconstruct
+
+    path = MESHES / "octagonal_pocket.stl"
+    if not path.exists():
+        pytest.skip("dev mesh not available")
+    state = reconstruct(path, None, stop_after="basemesh").state
+    target = state["target"]
+    base, info = base_mesh_from_polycube(target, state["polycube"], state["face_label"],
+                                         state["face_part"], state["frames"].part_frames,
+                                         target_faces=300)
+    check_polymesh(base)
+    assert info["genus"] == state["input_genus"] == 1
+    assert distance_to_surface(base.vertices, target.vertices, target.faces).max() <= 1e-6
