@@ -2,9 +2,9 @@
 """The README's demo: run the pipeline headless on the bundled samples and write ``OUT/``.
 
 Usage: ``.venv/bin/python examples/demo.py OUT_DIR``. Writes, for the bundled SIMP
-cantilever, the labeling PLY and the JSON report (and the STEP solid once every stage
-exists), and for the bundled genus-3 SubD cage a STEP solid and its report. Stages that
-are not built yet are named plainly.
+cantilever, the STEP solid, its fitted base mesh, the labeling PLY and the JSON report, and
+checks the solid against the target; for the bundled genus-3 SubD cage a STEP solid and its
+report. A stage that stops the run is named plainly.
 """
 import os
 import sys
@@ -13,7 +13,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
 from core.errors import StageNotAvailableError  # noqa: E402
-from polycube_wb.api import reconstruct_to_step, subd_to_solid  # noqa: E402
+from polycube_wb.api import check, reconstruct_to_step, subd_to_solid  # noqa: E402
 
 
 def main(out_dir):
@@ -40,9 +40,16 @@ def main(out_dir):
         print(f"   labeling: valid={labeling['valid']}, {labeling['charts']} charts, "
               f"{labeling['corners']} corners, mean normal-to-label angle "
               f"{labeling['mean_angle_deg']:.1f} deg")
-    for kind, path in report["outputs"].items():
+    outputs = dict(report["outputs"], report=paths["report"])
+    for kind, path in outputs.items():
         print(f"   wrote {kind}: {os.path.relpath(path)}")
-    print(f"   wrote report: {os.path.relpath(paths['report'])}")
+    if "step" in outputs:
+        figures = check(target, outputs["step"])
+        distances = figures["distances"]
+        print(f"   check: valid={figures['valid']}, watertight={figures['watertight']}, "
+              f"{figures['faces']} faces; mean distance {distances['result_to_target_mean']:.2%} "
+              f"and max {distances['result_to_target_max']:.2%} of the bounding-box diagonal; "
+              f"{figures['outside_volume_fraction']:.3%} of the target volume outside")
 
     cage = os.path.join(HERE, "genus3_cage.obj")
     print(f"== subd-to-step {os.path.relpath(cage)} (Catmull-Clark cage, genus 3)")
