@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from core.errors import InvalidMeshError, ParameterError
+from core.geometry import radius_classes
 
 INSTALL_HINT = (
     "the {name} package is needed for the mesh quality checks; install it into the Python "
@@ -28,7 +29,6 @@ INSTALL_HINT = (
     "<UserAppData> is FreeCAD.getUserAppDataDir())")
 
 _NEAREST_TRIANGLES = 8
-_RADIUS_CLASSES = 12
 _POINT_BLOCK = 4096
 
 
@@ -287,7 +287,7 @@ def point_surface_distance(points, V, F):
     length = np.linalg.norm(normal, axis=1)
     normal = np.divide(normal, length[:, None], out=np.zeros_like(normal),
                        where=length[:, None] > 0)
-    classes = _radius_classes(radius)
+    classes = radius_classes(radius)
     trees = [(members, cKDTree(centroids[members]), radius[members].max()) for members in classes]
     nearest = cKDTree(centroids)
     k = min(_NEAREST_TRIANGLES, len(F))
@@ -325,16 +325,6 @@ def _pair_distance(triangles, points):
     """(k,) distance from ``points[i]`` to ``triangles[i]``, both (k, ...) float64."""
     closest = _optional_module("trimesh.triangles").closest_point(triangles, points)
     return np.linalg.norm(closest - points, axis=1)
-
-
-def _radius_classes(radius):
-    """Index arrays of triangles grouped by radius: (r_max/2, r_max], (r_max/4, r_max/2], ..."""
-    r_max = radius.max()
-    if not r_max > 0:
-        return [np.arange(len(radius))]
-    level = np.floor(-np.log2(np.maximum(radius, np.finfo(float).tiny) / r_max))
-    level = np.minimum(level, _RADIUS_CLASSES - 1).astype(np.int64)
-    return [np.flatnonzero(level == value) for value in np.unique(level)]
 
 
 def _optional_module(name):

@@ -23,10 +23,10 @@ from itertools import chain
 import numpy as np
 from scipy.spatial import cKDTree
 
+from core.geometry import radius_classes
 from core.quality import validate_triangles
 
 _NEAREST = 8
-_SIZE_CLASSES = 12
 _BLOCK = 4096
 
 REGION_FACE = 0
@@ -113,7 +113,7 @@ class TargetSurface:
         self._nearest = cKDTree(self._centroids)
         self._classes = [(members, cKDTree(self._centroids[members]),
                           float(self._radius[members].max()))
-                         for members in _size_classes(self._radius)]
+                         for members in radius_classes(self._radius)]
         self._edge_normals, self._vertex_normals = self._pseudo_normals()
 
     def _pseudo_normals(self):
@@ -225,11 +225,3 @@ def _unit(x):
     return np.divide(x, length, out=np.zeros_like(x), where=length > 0)
 
 
-def _size_classes(radius):
-    """Index arrays of triangles grouped by bounding radius (halving classes)."""
-    r_max = radius.max()
-    if not r_max > 0:
-        return [np.arange(len(radius))]
-    level = np.floor(-np.log2(np.maximum(radius, np.finfo(float).tiny) / r_max))
-    level = np.minimum(level, _SIZE_CLASSES - 1).astype(np.int64)
-    return [np.flatnonzero(level == value) for value in np.unique(level)]
