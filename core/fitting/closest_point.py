@@ -223,5 +223,3 @@ def _distances(triangles, points):
 def _unit(x):
     length = np.linalg.norm(x, axis=1, keepdims=True)
     return np.divide(x, length, out=np.zeros_like(x), where=length > 0)
-
-
