@@ -77,3 +77,8 @@ def test_bad_base_meshes_exit_2(tmp_path):
     assert result.returncode == 2 and result.stderr.startswith("error:")
     result = run("subd-to-step", tmp_path / "open.obj", "-o", tmp_path / "x.txt")
     assert result.returncode == 2
+    write_polymesh(tmp_path / "cube.obj", sample_cages.cube())
+    for depth in ("0", "-1", "100"):
+        result = run("subd-to-step", tmp_path / "cube.obj", "-o", tmp_path / "x.step", "--depth", depth)
+        assert result.returncode == 2 and result.stderr.startswith("error: depth must be"), depth
+        assert not (tmp_path / "x.step").exists()
