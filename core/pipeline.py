@@ -62,7 +62,14 @@ def stage_parts(state, params):
 
     mesh = state["target"]
     if params.parts == "single":
-        return {"face_part": single_part(mesh), "report": {"mode": "single", "parts": 1}}
+        from core.mesh_topology import connected_face_components
+
+        # with components="all", every connected component is its own (single) part
+        face_part = connected_face_components(mesh.faces).astype(np.int32)
+        if face_part.max() == 0:
+            face_part = single_part(mesh)
+        return {"face_part": face_part,
+                "report": {"mode": "single", "parts": int(face_part.max()) + 1}}
     if params.parts == "file":
         face_part = parts_from_user(mesh, read_parts_file(params.parts_file))
         return {"face_part": face_part,

@@ -151,3 +151,16 @@ def test_user_parts_from_a_file(tmp_path):
                     "face_part")
     assert_rejected(run("reconstruct", SAMPLE, "--parts-file", tmp_path / "none.json",
                         "--stop-after", "parts"), "cannot read the parts file")
+
+
+def test_every_component_is_a_part_with_components_all(tmp_path):
+    boxes = [trimesh.creation.box(), trimesh.creation.box()]
+    boxes[1].apply_translation([3.0, 0.0, 0.0])
+    path = tmp_path / "two.stl"
+    trimesh.util.concatenate(boxes).export(path)
+    result = run("reconstruct", path, "--components", "all", "--stop-after", "labeling",
+                 "--report", tmp_path / "r.json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["input"]["components"] == 2 and report["parts"]["parts"] == 2
+    assert report["labeling"]["valid"] and report["labeling"]["charts"] == 12
