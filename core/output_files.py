@@ -30,7 +30,8 @@ def check_output_path(path, inputs=(), what="output"):
         raise ParameterError(f"cannot write the {what} {target}: it is a folder")
     for source in inputs:
         if source is not None and _same_file(target, source):
-            raise ParameterError(f"refusing to write the {what} over the input file {source}")
+            raise ParameterError(f"refusing to overwrite the input file {os.fspath(source)} "
+                                 f"with the {what} {target}")
     return target
 
 

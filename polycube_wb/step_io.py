@@ -11,7 +11,8 @@ import tempfile
 import FreeCAD  # noqa: F401  (importing Part before FreeCAD segfaults in 0.20.2)
 import Part
 
-from core.errors import ExportError, PolycubeInputError
+from core.errors import ExportError, ParameterError, PolycubeInputError
+from core.output_files import check_output_path
 
 STEP_SUFFIXES = (".step", ".stp")
 
@@ -53,18 +54,12 @@ def write_step(shape, path, input_paths=(), overwrite=True):
     """
     target = _step_path(path)
     folder = os.path.dirname(target)
-    if not os.path.isdir(folder):
-        raise StepPathError(f"cannot write {target}: folder {folder} does not exist")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise StepPathError(f"cannot write {target}: folder {folder} is not writable")
-    if os.path.isdir(target):
-        raise StepPathError(f"cannot write {target}: it is a folder")
     if isinstance(input_paths, (str, bytes, os.PathLike)):
         input_paths = (input_paths,)
-    for source in input_paths:
-        if _same_file(target, source):
-            raise StepPathError(f"refusing to overwrite the input file {os.fspath(source)} "
-                                f"with the STEP output {target}")
+    try:
+        check_output_path(target, input_paths, "STEP file")
+    except ParameterError as exc:
+        raise StepPathError(str(exc)) from exc
     if os.path.exists(target) and not overwrite:
         raise StepPathError(f"{target} exists and overwrite=False")
     if shape is None or shape.isNull():
@@ -170,14 +165,6 @@ def _step_path(path):
     if not text.lower().endswith(STEP_SUFFIXES):
         raise StepPathError(f"STEP file name must end in .step or .stp, got {text}")
     return text
-
-
-def _same_file(a, b):
-    """True if paths ``a`` and ``b`` name the same file (or the same path if one is missing)."""
-    b = os.fspath(b)
-    if os.path.exists(a) and os.path.exists(b):
-        return os.path.samefile(a, b)
-    return os.path.realpath(a) == os.path.realpath(b)
 
 
 def _new_file_mode(target):

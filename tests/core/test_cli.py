@@ -118,7 +118,7 @@ def test_output_over_the_input_is_refused(tmp_path):
     copy.write_bytes(open(SAMPLE, "rb").read())
     before = digest(copy)
     assert_rejected(run("reconstruct", copy, "--stop-after", "labeling", "--report", copy),
-                    "over the input")
+                    "overwrite the input file")
     assert digest(copy) == before
 
 
