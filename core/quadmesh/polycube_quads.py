@@ -44,6 +44,15 @@ MAX_CELLS = 2_000_000
 """Refuse grids with more candidate cells than this (a sign of a broken polycube)."""
 
 
+
+def _by_chart(chart, n_charts):
+    """Items grouped by chart: ``order[start[c]:start[c + 1]]`` are the items of chart ``c``.
+
+    chart : (k,) int64 chart of each item. Returns ``(order (k,), start (n_charts + 1,))``.
+    """
+    order = np.argsort(chart, kind="stable")
+    return order, np.searchsorted(chart[order], np.arange(n_charts + 1))
+
 def _example(mask):
     return np.flatnonzero(mask)[:5].tolist()
 
@@ -268,10 +277,8 @@ def base_mesh_from_polycube(target, polycube, face_label, face_part=None, part_f
     # keep the cells the chart boundary winds around; the sign gives their orientation
     label_sign = np.where(chart_label % 2 == 0, 1, -1)
     wind = np.zeros(len(cell_chart), dtype=np.int64)
-    b_order = np.argsort(bchart, kind="stable")
-    b_start = np.searchsorted(bchart[b_order], np.arange(n_charts + 1))
-    c_order = np.argsort(cell_chart, kind="stable")
-    c_start = np.searchsorted(cell_chart[c_order], np.arange(n_charts + 1))
+    b_order, b_start = _by_chart(bchart, n_charts)
+    c_order, c_start = _by_chart(cell_chart, n_charts)
     for c in range(n_charts):
         cells = c_order[c_start[c]:c_start[c + 1]]
         if not len(cells):
@@ -532,10 +539,8 @@ def _map_to_target(V, F, U, polycube, face_chart, v_chart, local_pos, b_ax, d_ax
     world = np.zeros((nv, 3))
     in_flipped = np.zeros(nv, dtype=bool)
     outside = np.zeros(nv, dtype=bool)
-    f_order = np.argsort(face_chart, kind="stable")
-    f_start = np.searchsorted(face_chart[f_order], np.arange(n_charts + 1))
-    v_order = np.argsort(v_chart, kind="stable")
-    v_start = np.searchsorted(v_chart[v_order], np.arange(n_charts + 1))
+    f_order, f_start = _by_chart(face_chart, n_charts)
+    v_order, v_start = _by_chart(v_chart, n_charts)
     for c in range(n_charts):
         verts = v_order[v_start[c]:v_start[c + 1]]
         if not len(verts):
