@@ -44,7 +44,6 @@ MAX_CELLS = 2_000_000
 """Refuse grids with more candidate cells than this (a sign of a broken polycube)."""
 
 
-
 def _by_chart(chart, n_charts):
     """Items grouped by chart: ``order[start[c]:start[c + 1]]`` are the items of chart ``c``.
 
@@ -52,6 +51,7 @@ def _by_chart(chart, n_charts):
     """
     order = np.argsort(chart, kind="stable")
     return order, np.searchsorted(chart[order], np.arange(n_charts + 1))
+
 
 def _example(mask):
     return np.flatnonzero(mask)[:5].tolist()
