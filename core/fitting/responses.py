@@ -16,6 +16,8 @@ base mesh (Eq. 11) is the caller's job.
 """
 from dataclasses import dataclass
 
+from itertools import chain
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -216,8 +218,8 @@ def _ray_candidates(centre, reach, centroid, radius):
             centre, r=reach + float(radius[members].max()))
         lengths = np.fromiter(map(len, lists), np.int64, len(centre))
         if lengths.sum():
-            found_t.append(members[np.concatenate([np.asarray(item, dtype=np.int64)
-                                                   for item in lists if item])])
+            found_t.append(members[np.fromiter(chain.from_iterable(lists), np.int64,
+                                               int(lengths.sum()))])
             found_o.append(np.repeat(np.arange(len(centre)), lengths))
     if not found_t:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
