@@ -15,7 +15,6 @@ base mesh (Eq. 11) is the caller's job.
   smooth aggregate constraint ``t_j >= t_min``.
 """
 from dataclasses import dataclass
-
 from itertools import chain
 
 import numpy as np
