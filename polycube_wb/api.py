@@ -78,7 +78,7 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
     if stop_after == "solid":
         if "patches" in state:
             started = time.perf_counter()
-            solid_section = _solid_and_step(state["patches"], step_path, inputs, report)
+            solid_section = _solid_and_step(state["patches"], step_path, inputs)
             report["stages"]["solid"] = {"status": "ok", "message": "",
                                          "seconds": round(time.perf_counter() - started, 4)}
             report["brep"] = solid_section
@@ -122,7 +122,7 @@ def _available_stops(report):
     return [stop for stop in STOP_AFTER_CHOICES if LAST_CORE_STAGE[stop] in done]
 
 
-def _solid_and_step(patches, step_path, inputs, report):
+def _solid_and_step(patches, step_path, inputs):
     """Build the solid from patches, write STEP if asked; returns the report's ``brep`` section."""
     from polycube_wb.brep import build_solid
     from polycube_wb.step_io import write_step

@@ -193,7 +193,7 @@ def extract_layout(topology, face_part, face_label):
     order = np.lexsort((ends_e, ends_v))
     ends_v, ends_e = ends_v[order], ends_e[order]
     two = degree[ends_v] == 2
-    v2, e2 = ends_v[two], ends_e[two]
+    e2 = ends_e[two]
     pa, pb = e2[0::2], e2[1::2]
     graph = sp.csr_matrix((np.ones(len(pa), dtype=np.int8), (pa, pb)), shape=(k, k))
     if k:
