@@ -28,8 +28,9 @@ class ReconstructionParams:
     penalty : Eq. 3 p, weight of opposite labels and interface-parallel labels (paper: 1e5).
     max_sweeps : cap on HBECVT sweeps.
     repair : run the validity repair loop after HBECVT.
-    target_faces : approximate number of base-mesh faces (the coarse polycube grid is refined
-        to about this many; a grid that is already finer is kept).
+    target_faces : base-mesh face budget: the integer polycube's scale is searched so the quad
+        count is within 25% of it; when the labeling needs more, the smallest layout found is
+        used and the report says why.
     max_base_faces : a base mesh with more faces stops the run with a message (its fit would
         take many minutes, and such a model is not the few-patch result the tool is for).
     subdivision_levels : Catmull-Clark levels used by the fit (paper: 2).

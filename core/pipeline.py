@@ -18,7 +18,7 @@ from core.errors import PolycubeInputError, StageNotAvailableError
 from core.params import ReconstructionParams
 from core.progress import NO_PROGRESS
 
-CORE_STAGES = ("intake", "parts", "frames", "labeling", "polycube", "basemesh", "fit", "patches")
+CORE_STAGES = ("intake", "parts", "frames", "labeling", "basemesh", "fit", "patches")
 STOP_AFTER_CHOICES = ("intake", "parts", "labeling", "basemesh", "fit", "solid")
 
 
@@ -151,62 +151,32 @@ def stage_labeling(state, params):
     return {"face_label": labels, "validity": validity, "report": report, "message": message}
 
 
-def stage_polycube(state, params):
+def stage_basemesh(state, params):
     from core.errors import LabelingError
-    from core.polycube.deform import polycube_deformation
-    from core.polycube.wireframe import extract_wireframe, straighten_wireframe
+    from core.quadmesh import build_base_mesh
 
     labeling = state["validity"].report
     if not labeling["valid"]:
         raise LabelingError(
-            "the polycube needs a valid labeling; it still has "
+            "the base mesh needs a valid labeling; it still has "
             f"{labeling['invalid_charts']['count']} invalid charts, "
             f"{labeling['invalid_boundaries']['count']} invalid boundaries and "
             f"{labeling['invalid_corners']['count']} invalid corners (see the labeling section)")
-    mesh, field = state["target"], state["frames"]
-    deformed = polycube_deformation(mesh.vertices, mesh.faces, state["face_label"],
-                                    field.face_frame, state["face_part"], field.part_frames)
-    wireframe, layout = extract_wireframe(mesh.faces, state["face_part"], state["face_label"],
-                                          len(mesh.vertices))
-    _, _, extent = straighten_wireframe(deformed.local, wireframe, layout, deformed.chart_plane)
-    info = deformed.info
-    report = {
-        "charts": info["charts"], "flipped_triangles": info["flipped"],
-        "degenerate_triangles": info["degenerate"],
-        "max_chart_planarity": info["max_chart_planarity"],
-        "corners": int(len(wireframe.corners)), "wireframe_edges": int(len(wireframe.edges)),
-        "collapsed_wireframe_edges": int((np.abs(extent) <= 1e-12).sum()),
-        "seconds": info["seconds"],
-    }
-    message = (f"{info['flipped']} flipped triangles after deformation" if info["flipped"]
-               else "no flipped triangles")
-    return {"polycube": deformed, "wireframe": wireframe, "report": report, "message": message}
-
-
-def stage_basemesh(state, params):
-    from core.quadmesh import base_mesh_from_polycube
-
-    base, info = base_mesh_from_polycube(state["target"], state["polycube"], state["face_label"],
-                                         state["face_part"], state["frames"].part_frames,
-                                         target_faces=params.target_faces)
-    keys = ("faces", "quads", "triangles", "other", "vertices", "extraordinary_vertices", "genus",
-            "coarse_faces", "located_in_flipped", "inverted_cells", "volume", "seconds")
-    report = {key: info[key] for key in keys if key in info}
-    if info["faces"] > params.max_base_faces:
-        from core.errors import LabelingError
-
-        raise LabelingError(
-            f"the base mesh has {info['faces']} faces, more than max_base_faces="
-            f"{params.max_base_faces}: its {info.get('coarse_faces', '?')}-face polycube grid is "
-            "too fine (many charts); coarser quad layouts are not built yet")
+    field = state["frames"]
+    interface_axis = field.face_interface_axis if len(field.interfaces) else None
+    base, info = build_base_mesh(state["target"], state["face_part"], state["face_label"],
+                                 field.face_frame, field.part_frames,
+                                 target_faces=params.target_faces,
+                                 max_base_faces=params.max_base_faces,
+                                 face_interface_axis=interface_axis)
     target_genus = state["input_genus"]
     if info["genus"] != target_genus:
-        from core.errors import LabelingError
-
         raise LabelingError(
-            f"the base mesh has genus {info['genus']} but the target has genus {target_genus}: "
-            "the polycube lost or gained handles (thin members collapsed in the deformation)")
-    return {"base_mesh": base, "report": report}
+            f"the base mesh has genus {info['genus']} but the target has genus {target_genus}")
+    message = ("" if info["within_budget"] else
+               f"{info['faces']} faces for a budget of {info['target_faces']}: "
+               f"{info['minimum_reason'] or 'the closest layout found'}")
+    return {"base_mesh": base, "report": info, "message": message}
 
 
 FIT_FACE_BUDGET = 40_000
@@ -235,7 +205,7 @@ def stage_fit(state, params):
     message = ("" if report["self_intersections"] == 0 else
                f"warning: the fitted limit surface intersects itself "
                f"({report['self_intersections']} triangle pairs at level {levels})")
-    return {"initial_base_mesh": base, "base_mesh": fitted, "report": report, "message": message}
+    return {"base_mesh": fitted, "report": report, "message": message}
 
 
 def count_limit_self_intersections(base, levels):
@@ -260,7 +230,7 @@ def stage_patches(state, params):
 
 STAGE_FUNCTIONS = {
     "intake": stage_intake, "parts": stage_parts, "frames": stage_frames,
-    "labeling": stage_labeling, "polycube": stage_polycube, "basemesh": stage_basemesh,
+    "labeling": stage_labeling, "basemesh": stage_basemesh,
     "fit": stage_fit, "patches": stage_patches,
 }
 

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Coarse quad base mesh from the polycube (paper Sect. 2.3, Fig. 4d)."""
-from core.quadmesh.polycube_quads import base_mesh_from_polycube, mesh_statistics, polymesh_volume
+"""Coarse quad base mesh of a labelled target (paper Sect. 2.3; see :mod:`.base_mesh`)."""
+from core.quadmesh.base_mesh import build_base_mesh
 
-__all__ = ["base_mesh_from_polycube", "mesh_statistics", "polymesh_volume"]
+__all__ = ["build_base_mesh"]

@@ -68,14 +68,15 @@ def test_full_run_writes_a_step_solid_and_every_report_section(tmp_path):
     assert (tmp_path / "out.step").stat().st_size > 0 and (tmp_path / "base.obj").exists()
 
 
-def test_stop_after_an_unavailable_stage_exits_1(tmp_path):
+def test_automatic_parts_are_assembled_into_one_base_mesh(tmp_path):
     result = run("reconstruct", SAMPLE, "--parts", "auto", "--stop-after", "basemesh",
-                 "--report", tmp_path / "r.json")
-    assert result.returncode == 1 and "'basemesh' stage is not available" in result.stderr
+                 "--report", tmp_path / "r.json", "--base-mesh", tmp_path / "base.obj")
+    assert result.returncode == 0, result.stderr
     report = json.loads((tmp_path / "r.json").read_text())
-    assert report["stages"]["labeling"]["status"] == "ok"
-    assert report["stages"]["basemesh"]["status"] == "not_available"
-
+    assert report["parts"]["parts"] >= 2 and report["stages"]["basemesh"]["status"] == "ok"
+    base = report["base_mesh"]
+    assert base["genus"] == report["input"]["genus"] and base["quads"] == base["faces"]
+    assert (tmp_path / "base.obj").exists()
 
 def assert_rejected(result, *words):
     assert result.returncode == 2, (result.returncode, result.stderr)

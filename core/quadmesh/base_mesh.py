@@ -1,0 +1,240 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Coarse quad base mesh of a labelled target (paper Sect. 2.3; issue 8).
+
+1. :mod:`chart_complex`: charts, sides and corners of the labeling, measured on the target.
+2. :mod:`side_signs`: side directions that make every chart a rectilinear polygon.
+3. :mod:`quantize`: integer side lengths (a mixed-integer program) closest to a scale times the
+   measured lengths, every chart polygon closed; the scale is searched for the face budget.
+4. :mod:`lattice`: the unit squares of every integer chart polygon are the quads; side points
+   are shared by both charts of a side, across part interfaces too (parts assembled).
+5. :mod:`embed`: quads placed on the target (corners, sides by arc length, interiors by a
+   Tutte map of each chart region onto its polygon); :mod:`relax` evens them out, each point
+   kept on its own chart or side.
+"""
+import time
+
+import numpy as np
+
+from core.errors import InvalidMeshError, LabelingError, ParameterError
+from core.polymesh_checks import check_polymesh
+from core.quadmesh.chart_complex import build_chart_complex
+from core.quadmesh.embed import (interior_point_positions, side_point_positions,
+                                 tutte_coordinates)
+from core.quadmesh.lattice import OverlappingChartsError, build_lattice, chart_orientation
+from core.quadmesh.quantize import (BUDGET_TOLERANCE, collapsible_sides, loop_tables,
+                                    quantize_for_budget, rectangular_refinement)
+from core.quadmesh.relax import relax_on_target
+from core.quadmesh.side_signs import make_loops_rectilinear
+from core.types import PolyMesh
+
+REFINE_BELOW = 8000
+"""Targets with fewer triangles are split by midpoint subdivision (same surface) until they have
+at least this many, so every chart has interior vertices for its Tutte map and its slits."""
+
+
+def polymesh_genus(mesh):
+    """Genus of a closed, connected-per-component polygon mesh (Euler characteristic)."""
+    from scipy.sparse.csgraph import connected_components
+    import scipy.sparse as sp
+
+    fv, fo = mesh.face_vertices, mesh.face_offsets
+    face = np.repeat(np.arange(mesh.n_faces), np.diff(fo))
+    nxt = np.arange(len(fv)) + 1
+    nxt[fo[1:] - 1] = fo[:-1]
+    a, b = fv, fv[nxt]
+    n = np.int64(len(mesh.vertices))
+    edges = np.unique(np.minimum(a, b) * n + np.maximum(a, b))
+    graph = sp.csr_matrix((np.ones(len(fv)), (fv, face)), shape=(len(mesh.vertices), mesh.n_faces))
+    components, _ = connected_components(graph @ graph.T, directed=False)
+    euler = len(mesh.vertices) - len(edges) + mesh.n_faces
+    return int((2 * components - euler) // 2)
+
+
+REFINEMENT_ROUNDS = 6
+"""Rounds of quantization, each splitting more overlapping charts into rectangles."""
+
+
+def refined_target(target):
+    """The target split by midpoint subdivision until it has ``REFINE_BELOW`` triangles.
+
+    Returns ``(V, F, parent)``: (n', 3) float64, (m', 3) int64 and (m',) int64 original face of
+    every triangle. The surface is unchanged; original vertices keep their indices.
+    """
+    import trimesh
+
+    V = np.asarray(target.vertices, dtype=np.float64)
+    F = np.asarray(target.faces, dtype=np.int64)
+    parent = np.arange(len(F))
+    while len(F) < REFINE_BELOW:
+        V, F = trimesh.remesh.subdivide(V, F)
+        parent = np.repeat(parent, 4)
+    return V, np.asarray(F, dtype=np.int64), parent
+
+
+def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, collapsible):
+    """Quantize, lay out and embed; returns ``(mesh, polycube, rounds, refinement, folded)``.
+
+    Charts whose integer polygon overlaps itself are split into rectangles, lazily (only those,
+    so the other charts keep their freedom), and the quantization is repeated.
+
+    Raises
+    ------
+    LabelingError (no layout, or more than ``max_base_faces`` quads); InvalidMeshError when the
+    embedded quads are not a closed 2-manifold (a collapse that pinched a vertex).
+    """
+    refine = set()
+    for _ in range(REFINEMENT_ROUNDS):
+        refinement = rectangular_refinement(complex_, tables, refine)
+        polycube, rounds = quantize_for_budget(complex_, tables, refinement, target_faces,
+                                               collapsible)
+        if polycube.faces > max_base_faces:
+            raise LabelingError(
+                f"the smallest quantized layout found has {polycube.faces} quads, more than "
+                f"max_base_faces={max_base_faces} ({complex_.n_charts} charts, "
+                f"{complex_.n_sides} sides, each at least one unit long); raise "
+                "--max-base-faces or simplify the labeling (--parts auto)")
+        try:
+            lattice = build_lattice(complex_, tables, polycube)
+            break
+        except OverlappingChartsError as exc:
+            if set(exc.charts) <= refine:
+                raise
+            refine |= set(exc.charts)
+    else:
+        raise OverlappingChartsError(sorted(refine))
+    orientation = chart_orientation(complex_, tables, polycube.corner_uv)
+    face_uv = tutte_coordinates(V, F, complex_, tables, polycube)
+    interior, folded = interior_point_positions(V, F, complex_, lattice, face_uv, orientation)
+    points = np.concatenate([V[complex_.corner_vertex],
+                             side_point_positions(V, complex_, lattice, polycube.side_length),
+                             interior])
+    # identified points become one vertex (the lowest name: a corner where there is one)
+    vertex = _merge_points(lattice.n_points, lattice.identified)
+    used, compact = np.unique(vertex, return_inverse=True)
+    mesh = PolyMesh(points[used], compact[lattice.quads.reshape(-1)].astype(np.int64),
+                    np.arange(0, 4 * len(lattice.quads) + 1, 4, dtype=np.int64))
+    check_polymesh(mesh)
+    n_side_points = len(lattice.side_point_side)
+    side_of = np.full(lattice.n_points, -1, dtype=np.int64)
+    side_of[lattice.n_corners:lattice.n_corners + n_side_points] = lattice.side_point_side
+    step_of = np.zeros(lattice.n_points)
+    step_of[lattice.n_corners:lattice.n_corners + n_side_points] = (
+        lattice.side_point_step / polycube.side_length[lattice.side_point_side])
+    chart_of = np.full(lattice.n_points, -1, dtype=np.int64)
+    chart_of[lattice.n_corners + n_side_points:] = lattice.interior_chart
+    relaxed = relax_on_target(mesh, V, F, complex_.face_chart, side_of[used], step_of[used],
+                              polycube.side_length, chart_of[used],
+                              lambda side: V[complex_.chain(side)])
+    try:
+        check_polymesh(PolyMesh(relaxed, mesh.face_vertices, mesh.face_offsets))
+        mesh = PolyMesh(relaxed, mesh.face_vertices, mesh.face_offsets)
+    except InvalidMeshError:
+        pass  # smoothing degenerated a face somewhere: keep the Tutte placement
+    return mesh, polycube, rounds, refinement, folded
+
+
+def _merge_points(n, pairs):
+    """(n,) int64 representative (lowest index) of every point under the identified pairs."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    graph = sp.csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, component = connected_components(graph, directed=False)
+    lowest = np.full(component.max() + 1, n, dtype=np.int64)
+    np.minimum.at(lowest, component, np.arange(n))
+    return lowest[component]
+
+
+def euler_genus(V, F):
+    """Genus of a closed triangle mesh with one component (Euler characteristic)."""
+    from core.mesh_topology import unique_edges
+
+    edges, _ = unique_edges(F)
+    return int((2 - (len(V) - len(edges) + len(F))) // 2)
+
+
+def build_base_mesh(target, face_part, face_label, face_frame, part_frames, target_faces=300,
+                    max_base_faces=2500, face_interface_axis=None):
+    """Closed all-quad base mesh on the target from a valid polycube labeling.
+
+    Parameters
+    ----------
+    target : core.types.TriMesh (n vertices, m faces, outward).
+    face_part : (m,) int part of each face; face_label : (m,) int labels 0..5 in the face frame.
+    face_frame : (m, 3, 3) float64 blended frame of each face (rows x, y, z).
+    part_frames : (P, 3, 3) float64 frame of each part.
+    target_faces : int >= 6, the face budget (met within ``BUDGET_TOLERANCE`` when the
+        labeling allows it; otherwise the smallest layout found is used and reported).
+    max_base_faces : int, refuse layouts with more faces than this.
+    face_interface_axis : (m, 3) float64 normal of the part interface next to each face, NaN
+        rows where none (``FrameField.face_interface_axis``), or None.
+
+    Returns
+    -------
+    mesh : core.types.PolyMesh, quads only, vertices on the target, closed, 2-manifold, outward.
+    info : dict (JSON-serialisable) with ``faces``, ``quads``, ``triangles``, ``other``,
+        ``vertices``, ``extraordinary_vertices``, ``min_valence``, ``max_valence``, ``genus``,
+        ``target_faces``, ``within_budget``, ``minimum_reason``, ``scale``, ``solver_status``,
+        ``scale_rounds``, ``charts``, ``sides``, ``corners``, ``side_directions_flipped``,
+        ``folded_points``, ``rectangles``, ``collapsed_sides`` and ``seconds``.
+
+    Raises
+    ------
+    ParameterError for a bad budget; LabelingError when the labeling cannot be quantized or
+    laid out (the message names the charts), or the layout exceeds ``max_base_faces``.
+    """
+    started = time.perf_counter()
+    if isinstance(target_faces, bool) or not isinstance(target_faces, (int, np.integer)) \
+            or target_faces < 6:
+        raise ParameterError(f"target_faces must be an integer >= 6, got {target_faces!r}")
+    V, F, parent = refined_target(target)
+    part_frames = np.asarray(part_frames, dtype=np.float64).reshape(-1, 3, 3)
+    interface_axis = (None if face_interface_axis is None
+                      else np.asarray(face_interface_axis, dtype=np.float64)[parent])
+    complex_ = build_chart_complex(V, F, np.asarray(face_part)[parent],
+                                   np.asarray(face_label)[parent], np.asarray(face_frame)[parent],
+                                   interface_axis)
+    target_genus = euler_genus(V, F)
+    collapsible = collapsible_sides(complex_, int(target_faces))
+    try:
+        layout_complex, flipped = make_loops_rectilinear(complex_, collapsible)
+        tables = loop_tables(layout_complex, V, part_frames)
+        mesh, polycube, rounds, refinement, folded = _layout_on_target(
+            V, F, layout_complex, tables, int(target_faces), max_base_faces, collapsible)
+        if polymesh_genus(mesh) != target_genus:
+            raise LabelingError("collapsing sliver charts changed the genus")
+    except (LabelingError, InvalidMeshError):
+        # slivers that cannot vanish cleanly keep at least one unit
+        collapsible = np.zeros(complex_.n_sides, dtype=bool)
+        layout_complex, flipped = make_loops_rectilinear(complex_, collapsible)
+        tables = loop_tables(layout_complex, V, part_frames)
+        try:
+            mesh, polycube, rounds, refinement, folded = _layout_on_target(
+                V, F, layout_complex, tables, int(target_faces), max_base_faces, collapsible)
+        except InvalidMeshError as exc:
+            raise LabelingError(f"the quantized layout does not embed as a closed 2-manifold: "
+                                f"{exc}; try another labeling or --parts") from exc
+    complex_ = layout_complex
+    points = mesh.vertices
+    valence = np.bincount(mesh.face_vertices, minlength=len(points))
+    within = abs(polycube.faces - target_faces) <= BUDGET_TOLERANCE * target_faces
+    minimum_reason = None
+    if not within and polycube.faces > target_faces:
+        minimum_reason = (f"{complex_.n_sides} sides of at least one unit each around "
+                          f"{complex_.n_charts} charts need at least about {polycube.faces} quads")
+    info = {
+        "faces": int(mesh.n_faces), "quads": int(mesh.n_faces), "triangles": 0, "other": 0,
+        "vertices": int(len(points)),
+        "extraordinary_vertices": int((valence != 4).sum()),
+        "min_valence": int(valence.min()), "max_valence": int(valence.max()),
+        "genus": polymesh_genus(mesh),
+        "target_faces": int(target_faces), "within_budget": bool(within),
+        "minimum_reason": minimum_reason,
+        "scale": polycube.scale, "solver_status": polycube.status, "scale_rounds": rounds,
+        "charts": int(complex_.n_charts), "sides": int(complex_.n_sides),
+        "corners": int(complex_.n_corners), "side_directions_flipped": int(len(flipped)),
+        "folded_points": int(folded), "rectangles": refinement.rectangles,
+        "collapsed_sides": int((polycube.side_length == 0).sum()),
+        "seconds": round(time.perf_counter() - started, 4),
+    }
+    return mesh, info

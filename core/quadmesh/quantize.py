@@ -1,0 +1,435 @@
+"""Integer chart polygons: every side of the chart complex gets an integer length (issue 8, item 1).
+
+Each chart is a rectilinear polygon in its label plane, walked with the chart on the left
+(slits make every chart a disk, :mod:`core.quadmesh.chart_complex`). Its sides have integer
+lengths ``l_s >= 1``, one unknown per side shared by the two charts (or the two banks of a
+slit) it bounds, so the unit lattices of neighbouring charts meet with the same splits: the
+layout is conforming with no T-junctions, inside a part and across part interfaces alike (parts
+are assembled by construction).
+
+A rectilinear polygon drawn from any side lengths can overlap itself. Every chart is therefore
+split into rectangles first, combinatorially, by Tamassia's rectangular refinement of its turn
+sequence: from every reflex corner the incoming side is extended to the first side ahead where
+the turns add up to one left turn (its *front*), splitting that side in two. Each rectangle
+closes when its opposite sides are equally long, and any lengths >= 1 that close every
+rectangle draw every chart as a simple polygon tiled by those rectangles: no chart can fold
+over, collapse or overlap itself, whatever the scale.
+
+The objective keeps the side lengths close to their measured lengths on the target times a
+scale ``s`` (units per target length): ``min sum |l - s L|`` (a mixed-integer program solved by
+HiGHS, ``scipy.optimize.milp``). Short sides land on one unit wherever the constraints allow,
+which makes the layout coarse. The scale sets the number of unit squares, which is the number of
+base-mesh quads; :func:`quantize_for_budget` searches it for a face budget.
+
+After Protais, Bourcier, Ledoux, Lévy, "Robust quantization for polycube maps" (CAD 2022);
+Lyon, Campen, Kobbelt, "Quad layouts via constrained T-mesh quantization" (EG 2021); Tamassia,
+"On embedding a graph in the grid with the minimum number of bends" (SIAM J. Comput. 1987).
+"""
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import Bounds, LinearConstraint, milp
+
+from core.errors import LabelingError
+
+MILP_TIME_LIMIT = 20.0
+"""Seconds HiGHS may spend on one quantization."""
+MILP_GAP = 0.01
+"""Relative optimality gap accepted from HiGHS (the objective is a soft closeness measure)."""
+BUDGET_TOLERANCE = 0.25
+"""The face budget is met when the face count is within this fraction of it."""
+COLLAPSE_BELOW = 0.5
+"""Sides measured shorter than this many units (at the budget's first scale) may get length
+zero: slivers of the labeling collapse (:func:`collapsible_sides`)."""
+EXTRA_COST = 1e-3
+"""Objective weight of the lengths of inserted edges and split pieces (per unit)."""
+SCALE_ROUNDS = 10
+"""Most scales tried by :func:`quantize_for_budget`."""
+
+
+@dataclass(frozen=True)
+class LoopTables:
+    """The loop references of a chart complex as flat tables (``complex_.loop_sides`` order).
+
+    ref_chart, ref_side : (j,) int64 chart and side of every reference.
+    ref_axis : (j,) int64 0 when the side runs along the chart's ``u`` axis (``b``), 1 along ``v``.
+    ref_sign : (j,) int64 +1 when walking the reference increases that coordinate.
+    ref_next : (j,) int64 the next reference along the same loop.
+    chart_turn_sign : (c,) int64 +1 where ``(u, v)`` is counter-clockwise seen from outside
+        (label +a), -1 where it is mirrored (label -a).
+    ref_measured : (j, 2) float64 measured ``(u, v)`` of every reference's start corner: the
+        target corner projected on the chart's in-plane axes of its part frame.
+    """
+
+    ref_chart: np.ndarray
+    ref_side: np.ndarray
+    ref_axis: np.ndarray
+    ref_sign: np.ndarray
+    ref_next: np.ndarray
+    chart_turn_sign: np.ndarray
+    ref_measured: np.ndarray
+
+
+@dataclass(frozen=True)
+class Refinement:
+    """Rectangles of every chart and the equalities that close them.
+
+    n_vars : int, unknowns: the side lengths (``0 .. n_sides-1``), then the pieces of split
+        edges and the lengths of the inserted edges.
+    equalities : (r, n_vars) CSR float64, rows that must be zero (splits and rectangle closure).
+    extents : (q, n_vars) CSR float64, rows that must be >= 1: each rectangle's width and height.
+    piece : (n_vars,) bool, unknowns that are pieces of a split edge (they may be zero: the
+        inserted edge then meets a corner of the edge it splits).
+    rectangles : int, rectangles of all charts.
+    """
+
+    n_vars: int
+    equalities: sp.csr_matrix
+    extents: sp.csr_matrix
+    piece: np.ndarray
+    rectangles: int
+
+
+@dataclass(frozen=True)
+class IntegerPolycube:
+    """Result of one quantization.
+
+    side_length : (s,) int64 length of every side in units (>= 1).
+    corner_uv : (j, 2) int64 integer ``(u, v)`` of every reference's start corner in its chart
+        (the chart's first reference starts at ``(0, 0)``).
+    scale : float, units per target length used in the objective.
+    faces : int, unit squares of all chart polygons (= base-mesh quads).
+    chart_faces : (c,) int64 unit squares of each chart.
+    status : str, HiGHS status message.
+    """
+
+    side_length: np.ndarray
+    corner_uv: np.ndarray
+    scale: float
+    faces: int
+    chart_faces: np.ndarray
+    status: str
+
+
+def chart_plane_axes(label):
+    """In-plane axes ``(b, d)`` of charts with the given labels (so ``e_b x e_d = e_a``)."""
+    axis = np.asarray(label) // 2
+    return (axis + 1) % 3, (axis + 2) % 3
+
+
+def loop_tables(complex_, V, part_frames):
+    """Flat reference tables of ``complex_`` (one loop per chart).
+
+    V : (n, 3) float64 target vertices; part_frames : (P, 3, 3) float64 frames (rows x, y, z).
+
+    Raises
+    ------
+    LabelingError when a chart has several boundary loops (a hole its slits did not reach) or
+    a side runs along its chart's label axis.
+    """
+    counts = np.bincount(complex_.loop_chart, minlength=complex_.n_charts)
+    if (counts != 1).any():
+        bad = np.flatnonzero(counts != 1)
+        raise LabelingError(f"{len(bad)} charts are not disks after cutting (e.g. charts "
+                            f"{bad[:5].tolist()} with {counts[bad[:5]].tolist()} boundary loops)")
+    refs = complex_.loop_sides
+    n_loops = len(complex_.loop_chart)
+    sizes = np.diff(complex_.loop_offsets)
+    ref_loop = np.repeat(np.arange(n_loops), sizes)
+    ref_chart = complex_.loop_chart[ref_loop]
+    side = np.where(refs >= 0, refs, ~refs)
+    walk = np.where(refs >= 0, 1, -1)
+    column = np.where(complex_.side_chart[side, 0] == ref_chart, 0, 1)
+    side_axis = complex_.side_axis[side, column]
+    b_axis, d_axis = chart_plane_axes(complex_.chart_label[ref_chart])
+    if ((side_axis != b_axis) & (side_axis != d_axis)).any():
+        raise LabelingError("a side runs along the label axis of its own chart: the labeling is "
+                            "not a polycube there")
+    rows = np.arange(len(refs))
+    rank = rows - complex_.loop_offsets[:-1][ref_loop]
+    ref_next = np.where(rank == sizes[ref_loop] - 1, complex_.loop_offsets[:-1][ref_loop],
+                        rows + 1)
+    corner = np.where(refs >= 0, complex_.side_corners[side, 0], complex_.side_corners[side, 1])
+    frame = np.asarray(part_frames)[complex_.chart_part[ref_chart]]
+    point = V[complex_.corner_vertex[corner]]
+    measured = np.stack([np.einsum("rj,rj->r", point, frame[rows, b_axis]),
+                         np.einsum("rj,rj->r", point, frame[rows, d_axis])], axis=1)
+    return LoopTables(ref_chart, side, np.where(side_axis == b_axis, 0, 1),
+                      complex_.side_sign[side, column] * walk, ref_next,
+                      np.where(complex_.chart_label % 2 == 0, 1, -1), measured)
+
+
+def _turn(a, b, turn_sign):
+    """Turn (+1 left, -1 right, 0 straight) from direction ``a`` to ``b`` = (axis, sign)."""
+    if a[0] == b[0]:
+        if a[1] != b[1]:
+            raise LabelingError("a chart boundary reverses along one axis: not a polycube")
+        return 0
+    cross = a[1] * b[1] * (1 if a[0] == 0 else -1)
+    return turn_sign * cross
+
+
+def _front(face, turns, i):
+    """The side the extension of side ``i`` of a face runs into, from its reflex end.
+
+    Candidates are the sides ``k`` ahead where the turns from ``i`` add up to one left turn
+    (Tamassia's rule: the extension meets a side of that direction). Among them the first one
+    the extension meets in the measured chart is chosen (so the refinement follows the target);
+    without a measured hit, the first candidate. Returns ``(k, hit)``: the side and the measured
+    hit point (2,).
+    """
+    n = len(face)
+    (axis, sign), _, _ = face[i]
+    origin = face[(i + 1) % n][2]
+    other = 1 - axis
+    best, best_t, total = None, np.inf, 0
+    for step in range(n):
+        total += turns[(i + step) % n]
+        if total != 1:
+            continue
+        k = (i + step + 1) % n
+        start, end = face[k][2], face[(k + 1) % n][2]
+        line = 0.5 * (start[axis] + end[axis])
+        t = (line - origin[axis]) * sign
+        low, high = min(start[other], end[other]), max(start[other], end[other])
+        if best is None:
+            best, best_line = k, line
+        if t > 0 and low <= origin[other] <= high and t < best_t:
+            best, best_t, best_line = k, t, line
+    hit = np.array(origin, dtype=np.float64)
+    hit[axis] = best_line
+    start, end = face[best][2], face[(best + 1) % n][2]
+    hit[other] = np.clip(origin[other], min(start[other], end[other]),
+                         max(start[other], end[other]))
+    return best, hit
+
+
+def rectangular_refinement(complex_, tables, refine=()):
+    """Closure rows of every chart; the charts in ``refine`` are split into rectangles first.
+
+    Parameters
+    ----------
+    complex_ : ChartComplex; tables : LoopTables.
+    refine : charts split into rectangles (Tamassia's rectangular refinement of their turns,
+        fronts chosen by the measured chart, :func:`_front`); every other chart only closes as
+        a whole polygon.
+
+    Returns
+    -------
+    Refinement
+    """
+    refine = set(refine)
+    n_vars = complex_.n_sides
+    rows, cols, vals = [], [], []
+    ext_rows, ext_cols = [], []
+    pieces = []
+    n_rows = 0
+    rectangles = 0
+    order = np.argsort(tables.ref_chart, kind="stable")
+    starts = np.searchsorted(tables.ref_chart[order], np.arange(complex_.n_charts + 1))
+    for chart in range(complex_.n_charts):
+        first = order[starts[chart]]
+        walk, r = [], first
+        while True:
+            walk.append(r)
+            r = tables.ref_next[r]
+            if r == first:
+                break
+        sign = int(tables.chart_turn_sign[chart])
+        # a face edge: ((axis, direction), length unknown, measured start point)
+        faces = [[((int(tables.ref_axis[r]), int(tables.ref_sign[r])), int(tables.ref_side[r]),
+                   tables.ref_measured[r]) for r in walk]]
+        while faces:
+            face = faces.pop()
+            n = len(face)
+            turns = [_turn(face[j][0], face[(j + 1) % n][0], sign) for j in range(n)]
+            reflex = [j for j, t in enumerate(turns) if t < 0] if chart in refine else []
+            if not reflex:
+                # a rectangle closes: the signed lengths along each axis add up to zero
+                row = {0: {}, 1: {}}
+                for (axis, direction), var, _ in face:
+                    row[axis][var] = row[axis].get(var, 0) + direction
+                for axis_row in row.values():
+                    entries = [(v, c) for v, c in axis_row.items() if c != 0]
+                    for v, c in entries:
+                        rows.append(n_rows)
+                        cols.append(v)
+                        vals.append(float(c))
+                    n_rows += 1
+                if chart in refine:
+                    for axis in (0, 1):
+                        forward = sorted({var for (a, d), var, _ in face if a == axis and d > 0})
+                        ext_rows += [2 * rectangles + axis] * len(forward)
+                        ext_cols += forward
+                    rectangles += 1
+                continue
+            i = reflex[0]
+            k, hit = _front(face, turns, i)
+            direction_i, _, _ = face[i]
+            dir_k, var_k, start_k = face[k]
+            origin = face[(i + 1) % n][2]
+            a, b, dummy = n_vars, n_vars + 1, n_vars + 2
+            pieces += [a, b]
+            n_vars += 3
+            rows += [n_rows] * 3
+            cols += [a, b, var_k]
+            vals += [1.0, 1.0, -1.0]
+            n_rows += 1
+            back = (direction_i[0], -direction_i[1])
+            ahead = [face[(i + 1 + j) % n] for j in range((k - i - 1) % n)]
+            behind = [face[(k + 1 + j) % n] for j in range((i - k) % n)]
+            faces.append(ahead + [(dir_k, a, start_k), (back, dummy, hit)])
+            faces.append([(direction_i, dummy, origin), (dir_k, b, hit)] + behind)
+    # the walk inside every slit closes, so both banks of the slit coincide
+    for walk in complex_.slit_walks():
+        for axis in (0, 1):
+            along = walk[tables.ref_axis[walk] == axis]
+            if len(along):
+                rows += [n_rows] * len(along)
+                cols += tables.ref_side[along].tolist()
+                vals += tables.ref_sign[along].astype(float).tolist()
+                n_rows += 1
+    equalities = sp.csr_matrix((vals, (rows, cols)), shape=(n_rows, n_vars))
+    equalities.sum_duplicates()
+    extents = sp.csr_matrix((np.ones(len(ext_rows)), (ext_rows, ext_cols)),
+                            shape=(2 * rectangles, n_vars))
+    piece = np.zeros(n_vars, dtype=bool)
+    piece[pieces] = True
+    return Refinement(n_vars, equalities, extents, piece, rectangles)
+
+
+def corner_coordinates(complex_, tables, side_length):
+    """(j, 2) int64 ``(u, v)`` of every reference's start corner, walking each chart's loop."""
+    step = np.zeros((len(tables.ref_side), 2), dtype=np.int64)
+    step[np.arange(len(step)), tables.ref_axis] = tables.ref_sign * side_length[tables.ref_side]
+    uv = np.zeros_like(step)
+    order = np.argsort(tables.ref_chart, kind="stable")
+    starts = np.searchsorted(tables.ref_chart[order], np.arange(complex_.n_charts + 1))
+    for chart in range(complex_.n_charts):
+        r = first = order[starts[chart]]
+        position = np.zeros(2, dtype=np.int64)
+        while True:
+            uv[r] = position
+            position = position + step[r]
+            r = tables.ref_next[r]
+            if r == first:
+                break
+    return uv
+
+
+def chart_unit_squares(complex_, tables, corner_uv):
+    """(c,) int64 unit squares of every chart polygon (absolute value of its signed area)."""
+    u, v = corner_uv[:, 0].astype(np.float64), corner_uv[:, 1].astype(np.float64)
+    nxt = tables.ref_next
+    cross = u * v[nxt] - u[nxt] * v
+    signed = np.bincount(tables.ref_chart, weights=0.5 * cross, minlength=complex_.n_charts)
+    return np.rint(np.abs(signed)).astype(np.int64)
+
+
+def measured_lengths(complex_):
+    """(s,) float64 measured length of every side along its axis (mean of its two frames)."""
+    return complex_.side_extent.mean(axis=1)
+
+
+def quantize(complex_, tables, refinement, scale, collapsible=None):
+    """Integer side lengths closest to ``scale`` times the measured ones, every rectangle closed.
+
+    Parameters
+    ----------
+    complex_ : ChartComplex; tables : LoopTables; refinement : Refinement.
+    scale : float > 0, units per target length.
+    collapsible : (s,) bool sides that may have length zero (slivers collapse), or None.
+
+    Returns
+    -------
+    IntegerPolycube
+
+    Raises
+    ------
+    LabelingError when no integer lengths close every rectangle.
+    """
+    n_sides, n = complex_.n_sides, refinement.n_vars
+    goal = scale * measured_lengths(complex_)
+    eye = sp.identity(n, format="csr")[:n_sides]
+    slack = sp.identity(n_sides, format="csr")
+    # variables [lengths (n), t (n_sides)]: t >= |l - goal| for the side lengths
+    constraints = [
+        LinearConstraint(sp.vstack([sp.hstack([-eye, slack]), sp.hstack([eye, slack])]),
+                         np.concatenate([-goal, goal]), np.inf),
+        LinearConstraint(sp.hstack([refinement.equalities,
+                                    sp.csr_matrix((refinement.equalities.shape[0], n_sides))]),
+                         0.0, 0.0),
+        LinearConstraint(sp.hstack([refinement.extents,
+                                    sp.csr_matrix((refinement.extents.shape[0], n_sides))]),
+                         1.0, np.inf),
+    ]
+    # inserted edges and split pieces carry a small cost: no larger than the sides need
+    cost = np.concatenate([np.zeros(n_sides), np.full(n - n_sides, EXTRA_COST), np.ones(n_sides)])
+    integrality = np.concatenate([np.ones(n), np.zeros(n_sides)])
+    side_lower = np.ones(n_sides) if collapsible is None else np.where(collapsible, 0.0, 1.0)
+    lower = np.concatenate([side_lower, np.where(refinement.piece[n_sides:], 0.0, 1.0),
+                            np.zeros(n_sides)])
+    result = milp(cost, integrality=integrality, bounds=Bounds(lower, np.inf),
+                  constraints=constraints,
+                  options={"time_limit": MILP_TIME_LIMIT, "mip_rel_gap": MILP_GAP})
+    if result.x is None:
+        raise LabelingError(
+            f"no integer side lengths close every rectangle of this labeling's charts "
+            f"({n_sides} sides, {refinement.rectangles} rectangles): HiGHS says "
+            f"'{result.message}'; try --parts auto or another labeling")
+    side_length = np.rint(result.x[:n_sides]).astype(np.int64)
+    corner_uv = corner_coordinates(complex_, tables, side_length)
+    chart_faces = chart_unit_squares(complex_, tables, corner_uv)
+    return IntegerPolycube(side_length, corner_uv, float(scale), int(chart_faces.sum()),
+                           chart_faces, str(result.message))
+
+
+def first_scale(complex_, target_faces):
+    """Scale (units per target length) at which the charts' area is ``target_faces`` squares."""
+    return float(np.sqrt(target_faces / max(float(complex_.chart_area.sum()), 1e-300)))
+
+
+def collapsible_sides(complex_, target_faces):
+    """(s,) bool sides shorter than ``COLLAPSE_BELOW`` units at :func:`first_scale`."""
+    return measured_lengths(complex_) * first_scale(complex_, target_faces) < COLLAPSE_BELOW
+
+
+def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=None):
+    """The quantization whose face count is closest to ``target_faces``.
+
+    Starts from the scale that gives the target area in unit squares; the face count grows
+    roughly with the square of the scale but in steps, so the scale is then bisected (in log
+    scale) between the largest one giving too few faces and the smallest giving too many.
+    Stops when the count is within ``BUDGET_TOLERANCE`` of the budget; when even a tiny scale
+    gives too many faces, that is the minimum the constraints allow.
+
+    Returns
+    -------
+    best : IntegerPolycube (closest to the budget; the smallest one when none meets it).
+    rounds : list of dicts with the scale and faces of every round (for the report).
+    ``collapsible`` is passed on to :func:`quantize`.
+    """
+    scale = first_scale(complex_, target_faces)
+    rounds, best = [], None
+    low, high = None, None
+    for _ in range(SCALE_ROUNDS):
+        result = quantize(complex_, tables, refinement, scale, collapsible)
+        rounds.append({"scale": scale, "faces": result.faces})
+        if best is None or abs(result.faces - target_faces) < abs(best.faces - target_faces):
+            best = result
+        if abs(result.faces - target_faces) <= BUDGET_TOLERANCE * target_faces:
+            break
+        if len(rounds) >= 3 and len({r["faces"] for r in rounds[-3:]}) == 1:
+            break  # the constraints' minimum: smaller scales give the same layout
+        if result.faces < target_faces:
+            low = scale if low is None else max(low, scale)
+        else:
+            high = scale if high is None else min(high, scale)
+        if low is not None and high is not None:
+            scale = float(np.sqrt(low * high))
+        elif low is None:
+            scale *= 0.5 if len(rounds) > 1 else float(np.sqrt(target_faces / result.faces))
+        else:
+            scale *= 2.0 if len(rounds) > 1 else float(np.sqrt(target_faces / max(result.faces, 1)))
+    return best, rounds

@@ -1,0 +1,257 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Side directions that make every chart a rectilinear polygon (turning number rule).
+
+Walking a chart's boundary loop with the chart on the left (seen from outside), each corner
+turns left (+1), right (-1) or goes straight (0) in the chart's plane, from the directions of
+the two sides that meet there. A rectilinear polygon turns by exactly +4 around its outer loop
+and -4 around each hole; a reversal (two consecutive sides along one axis in opposite
+directions) is impossible. Side directions measured on the target can break this where a short
+side zig-zags (noisy TO surfaces, turning points). :func:`make_loops_rectilinear` flips the
+fewest measured side directions, weighted by their measured extent, so that every loop obeys
+the rule: a small mixed-integer program (one binary per side direction, one per pair of
+consecutive sides for the product of their flips, one per loop for outer/hole).
+"""
+from dataclasses import replace
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import Bounds, LinearConstraint, milp
+
+from core.errors import LabelingError
+
+AXES = np.eye(3)
+MILP_TIME_LIMIT = 20.0
+"""Seconds HiGHS may spend on the sign repair."""
+CLOSURE_BOUND = 1000.0
+"""Largest side length (relative to the shortest, 1) in the closure check."""
+
+
+def _loop_directions(complex_, loop):
+    """Sign keys and base directions of the sides of one loop in its chart's plane.
+
+    Returns ``(keys, directions, normal)``: (k,) int64 index into ``complex_.side_sign``'s
+    flat (s * 2 + column) layout, (k, 3) float64 unit directions, (3,) outward label normal.
+    """
+    chart = complex_.loop_chart[loop]
+    label = complex_.chart_label[chart]
+    normal = AXES[label // 2] * (1.0 if label % 2 == 0 else -1.0)
+    positions = np.arange(complex_.loop_offsets[loop], complex_.loop_offsets[loop + 1])
+    keys, directions = _reference_directions(complex_, positions)
+    return keys, directions, normal
+
+
+def _reference_directions(complex_, positions):
+    """Sign keys (k,) int64 and unit directions (k, 3) of the loop references at ``positions``."""
+    loop_of = np.searchsorted(complex_.loop_offsets, positions, side="right") - 1
+    chart = complex_.loop_chart[loop_of]
+    refs = complex_.loop_sides[positions]
+    sides = np.where(refs >= 0, refs, ~refs)
+    column = np.where(complex_.side_chart[sides, 0] == chart, 0, 1)
+    interface = (complex_.chart_part[complex_.side_chart[sides, 0]]
+                 != complex_.chart_part[complex_.side_chart[sides, 1]])
+    key_column = np.where(interface, column, 0)
+    walk = np.where(refs >= 0, 1.0, -1.0)
+    directions = (AXES[complex_.side_axis[sides, column]]
+                  * (complex_.side_sign[sides, column] * walk)[:, None])
+    return sides * 2 + key_column, directions
+
+
+def loop_turning(complex_):
+    """(l,) int64 turning number of every loop with the current side directions (99 = reversal)."""
+    totals = []
+    for loop in range(len(complex_.loop_chart)):
+        _, d, normal = _loop_directions(complex_, loop)
+        nxt = np.roll(d, -1, axis=0)
+        reverse = np.einsum("kj,kj->k", d, nxt) < -0.5
+        turn = np.rint(np.cross(d, nxt) @ normal).astype(np.int64)
+        totals.append(99 if reverse.any() else int(turn.sum()))
+    return np.asarray(totals, dtype=np.int64)
+
+
+def make_loops_rectilinear(complex_, collapsible=None):
+    """Flip the cheapest set of measured side directions so every chart can be a polygon.
+
+    Every loop must turn by +4 (outer) or -4 (hole), and the charts must close together: some
+    positive side lengths (shared by the two charts of each side) close every loop along both
+    of its axes. Without the second condition a labeling that winds like a helical staircase
+    around a handle (short sides measured the wrong way on a noisy surface) has rectilinear
+    charts that no lengths can close. Lengths are continuous here (closure is homogeneous, so a
+    rational solution scales to integers); the side-length bound ``CLOSURE_BOUND`` linearises
+    the product of a flip and a length.
+
+    Parameters
+    ----------
+    complex_ : ChartComplex
+    collapsible : (s,) bool sides allowed length zero in the closure check, or None.
+
+    Returns
+    -------
+    complex_ : ChartComplex with ``side_sign`` repaired (the input when nothing changes).
+    flipped : (f, 2) int64 rows (side, column) whose direction was reversed.
+
+    Raises
+    ------
+    LabelingError naming the charts when no choice of directions makes them rectilinear.
+    """
+    n_loops = len(complex_.loop_chart)
+    keys, pair_a, pair_b, pair_turn, pair_parallel, pair_loop = [], [], [], [], [], []
+    for loop in range(n_loops):
+        k, d, normal = _loop_directions(complex_, loop)
+        nxt = np.roll(d, -1, axis=0)
+        keys.append(k)
+        pair_a.append(k)
+        pair_b.append(np.roll(k, -1))
+        pair_turn.append(np.rint(np.cross(d, nxt) @ normal))
+        pair_parallel.append(np.einsum("kj,kj->k", d, nxt))
+        pair_loop.append(np.full(len(k), loop))
+    collapsible = (np.zeros(complex_.n_sides, dtype=bool) if collapsible is None
+                   else np.asarray(collapsible, dtype=bool))
+    if loops_are_rectilinear(complex_) and charts_close(complex_, collapsible):
+        return complex_, np.zeros((0, 2), dtype=np.int64)
+    used, key_var = np.unique(np.concatenate(keys), return_inverse=True)
+    nf = len(used)
+    a = np.searchsorted(used, np.concatenate(pair_a))
+    b = np.searchsorted(used, np.concatenate(pair_b))
+    turn = np.concatenate(pair_turn)
+    parallel = np.concatenate(pair_parallel)
+    loop_of_pair = np.concatenate(pair_loop)
+    npairs = len(a)
+    n_sides = complex_.n_sides
+    # variables: flips f (nf), pair products x (npairs), hole flags h (n_loops), side lengths
+    # l (n_sides), flipped lengths y = f * l (nf)
+    nvar = nf + npairs + n_loops + n_sides + nf
+    length0 = nf + npairs + n_loops
+    flipped0 = length0 + n_sides
+    rows, cols, vals, lo, hi = [], [], [], [], []
+
+    def add(entries, lower, upper):
+        row = len(lo)
+        for col, val in entries:
+            rows.append(row)
+            cols.append(col)
+            vals.append(val)
+        lo.append(lower)
+        hi.append(upper)
+
+    for p in range(npairs):
+        x, fa, fb = nf + p, a[p], b[p]
+        # x = fa XOR fb
+        add([(x, 1), (fa, -1), (fb, 1)], 0, np.inf)
+        add([(x, 1), (fa, 1), (fb, -1)], 0, np.inf)
+        add([(x, 1), (fa, -1), (fb, -1)], -np.inf, 0)
+        add([(x, 1), (fa, 1), (fb, 1)], -np.inf, 2)
+        if abs(parallel[p]) > 0.5:
+            # collinear neighbours must keep going the same way: flip both or neither
+            value = 1 if parallel[p] < 0 else 0
+            add([(x, 1)], value, value)
+    for loop in range(n_loops):
+        pairs = np.flatnonzero(loop_of_pair == loop)
+        entries = [(nf + p, -2.0 * turn[p]) for p in pairs if abs(parallel[p]) <= 0.5]
+        entries.append((nf + npairs + loop, 8.0))
+        rhs = 4.0 - float(turn[pairs].sum())
+        add(entries, rhs, rhs)
+    for chart in range(complex_.n_charts):
+        loops = np.flatnonzero(complex_.loop_chart == chart)
+        if len(loops):
+            add([(nf + npairs + loop, 1.0) for loop in loops], len(loops) - 1, len(loops) - 1)
+    key_side = used // 2
+    big = CLOSURE_BOUND
+    for key in range(nf):
+        f, l, y = key, length0 + key_side[key], flipped0 + key
+        add([(y, 1.0), (f, -big)], -np.inf, 0.0)
+        add([(y, 1.0), (l, -1.0)], -np.inf, 0.0)
+        add([(y, 1.0), (l, -1.0), (f, -big)], -big, np.inf)
+    for loop in range(n_loops):
+        k, d, _ = _loop_directions(complex_, loop)
+        key = np.searchsorted(used, k)
+        axis = np.argmax(np.abs(d), axis=1)
+        for along in np.unique(axis):
+            entries = []
+            for j in np.flatnonzero(axis == along):
+                coefficient = float(d[j, along])
+                entries += [(length0 + key_side[key[j]], coefficient),
+                            (flipped0 + key[j], -2.0 * coefficient)]
+            add(entries, 0.0, 0.0)
+    for walk in complex_.slit_walks():
+        k, d = _reference_directions(complex_, walk)
+        key = np.searchsorted(used, k)
+        axis = np.argmax(np.abs(d), axis=1)
+        for along in np.unique(axis):
+            entries = []
+            for j in np.flatnonzero(axis == along):
+                coefficient = float(d[j, along])
+                entries += [(length0 + key_side[key[j]], coefficient),
+                            (flipped0 + key[j], -2.0 * coefficient)]
+            add(entries, 0.0, 0.0)
+    matrix = sp.csr_matrix((vals, (rows, cols)), shape=(len(lo), nvar))
+    matrix.sum_duplicates()
+    extent = complex_.side_extent.reshape(-1)[used]
+    cost = np.concatenate([extent + 1e-9 * (1.0 + np.arange(nf)),
+                           np.zeros(npairs + n_loops + n_sides + nf)])
+    integrality = np.concatenate([np.ones(nf + npairs + n_loops), np.zeros(n_sides + nf)])
+    lower = np.concatenate([np.zeros(nf + npairs + n_loops), np.where(collapsible, 0.0, 1.0),
+                            np.zeros(nf)])
+    upper = np.concatenate([np.ones(nf + npairs + n_loops), np.full(n_sides + nf, big)])
+    result = milp(cost, integrality=integrality, bounds=Bounds(lower, upper),
+                  constraints=[LinearConstraint(matrix, lo, hi)],
+                  options={"time_limit": MILP_TIME_LIMIT})
+    if result.x is None:
+        bad = np.flatnonzero(np.isin(loop_turning(complex_), [-4, 4], invert=True))
+        charts = np.unique(complex_.loop_chart[bad])
+        raise LabelingError(
+            f"no side directions make every chart a closed rectilinear polygon ({len(charts)} "
+            f"charts do not turn by four, e.g. charts {charts[:5].tolist()}); HiGHS says "
+            f"'{result.message}'. The labeling is not a polycube there: try --parts auto or "
+            "another labeling")
+    flip = np.rint(result.x[:nf]).astype(bool)
+    flat = complex_.side_sign.reshape(-1).copy()
+    flat[used[flip]] *= -1
+    sign = flat.reshape(-1, 2)
+    same_part = (complex_.chart_part[complex_.side_chart[:, 0]]
+                 == complex_.chart_part[complex_.side_chart[:, 1]])
+    sign[same_part, 1] = sign[same_part, 0]
+    flipped = np.stack(np.divmod(used[flip], 2), axis=1)
+    return replace(complex_, side_sign=sign), flipped
+
+
+def loops_are_rectilinear(complex_):
+    """True when every chart has one loop turning by +4 and all its other loops by -4."""
+    turning = loop_turning(complex_)
+    if np.isin(turning, [-4, 4], invert=True).any():
+        return False
+    outer = np.bincount(complex_.loop_chart[turning == 4], minlength=complex_.n_charts)
+    has_loop = np.bincount(complex_.loop_chart, minlength=complex_.n_charts) > 0
+    return bool((outer[has_loop] == 1).all())
+
+
+def charts_close(complex_, collapsible=None):
+    """True when side lengths >= 1 (>= 0 for ``collapsible`` sides) close every loop (an LP)."""
+    from scipy.optimize import linprog
+
+    rows, cols, vals = [], [], []
+    row = 0
+    for loop in range(len(complex_.loop_chart)):
+        k, d, _ = _loop_directions(complex_, loop)
+        axis = np.argmax(np.abs(d), axis=1)
+        for along in np.unique(axis):
+            j = np.flatnonzero(axis == along)
+            rows += [row] * len(j)
+            cols += (k[j] // 2).tolist()
+            vals += d[j, along].tolist()
+            row += 1
+    for walk in complex_.slit_walks():
+        k, d = _reference_directions(complex_, walk)
+        axis = np.argmax(np.abs(d), axis=1)
+        for along in np.unique(axis):
+            j = np.flatnonzero(axis == along)
+            rows += [row] * len(j)
+            cols += (k[j] // 2).tolist()
+            vals += d[j, along].tolist()
+            row += 1
+    matrix = sp.csr_matrix((vals, (rows, cols)), shape=(row, complex_.n_sides))
+    matrix.sum_duplicates()
+    result = linprog(np.zeros(complex_.n_sides), A_eq=matrix, b_eq=np.zeros(row),
+                     bounds=[(0.0 if c else 1.0, None) for c in (
+                         np.zeros(complex_.n_sides, dtype=bool) if collapsible is None
+                         else collapsible)], method="highs")
+    return result.status == 0
