@@ -21,8 +21,8 @@ from core.quadmesh.chart_complex import build_chart_complex
 from core.quadmesh.embed import (interior_point_positions, side_point_positions,
                                  tutte_coordinates)
 from core.quadmesh.lattice import OverlappingChartsError, build_lattice, chart_orientation
-from core.quadmesh.quantize import (BUDGET_TOLERANCE, collapsible_sides, loop_tables,
-                                    quantize_for_budget, rectangular_refinement)
+from core.quadmesh.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapsible_sides,
+                                    loop_tables, quantize_for_budget, rectangular_refinement)
 from core.quadmesh.relax import relax_on_target
 from core.quadmesh.side_signs import make_loops_rectilinear
 from core.types import PolyMesh
@@ -50,8 +50,8 @@ def polymesh_genus(mesh):
     return int((2 * components - euler) // 2)
 
 
-REFINEMENT_ROUNDS = 6
-"""Rounds of quantization, each splitting more overlapping charts into rectangles."""
+REFINEMENT_ROUNDS = 24
+"""Rounds of quantization, each splitting one more overlapping chart into rectangles."""
 
 
 def refined_target(target):
@@ -74,19 +74,34 @@ def refined_target(target):
 def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, collapsible):
     """Quantize, lay out and embed; returns ``(mesh, polycube, rounds, refinement, folded)``.
 
-    Charts whose integer polygon overlaps itself are split into rectangles, lazily (only those,
-    so the other charts keep their freedom), and the quantization is repeated.
+    Charts whose integer polygon overlaps itself are split into rectangles, lazily and one at a
+    time (only those, so the other charts keep their freedom; a chart whose rectangles make
+    the program infeasible stays whole), and the quantization is repeated.
 
     Raises
     ------
     LabelingError (no layout, or more than ``max_base_faces`` quads); InvalidMeshError when the
     embedded quads are not a closed 2-manifold (a collapse that pinched a vertex).
     """
-    refine = set()
+    refine, unrefinable, last = {}, set(), None
     for _ in range(REFINEMENT_ROUNDS):
         refinement = rectangular_refinement(complex_, tables, refine)
-        polycube, rounds = quantize_for_budget(complex_, tables, refinement, target_faces,
-                                               collapsible)
+        try:
+            polycube, rounds = quantize_for_budget(complex_, tables, refinement, target_faces,
+                                                   collapsible)
+        except LabelingError:
+            if last is None:
+                raise
+            # this chart's rectangles contradict the others: try its next refinement, then
+            # leave it whole
+            following = REFINEMENTS.index(refine[last]) + 1
+            if following < len(REFINEMENTS):
+                refine[last] = REFINEMENTS[following]
+            else:
+                del refine[last]
+                unrefinable.add(last)
+                last = None
+            continue
         if polycube.faces > max_base_faces:
             raise LabelingError(
                 f"the smallest quantized layout found has {polycube.faces} quads, more than "
@@ -97,11 +112,13 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
             lattice = build_lattice(complex_, tables, polycube)
             break
         except OverlappingChartsError as exc:
-            if set(exc.charts) <= refine:
+            candidates = [c for c in exc.charts if c not in refine and c not in unrefinable]
+            if not candidates:
                 raise
-            refine |= set(exc.charts)
+            last = candidates[0]
+            refine[last] = REFINEMENTS[0]
     else:
-        raise OverlappingChartsError(sorted(refine))
+        raise OverlappingChartsError(sorted(set(refine) | unrefinable))
     orientation = chart_orientation(complex_, tables, polycube.corner_uv)
     face_uv = tutte_coordinates(V, F, complex_, tables, polycube)
     interior, folded = interior_point_positions(V, F, complex_, lattice, face_uv, orientation)

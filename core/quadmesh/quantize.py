@@ -170,14 +170,14 @@ def _turn(a, b, turn_sign):
     return turn_sign * cross
 
 
-def _front(face, turns, i):
+def _front(face, turns, i, measured=True):
     """The side the extension of side ``i`` of a face runs into, from its reflex end.
 
     Candidates are the sides ``k`` ahead where the turns from ``i`` add up to one left turn
     (Tamassia's rule: the extension meets a side of that direction). Among them the first one
     the extension meets in the measured chart is chosen (so the refinement follows the target);
-    without a measured hit, the first candidate. Returns ``(k, hit)``: the side and the measured
-    hit point (2,).
+    without a measured hit, or with ``measured`` False, the first candidate. Returns
+    ``(k, hit)``: the side and the measured hit point (2,).
     """
     n = len(face)
     (axis, sign), _, _ = face[i]
@@ -195,7 +195,7 @@ def _front(face, turns, i):
         low, high = min(start[other], end[other]), max(start[other], end[other])
         if best is None:
             best, best_line = k, line
-        if t > 0 and low <= origin[other] <= high and t < best_t:
+        if measured and t > 0 and low <= origin[other] <= high and t < best_t:
             best, best_t, best_line = k, t, line
     hit = np.array(origin, dtype=np.float64)
     hit[axis] = best_line
@@ -205,21 +205,28 @@ def _front(face, turns, i):
     return best, hit
 
 
+REFINEMENTS = ("measured", "first", "mirrored")
+"""Ways to split a chart into rectangles: fronts met first in the measured chart, Tamassia's
+first candidate fronts, or measured fronts of the loop walked backwards (each reflex corner
+then extends its other side)."""
+
+
 def rectangular_refinement(complex_, tables, refine=()):
     """Closure rows of every chart; the charts in ``refine`` are split into rectangles first.
 
     Parameters
     ----------
     complex_ : ChartComplex; tables : LoopTables.
-    refine : charts split into rectangles (Tamassia's rectangular refinement of their turns,
-        fronts chosen by the measured chart, :func:`_front`); every other chart only closes as
-        a whole polygon.
+    refine : dict chart -> one of ``REFINEMENTS`` (or a collection of charts, all
+        ``"measured"``): charts split into rectangles (Tamassia's rectangular refinement of
+        their turns, fronts by :func:`_front`); every other chart only closes as a whole
+        polygon.
 
     Returns
     -------
     Refinement
     """
-    refine = set(refine)
+    refine = dict(refine) if isinstance(refine, dict) else dict.fromkeys(refine, "measured")
     n_vars = complex_.n_sides
     rows, cols, vals = [], [], []
     ext_rows, ext_cols = [], []
@@ -238,8 +245,16 @@ def rectangular_refinement(complex_, tables, refine=()):
                 break
         sign = int(tables.chart_turn_sign[chart])
         # a face edge: ((axis, direction), length unknown, measured start point)
-        faces = [[((int(tables.ref_axis[r]), int(tables.ref_sign[r])), int(tables.ref_side[r]),
-                   tables.ref_measured[r]) for r in walk]]
+        face = [((int(tables.ref_axis[r]), int(tables.ref_sign[r])), int(tables.ref_side[r]),
+                 tables.ref_measured[r]) for r in walk]
+        mode = refine.get(chart)
+        if mode == "mirrored":
+            # the same polygon walked backwards (interior on the right); each edge then starts
+            # where it ended
+            face = [((axis, -direction), var, face[(j + 1) % len(face)][2])
+                    for j, ((axis, direction), var, _) in enumerate(face)][::-1]
+            sign = -sign
+        faces = [face]
         while faces:
             face = faces.pop()
             n = len(face)
@@ -265,7 +280,7 @@ def rectangular_refinement(complex_, tables, refine=()):
                     rectangles += 1
                 continue
             i = reflex[0]
-            k, hit = _front(face, turns, i)
+            k, hit = _front(face, turns, i, measured=mode != "first")
             direction_i, _, _ = face[i]
             dir_k, var_k, start_k = face[k]
             origin = face[(i + 1) % n][2]
