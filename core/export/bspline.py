@@ -315,6 +315,37 @@ def evaluate_patches(patches, u, v, du=0, dv=0):
     return np.einsum("si,niks->nsk", Bu, tmp)
 
 
+def evaluate_patch_points(patches, face, u, v, chunk=4096):
+    """Points of any patches at one parameter pair each.
+
+    Parameters
+    ----------
+    patches : list of BSplinePatch (any knot layouts).
+    face : (p,) int64 patch of each point; u, v : (p,) float64 parameters.
+    chunk : int, points evaluated together (bounds memory on graded patches).
+
+    Returns
+    -------
+    (p, 3) float64
+    """
+    face = np.asarray(face, dtype=np.int64)
+    out = np.empty((len(face), 3))
+    for g in _layout_groups(patches):
+        p0 = patches[g[0]]
+        slot = np.full(len(patches), -1, dtype=np.int64)
+        slot[g] = np.arange(len(g))
+        idx = np.flatnonzero(slot[face] >= 0)
+        if not len(idx):
+            continue
+        P = np.stack([patches[i].poles for i in g])
+        for part in np.array_split(idx, max(1, len(idx) // chunk)):
+            Bu = basis_matrix(p0.u_knots, p0.u_mults, u[part], degree=p0.degree_u)
+            Bv = basis_matrix(p0.v_knots, p0.v_mults, v[part], degree=p0.degree_v)
+            rows = np.einsum("pi,pijk->pjk", Bu, P[slot[face[part]]])
+            out[part] = np.einsum("pj,pjk->pk", Bv, rows)
+    return out
+
+
 def evaluate_patch_grid(patches, su, sv, du=0, dv=0):
     """(len(patches), len(su), len(sv), 3) points of same-layout patches on a grid."""
     p0 = patches[0]
@@ -532,6 +563,44 @@ def tessellate_patches(patchset, resolution=16, weld_tolerance=1e-9):
     F = np.searchsorted(uniq, label)[T]
     keep = (F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])
     return V, F[keep]
+
+
+def enclosed_volume(patches, chunk=64):
+    """Signed volume enclosed by a closed patch set (divergence theorem).
+
+    ``V = 1/3 sum_patches int (S - c) . (S_u x S_v) du dv`` with ``c`` the mean pole,
+    by Gauss-Legendre quadrature with 5 nodes per knot span, exact for bicubic
+    patches (the integrand has degree 8 in each parameter).
+
+    Parameters
+    ----------
+    patches : list of BSplinePatch of degree <= 3, closed as a set.
+    chunk : int, patches evaluated together.
+
+    Returns
+    -------
+    float, model units cubed; positive when ``d/du x d/dv`` points outward.
+    """
+    nodes, weights = np.polynomial.legendre.leggauss(5)
+    centre = np.mean([p.poles.reshape(-1, 3).mean(axis=0) for p in patches], axis=0)
+
+    def rule(knots):
+        a, b = knots[:-1, None], knots[1:, None]
+        return ((0.5 * (a + b) + 0.5 * (b - a) * nodes).reshape(-1),
+                (0.5 * (b - a) * weights).reshape(-1))
+
+    total = 0.0
+    for g in _layout_groups(patches):
+        p0 = patches[g[0]]
+        su, wu = rule(p0.u_knots)
+        sv, wv = rule(p0.v_knots)
+        for part in np.array_split(g, max(1, len(g) // chunk)):
+            sel = [patches[i] for i in part]
+            S = evaluate_patch_grid(sel, su, sv) - centre
+            normal = np.cross(evaluate_patch_grid(sel, su, sv, 1, 0),
+                              evaluate_patch_grid(sel, su, sv, 0, 1))
+            total += float(np.einsum("i,nijk,nijk,j->", wu, S, normal, wv))
+    return total / 3.0
 
 
 def triangle_mesh_volume(vertices, faces):
