@@ -124,15 +124,22 @@ def _available_stops(report):
 
 def _solid_and_step(patches, step_path, inputs):
     """Build the solid from patches, write STEP if asked; returns the report's ``brep`` section."""
-    from polycube_wb.brep import build_solid
-    from polycube_wb.step_io import write_step
+    from polycube_wb.brep import make_solid
+    from polycube_wb.step_io import write_solid_step
 
-    solid, section = build_solid(patches)
+    built = make_solid(patches)
+    section = built.figures
     section["max_normal_jump_deg"] = patches.info.get("normal_jump_max_deg")
     section["step_path"] = None
     if step_path is not None:
-        section["step_path"] = write_step(solid, step_path, input_paths=inputs)
+        section["step_path"] = write_solid_step(built, patches, step_path, input_paths=inputs,
+                                                name=_input_name(inputs[0]))
     return section
+
+
+def _input_name(path):
+    """The STEP product name for an input file: its name without the suffix."""
+    return os.path.splitext(os.path.basename(os.fspath(path)))[0]
 
 
 def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=DEFAULT_EXPORT_DEPTH,
@@ -158,8 +165,8 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=DEFAUL
     from core.polymesh_checks import check_polymesh
     from core.polymesh_io import read_polymesh
     from core.subdivision.limit import limit_volume
-    from polycube_wb.brep import build_solid
-    from polycube_wb.step_io import write_step
+    from polycube_wb.brep import make_solid
+    from polycube_wb.step_io import write_solid_step
 
     if not isinstance(depth, (int, np.integer)) or not 1 <= depth <= MAX_EXPORT_DEPTH:
         from core.errors import ParameterError
@@ -183,12 +190,14 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=DEFAUL
     progress.check_cancel()
     progress.report("solid", 0.5)
     clock = time.perf_counter()
-    solid, brep = build_solid(patches, progress)
+    built = make_solid(patches, progress)
+    solid, brep = built.solid, built.figures
     stages["solid"] = _ok(clock)
     brep["step_path"] = None
     if step_path is not None:
         clock = time.perf_counter()
-        brep["step_path"] = write_step(solid, step_path, input_paths=inputs)
+        brep["step_path"] = write_solid_step(built, patches, step_path, input_paths=inputs,
+                                             name=_input_name(base_mesh_path))
         stages["step"] = _ok(clock)
     brep["limit_volume"] = brep["volume_error_rel"] = None
     if measure:

@@ -15,6 +15,8 @@ boundaries; FreeCAD 0.20.2 cannot sew with a chosen tolerance), and the figures 
 the patches' boundary pole rows are matched in numpy to name the patches whose sides
 have no identical partner and the size of the gap to the nearest candidate.
 """
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -44,7 +46,32 @@ def patches_to_solid(patchset, progress=NO_PROGRESS):
     return build_solid(patchset, progress)[0]
 
 
+@dataclass
+class BuiltSolid:
+    """A solid and what it was built from.
+
+    solid : Part.Solid; figures : dict (see :func:`build_solid`);
+    topology : core.export.brep_topology.BRepTopology of the shared edges, or None when
+        the faces had to be sewn; reverse : bool, faces are reversed against the patches'
+        ``d/du x d/dv``.
+    """
+
+    solid: object
+    figures: dict
+    topology: object
+    reverse: bool
+
+
 def build_solid(patchset, progress=NO_PROGRESS):
+    """Build a closed, valid, outward-oriented ``Part.Solid`` and the figures checked on it.
+
+    Same as ``make_solid(patchset, progress)`` without the topology; see :func:`make_solid`.
+    """
+    built = make_solid(patchset, progress)
+    return built.solid, built.figures
+
+
+def make_solid(patchset, progress=NO_PROGRESS):
     """Build a closed, valid, outward-oriented ``Part.Solid`` and the figures checked on it.
 
     Parameters
@@ -60,9 +87,10 @@ def build_solid(patchset, progress=NO_PROGRESS):
 
     Returns
     -------
-    solid : Part.Solid
-        One B-rep face per patch, one closed shell, ``isValid()`` true, volume > 0.
-    figures : dict
+    BuiltSolid
+        ``solid``: one B-rep face per patch, one closed shell, ``isValid()`` true,
+        volume > 0; ``topology`` (None if sewn) and ``reverse`` for the STEP writer;
+        ``figures``: dict
         ``faces``, ``edges``, ``shells``, ``valid``, ``closed``, ``volume`` (model units
         cubed, by exact quadrature of the patches), ``construction`` (``"shared_edges"``
         or ``"sewn"``) and ``construction_note`` (why sewing was needed, else "").
@@ -83,14 +111,18 @@ def build_solid(patchset, progress=NO_PROGRESS):
     progress.report("brep", 0.1, "building the shell from shared edges")
     progress.check_cancel()
     volume = enclosed_volume(patches)
+    reverse = bool(volume < 0)
+    topology = patchset.topology
     try:
-        solid = _shared_edge_solid(patchset, volume < 0)
+        if topology is None:
+            topology = topology_from_sides(patches)
+        solid = _shared_edge_solid(patches, topology, reverse)
         construction, note = "shared_edges", ""
     except ExportError as exc:
         progress.report("brep", 0.4, "sewing faces into a shell")
         progress.check_cancel()
         solid = _sewn_solid(patches, str(exc))
-        construction, note = "sewn", f"shared-edge construction failed: {exc}"
+        construction, note, topology = "sewn", f"shared-edge construction failed: {exc}", None
     volume = abs(volume)
     progress.report("brep", 0.8, "checking the solid")
     progress.check_cancel()
@@ -108,18 +140,15 @@ def build_solid(patchset, progress=NO_PROGRESS):
     figures = {"faces": len(solid.Faces), "edges": len(solid.Edges), "shells": len(solid.Shells),
                "valid": True, "closed": True, "volume": float(volume),
                "construction": construction, "construction_note": note}
-    return solid, figures
+    return BuiltSolid(solid, figures, topology, reverse)
 
 
-def _shared_edge_solid(patchset, reverse):
+def _shared_edge_solid(patches, topology, reverse):
     """The solid read from BREP text of the shared-edge topology; ExportError if invalid."""
-    topology = patchset.topology
-    if topology is None:
-        topology = topology_from_sides(patchset.patches)
-    check_topology(topology, patchset.patches, TOLERANCE)
+    check_topology(topology, patches, TOLERANCE)
     shape = Part.Shape()
     try:
-        shape.importBrepFromString(brep_text(patchset.patches, topology, TOLERANCE, reverse))
+        shape.importBrepFromString(brep_text(patches, topology, TOLERANCE, reverse))
     except (Part.OCCError, RuntimeError) as exc:
         raise ExportError(f"OpenCascade could not read the shared-edge B-rep ({exc})") from exc
     if shape.isNull() or shape.ShapeType != "Solid":
