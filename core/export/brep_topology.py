@@ -147,15 +147,15 @@ def check_topology(topology, patches, tolerance, samples=5):
     Checks that every edge is used exactly twice, once in each direction; that each
     face's loop is closed (every use ends at the vertex where the next one starts);
     that the edge curves start and end at their vertices; and that each curve and
-    its parameter lines on both patches agree within ``tolerance`` at ``samples``
-    parameters.
+    its parameter lines on both patches agree within ``tolerance`` at ``samples`` even
+    parameters and at the middle of every knot span of the curves.
 
     Parameters
     ----------
     topology : BRepTopology
     patches : list of core.types.BSplinePatch, the faces.
     tolerance : float, model units.
-    samples : int >= 2, parameters per edge.
+    samples : int >= 2, even parameters per edge (span midpoints are added).
 
     Returns
     -------
@@ -191,12 +191,15 @@ def check_topology(topology, patches, tolerance, samples=5):
         u = int(open_use[0])
         raise ExportError(f"the boundary loop of patch {t.use_face[u]} is not closed: its edge "
                           f"{t.use_edge[u]} ends where the next one does not start")
-    param = np.linspace(0.0, 1.0, samples)
-    curve_pts = np.empty((n_edges, samples, 3))
     layouts = {}
     for e, curve in enumerate(t.edge_curves):
         key = (curve.knots.tobytes(), curve.mults.tobytes(), curve.degree)
         layouts.setdefault(key, []).append(e)
+    mids = [0.5 * (t.edge_curves[m[0]].knots[1:] + t.edge_curves[m[0]].knots[:-1])
+            for m in layouts.values()]
+    param = np.unique(np.concatenate([np.linspace(0.0, 1.0, samples)] + mids))
+    samples = len(param)
+    curve_pts = np.empty((n_edges, samples, 3))
     for members in layouts.values():
         c0 = t.edge_curves[members[0]]
         B = basis_matrix(c0.knots, c0.mults, param, degree=c0.degree)
