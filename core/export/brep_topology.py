@@ -15,6 +15,8 @@ edges. :func:`check_topology` verifies either kind in numpy.
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from core.errors import ExportError
 
@@ -144,7 +146,8 @@ def topology_from_sides(patches):
 def check_topology(topology, patches, tolerance, samples=5):
     """Verify that a topology describes one closed, consistently oriented shell.
 
-    Checks that every edge is used exactly twice, once in each direction; that each
+    Checks that every edge is used exactly twice, once in each direction; that the
+    faces form one connected piece; that each
     face's loop is closed (every use ends at the vertex where the next one starts);
     that the edge curves start and end at their vertices; and that each curve and
     its parameter lines on both patches agree within ``tolerance`` at ``samples`` even
@@ -180,6 +183,13 @@ def check_topology(topology, patches, tolerance, samples=5):
     if len(np.unique(t.use_face)) != len(patches):
         raise ExportError(f"the topology has loops for {len(np.unique(t.use_face))} of "
                           f"{len(patches)} patches")
+    pair = np.argsort(t.use_edge, kind="stable").reshape(n_edges, 2)
+    faces = t.use_face[pair]
+    graph = coo_matrix((np.ones(n_edges), (faces[:, 0], faces[:, 1])),
+                       shape=(len(patches), len(patches)))
+    pieces = connected_components(graph, directed=False)[0]
+    if pieces > 1:
+        raise ExportError(f"the patches form {pieces} separate pieces; a solid needs one shell")
     ends = t.edge_vertices[t.use_edge]
     loop_start = np.where(t.use_reversed, ends[:, 1], ends[:, 0])
     loop_end = np.where(t.use_reversed, ends[:, 0], ends[:, 1])
