@@ -222,7 +222,7 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=DEFAUL
     return solid, report
 
 
-def _reference_level(n_faces, budget=500_000):
+def _reference_level(n_faces, budget=150_000):
     """Subdivision level for the reference limit volume: at most ``budget`` faces, 3..5."""
     level = int(np.floor(np.log(budget / max(n_faces, 1)) / np.log(4.0)))
     return min(5, max(3, level))

@@ -106,8 +106,9 @@ def make_solid(patchset, progress=NO_PROGRESS):
     patches = list(patchset.patches)
     if not patches:
         raise ExportError("cannot build a solid: the PatchSet has no patches")
+    checked_layouts = set()
     for index, patch in enumerate(patches):
-        _check_patch(index, patch)
+        _check_patch(index, patch, checked_layouts)
     progress.report("brep", 0.1, "building the shell from shared edges")
     progress.check_cancel()
     volume = enclosed_volume(patches)
@@ -231,8 +232,12 @@ def _surface(patch):
     return surface
 
 
-def _check_patch(index, patch):
-    """Raise ExportError naming the patch if its arrays cannot define a B-spline surface."""
+def _check_patch(index, patch, checked_layouts):
+    """Raise ExportError naming the patch if its arrays cannot define a B-spline surface.
+
+    ``checked_layouts`` (set) collects the knot layouts already found valid, so patches
+    sharing one are not checked again.
+    """
     poles = np.asarray(patch.poles)
     if poles.ndim != 3 or poles.shape[2] != 3 or poles.shape[0] < 2 or poles.shape[1] < 2:
         raise ExportError(f"patch {index}: poles must have shape (nu, nv, 3) with nu, nv >= 2, "
@@ -240,10 +245,18 @@ def _check_patch(index, patch):
     if not np.issubdtype(poles.dtype, np.number) or not np.all(np.isfinite(poles)):
         bad = int(np.count_nonzero(~np.isfinite(poles.astype(np.float64)).all(axis=2)))
         raise ExportError(f"patch {index}: {bad} poles are not finite")
-    for direction, count, knots, mults, degree in (
-            ("u", poles.shape[0], patch.u_knots, patch.u_mults, patch.degree_u),
-            ("v", poles.shape[1], patch.v_knots, patch.v_mults, patch.degree_v)):
-        _check_direction(index, direction, count, np.asarray(knots), np.asarray(mults), degree)
+    directions = (("u", poles.shape[0], np.asarray(patch.u_knots), np.asarray(patch.u_mults),
+                   patch.degree_u),
+                  ("v", poles.shape[1], np.asarray(patch.v_knots), np.asarray(patch.v_mults),
+                   patch.degree_v))
+    layout = tuple((count, knots.dtype.str, knots.shape, knots.tobytes(), mults.dtype.str,
+                    mults.shape, mults.tobytes(), degree)
+                   for _, count, knots, mults, degree in directions)
+    if layout in checked_layouts:
+        return
+    for direction, count, knots, mults, degree in directions:
+        _check_direction(index, direction, count, knots, mults, degree)
+    checked_layouts.add(layout)
 
 
 def _check_direction(index, direction, count, knots, mults, degree):

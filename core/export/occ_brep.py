@@ -22,13 +22,14 @@ FACE_FLAGS, SHELL_FLAGS, SOLID_FLAGS = "0111000", "0101100", "1100000"
 
 
 def _numbers(values):
-    """Space-separated shortest round-trip decimal form of a float array."""
-    return " ".join(map(repr, np.asarray(values, dtype=np.float64).reshape(-1).tolist()))
+    """Space-separated 17-significant-digit (round-trip exact) form of a float array."""
+    flat = np.asarray(values, dtype=np.float64).reshape(-1).tolist()
+    return ("%.17g " * len(flat)) % tuple(flat)
 
 
 def _knot_lines(knots, mults):
-    return "\n".join(f"{k!r} {int(m)}" for k, m in zip(np.asarray(knots, dtype=np.float64).tolist(),
-                                                        np.asarray(mults).tolist()))
+    return "\n".join(f"{k:.17g} {int(m)}" for k, m in zip(np.asarray(knots, dtype=np.float64).tolist(),
+                                                           np.asarray(mults).tolist()))
 
 
 def _curve_3d(curve):
@@ -63,7 +64,7 @@ def brep_text(patches, topology, tolerance, reverse=False):
     t = topology
     n_vertices, n_edges, n_faces = len(t.vertices), len(t.edge_curves), len(patches)
     n_shapes = n_vertices + n_edges + 2 * n_faces + 2
-    tol = repr(float(tolerance))
+    tol = f"{float(tolerance):.17g}"
     vertex_ref = n_shapes - np.arange(n_vertices)
     edge_ref = n_shapes - n_vertices - np.arange(n_edges)
     wire_ref = n_shapes - n_vertices - n_edges - 2 * np.arange(n_faces)

@@ -14,13 +14,16 @@ import numpy as np
 SCHEMA = "AUTOMOTIVE_DESIGN { 1 0 10303 214 1 1 1 1 }"
 
 
+def step_reals(values):
+    """STEP REAL literals of a float array: 17 significant digits (round-trip exact),
+    always with a decimal point (``%#.17G``). Returns a list of str."""
+    flat = np.asarray(values, dtype=np.float64).reshape(-1).tolist()
+    return (("%#.17G," * len(flat)) % tuple(flat)).split(",")[:-1]
+
+
 def step_real(value):
-    """STEP REAL literal of a float: shortest round-trip digits, always with a point."""
-    text = repr(float(value))
-    mantissa, _, exponent = text.partition("e")
-    if "." not in mantissa:
-        mantissa += "."
-    return mantissa + ("E" + exponent if exponent else "")
+    """STEP REAL literal of one float (see :func:`step_reals`)."""
+    return "%#.17G" % float(value)
 
 
 def step_string(text):
@@ -42,7 +45,7 @@ class _Entities:
     def points(self, xyz):
         """One CARTESIAN_POINT per row of ``xyz`` (n, 3); returns their ids."""
         first = len(self.lines) + 1
-        reals = [step_real(x) for x in np.asarray(xyz, dtype=np.float64).reshape(-1).tolist()]
+        reals = step_reals(xyz)
         self.lines += [f"CARTESIAN_POINT('',({reals[i]},{reals[i + 1]},{reals[i + 2]}))"
                        for i in range(0, len(reals), 3)]
         return list(range(first, first + len(reals) // 3))
@@ -57,7 +60,7 @@ def _ints(values):
 
 
 def _reals(values):
-    return "(" + ",".join(step_real(v) for v in np.asarray(values, dtype=np.float64).tolist()) + ")"
+    return "(" + ",".join(step_reals(values)) + ")"
 
 
 def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970-01-01T00:00:00"):
