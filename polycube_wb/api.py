@@ -71,7 +71,7 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
         if "base_mesh" in state:
             from core.polymesh_io import write_polymesh
 
-            write_polymesh(base_mesh_path, state["base_mesh"])
+            write_polymesh(base_mesh_path, state["base_mesh"], inputs)
             outputs["base_mesh"] = os.path.abspath(base_mesh_path)
         else:
             missing.append(("base mesh", "basemesh"))
@@ -162,7 +162,7 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=DEFAUL
     (Part.Solid, dict report)
     """
     from core.export.bspline import limit_surface_patches
-    from core.polymesh_checks import check_polymesh
+    from core.polymesh_checks import check_export_range, check_polymesh
     from core.polymesh_io import read_polymesh
     from core.subdivision.limit import limit_volume
     from polycube_wb.brep import make_solid
@@ -182,6 +182,8 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=DEFAUL
     clock = time.perf_counter()
     base = read_polymesh(base_mesh_path)
     check_polymesh(base)
+    check_export_range(base)
+    _refuse_self_intersections(base, base_mesh_path)
     stages["intake"] = _ok(clock)
     progress.report("patches", 0.1)
     clock = time.perf_counter()
@@ -220,6 +222,27 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=DEFAUL
         write_json_atomic(report_path, report, inputs)
     progress.report("done", 1.0)
     return solid, report
+
+
+def _refuse_self_intersections(base, path, budget=10_000):
+    """InvalidMeshError if the limit surface of ``base`` intersects itself.
+
+    Tested on the limit mesh at the subdivision level (1..3) with at most ``budget``
+    quads (``core.pipeline.limit_self_intersections``, the check the fit reports).
+    """
+    from core.errors import InvalidMeshError
+    from core.pipeline import limit_self_intersections
+
+    levels = int(np.clip(np.floor(np.log(budget / max(base.n_faces, 1)) / np.log(4.0)), 1, 3))
+    pairs, faces, points = limit_self_intersections(base, levels)
+    if len(pairs):
+        x, y, z = points[0]
+        raise InvalidMeshError(
+            f"{os.fspath(path)}: the limit surface intersects itself ({len(pairs)} crossing "
+            f"triangle pairs of its level-{levels} limit mesh), e.g. between base faces "
+            f"{faces[0, 0]} and {faces[0, 1]} near ({x:.6g}, {y:.6g}, {z:.6g}); "
+            "a STEP solid of it would not be a solid", reason="self_intersecting",
+            count=len(pairs), examples=faces[:5].tolist())
 
 
 def _reference_level(n_faces, budget=150_000):
