@@ -1,32 +1,39 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Catmull-Clark limit surface -> bicubic B-spline patches (one per quad).
+"""Catmull-Clark limit surface -> bicubic B-spline patches (one per base quad).
 
 Method
 ------
-The patch mesh ``P`` is the base mesh if it is all quads, else its first
-Catmull-Clark refinement (one patch per level-1 quad, so every patch edge is shared
-by exactly two patches and the B-rep closes without T-junctions).
+Patches (:mod:`core.export.patch_mesh`): one per base quad, whatever the other faces
+are; a face with ``n != 4`` corners gives the ``n`` quads of its first Catmull-Clark
+refinement. A base quad's side next to such a face is split at its midpoint into two
+B-rep edges, so the B-rep stays conforming while the quad keeps one surface. The limit
+surface is evaluated exactly on the base mesh (all quads) or on its level-1
+refinement, where a base quad is its four level-1 quads.
 
-On a quad of ``P`` the limit surface is a piecewise bicubic polynomial on the dyadic
-"graded" grid with knots ``0, 2^-d, ..., 1/4, 1/2, 3/4, ..., 1 - 2^-d, 1``, C2 across
-every knot line, except in the ``2^-d x 2^-d`` cells at extraordinary corners, where
-it is not polynomial at all. So a clamped bicubic B-spline on that knot vector
-reproduces the limit surface exactly outside those corner cells, and approximates it
-inside them (the error shrinks with ``d``). A quad whose corners all have valence 4
-is one bicubic polynomial (the uniform B-spline of its 16-point 1-ring), reproduced
-exactly by a single Bezier patch.
+On a patch the limit surface is a piecewise bicubic polynomial on the dyadic "graded"
+grid with knots ``0, 2^-d, ..., 1/4, 1/2, 3/4, ..., 1 - 2^-d, 1``, C2 across every knot
+line, except in the ``2^-d x 2^-d`` cells at extraordinary corners, where it is not
+polynomial at all. So a clamped bicubic B-spline on that knot vector reproduces the
+limit surface exactly outside those corner cells, and approximates it inside them (the
+error shrinks with ``d``). A base quad whose corners have valence 4 and touch only
+quads is one bicubic polynomial (the uniform B-spline of its 16-point 1-ring),
+reproduced exactly by a single Bezier patch.
 
-Knot vectors are per "edge ring" (the strips of quads crossing opposite edges): a
-ring gets the graded knot vector if any of its quads has an extraordinary corner, a
-single Bezier span otherwise, so opposite edges of a quad always carry the same knots
-and neighbours agree on every shared edge.
+Knot vectors of base quads are per "edge ring" (strips of base quads crossing opposite
+sides): a ring gets the graded knot vector if any of its quads is not regular, a
+single Bezier span otherwise, so opposite sides of a quad carry the same knots and
+neighbouring quads agree on every shared side. Patches of non-quad faces are graded in
+both directions; the knots of half a graded side are a subset of the graded knots, so
+the halves of a split side are represented exactly on them.
 
 Poles are fitted to exact limit points (:class:`core.subdivision.limit.LimitEvaluator`)
-at dyadic parameters: first every edge curve once (ends fixed at the exact limit
-points, the pole next to an extraordinary end projected onto the exact limit tangent
-plane so all patches share the normal there), written bit-identically into both
-patches; then the interior poles by a tensor-product least-squares fit with the
-boundary fixed. Where the limit surface lies in the spline space the fit is exact.
+at dyadic parameters: first every edge curve once (ends fixed at the B-rep vertices,
+the pole next to an extraordinary end projected onto the exact limit tangent plane so
+all patches share the normal there), written bit-identically into the patches that
+use the whole curve as a side (a split side uses its parent side curve); then the
+interior poles by a tensor-product least-squares fit with the boundary fixed. Where
+the limit surface lies in the spline space the fit is exact. The shared vertices and
+edges are returned as a :class:`core.export.brep_topology.BRepTopology`.
 """
 import numpy as np
 from scipy.interpolate import BSpline
@@ -692,8 +699,10 @@ def tessellate_patches(patchset, resolution=16, weld_tolerance=1e-9):
     """Watertight triangle mesh of a PatchSet.
 
     Each patch is sampled on a grid (every knot span split into
-    ``ceil(span * resolution)`` parts); neighbouring patches share their knots along
-    common edges, so their boundary samples coincide and are welded.
+    ``ceil(span * resolution)`` parts); neighbouring patches sharing a whole side share
+    its knots, so their boundary samples coincide and are welded. A quad side split
+    next to a non-quad face (mixed cages) is sampled differently on its two sides, so
+    there the result is watertight only up to T-junctions.
 
     Parameters
     ----------
