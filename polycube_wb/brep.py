@@ -149,7 +149,7 @@ def _shared_edge_solid(patches, topology, reverse):
     check_topology(topology, patches, TOLERANCE)
     shape = Part.Shape()
     try:
-        shape.importBrepFromString(brep_text(patches, topology, TOLERANCE, reverse))
+        shape.importBrepFromString(brep_text(patches, topology, TOLERANCE, reverse), False)
     except (Part.OCCError, RuntimeError) as exc:
         raise ExportError(f"OpenCascade could not read the shared-edge B-rep ({exc})") from exc
     if shape.isNull() or shape.ShapeType != "Solid":
