@@ -266,8 +266,8 @@ def _fit_side_curves(ctx, vertex_pos):
             continue
         B, X = _side_samples(ctx, kind, patch[sel], local[sel])
         Q = _fit_with_ends(ctx, B, X, a[sel], b[sel], vertex_pos[a[sel]], vertex_pos[b[sel]])
-        for i, e in enumerate(edge[sel].tolist()):
-            sides[e] = (int(a[sel][i]), int(b[sel][i]), kind, Q[i])
+        for e, start, end, poles in zip(edge[sel].tolist(), a[sel].tolist(), b[sel].tolist(), Q):
+            sides[e] = (start, end, kind, poles)
     return sides
 
 
@@ -751,7 +751,7 @@ def tessellate_patches(patchset, resolution=16, weld_tolerance=1e-9):
 def enclosed_volume(patches, chunk=64):
     """Signed volume enclosed by a closed patch set (divergence theorem).
 
-    ``V = 1/3 sum_patches int (S - c) . (S_u x S_v) du dv`` with ``c`` the mean pole,
+    ``V = 1/3 sum_patches int (S - c) . (S_u x S_v) du dv`` with ``c`` the mean corner,
     by Gauss-Legendre quadrature with 5 nodes per knot span, exact for bicubic
     patches (the integrand has degree 8 in each parameter).
 
@@ -765,7 +765,7 @@ def enclosed_volume(patches, chunk=64):
     float, model units cubed; positive when ``d/du x d/dv`` points outward.
     """
     nodes, weights = np.polynomial.legendre.leggauss(5)
-    centre = np.mean([p.poles.reshape(-1, 3).mean(axis=0) for p in patches], axis=0)
+    centre = np.mean([p.poles[0, 0] for p in patches], axis=0)
 
     def rule(knots):
         a, b = knots[:-1, None], knots[1:, None]
