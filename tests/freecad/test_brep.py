@@ -205,6 +205,22 @@ def test_broken_topology_falls_back_to_sewing_and_says_so(curved):
     assert built.solid.Volume == pytest.approx(solid.Volume, rel=1e-9)
 
 
+def test_sewn_solids_are_written_as_ap214_millimetres_too(curved, tmp_path):
+    from core.export.brep_topology import topology_from_sides
+    from polycube_wb.step_io import write_solid_step
+
+    patchset, solid = curved
+    topology = topology_from_sides(patchset.patches)
+    topology.use_reversed[3] = not topology.use_reversed[3]
+    broken = PatchSet(patchset.patches, patchset.face_of_patch, {}, topology)
+    built = make_solid(broken)
+    path = write_solid_step(built, broken, tmp_path / "sewn.step", name="lattice")
+    text = open(path).read()
+    assert "AUTOMOTIVE_DESIGN" in text and "SI_UNIT(.MILLI.,.METRE.)" in text
+    assert "PRODUCT('lattice" in text
+    assert read_step(path).Volume == pytest.approx(solid.Volume, rel=1e-9)
+
+
 def test_two_separate_closed_pieces_raise_export_error():
     first, second = lattice_patchset(1), lattice_patchset(1)
     for patch in second.patches:
