@@ -51,7 +51,7 @@ def test_cli_subd_to_step_and_check(tmp_path):
     write_polymesh(cage, sample_cages.torus())
     result = run("subd-to-step", cage, "-o", tmp_path / "torus.step", "--report", tmp_path / "r.json")
     assert result.returncode == 0, result.stderr
-    assert "valid=True closed=True" in result.stdout
+    assert "valid=True closed=True" in result.stdout and "built from shared edges" in result.stdout
     # the limit surface lies in the convex hull of its control points: use the hull as target
     import trimesh
 
