@@ -14,6 +14,8 @@ straight ``(u, v)`` segment of :attr:`BRepTopology.use_uv`); one clamped B-splin
 tolerance. Shapes are numbered in writing order and referenced back from the end
 (the last shape written, the solid, is number 1).
 """
+from functools import lru_cache
+
 import numpy as np
 
 HEADER = "CASCADE Topology V1, (c) Matra-Datavision"
@@ -28,8 +30,16 @@ def _numbers(values):
 
 
 def _knot_lines(knots, mults):
-    return "\n".join(f"{k:.17g} {int(m)}" for k, m in zip(np.asarray(knots, dtype=np.float64).tolist(),
-                                                           np.asarray(mults).tolist()))
+    """``knot mult`` lines of a knot vector (formatted once per distinct vector)."""
+    return _knot_text(np.asarray(knots, dtype=np.float64).tobytes(),
+                      np.asarray(mults, dtype=np.int64).tobytes())
+
+
+@lru_cache(maxsize=256)
+def _knot_text(knot_bytes, mult_bytes):
+    knots = np.frombuffer(knot_bytes, dtype=np.float64).tolist()
+    mults = np.frombuffer(mult_bytes, dtype=np.int64).tolist()
+    return "\n".join(f"{k:.17g} {m}" for k, m in zip(knots, mults))
 
 
 def _curve_3d(curve):

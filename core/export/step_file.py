@@ -9,6 +9,8 @@ B_SPLINE_CURVE_WITH_KNOTS) referenced by both faces; each face is an ADVANCED_FA
 a B_SPLINE_SURFACE_WITH_KNOTS bounded by one EDGE_LOOP. Edges carry no parameter
 curves; readers compute them from the 3-D curves, which lie on the patch boundaries.
 """
+from functools import lru_cache
+
 import numpy as np
 
 SCHEMA = "AUTOMOTIVE_DESIGN { 1 0 10303 214 1 1 1 1 }"
@@ -49,6 +51,19 @@ class _Entities:
         self.lines += [f"CARTESIAN_POINT('',({reals[i]},{reals[i + 1]},{reals[i + 2]}))"
                        for i in range(0, len(reals), 3)]
         return list(range(first, first + len(reals) // 3))
+
+
+def _knot_args(knots, mults):
+    """``(mults),(knots)`` arguments of a B-spline entity (formatted once per vector)."""
+    return _knot_arg_text(np.asarray(knots, dtype=np.float64).tobytes(),
+                          np.asarray(mults, dtype=np.int64).tobytes())
+
+
+@lru_cache(maxsize=256)
+def _knot_arg_text(knot_bytes, mult_bytes):
+    knots = np.frombuffer(knot_bytes, dtype=np.float64)
+    mults = np.frombuffer(mult_bytes, dtype=np.int64)
+    return _ints(mults), _reals(knots)
 
 
 def _refs(ids):
@@ -105,9 +120,9 @@ def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970
     edge_ids = []
     for e, curve in enumerate(t.edge_curves):
         poles = ent.points(curve.poles)
+        mults, knots = _knot_args(curve.knots, curve.mults)
         bspline = ent.add(f"B_SPLINE_CURVE_WITH_KNOTS('',{int(curve.degree)},{_refs(poles)},"
-                          f".UNSPECIFIED.,.F.,.F.,{_ints(curve.mults)},{_reals(curve.knots)},"
-                          ".UNSPECIFIED.)")
+                          f".UNSPECIFIED.,.F.,.F.,{mults},{knots},.UNSPECIFIED.)")
         start, end = t.edge_vertices[e]
         edge_ids.append(ent.add(f"EDGE_CURVE('',#{vertex_ids[start]},#{vertex_ids[end]},"
                                 f"#{bspline},.T.)"))
@@ -118,10 +133,11 @@ def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970
         poles = np.asarray(patch.poles)
         ids = np.asarray(ent.points(poles.reshape(-1, 3))).reshape(poles.shape[:2])
         grid = "(" + ",".join(_refs(row) for row in ids.tolist()) + ")"
+        u_mults, u_knots = _knot_args(patch.u_knots, patch.u_mults)
+        v_mults, v_knots = _knot_args(patch.v_knots, patch.v_mults)
         surface = ent.add(f"B_SPLINE_SURFACE_WITH_KNOTS('',{int(patch.degree_u)},"
                           f"{int(patch.degree_v)},{grid},.UNSPECIFIED.,.F.,.F.,.F.,"
-                          f"{_ints(patch.u_mults)},{_ints(patch.v_mults)},"
-                          f"{_reals(patch.u_knots)},{_reals(patch.v_knots)},.UNSPECIFIED.)")
+                          f"{u_mults},{v_mults},{u_knots},{v_knots},.UNSPECIFIED.)")
         oriented = [ent.add(f"ORIENTED_EDGE('',*,*,#{edge_ids[t.use_edge[u]]},"
                             f"{'.F.' if t.use_reversed[u] else '.T.'})")
                     for u in range(offsets[f], offsets[f + 1])]
