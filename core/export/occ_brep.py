@@ -8,8 +8,9 @@ oriented edges, then the shell and the solid. Reading it back
 (``Part.Shape.importBrepFromString``) rebuilds the solid as written, with every edge
 shared by its two faces: no sewing, no projection, no tolerance search.
 
-Layout written here: no locations; one degree-1 B-spline pcurve per edge use (the
-straight ``(u, v)`` segment of :attr:`BRepTopology.use_uv`); one clamped B-spline
+Layout written here: no locations; one pcurve per edge use, the straight ``(u, v)``
+segment of :attr:`BRepTopology.use_uv` (a unit-speed line for whole patch sides, which
+OpenCascade checks faster, else a degree-1 B-spline); one clamped B-spline
 3-D curve per edge and one B-spline surface per patch; all shapes with the same
 tolerance. Shapes are numbered in writing order and referenced back from the end
 (the last shape written, the solid, is number 1).
@@ -40,6 +41,16 @@ def _knot_text(knot_bytes, mult_bytes):
     knots = np.frombuffer(knot_bytes, dtype=np.float64).tolist()
     mults = np.frombuffer(mult_bytes, dtype=np.int64).tolist()
     return "\n".join(f"{k:.17g} {m}" for k, m in zip(knots, mults))
+
+
+def _pcurve(uv):
+    """A use's parameter line: a unit-speed Geom2d line when the segment has length 1,
+    else a degree-1 B-spline between its ends (both on parameter 0..1)."""
+    start, end = uv
+    direction = end - start
+    if abs(float(np.hypot(*direction)) - 1.0) == 0.0:
+        return f"1 {_numbers(start)}{_numbers(direction)}"
+    return f"7 0 0 1 2 2 {_numbers(uv)}\n0 2\n1 2"
 
 
 def _curve_3d(curve):
@@ -81,7 +92,7 @@ def brep_text(patches, topology, tolerance, reverse=False):
     face_ref = wire_ref - 1
 
     out = ["", HEADER, "Locations 0", f"Curve2ds {len(t.use_edge)}"]
-    out += [f"7 0 0 1 2 2 {_numbers(uv)}\n0 2\n1 2" for uv in t.use_uv]
+    out += [_pcurve(uv) for uv in t.use_uv]
     out.append(f"Curves {n_edges}")
     out += [_curve_3d(curve) for curve in t.edge_curves]
     out += ["Polygon3D 0", "PolygonOnTriangulations 0", f"Surfaces {n_faces}"]
