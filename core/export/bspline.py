@@ -95,15 +95,6 @@ def sample_params(kind, depth, per_span=2):
 
 # ----------------------------------------------------------- patch mesh ---
 
-def patch_mesh(base):
-    """The patches of ``base`` and the polygon mesh of their B-rep edges.
-
-    See :mod:`core.export.patch_mesh`: one patch per base quad, ``n`` per face with
-    ``n != 4`` corners.
-    """
-    return build_patch_mesh(base)
-
-
 def _edge_param(corner, t):
     """Face parameters (u, v) of the point ``t`` along the edge leaving local corner."""
     one = np.ones_like(t)
@@ -432,7 +423,8 @@ def limit_surface_patches(base, depth=DEFAULT_DEPTH, measure=True):
     Returns
     -------
     PatchSet
-        ``patches[i]`` is face ``i`` of the patch mesh (:func:`patch_mesh`): one per
+        ``patches[i]`` is face ``i`` of the patch mesh
+        (:func:`core.export.patch_mesh.build_patch_mesh`): one per
         base quad, ``n`` per base face with ``n != 4`` corners; ``face_of_patch[i]`` is
         its base face; ``topology`` holds the shared B-rep vertices and edges (a quad
         side next to a non-quad face is two edges). ``d/du x d/dv`` points outward.

@@ -8,6 +8,7 @@ import pytest
 from core.errors import ExportError
 from core.export import bspline as bs
 from core.export.brep_topology import check_topology
+from core.export.patch_mesh import build_patch_mesh
 from core.subdivision import sample_cages as sc
 from core.subdivision.catmull_clark import mesh_topology
 from core.subdivision.limit import LimitEvaluator, limit_volume
@@ -139,7 +140,7 @@ def test_c2_across_regular_edges(patchsets):
     """Across edges away from EVs the two patches agree in 1st and 2nd cross derivatives."""
     for name in ("torus", "grid_sphere"):
         ps = patchsets[name]
-        quads = bs.patch_mesh(getattr(sc, name)()).mesh
+        quads = build_patch_mesh(getattr(sc, name)()).mesh
         topo = mesh_topology(quads.face_vertices, quads.face_offsets, len(quads.vertices))
         val = np.bincount(quads.face_vertices)
         has_ev = (val[quads.face_vertices.reshape(-1, 4)] != 4).any(axis=1)
