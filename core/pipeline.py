@@ -210,6 +210,21 @@ def stage_fit(state, params):
 
 def count_limit_self_intersections(base, levels):
     """Intersecting triangle pairs of the level-``levels`` limit mesh of ``base`` (0 = clean)."""
+    return int(len(limit_self_intersections(base, levels)[0]))
+
+
+def limit_self_intersections(base, levels):
+    """Where the level-``levels`` limit mesh of ``base`` intersects itself.
+
+    The base mesh is subdivided ``levels >= 1`` times, its vertices moved to their
+    limit positions and its quads split into two triangles each.
+
+    Returns
+    -------
+    pairs : (k, 2) int64 intersecting triangle pairs (``core.self_intersection``).
+    base_faces : (k, 2) int64 the base faces the two triangles of each pair lie on.
+    points : (k, 3) float64 the centroid of the first triangle of each pair.
+    """
     from core.fitting.responses import triangulate
     from core.self_intersection import find_self_intersections
     from core.subdivision.catmull_clark import build_hierarchy
@@ -217,8 +232,12 @@ def count_limit_self_intersections(base, levels):
 
     fine = build_hierarchy(base, levels).meshes[levels]
     limit, _, _ = limit_matrices(fine)
+    points = limit @ fine.vertices
     triangles = triangulate(fine.face_vertices, fine.face_offsets)
-    return int(len(find_self_intersections(limit @ fine.vertices, triangles)))
+    pairs = find_self_intersections(points, triangles)
+    level_one_face = pairs // 2 // 4 ** (levels - 1)
+    base_faces = np.repeat(np.arange(base.n_faces), base.face_sizes)[level_one_face]
+    return pairs, base_faces, points[triangles[pairs[:, 0]]].mean(axis=1)
 
 
 def stage_patches(state, params):

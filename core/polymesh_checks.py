@@ -12,6 +12,11 @@ from core.errors import InvalidMeshError
 
 AREA_TOLERANCE = 1e-14
 """Faces with area below this times the squared bounding-box diagonal are degenerate."""
+MAX_EXPORT_COORDINATE = 1e7
+"""Largest |coordinate| (mm) of a cage exported to a B-rep: there a float64 still resolves
+steps of 2e-9, well below the B-rep tolerance of 1e-7 (OpenCascade's Precision::Confusion)."""
+MIN_EXPORT_DIAGONAL = 1e-3
+"""Smallest bounding-box diagonal (mm) of an exported cage: 10,000 times the B-rep tolerance."""
 
 
 def _fail(what, reason, bad, examples):
@@ -125,3 +130,34 @@ def check_polymesh(mesh):
             f"base mesh faces point inward: all {m} faces are clockwise seen from outside "
             f"(enclosed volume {volume:.6g} < 0); reverse the corner order of every face",
             reason="orientation", count=m, examples=[0])
+
+
+def check_export_range(mesh):
+    """Check that a cage's coordinates suit a B-rep with a 1e-7 mm tolerance.
+
+    Parameters
+    ----------
+    mesh : core.types.PolyMesh, finite coordinates in millimetres.
+
+    Raises
+    ------
+    InvalidMeshError
+        ``coordinate_range`` when a coordinate exceeds :data:`MAX_EXPORT_COORDINATE` in
+        magnitude (the message gives the largest and a vertex having it) or the
+        bounding-box diagonal is below :data:`MIN_EXPORT_DIAGONAL`.
+    """
+    V = np.asarray(mesh.vertices, dtype=np.float64)
+    size = np.abs(V).max(axis=1)
+    if size.max() > MAX_EXPORT_COORDINATE:
+        far = np.flatnonzero(size > MAX_EXPORT_COORDINATE)
+        raise InvalidMeshError(
+            f"base mesh coordinates reach {size.max():.3g} mm ({len(far)} vertices beyond "
+            f"+-{MAX_EXPORT_COORDINATE:.0e} mm, e.g. vertex {int(np.argmax(size))}): a B-rep with "
+            "tolerance 1e-07 mm cannot resolve them; scale or move the cage closer to the origin",
+            reason="coordinate_range", count=len(far), examples=far[:5].tolist())
+    diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    if diagonal < MIN_EXPORT_DIAGONAL:
+        raise InvalidMeshError(
+            f"base mesh is {diagonal:.3g} mm across (bounding-box diagonal), less than "
+            f"{MIN_EXPORT_DIAGONAL:g} mm: too small for a B-rep with tolerance 1e-07 mm; scale it up",
+            reason="coordinate_range", count=1, examples=[0])

@@ -10,6 +10,7 @@ import os
 import numpy as np
 
 from core.errors import InvalidMeshError
+from core.output_files import write_text_atomic
 from core.types import PolyMesh
 
 
@@ -85,16 +86,23 @@ def read_polymesh(path):
     return parse_obj(text, name=os.path.basename(os.fspath(path)))
 
 
-def write_polymesh(path, mesh):
+def write_polymesh(path, mesh, inputs=()):
     """Write ``mesh`` as a polygon OBJ (coordinates with 17 significant digits, so a
-    read-back is bit-identical). The file is written to a temporary name and renamed."""
-    path = os.fspath(path)
+    read-back is bit-identical), atomically and never over one of ``inputs``
+    (:func:`core.output_files.write_text_atomic`).
+
+    Returns
+    -------
+    str, the absolute path written.
+
+    Raises
+    ------
+    ParameterError
+        The folder is missing or not writable, ``path`` is a folder or one of ``inputs``.
+    """
     lines = ["# polygon mesh written by polycube_wb"]
     lines += ["v %.17g %.17g %.17g" % tuple(p) for p in np.asarray(mesh.vertices)]
     fv = np.asarray(mesh.face_vertices) + 1
     fo = np.asarray(mesh.face_offsets)
     lines += ["f " + " ".join(map(str, fv[a:b])) for a, b in zip(fo[:-1], fo[1:])]
-    tmp = path + ".tmp"
-    with open(tmp, "w", encoding="utf-8") as fh:
-        fh.write("\n".join(lines) + "\n")
-    os.replace(tmp, path)
+    return write_text_atomic(path, "\n".join(lines) + "\n", inputs, "base mesh")

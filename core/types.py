@@ -104,12 +104,16 @@ class BSplinePatch:
 class PatchSet:
     """The limit surface of a base mesh as B-spline patches.
 
-    patches : list of BSplinePatch; neighbouring patches have bit-identical poles
-        along their shared boundary so the B-rep shell closes without sewing.
+    patches : list of BSplinePatch; neighbouring patches agree along their shared
+        boundary so the B-rep shell closes without sewing.
     face_of_patch : (k,) int64 base-mesh face each patch comes from.
     info : figures about the approximation (EV error, continuity), JSON-serialisable.
+    topology : core.export.brep_topology.BRepTopology or None, the shared vertices
+        and edges of the patches; None means whole sides with bit-identical poles
+        (``topology_from_sides``).
     """
 
     patches: list
     face_of_patch: np.ndarray
     info: dict = field(default_factory=dict)
+    topology: object = None

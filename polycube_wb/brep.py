@@ -1,12 +1,22 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""B-spline patches -> FreeCAD B-rep solid (Part.BSplineSurface faces, shell, solid).
+"""B-spline patches -> FreeCAD B-rep solid, built from shared edges.
 
-FreeCAD 0.20.2 cannot sew with a chosen tolerance (``sewShape(tol)`` ignores it), so a closed
-shell relies on neighbouring patches having bit-identical boundary poles; ``Part.Shell``
-then merges the coincident boundaries. When the shell does not close, the patches'
-boundary pole rows are matched in numpy to name the patches whose sides have no
-identical partner and the size of the gap to the nearest candidate.
+The solid is assembled topologically: every B-rep vertex and edge is made once and
+used by both faces that meet there (``core.export.brep_topology``), written as
+OpenCascade BREP text (``core.export.occ_brep``) and read with
+``Part.Shape.importBrepFromString``, which rebuilds exactly that topology. Nothing is
+sewn and no curve is projected, so this is fast and the result does not depend on a
+sewing tolerance. OpenCascade's validity check (``isValid``) still judges the result.
+
+Only when that path fails (a PatchSet whose sides do not pair up, or a solid the
+check rejects) are the faces sewn the old way (``Part.Shell`` merges coincident
+boundaries; FreeCAD 0.20.2 cannot sew with a chosen tolerance), and the figures say
+``construction: "sewn"`` with the reason. When the shell does not close either way,
+the patches' boundary pole rows are matched in numpy to name the patches whose sides
+have no identical partner and the size of the gap to the nearest candidate.
 """
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -15,12 +25,17 @@ import FreeCAD
 import Part
 
 from core.errors import ExportError
+from core.export.brep_topology import check_topology, topology_from_sides
+from core.export.bspline import enclosed_volume
+from core.export.occ_brep import brep_text
 from core.progress import NO_PROGRESS
 from polycube_wb.convert import shape_to_arrays
 
 _MAX_DEGREE = 25  # OpenCascade's Geom_BSplineSurface::MaxDegree()
 _SIDE_NAMES = ("u=min", "u=max", "v=min", "v=max")
 _MAX_EXAMPLES = 5
+TOLERANCE = 1e-7
+"""Tolerance of the B-rep vertices, edges and faces (OpenCascade's Precision::Confusion)."""
 
 
 def patches_to_solid(patchset, progress=NO_PROGRESS):
@@ -31,58 +46,85 @@ def patches_to_solid(patchset, progress=NO_PROGRESS):
     return build_solid(patchset, progress)[0]
 
 
+@dataclass
+class BuiltSolid:
+    """A solid and what it was built from.
+
+    solid : Part.Solid; figures : dict (see :func:`build_solid`);
+    topology : core.export.brep_topology.BRepTopology of the shared edges, or None when
+        the faces had to be sewn; reverse : bool, faces are reversed against the patches'
+        ``d/du x d/dv``.
+    """
+
+    solid: object
+    figures: dict
+    topology: object
+    reverse: bool
+
+
 def build_solid(patchset, progress=NO_PROGRESS):
+    """Build a closed, valid, outward-oriented ``Part.Solid`` and the figures checked on it.
+
+    Same as ``make_solid(patchset, progress)`` without the topology; see :func:`make_solid`.
+    """
+    built = make_solid(patchset, progress)
+    return built.solid, built.figures
+
+
+def make_solid(patchset, progress=NO_PROGRESS):
     """Build a closed, valid, outward-oriented ``Part.Solid`` and the figures checked on it.
 
     Parameters
     ----------
     patchset : core.types.PatchSet
         ``patches`` is a list of BSplinePatch (poles (nu, nv, 3) float64, OpenCascade-style
-        distinct knots + multiplicities). Neighbouring patches must have bit-identical
-        boundary poles; ``d/du x d/dv`` should point outward (the solid is reversed if
-        its volume comes out negative either way).
+        distinct knots + multiplicities); ``topology`` gives the shared edges, or None
+        when neighbouring patches share whole sides with bit-identical poles.
+        ``d/du x d/dv`` should point outward (every face is reversed if the enclosed
+        volume comes out negative).
     progress : core.progress.Progress
         Receives ``report("brep", fraction)``; ``check_cancel()`` is called between steps.
 
     Returns
     -------
-    solid : Part.Solid
-        One B-rep face per patch, one closed shell, ``isValid()`` true, volume > 0.
-    figures : dict
-        What was checked, so callers need not recompute it (OpenCascade's volume and
-        validity checks take seconds on thousands of faces): ``faces``, ``shells``,
-        ``valid``, ``closed``, ``volume`` (model units cubed).
+    BuiltSolid
+        ``solid``: one B-rep face per patch, one closed shell, ``isValid()`` true,
+        volume > 0; ``topology`` (None if sewn) and ``reverse`` for the STEP writer;
+        ``figures``: dict
+        ``faces``, ``edges``, ``shells``, ``valid``, ``closed``, ``volume`` (model units
+        cubed, by exact quadrature of the patches), ``construction`` (``"shared_edges"``
+        or ``"sewn"``) and ``construction_note`` (why sewing was needed, else "").
 
     Raises
     ------
     ExportError
         A patch is malformed (the message names the patch and the field), the faces
         do not form one closed shell (the message gives the number of free edges and
-        examples of patch sides without an identical partner, with the gap size), or
-        OpenCascade reports the solid invalid.
+        examples of patch sides without a partner, with the gap size), or OpenCascade
+        reports the solid invalid.
     """
     patches = list(patchset.patches)
     if not patches:
         raise ExportError("cannot build a solid: the PatchSet has no patches")
+    checked_layouts = set()
     for index, patch in enumerate(patches):
-        _check_patch(index, patch)
-    faces = [Part.Face(_surface(patch)) for patch in patches]
-    progress.report("brep", 0.1, "sewing faces into a shell")
+        _check_patch(index, patch, checked_layouts)
+    progress.report("brep", 0.1, "building the shell from shared edges")
     progress.check_cancel()
+    volume = enclosed_volume(patches)
+    reverse = bool(volume < 0)
+    topology = patchset.topology
     try:
-        shell = Part.Shell(faces)
-    except Part.OCCError as exc:
-        raise ExportError(_open_shell_message(patches, None, f"Part.Shell failed ({exc})")) from exc
-    if not shell.isClosed():
-        raise ExportError(_open_shell_message(patches, _free_edge_count(shell),
-                                              "the shell is not closed"))
-    progress.report("brep", 0.5, "making the solid")
-    progress.check_cancel()
-    solid = Part.Solid(shell)
-    volume = solid.Volume
-    if volume < 0:
-        solid.reverse()
-        volume = -volume
+        if topology is None:
+            topology = topology_from_sides(patches)
+        solid = _shared_edge_solid(patches, topology, reverse)
+        construction, note = "shared_edges", ""
+    except ExportError as exc:
+        progress.report("brep", 0.4, "sewing faces into a shell")
+        progress.check_cancel()
+        solid = _sewn_solid(patches, str(exc))
+        construction, note, topology = "sewn", f"shared-edge construction failed: {exc}", None
+    volume = abs(volume)
     progress.report("brep", 0.8, "checking the solid")
     progress.check_cancel()
     if len(solid.Faces) != len(patches):
@@ -92,13 +134,47 @@ def build_solid(patchset, progress=NO_PROGRESS):
         raise ExportError(f"the solid has {len(solid.Shells)} shells; expected one closed shell")
     if not volume > 0:
         raise ExportError(f"the solid encloses no volume ({volume:.6g})")
-    if not solid.isValid():
+    if construction == "sewn" and not solid.isValid():
         raise ExportError("OpenCascade reports the solid as invalid (BRepCheck_Analyzer); "
                           f"{len(patches)} patches, volume {volume:.6g}")
     progress.report("brep", 1.0)
-    figures = {"faces": len(solid.Faces), "shells": len(solid.Shells), "valid": True,
-               "closed": True, "volume": float(volume)}
-    return solid, figures
+    figures = {"faces": len(solid.Faces), "edges": len(solid.Edges), "shells": len(solid.Shells),
+               "valid": True, "closed": True, "volume": float(volume),
+               "construction": construction, "construction_note": note}
+    return BuiltSolid(solid, figures, topology, reverse)
+
+
+def _shared_edge_solid(patches, topology, reverse):
+    """The solid read from BREP text of the shared-edge topology; ExportError if invalid."""
+    check_topology(topology, patches, TOLERANCE)
+    shape = Part.Shape()
+    try:
+        shape.importBrepFromString(brep_text(patches, topology, TOLERANCE, reverse), False)
+    except (Part.OCCError, RuntimeError) as exc:
+        raise ExportError(f"OpenCascade could not read the shared-edge B-rep ({exc})") from exc
+    if shape.isNull() or shape.ShapeType != "Solid":
+        raise ExportError("the shared-edge B-rep did not give a solid")
+    if not shape.isValid():
+        raise ExportError("OpenCascade reports the shared-edge solid as invalid (BRepCheck_Analyzer)")
+    return shape
+
+
+def _sewn_solid(patches, why):
+    """Faces sewn by ``Part.Shell`` into a solid, outward; ExportError if it does not close."""
+    faces = [Part.Face(_surface(patch)) for patch in patches]
+    try:
+        shell = Part.Shell(faces)
+    except Part.OCCError as exc:
+        raise ExportError(_open_shell_message(patches, None, f"Part.Shell failed ({exc})")
+                          + f" (shared-edge construction: {why})") from exc
+    if not shell.isClosed():
+        raise ExportError(_open_shell_message(patches, _free_edge_count(shell),
+                                              "the shell is not closed")
+                          + f" (shared-edge construction: {why})")
+    solid = Part.Solid(shell)
+    if solid.Volume < 0:
+        solid.reverse()
+    return solid
 
 
 def solid_report(solid):
@@ -156,8 +232,12 @@ def _surface(patch):
     return surface
 
 
-def _check_patch(index, patch):
-    """Raise ExportError naming the patch if its arrays cannot define a B-spline surface."""
+def _check_patch(index, patch, checked_layouts):
+    """Raise ExportError naming the patch if its arrays cannot define a B-spline surface.
+
+    ``checked_layouts`` (set) collects the knot layouts already found valid, so patches
+    sharing one are not checked again.
+    """
     poles = np.asarray(patch.poles)
     if poles.ndim != 3 or poles.shape[2] != 3 or poles.shape[0] < 2 or poles.shape[1] < 2:
         raise ExportError(f"patch {index}: poles must have shape (nu, nv, 3) with nu, nv >= 2, "
@@ -165,10 +245,18 @@ def _check_patch(index, patch):
     if not np.issubdtype(poles.dtype, np.number) or not np.all(np.isfinite(poles)):
         bad = int(np.count_nonzero(~np.isfinite(poles.astype(np.float64)).all(axis=2)))
         raise ExportError(f"patch {index}: {bad} poles are not finite")
-    for direction, count, knots, mults, degree in (
-            ("u", poles.shape[0], patch.u_knots, patch.u_mults, patch.degree_u),
-            ("v", poles.shape[1], patch.v_knots, patch.v_mults, patch.degree_v)):
-        _check_direction(index, direction, count, np.asarray(knots), np.asarray(mults), degree)
+    directions = (("u", poles.shape[0], np.asarray(patch.u_knots), np.asarray(patch.u_mults),
+                   patch.degree_u),
+                  ("v", poles.shape[1], np.asarray(patch.v_knots), np.asarray(patch.v_mults),
+                   patch.degree_v))
+    layout = tuple((count, knots.dtype.str, knots.shape, knots.tobytes(), mults.dtype.str,
+                    mults.shape, mults.tobytes(), degree)
+                   for _, count, knots, mults, degree in directions)
+    if layout in checked_layouts:
+        return
+    for direction, count, knots, mults, degree in directions:
+        _check_direction(index, direction, count, knots, mults, degree)
+    checked_layouts.add(layout)
 
 
 def _check_direction(index, direction, count, knots, mults, degree):

@@ -162,8 +162,12 @@ def _subd_to_step(args):
           f"{base['other']} other), {base['extraordinary_vertices']} extraordinary vertices, genus {base['genus']}")
     reference = ("" if brep["limit_volume"] is None else
                  f" (limit surface {brep['limit_volume']:.6g}, rel. error {brep['volume_error_rel']:.1e})")
-    print(f"solid: {brep['faces']} B-spline faces, valid={brep['valid']} closed={brep['closed']} "
-          f"volume={brep['volume']:.6g}{reference}")
+    per_face = ", ".join(f"{n}-gon {k:g}" for n, k in patches["patches_per_base_face"].items())
+    print(f"solid: {brep['faces']} B-spline faces (per base face: {per_face}), valid={brep['valid']} "
+          f"closed={brep['closed']} volume={brep['volume']:.6g}{reference}, built from "
+          f"{brep['construction'].replace('_', ' ')}")
+    if brep["construction_note"]:
+        print(f"  note: {brep['construction_note']}")
     if patches.get("max_error_rel") is not None:
         print(f"patches: max deviation from the limit surface {patches['max_error_rel']:.1e} of the "
               f"bbox diagonal, normal jump max {patches['normal_jump_max_deg']:.3f} deg")

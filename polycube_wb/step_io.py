@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""STEP files: atomic write, read, and a write/read round-trip check.
+"""STEP files (AP214, millimetres, named product): atomic write, read, round-trip check.
 
 FreeCAD 0.20.2's ``Part.read`` picks the reader from the file extension, so STEP files
 must end in ``.step`` or ``.stp`` (any case); the temporary file written next to the
@@ -12,7 +12,7 @@ import FreeCAD  # noqa: F401  (importing Part before FreeCAD segfaults in 0.20.2
 import Part
 
 from core.errors import ExportError, ParameterError, PolycubeInputError
-from core.output_files import check_output_path
+from core.output_files import check_output_path, write_text_atomic
 
 STEP_SUFFIXES = (".step", ".stp")
 
@@ -21,8 +21,8 @@ class StepPathError(ExportError, PolycubeInputError):
     """A STEP path is unusable (missing folder, not writable, wrong suffix, is an input)."""
 
 
-def write_step(shape, path, input_paths=(), overwrite=True):
-    """Write ``shape`` to a STEP file atomically.
+def write_step(shape, path, input_paths=(), overwrite=True, name=None):
+    """Write ``shape`` to an AP214 STEP file (millimetres) atomically, with OpenCascade.
 
     The file is written to a temporary file in the target folder, flushed to disk, then
     moved over ``path`` with ``os.replace``; on any failure the temporary file is removed
@@ -38,6 +38,8 @@ def write_step(shape, path, input_paths=(), overwrite=True):
         Files the result was computed from; writing over any of them is refused.
     overwrite : bool
         If False, an existing ``path`` is an error.
+    name : str or None
+        Product name; default the file name without its suffix.
 
     Returns
     -------
@@ -52,20 +54,14 @@ def write_step(shape, path, input_paths=(), overwrite=True):
     ExportError
         The shape is null or OpenCascade fails to write it.
     """
-    target = _step_path(path)
-    folder = os.path.dirname(target)
-    if isinstance(input_paths, (str, bytes, os.PathLike)):
-        input_paths = (input_paths,)
-    try:
-        check_output_path(target, input_paths, "STEP file")
-    except ParameterError as exc:
-        raise StepPathError(str(exc)) from exc
-    if os.path.exists(target) and not overwrite:
-        raise StepPathError(f"{target} exists and overwrite=False")
+    target, _ = _checked_target(path, input_paths, overwrite)
     if shape is None or shape.isNull():
         raise ExportError("cannot write a null shape to STEP")
+    for key, value in (("write.step.schema", "AP214IS"), ("write.step.unit", "MM"),
+                       ("write.step.product.name", _product_name(target, name))):
+        Part.setStaticValue(key, value)
     handle, temp = tempfile.mkstemp(prefix="." + os.path.basename(target) + ".",
-                                    suffix=".tmp.step", dir=folder)
+                                    suffix=".tmp.step", dir=os.path.dirname(target))
     os.close(handle)
     try:
         try:
@@ -82,6 +78,62 @@ def write_step(shape, path, input_paths=(), overwrite=True):
         if os.path.exists(temp):
             os.remove(temp)
     return target
+
+
+def write_solid_step(built, patchset, path, input_paths=(), overwrite=True, name=None):
+    """Write a solid from :func:`polycube_wb.brep.make_solid` to an AP214 STEP file.
+
+    A solid built from shared edges is written directly from its patches and topology
+    (``core.export.step_file``: the same vertices, edges and faces, millimetres, the
+    product ``name``), atomically; a sewn solid goes through :func:`write_step`.
+
+    Parameters
+    ----------
+    built : polycube_wb.brep.BuiltSolid
+    patchset : core.types.PatchSet the solid was built from.
+    path, input_paths, overwrite, name : as in :func:`write_step`.
+
+    Returns
+    -------
+    str, absolute path of the written file.
+    """
+    if built.topology is None:
+        return write_step(built.solid, path, input_paths, overwrite, name)
+    from core.export.step_file import step_text
+    from polycube_wb.brep import TOLERANCE
+
+    target, inputs = _checked_target(path, input_paths, overwrite)
+    text = step_text(patchset.patches, built.topology, _product_name(target, name), TOLERANCE,
+                     built.reverse)
+    mode = _new_file_mode(target)
+    try:
+        write_text_atomic(target, text, inputs, "STEP file")
+    except ParameterError as exc:
+        raise StepPathError(str(exc)) from exc
+    os.chmod(target, mode)
+    return target
+
+
+def _checked_target(path, input_paths, overwrite):
+    """(absolute STEP target path, tuple of inputs), or StepPathError (suffix, folder,
+    input, overwrite)."""
+    target = _step_path(path)
+    if isinstance(input_paths, (str, bytes, os.PathLike)):
+        input_paths = (input_paths,)
+    try:
+        check_output_path(target, input_paths, "STEP file")
+    except ParameterError as exc:
+        raise StepPathError(str(exc)) from exc
+    if os.path.exists(target) and not overwrite:
+        raise StepPathError(f"{target} exists and overwrite=False")
+    return target, tuple(input_paths)
+
+
+def _product_name(target, name):
+    """The product name: ``name``, else the file name without its suffix."""
+    if name:
+        return str(name)
+    return os.path.splitext(os.path.basename(target))[0]
 
 
 def read_step(path):

@@ -1,9 +1,14 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Limit surface -> bicubic B-spline patches: exactness, error, continuity, sharing."""
+import copy
+
 import numpy as np
 import pytest
 
+from core.errors import ExportError
 from core.export import bspline as bs
+from core.export.brep_topology import check_topology
+from core.export.patch_mesh import build_patch_mesh
 from core.subdivision import sample_cages as sc
 from core.subdivision.catmull_clark import mesh_topology
 from core.subdivision.limit import LimitEvaluator, limit_volume
@@ -71,12 +76,54 @@ def test_ev_error_and_continuity_targets(patchsets, name):
     assert info["normal_jump_p95_deg"] <= info["normal_jump_max_deg"]
 
 
-def test_non_quad_faces_use_level_one_patches(patchsets):
+@pytest.mark.parametrize("name, quads, others, per_other", [("mixed_prism", 7, 10, 3),
+                                                           ("pentagonal_prism", 5, 2, 5)])
+def test_one_patch_per_base_quad_on_mixed_cages(patchsets, name, quads, others, per_other):
+    """One patch per quad, n per n-gon; quad sides next to an n-gon are split in two."""
+    ps = patchsets[name]
+    base = getattr(sc, name)()
+    sizes = base.face_sizes
+    assert len(ps.patches) == quads + per_other * others
+    per_face = np.bincount(ps.face_of_patch, minlength=base.n_faces)
+    assert (per_face[sizes == 4] == 1).all() and (per_face[sizes != 4] == sizes[sizes != 4]).all()
+    assert ps.info["patches_per_base_face"] == {"4": 1.0, str(sizes[sizes != 4][0]): per_other}
+    loops = np.bincount(ps.topology.use_face)
+    quad_patch = np.flatnonzero(sizes[ps.face_of_patch] == 4)
+    assert (loops[quad_patch] > 4).any() and (loops[sizes[ps.face_of_patch] != 4] == 4).all()
+
+
+@pytest.mark.parametrize("name", EV_CAGES + ["torus"])
+def test_shared_edges_lie_on_both_patches(patchsets, name):
+    """Every B-rep edge is used once in each direction and lies on both its patches
+    (bit-identical boundary rows on whole shared sides, within 1e-12 of the diagonal
+    on split sides)."""
+    ps = patchsets[name]
+    gap = check_topology(ps.topology, ps.patches, 1e-12 * ps.info["bbox_diagonal"], samples=9)
+    assert gap <= 1e-12 * ps.info["bbox_diagonal"]
+    checked = 0
+    for p, patch in enumerate(ps.patches):
+        uses = np.flatnonzero(ps.topology.use_face == p)
+        if len(uses) != 4:
+            continue  # a quad with split sides: its halves are checked by check_topology above
+        for k, use in enumerate(uses):
+            row, _ = _boundary(patch, k)
+            curve = ps.topology.edge_curves[ps.topology.use_edge[use]].poles
+            assert np.array_equal(row, curve[::-1] if ps.topology.use_reversed[use] else curve)
+            checked += 1
+    assert checked >= 0.5 * len(ps.topology.use_edge)
+
+
+def test_topology_check_detects_a_moved_edge(patchsets):
     ps = patchsets["mixed_prism"]
-    base = sc.mixed_prism()
-    assert ps.info["patch_level"] == 1
-    assert len(ps.patches) == len(base.face_vertices)
-    assert np.array_equal(ps.face_of_patch, np.repeat(np.arange(base.n_faces), base.face_sizes))
+    topo = ps.topology
+    moved = copy.deepcopy(topo)
+    moved.edge_curves[5].poles[2] += 1e-3
+    with pytest.raises(ExportError, match="edge 5 lies"):
+        check_topology(moved, ps.patches, 1e-7)
+    flipped = copy.deepcopy(topo)
+    flipped.use_reversed[0] = not flipped.use_reversed[0]
+    with pytest.raises(ExportError, match="not used once in each direction"):
+        check_topology(flipped, ps.patches, 1e-7)
 
 
 def _boundary(patch, k):
@@ -89,25 +136,11 @@ def _boundary(patch, k):
     return rows[k], knots[k]
 
 
-@pytest.mark.parametrize("name", EV_CAGES + ["torus"])
-def test_shared_boundaries_bit_identical(patchsets, name):
-    ps = patchsets[name]
-    quads = bs.patch_mesh(getattr(sc, name)())[0]
-    topo = mesh_topology(quads.face_vertices, quads.face_offsets, len(quads.vertices))
-    for c in range(len(quads.face_vertices)):
-        t = topo.twin[c]
-        fa, fb = c // 4, t // 4
-        ra, (ka, ma) = _boundary(ps.patches[fa], c % 4)
-        rb, (kb, mb) = _boundary(ps.patches[fb], t % 4)
-        assert np.array_equal(ra, rb[::-1])
-        assert np.array_equal(ka, 1.0 - kb[::-1]) and np.array_equal(ma, mb[::-1])
-
-
 def test_c2_across_regular_edges(patchsets):
     """Across edges away from EVs the two patches agree in 1st and 2nd cross derivatives."""
     for name in ("torus", "grid_sphere"):
         ps = patchsets[name]
-        quads = bs.patch_mesh(getattr(sc, name)())[0]
+        quads = build_patch_mesh(getattr(sc, name)()).mesh
         topo = mesh_topology(quads.face_vertices, quads.face_offsets, len(quads.vertices))
         val = np.bincount(quads.face_vertices)
         has_ev = (val[quads.face_vertices.reshape(-1, 4)] != 4).any(axis=1)

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from core.errors import InvalidMeshError
-from core.polymesh_checks import check_polymesh
+from core.errors import InvalidMeshError, ParameterError
+from core.polymesh_checks import check_export_range, check_polymesh
 from core.polymesh_io import parse_obj, read_polymesh, write_polymesh
 from core.subdivision import sample_cages as sc
 from core.types import PolyMesh
@@ -91,6 +91,35 @@ def test_obj_round_trip_keeps_ngons(tmp_path):
     assert np.array_equal(back.face_vertices, mesh.face_vertices)
     assert np.array_equal(back.face_offsets, mesh.face_offsets)
     assert sorted(back.face_sizes.tolist()) == [4] * 5 + [5, 5]
+
+
+def test_obj_write_protects_inputs_and_is_atomic(tmp_path):
+    """The writer refuses to overwrite an input (even through another name), leaving
+    it unchanged and no temporary file behind; an overwrite replaces the file whole."""
+    path = tmp_path / "cage.obj"
+    write_polymesh(path, sc.cube())
+    before = path.read_bytes()
+    alias = tmp_path / "alias.obj"
+    alias.symlink_to(path)
+    with pytest.raises(ParameterError, match="refusing to overwrite the input file"):
+        write_polymesh(alias, sc.torus(), inputs=(path,))
+    assert path.read_bytes() == before
+    write_polymesh(path, sc.torus())
+    assert read_polymesh(path).n_faces == sc.torus().n_faces
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["alias.obj", "cage.obj"]
+    with pytest.raises(ParameterError, match="does not exist"):
+        write_polymesh(tmp_path / "missing" / "x.obj", sc.cube())
+
+
+@pytest.mark.parametrize("scale, shift, match", [(1.0, 1e15, "reach 1e\\+15 mm"),
+                                                 (1e-5, 0.0, "too small")])
+def test_export_range_is_checked(scale, shift, match):
+    cube = sc.cube()
+    mesh = PolyMesh(cube.vertices * scale + shift, cube.face_vertices, cube.face_offsets)
+    with pytest.raises(InvalidMeshError, match=match) as err:
+        check_export_range(mesh)
+    assert err.value.reason == "coordinate_range"
+    check_export_range(PolyMesh(cube.vertices * 1e4 - 5e6, cube.face_vertices, cube.face_offsets))
 
 
 def test_obj_slash_forms_and_negative_indices():

@@ -11,7 +11,7 @@ import Part
 from core.errors import ExportError, InvalidMeshError, PolycubeInputError
 from core.quality import is_watertight_manifold
 from core.types import PatchSet
-from polycube_wb.brep import patches_to_solid, solid_report, tessellate
+from polycube_wb.brep import make_solid, patches_to_solid, solid_report, tessellate
 from polycube_wb.convert import arrays_to_mesh, mesh_to_arrays
 from polycube_wb.step_io import StepPathError, read_step, step_round_trip, write_step
 from synthetic_patches import divergence_volume, lattice_patchset, superellipsoid_map
@@ -174,6 +174,51 @@ def test_missing_patch_raises_export_error():
     del patchset.patches[7]
     with pytest.raises(ExportError, match="not closed; 4 free"):
         patches_to_solid(patchset)
+
+
+def test_solid_is_built_from_shared_edges_without_sewing(curved):
+    patchset, solid = curved
+    built = make_solid(patchset)
+    assert built.figures["construction"] == "shared_edges"
+    assert len(built.topology.edge_curves) == len(solid.Edges) == 48
+    assert built.figures["edges"] == 48 and built.figures["faces"] == 24
+    # every B-rep edge is one shape shared by its two faces, not two coincident copies
+    uses = {}
+    for face in solid.Faces:
+        for edge in face.Edges:
+            uses[edge.hashCode()] = uses.get(edge.hashCode(), 0) + 1
+    assert sorted(set(uses.values())) == [2] and len(uses) == 48
+    assert built.figures["volume"] == pytest.approx(divergence_volume(patchset), rel=1e-12)
+
+
+def test_broken_topology_falls_back_to_sewing_and_says_so(curved):
+    from core.export.brep_topology import topology_from_sides
+
+    patchset, solid = curved
+    topology = topology_from_sides(patchset.patches)
+    topology.use_reversed[3] = not topology.use_reversed[3]
+    broken = PatchSet(patchset.patches, patchset.face_of_patch, {}, topology)
+    built = make_solid(broken)
+    assert built.figures["construction"] == "sewn" and built.topology is None
+    assert "not used once in each direction" in built.figures["construction_note"]
+    assert built.solid.isValid() and len(built.solid.Faces) == 24
+    assert built.solid.Volume == pytest.approx(solid.Volume, rel=1e-9)
+
+
+def test_sewn_solids_are_written_as_ap214_millimetres_too(curved, tmp_path):
+    from core.export.brep_topology import topology_from_sides
+    from polycube_wb.step_io import write_solid_step
+
+    patchset, solid = curved
+    topology = topology_from_sides(patchset.patches)
+    topology.use_reversed[3] = not topology.use_reversed[3]
+    broken = PatchSet(patchset.patches, patchset.face_of_patch, {}, topology)
+    built = make_solid(broken)
+    path = write_solid_step(built, broken, tmp_path / "sewn.step", name="lattice")
+    text = open(path).read()
+    assert "AUTOMOTIVE_DESIGN" in text and "SI_UNIT(.MILLI.,.METRE.)" in text
+    assert "PRODUCT('lattice" in text
+    assert read_step(path).Volume == pytest.approx(solid.Volume, rel=1e-9)
 
 
 def test_two_separate_closed_pieces_raise_export_error():

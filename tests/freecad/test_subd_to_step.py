@@ -51,7 +51,7 @@ def test_cli_subd_to_step_and_check(tmp_path):
     write_polymesh(cage, sample_cages.torus())
     result = run("subd-to-step", cage, "-o", tmp_path / "torus.step", "--report", tmp_path / "r.json")
     assert result.returncode == 0, result.stderr
-    assert "valid=True closed=True" in result.stdout
+    assert "valid=True closed=True" in result.stdout and "built from shared edges" in result.stdout
     # the limit surface lies in the convex hull of its control points: use the hull as target
     import trimesh
 
@@ -82,3 +82,23 @@ def test_bad_base_meshes_exit_2(tmp_path):
         result = run("subd-to-step", tmp_path / "cube.obj", "-o", tmp_path / "x.step", "--depth", depth)
         assert result.returncode == 2 and result.stderr.startswith("error: depth must be"), depth
         assert not (tmp_path / "x.step").exists()
+
+
+def test_self_intersecting_cage_is_refused_naming_where(tmp_path):
+    """A spindle torus (tube radius above the ring radius) crosses itself near its axis."""
+    write_polymesh(tmp_path / "spindle.obj", sample_cages.torus(major_radius=0.5, minor_radius=1.0))
+    result = run("subd-to-step", tmp_path / "spindle.obj", "-o", tmp_path / "x.step")
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith("error:") and "intersects itself" in result.stderr
+    assert "between base faces" in result.stderr and " near (" in result.stderr
+    assert not (tmp_path / "x.step").exists()
+
+
+def test_huge_coordinates_get_a_clear_range_error(tmp_path):
+    cube = sample_cages.cube()
+    huge = PolyMesh(cube.vertices * 1e15, cube.face_vertices, cube.face_offsets)
+    write_polymesh(tmp_path / "huge.obj", huge)
+    result = run("subd-to-step", tmp_path / "huge.obj", "-o", tmp_path / "x.step")
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith("error: base mesh coordinates reach 1e+15 mm")
+    assert not (tmp_path / "x.step").exists()

@@ -1,0 +1,110 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Mixed cages to STEP: shared-edge solids, AP214 in millimetres, read back by two readers."""
+import pytest
+
+import FreeCAD  # noqa: F401  (must precede Part)
+import Part
+
+from core.polymesh_io import write_polymesh
+from core.subdivision import sample_cages
+
+# patches expected per cage (one per quad, n per n-gon) and today's accuracy figures:
+# largest patch deviation from the exact limit surface (fraction of the bbox diagonal)
+CAGES = {"mixed_prism": (7 + 3 * 10, 6.4e-5), "pentagonal_prism": (5 + 2 * 5, 3.1e-5),
+         "genus3_block": (68, 1.6e-5), "cube": (6, 3.8e-6)}
+NORMAL_JUMP_MAX_DEG = 0.315
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    from polycube_wb.api import subd_to_solid
+
+    folder = tmp_path_factory.mktemp("step")
+    out = {}
+    for name in CAGES:
+        cage = folder / f"{name}.obj"
+        write_polymesh(cage, getattr(sample_cages, name)())
+        step = folder / f"{name}.step"
+        solid, report = subd_to_solid(cage, step)
+        out[name] = (solid, report, step)
+    return out
+
+
+@pytest.mark.parametrize("name", list(CAGES))
+def test_one_face_per_quad_built_from_shared_edges(exported, name):
+    solid, report, _ = exported[name]
+    faces, max_error = CAGES[name]
+    brep = report["brep"]
+    assert brep["construction"] == "shared_edges" and brep["construction_note"] == ""
+    assert brep["valid"] and brep["closed"] and brep["faces"] == faces == len(solid.Faces)
+    assert solid.isValid() and len(solid.Shells) == 1 and solid.Shells[0].isClosed()
+    assert abs(solid.Volume - brep["volume"]) <= 1e-7 * brep["volume"]
+    assert brep["volume_error_rel"] < 1e-5
+    assert report["patches"]["max_ev_error_rel"] <= max_error
+    assert report["patches"]["normal_jump_max_deg"] <= NORMAL_JUMP_MAX_DEG
+
+
+@pytest.mark.parametrize("name", ["mixed_prism", "genus3_block"])
+def test_step_file_is_ap214_in_millimetres_with_the_input_name(exported, name):
+    _, _, step = exported[name]
+    text = step.read_text()
+    assert "FILE_SCHEMA(('AUTOMOTIVE_DESIGN { 1 0 10303 214 1 1 1 1 }'));" in text
+    assert "SI_UNIT(.MILLI.,.METRE.)" in text
+    assert f"PRODUCT('{name}','{name}'," in text
+    assert text.count("ADVANCED_FACE(") == CAGES[name][0]
+    assert text.count("MANIFOLD_SOLID_BREP(") == 1 and text.count("CLOSED_SHELL(") == 1
+
+
+def test_freecad_reads_back_the_same_solid(exported):
+    solid, report, step = exported["mixed_prism"]
+    shape = Part.read(str(step))
+    assert shape.ShapeType == "Solid" and shape.isValid()
+    assert len(shape.Faces) == len(solid.Faces) and len(shape.Edges) == len(solid.Edges)
+    assert abs(shape.Volume - solid.Volume) <= 1e-9 * solid.Volume
+
+
+def test_writing_twice_gives_identical_files(exported, tmp_path):
+    from polycube_wb.api import subd_to_solid
+
+    _, _, step = exported["mixed_prism"]
+    cage = tmp_path / "mixed_prism.obj"
+    write_polymesh(cage, sample_cages.mixed_prism())
+    subd_to_solid(cage, tmp_path / "again.step", measure=False)
+    again = (tmp_path / "again.step").read_text().replace("'again'", "'mixed_prism'")
+    assert again == step.read_text()
+
+
+def test_second_reader_gmsh_finds_one_closed_volume_in_millimetres(exported):
+    """gmsh reads the STEP with its own OpenCascade build and meshes its surface."""
+    gmsh = pytest.importorskip("gmsh")
+    import numpy as np
+    import trimesh
+
+    solid, report, step = exported["mixed_prism"]
+    gmsh.initialize(["-noenv"], readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        volumes = {}
+        for unit in ("MM", "M"):
+            gmsh.clear()
+            gmsh.option.setString("Geometry.OCCTargetUnit", unit)
+            gmsh.model.occ.importShapes(str(step))
+            gmsh.model.occ.synchronize()
+            entities = gmsh.model.getEntities(3)
+            assert len(entities) == 1
+            volumes[unit] = gmsh.model.occ.getMass(3, entities[0][1])
+        assert len(gmsh.model.getBoundary(entities, oriented=False)) == CAGES["mixed_prism"][0]
+        assert gmsh.model.getEntityName(3, entities[0][1]).endswith("mixed_prism")
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.2e-3)
+        gmsh.model.mesh.generate(2)
+        nodes, coords, _ = gmsh.model.mesh.getNodes()
+        _, _, connectivity = gmsh.model.mesh.getElements(2)
+    finally:
+        gmsh.finalize()
+    assert abs(volumes["MM"] - solid.Volume) <= 1e-6 * solid.Volume
+    assert abs(volumes["M"] - 1e-9 * solid.Volume) <= 1e-6 * 1e-9 * solid.Volume
+    index = np.searchsorted(np.sort(nodes), np.concatenate(connectivity))
+    order = np.argsort(nodes)
+    surface = trimesh.Trimesh(coords.reshape(-1, 3)[order], index.reshape(-1, 3), process=True)
+    assert surface.is_watertight
+    assert abs(abs(surface.volume) - 1e-9 * solid.Volume) < 0.02 * 1e-9 * solid.Volume
