@@ -342,9 +342,9 @@ def _make(doc, kind, name, links, properties):
         setattr(obj, prop, value)
     for prop, value in properties.items():
         if prop not in obj.PropertiesList:
+            known = ", ".join(sorted(obj.PropertiesList))
             doc.removeObject(obj.Name)
-            raise ParameterError(f"{kind} has no property {prop!r}; its properties: "
-                                 f"{', '.join(sorted(obj.PropertiesList))}")
+            raise ParameterError(f"{kind} has no property {prop!r}; its properties: {known}")
         setattr(obj, prop, value)
     _attach_view_provider(obj, kind)
     return obj
@@ -509,10 +509,21 @@ def make_chain(doc, start, last="Solid", **properties):
     previous = start
     for kind in STAGE_ORDER[STAGE_ORDER.index(stage_kind(start)) + 1:
                             STAGE_ORDER.index(last) + 1]:
-        existing = next((obj for obj in previous.InList if stage_kind(obj) == kind), None)
+        existing = next((obj for obj in previous.InList
+                         if stage_kind(obj) == kind and is_reusable(obj)), None)
         chain[kind] = existing or factories[kind](doc, previous, **properties.get(kind, {}))
         previous = chain[kind]
     return chain
+
+
+def is_reusable(obj):
+    """Whether later stages may be built on ``obj`` by default.
+
+    A Segmentation with automatic parts is not: assembling the part base meshes at their
+    interfaces is not built yet, so *Segment parts* shows the parts without changing what
+    the base mesh is built from (select it explicitly to try).
+    """
+    return not (stage_kind(obj) == "Segmentation" and obj.PartMode == "auto")
 
 
 class RecomputeOutcome:

@@ -41,9 +41,18 @@ def default(name):
 
 
 def set_default(name, value):
-    """Store the user's default for ``name`` (type as in ``paper_defaults``)."""
+    """Store the user's default for ``name`` (type as in ``paper_defaults``).
+
+    The paper's value is stored as no preference at all, so the user follows the code's
+    default until choosing another value.
+    """
+    from polycube_wb.api import DEFAULT_EXPORT_DEPTH
+
     group = FreeCAD.ParamGet(PREFERENCES)
-    if isinstance(value, bool):
+    paper = DEFAULT_EXPORT_DEPTH if name == EXPORT_DEPTH_KEY else paper_defaults()[name]
+    if value == paper:
+        _forget(group, name)
+    elif isinstance(value, bool):
         group.SetBool(name, value)
     elif isinstance(value, int):
         group.SetInt(name, value)
@@ -57,5 +66,9 @@ def reset_defaults():
     """Forget the user's defaults (back to the paper's values)."""
     group = FreeCAD.ParamGet(PREFERENCES)
     for name in PREFERENCE_FIELDS + (EXPORT_DEPTH_KEY,):
-        for remove in (group.RemBool, group.RemInt, group.RemFloat, group.RemString):
-            remove(name)
+        _forget(group, name)
+
+
+def _forget(group, name):
+    for remove in (group.RemBool, group.RemInt, group.RemFloat, group.RemString):
+        remove(name)

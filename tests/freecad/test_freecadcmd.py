@@ -5,7 +5,7 @@
 - a FreeCADCmd script turns a SubD cage into a STEP solid through ``polycube_wb.api``;
 - ``from core.x import y`` keeps finding our ``core`` after another addon (CfdOF)
   replaced ``sys.modules['core']``, in ``freecadcmd`` and in plain Python;
-- the progress adapter (``polycube_wb.gui.fc_progress``) maps FreeCAD's abort to
+- the progress adapter (``polycube_wb.gui.fc_progress``) runs one bar forwards and maps FreeCAD's abort to
   ``core.errors.Cancelled``.
 
 Subprocesses run in a temporary folder, so nothing in the working directory can
@@ -179,22 +179,24 @@ class _FakeIndicator:
         self.log.append(("stop", self.steps))
 
 
-def test_progress_adapter_restarts_per_stage_and_clamps():
+def test_progress_adapter_runs_one_bar_forwards_and_clamps():
+    from core.progress import SubProgress
     from polycube_wb.gui.fc_progress import STEPS, FreeCADProgress
 
     _FakeIndicator.log = []
     with FreeCADProgress("Job", indicator_factory=_FakeIndicator) as progress:
         progress.report("intake", 0.25)
         progress.report("intake", 0.1)
-        progress.report("labeling", 2.0)
+        fit = SubProgress(progress, 0.5, 0.9)
+        fit.report("fit", 0.5)
+        fit.report("fit", 2.0)
         progress.check_cancel()
-    assert _FakeIndicator.log == [("start", "Job: intake", STEPS), ("stop", STEPS // 4),
-                                  ("start", "Job: labeling", STEPS), ("stop", STEPS)]
+    assert _FakeIndicator.log == [("start", "Job", STEPS), ("stop", round(0.9 * STEPS))]
 
 
 def test_progress_adapter_turns_abort_into_cancelled():
     from core.errors import Cancelled
-    from polycube_wb.gui.fc_progress import FreeCADProgress
+    from polycube_wb.gui.fc_progress import STEPS, FreeCADProgress
 
     _FakeIndicator.log = []
     progress = FreeCADProgress("Job", indicator_factory=lambda: _FakeIndicator(abort_after=3))
@@ -206,7 +208,7 @@ def test_progress_adapter_turns_abort_into_cancelled():
     with pytest.raises(Cancelled):
         progress.report("fit", 0.6)
     progress.stop()
-    assert _FakeIndicator.log == [("start", "Job: fit", 100)], "FreeCAD stops itself on abort"
+    assert _FakeIndicator.log == [("start", "Job", STEPS)], "FreeCAD stops itself on abort"
 
 
 def test_progress_adapter_with_freecads_indicator(tmp_path):
