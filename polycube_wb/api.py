@@ -584,12 +584,25 @@ def run_in_transaction(doc, title, build, progress=NO_PROGRESS):
         raise
     if outcome.cancelled:
         doc.abortTransaction()
-        for obj in up_to_date:
-            if doc.getObject(obj.Name) is obj:
-                obj.purgeTouched()
+        _restore_states(doc, up_to_date)
         raise Cancelled(f"{title}: cancelled by the user; the document is as before")
     doc.commitTransaction()
     return built, outcome
+
+
+def _restore_states(doc, up_to_date):
+    """After a rollback: the objects that were up to date before are so again.
+
+    The rollback restores their properties but leaves FreeCAD's ``Touched``/``Invalid``
+    flags of the cancelled run; recomputing such an object alone only redisplays its
+    restored result (its inputs and parameters match what it last ran with).
+    """
+    for obj in up_to_date:
+        if doc.getObject(obj.Name) is not obj:
+            continue
+        if not obj.isValid():
+            obj.recompute()
+        obj.purgeTouched()
 
 
 def describe(obj):

@@ -103,6 +103,8 @@ def run_guarded(title, work, with_progress=False):
     box = None
     QtGui.QApplication.setOverrideCursor(QtCore.Qt.WaitCursor)
     try:
+        if progress is not None:
+            progress.start()
         return work(progress)
     except Cancelled as exc:
         FreeCAD.Console.PrintWarning(f"Polycube: {exc}\n")
@@ -142,26 +144,30 @@ def run_stage_command(title, doc, build):
 
     Returns
     -------
-    api.RecomputeOutcome, or None when it failed before recomputing or was cancelled.
+    api.RecomputeOutcome, or None when it failed before recomputing or was cancelled
+    (the document is then as before). Success and stage failures are reported after the
+    progress bar has stopped (stopping it clears the status bar).
     """
     from polycube_wb import api
 
-    def work(progress):
-        shown, outcome = api.run_in_transaction(doc, title, build, progress)
-        if outcome.failures:
-            lines = [f"{doc.getObject(name).Label}: {reason}"
-                     for name, reason in outcome.failures.items()]
-            FreeCAD.Console.PrintWarning(f"Polycube: {title}: " + "; ".join(lines) + "\n")
-            message_box("warning", title, "A stage did not finish:\n\n" + "\n".join(lines))
-        if shown is not None:
-            _supersede(shown)
-            if not outcome.failures:
-                report_success(api.describe(shown))
-        elif not outcome.failures:
-            report_success(f"{title}: done")
-        return outcome
-
-    return run_guarded(title, work, with_progress=True)
+    done = run_guarded(title, lambda progress: api.run_in_transaction(doc, title, build,
+                                                                      progress),
+                       with_progress=True)
+    if done is None:
+        return None
+    shown, outcome = done
+    if outcome.failures:
+        lines = [f"{doc.getObject(name).Label}: {reason}"
+                 for name, reason in outcome.failures.items()]
+        FreeCAD.Console.PrintWarning(f"Polycube: {title}: " + "; ".join(lines) + "\n")
+        message_box("warning", title, "A stage did not finish:\n\n" + "\n".join(lines))
+    if shown is not None:
+        _supersede(shown)
+        if not outcome.failures:
+            report_success(api.describe(shown))
+    elif not outcome.failures:
+        report_success(f"{title}: done")
+    return outcome
 
 
 def _supersede(obj):

@@ -10,6 +10,11 @@ Headless it prints percentages to the console.
 One bar spans the whole run: the fractions reported are of the whole run (the pipeline
 and the stage objects hand each stage its share through ``core.progress.SubProgress``),
 so the bar only moves forward. The stage name goes to the status bar (GUI) and the log.
+
+Start the bar (``start()``, or entering the ``with`` block) *before* ``doc.recompute()``:
+recompute opens its own progress sequence, and FreeCAD ignores a sequence started
+inside another one, so a bar first started from an object's ``execute`` never moves,
+never repaints the window and never sees Esc (measured in the GUI, FreeCAD 0.20.2).
 """
 import FreeCAD
 
@@ -46,7 +51,15 @@ class FreeCADProgress(Progress):
         self.cancelled = False
 
     def __enter__(self):
+        self.start()
         return self
+
+    def start(self):
+        """Show the bar at 0 (idempotent); see the module notes on when to call it."""
+        if self._indicator is None and not self.cancelled:
+            self._indicator = self._factory()
+            self._indicator.start(self.title, STEPS)
+            self._done = 0
 
     def __exit__(self, exc_type, exc, traceback):
         self.stop()
@@ -61,10 +74,7 @@ class FreeCADProgress(Progress):
             The user pressed Esc while the bar was advancing (or earlier).
         """
         self.check_cancel()
-        if self._indicator is None:
-            self._indicator = self._factory()
-            self._indicator.start(self.title, STEPS)
-            self._done = 0
+        self.start()
         if stage != self._stage:
             self._stage = stage
             _show_stage(f"{self.title}: {stage}" + (f" ({message})" if message else ""))

@@ -42,6 +42,8 @@ FIELDS = {
         ("Scale", "Colour scale, mm (0: largest deviation)", "float", (0.0, 1e9), None)),
 }
 CAGE_KINDS = ("BaseMesh", "Fit")
+ACTIVE = {}
+"""Object name -> its open task panel (for scripts and tests)."""
 
 
 def panel_for(obj):
@@ -57,6 +59,7 @@ class StagePanel:
 
         self.obj = obj
         self.kind = stage_kind(obj)
+        ACTIVE[obj.Name] = self
         self.widgets = {}
         self.outcome = None
         self.form = QtGui.QWidget()
@@ -94,9 +97,10 @@ class StagePanel:
             self.apply()
 
     def accept(self):
-        """Write the fields and recompute; closes the panel unless the user cancelled."""
+        """Write the fields and recompute; the panel stays open when the user cancelled
+        or the change could not be made (the document is then as before)."""
         self.apply()
-        if self.outcome is not None and self.outcome.cancelled:
+        if self.outcome is None:
             return False
         _close(self.obj)
         return True
@@ -212,6 +216,7 @@ def _replay_lines(obj, changed):
 
 
 def _close(obj):
+    ACTIVE.pop(obj.Name, None)
     FreeCADGui.Control.closeDialog()
     gui_document = FreeCADGui.getDocument(obj.Document.Name)
     if gui_document is not None and gui_document.getInEdit() is not None:

@@ -177,7 +177,8 @@ def test_cancel_during_the_fit_leaves_the_document_as_it_was(chain_doc):
     assert list(fit.CageVertices) == cage
     assert solid.Shape.Volume == pytest.approx(volume, rel=1e-12)
     assert chain_doc.UndoCount == undo
-    assert "Touched" not in fit.State and "Touched" not in solid.State
+    assert fit.State == ["Up-to-date"] and solid.State == ["Up-to-date"]
+    assert fit.isValid() and fit.Status == "ok"
 
 
 def test_failed_stage_is_invalid_with_a_one_line_status_others_intact(chain_doc):
