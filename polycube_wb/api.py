@@ -516,6 +516,39 @@ def make_chain(doc, start, last="Solid", **properties):
     return chain
 
 
+def move_cage_vertices(obj, moves):
+    """Move vertices of a cage object (BaseMesh or Fit); the next recompute follows.
+
+    Parameters
+    ----------
+    obj : a BaseMesh or Fit object.
+    moves : dict vertex index -> new position (x, y, z) in model units (mm).
+
+    Raises
+    ------
+    ParameterError
+        ``obj`` holds no cage, an index is not a cage vertex, or a position is not 3
+        finite numbers.
+    """
+    import FreeCAD
+
+    from core.errors import ParameterError
+
+    if stage_kind(obj) not in ("BaseMesh", "Fit"):
+        raise ParameterError(f"{obj.Label} is not a BaseMesh or Fit object (it has no cage)")
+    points = list(obj.CageVertices)
+    for index, position in moves.items():
+        if not isinstance(index, (int, np.integer)) or not 0 <= index < len(points):
+            raise ParameterError(f"{obj.Label}: {index!r} is not a cage vertex index "
+                                 f"(0..{len(points) - 1})")
+        position = np.asarray(position, dtype=np.float64)
+        if position.shape != (3,) or not np.all(np.isfinite(position)):
+            raise ParameterError(f"{obj.Label}: vertex {index} position must be 3 finite "
+                                 f"numbers, got {position.tolist()}")
+        points[index] = FreeCAD.Vector(*position.tolist())
+    obj.CageVertices = points
+
+
 def is_reusable(obj):
     """Whether later stages may be built on ``obj`` by default.
 

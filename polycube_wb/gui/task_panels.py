@@ -125,21 +125,25 @@ class StagePanel:
 
     def apply(self, vertex_moves=None):
         """Write the fields (and ``vertex_moves``: index -> new position) and recompute."""
+        from polycube_wb import api
         from polycube_wb.gui.commands import run_stage_command
 
         obj, values = self.obj, self.values()
         changed = {prop: value for prop, value in values.items()
                    if getattr(obj, prop) != value}
+        if not changed and not vertex_moves and obj.isValid() and obj.Status == "ok":
+            self.outcome = api.RecomputeOutcome({}, False)  # nothing to do
+            return
 
         def build():
             for line in _replay_lines(obj, changed):
                 FreeCADGui.doCommand(line)
             if vertex_moves:
-                points = list(obj.CageVertices)
-                for index, point in vertex_moves.items():
-                    points[index] = point
-                obj.CageVertices = points
+                moves = {index: tuple(point) for index, point in vertex_moves.items()}
+                FreeCADGui.doCommand("from polycube_wb import api")
+                FreeCADGui.doCommand(f"api.move_cage_vertices({_reference(obj)}, {moves!r})")
             obj.touch()
+            return obj
 
         self.outcome = run_stage_command(f"Edit {obj.Label}", obj.Document, build)
         self.show_status()
@@ -209,10 +213,13 @@ class StagePanel:
         self.apply({index: points[index] + offset for index in indices})
 
 
+def _reference(obj):
+    return f"App.getDocument({obj.Document.Name!r}).getObject({obj.Name!r})"
+
+
 def _replay_lines(obj, changed):
     """Console lines that set ``changed`` (property -> value) on ``obj``."""
-    where = f"App.getDocument({obj.Document.Name!r}).getObject({obj.Name!r})"
-    return [f"{where}.{prop} = {value!r}" for prop, value in changed.items()]
+    return [f"{_reference(obj)}.{prop} = {value!r}" for prop, value in changed.items()]
 
 
 def _close(obj):

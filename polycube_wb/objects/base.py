@@ -9,7 +9,8 @@ numpy arrays there are silently lost).
 Recompute reruns only what changed. Each object stores ``ResultId`` (a hash of its result),
 ``InputId`` (the ``ResultId`` of its inputs when it ran) and ``ParamsId`` (a hash of its
 parameters). ``execute`` reruns the stage only when one of those differs; otherwise it just
-rebuilds its display from the stored result. So editing a stored result (the cage's vertex
+rebuilds its display from the stored result (and keeps its cached outputs unless the stored
+result changed). So editing a stored result (the cage's vertex
 coordinates) changes the ``ResultId`` and reruns the stages after it, not the stage itself.
 
 The objects' ``execute`` is called by ``doc.recompute()``, which cannot pass arguments;
@@ -231,9 +232,10 @@ class StageProxy:
                 self.run(obj, progress)
                 obj.InputId = self.input_id(obj)
                 obj.ParamsId = fingerprint(self.parameters(obj))
-            else:
-                self._cache = None  # the stored result may have been edited
-            obj.ResultId = self.show(obj)
+            result_id = self.show(obj)
+            if result_id != obj.ResultId:  # a new or edited result: forget the cached one
+                self._cache = None
+                obj.ResultId = result_id
         except Cancelled as exc:
             self._fail(obj, session, "cancelled by the user", cancelled=True)
             raise exc

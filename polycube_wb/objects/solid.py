@@ -54,9 +54,13 @@ class SolidProxy(StageProxy):
             setattr(obj, name, brep[key])
 
     def show(self, obj):
-        from polycube_wb.objects.base import fingerprint
+        """The solid is a function of the cage and the depth: its id is theirs (hashing the
+        B-rep of hundreds of B-spline faces would cost about a second)."""
+        from polycube_wb.objects.base import StageFailed, fingerprint
 
-        return fingerprint(obj.Shape.exportBrepToString() if not obj.Shape.isNull() else "")
+        if obj.Shape.isNull():
+            raise StageFailed(f"{obj.Label}: no solid is stored; recompute it")
+        return fingerprint(obj.InputId, obj.ParamsId)
 
     def load_outputs(self, obj):
         return {}

@@ -133,14 +133,30 @@ def test_edited_fitted_cage_moves_the_solid_without_refitting(chain_doc):
     before = solid.Shape.BoundBox
     points = list(fit.CageVertices)
     top = max(range(len(points)), key=lambda k: points[k].z)
-    points[top] = points[top] + FreeCAD.Vector(0, 0, 5.0)
-    fit.CageVertices = points
+    moved = points[top] + FreeCAD.Vector(0, 0, 5.0)
+    api.move_cage_vertices(fit, {top: (moved.x, moved.y, moved.z)})
     assert api.recompute(chain_doc).ok
     assert log.ran == [solid.Name], "only the solid reruns"
-    assert fit.CageVertices[top].z == pytest.approx(points[top].z)
+    assert fit.CageVertices[top].z == pytest.approx(points[top].z + 5.0)
+    assert [p for k, p in enumerate(fit.CageVertices) if k != top] == \
+        [p for k, p in enumerate(points) if k != top]
     after = solid.Shape.BoundBox
     assert solid.Shape.isValid()
     assert after.ZMax > before.ZMax + 0.5, "the solid follows the moved vertex"
+
+
+def test_cage_edits_are_checked(chain_doc):
+    from core.errors import ParameterError
+    from polycube_wb import api
+
+    objects = _objects(chain_doc)
+    count = len(objects["BaseMesh"].CageVertices)
+    with pytest.raises(ParameterError, match=f"is not a cage vertex index \\(0..{count - 1}\\)"):
+        api.move_cage_vertices(objects["BaseMesh"], {count: (0, 0, 0)})
+    with pytest.raises(ParameterError, match="3 finite numbers"):
+        api.move_cage_vertices(objects["BaseMesh"], {0: (0, float("nan"), 0)})
+    with pytest.raises(ParameterError, match="not a BaseMesh or Fit"):
+        api.move_cage_vertices(objects["Solid"], {0: (0, 0, 0)})
 
 
 def test_cancel_during_the_fit_leaves_the_document_as_it_was(chain_doc):
