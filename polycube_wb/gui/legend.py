@@ -24,14 +24,16 @@ def legend_texts(obj):
 
 
 def update_legend(obj):
-    """Draw (or redraw) the legend of ``obj`` in its document's 3D view."""
+    """Draw (or redraw) the legend of ``obj`` in its document's 3D view (only while the
+    object is shown: the view provider adds and removes it with the visibility)."""
     from pivy import coin
 
     from polycube_wb.objects.deviation import deviation_colours
 
     remove_legend(obj)
     view = FreeCADGui.getDocument(obj.Document.Name).ActiveView
-    if not hasattr(view, "getSceneGraph") or obj.ScaleUsed <= 0:
+    if not hasattr(view, "getSceneGraph") or obj.ScaleUsed <= 0 or \
+            not obj.ViewObject.Visibility:
         return
     node = coin.SoAnnotation()
     camera = coin.SoOrthographicCamera()

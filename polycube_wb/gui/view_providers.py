@@ -63,6 +63,15 @@ class StageViewProvider:
 
             update_legend(obj)
 
+    def onChanged(self, vobj, prop):
+        if prop == "Visibility" and _kind(vobj.Object) == "Deviation":
+            from polycube_wb.gui.legend import remove_legend, update_legend
+
+            if vobj.Visibility:
+                update_legend(vobj.Object)
+            else:
+                remove_legend(vobj.Object)
+
     def onDelete(self, vobj, subelements):
         if _kind(vobj.Object) == "Deviation":
             from polycube_wb.gui.legend import remove_legend

@@ -3,6 +3,7 @@
 
 - the runtime packages (trimesh, manifold3d) import inside ``freecadcmd``;
 - a FreeCADCmd script turns a SubD cage into a STEP solid through ``polycube_wb.api``;
+- the parametric stage objects recompute, save and reopen in ``freecadcmd``;
 - ``from core.x import y`` keeps finding our ``core`` after another addon (CfdOF)
   replaced ``sys.modules['core']``, in ``freecadcmd`` and in plain Python;
 - the progress adapter (``polycube_wb.gui.fc_progress``) runs one bar forwards and maps FreeCAD's abort to
@@ -106,6 +107,36 @@ def test_freecadcmd_script_subd_cage_to_step(tmp_path, load_addon):
     assert abs(result["volume"] - result["limit_volume"]) / result["limit_volume"] < 1e-4
     assert result["read_volume"] == pytest.approx(result["volume"], rel=1e-6)
     assert step.stat().st_size > 1000
+
+
+@needs_freecadcmd
+def test_stage_objects_in_freecadcmd_save_and_reopen(tmp_path):
+    """The App side of the stage objects works in FreeCAD's own console Python."""
+    mesh = os.path.join(REPO, "examples", "to_simp_cantilever.stl")
+    saved = tmp_path / "segmented.FCStd"
+    result = _freecadcmd(_script(f"""
+        import FreeCAD
+        from polycube_wb import api
+
+        doc = FreeCAD.newDocument("Cmd")
+        target = api.make_target(doc, {mesh!r}, check_self_intersections=False)
+        seg = api.make_segmentation(doc, target, Lambda=0.5)
+        outcome = api.recompute(doc)
+        names = (target.Name, seg.Name)
+        doc.saveAs({str(saved)!r})
+        FreeCAD.closeDocument(doc.Name)
+        doc = FreeCAD.openDocument({str(saved)!r})
+        seg = doc.getObject(names[1])
+        result = {{"ok": outcome.ok, "gui": bool(FreeCAD.GuiUp),
+                  "proxy": type(seg.Proxy).__module__ + "." + type(seg.Proxy).__name__,
+                  "valid": seg.Valid, "labels": len(seg.FaceLabel),
+                  "facets": doc.getObject(names[0]).Mesh.CountFacets,
+                  "status": seg.Status}}
+    """), tmp_path, load_addon=True)
+    assert result["ok"] and not result["gui"]
+    assert result["proxy"] == "polycube_wb.objects.segmentation.SegmentationProxy"
+    assert result["valid"] and result["status"] == "ok"
+    assert result["labels"] == result["facets"] == 15388
 
 
 COLLISION_BODY = """

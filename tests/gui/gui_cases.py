@@ -403,7 +403,7 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
         red, blue = _reddish_and_bluish(image_figures(shot)[4])
         self.assertGreater(red + blue, 20, f"no colour map visible ({red} red, {blue} blue)")
         deviation.ViewObject.Visibility = False
-        legend.remove_legend(deviation)
+        self.assertFalse(legend.has_legend(deviation), "the legend goes with the map")
         self.one("Solid").ViewObject.Visibility = True
 
     def test_6_edit_the_cage_and_undo(self):
