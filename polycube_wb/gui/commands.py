@@ -418,20 +418,34 @@ def _make_chain_to_solid(target):
 class CheckResultCommand(_Command):
     ID = "PolyCube_CheckResult"
     MENU_TEXT = "Check result (deviation map)"
-    TOOLTIP = ("Colour the selected (or last) solid by its distance to the target, with a "
-               "legend, and report mean and max distance, volume outside and uncovered")
+    TOOLTIP = ("Colour the selected (or last) solid by its distance to the target (its own, "
+               "or the selected mesh), with a legend, and report mean and max distance, "
+               "volume outside and uncovered")
 
     def IsActive(self):
-        return FreeCAD.ActiveDocument is not None and selected_or_last("Solid") is not None
+        return FreeCAD.ActiveDocument is not None and _solid_to_check() is not None
 
     def Activated(self):
         from polycube_wb import api
 
-        solid = selected_or_last("Solid")
-        target = api.upstream_objects(solid).get("Target")
+        solid = _solid_to_check()
+        target = api.upstream_objects(solid).get("Target") or next(
+            (obj for obj in _selection() if obj.isDerivedFrom("Mesh::Feature")),
+            None) or api.find_stage(FreeCAD.ActiveDocument, "Target")
+        if target is None:
+            _no_target(self.MENU_TEXT)
+            return
         run_stage_command(self.MENU_TEXT, FreeCAD.ActiveDocument, lambda: _do(
             f"api.make_deviation(App.ActiveDocument, {_ref(solid)}, {_ref(target)}, "
             f"name={solid.Name + '_deviation'!r})"))
+
+
+def _solid_to_check():
+    """The selected Part object holding a solid, else the last Solid stage object."""
+    for obj in _selection():
+        if obj.isDerivedFrom("Part::Feature") and len(obj.Shape.Solids) == 1:
+            return obj
+    return selected_or_last("Solid")
 
 
 class EditCageCommand(_Command):

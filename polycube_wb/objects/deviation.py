@@ -52,19 +52,44 @@ class DeviationProxy(StageProxy):
     def parameters(self, obj):
         return {"tolerance": float(obj.Tolerance)}
 
+    def inputs(self, obj):
+        """The solid and the target: stage objects, or plain ones (a ``Part::Feature``
+        solid and a ``Mesh::Feature``, e.g. from ``api.reconstruct`` or an older version)."""
+        found = []
+        for name, kind in (("Solid", "Part::Feature"), ("Target", "Mesh::Feature")):
+            upstream = getattr(obj, name)
+            if upstream is None or not upstream.isDerivedFrom(kind):
+                raise StageFailed(f"{obj.Label}: its '{name}' link must point to a {kind} "
+                                  "object")
+            found.append(upstream)
+        return found
+
+    def input_id(self, obj):
+        """Result ids of stage objects; for plain objects, a hash of their geometry."""
+        ids = []
+        for upstream in self.inputs(obj):
+            if getattr(upstream, "ResultId", ""):
+                ids.append(upstream.ResultId)
+            elif upstream.isDerivedFrom("Mesh::Feature"):
+                ids.append(fingerprint(*_mesh_arrays(upstream)))
+            else:
+                shape = upstream.Shape
+                ids.append(fingerprint(len(shape.Faces), shape.Volume, shape.Area))
+        return fingerprint(ids)
+
     def run(self, obj, progress):
         from core.errors import ParameterError
         from core.fitting.closest_point import TargetSurface
         from core.quality import containment, is_watertight_manifold
         from polycube_wb.brep import tessellate
-        from polycube_wb.convert import arrays_to_mesh, mesh_to_arrays
+        from polycube_wb.convert import arrays_to_mesh
 
         if not 0 < obj.Tolerance <= 0.1:
             raise ParameterError(f"Tolerance must be in (0, 0.1], got {obj.Tolerance}")
         solids = obj.Solid.Shape.Solids
         if len(solids) != 1:
             raise StageFailed(f"{obj.Solid.Label}: expected one solid, found {len(solids)}")
-        target_V, target_F = mesh_to_arrays(obj.Target.Mesh)
+        target_V, target_F = _mesh_arrays(obj.Target)
         surface = TargetSurface(target_V, target_F)
         progress.report("tessellate", 0.1)
         V, F = tessellate(solids[0], obj.Tolerance * surface.diagonal)
@@ -95,6 +120,12 @@ class DeviationProxy(StageProxy):
 
     def load_outputs(self, obj):
         return {}
+
+
+def _mesh_arrays(obj):
+    from polycube_wb.convert import mesh_to_arrays
+
+    return mesh_to_arrays(obj.Mesh)
 
 
 def deviation_colours(signed, scale):

@@ -246,6 +246,30 @@ def test_deviation_map_colours_and_figures(chain_doc):
                           axis=1)) > 0.0
 
 
+def test_deviation_of_plain_objects(tmp_path):
+    """The map also checks a plain solid against a plain mesh (api.reconstruct's objects)."""
+    from polycube_wb import api
+    from polycube_wb.brep import tessellate
+    from polycube_wb.document import add_solid, add_target_mesh
+    from core.types import TriMesh
+
+    cage = tmp_path / "torus.obj"
+    write_polymesh(cage, sample_cages.torus())
+    solid, _ = api.subd_to_solid(cage, measure=False)
+    doc = FreeCAD.newDocument("PolycubePlainCheck")
+    try:
+        solid_obj = add_solid(doc, solid, "Solid")
+        V, F = tessellate(solid, 1e-3 * solid.BoundBox.DiagonalLength)
+        target = add_target_mesh(doc, TriMesh(V, F), "Target")
+        deviation = api.make_deviation(doc, solid_obj, target)
+        assert api.recompute(doc).ok
+        # The target is a chordal tessellation of the solid: within 1e-3 of the diagonal.
+        assert deviation.MaxDeviationPercent < 0.1 + 1e-9
+        assert deviation.Watertight and deviation.UncoveredVolume < 0.1
+    finally:
+        FreeCAD.closeDocument(doc.Name)
+
+
 def test_moving_the_target_moves_the_labeling(tmp_path):
     from polycube_wb import api
 
