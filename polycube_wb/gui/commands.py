@@ -486,23 +486,23 @@ class ImportSubDCommand(_Command):
             return
         doc = FreeCAD.ActiveDocument or FreeCAD.newDocument()
 
-        def work(progress):
-            from polycube_wb import api
-
+        def work(_):
             doc.openTransaction("Import SubD cage as solid")
             try:
-                obj, report = api.import_subd_cage(doc, path, progress)
+                obj, report = _do(f"api.import_subd_cage(App.ActiveDocument, {path!r})")
             except BaseException:
                 doc.abortTransaction()
                 raise
             doc.commitTransaction()
+            return obj, report
+
+        done = run_guarded("Import SubD cage as solid", work)
+        if done:
+            obj, report = done
             brep = report["brep"]
             report_success(f"{path} -> {obj.Label}: {brep['faces']} B-spline faces, valid "
                            f"{brep['valid']}, volume {brep['volume']:.6g} (limit surface "
                            f"{brep['limit_volume']:.6g})")
-            return obj
-
-        if run_guarded("Import SubD cage as solid", work, with_progress=True):
             _view_fit()
 
 
