@@ -27,7 +27,9 @@ CAGE_SCREENSHOTS = ("polycube_base_mesh.png",)
 WINDOW_GRABS = ("polycube_fit_progress.png",)
 """The main window during the fit (progress bar), grabbed at the window's own size."""
 MIN_CASES = 10
-TIMEOUT = 300
+TIMEOUT = 600
+"""Guard against a hung GUI (FreeCAD under Xvfb without a window manager), not a timing
+check: the run takes about 1 min of CPU, longer in wall-clock on a loaded machine."""
 MIN_PNG_BYTES = 10_000
 """A uniform 1024 x 768 PNG compresses to a few kB; a rendered model is far larger."""
 
