@@ -230,12 +230,12 @@ def stage_fit(state, params):
     base = state["base_mesh"]
     levels = fit_levels(base.n_faces, params.subdivision_levels)
     fitted, info = fit_base_mesh(base, state["target"], levels=levels,
-                                 iterations=params.fit_iterations, mode="inside",
-                                 progress=state.get("progress"))
-    report = {"mode": "inside", "levels": levels, **{key: info[key] for key in (
+                                 iterations=params.fit_iterations, mode=params.fit_mode,
+                                 t_min=params.fit_t_min, progress=state.get("progress"))
+    report = {"mode": params.fit_mode, "levels": levels, **{key: info[key] for key in (
         "iterations", "stopped", "mean_distance", "max_distance", "outside_volume_fraction",
         "uncovered_volume_fraction", "initial_mean_distance", "initial_max_distance", "initial_outside_volume_fraction",
-        "seconds") if key in info}}
+        "t_min", "seconds") if key in info}}
     report["self_intersections"] = count_limit_self_intersections(fitted, levels)
     message = ("" if report["self_intersections"] == 0 else
                f"warning: the fitted limit surface intersects itself "

@@ -432,7 +432,8 @@ def make_base_mesh(doc, segmentation, name="BaseMesh", **properties):
 def make_fit(doc, cage, name="Fit", **properties):
     """Add a Fit of the cage object ``cage`` (a BaseMesh or a Fit) to its target.
 
-    ``properties``: ``Iterations``, ``SubdivisionLevels``.
+    ``properties``: ``Iterations``, ``SubdivisionLevels``, ``Mode`` (``inside`` /
+    ``nearest``), ``AutoMinThickness``, ``MinThickness`` (mm).
     """
     return _make(doc, "Fit", name, {"BaseMesh": cage}, properties)
 

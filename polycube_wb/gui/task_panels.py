@@ -35,7 +35,10 @@ FIELDS = {
         ("MaxBaseFaces", "Most faces", "int", (6, 1000000), "max_base_faces")),
     "Fit": (
         ("Iterations", "Iterations", "int", (0, 100000), "fit_iterations"),
-        ("SubdivisionLevels", "Subdivision levels", "int", (1, 5), "subdivision_levels")),
+        ("SubdivisionLevels", "Subdivision levels", "int", (1, 5), "subdivision_levels"),
+        ("Mode", "Mode", "choice", ("inside", "nearest"), "fit_mode"),
+        ("AutoMinThickness", "Automatic minimal thickness", "bool", None, None),
+        ("MinThickness", "Minimal thickness, mm (0: none)", "float", (0.0, 1e6), None)),
     "Solid": (("Depth", "Grading depth at extraordinary vertices", "int", (1, 12), None),),
     "Deviation": (
         ("Tolerance", "Tessellation tolerance (of the diagonal)", "float", (1e-6, 0.1), None),

@@ -34,6 +34,16 @@ class FitProxy(CageProxy):
         add_property(obj, "App::PropertyInteger", "SubdivisionLevels", "Fit",
                      "Catmull-Clark levels the fit works on (paper: 2; fewer on large cages)",
                      default("subdivision_levels"))
+        if add_property(obj, "App::PropertyEnumeration", "Mode", "Fit",
+                        "'inside': the limit surface stays inside the target (paper); "
+                        "'nearest': the distance is penalised on both sides",
+                        ["inside", "nearest"]):
+            obj.Mode = default("fit_mode")
+        add_property(obj, "App::PropertyBool", "AutoMinThickness", "Fit",
+                     "Pick the minimal wall thickness from the cage and the target", True)
+        add_property(obj, "App::PropertyFloat", "MinThickness", "Fit",
+                     "Minimal wall thickness when not automatic, mm (0: no thickness "
+                     "constraint)", 0.0)
         add_cage_properties(obj)
         for name, _, tooltip in FIGURES:
             add_property(obj, "App::PropertyFloat", name, "Result", tooltip, 0.0,
@@ -44,7 +54,8 @@ class FitProxy(CageProxy):
 
     def parameters(self, obj):
         return {"fit_iterations": int(obj.Iterations),
-                "subdivision_levels": int(obj.SubdivisionLevels)}
+                "subdivision_levels": int(obj.SubdivisionLevels), "fit_mode": obj.Mode,
+                "fit_t_min": None if obj.AutoMinThickness else float(obj.MinThickness)}
 
     def run(self, obj, progress):
         state = self.upstream_state(obj)

@@ -50,7 +50,8 @@ class SegmentationProxy(StageProxy):
         add_property(obj, "App::PropertyInteger", "MaxSweeps", "Labeling",
                      "Most HBECVT sweeps", default("max_sweeps"))
         add_property(obj, "App::PropertyBool", "Repair", "Labeling",
-                     "Repair invalid charts, boundaries and corners after HBECVT", True)
+                     "Repair invalid charts, boundaries and corners after HBECVT",
+                     default("repair"))
         add_property(obj, "App::PropertyEnumeration", "ColourBy", "Display",
                      "Colour the faces by polycube label or by part", list(COLOUR_MODES),
                      output=True)

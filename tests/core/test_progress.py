@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Progress through the pipeline: one forward bar, the fit reports its iterations, cancel.
 
-Also the intake of an in-memory mesh (what the document's Target object uses).
+Also the intake of an in-memory mesh (what the document's Target object uses) and the
+fit's mode and thickness parameters (what the Fit object sets).
 """
 import numpy as np
 import pytest
@@ -79,3 +80,16 @@ def test_intake_validates_an_in_memory_mesh():
     assert failed is None
     assert len(state["target"].faces) == 12 and report["intake"]["genus"] == 0
     assert report["intake"]["file"] == "box in memory"
+
+
+def test_fit_mode_and_thickness_reach_the_fit():
+    from core.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="fit_mode must be one of inside, nearest"):
+        ReconstructionParams(fit_mode="outside")
+    with pytest.raises(ParameterError, match="fit_t_min must be between"):
+        ReconstructionParams(fit_t_min=-1.0)
+    params = ReconstructionParams(fit_iterations=2, fit_mode="nearest", fit_t_min=0.0)
+    _, report, failed = run_stages(_box_state(), ["fit"], params)
+    assert failed is None
+    assert report["fit"]["mode"] == "nearest" and report["fit"]["t_min"] == 0.0

@@ -106,6 +106,11 @@ def test_reopened_chain_has_its_proxies_and_results(chain_doc):
     solid = objects["Solid"].Shape
     assert solid.isValid() and len(solid.Solids) == 1 and solid.Shells[0].isClosed()
     assert objects["Solid"].BrepFaces == len(solid.Faces) == base.n_faces
+    # Colouring by part instead of label recolours without touching anything.
+    by_label = list(seg.FaceColors)
+    seg.ColourBy = "Parts"
+    assert seg.State == ["Up-to-date"]
+    assert len(set(seg.FaceColors)) == seg.Parts == 1 and seg.FaceColors != by_label
 
 
 def test_parameter_change_reruns_that_stage_and_later_without_the_file(chain_doc):
@@ -348,14 +353,20 @@ def test_preferences_give_new_objects_their_defaults():
     try:
         set_default("fit_iterations", 7)
         set_default("lam", 0.25)
+        set_default("fit_mode", "nearest")
         fit = api.make_fit(doc, None)
-        assert fit.Iterations == 7 and default("lam") == 0.25
+        assert fit.Iterations == 7 and fit.Mode == "nearest" and default("lam") == 0.25
+        assert fit.Proxy.parameters(fit)["fit_t_min"] is None, "automatic by default"
+        fit.AutoMinThickness = False
+        fit.MinThickness = 0.5
+        assert fit.Proxy.parameters(fit)["fit_t_min"] == 0.5
         set_default("fit_iterations", 100)  # the paper's value: stored as no preference
         assert default("fit_iterations") == 100
     finally:
         reset_defaults()
         FreeCAD.closeDocument(doc.Name)
     assert default("lam") == 0.5 and default("fit_iterations") == 100
+    assert default("fit_mode") == "inside"
 
 
 def test_solid_and_target_survive_save_and_reopen(tmp_path):
