@@ -471,6 +471,20 @@ def _selected_cage():
     return None
 
 
+class RecomputeCommand(_Command):
+    ID = "PolyCube_Recompute"
+    MENU_TEXT = "Recompute with progress"
+    TOOLTIP = ("Recompute the document's changed stages (e.g. after editing properties) as "
+               "one undo step with the progress bar; Esc cancels and restores the document")
+
+    def IsActive(self):
+        return FreeCAD.ActiveDocument is not None
+
+    def Activated(self):
+        doc = FreeCAD.ActiveDocument
+        run_stage_command("Recompute", doc, lambda: None)
+
+
 class ImportSubDCommand(_Command):
     ID = "PolyCube_ImportSubD"
     MENU_TEXT = "Import SubD cage as solid..."
@@ -532,12 +546,13 @@ def _no_target(title):
 
 COMMANDS = (ImportTargetCommand, SegmentPartsCommand, LabelPolycubeCommand,
             BuildBaseMeshCommand, FitTargetCommand, MakeSolidCommand, ReconstructAllCommand,
-            CheckResultCommand, EditCageCommand, ImportSubDCommand, ExportStepCommand)
+            RecomputeCommand, CheckResultCommand, EditCageCommand, ImportSubDCommand,
+            ExportStepCommand)
 TOOLBAR = tuple(command.ID for command in COMMANDS)
 MENU = (ImportTargetCommand.ID, "Separator", SegmentPartsCommand.ID, LabelPolycubeCommand.ID,
         BuildBaseMeshCommand.ID, FitTargetCommand.ID, MakeSolidCommand.ID, "Separator",
-        ReconstructAllCommand.ID, "Separator", CheckResultCommand.ID, EditCageCommand.ID,
-        "Separator", ImportSubDCommand.ID, ExportStepCommand.ID)
+        ReconstructAllCommand.ID, RecomputeCommand.ID, "Separator", CheckResultCommand.ID,
+        EditCageCommand.ID, "Separator", ImportSubDCommand.ID, ExportStepCommand.ID)
 
 
 def register():

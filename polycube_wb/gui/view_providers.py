@@ -28,6 +28,11 @@ class StageViewProvider:
     def attach(self, vobj):
         self.Object = vobj.Object
         self.kind = _kind(vobj.Object)
+        if self.kind == "Deviation":
+            # A reopened map: draw its legend once the document and its view are loaded.
+            from PySide import QtCore
+
+            QtCore.QTimer.singleShot(0, lambda: _legend_after_restore(vobj.Object))
 
     def getIcon(self):
         return icon_path(ICONS.get(self.kind or "", "PolycubeWorkbench"))
@@ -84,6 +89,16 @@ class StageViewProvider:
 
     def __setstate__(self, state):
         self.kind = None
+
+
+def _legend_after_restore(obj):
+    from polycube_wb.gui.legend import has_legend, update_legend
+
+    try:
+        if obj.ViewObject.Visibility and obj.ScaleUsed > 0 and not has_legend(obj):
+            update_legend(obj)
+    except ReferenceError:  # the document was closed before the event loop ran
+        return
 
 
 def _kind(obj):

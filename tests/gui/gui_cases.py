@@ -172,7 +172,7 @@ class WorkbenchTest(unittest.TestCase):
         self.assertEqual(workbench.name(), WORKBENCH)
         known = set(FreeCADGui.listCommands())
         ids = [command.ID for command in commands.COMMANDS]
-        self.assertEqual(len(ids), 11)
+        self.assertEqual(len(ids), 12)
         for command_id in ids:
             self.assertTrue(command_id.startswith("PolyCube_"))
             self.assertIn(command_id, known)
@@ -438,12 +438,24 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
         name = self.doc.Name
         FreeCAD.closeDocument(name)
         type(self).doc = FreeCAD.openDocument(path)
-        fit, solid = self.one("Fit"), self.one("Solid")
+        from polycube_wb.gui import legend
+
+        fit, solid, deviation = self.one("Fit"), self.one("Solid"), self.one("Deviation")
         self.assertTrue(solid.Shape.isValid())
+        deviation.ViewObject.Visibility = True
+        self.assertTrue(legend.has_legend(deviation), "the reopened map shows its legend")
+        deviation.ViewObject.Visibility = False
         panel = self.open_panel(fit)
         panel.widgets["Iterations"][0].setValue(1)
         self.assertTrue(panel.accept())
         self.assertEqual((fit.Status, solid.Status), ("ok", "ok"))
+        # A property edited in the property editor, then the workbench's recompute.
+        solid.Depth = 6
+        FreeCADGui.runCommand("PolyCube_Recompute")
+        self.assertEqual(self.stubs.boxes, [])
+        self.assertEqual(solid.Status, "ok")
+        self.assertTrue(solid.isValid() and "Touched" not in solid.State, solid.State)
+        self.assertIn("Recompute", self.doc.UndoNames)
         step = api.export_step(solid, os.path.join(self.tmp, "cantilever.step"))
         import Part
 
