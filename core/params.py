@@ -6,6 +6,9 @@ from core.errors import ParameterError
 
 PART_MODES = ("single", "auto", "file")
 COMPONENT_POLICIES = ("largest", "all", "error")
+FIT_MODES = ("inside", "nearest")
+"""The modes of ``core.fitting.fit_base_mesh`` (its ``MODES``; checked here so a bad mode
+is reported before any stage runs)."""
 UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 
 
@@ -35,6 +38,10 @@ class ReconstructionParams:
         take many minutes, and such a model is not the few-patch result the tool is for).
     subdivision_levels : Catmull-Clark levels used by the fit (paper: 2).
     fit_iterations : shape-optimisation iterations (paper: 100).
+    fit_mode : ``inside`` (paper: the limit surface stays inside the target) or ``nearest``
+        (the distance is penalised on both sides).
+    fit_t_min : minimal wall thickness of the fit in model units; None picks it from the
+        base mesh and the target (see ``core.fitting.fit_base_mesh``), 0 disables it.
     """
 
     units: str = "mm"
@@ -51,6 +58,8 @@ class ReconstructionParams:
     max_base_faces: int = 2500
     subdivision_levels: int = 2
     fit_iterations: int = 100
+    fit_mode: str = "inside"
+    fit_t_min: float = None
 
     def __post_init__(self):
         _choice("units", self.units, tuple(UNIT_TO_MM))
@@ -67,6 +76,9 @@ class ReconstructionParams:
         _range("max_base_faces", self.max_base_faces, 6, 1_000_000)
         _range("subdivision_levels", self.subdivision_levels, 1, 5)
         _range("fit_iterations", self.fit_iterations, 0, 100_000)
+        _choice("fit_mode", self.fit_mode, FIT_MODES)
+        if self.fit_t_min is not None:
+            _range("fit_t_min", self.fit_t_min, 0.0, 1e9)
 
     @classmethod
     def from_dict(cls, values):

@@ -16,7 +16,7 @@ import numpy as np
 
 from core.errors import PolycubeInputError, StageNotAvailableError
 from core.params import ReconstructionParams
-from core.progress import NO_PROGRESS
+from core.progress import NO_PROGRESS, SubProgress
 
 CORE_STAGES = ("intake", "parts", "frames", "labeling", "basemesh", "fit", "patches")
 STOP_AFTER_CHOICES = ("intake", "parts", "labeling", "basemesh", "fit", "solid")
@@ -47,8 +47,12 @@ def stage_intake(state, params):
     from core.mesh_io import read_triangle_soup
     from core.validate import validate_target
 
-    path = state["input_path"]
-    vertices, faces = read_triangle_soup(path)
+    if "input_mesh" in state:  # (vertices, faces) arrays given in memory, e.g. by a document
+        path = state.get("input_path", "mesh")
+        vertices, faces = state["input_mesh"]
+    else:
+        path = state["input_path"]
+        vertices, faces = read_triangle_soup(path)
     mesh, summary = validate_target(vertices, faces, components=params.components,
                                     check_self_intersections=params.check_self_intersections,
                                     name=str(path))
@@ -196,11 +200,12 @@ def stage_fit(state, params):
     base = state["base_mesh"]
     levels = fit_levels(base.n_faces, params.subdivision_levels)
     fitted, info = fit_base_mesh(base, state["target"], levels=levels,
-                                 iterations=params.fit_iterations, mode="inside")
-    report = {"mode": "inside", "levels": levels, **{key: info[key] for key in (
+                                 iterations=params.fit_iterations, mode=params.fit_mode,
+                                 t_min=params.fit_t_min, progress=state.get("progress"))
+    report = {"mode": params.fit_mode, "levels": levels, **{key: info[key] for key in (
         "iterations", "stopped", "mean_distance", "max_distance", "outside_volume_fraction",
         "uncovered_volume_fraction", "initial_mean_distance", "initial_max_distance", "initial_outside_volume_fraction",
-        "seconds") if key in info}}
+        "t_min", "seconds") if key in info}}
     report["self_intersections"] = count_limit_self_intersections(fitted, levels)
     message = ("" if report["self_intersections"] == 0 else
                f"warning: the fitted limit surface intersects itself "
@@ -259,7 +264,13 @@ LAST_CORE_STAGE = {"intake": "intake", "parts": "frames", "labeling": "labeling"
 
 
 def run_stages(state, stages, params, progress=NO_PROGRESS, report=None):
-    """Run ``stages`` in order on ``state``; returns ``(state, report, failed_exception)``."""
+    """Run ``stages`` in order on ``state``; returns ``(state, report, failed_exception)``.
+
+    While a stage runs, ``state["progress"]`` is its share of ``progress`` (a
+    ``SubProgress`` the stage reports its own fraction to, and that cancels); it is
+    removed when the run ends. ``state["input_mesh"] = (vertices, faces)`` makes the
+    intake validate those arrays instead of reading ``state["input_path"]``.
+    """
     report = report if report is not None else {"stages": {}}
     report.setdefault("stages", {})
     blocked_by = None
@@ -271,6 +282,7 @@ def run_stages(state, stages, params, progress=NO_PROGRESS, report=None):
             continue
         progress.check_cancel()
         progress.report(name, index / len(stages))
+        state["progress"] = SubProgress(progress, index / len(stages), (index + 1) / len(stages))
         start = time.perf_counter()
         try:
             output = STAGE_FUNCTIONS[name](state, params)
@@ -289,6 +301,7 @@ def run_stages(state, stages, params, progress=NO_PROGRESS, report=None):
             report[name] = stage_report
         entry["seconds"] = round(time.perf_counter() - start, 4)
         report["stages"][name] = entry
+    state.pop("progress", None)
     progress.report("done", 1.0)
     return state, report, failed
 

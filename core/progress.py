@@ -17,3 +17,29 @@ class Progress:
 
 
 NO_PROGRESS = Progress()
+
+
+class SubProgress(Progress):
+    """The part ``[start, end]`` of a parent's progress, for one step of a longer run.
+
+    A step reports its own fraction in [0, 1]; the parent sees
+    ``start + fraction * (end - start)``, so a bar spanning the whole run never jumps
+    back when the next step starts counting from 0.
+
+    Parameters
+    ----------
+    parent : Progress
+    start, end : float, 0 <= start <= end <= 1, the parent's fractions this step covers.
+    """
+
+    def __init__(self, parent, start, end):
+        self.parent = parent
+        self.start = float(start)
+        self.end = float(end)
+
+    def report(self, stage, fraction, message=""):
+        fraction = min(max(float(fraction), 0.0), 1.0)
+        self.parent.report(stage, self.start + fraction * (self.end - self.start), message)
+
+    def check_cancel(self):
+        self.parent.check_cancel()

@@ -348,3 +348,381 @@ def reconstruct(doc, mesh_path, progress=NO_PROGRESS, **params):
     from polycube_wb.brep import patches_to_solid
 
     return add_solid(doc, patches_to_solid(result.state["patches"]), name + "_solid")
+
+
+# ----------------------------------------------------------------------------------------
+# Parametric document objects (one per stage): factories, recompute, document operations
+# ----------------------------------------------------------------------------------------
+
+_STAGE_OBJECTS = {
+    # kind: (FreeCAD type, proxy module, proxy class)
+    "Target": ("Mesh::FeaturePython", "polycube_wb.objects.target", "TargetProxy"),
+    "Segmentation": ("Mesh::FeaturePython", "polycube_wb.objects.segmentation",
+                     "SegmentationProxy"),
+    "BaseMesh": ("Part::FeaturePython", "polycube_wb.objects.base_mesh", "BaseMeshProxy"),
+    "Fit": ("Part::FeaturePython", "polycube_wb.objects.fit", "FitProxy"),
+    "Solid": ("Part::FeaturePython", "polycube_wb.objects.solid", "SolidProxy"),
+    "Deviation": ("Mesh::FeaturePython", "polycube_wb.objects.deviation", "DeviationProxy"),
+}
+
+
+def _make(doc, kind, name, links, properties):
+    """Add a stage object of ``kind`` with its links and properties set; returns it."""
+    import importlib
+
+    from core.errors import ParameterError
+
+    type_name, module, cls = _STAGE_OBJECTS[kind]
+    obj = doc.addObject(type_name, name)
+    getattr(importlib.import_module(module), cls)(obj)
+    for prop, value in links.items():
+        setattr(obj, prop, value)
+    for prop, value in properties.items():
+        if prop not in obj.PropertiesList:
+            known = ", ".join(sorted(obj.PropertiesList))
+            doc.removeObject(obj.Name)
+            raise ParameterError(f"{kind} has no property {prop!r}; its properties: {known}")
+        setattr(obj, prop, value)
+    _attach_view_provider(obj, kind)
+    return obj
+
+
+def _attach_view_provider(obj, kind):
+    import FreeCAD
+
+    if FreeCAD.GuiUp and obj.ViewObject is not None:
+        from polycube_wb.gui.view_providers import attach_view_provider
+
+        attach_view_provider(obj, kind)
+
+
+def stage_kind(obj):
+    """``Target``, ``Segmentation``, ... for a stage object, else None."""
+    from polycube_wb.objects.base import stage_kind as kind_of
+
+    return kind_of(obj)
+
+
+def make_target(doc, source, name="Target", components="largest",
+                check_self_intersections=True):
+    """Add a Target object holding a validated mesh (embedded in the document).
+
+    Parameters
+    ----------
+    doc : App.Document
+    source : path of a mesh file (STL, OBJ, PLY, OFF), a ``core.types.TriMesh``, or a
+        ``Mesh::Feature`` (e.g. the plain target of a document made by an older version;
+        its placement is applied).
+    components, check_self_intersections : as in ``core.validate.validate_target``.
+
+    Returns
+    -------
+    Mesh::FeaturePython, not yet recomputed (``doc.recompute()`` or :func:`recompute`).
+
+    Raises
+    ------
+    InvalidMeshError
+        The file cannot be read or the mesh is not a valid closed solid; nothing is added.
+    """
+    from core.types import TriMesh
+    from core.validate import validate_target
+    from polycube_wb.convert import arrays_to_mesh, mesh_to_arrays
+
+    source_file = ""
+    if isinstance(source, TriMesh):
+        vertices, faces = source.vertices, source.faces
+    elif hasattr(source, "Mesh"):
+        vertices, faces = mesh_to_arrays(source.Mesh)
+        source_file = getattr(source, "PolycubeSource", "") or getattr(source, "SourceFile", "")
+    else:
+        from core.mesh_io import read_triangle_soup
+
+        source_file = os.path.abspath(os.fspath(source))
+        vertices, faces = read_triangle_soup(source_file)
+    mesh, _ = validate_target(vertices, faces, components=components,
+                              check_self_intersections=check_self_intersections,
+                              name=source_file or name)
+    obj = _make(doc, "Target", name, {}, {"CheckSelfIntersections": check_self_intersections})
+    obj.Mesh = arrays_to_mesh(mesh.vertices, mesh.faces)
+    obj.SourceFile = source_file
+    return obj
+
+
+def make_segmentation(doc, target, name="Segmentation", **properties):
+    """Add a Segmentation (parts, frames, HBECVT labeling) of ``target``.
+
+    ``properties``: ``PartMode`` (``single``/``auto``), ``BlendFactor``, ``Lambda``,
+    ``Penalty``, ``MaxSweeps``, ``Repair``, ``ColourBy``; defaults are the preferences,
+    else the paper's values.
+    """
+    return _make(doc, "Segmentation", name, {"Target": target}, properties)
+
+
+def make_base_mesh(doc, segmentation, name="BaseMesh", **properties):
+    """Add a BaseMesh (polycube and coarse quad cage) built from ``segmentation``.
+
+    ``properties``: ``TargetFaces``, ``MaxBaseFaces``.
+    """
+    return _make(doc, "BaseMesh", name, {"Segmentation": segmentation}, properties)
+
+
+def make_fit(doc, cage, name="Fit", **properties):
+    """Add a Fit of the cage object ``cage`` (a BaseMesh or a Fit) to its target.
+
+    ``properties``: ``Iterations``, ``SubdivisionLevels``, ``Mode`` (``inside`` /
+    ``nearest``), ``AutoMinThickness``, ``MinThickness`` (mm).
+    """
+    return _make(doc, "Fit", name, {"BaseMesh": cage}, properties)
+
+
+def make_solid(doc, cage, name="Solid", **properties):
+    """Add a Solid: the limit surface of the cage object ``cage`` as B-spline faces.
+
+    ``properties``: ``Depth`` (grading at extraordinary vertices).
+    """
+    return _make(doc, "Solid", name, {"Cage": cage}, properties)
+
+
+def make_deviation(doc, solid, target, name="Deviation", **properties):
+    """Add a Deviation colour map (and check figures) of ``solid`` against ``target``.
+
+    ``properties``: ``Tolerance`` (tessellation, fraction of the diagonal), ``Scale``.
+    """
+    return _make(doc, "Deviation", name, {"Solid": solid, "Target": target}, properties)
+
+
+STAGE_ORDER = ("Target", "Segmentation", "BaseMesh", "Fit", "Solid")
+
+
+def upstream_objects(obj):
+    """Dict kind -> object of ``obj`` and the stage objects it is built from."""
+    found = {}
+    stack = [obj]
+    while stack:
+        current = stack.pop()
+        kind = stage_kind(current)
+        if kind is None or kind in found:
+            continue
+        found[kind] = current
+        stack.extend(getattr(current, link) for link in current.Proxy.INPUTS)
+    return found
+
+
+def find_stage(doc, kind, start=None):
+    """The stage object of ``kind`` to work on, or None.
+
+    With ``start`` (e.g. the selection): the one ``start`` is built from, else the last
+    one built from ``start``; otherwise (or when there is none) the last one in ``doc``.
+    """
+    if start is not None:
+        upstream = upstream_objects(start).get(kind)
+        if upstream is not None:
+            return upstream
+        built = {obj.Name for obj in start.InListRecursive}
+        for obj in reversed(doc.Objects):
+            if obj.Name in built and stage_kind(obj) == kind:
+                return obj
+    for obj in reversed(doc.Objects):
+        if stage_kind(obj) == kind:
+            return obj
+    return None
+
+
+def make_chain(doc, start, last="Solid", **properties):
+    """Add the stage objects after ``start`` up to ``last`` (reusing existing ones).
+
+    Parameters
+    ----------
+    start : a stage object (typically the Target).
+    last : kind of the last stage to have (``Segmentation`` ... ``Solid``).
+    properties : ``{kind: {property: value}}`` for the objects that are created.
+
+    Returns
+    -------
+    dict kind -> object, for every kind from the Target to ``last``.
+    """
+    factories = {"Segmentation": make_segmentation, "BaseMesh": make_base_mesh,
+                 "Fit": make_fit, "Solid": make_solid}
+    chain = upstream_objects(start)
+    previous = start
+    for kind in STAGE_ORDER[STAGE_ORDER.index(stage_kind(start)) + 1:
+                            STAGE_ORDER.index(last) + 1]:
+        existing = next((obj for obj in previous.InList
+                         if stage_kind(obj) == kind and is_reusable(obj)), None)
+        chain[kind] = existing or factories[kind](doc, previous, **properties.get(kind, {}))
+        previous = chain[kind]
+    return chain
+
+
+def move_cage_vertices(obj, moves):
+    """Move vertices of a cage object (BaseMesh or Fit); the next recompute follows.
+
+    Parameters
+    ----------
+    obj : a BaseMesh or Fit object.
+    moves : dict vertex index -> new position (x, y, z) in model units (mm).
+
+    Raises
+    ------
+    ParameterError
+        ``obj`` holds no cage, an index is not a cage vertex, or a position is not 3
+        finite numbers.
+    """
+    import FreeCAD
+
+    from core.errors import ParameterError
+
+    if stage_kind(obj) not in ("BaseMesh", "Fit"):
+        raise ParameterError(f"{obj.Label} is not a BaseMesh or Fit object (it has no cage)")
+    points = list(obj.CageVertices)
+    for index, position in moves.items():
+        if not isinstance(index, (int, np.integer)) or not 0 <= index < len(points):
+            raise ParameterError(f"{obj.Label}: {index!r} is not a cage vertex index "
+                                 f"(0..{len(points) - 1})")
+        position = np.asarray(position, dtype=np.float64)
+        if position.shape != (3,) or not np.all(np.isfinite(position)):
+            raise ParameterError(f"{obj.Label}: vertex {index} position must be 3 finite "
+                                 f"numbers, got {position.tolist()}")
+        points[index] = FreeCAD.Vector(*position.tolist())
+    obj.CageVertices = points
+
+
+def is_reusable(obj):
+    """Whether later stages may be built on ``obj`` by default.
+
+    A Segmentation with automatic parts is not: assembling the part base meshes at their
+    interfaces is not built yet, so *Segment parts* shows the parts without changing what
+    the base mesh is built from (select it explicitly to try).
+    """
+    return not (stage_kind(obj) == "Segmentation" and obj.PartMode == "auto")
+
+
+class RecomputeOutcome:
+    """What a :func:`recompute` did.
+
+    failures : dict object name -> one-line reason its stage failed (empty when all ran).
+    cancelled : bool, the user cancelled (the document was rolled back).
+    """
+
+    def __init__(self, failures, cancelled):
+        self.failures = failures
+        self.cancelled = cancelled
+
+    @property
+    def ok(self):
+        return not self.failures and not self.cancelled
+
+
+def recompute(doc, progress=NO_PROGRESS):
+    """``doc.recompute()`` with ``progress`` reaching the stage objects; returns the outcome.
+
+    FreeCAD does not propagate errors from ``execute``; the outcome lists them. An object
+    whose stage failed is marked invalid (``obj.isValid()`` is False) with the reason in its
+    ``Status`` property; the objects after it are not recomputed.
+    """
+    from polycube_wb.objects.base import recompute_session
+
+    with recompute_session(doc, progress) as session:
+        doc.recompute()
+    return RecomputeOutcome(dict(session.failures), session.cancelled)
+
+
+def run_in_transaction(doc, title, build, progress=NO_PROGRESS):
+    """Run ``build()`` (adds or changes objects), then recompute, as one undo step.
+
+    When the user cancels during the recompute, or ``build`` raises, the document is
+    rolled back to what it was before (nothing half-made stays; needs ``doc.UndoMode``,
+    which the GUI turns on).
+
+    Returns
+    -------
+    (what ``build`` returned, RecomputeOutcome)
+
+    Raises
+    ------
+    core.errors.Cancelled
+        The user cancelled; the document is as before.
+    """
+    from core.errors import Cancelled
+
+    up_to_date = [obj for obj in doc.Objects if "Touched" not in obj.State]
+    doc.openTransaction(title)
+    try:
+        built = build()
+        outcome = recompute(doc, progress)
+    except BaseException:
+        doc.abortTransaction()
+        raise
+    if outcome.cancelled:
+        doc.abortTransaction()
+        _restore_states(doc, up_to_date)
+        raise Cancelled(f"{title}: cancelled by the user; the document is as before")
+    doc.commitTransaction()
+    return built, outcome
+
+
+def _restore_states(doc, up_to_date):
+    """After a rollback: the objects that were up to date before are so again.
+
+    The rollback restores their properties but leaves FreeCAD's ``Touched``/``Invalid``
+    flags of the cancelled run; recomputing such an object alone only redisplays its
+    restored result (its inputs and parameters match what it last ran with).
+    """
+    for obj in up_to_date:
+        if doc.getObject(obj.Name) is not obj:
+            continue
+        if not obj.isValid():
+            obj.recompute()
+        obj.purgeTouched()
+
+
+def describe(obj):
+    """One line about a stage object's result (for the Report view and messages)."""
+    kind = stage_kind(obj)
+    if not obj.isValid() or obj.Status not in ("ok", ""):
+        return f"{obj.Label}: failed: {obj.Status}"
+    if kind == "Target":
+        return f"{obj.Label}: {obj.Triangles} triangles, genus {obj.Genus}"
+    if kind == "Segmentation":
+        return (f"{obj.Label}: labeling {'valid' if obj.Valid else 'INVALID'}: {obj.Parts} "
+                f"part(s), {obj.Charts} charts, {obj.Corners} corners; invalid charts "
+                f"{obj.InvalidCharts}, boundaries {obj.InvalidBoundaries}, corners "
+                f"{obj.InvalidCorners}")
+    if kind in ("BaseMesh", "Fit"):
+        line = (f"{obj.Label}: cage of {obj.Faces} faces, {obj.Vertices} vertices, "
+                f"{obj.ExtraordinaryVertices} extraordinary, genus {obj.Genus}")
+        if kind == "Fit":
+            line += (f"; mean distance {obj.MeanDistance:.2e}, max {obj.MaxDistance:.2e} of "
+                     f"the diagonal, outside volume {obj.OutsideVolume:.2e} ({obj.Stopped})")
+        return line
+    if kind == "Solid":
+        return (f"{obj.Label}: solid of {obj.BrepFaces} B-spline faces, valid "
+                f"{obj.BrepValid}, volume {obj.BrepVolume:.6g}")
+    if kind == "Deviation":
+        return (f"{obj.Label}: deviation mean {obj.MeanDeviation:.3g} ({obj.MeanDeviationPercent:.3f} "
+                f"% of the diagonal), max {obj.MaxDeviation:.3g} ({obj.MaxDeviationPercent:.3f} "
+                f"%); outside volume {obj.OutsideVolume:.3f} %, uncovered {obj.UncoveredVolume:.3f} "
+                f"%; watertight {obj.Watertight}")
+    return obj.Label
+
+
+def import_subd_cage(doc, path, progress=NO_PROGRESS, depth=DEFAULT_EXPORT_DEPTH):
+    """Turn a SubD cage (closed polygon OBJ) into a B-spline solid ``Part::Feature`` in ``doc``.
+
+    Returns
+    -------
+    (Part::Feature, dict) the new object and the report of :func:`subd_to_solid`.
+    """
+    from polycube_wb.document import add_solid
+
+    path = os.path.abspath(os.fspath(path))
+    solid, report = subd_to_solid(path, depth=depth, measure=True, progress=progress)
+    name = os.path.splitext(os.path.basename(path))[0] + "_solid"
+    return add_solid(doc, solid, name), report
+
+
+def export_step(obj, path):
+    """Write the shape of ``obj`` (a Part object) to a STEP file; returns the path."""
+    from polycube_wb.step_io import write_step
+
+    return write_step(obj.Shape, path)

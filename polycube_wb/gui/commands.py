@@ -1,20 +1,19 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""The workbench's commands and the document operations behind them.
+"""The workbench's commands: thin wrappers over ``polycube_wb.api``.
 
-Each command's ``Activated`` only gathers input (file dialogs, the selection) and calls
-one of the module-level operations below (``import_target_mesh``, ``label_polycube``,
-``import_subd_cage``, ...). The operations do the work inside a document transaction
-(one undo step) and take no dialogs, so scripts and tests call them directly.
+A command gathers its input (a file dialog, the selection), then runs the API calls as
+one undo step with the progress bar (``run_stage_command``): the calls that create or
+change objects go through ``FreeCADGui.doCommand``, so the Python console shows a script
+that replays them, and the recompute that follows runs the stages (Esc cancels and
+rolls the document back). Success is reported in the Report view and the status bar;
+failures also in a message box: bad input (``PolycubeInputError``) a warning, a stage
+that is not built yet an information box naming it, anything else an error box plus the
+traceback in the Report view.
 
-Errors reach the user twice: as a line in the Report view (``FreeCAD.Console``) and as
-a message box. Bad input (``PolycubeInputError``) is a warning box, a stage that is not
-built yet (``StageNotAvailableError``) an information box naming the stage, anything
-else an error box plus the traceback in the Report view.
-
-Importing this module needs the FreeCAD GUI only for ``register()`` and the commands'
-``Activated``; numpy and ``core`` are imported when a command runs.
+Each stage command works on the selected object's chain (or the last target): it reuses
+the stage objects that exist, creates the missing ones, and hides the displays the new
+result supersedes.
 """
-import contextlib
 import os
 import traceback
 
@@ -23,461 +22,28 @@ import FreeCADGui
 
 from polycube_wb.gui import icon_path
 
-SOURCE_PROPERTY = "PolycubeSource"
-"""Property on an imported target ``Mesh::Feature``: the mesh file it was read from."""
-PARTS_PROPERTY = "PolycubeParts"
-"""Property on a target: how the pipeline splits it into parts (``single`` or ``auto``)."""
-RESULT_KIND_PROPERTY = "PolycubeResult"
-"""Property on a result group (``parts`` or ``labels``)."""
-RESULT_TARGET_PROPERTY = "PolycubeTarget"
-"""Link from a result group to its target mesh object."""
-
 MESH_FILTER = "Triangle meshes (*.stl *.obj *.ply *.off);;All files (*)"
 CAGE_FILTER = "Polygon meshes (*.obj);;All files (*)"
 STEP_FILTER = "STEP files (*.step *.stp)"
-PREFERENCES = "User parameter:BaseApp/Preferences/Mod/Polycube"
-
-LABEL_NAMES = ("PlusX", "MinusX", "PlusY", "MinusY", "PlusZ", "MinusZ")
-"""Object names of the six polycube labels (directions in the part's own frame)."""
-LABEL_COLOURS = ((0.90, 0.16, 0.16), (0.55, 0.05, 0.05), (0.20, 0.75, 0.20),
-                 (0.05, 0.40, 0.05), (0.20, 0.45, 0.95), (0.05, 0.15, 0.55))
-PART_COLOURS = ((0.12, 0.47, 0.71), (1.00, 0.50, 0.05), (0.17, 0.63, 0.17),
-                (0.84, 0.15, 0.16), (0.58, 0.40, 0.74), (0.55, 0.34, 0.29),
-                (0.89, 0.47, 0.76), (0.50, 0.50, 0.50), (0.74, 0.74, 0.13),
-                (0.09, 0.75, 0.81))
-
 NOT_AVAILABLE = "not available yet"
+SUPERSEDES = {"Segmentation": ("Target",), "BaseMesh": ("Segmentation",),
+              "Fit": ("BaseMesh",), "Solid": ("Fit", "BaseMesh"), "Deviation": ("Solid",)}
+"""Displays hidden when a stage's result is shown."""
 
 
 # ----------------------------------------------------------------------------------------
-# Document operations (no dialogs; usable from scripts and tests)
-# ----------------------------------------------------------------------------------------
-
-@contextlib.contextmanager
-def transaction(doc, name):
-    """One undo step for everything done inside the block.
-
-    The transaction is aborted (changes rolled back) when the block raises, except for
-    ``StageNotAvailableError``: what was added before the missing stage (e.g. the target
-    mesh of *Reconstruct all*) is kept and can be undone.
-    """
-    from core.errors import StageNotAvailableError
-
-    doc.openTransaction(name)
-    try:
-        yield
-    except StageNotAvailableError:
-        doc.commitTransaction()
-        raise
-    except BaseException:
-        doc.abortTransaction()
-        raise
-    doc.commitTransaction()
-
-
-def import_target_mesh(doc, path, components="largest", check_self_intersections=True):
-    """Read and validate a target mesh file and add it as a ``Mesh::Feature``.
-
-    Parameters
-    ----------
-    doc : App.Document
-    path : str, STL / OBJ / PLY / OFF file.
-    components, check_self_intersections : as in ``core.validate.validate_target``.
-
-    Returns
-    -------
-    (Mesh::Feature, dict)
-        The new object (with the ``PolycubeSource`` and ``PolycubeParts`` properties) and
-        the intake summary (triangles, vertices, genus, components, bbox_diagonal, ...).
-
-    Raises
-    ------
-    InvalidMeshError
-        The file cannot be read or the mesh is not a valid closed solid; the document
-        is not changed.
-    """
-    from core.mesh_io import read_triangle_soup
-    from core.validate import validate_target
-    from polycube_wb.document import add_target_mesh
-
-    path = os.path.abspath(os.fspath(path))
-    mesh, summary = validate_target(*read_triangle_soup(path), components=components,
-                                    check_self_intersections=check_self_intersections,
-                                    name=path)
-    with transaction(doc, "Import target mesh"):
-        obj = add_target_mesh(doc, mesh, _base_name(path))
-        mark_target(obj, path)
-    FreeCAD.Console.PrintMessage(
-        f"Polycube: imported {path}: {summary['triangles']} triangles, "
-        f"{summary['vertices']} vertices, genus {summary['genus']}, "
-        f"{summary['components']} component(s), bounding-box diagonal "
-        f"{summary['bbox_diagonal']:.6g}, volume {summary['volume']:.6g}\n")
-    for warning in summary["warnings"]:
-        FreeCAD.Console.PrintWarning(f"Polycube: {path}: {warning}\n")
-    return obj, summary
-
-
-def mark_target(obj, path, parts="single"):
-    """Record on ``obj`` that it is the target mesh read from ``path`` (idempotent)."""
-    from core.params import PART_MODES
-
-    if SOURCE_PROPERTY not in obj.PropertiesList:
-        obj.addProperty("App::PropertyFile", SOURCE_PROPERTY, "Polycube",
-                        "Mesh file this target was read from")
-        obj.setEditorMode(SOURCE_PROPERTY, 1)
-    if PARTS_PROPERTY not in obj.PropertiesList:
-        obj.addProperty("App::PropertyEnumeration", PARTS_PROPERTY, "Polycube",
-                        "Parts for labeling: 'single' (whole mesh) or 'auto' (curve skeleton)")
-        setattr(obj, PARTS_PROPERTY, list(PART_MODES))
-        setattr(obj, PARTS_PROPERTY, parts)
-    setattr(obj, SOURCE_PROPERTY, os.fspath(path))
-
-
-def is_target(obj):
-    """True if ``obj`` is a target mesh added by this workbench."""
-    return obj.isDerivedFrom("Mesh::Feature") and SOURCE_PROPERTY in obj.PropertiesList
-
-
-def find_target(doc, selection=()):
-    """The target mesh to work on: the selected one, else the last one added to ``doc``.
-
-    Returns None when ``doc`` holds no target.
-    """
-    for obj in selection:
-        if is_target(obj):
-            return obj
-    for obj in reversed(doc.Objects):
-        if is_target(obj):
-            return obj
-    return None
-
-
-def segment_parts(doc, target, progress=None):
-    """Split the target into parts (curve-skeleton segmentation) and show them.
-
-    Sets the target's ``PolycubeParts`` to ``auto`` (so *Label polycube* uses these
-    parts) and adds a group with one coloured mesh per part, replacing an earlier one.
-
-    Returns
-    -------
-    (App::DocumentObjectGroup, dict) the group and the report's ``parts`` section.
-    """
-    result = _run_to(target, "parts", progress, parts="auto")
-    state = result.state
-    with transaction(doc, "Segment parts"):
-        setattr(target, PARTS_PROPERTY, "auto")
-        n_parts = int(state["face_part"].max()) + 1
-        names = [f"Part{k:03d}" for k in range(n_parts)]
-        colours = [PART_COLOURS[k % len(PART_COLOURS)] for k in range(n_parts)]
-        group = _show_face_groups(doc, target, state["target"], state["face_part"], names,
-                                  colours, "parts")
-    section = result.report.get("parts", {})
-    FreeCAD.Console.PrintMessage(
-        f"Polycube: {target.Label}: {n_parts} part(s) "
-        f"({section.get('pieces', 'n/a')} skeleton pieces, "
-        f"{section.get('junctions', 'n/a')} junctions)\n")
-    return group, section
-
-
-def label_polycube(doc, target, progress=None):
-    """Run the pipeline up to the polycube labeling and show the six labels.
-
-    Uses the target's ``PolycubeParts`` mode. Adds a group with one coloured mesh per
-    label (``PlusX`` ... ``MinusZ``, directions in each part's own frame), replacing an
-    earlier one, hides the target, and prints the validity figures.
-
-    Returns
-    -------
-    (App::DocumentObjectGroup, dict) the group and the report's ``labeling`` section.
-    """
-    result = _run_to(target, "labeling", progress, parts=getattr(target, PARTS_PROPERTY))
-    state, report = result.state, result.report["labeling"]
-    with transaction(doc, "Label polycube"):
-        group = _show_face_groups(doc, target, state["target"], state["face_label"],
-                                  list(LABEL_NAMES), list(LABEL_COLOURS), "labels")
-        if target.ViewObject is not None:
-            target.ViewObject.Visibility = False
-    print_labeling_report(target.Label, report)
-    return group, report
-
-
-def build_base_mesh(doc, target, progress=None):
-    """Run the pipeline to the coarse quad base mesh (one part) and show its cage.
-
-    Returns
-    -------
-    (Part::Feature, dict) the cage object and the report's ``base_mesh`` section.
-
-    Raises
-    ------
-    StageNotAvailableError when the base mesh cannot be built yet (e.g. several parts).
-    """
-    obj, report = _run_and_show_cage(doc, target, "basemesh", "BaseMesh", "base mesh", progress)
-    section = report["base_mesh"]
-    FreeCAD.Console.PrintMessage(
-        f"Polycube: {target.Label}: base mesh {section['faces']} faces ({section['quads']} quads), "
-        f"{section['vertices']} vertices, {section['extraordinary_vertices']} extraordinary "
-        f"vertices, genus {section['genus']}\n")
-    return obj, section
-
-
-def fit_to_target(doc, target, progress=None, **params):
-    """Run the pipeline through the shape optimisation and show the fitted base mesh's cage.
-
-    ``params`` are pipeline parameters (e.g. ``fit_iterations``).
-
-    Returns
-    -------
-    (Part::Feature, dict) the cage object and the report's ``fit`` section.
-    """
-    obj, report = _run_and_show_cage(doc, target, "fit", "FittedBaseMesh", "fitted base mesh",
-                                     progress, **params)
-    fit = report["fit"]
-    FreeCAD.Console.PrintMessage(
-        f"Polycube: {target.Label}: fit {fit['iterations']} iterations ({fit['stopped']}); mean "
-        f"distance {fit['mean_distance']:.2e}, max {fit['max_distance']:.2e} of the bounding-box "
-        f"diagonal; outside volume {fit['outside_volume_fraction']:.2e} of the target\n")
-    return obj, fit
-
-
-def _run_and_show_cage(doc, target, stop_after, suffix, what, progress, **params):
-    """Run to ``stop_after`` and show ``state['base_mesh']`` as ``<target>_<suffix>``."""
-    from core.errors import StageNotAvailableError
-    from polycube_wb.document import add_base_mesh
-
-    params.setdefault("parts", getattr(target, PARTS_PROPERTY))
-    result = _run_to(target, stop_after, progress, **params)
-    stages = result.report["stages"]
-    if any(entry["status"] != "ok" for entry in stages.values()):
-        stage, entry = next((name, entry) for name, entry in stages.items()
-                            if entry["status"] != "ok")
-        raise StageNotAvailableError(f"the '{stage}' stage did not run: {entry['message']}")
-    name = f"{target.Name}_{suffix}"
-    with transaction(doc, f"Build {what}"):
-        old = doc.getObject(name)
-        if old is not None:
-            doc.removeObject(old.Name)
-        obj = add_base_mesh(doc, result.state["base_mesh"], name)
-        obj.Label = f"{target.Label} {what}"
-    return obj, result.report
-
-
-def print_labeling_report(name, report):
-    """Write the labeling validity figures to the Report view."""
-    line = (f"Polycube: {name}: labeling {'valid' if report['valid'] else 'INVALID'}: "
-            f"{report['parts']} part(s), {report['charts']} charts, {report['corners']} "
-            f"corners; invalid charts {report['invalid_charts']}, invalid boundaries "
-            f"{report['invalid_boundaries']}, invalid corners {report['invalid_corners']}, "
-            f"turning points {report['turning_points']}; mean normal-to-label angle "
-            f"{report['mean_angle_deg']:.2f} deg\n")
-    if report["valid"]:
-        FreeCAD.Console.PrintMessage(line)
-    else:
-        FreeCAD.Console.PrintWarning(line)
-
-
-def reconstruct_all(doc, path, progress=None, **params):
-    """``polycube_wb.api.reconstruct`` inside one transaction; returns the solid's object.
-
-    The target mesh the API adds is marked as a target (``PolycubeSource``) so the
-    stage commands can use it.
-
-    Raises
-    ------
-    StageNotAvailableError
-        A stage the solid needs is not built yet; the target mesh stays in ``doc``.
-    """
-    from core.progress import NO_PROGRESS
-    from polycube_wb import api
-
-    path = os.path.abspath(os.fspath(path))
-    before = {obj.Name for obj in doc.Objects}
-    with transaction(doc, "Reconstruct all"):
-        try:
-            solid = api.reconstruct(doc, path, progress=progress or NO_PROGRESS, **params)
-        finally:
-            for obj in doc.Objects:
-                if obj.Name not in before and obj.isDerivedFrom("Mesh::Feature"):
-                    mark_target(obj, path, params.get("parts", "single"))
-    return solid
-
-
-def import_subd_cage(doc, path, progress=None, depth=None):
-    """Turn a SubD cage (closed polygon OBJ) into a B-spline solid in ``doc``.
-
-    Returns
-    -------
-    (Part::Feature, dict) the new object and the report of
-    ``polycube_wb.api.subd_to_solid`` (``brep``: faces, valid, closed, volume,
-    volume_error_rel, ...).
-    """
-    from core.progress import NO_PROGRESS
-    from polycube_wb import api
-    from polycube_wb.document import add_solid
-
-    path = os.path.abspath(os.fspath(path))
-    depth = api.DEFAULT_EXPORT_DEPTH if depth is None else depth
-    solid, report = api.subd_to_solid(path, depth=depth, measure=True,
-                                      progress=progress or NO_PROGRESS)
-    with transaction(doc, "Import SubD cage as solid"):
-        obj = add_solid(doc, solid, _base_name(path) + "_solid")
-    brep = report["brep"]
-    jump = brep.get("max_normal_jump_deg")
-    FreeCAD.Console.PrintMessage(
-        f"Polycube: {path} -> {obj.Label}: {brep['faces']} B-spline faces, "
-        f"valid {brep['valid']}, closed {brep['closed']}, volume {brep['volume']:.6g} "
-        f"(limit surface {brep['limit_volume']:.6g}, relative error "
-        f"{brep['volume_error_rel']:.2e}), max normal jump "
-        f"{'n/a' if jump is None else f'{jump:.3g} deg'}\n")
-    return obj, report
-
-
-def export_step(obj, path):
-    """Write the shape of ``obj`` (a Part object) to a STEP file; returns the path."""
-    from polycube_wb.step_io import write_step
-
-    written = write_step(obj.Shape, path)
-    FreeCAD.Console.PrintMessage(f"Polycube: wrote {obj.Label} to {written}\n")
-    return written
-
-
-def check_result(solid_obj, target_obj, samples=20000):
-    """Compare a result solid with a target mesh, as ``polycube_wb.api.check`` does.
-
-    Parameters
-    ----------
-    solid_obj : Part object whose shape holds exactly one solid.
-    target_obj : ``Mesh::Feature`` with a closed, outward-oriented mesh.
-    samples : random surface points per surface for the distances.
-
-    Returns
-    -------
-    dict
-        ``valid``, ``closed``, ``faces``, ``watertight`` (tessellation of the solid,
-        manifold3d and trimesh), ``outside_volume_fraction``,
-        ``uncovered_volume_fraction`` (fractions of the target volume) and
-        ``distances`` (``core.quality.surface_distances``, fractions of the target's
-        bounding-box diagonal).
-
-    Raises
-    ------
-    PolycubeInputError
-        The object does not hold exactly one solid.
-    """
-    import numpy as np
-
-    from core.errors import PolycubeInputError
-    from core.quality import containment, is_watertight_manifold, surface_distances
-    from polycube_wb.brep import tessellate
-    from polycube_wb.convert import mesh_to_arrays
-
-    solids = solid_obj.Shape.Solids
-    if len(solids) != 1:
-        raise PolycubeInputError(f"{solid_obj.Label}: expected one solid, found {len(solids)}")
-    solid = solids[0]
-    target_V, target_F = mesh_to_arrays(target_obj.Mesh)
-    diagonal = float(np.linalg.norm(target_V.max(axis=0) - target_V.min(axis=0)))
-    V, F = tessellate(solid, 1e-4 * diagonal)
-    inside = containment(V, F, target_V, target_F)
-    distances = surface_distances(V, F, target_V, target_F, samples=samples)
-    shells = solid.Shells
-    figures = {
-        "result": solid_obj.Label,
-        "target": target_obj.Label,
-        "valid": bool(solid.isValid()),
-        "closed": bool(shells) and all(shell.isClosed() for shell in shells),
-        "faces": len(solid.Faces),
-        "watertight": bool(is_watertight_manifold(V, F)),
-        "outside_volume_fraction": inside["outside_volume_fraction"],
-        "uncovered_volume_fraction": inside["uncovered_volume_fraction"],
-        "distances": distances,
-    }
-    FreeCAD.Console.PrintMessage(
-        f"Polycube: check {figures['result']} against {figures['target']}: "
-        f"valid {figures['valid']}, closed {figures['closed']}, watertight "
-        f"{figures['watertight']}, {figures['faces']} faces; outside volume "
-        f"{100 * figures['outside_volume_fraction']:.3f} %, uncovered volume "
-        f"{100 * figures['uncovered_volume_fraction']:.3f} % of the target; distance to "
-        f"target mean {distances['result_to_target_mean']:.2e}, Hausdorff "
-        f"{distances['hausdorff']:.2e} (fractions of the bounding-box diagonal)\n")
-    return figures
-
-
-def _run_to(target, stop_after, progress, **params):
-    """Run the core pipeline on a target object's file up to ``stop_after``."""
-    from core.pipeline import reconstruct
-    from core.progress import NO_PROGRESS
-
-    result = reconstruct(getattr(target, SOURCE_PROPERTY), params, progress or NO_PROGRESS,
-                         stop_after)
-    if result.failed is not None:
-        raise result.failed
-    return result
-
-
-def _show_face_groups(doc, target, mesh, face_group, names, colours, kind):
-    """Add a group holding one coloured mesh per face group; replaces an older one.
-
-    Parameters
-    ----------
-    mesh : core.types.TriMesh, the validated target (vertices (n, 3) float64,
-        faces (m, 3) int64).
-    face_group : (m,) int, group index of every face (index into ``names``).
-    names, colours : per group index, object name and RGB in [0, 1].
-    kind : ``parts`` or ``labels``.
-    """
-    import numpy as np
-
-    from polycube_wb.convert import arrays_to_mesh
-
-    _remove_result_groups(doc, target, kind)
-    group = doc.addObject("App::DocumentObjectGroup", f"{target.Name}_{kind}")
-    group.Label = f"{target.Label} {kind}"
-    group.addProperty("App::PropertyString", RESULT_KIND_PROPERTY, "Polycube", "Result kind")
-    group.addProperty("App::PropertyLink", RESULT_TARGET_PROPERTY, "Polycube", "Target mesh")
-    setattr(group, RESULT_KIND_PROPERTY, kind)
-    setattr(group, RESULT_TARGET_PROPERTY, target)
-    vertices = np.asarray(mesh.vertices)
-    faces = np.asarray(mesh.faces)
-    face_group = np.asarray(face_group)
-    for index in np.unique(face_group):
-        sub = faces[face_group == index]
-        used, local = np.unique(sub, return_inverse=True)
-        obj = doc.addObject("Mesh::Feature", f"{target.Name}_{names[index]}")
-        obj.Label = f"{target.Label} {names[index]}"
-        obj.Mesh = arrays_to_mesh(vertices[used], local.reshape(-1, 3))
-        group.addObject(obj)
-        if obj.ViewObject is not None:
-            obj.ViewObject.ShapeColor = tuple(colours[index])
-    doc.recompute()
-    return group
-
-
-def _remove_result_groups(doc, target, kind):
-    for obj in list(doc.Objects):
-        if RESULT_KIND_PROPERTY not in obj.PropertiesList:
-            continue
-        link = getattr(obj, RESULT_TARGET_PROPERTY)
-        if getattr(obj, RESULT_KIND_PROPERTY) == kind and link is not None \
-                and link.Name == target.Name:
-            for child in list(obj.Group):
-                doc.removeObject(child.Name)
-            doc.removeObject(obj.Name)
-
-
-def _base_name(path):
-    return os.path.splitext(os.path.basename(path))[0]
-
-
-# ----------------------------------------------------------------------------------------
-# GUI helpers (dialogs and feedback); tests replace ask_* and message_box
+# Dialogs and feedback (tests replace ask_* and message_box)
 # ----------------------------------------------------------------------------------------
 
 def _last_directory():
+    from polycube_wb.preferences import PREFERENCES
+
     return FreeCAD.ParamGet(PREFERENCES).GetString("LastDirectory", os.path.expanduser("~"))
 
 
 def _remember_directory(path):
+    from polycube_wb.preferences import PREFERENCES
+
     FreeCAD.ParamGet(PREFERENCES).SetString("LastDirectory", os.path.dirname(path))
 
 
@@ -514,19 +80,19 @@ def message_box(kind, title, text):
     getattr(QtGui.QMessageBox, kind)(FreeCADGui.getMainWindow(), title, text)
 
 
+def report_success(text):
+    """A success line in the Report view and the status bar."""
+    FreeCAD.Console.PrintMessage(f"Polycube: {text}\n")
+    FreeCADGui.getMainWindow().statusBar().showMessage(f"Polycube: {text}", 15000)
+
+
 def run_guarded(title, work, with_progress=False):
     """Run ``work(progress)`` with a wait cursor and report any failure.
 
-    Parameters
-    ----------
-    title : str, names the operation in the Report view, the progress bar and boxes.
-    work : callable taking a ``FreeCADProgress`` (``with_progress``) or None.
-    with_progress : show FreeCAD's progress bar (Esc cancels).
-
     Returns
     -------
-    What ``work`` returns, or None after a failure. The bar is stopped and the cursor
-    restored before a message box opens, so the box is never blocked by the bar.
+    What ``work`` returns, or None after a failure or a cancel. The bar is stopped and
+    the cursor restored before a message box opens.
     """
     from PySide import QtCore, QtGui
 
@@ -537,9 +103,12 @@ def run_guarded(title, work, with_progress=False):
     box = None
     QtGui.QApplication.setOverrideCursor(QtCore.Qt.WaitCursor)
     try:
+        if progress is not None:
+            progress.start()
         return work(progress)
     except Cancelled as exc:
-        FreeCAD.Console.PrintWarning(f"Polycube: {title}: {exc}\n")
+        FreeCAD.Console.PrintWarning(f"Polycube: {exc}\n")
+        FreeCADGui.getMainWindow().statusBar().showMessage(f"Polycube: {exc}", 15000)
     except StageNotAvailableError as exc:
         FreeCAD.Console.PrintWarning(f"Polycube: {title}: {NOT_AVAILABLE}: {exc}\n")
         box = ("information", f"Stage {NOT_AVAILABLE}:\n\n{exc}")
@@ -563,6 +132,57 @@ def run_guarded(title, work, with_progress=False):
     return None
 
 
+def run_stage_command(title, doc, build):
+    """Run ``build()`` and the recompute it needs as one undo step, with progress.
+
+    Parameters
+    ----------
+    title : str, the undo step's and the progress bar's name.
+    doc : App.Document
+    build : callable creating or changing objects (through ``FreeCADGui.doCommand``);
+        may return a stage object to report on and show.
+
+    Returns
+    -------
+    api.RecomputeOutcome, or None when it failed before recomputing or was cancelled
+    (the document is then as before). Success and stage failures are reported after the
+    progress bar has stopped (stopping it clears the status bar).
+    """
+    from polycube_wb import api
+
+    done = run_guarded(title, lambda progress: api.run_in_transaction(doc, title, build,
+                                                                      progress),
+                       with_progress=True)
+    if done is None:
+        return None
+    shown, outcome = done
+    if outcome.failures:
+        lines = [f"{doc.getObject(name).Label}: {reason}"
+                 for name, reason in outcome.failures.items()]
+        FreeCAD.Console.PrintWarning(f"Polycube: {title}: " + "; ".join(lines) + "\n")
+        message_box("warning", title, "A stage did not finish:\n\n" + "\n".join(lines))
+    if shown is not None:
+        _supersede(shown)
+        if not outcome.failures:
+            report_success(api.describe(shown))
+    elif not outcome.failures:
+        report_success(f"{title}: done")
+    return outcome
+
+
+def _supersede(obj):
+    """Show ``obj`` and hide the upstream displays its result replaces."""
+    from polycube_wb import api
+
+    if obj.ViewObject is None:
+        return
+    obj.ViewObject.Visibility = True
+    chain = api.upstream_objects(obj)
+    for kind in SUPERSEDES.get(api.stage_kind(obj), ()):
+        if kind in chain and chain[kind] is not obj and chain[kind].ViewObject is not None:
+            chain[kind].ViewObject.Visibility = False
+
+
 def _selection():
     return FreeCADGui.Selection.getSelection()
 
@@ -570,6 +190,44 @@ def _selection():
 def _view_fit():
     if FreeCADGui.ActiveDocument is not None:
         FreeCADGui.SendMsgToActiveView("ViewFit")
+
+
+def _ref(obj):
+    return f"App.getDocument({obj.Document.Name!r}).getObject({obj.Name!r})"
+
+
+def _do(line):
+    """Run a console line (echoed in the Python console) and return ``_polycube_result``."""
+    FreeCADGui.doCommand("from polycube_wb import api")
+    FreeCADGui.doCommand(f"_polycube_result = {line}")
+    import __main__
+
+    return getattr(__main__, "_polycube_result", None)
+
+
+def selected_or_last(kind):
+    """The stage object of ``kind`` for the selection (its chain), else the last one."""
+    from polycube_wb import api
+
+    doc = FreeCAD.ActiveDocument
+    for obj in _selection():
+        if api.stage_kind(obj) is not None:
+            found = api.find_stage(doc, kind, obj)
+            if found is not None:
+                return found
+    return api.find_stage(doc, kind)
+
+
+def target_for_selection():
+    """The Target to work on: the selection's, else the last one; converts an old plain
+    target mesh (``Mesh::Feature`` of an older version) into a Target when selected."""
+    from polycube_wb import api
+
+    for obj in _selection():
+        if api.stage_kind(obj) is None and obj.isDerivedFrom("Mesh::Feature"):
+            return _do(f"api.make_target(App.ActiveDocument, {_ref(obj)}, "
+                       f"name={obj.Name + '_target'!r})")
+    return selected_or_last("Target")
 
 
 # ----------------------------------------------------------------------------------------
@@ -595,7 +253,7 @@ class ImportTargetCommand(_Command):
     ID = "PolyCube_ImportTarget"
     MENU_TEXT = "Import target mesh..."
     TOOLTIP = ("Read a watertight triangle mesh (STL, OBJ, PLY, OFF), validate it and add it "
-               "to the document as the reconstruction target")
+               "to the document (embedded) as the reconstruction target")
 
     def IsActive(self):
         return True
@@ -605,81 +263,226 @@ class ImportTargetCommand(_Command):
         if path is None:
             return
         doc = FreeCAD.ActiveDocument or FreeCAD.newDocument()
-        if run_guarded("Import target mesh", lambda _: import_target_mesh(doc, path)):
-            _view_fit()
+        name = os.path.splitext(os.path.basename(path))[0]
+        run_stage_command("Import target mesh", doc, lambda: _do(
+            f"api.make_target(App.ActiveDocument, {path!r}, name={name!r})"))
+        _view_fit()
 
 
-class _TargetStageCommand(_Command):
-    """Runs ``STAGE(doc, target, progress)`` on the selected (or last imported) target."""
+class _StageCommand(_Command):
+    """Creates the stage ``KIND`` after the selection's chain (reusing what exists)."""
 
-    STAGE = None
+    KIND = ""
+    PROPERTIES = {}
 
     def Activated(self):
         doc = FreeCAD.ActiveDocument
-        target = find_target(doc, _selection())
+        from polycube_wb import api
+
+        existing = selected_or_last(self.KIND)
+        if existing is not None and api.is_reusable(existing) and \
+                _is_on_selected_chain(existing):
+            run_stage_command(self.MENU_TEXT, doc, lambda: _recompute_existing(existing))
+            return
+        target = target_for_selection()
         if target is None:
             _no_target(self.MENU_TEXT)
             return
-        stage = type(self).STAGE
-        run_guarded(self.MENU_TEXT, lambda progress: stage(doc, target, progress),
-                    with_progress=True)
+        run_stage_command(self.MENU_TEXT, doc, lambda: self.create(target))
+
+    def create(self, target):
+        """Make the chain from ``target`` to this stage; returns the new stage object."""
+        chain_start = _chain_start(target, self.KIND)
+        properties = {self.KIND: self.PROPERTIES} if self.PROPERTIES else {}
+        _do(f"api.make_chain(App.ActiveDocument, {_ref(chain_start)}, {self.KIND!r}, "
+            f"**{properties!r})")
+        from polycube_wb import api
+
+        return api.find_stage(FreeCAD.ActiveDocument, self.KIND, chain_start)
 
 
-class SegmentPartsCommand(_TargetStageCommand):
+def _chain_start(target, kind):
+    """Where to extend the chain: the selected stage object if it comes before ``kind``."""
+    from polycube_wb import api
+
+    order = api.STAGE_ORDER
+    for obj in _selection():
+        selected = api.stage_kind(obj)
+        if selected in order and kind in order and order.index(selected) < order.index(kind):
+            return obj
+    return target
+
+
+def _is_on_selected_chain(obj):
+    """True when ``obj`` is selected or built from the selection (or nothing is selected)."""
+    from polycube_wb import api
+
+    selection = [o for o in _selection() if api.stage_kind(o) is not None]
+    if not selection:
+        return True
+    chain = api.upstream_objects(obj).values()
+    return any(o is obj or o in chain for o in selection)
+
+
+def _recompute_existing(obj):
+    FreeCADGui.doCommand(f"{_ref(obj)}.touch()")
+    return obj
+
+
+class SegmentPartsCommand(_StageCommand):
     ID = "PolyCube_SegmentParts"
     MENU_TEXT = "Segment parts"
-    TOOLTIP = ("Split the selected (or last imported) target into parts along its curve "
-               "skeleton and show each part in its own colour")
-    STAGE = segment_parts
+    TOOLTIP = ("Split the target into parts along its curve skeleton and show each part in "
+               "its own colour (a Segmentation with automatic parts; the base mesh stage "
+               "keeps using the single-part labeling unless you select this one)")
+    KIND = "Segmentation"
+
+    def Activated(self):
+        target = target_for_selection()
+        if target is None:
+            _no_target(self.MENU_TEXT)
+            return
+        run_stage_command(self.MENU_TEXT, FreeCAD.ActiveDocument, lambda: _do(
+            f"api.make_segmentation(App.ActiveDocument, {_ref(target)}, "
+            f"name={target.Name + '_parts'!r}, PartMode='auto', ColourBy='Parts')"))
 
 
-class LabelPolycubeCommand(_TargetStageCommand):
+class LabelPolycubeCommand(_StageCommand):
     ID = "PolyCube_LabelPolycube"
     MENU_TEXT = "Label polycube"
-    TOOLTIP = ("Compute the polycube labeling (HBECVT) of the selected (or last imported) "
-               "target, show the six labels in colour and report its validity")
-    STAGE = label_polycube
+    TOOLTIP = ("Compute the polycube labeling (HBECVT) of the selected (or last) target, "
+               "show the six labels in colour and report its validity")
+    KIND = "Segmentation"
 
 
-class BuildBaseMeshCommand(_TargetStageCommand):
+class BuildBaseMeshCommand(_StageCommand):
     ID = "PolyCube_BuildBaseMesh"
     MENU_TEXT = "Build polycube + base mesh"
     TOOLTIP = ("Deform the labeled target into a polycube and build the coarse quad base mesh "
                "(one part); shows its cage")
-    STAGE = build_base_mesh
+    KIND = "BaseMesh"
 
 
-class FitTargetCommand(_TargetStageCommand):
+class FitTargetCommand(_StageCommand):
     ID = "PolyCube_FitTarget"
     MENU_TEXT = "Fit to target"
     TOOLTIP = ("Optimise the base mesh so its Catmull-Clark limit surface fits the target "
-               "from inside (volume, packaging and thickness; relaxed gradient projection)")
-    STAGE = fit_to_target
+               "from inside (volume, packaging and thickness; Esc cancels)")
+    KIND = "Fit"
+
+
+class MakeSolidCommand(_StageCommand):
+    ID = "PolyCube_MakeSolid"
+    MENU_TEXT = "Make solid"
+    TOOLTIP = ("Turn the fitted cage (or the selected cage) into a solid of bicubic B-spline "
+               "faces: its Catmull-Clark limit surface")
+    KIND = "Solid"
 
 
 class ReconstructAllCommand(_Command):
     ID = "PolyCube_ReconstructAll"
-    MENU_TEXT = "Reconstruct all..."
-    TOOLTIP = ("Run every stage on a target mesh file, from validation to the B-spline solid; "
-               "reports the stage that stops it, if any")
+    MENU_TEXT = "Reconstruct all"
+    TOOLTIP = ("Run every stage on the selected (or last) target, from the labeling to the "
+               "B-spline solid; asks for a mesh file when the document has no target")
 
     def IsActive(self):
         return True
 
     def Activated(self):
         doc = FreeCAD.ActiveDocument
-        target = find_target(doc, _selection()) if doc is not None else None
-        start = getattr(target, SOURCE_PROPERTY) if target is not None else None
-        path = ask_open_file("Reconstruct all", MESH_FILTER, start)
-        if path is None:
-            return
-        doc = doc or FreeCAD.newDocument()
-        same_file = target is not None and os.path.abspath(path) == start
-        parts = getattr(target, PARTS_PROPERTY) if same_file else "single"
-        run_guarded("Reconstruct all",
-                    lambda progress: reconstruct_all(doc, path, progress, parts=parts),
-                    with_progress=True)
+        target = target_for_selection() if doc is not None else None
+        if target is None:
+            path = ask_open_file("Reconstruct all: target mesh", MESH_FILTER)
+            if path is None:
+                return
+            doc = doc or FreeCAD.newDocument()
+            name = os.path.splitext(os.path.basename(path))[0]
+
+            def build():
+                made = _do(f"api.make_target(App.ActiveDocument, {path!r}, name={name!r})")
+                return _make_chain_to_solid(made)
+        else:
+            def build():
+                return _make_chain_to_solid(target)
+        run_stage_command("Reconstruct all", doc, build)
         _view_fit()
+
+
+def _make_chain_to_solid(target):
+    from polycube_wb import api
+
+    _do(f"api.make_chain(App.ActiveDocument, {_ref(target)}, 'Solid')")
+    return api.find_stage(FreeCAD.ActiveDocument, "Solid", target)
+
+
+class CheckResultCommand(_Command):
+    ID = "PolyCube_CheckResult"
+    MENU_TEXT = "Check result (deviation map)"
+    TOOLTIP = ("Colour the selected (or last) solid by its distance to the target (its own, "
+               "or the selected mesh), with a legend, and report mean and max distance, "
+               "volume outside and uncovered")
+
+    def IsActive(self):
+        return FreeCAD.ActiveDocument is not None and _solid_to_check() is not None
+
+    def Activated(self):
+        from polycube_wb import api
+
+        solid = _solid_to_check()
+        target = api.upstream_objects(solid).get("Target") or next(
+            (obj for obj in _selection() if obj.isDerivedFrom("Mesh::Feature")),
+            None) or api.find_stage(FreeCAD.ActiveDocument, "Target")
+        if target is None:
+            _no_target(self.MENU_TEXT)
+            return
+        run_stage_command(self.MENU_TEXT, FreeCAD.ActiveDocument, lambda: _do(
+            f"api.make_deviation(App.ActiveDocument, {_ref(solid)}, {_ref(target)}, "
+            f"name={solid.Name + '_deviation'!r})"))
+
+
+def _solid_to_check():
+    """The selected Part object holding a solid, else the last Solid stage object."""
+    for obj in _selection():
+        if obj.isDerivedFrom("Part::Feature") and len(obj.Shape.Solids) == 1:
+            return obj
+    return selected_or_last("Solid")
+
+
+class EditCageCommand(_Command):
+    ID = "PolyCube_EditCage"
+    MENU_TEXT = "Edit cage"
+    TOOLTIP = ("Move vertices of the selected base mesh or fitted cage; the fit (from an "
+               "edited base mesh) or the solid (from an edited fitted cage) follows")
+
+    def IsActive(self):
+        return FreeCAD.ActiveDocument is not None and _selected_cage() is not None
+
+    def Activated(self):
+        cage = _selected_cage()
+        FreeCADGui.ActiveDocument.setEdit(cage.Name, 0)
+
+
+def _selected_cage():
+    from polycube_wb import api
+
+    for obj in _selection():
+        if api.stage_kind(obj) in ("BaseMesh", "Fit"):
+            return obj
+    return None
+
+
+class RecomputeCommand(_Command):
+    ID = "PolyCube_Recompute"
+    MENU_TEXT = "Recompute with progress"
+    TOOLTIP = ("Recompute the document's changed stages (e.g. after editing properties) as "
+               "one undo step with the progress bar; Esc cancels and restores the document")
+
+    def IsActive(self):
+        return FreeCAD.ActiveDocument is not None
+
+    def Activated(self):
+        doc = FreeCAD.ActiveDocument
+        run_stage_command("Recompute", doc, lambda: None)
 
 
 class ImportSubDCommand(_Command):
@@ -696,10 +499,24 @@ class ImportSubDCommand(_Command):
         if path is None:
             return
         doc = FreeCAD.ActiveDocument or FreeCAD.newDocument()
-        done = run_guarded("Import SubD cage as solid",
-                           lambda progress: import_subd_cage(doc, path, progress),
-                           with_progress=True)
+
+        def work(_):
+            doc.openTransaction("Import SubD cage as solid")
+            try:
+                obj, report = _do(f"api.import_subd_cage(App.ActiveDocument, {path!r})")
+            except BaseException:
+                doc.abortTransaction()
+                raise
+            doc.commitTransaction()
+            return obj, report
+
+        done = run_guarded("Import SubD cage as solid", work)
         if done:
+            obj, report = done
+            brep = report["brep"]
+            report_success(f"{path} -> {obj.Label}: {brep['faces']} B-spline faces, valid "
+                           f"{brep['valid']}, volume {brep['volume']:.6g} (limit surface "
+                           f"{brep['limit_volume']:.6g})")
             _view_fit()
 
 
@@ -717,28 +534,8 @@ class ExportStepCommand(_Command):
         start = os.path.join(_last_directory(), obj.Label + ".step")
         path = ask_save_file("Export STEP", STEP_FILTER, start)
         if path is not None:
-            run_guarded("Export STEP", lambda _: export_step(obj, path))
-
-
-class CheckResultCommand(_Command):
-    ID = "PolyCube_CheckResult"
-    MENU_TEXT = "Check result"
-    TOOLTIP = ("Compare the selected solid with the target mesh (the selected mesh, else the "
-               "last imported target): validity, watertightness, volume outside/uncovered "
-               "and surface distances in the Report view")
-
-    def IsActive(self):
-        return any(obj.isDerivedFrom("Part::Feature") for obj in _selection())
-
-    def Activated(self):
-        selection = _selection()
-        solid = next(obj for obj in selection if obj.isDerivedFrom("Part::Feature"))
-        target = next((obj for obj in selection if obj.isDerivedFrom("Mesh::Feature")), None)
-        target = target or find_target(FreeCAD.ActiveDocument)
-        if target is None:
-            _no_target(self.MENU_TEXT)
-            return
-        run_guarded(self.MENU_TEXT, lambda _: check_result(solid, target))
+            run_guarded("Export STEP", lambda _: report_success(
+                f"wrote {obj.Label} to {_do(f'api.export_step({_ref(obj)}, {path!r})')}"))
 
 
 def _no_target(title):
@@ -748,12 +545,14 @@ def _no_target(title):
 
 
 COMMANDS = (ImportTargetCommand, SegmentPartsCommand, LabelPolycubeCommand,
-            BuildBaseMeshCommand, FitTargetCommand, ReconstructAllCommand, ImportSubDCommand,
-            ExportStepCommand, CheckResultCommand)
+            BuildBaseMeshCommand, FitTargetCommand, MakeSolidCommand, ReconstructAllCommand,
+            RecomputeCommand, CheckResultCommand, EditCageCommand, ImportSubDCommand,
+            ExportStepCommand)
 TOOLBAR = tuple(command.ID for command in COMMANDS)
 MENU = (ImportTargetCommand.ID, "Separator", SegmentPartsCommand.ID, LabelPolycubeCommand.ID,
-        BuildBaseMeshCommand.ID, FitTargetCommand.ID, "Separator", ReconstructAllCommand.ID,
-        "Separator", ImportSubDCommand.ID, ExportStepCommand.ID, CheckResultCommand.ID)
+        BuildBaseMeshCommand.ID, FitTargetCommand.ID, MakeSolidCommand.ID, "Separator",
+        ReconstructAllCommand.ID, RecomputeCommand.ID, "Separator", CheckResultCommand.ID,
+        EditCageCommand.ID, "Separator", ImportSubDCommand.ID, ExportStepCommand.ID)
 
 
 def register():

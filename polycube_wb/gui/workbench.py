@@ -20,10 +20,12 @@ class PolycubeWorkbench(FreeCADGui.Workbench):
     Icon = icon_path("PolycubeWorkbench")
 
     def Initialize(self):
-        """Register the commands and build the menu and toolbar (runs once)."""
+        """Register the commands and the preferences page, build the menu and toolbar."""
         from polycube_wb.gui import commands
+        from polycube_wb.gui.preferences import PreferencesPage
 
         commands.register()
+        FreeCADGui.addPreferencePage(PreferencesPage, "Polycube")
         self.appendToolbar(MENU_AND_TOOLBAR, list(commands.TOOLBAR))
         self.appendMenu(MENU_AND_TOOLBAR, list(commands.MENU))
 

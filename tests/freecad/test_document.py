@@ -1,6 +1,16 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Documents: results saved in an FCStd file reopen unchanged; the manifest parses."""
+"""Documents: the parametric stage objects headless, and plain results saved and reopened.
+
+One module-scoped document runs the whole chain on the bundled cantilever (2 fit
+iterations, ~10 s) from a copy of the STL that is deleted right after the import, so
+every later step (recompute, save, reopen, recompute) proves the document is
+self-contained.
+"""
 import os
+import shutil
+
+import numpy as np
+import pytest
 
 import FreeCAD
 
@@ -8,6 +18,355 @@ from core.polymesh_io import write_polymesh
 from core.subdivision import sample_cages
 
 REPO = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+SAMPLE = os.path.join(REPO, "examples", "to_simp_cantilever.stl")
+KINDS = ("Target", "Segmentation", "BaseMesh", "Fit", "Solid")
+
+
+class RunLog:
+    """Records which stage objects actually ran their stage (not just redisplayed)."""
+
+    def __init__(self, objects):
+        self.ran = []
+        for obj in objects:
+            original = obj.Proxy.run
+
+            def run(o, progress, original=original):
+                self.ran.append(o.Name)
+                return original(o, progress)
+
+            obj.Proxy.run = run
+
+
+@pytest.fixture(scope="module")
+def chain_file(tmp_path_factory):
+    """Path of a saved document holding the recomputed chain (source STL deleted)."""
+    from polycube_wb import api
+
+    folder = tmp_path_factory.mktemp("chain")
+    source = folder / "cantilever.stl"
+    shutil.copy(SAMPLE, source)
+    doc = FreeCAD.newDocument("PolycubeChain")
+    target = api.make_target(doc, str(source), check_self_intersections=False)
+    os.remove(source)
+    chain = api.make_chain(doc, target, "Solid", Fit={"Iterations": 2})
+    outcome = api.recompute(doc)
+    assert outcome.ok, outcome.failures
+    path = str(folder / "chain.FCStd")
+    doc.saveAs(path)
+    FreeCAD.closeDocument(doc.Name)
+    assert sorted(chain) == sorted(KINDS)
+    return path
+
+
+@pytest.fixture
+def chain_doc(chain_file, tmp_path):
+    """A fresh copy of the saved chain document, opened (undo on), closed afterwards."""
+    copy = str(tmp_path / "copy.FCStd")
+    shutil.copy(chain_file, copy)
+    doc = FreeCAD.openDocument(copy)
+    doc.UndoMode = 1
+    yield doc
+    FreeCAD.closeDocument(doc.Name)
+
+
+def _objects(doc):
+    from polycube_wb import api
+
+    return {api.stage_kind(obj): obj for obj in doc.Objects if api.stage_kind(obj)}
+
+
+def test_reopened_chain_has_its_proxies_and_results(chain_doc):
+    from polycube_wb.objects.cage import read_cage
+    from polycube_wb.objects.fit import FitProxy
+    from polycube_wb.objects.target import TargetProxy
+
+    objects = _objects(chain_doc)
+    assert sorted(objects) == sorted(KINDS)
+    assert isinstance(objects["Target"].Proxy, TargetProxy)
+    assert isinstance(objects["Fit"].Proxy, FitProxy)
+    for obj in objects.values():
+        assert obj.Status == "ok" and obj.isValid(), (obj.Name, obj.Status)
+        assert obj.State == ["Up-to-date"], (obj.Name, obj.State)
+    target, seg = objects["Target"], objects["Segmentation"]
+    assert target.Mesh.CountFacets == target.Triangles == 15388
+    assert target.Mesh.isSolid() and target.Genus == 0
+    assert len(seg.FaceLabel) == len(seg.FaceColors) == target.Triangles
+    assert set(seg.FaceLabel) == set(range(6)) and seg.Valid
+    for kind in ("BaseMesh", "Fit"):
+        cage = read_cage(objects[kind])
+        shape = objects[kind].Shape
+        assert cage.n_faces == objects[kind].Faces > 6
+        # The shape's first vertices are the cage vertices, in order (the saved B-rep
+        # keeps about 15 significant digits).
+        first = np.array([[v.X, v.Y, v.Z] for v in shape.Vertexes[:len(cage.vertices)]])
+        assert np.abs(first - cage.vertices).max() < 1e-9 * shape.BoundBox.DiagonalLength
+    base, fitted = read_cage(objects["BaseMesh"]), read_cage(objects["Fit"])
+    assert np.array_equal(base.face_vertices, fitted.face_vertices)
+    assert np.abs(base.vertices - fitted.vertices).max() > 0, "the fit moved the cage"
+    solid = objects["Solid"].Shape
+    assert solid.isValid() and len(solid.Solids) == 1 and solid.Shells[0].isClosed()
+    assert objects["Solid"].BrepFaces == len(solid.Faces) == base.n_faces
+    # Colouring by part instead of label recolours without touching anything.
+    by_label = list(seg.FaceColors)
+    seg.ColourBy = "Parts"
+    assert seg.State == ["Up-to-date"]
+    assert len(set(seg.FaceColors)) == seg.Parts == 1 and seg.FaceColors != by_label
+
+
+def test_parameter_change_reruns_that_stage_and_later_without_the_file(chain_doc):
+    from polycube_wb import api
+
+    objects = _objects(chain_doc)
+    log = RunLog(objects.values())
+    volume = objects["Solid"].Shape.Volume
+    objects["Fit"].Iterations = 1
+    outcome = api.recompute(chain_doc)
+    assert outcome.ok, outcome.failures
+    assert log.ran == [objects["Fit"].Name, objects["Solid"].Name]
+    assert objects["Solid"].Shape.isValid()
+    assert objects["Solid"].Shape.Volume != pytest.approx(volume, rel=1e-9)
+    log.ran.clear()
+    assert api.recompute(chain_doc).ok and log.ran == [], "nothing changed, nothing reruns"
+
+
+def test_edited_fitted_cage_moves_the_solid_without_refitting(chain_doc):
+    from polycube_wb import api
+
+    objects = _objects(chain_doc)
+    fit, solid = objects["Fit"], objects["Solid"]
+    log = RunLog(objects.values())
+    before = solid.Shape.BoundBox
+    points = list(fit.CageVertices)
+    top = max(range(len(points)), key=lambda k: points[k].z)
+    moved = points[top] + FreeCAD.Vector(0, 0, 5.0)
+    api.move_cage_vertices(fit, {top: (moved.x, moved.y, moved.z)})
+    assert api.recompute(chain_doc).ok
+    assert log.ran == [solid.Name], "only the solid reruns"
+    assert fit.CageVertices[top].z == pytest.approx(points[top].z + 5.0)
+    assert [p for k, p in enumerate(fit.CageVertices) if k != top] == \
+        [p for k, p in enumerate(points) if k != top]
+    after = solid.Shape.BoundBox
+    assert solid.Shape.isValid()
+    assert after.ZMax > before.ZMax + 0.5, "the solid follows the moved vertex"
+
+
+def test_cage_edits_are_checked(chain_doc):
+    from core.errors import ParameterError
+    from polycube_wb import api
+
+    objects = _objects(chain_doc)
+    count = len(objects["BaseMesh"].CageVertices)
+    with pytest.raises(ParameterError, match=f"is not a cage vertex index \\(0..{count - 1}\\)"):
+        api.move_cage_vertices(objects["BaseMesh"], {count: (0, 0, 0)})
+    with pytest.raises(ParameterError, match="3 finite numbers"):
+        api.move_cage_vertices(objects["BaseMesh"], {0: (0, float("nan"), 0)})
+    with pytest.raises(ParameterError, match="not a BaseMesh or Fit"):
+        api.move_cage_vertices(objects["Solid"], {0: (0, 0, 0)})
+
+
+def test_cancel_during_the_fit_leaves_the_document_as_it_was(chain_doc):
+    from core.errors import Cancelled
+    from core.progress import Progress
+    from polycube_wb import api
+
+    class CancelDuringFit(Progress):
+        """Cancels at the first report from inside the fit's iterations."""
+
+        def __init__(self):
+            self.seen = []
+
+        def report(self, stage, fraction, message=""):
+            self.seen.append((stage, fraction))
+
+        def check_cancel(self):
+            if any(stage == "fit" for stage, _ in self.seen):
+                raise Cancelled("test: Esc")
+
+    objects = _objects(chain_doc)
+    fit, solid = objects["Fit"], objects["Solid"]
+    cage, volume, undo = list(fit.CageVertices), solid.Shape.Volume, chain_doc.UndoCount
+    progress = CancelDuringFit()
+
+    def build():
+        fit.Iterations = 40
+
+    with pytest.raises(Cancelled, match="document is as before"):
+        api.run_in_transaction(chain_doc, "Refit", build, progress)
+    fractions = [fraction for stage, fraction in progress.seen]
+    assert fractions == sorted(fractions), "one bar for the whole run, never backwards"
+    assert fit.Iterations == 2
+    assert list(fit.CageVertices) == cage
+    assert solid.Shape.Volume == pytest.approx(volume, rel=1e-12)
+    assert chain_doc.UndoCount == undo
+    assert fit.State == ["Up-to-date"] and solid.State == ["Up-to-date"]
+    assert fit.isValid() and fit.Status == "ok"
+
+
+def test_failed_stage_is_invalid_with_a_one_line_status_others_intact(chain_doc):
+    from polycube_wb import api
+
+    objects = _objects(chain_doc)
+    solid, fit = objects["Solid"], objects["Fit"]
+    deviation = api.make_deviation(chain_doc, solid, objects["Target"])
+    solid.Depth = 0
+    outcome = api.recompute(chain_doc)
+    assert list(outcome.failures) == [solid.Name]
+    assert not solid.isValid() and "Invalid" in solid.State
+    assert solid.Status.startswith("Depth must be between 1 and") and "\n" not in solid.Status
+    assert fit.isValid() and fit.Status == "ok"
+    assert deviation.Status == "" and deviation.Mesh.CountFacets == 0, "not run after a failure"
+    solid.Depth = 8
+    assert api.recompute(chain_doc).ok
+    assert solid.isValid() and solid.Status == "ok"
+
+
+def test_deviation_map_colours_and_figures(chain_doc):
+    from polycube_wb import api
+
+    objects = _objects(chain_doc)
+    target, solid = objects["Target"], objects["Solid"]
+    deviation = api.make_deviation(chain_doc, solid, target)
+    assert api.recompute(chain_doc).ok
+    diagonal = target.Mesh.BoundBox.DiagonalLength
+    assert deviation.Mesh.CountPoints == len(deviation.VertexColors) == \
+        len(deviation.SignedDistance) > 1000
+    assert deviation.Watertight
+    assert 0 < deviation.MeanDeviation <= deviation.MaxDeviation < 0.1 * diagonal
+    assert deviation.MaxDeviationPercent == pytest.approx(
+        100 * deviation.MaxDeviation / diagonal, rel=1e-6)
+    assert 0 <= deviation.OutsideVolume < 20 and 0 <= deviation.UncoveredVolume < 50
+    signed = np.asarray(deviation.SignedDistance)
+    colours = np.asarray(deviation.VertexColors)[:, :3]
+    worst = int(np.argmax(np.abs(signed)))
+    assert deviation.ScaleUsed == pytest.approx(abs(signed[worst]))
+    # The vertex at the largest distance has the full end colour of its side.
+    end = (0.85, 0.13, 0.13) if signed[worst] > 0 else (0.13, 0.31, 0.85)
+    assert np.allclose(colours[worst], end, atol=0.01)
+    log = RunLog([deviation])
+    deviation.Scale = deviation.ScaleUsed / 4
+    assert api.recompute(chain_doc).ok
+    assert log.ran == [], "a new colour scale only recolours"
+    assert deviation.ScaleUsed == pytest.approx(abs(signed[worst]) / 4)
+    assert np.mean(np.all(np.isclose(np.asarray(deviation.VertexColors)[:, :3], end, atol=0.01),
+                          axis=1)) > 0.0
+
+
+def test_deviation_of_plain_objects(tmp_path):
+    """The map also checks a plain solid against a plain mesh (api.reconstruct's objects)."""
+    from polycube_wb import api
+    from polycube_wb.brep import tessellate
+    from polycube_wb.document import add_solid, add_target_mesh
+    from core.types import TriMesh
+
+    cage = tmp_path / "torus.obj"
+    write_polymesh(cage, sample_cages.torus())
+    solid, _ = api.subd_to_solid(cage, measure=False)
+    doc = FreeCAD.newDocument("PolycubePlainCheck")
+    try:
+        solid_obj = add_solid(doc, solid, "Solid")
+        V, F = tessellate(solid, 1e-3 * solid.BoundBox.DiagonalLength)
+        target = add_target_mesh(doc, TriMesh(V, F), "Target")
+        deviation = api.make_deviation(doc, solid_obj, target)
+        assert api.recompute(doc).ok
+        # The target is a chordal tessellation of the solid: within 1e-3 of the diagonal.
+        assert deviation.MaxDeviationPercent < 0.1 + 1e-9
+        assert deviation.Watertight and deviation.UncoveredVolume < 0.1
+    finally:
+        FreeCAD.closeDocument(doc.Name)
+
+
+def test_moving_the_target_moves_the_labeling(tmp_path):
+    from polycube_wb import api
+
+    doc = FreeCAD.newDocument("PolycubeMove")
+    try:
+        target = api.make_target(doc, SAMPLE, check_self_intersections=False)
+        seg = api.make_segmentation(doc, target)
+        assert api.recompute(doc).ok
+        before = seg.Mesh.BoundBox
+        log = RunLog([target, seg])
+        target.Placement.Base = FreeCAD.Vector(50.0, 0.0, 0.0)
+        assert api.recompute(doc).ok
+        assert log.ran == [target.Name, seg.Name]
+        after = seg.Mesh.BoundBox
+        assert after.XMin == pytest.approx(before.XMin + 50.0, abs=1e-6)
+        assert after.YMin == pytest.approx(before.YMin, abs=1e-6)
+    finally:
+        FreeCAD.closeDocument(doc.Name)
+
+
+def test_bad_input_and_links_give_clear_errors(tmp_path):
+    from core.errors import InvalidMeshError, ParameterError
+    from polycube_wb import api
+
+    open_mesh = tmp_path / "open.stl"
+    open_mesh.write_text("solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n"
+                         "vertex 0 1 0\nendloop\nendfacet\nendsolid t\n")
+    doc = FreeCAD.newDocument("PolycubeBad")
+    try:
+        with pytest.raises(InvalidMeshError):
+            api.make_target(doc, str(open_mesh))
+        assert doc.Objects == []
+        target = api.make_target(doc, SAMPLE, check_self_intersections=False)
+        with pytest.raises(ParameterError, match="Segmentation has no property 'Lamda'"):
+            api.make_segmentation(doc, target, Lamda=0.3)
+        assert [obj.Name for obj in doc.Objects] == [target.Name]
+        fit = api.make_fit(doc, None)
+        outcome = api.recompute(doc)
+        assert "'BaseMesh' link must point to a Polycube stage object" in outcome.failures[fit.Name]
+        assert not fit.isValid() and target.isValid()
+    finally:
+        FreeCAD.closeDocument(doc.Name)
+
+
+def test_old_plain_target_document_opens_and_converts(tmp_path):
+    """Documents of the previous version hold a plain Mesh::Feature with PolycubeSource."""
+    from core.mesh_io import read_triangle_soup
+    from core.validate import validate_target
+    from polycube_wb import api
+    from polycube_wb.document import add_target_mesh
+
+    mesh, _ = validate_target(*read_triangle_soup(SAMPLE), check_self_intersections=False)
+    doc = FreeCAD.newDocument("PolycubeOld")
+    old = add_target_mesh(doc, mesh, "cantilever_target")
+    old.addProperty("App::PropertyFile", "PolycubeSource", "Polycube", "Mesh file")
+    old.PolycubeSource = "/nonexistent/cantilever.stl"
+    path = str(tmp_path / "old.FCStd")
+    doc.saveAs(path)
+    FreeCAD.closeDocument(doc.Name)
+    reopened = FreeCAD.openDocument(path)
+    try:
+        old = reopened.getObject("cantilever_target")
+        target = api.make_target(reopened, old, check_self_intersections=False)
+        assert target.Mesh.CountFacets == old.Mesh.CountFacets == len(mesh.faces)
+        assert target.SourceFile == "/nonexistent/cantilever.stl"
+        assert api.recompute(reopened).ok and target.Genus == 0
+    finally:
+        FreeCAD.closeDocument(reopened.Name)
+
+
+def test_preferences_give_new_objects_their_defaults():
+    from polycube_wb import api
+    from polycube_wb.preferences import default, reset_defaults, set_default
+
+    doc = FreeCAD.newDocument("PolycubePrefs")
+    try:
+        set_default("fit_iterations", 7)
+        set_default("lam", 0.25)
+        set_default("fit_mode", "nearest")
+        fit = api.make_fit(doc, None)
+        assert fit.Iterations == 7 and fit.Mode == "nearest" and default("lam") == 0.25
+        assert fit.Proxy.parameters(fit)["fit_t_min"] is None, "automatic by default"
+        fit.AutoMinThickness = False
+        fit.MinThickness = 0.5
+        assert fit.Proxy.parameters(fit)["fit_t_min"] == 0.5
+        set_default("fit_iterations", 100)  # the paper's value: stored as no preference
+        assert default("fit_iterations") == 100
+    finally:
+        reset_defaults()
+        FreeCAD.closeDocument(doc.Name)
+    assert default("lam") == 0.5 and default("fit_iterations") == 100
+    assert default("fit_mode") == "inside"
 
 
 def test_solid_and_target_survive_save_and_reopen(tmp_path):
@@ -19,7 +378,7 @@ def test_solid_and_target_survive_save_and_reopen(tmp_path):
     cage = tmp_path / "torus.obj"
     write_polymesh(cage, sample_cages.torus())
     solid, _ = subd_to_solid(cage, measure=False)
-    target, _ = validate_target(*read_triangle_soup(os.path.join(REPO, "examples", "to_simp_cantilever.stl")))
+    target, _ = validate_target(*read_triangle_soup(SAMPLE))
     doc = FreeCAD.newDocument("PolycubeSaveTest")
     add_target_mesh(doc, target, "Target")
     add_solid(doc, solid, "Solid")
@@ -41,6 +400,5 @@ def test_package_manifest_parses():
     workbench = meta.Content["workbench"][0]
     assert meta.Name == "Polycube" and workbench.Classname == "PolycubeWorkbench"
     assert os.path.isfile(os.path.join(REPO, meta.Icon))
-    with open(os.path.join(REPO, "InitGui.py"), encoding="utf-8") as handle:
-        assert f"class {workbench.Classname}" in handle.read() or \
-            workbench.Classname in open(os.path.join(REPO, "polycube_wb", "gui", "workbench.py")).read()
+    with open(os.path.join(REPO, "polycube_wb", "gui", "workbench.py"), encoding="utf-8") as handle:
+        assert f"class {workbench.Classname}" in handle.read()

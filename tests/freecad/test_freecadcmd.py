@@ -3,9 +3,10 @@
 
 - the runtime packages (trimesh, manifold3d) import inside ``freecadcmd``;
 - a FreeCADCmd script turns a SubD cage into a STEP solid through ``polycube_wb.api``;
+- the parametric stage objects recompute, save and reopen in ``freecadcmd``;
 - ``from core.x import y`` keeps finding our ``core`` after another addon (CfdOF)
   replaced ``sys.modules['core']``, in ``freecadcmd`` and in plain Python;
-- the progress adapter (``polycube_wb.gui.fc_progress``) maps FreeCAD's abort to
+- the progress adapter (``polycube_wb.gui.fc_progress``) runs one bar forwards and maps FreeCAD's abort to
   ``core.errors.Cancelled``.
 
 Subprocesses run in a temporary folder, so nothing in the working directory can
@@ -108,6 +109,36 @@ def test_freecadcmd_script_subd_cage_to_step(tmp_path, load_addon):
     assert step.stat().st_size > 1000
 
 
+@needs_freecadcmd
+def test_stage_objects_in_freecadcmd_save_and_reopen(tmp_path):
+    """The App side of the stage objects works in FreeCAD's own console Python."""
+    mesh = os.path.join(REPO, "examples", "to_simp_cantilever.stl")
+    saved = tmp_path / "segmented.FCStd"
+    result = _freecadcmd(_script(f"""
+        import FreeCAD
+        from polycube_wb import api
+
+        doc = FreeCAD.newDocument("Cmd")
+        target = api.make_target(doc, {mesh!r}, check_self_intersections=False)
+        seg = api.make_segmentation(doc, target, Lambda=0.5)
+        outcome = api.recompute(doc)
+        names = (target.Name, seg.Name)
+        doc.saveAs({str(saved)!r})
+        FreeCAD.closeDocument(doc.Name)
+        doc = FreeCAD.openDocument({str(saved)!r})
+        seg = doc.getObject(names[1])
+        result = {{"ok": outcome.ok, "gui": bool(FreeCAD.GuiUp),
+                  "proxy": type(seg.Proxy).__module__ + "." + type(seg.Proxy).__name__,
+                  "valid": seg.Valid, "labels": len(seg.FaceLabel),
+                  "facets": doc.getObject(names[0]).Mesh.CountFacets,
+                  "status": seg.Status}}
+    """), tmp_path, load_addon=True)
+    assert result["ok"] and not result["gui"]
+    assert result["proxy"] == "polycube_wb.objects.segmentation.SegmentationProxy"
+    assert result["valid"] and result["status"] == "ok"
+    assert result["labels"] == result["facets"] == 15388
+
+
 COLLISION_BODY = """
     import os, types
     import polycube_wb
@@ -179,22 +210,24 @@ class _FakeIndicator:
         self.log.append(("stop", self.steps))
 
 
-def test_progress_adapter_restarts_per_stage_and_clamps():
+def test_progress_adapter_runs_one_bar_forwards_and_clamps():
+    from core.progress import SubProgress
     from polycube_wb.gui.fc_progress import STEPS, FreeCADProgress
 
     _FakeIndicator.log = []
     with FreeCADProgress("Job", indicator_factory=_FakeIndicator) as progress:
         progress.report("intake", 0.25)
         progress.report("intake", 0.1)
-        progress.report("labeling", 2.0)
+        fit = SubProgress(progress, 0.5, 0.9)
+        fit.report("fit", 0.5)
+        fit.report("fit", 2.0)
         progress.check_cancel()
-    assert _FakeIndicator.log == [("start", "Job: intake", STEPS), ("stop", STEPS // 4),
-                                  ("start", "Job: labeling", STEPS), ("stop", STEPS)]
+    assert _FakeIndicator.log == [("start", "Job", STEPS), ("stop", round(0.9 * STEPS))]
 
 
 def test_progress_adapter_turns_abort_into_cancelled():
     from core.errors import Cancelled
-    from polycube_wb.gui.fc_progress import FreeCADProgress
+    from polycube_wb.gui.fc_progress import STEPS, FreeCADProgress
 
     _FakeIndicator.log = []
     progress = FreeCADProgress("Job", indicator_factory=lambda: _FakeIndicator(abort_after=3))
@@ -206,7 +239,7 @@ def test_progress_adapter_turns_abort_into_cancelled():
     with pytest.raises(Cancelled):
         progress.report("fit", 0.6)
     progress.stop()
-    assert _FakeIndicator.log == [("start", "Job: fit", 100)], "FreeCAD stops itself on abort"
+    assert _FakeIndicator.log == [("start", "Job", STEPS)], "FreeCAD stops itself on abort"
 
 
 def test_progress_adapter_with_freecads_indicator(tmp_path):

@@ -1,13 +1,17 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Workbench tests that run inside the real FreeCAD GUI (loaded by TestPolycubeGui.py).
 
-Every case makes its own document and closes it, and file dialogs and message boxes
-are replaced by stubs, so the run needs no user and leaves nothing behind except the
-screenshots in ``$POLYCUBE_GUI_OUTPUT`` (default ``tests/gui/output/``).
+File dialogs and message boxes are replaced by stubs, so the run needs no user. The
+workflow case runs the commands in the order a user would, on one document, in
+numbered steps (unittest runs them in name order): import, segment parts, label, base
+mesh, fit, solid, each task panel, a real Esc key press during the fit, the deviation
+map, a cage edit, undo, save / reopen without the source file. Screenshots go to
+``$POLYCUBE_GUI_OUTPUT`` (default ``tests/gui/output/``).
 """
 import os
 import shutil
 import tempfile
+import time
 import unittest
 
 import FreeCAD
@@ -15,13 +19,13 @@ import FreeCADGui
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 OUTPUT = os.environ.get("POLYCUBE_GUI_OUTPUT") or os.path.join(REPO, "tests", "gui", "output")
-TARGET_MESH = os.path.normpath(os.path.join(REPO, "..", "shared", "data", "meshes",
-                                            "to_simp_lbracket.stl"))
 SAMPLE_MESH = os.path.join(REPO, "examples", "to_simp_cantilever.stl")
 WORKBENCH = "PolycubeWorkbench"
 SCREENSHOT_SIZE = (1024, 768)
 MIN_COVERED = 0.03
 """Least fraction of non-background pixels for a screenshot to count as showing the model."""
+FIT_ITERATIONS = 2
+"""Fit iterations of the test chain (the preference is set to it for the run)."""
 
 
 def _commands():
@@ -43,7 +47,7 @@ def save_screenshot(doc, file_name):
 
 
 def image_figures(path, columns=128, rows=96):
-    """(width, height, distinct colours, covered fraction) of a screenshot.
+    """(width, height, distinct colours, covered fraction, colours) of a screenshot.
 
     Colours and coverage (pixels that are not pure white) are counted on a
     ``columns x rows`` nearest-neighbour sample of the image.
@@ -53,55 +57,114 @@ def image_figures(path, columns=128, rows=96):
     image = QtGui.QImage(path)
     small = image.scaled(columns, rows, QtCore.Qt.IgnoreAspectRatio,
                          QtCore.Qt.FastTransformation)
-    colours = set()
-    covered = 0
+    colours = []
     for y in range(rows):
         for x in range(columns):
-            rgb = small.pixel(x, y) & 0xFFFFFF
-            colours.add(rgb)
-            covered += rgb != 0xFFFFFF
-    return image.width(), image.height(), len(colours), covered / float(columns * rows)
+            colours.append(small.pixel(x, y) & 0xFFFFFF)
+    covered = sum(rgb != 0xFFFFFF for rgb in colours) / float(columns * rows)
+    return image.width(), image.height(), len(set(colours)), covered, colours
 
 
-class _DocumentCase(unittest.TestCase):
-    """A fresh document and temporary folder per test; stubs for dialogs and boxes."""
+def _reddish_and_bluish(colours):
+    """Counts of clearly red and clearly blue pixels (the deviation map's two ends)."""
+    red = blue = 0
+    for rgb in colours:
+        r, g, b = rgb >> 16, (rgb >> 8) & 0xFF, rgb & 0xFF
+        red += r > 150 and r > g + 60 and r > b + 60
+        blue += b > 150 and b > r + 60 and b > g + 30
+    return red, blue
 
-    def setUp(self):
+
+class _Stubs:
+    """Replaces the dialogs and boxes of the commands module; restores them."""
+
+    def __init__(self):
         self.commands = _commands()
-        self.doc = FreeCAD.newDocument("PolycubeGuiTest")
-        FreeCADGui.activateWorkbench(WORKBENCH)
-        self.tmp = tempfile.mkdtemp(prefix="polycube_gui_")
         self.boxes = []
-        self._saved = (self.commands.ask_open_file, self.commands.message_box)
+        self.saved = (self.commands.ask_open_file, self.commands.message_box)
         self.commands.message_box = lambda kind, title, text: self.boxes.append((kind, text))
-
-    def tearDown(self):
-        self.commands.ask_open_file, self.commands.message_box = self._saved
-        FreeCAD.closeDocument(self.doc.Name)
-        shutil.rmtree(self.tmp, ignore_errors=True)
-
-    def write_cage(self, cage, name):
-        from core.polymesh_io import write_polymesh
-
-        path = os.path.join(self.tmp, name)
-        write_polymesh(path, cage)
-        return path
 
     def answer_open_dialog(self, path):
         self.commands.ask_open_file = lambda *args, **kwargs: path
 
-    def assert_screenshot_shows_model(self, path):
-        width, height, colours, covered = image_figures(path)
+    def restore(self):
+        self.commands.ask_open_file, self.commands.message_box = self.saved
+
+
+class _ScreenshotAssertions:
+    def assert_screenshot_shows_model(self, path, min_colours=20, min_covered=MIN_COVERED):
+        """The screenshot has its size, some colours and enough non-white pixels (a
+        wireframe cage has two colours and covers less than a shaded surface)."""
+        width, height, colours, covered, _ = image_figures(path)
         self.assertEqual((width, height), SCREENSHOT_SIZE)
-        self.assertGreater(colours, 20, f"{path}: only {colours} colours, looks empty")
-        self.assertGreater(covered, MIN_COVERED,
+        self.assertGreaterEqual(colours, min_colours, f"{path}: only {colours} colours")
+        self.assertGreater(covered, min_covered,
                            f"{path}: only {covered:.1%} of the pixels show the model")
 
 
-class WorkbenchTest(unittest.TestCase):
-    """The workbench registers, activates and shows its commands."""
+def _objects(doc, kind):
+    from polycube_wb import api
 
-    def test_activate_lists_commands_and_toolbar(self):
+    return [obj for obj in doc.Objects if api.stage_kind(obj) == kind]
+
+
+def _select(*objects):
+    FreeCADGui.Selection.clearSelection()
+    for obj in objects:
+        FreeCADGui.Selection.addSelection(obj)
+
+
+class EscapeKey:
+    """Presses a real Esc key during the next long run and answers FreeCAD's question.
+
+    A Qt timer (it fires while the progress bar processes events) grabs the main window
+    after ``after`` seconds (the bar shows after 2 s), then posts an Esc key press to
+    the main window and clicks *Yes* in FreeCAD's "Do you really want to abort?" box.
+    """
+
+    def __init__(self, after, grab_path):
+        from PySide import QtCore
+
+        self.after, self.grab_path = after, grab_path
+        self.started = time.monotonic()
+        self.sent = self.answered = 0
+        self.grabbed = False
+        self.timer = QtCore.QTimer()
+        self.timer.setInterval(200)
+        self.timer.timeout.connect(self._tick)
+        self.timer.start()
+
+    def _tick(self):
+        from PySide import QtCore, QtGui
+
+        box = QtGui.QApplication.activeModalWidget()
+        if isinstance(box, QtGui.QMessageBox):
+            box.button(QtGui.QMessageBox.Yes).click()
+            self.answered += 1
+            self.timer.stop()
+            return
+        if time.monotonic() - self.started < self.after:
+            return
+        if not self.grabbed:
+            FreeCADGui.getMainWindow().grab().save(self.grab_path)
+            self.grabbed = True
+        event = QtGui.QKeyEvent(QtCore.QEvent.KeyPress, QtCore.Qt.Key_Escape,
+                                QtCore.Qt.NoModifier)
+        QtGui.QApplication.postEvent(FreeCADGui.getMainWindow(), event)
+        self.sent += 1
+
+    def stop(self):
+        self.timer.stop()
+
+
+class WorkbenchTest(unittest.TestCase):
+    """The workbench registers, activates and shows its commands and preferences page."""
+
+    def test_activate_lists_commands_toolbar_and_preferences(self):
+        from PySide import QtGui
+
+        from polycube_wb.gui.preferences import PreferencesPage
+
         commands = _commands()
         self.assertIn(WORKBENCH, FreeCADGui.listWorkbenches())
         FreeCADGui.activateWorkbench(WORKBENCH)
@@ -109,244 +172,331 @@ class WorkbenchTest(unittest.TestCase):
         self.assertEqual(workbench.name(), WORKBENCH)
         known = set(FreeCADGui.listCommands())
         ids = [command.ID for command in commands.COMMANDS]
-        self.assertEqual(len(ids), 9)
+        self.assertEqual(len(ids), 12)
         for command_id in ids:
             self.assertTrue(command_id.startswith("PolyCube_"))
             self.assertIn(command_id, known)
             self.assertTrue(os.path.isfile(FreeCADGui.Command.get(command_id)
                                            .getInfo()["pixmap"]), command_id)
-        self.assertIn("Polycube", workbench.listToolbars())
         self.assertEqual(workbench.getToolbarItems()["Polycube"], ids)
-        self.assertIn("Polycube", workbench.listMenus())
-        from PySide import QtGui
-
         bars = [bar for bar in FreeCADGui.getMainWindow().findChildren(QtGui.QToolBar)
                 if bar.windowTitle() == "Polycube"]
         self.assertEqual(len(bars), 1)
         self.assertTrue(bars[0].isVisible())
-        self.assertEqual(len(bars[0].actions()), len(ids))
-
-    def test_stage_commands_are_active_with_a_document(self):
-        FreeCADGui.activateWorkbench(WORKBENCH)
-        doc = FreeCAD.newDocument("PolycubeGuiActive")
-        try:
-            for command_id in ("PolyCube_ImportTarget", "PolyCube_SegmentParts",
-                               "PolyCube_LabelPolycube", "PolyCube_BuildBaseMesh",
-                               "PolyCube_FitTarget", "PolyCube_ReconstructAll",
-                               "PolyCube_ImportSubD"):
-                command = FreeCADGui.Command.get(command_id)
-                self.assertTrue(command.isActive(), command_id)
-                self.assertNotIn("not available", command.getInfo()["menuText"].lower())
-        finally:
-            FreeCAD.closeDocument(doc.Name)
+        page = PreferencesPage()
+        page.loadSettings()
+        widget, _ = page.widgets["fit_iterations"]
+        self.assertEqual(widget.value(), 100, "the paper's default")
 
 
-class SubDSolidTest(_DocumentCase):
-    """SubD cage -> B-spline solid: geometry, undo, screenshot, STEP, check."""
-
-    def test_torus_cage_to_solid_undo_and_screenshot(self):
-        from core.subdivision.sample_cages import torus
-
-        path = self.write_cage(torus(), "torus.obj")
-        undo_before = self.doc.UndoCount
-        obj, report = self.commands.import_subd_cage(self.doc, path)
-        shape = obj.Shape
-        self.assertTrue(obj.isDerivedFrom("Part::Feature"))
-        self.assertTrue(shape.isValid())
-        self.assertEqual(len(shape.Solids), 1)
-        self.assertEqual(len(shape.Faces), 48)
-        self.assertTrue(all(shell.isClosed() for shell in shape.Shells))
-        self.assertEqual(len(shape.Shells), 1)
-        # Genus 1: Euler characteristic V - E + F of the B-rep is 0 for a torus.
-        self.assertEqual(len(shape.Vertexes) - len(shape.Edges) + len(shape.Faces), 0)
-        limit = report["brep"]["limit_volume"]
-        self.assertLess(abs(shape.Volume - limit) / limit, 1e-5)
-        self.assertEqual(self.doc.UndoCount, undo_before + 1)
-        self.assertIn("Import SubD cage as solid", self.doc.UndoNames)
-
-        shot = save_screenshot(self.doc, "polycube_torus_solid.png")
-        self.assert_screenshot_shows_model(shot)
-
-        name = obj.Name
-        self.doc.undo()
-        self.assertIsNone(self.doc.getObject(name))
-        self.assertEqual(len(self.doc.Objects), 0)
-
-    def test_command_runs_through_the_gui_and_undoes(self):
-        from core.subdivision.sample_cages import cube
-
-        self.answer_open_dialog(self.write_cage(cube(10.0), "cube.obj"))
-        FreeCADGui.runCommand("PolyCube_ImportSubD")
-        solids = [obj for obj in self.doc.Objects if obj.isDerivedFrom("Part::Feature")]
-        self.assertEqual(self.boxes, [])
-        self.assertEqual(len(solids), 1)
-        self.assertTrue(solids[0].Shape.isValid())
-        self.assertEqual(len(solids[0].Shape.Faces), 6)
-        self.doc.undo()
-        self.assertEqual(len(self.doc.Objects), 0)
-
-    def test_bad_cage_reports_warning_and_changes_nothing(self):
-        path = os.path.join(self.tmp, "open.obj")
-        with open(path, "w", encoding="utf-8") as handle:
-            handle.write("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")
-        self.answer_open_dialog(path)
-        FreeCADGui.runCommand("PolyCube_ImportSubD")
-        self.assertEqual(len(self.doc.Objects), 0)
-        self.assertEqual(len(self.boxes), 1)
-        self.assertEqual(self.boxes[0][0], "warning")
-
-    def test_export_step_and_check_against_a_target(self):
-        import Part  # after FreeCAD (imported at module level): the reverse order segfaults
-
-        from core.subdivision.sample_cages import torus
-        from polycube_wb.brep import tessellate
-        from polycube_wb.convert import arrays_to_mesh
-
-        obj, _ = self.commands.import_subd_cage(self.doc, self.write_cage(torus(), "t.obj"))
-        step = self.commands.export_step(obj, os.path.join(self.tmp, "torus.step"))
-        read = Part.read(step)
-        self.assertEqual(len(read.Solids), 1)
-        self.assertLess(abs(read.Volume - obj.Shape.Volume) / obj.Shape.Volume, 1e-6)
-
-        diagonal = obj.Shape.BoundBox.DiagonalLength
-        V, F = tessellate(obj.Shape, 1e-3 * diagonal)
-        target = self.doc.addObject("Mesh::Feature", "TorusTarget")
-        target.Mesh = arrays_to_mesh(V, F)
-        figures = self.commands.check_result(obj, target, samples=5000)
-        self.assertTrue(figures["valid"])
-        self.assertTrue(figures["closed"])
-        self.assertTrue(figures["watertight"])
-        # The target is a chordal tessellation (inside the surface, deviation <= 1e-3 of
-        # the diagonal), so the solid sticks out of it a little and covers all of it.
-        self.assertLess(figures["outside_volume_fraction"], 0.01)
-        self.assertLess(figures["uncovered_volume_fraction"], 1e-3)
-        self.assertLess(figures["distances"]["hausdorff"], 2e-3)
-
-
-class TargetMeshTest(_DocumentCase):
-    """Target mesh intake, labeling and Reconstruct all on the L-bracket."""
+class SubDSolidTest(unittest.TestCase, _ScreenshotAssertions):
+    """SubD cage -> B-spline solid through the command: geometry, undo, screenshot."""
 
     def setUp(self):
-        super().setUp()
-        if not os.path.isfile(TARGET_MESH):
-            self.fail(f"dev mesh missing: {TARGET_MESH} (the repo expects ../shared beside it)")
+        self.stubs = _Stubs()
+        self.doc = FreeCAD.newDocument("PolycubeSubD")
+        FreeCADGui.activateWorkbench(WORKBENCH)
+        self.tmp = tempfile.mkdtemp(prefix="polycube_gui_")
 
-    def test_import_label_and_screenshots(self):
-        obj, summary = self.commands.import_target_mesh(self.doc, TARGET_MESH)
-        self.assertTrue(self.commands.is_target(obj))
-        self.assertEqual(obj.Mesh.CountFacets, summary["triangles"])
-        self.assertEqual(obj.Mesh.CountPoints, summary["vertices"])
-        self.assertTrue(obj.Mesh.isSolid())
-        self.assertEqual(getattr(obj, self.commands.SOURCE_PROPERTY), TARGET_MESH)
+    def tearDown(self):
+        self.stubs.restore()
+        FreeCAD.closeDocument(self.doc.Name)
+        shutil.rmtree(self.tmp, ignore_errors=True)
+
+    def test_torus_cage_command_screenshot_undo_and_bad_cage(self):
+        from core.polymesh_io import write_polymesh
+        from core.subdivision.sample_cages import torus
+
+        path = os.path.join(self.tmp, "torus.obj")
+        write_polymesh(path, torus())
+        self.stubs.answer_open_dialog(path)
+        FreeCADGui.runCommand("PolyCube_ImportSubD")
+        self.assertEqual(self.stubs.boxes, [])
+        (obj,) = self.doc.Objects
+        shape = obj.Shape
+        self.assertTrue(shape.isValid())
+        self.assertEqual((len(shape.Solids), len(shape.Faces), len(shape.Shells)), (1, 48, 1))
+        self.assertTrue(shape.Shells[0].isClosed())
+        # Genus 1: Euler characteristic V - E + F of the B-rep is 0 for a torus.
+        self.assertEqual(len(shape.Vertexes) - len(shape.Edges) + len(shape.Faces), 0)
+        self.assertIn("Import SubD cage as solid", self.doc.UndoNames)
+        self.assert_screenshot_shows_model(save_screenshot(self.doc, "polycube_torus_solid.png"))
+        self.doc.undo()
+        self.assertEqual(len(self.doc.Objects), 0)
+
+        bad = os.path.join(self.tmp, "open.obj")
+        with open(bad, "w", encoding="utf-8") as handle:
+            handle.write("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")
+        self.stubs.answer_open_dialog(bad)
+        FreeCADGui.runCommand("PolyCube_ImportSubD")
+        self.assertEqual(len(self.doc.Objects), 0)
+        self.assertEqual([kind for kind, _ in self.stubs.boxes], ["warning"])
+
+
+class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
+    """A new user's session on the bundled cantilever, step by step on one document."""
+
+    @classmethod
+    def setUpClass(cls):
+        from polycube_wb.preferences import set_default
+
+        FreeCADGui.activateWorkbench(WORKBENCH)
+        cls.stubs = _Stubs()
+        cls.tmp = tempfile.mkdtemp(prefix="polycube_gui_")
+        cls.source = os.path.join(cls.tmp, "cantilever.stl")
+        shutil.copy(SAMPLE_MESH, cls.source)
+        cls.doc = FreeCAD.newDocument("PolycubeWorkflow")
+        set_default("fit_iterations", FIT_ITERATIONS)
+
+    @classmethod
+    def tearDownClass(cls):
+        from polycube_wb.preferences import reset_defaults
+
+        reset_defaults()
+        cls.stubs.restore()
+        if FreeCAD.getDocument(cls.doc.Name) is not None:
+            FreeCAD.closeDocument(cls.doc.Name)
+        shutil.rmtree(cls.tmp, ignore_errors=True)
+
+    def setUp(self):
+        self.stubs.boxes.clear()
+
+    def one(self, kind):
+        found = _objects(self.doc, kind)
+        self.assertEqual(len(found), 1, f"expected one {kind}, found {len(found)}")
+        return found[0]
+
+    def open_panel(self, obj):
+        """Double-click path: setEdit opens the object's task panel; returns the panel."""
+        FreeCADGui.ActiveDocument.setEdit(obj.Name, 0)
+        FreeCADGui.updateGui()
+        dialog = FreeCADGui.Control.activeDialog()
+        self.assertTrue(dialog, f"no task panel open for {obj.Label}")
+        from polycube_wb.gui import task_panels
+
+        panel = task_panels.ACTIVE.get(obj.Name)
+        self.assertIsNotNone(panel)
+        return panel
+
+    def test_1_import_segment_and_label(self):
+        self.stubs.answer_open_dialog(self.source)
+        FreeCADGui.runCommand("PolyCube_ImportTarget")
+        target = self.one("Target")
+        self.assertEqual(target.Mesh.CountFacets, 15388)
+        self.assertTrue(target.Mesh.isSolid())
+        self.assertEqual(target.Status, "ok")
+        self.assertIn("Import target mesh", self.doc.UndoNames)
         self.assert_screenshot_shows_model(save_screenshot(self.doc, "polycube_target_mesh.png"))
 
-        group, report = self.commands.label_polycube(self.doc, obj)
-        for key in ("valid", "charts", "corners", "invalid_charts", "invalid_boundaries",
-                    "invalid_corners", "turning_points"):
-            self.assertIn(key, report)
-        children = group.Group
-        self.assertGreaterEqual(len(children), 6 if report["valid"] else 1)
-        self.assertLessEqual(len(children), 6)
-        self.assertEqual(sum(child.Mesh.CountFacets for child in children),
-                         summary["triangles"])
-        self.assertFalse(obj.ViewObject.Visibility)
-        self.assert_screenshot_shows_model(save_screenshot(self.doc, "polycube_labels.png"))
+        _select(target)
+        FreeCADGui.runCommand("PolyCube_SegmentParts")
+        parts = self.one("Segmentation")
+        self.assertEqual(parts.PartMode, "auto")
+        self.assertGreaterEqual(parts.Parts, 1)
+        self.assertEqual(len(parts.FaceColors), target.Mesh.CountFacets)
+        self.assertFalse(target.ViewObject.Visibility, "the parts supersede the target")
+        self.assert_screenshot_shows_model(save_screenshot(self.doc, "polycube_parts.png"))
+        parts.ViewObject.Visibility = False
 
-        group_name = group.Name
-        self.commands.label_polycube(self.doc, obj)
-        groups = [o for o in self.doc.Objects if o.isDerivedFrom("App::DocumentObjectGroup")]
-        self.assertEqual(len(groups), 1, "a second labeling replaces the first")
-        self.doc.undo()
-        self.assertIsNotNone(self.doc.getObject(group_name))
+        _select(target)
+        FreeCADGui.runCommand("PolyCube_LabelPolycube")
+        labels = [seg for seg in _objects(self.doc, "Segmentation") if seg is not parts]
+        self.assertEqual(len(labels), 1, "labeling does not reuse the automatic parts")
+        self.assertEqual(labels[0].PartMode, "single")
+        self.assertTrue(labels[0].Valid)
+        self.assertEqual(set(labels[0].FaceLabel), set(range(6)))
+        self.assertEqual(self.stubs.boxes, [])
+        shot = save_screenshot(self.doc, "polycube_labels.png")
+        self.assert_screenshot_shows_model(shot)
+        self.assertGreater(image_figures(shot)[2], 40, "six label colours and shading")
 
-    def test_segment_parts_then_label_uses_them(self):
-        obj, summary = self.commands.import_target_mesh(self.doc, TARGET_MESH,
-                                                        check_self_intersections=False)
-        group, section = self.commands.segment_parts(self.doc, obj)
-        self.assertEqual(getattr(obj, self.commands.PARTS_PROPERTY), "auto")
-        self.assertEqual(len(group.Group), section["parts"])
-        self.assertGreaterEqual(section["parts"], 1)
-        self.assertEqual(sum(child.Mesh.CountFacets for child in group.Group),
-                         summary["triangles"])
-        _, report = self.commands.label_polycube(self.doc, obj)
-        self.assertEqual(report["parts"], section["parts"])
-
-    def test_base_mesh_cage_is_shown_and_undoable(self):
-        obj, _ = self.commands.import_target_mesh(self.doc, SAMPLE_MESH,
-                                                  check_self_intersections=False)
-        cage, section = self.commands.build_base_mesh(self.doc, obj)
-        self.assertGreater(section["faces"], 6)
-        self.assertEqual(section["faces"], section["quads"])
-        self.assertGreater(len(cage.Shape.Edges), section["faces"])
-        name = cage.Name
-        self.doc.undo()
-        self.assertIsNone(self.doc.getObject(name))
+    def test_2_base_mesh_fit_and_solid(self):
         FreeCADGui.Selection.clearSelection()
-        FreeCADGui.Selection.addSelection(obj)
         FreeCADGui.runCommand("PolyCube_BuildBaseMesh")
-        self.assertIsNotNone(self.doc.getObject(name), "the command builds the cage again")
-        self.assertEqual(self.boxes, [])
-        fitted, fit = self.commands.fit_to_target(self.doc, obj, fit_iterations=3)
-        self.assertEqual(fit["iterations"], 3)
-        self.assertLess(fit["outside_volume_fraction"], fit["initial_outside_volume_fraction"])
-        self.assertGreater(len(fitted.Shape.Edges), section["faces"])
+        base = self.one("BaseMesh")
+        self.assertEqual(base.Status, "ok")
+        self.assertEqual(base.Segmentation.PartMode, "single",
+                         "segment parts does not break the base mesh")
+        self.assertGreater(base.Faces, 6)
+        self.assert_screenshot_shows_model(save_screenshot(self.doc, "polycube_base_mesh.png"),
+                                           min_colours=2, min_covered=0.01)
+        FreeCADGui.runCommand("PolyCube_FitTarget")
+        fit = self.one("Fit")
+        self.assertEqual((fit.Status, fit.Iterations), ("ok", FIT_ITERATIONS))
+        self.assertFalse(base.ViewObject.Visibility)
+        FreeCADGui.runCommand("PolyCube_MakeSolid")
+        solid = self.one("Solid")
+        self.assertEqual(solid.Cage, fit)
+        self.assertTrue(solid.Shape.isValid())
+        self.assertEqual(len(solid.Shape.Solids), 1)
+        self.assertEqual(self.stubs.boxes, [])
+        self.assertIn("Make solid", self.doc.UndoNames)
+        self.assert_screenshot_shows_model(save_screenshot(self.doc, "polycube_solid.png"))
 
-    def test_bad_target_is_rejected_through_the_command(self):
-        path = os.path.join(self.tmp, "open.stl")
-        with open(path, "w", encoding="utf-8") as handle:
-            handle.write("solid t\n")
-            for tri in (((0, 0, 0), (1, 0, 0), (0, 1, 0)), ((0, 0, 0), (0, 0, 1), (1, 0, 0))):
-                handle.write("facet normal 0 0 0\nouter loop\n")
-                handle.writelines(f"vertex {x} {y} {z}\n" for x, y, z in tri)
-                handle.write("endloop\nendfacet\n")
-            handle.write("endsolid t\n")
-        from core.errors import InvalidMeshError
+    def test_3_task_panels_open_and_accept(self):
+        from PySide import QtGui
 
-        with self.assertRaises(InvalidMeshError) as raised:
-            self.commands.import_target_mesh(self.doc, path)
-        self.assertEqual(raised.exception.reason, "open")
-        self.answer_open_dialog(path)
-        FreeCADGui.runCommand("PolyCube_ImportTarget")
-        self.assertEqual(len(self.doc.Objects), 0)
-        self.assertEqual([kind for kind, _ in self.boxes], ["warning"])
-        self.assertIn(os.path.basename(path), self.boxes[0][1])
+        for kind in ("Target", "Segmentation", "BaseMesh", "Solid"):
+            obj = [o for o in _objects(self.doc, kind) if getattr(o, "PartMode", "") != "auto"][0]
+            panel = self.open_panel(obj)
+            self.assertTrue(panel.widgets)
+            panel.accept()
+            FreeCADGui.updateGui()
+            self.assertFalse(FreeCADGui.Control.activeDialog(), kind)
+            self.assertTrue(obj.isValid(), kind)
+        fit, solid = self.one("Fit"), self.one("Solid")
+        volume = solid.Shape.Volume
+        panel = self.open_panel(fit)
+        widget, _ = panel.widgets["Iterations"]
+        self.assertIsInstance(widget, QtGui.QSpinBox)
+        widget.setValue(FIT_ITERATIONS + 1)
+        self.assertTrue(panel.accept())
+        self.assertEqual(fit.Iterations, FIT_ITERATIONS + 1)
+        self.assertEqual(fit.Status, "ok")
+        self.assertNotAlmostEqual(solid.Shape.Volume, volume, places=3,
+                                  msg="the solid follows the refit")
+        self.assertIn(f"Edit {fit.Label}", self.doc.UndoNames)
 
-    def test_reconstruct_all_names_a_missing_stage(self):
-        from core.errors import StageNotAvailableError
+    def test_4_escape_during_the_fit_cancels_and_restores(self):
+        fit, solid = self.one("Fit"), self.one("Solid")
+        before = (fit.Iterations, list(fit.CageVertices), solid.Shape.Volume,
+                  self.doc.UndoCount)
+        panel = self.open_panel(fit)
+        panel.widgets["Iterations"][0].setValue(400)
+        grab = os.path.join(OUTPUT, "polycube_fit_progress.png")
+        os.makedirs(OUTPUT, exist_ok=True)
+        escape = EscapeKey(after=3.0, grab_path=grab)
+        started = time.monotonic()
+        try:
+            accepted = panel.accept()
+        finally:
+            escape.stop()
+        seconds = time.monotonic() - started
+        self.assertFalse(accepted, "the panel stays open after a cancel")
+        self.assertGreaterEqual(escape.sent, 1)
+        self.assertEqual(escape.answered, 1, "FreeCAD asked to confirm the abort")
+        self.assertLess(seconds, 60, "cancelled inside the fit, not after 400 iterations")
+        self.assertIsNone(panel.outcome)
+        self.assertEqual((fit.Iterations, list(fit.CageVertices), solid.Shape.Volume,
+                          self.doc.UndoCount), before)
+        self.assertTrue(fit.isValid() and solid.isValid())
+        self.assertTrue(os.path.isfile(grab))
+        panel.reject()
+        self.assertFalse(FreeCADGui.Control.activeDialog())
 
-        with self.assertRaises(StageNotAvailableError) as raised:
-            self.commands.reconstruct_all(self.doc, SAMPLE_MESH, parts="auto")
-        self.assertIn("'basemesh' stage, which is not available yet", str(raised.exception))
-        targets = [obj for obj in self.doc.Objects if self.commands.is_target(obj)]
-        self.assertEqual(len(targets), 1)
+    def test_5_deviation_map(self):
+        from polycube_wb.gui import legend
+
+        _select(self.one("Solid"))
+        FreeCADGui.runCommand("PolyCube_CheckResult")
+        deviation = self.one("Deviation")
+        self.assertEqual(deviation.Status, "ok")
+        self.assertEqual(len(deviation.VertexColors), deviation.Mesh.CountPoints)
+        self.assertTrue(deviation.ViewObject.Coloring)
+        self.assertFalse(self.one("Solid").ViewObject.Visibility)
+        self.assertTrue(legend.has_legend(deviation))
+        texts = legend.legend_texts(deviation)
+        self.assertIn("mm", texts[-1])
+        self.assertIn("%", texts[-1])
+        shot = save_screenshot(self.doc, "polycube_deviation.png")
+        self.assert_screenshot_shows_model(shot)
+        red, blue = _reddish_and_bluish(image_figures(shot)[4])
+        self.assertGreater(red + blue, 20, f"no colour map visible ({red} red, {blue} blue)")
+        deviation.ViewObject.Visibility = False
+        self.assertFalse(legend.has_legend(deviation), "the legend goes with the map")
+        self.one("Solid").ViewObject.Visibility = True
+
+    def test_6_edit_the_cage_and_undo(self):
+        fit, solid = self.one("Fit"), self.one("Solid")
+        iterations, before = fit.Iterations, solid.Shape.BoundBox
+        points = fit.CageVertices
+        top = max(range(len(points)), key=lambda k: points[k].z)
+        FreeCADGui.Selection.clearSelection()
+        FreeCADGui.Selection.addSelection(self.doc.Name, fit.Name, f"Vertex{top + 1}")
+        panel = self.open_panel(fit)
+        panel.use_selection()
+        self.assertEqual(panel.vertex_field.text(), str(top))
+        panel.move_fields[2].setValue(8.0)
+        panel.move_vertices()
+        self.assertEqual(fit.Iterations, iterations)
+        self.assertAlmostEqual(fit.CageVertices[top].z, points[top].z + 8.0, places=9)
+        self.assertEqual(solid.Status, "ok")
+        self.assertGreater(solid.Shape.BoundBox.ZMax, before.ZMax + 1.0,
+                           "the solid follows the moved vertex")
+        self.assert_screenshot_shows_model(save_screenshot(self.doc, "polycube_edited_cage.png"))
+        panel.reject()
         self.doc.undo()
-        self.assertEqual(len(self.doc.Objects), 0)
+        self.assertAlmostEqual(fit.CageVertices[top].z, points[top].z, places=9)
+        self.assertAlmostEqual(solid.Shape.BoundBox.ZMax, before.ZMax, places=6)
 
-    def test_reconstruct_all_builds_the_solid(self):
-        solid = self.commands.reconstruct_all(self.doc, SAMPLE_MESH, fit_iterations=3)
-        shape = solid.Shape
-        self.assertTrue(shape.isValid())
-        self.assertEqual(len(shape.Solids), 1)
-        self.assertGreater(len(shape.Faces), 6)
-        self.assertGreater(shape.Volume, 0)
-        for obj in self.doc.Objects:
-            if self.commands.is_target(obj) and obj.ViewObject is not None:
-                obj.ViewObject.Visibility = False
-        self.assert_screenshot_shows_model(save_screenshot(self.doc, "polycube_reconstructed.png"))
-        name = solid.Name
-        self.doc.undo()
-        self.assertIsNone(self.doc.getObject(name))
+    def test_7_save_reopen_without_the_source_and_recompute(self):
+        from polycube_wb import api
+
+        os.remove(self.source)
+        path = os.path.join(self.tmp, "workflow.FCStd")
+        self.doc.saveAs(path)
+        name = self.doc.Name
+        FreeCAD.closeDocument(name)
+        type(self).doc = FreeCAD.openDocument(path)
+        from polycube_wb.gui import legend
+
+        fit, solid, deviation = self.one("Fit"), self.one("Solid"), self.one("Deviation")
+        self.assertTrue(solid.Shape.isValid())
+        deviation.ViewObject.Visibility = True
+        self.assertTrue(legend.has_legend(deviation), "the reopened map shows its legend")
+        deviation.ViewObject.Visibility = False
+        panel = self.open_panel(fit)
+        panel.widgets["Iterations"][0].setValue(1)
+        self.assertTrue(panel.accept())
+        self.assertEqual((fit.Status, solid.Status), ("ok", "ok"))
+        # A property edited in the property editor, then the workbench's recompute.
+        solid.Depth = 6
+        FreeCADGui.runCommand("PolyCube_Recompute")
+        self.assertEqual(self.stubs.boxes, [])
+        self.assertEqual(solid.Status, "ok")
+        self.assertTrue(solid.isValid() and "Touched" not in solid.State, solid.State)
+        self.assertIn("Recompute", self.doc.UndoNames)
+        step = api.export_step(solid, os.path.join(self.tmp, "cantilever.step"))
+        import Part
+
+        read = Part.read(step)
+        self.assertEqual(len(read.Solids), 1)
+        self.assertAlmostEqual(read.Volume / solid.Shape.Volume, 1.0, places=6)
 
 
-class ProgressTest(unittest.TestCase):
-    """The progress adapter drives the GUI's status-bar progress indicator."""
+class ReconstructAllTest(unittest.TestCase, _ScreenshotAssertions):
+    """Reconstruct all on the selected target: one undo step, success reported."""
 
-    def test_stages_advance_and_stop(self):
-        from polycube_wb.gui.fc_progress import FreeCADProgress
+    def test_reconstruct_all_uses_the_selected_target(self):
+        from polycube_wb import api
+        from polycube_wb.preferences import reset_defaults, set_default
 
-        with FreeCADProgress("GUI progress test") as progress:
-            for stage in ("intake", "labeling"):
-                for fraction in (0.0, 0.3, 1.0):
-                    progress.report(stage, fraction)
-                    progress.check_cancel()
-        self.assertFalse(progress.cancelled)
+        stubs = _Stubs()
+        doc = FreeCAD.newDocument("PolycubeReconstructAll")
+        FreeCADGui.activateWorkbench(WORKBENCH)
+        set_default("fit_iterations", FIT_ITERATIONS)
+        try:
+            first = api.make_target(doc, SAMPLE_MESH, name="first",
+                                    check_self_intersections=False)
+            second = api.make_target(doc, SAMPLE_MESH, name="second",
+                                     check_self_intersections=False)
+            doc.recompute()
+            stubs.answer_open_dialog(None)
+            _select(first)
+            FreeCADGui.runCommand("PolyCube_ReconstructAll")
+            self.assertEqual(stubs.boxes, [])
+            (solid,) = _objects(doc, "Solid")
+            self.assertIs(api.upstream_objects(solid)["Target"], first)
+            self.assertEqual(second.InList, [])
+            self.assertTrue(solid.Shape.isValid())
+            self.assertEqual(len(_objects(doc, "Target")), 2, "no second import")
+            status = FreeCADGui.getMainWindow().statusBar().currentMessage()
+            self.assertIn("B-spline faces", status)
+            self.assert_screenshot_shows_model(save_screenshot(doc, "polycube_reconstructed.png"))
+            self.assertEqual(doc.UndoNames[0], "Reconstruct all")
+            doc.undo()
+            self.assertEqual(len(doc.Objects), 2)
+        finally:
+            reset_defaults()
+            stubs.restore()
+            FreeCAD.closeDocument(doc.Name)

@@ -1,0 +1,268 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Task panels of the stage objects: their parameters, OK / Apply / Cancel.
+
+One panel class serves every stage: its fields come from ``FIELDS`` (property, label,
+kind, range). OK and Apply write the fields to the object and recompute (one undo step,
+with the progress bar; Esc cancels and leaves the document as it was); Cancel changes
+nothing. "Paper defaults" puts the paper's values in the fields. The cage stages
+(BaseMesh, Fit) also offer moving selected cage vertices: the stages after them follow
+(a Fit reruns from an edited base mesh; a Solid follows an edited fitted cage directly).
+
+Panels hold no geometry code, so tests build them, set their widgets and call
+``accept()``.
+"""
+import FreeCAD
+import FreeCADGui
+from PySide import QtGui
+
+from polycube_wb.gui import icon_path
+
+FIELDS = {
+    # property, label, kind ("int", "float", "choice", "bool"), (minimum, maximum) or choices,
+    # ReconstructionParams field (for the paper's default) or None
+    "Target": (("CheckSelfIntersections", "Check self-intersections", "bool", None, None),),
+    "Segmentation": (
+        ("PartMode", "Parts", "choice", ("single", "auto"), "parts"),
+        ("BlendFactor", "Frame blending (mean edge lengths)", "float", (1e-3, 1000.0),
+         "blend_factor"),
+        ("Lambda", "λ (Eq. 3)", "float", (0.0, 1000.0), "lam"),
+        ("Penalty", "p (Eq. 3)", "float", (0.0, 1e12), "penalty"),
+        ("MaxSweeps", "Most HBECVT sweeps", "int", (1, 100000), "max_sweeps"),
+        ("Repair", "Repair the labeling", "bool", None, "repair"),
+        ("ColourBy", "Colour by", "choice", ("Labels", "Parts"), None)),
+    "BaseMesh": (
+        ("TargetFaces", "Target faces", "int", (6, 200000), "target_faces"),
+        ("MaxBaseFaces", "Most faces", "int", (6, 1000000), "max_base_faces")),
+    "Fit": (
+        ("Iterations", "Iterations", "int", (0, 100000), "fit_iterations"),
+        ("SubdivisionLevels", "Subdivision levels", "int", (1, 5), "subdivision_levels"),
+        ("Mode", "Mode", "choice", ("inside", "nearest"), "fit_mode"),
+        ("AutoMinThickness", "Automatic minimal thickness", "bool", None, None),
+        ("MinThickness", "Minimal thickness, mm (0: none)", "float", (0.0, 1e6), None)),
+    "Solid": (("Depth", "Grading depth at extraordinary vertices", "int", (1, 12), None),),
+    "Deviation": (
+        ("Tolerance", "Tessellation tolerance (of the diagonal)", "float", (1e-6, 0.1), None),
+        ("Scale", "Colour scale, mm (0: largest deviation)", "float", (0.0, 1e9), None)),
+}
+CAGE_KINDS = ("BaseMesh", "Fit")
+ACTIVE = {}
+"""Object name -> its open task panel (for scripts and tests)."""
+
+
+def panel_for(obj):
+    """The task panel of a stage object."""
+    return StagePanel(obj)
+
+
+class StagePanel:
+    """Task panel of one stage object (``form``, ``accept``, ``reject``, ``clicked``)."""
+
+    def __init__(self, obj):
+        from polycube_wb.objects.base import stage_kind
+
+        self.obj = obj
+        self.kind = stage_kind(obj)
+        ACTIVE[obj.Name] = self
+        self.widgets = {}
+        self.outcome = None
+        self.form = QtGui.QWidget()
+        self.form.setWindowTitle(f"Polycube {self.kind}: {obj.Label}")
+        self.form.setWindowIcon(QtGui.QIcon(icon_path("PolycubeWorkbench")))
+        layout = QtGui.QVBoxLayout(self.form)
+        box = QtGui.QGroupBox("Parameters")
+        form = QtGui.QFormLayout(box)
+        for prop, label, kind, limits, _ in FIELDS.get(self.kind, ()):
+            widget = make_widget(kind, limits)
+            set_widget_value(widget, kind, getattr(obj, prop))
+            widget.setToolTip(obj.getDocumentationOfProperty(prop))
+            form.addRow(label, widget)
+            self.widgets[prop] = (widget, kind)
+        defaults = QtGui.QPushButton("Paper defaults")
+        defaults.clicked.connect(self.paper_defaults)
+        form.addRow(defaults)
+        layout.addWidget(box)
+        if self.kind in CAGE_KINDS:
+            layout.addWidget(self._cage_box())
+        self.status = QtGui.QLabel()
+        self.status.setWordWrap(True)
+        layout.addWidget(self.status)
+        layout.addStretch(1)
+        self.show_status()
+
+    # -- task dialog protocol ---------------------------------------------------------------
+
+    def getStandardButtons(self):
+        buttons = QtGui.QDialogButtonBox
+        return int(buttons.Ok | buttons.Apply | buttons.Cancel)
+
+    def clicked(self, button):
+        if button == int(QtGui.QDialogButtonBox.Apply):
+            self.apply()
+
+    def accept(self):
+        """Write the fields and recompute; the panel stays open when the user cancelled
+        or the change could not be made (the document is then as before)."""
+        self.apply()
+        if self.outcome is None:
+            return False
+        _close(self.obj)
+        return True
+
+    def reject(self):
+        _close(self.obj)
+        return True
+
+    # -- actions ----------------------------------------------------------------------------
+
+    def values(self):
+        """Dict property -> value of the fields."""
+        return {prop: widget_value(widget, kind) for prop, (widget, kind) in self.widgets.items()}
+
+    def paper_defaults(self):
+        from polycube_wb.preferences import paper_defaults
+
+        defaults = paper_defaults()
+        for prop, _, kind, _, field in FIELDS.get(self.kind, ()):
+            if field is not None:
+                set_widget_value(self.widgets[prop][0], kind, defaults[field])
+
+    def apply(self, vertex_moves=None):
+        """Write the fields (and ``vertex_moves``: index -> new position) and recompute."""
+        from polycube_wb import api
+        from polycube_wb.gui.commands import run_stage_command
+
+        obj, values = self.obj, self.values()
+        changed = {prop: value for prop, value in values.items()
+                   if getattr(obj, prop) != value}
+        if not changed and not vertex_moves and obj.isValid() and obj.Status == "ok":
+            self.outcome = api.RecomputeOutcome({}, False)  # nothing to do
+            return
+
+        def build():
+            for line in _replay_lines(obj, changed):
+                FreeCADGui.doCommand(line)
+            if vertex_moves:
+                moves = {index: tuple(point) for index, point in vertex_moves.items()}
+                FreeCADGui.doCommand("from polycube_wb import api")
+                FreeCADGui.doCommand(f"api.move_cage_vertices({_reference(obj)}, {moves!r})")
+            obj.touch()
+            return obj
+
+        self.outcome = run_stage_command(f"Edit {obj.Label}", obj.Document, build)
+        self.show_status()
+
+    def show_status(self):
+        from polycube_wb import api
+
+        self.status.setText(api.describe(self.obj))
+
+    # -- cage editing -----------------------------------------------------------------------
+
+    def _cage_box(self):
+        box = QtGui.QGroupBox("Move cage vertices")
+        form = QtGui.QFormLayout(box)
+        self.vertex_field = QtGui.QLineEdit()
+        self.vertex_field.setToolTip("Cage vertex indices (from 0), separated by commas; "
+                                     "'Use selection' takes the vertices selected in the view")
+        form.addRow("Vertices", self.vertex_field)
+        use = QtGui.QPushButton("Use selection")
+        use.clicked.connect(self.use_selection)
+        form.addRow(use)
+        self.move_fields = []
+        for axis in "XYZ":
+            field = QtGui.QDoubleSpinBox()
+            field.setRange(-1e6, 1e6)
+            field.setDecimals(4)
+            field.setSuffix(" mm")
+            form.addRow(f"Move by {axis}", field)
+            self.move_fields.append(field)
+        move = QtGui.QPushButton("Move")
+        move.clicked.connect(self.move_vertices)
+        form.addRow(move)
+        return box
+
+    def selected_vertices(self):
+        """Cage vertex indices in the field; raises ValueError naming a bad entry."""
+        count = len(self.obj.CageVertices)
+        indices = []
+        for entry in self.vertex_field.text().replace(" ", "").split(","):
+            if not entry:
+                continue
+            if not entry.isdigit() or int(entry) >= count:
+                raise ValueError(f"'{entry}' is not a cage vertex index (0..{count - 1})")
+            indices.append(int(entry))
+        return sorted(set(indices))
+
+    def use_selection(self):
+        from polycube_wb.objects.cage import vertex_indices
+
+        count = len(self.obj.CageVertices)
+        names = []
+        for selection in FreeCADGui.Selection.getSelectionEx():
+            if selection.Object is self.obj:
+                names += selection.SubElementNames
+        picked = [index for index in vertex_indices(names) if index < count]
+        self.vertex_field.setText(", ".join(str(index) for index in picked))
+
+    def move_vertices(self):
+        """Move the listed cage vertices by the offset and recompute what follows."""
+        try:
+            indices = self.selected_vertices()
+        except ValueError as exc:
+            self.status.setText(str(exc))
+            return
+        offset = FreeCAD.Vector(*(field.value() for field in self.move_fields))
+        points = self.obj.CageVertices
+        self.apply({index: points[index] + offset for index in indices})
+
+
+def _reference(obj):
+    return f"App.getDocument({obj.Document.Name!r}).getObject({obj.Name!r})"
+
+
+def _replay_lines(obj, changed):
+    """Console lines that set ``changed`` (property -> value) on ``obj``."""
+    return [f"{_reference(obj)}.{prop} = {value!r}" for prop, value in changed.items()]
+
+
+def _close(obj):
+    ACTIVE.pop(obj.Name, None)
+    FreeCADGui.Control.closeDialog()
+    gui_document = FreeCADGui.getDocument(obj.Document.Name)
+    if gui_document is not None and gui_document.getInEdit() is not None:
+        gui_document.resetEdit()
+
+
+def make_widget(kind, limits):
+    if kind == "int":
+        widget = QtGui.QSpinBox()
+        widget.setRange(*limits)
+    elif kind == "float":
+        widget = QtGui.QDoubleSpinBox()
+        widget.setRange(*limits)
+        widget.setDecimals(6)
+    elif kind == "choice":
+        widget = QtGui.QComboBox()
+        widget.addItems(list(limits))
+    else:
+        widget = QtGui.QCheckBox()
+    return widget
+
+
+def set_widget_value(widget, kind, value):
+    if kind in ("int", "float"):
+        widget.setValue(value)
+    elif kind == "choice":
+        widget.setCurrentIndex(max(widget.findText(str(value)), 0))
+    else:
+        widget.setChecked(bool(value))
+
+
+def widget_value(widget, kind):
+    if kind == "int":
+        return int(widget.value())
+    if kind == "float":
+        return float(widget.value())
+    if kind == "choice":
+        return widget.currentText()
+    return bool(widget.isChecked())

@@ -1,0 +1,305 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""What every stage object shares: properties, persistence, fingerprints, the run session.
+
+A stage object keeps its parameters in properties and its result in the document (mesh,
+shape and list properties), never in the proxy: the proxy's saved state is only its
+``Type`` string (FreeCAD 0.20.2 stores proxies as JSON through ``__getstate__``, and
+numpy arrays there are silently lost).
+
+Recompute reruns only what changed. Each object stores ``ResultId`` (a hash of its result),
+``InputId`` (the ``ResultId`` of its inputs when it ran) and ``ParamsId`` (a hash of its
+parameters). ``execute`` reruns the stage only when one of those differs; otherwise it just
+rebuilds its display from the stored result (and keeps its cached outputs unless the stored
+result changed). So editing a stored result (the cage's vertex
+coordinates) changes the ``ResultId`` and reruns the stages after it, not the stage itself.
+
+The objects' ``execute`` is called by ``doc.recompute()``, which cannot pass arguments;
+``recompute_session`` hands them the progress object of the command that recomputes and
+collects their failures (an exception in ``execute`` does not propagate from recompute).
+"""
+import contextlib
+import hashlib
+import json
+
+import numpy as np
+
+import FreeCAD
+
+from core.errors import Cancelled, PolycubeError
+from core.progress import NO_PROGRESS, SubProgress
+
+STATUS_GROUP = "Status"
+STAGE_WEIGHTS = {"Target": 1.0, "Segmentation": 1.0, "BaseMesh": 2.0, "Fit": 12.0,
+                 "Solid": 1.5, "Deviation": 1.5}
+"""Share of the progress bar each object gets when several recompute together (about
+their run times on the bundled sample: the fit dominates)."""
+
+
+class StageFailed(PolycubeError):
+    """A core stage did not produce its result; the message is the stage's own reason."""
+
+
+class _Session:
+    """The progress and failures of one ``recompute_session``."""
+
+    def __init__(self, progress, weights):
+        self.progress = progress
+        self.weights = weights
+        self.total = sum(weights.values()) or 1.0
+        self.done = 0.0
+        self.failures = {}
+        self.cancelled = False
+
+    def span(self, obj):
+        """The ``SubProgress`` of ``obj``'s run: its share of the bar, in run order."""
+        weight = self.weights.get(obj.Name, 0.0)
+        start = self.done / self.total
+        self.done = min(self.total, self.done + weight)
+        return SubProgress(self.progress, start, self.done / self.total)
+
+
+_SESSIONS = []
+
+
+def _current():
+    return _SESSIONS[-1] if _SESSIONS else None
+
+
+@contextlib.contextmanager
+def recompute_session(doc, progress=NO_PROGRESS):
+    """Give the stage objects recomputed inside the block ``progress`` and collect failures.
+
+    The bar spans every stage object that the recompute will run (the touched ones and
+    everything after them), each weighted by ``STAGE_WEIGHTS``.
+
+    Yields
+    ------
+    _Session
+        ``failures`` maps object names to the one-line reason their stage failed;
+        ``cancelled`` is True when the user cancelled.
+    """
+    weights = {}
+    for obj in pending_objects(doc):
+        kind = stage_kind(obj)
+        if kind is not None:
+            weights[obj.Name] = STAGE_WEIGHTS.get(kind, 1.0)
+    session = _Session(progress, weights)
+    _SESSIONS.append(session)
+    try:
+        yield session
+    finally:
+        _SESSIONS.pop()
+
+
+def pending_objects(doc):
+    """Objects of ``doc`` a recompute will run: the touched ones and all depending on them."""
+    pending = {}
+    for obj in doc.Objects:
+        if "Touched" in obj.State or obj.MustExecute:
+            pending[obj.Name] = obj
+            for dependent in obj.InListRecursive:
+                pending[dependent.Name] = dependent
+    return list(pending.values())
+
+
+def stage_kind(obj):
+    """``Type`` of a stage object's proxy without the ``Polycube::`` prefix, else None."""
+    proxy = getattr(obj, "Proxy", None)
+    kind = getattr(proxy, "Type", "")
+    return kind.split("::", 1)[1] if kind.startswith("Polycube::") else None
+
+
+def add_property(obj, kind, name, group, tooltip, default=None, read_only=False, hidden=False,
+                 output=False):
+    """Add a property if ``obj`` lacks it (idempotent: new objects and old documents).
+
+    Parameters
+    ----------
+    kind : FreeCAD property type (``App::PropertyInteger``, ...).
+    default : value set only when the property is added (a list for an enumeration: its
+        choices, the first being the default).
+    read_only, hidden : editor modes; ``output`` marks a result that does not touch the
+        object when set (so storing a result does not schedule another recompute).
+    """
+    if name in obj.PropertiesList:
+        return False
+    obj.addProperty(kind, name, group, tooltip)
+    if default is not None:
+        setattr(obj, name, default)
+        if isinstance(default, list) and kind == "App::PropertyEnumeration":
+            setattr(obj, name, default[0])
+    if hidden:
+        obj.setEditorMode(name, 2)
+    elif read_only:
+        obj.setEditorMode(name, 1)
+    if output:
+        obj.setPropertyStatus(name, "Output")
+    return True
+
+
+def fingerprint(*parts):
+    """Short hex digest of arrays, numbers and strings (stable across runs and machines)."""
+    digest = hashlib.sha1()
+    for part in parts:
+        if isinstance(part, np.ndarray):
+            array = np.ascontiguousarray(part)
+            digest.update(str(array.dtype).encode() + str(array.shape).encode())
+            digest.update(array.tobytes())
+        else:
+            digest.update(json.dumps(part, sort_keys=True, default=str).encode())
+    return digest.hexdigest()[:16]
+
+
+class StageProxy:
+    """Base of the stage proxies.
+
+    Subclasses set ``TYPE`` and ``INPUTS`` (names of link properties to upstream stage
+    objects), and implement ``init_properties``, ``parameters(obj)`` (a JSON-able dict),
+    ``run(obj, progress)`` (run the stage and store its result, may raise) and
+    ``show(obj)`` (rebuild the display from the stored result; returns its ``ResultId``).
+    ``outputs(obj)`` returns the core state entries later stages need, cached in memory
+    and rebuilt from the document when missing (after reopening).
+    """
+
+    TYPE = "Polycube::Stage"
+    INPUTS = ()
+
+    def __init__(self, obj):
+        obj.Proxy = self
+        self.Type = self.TYPE
+        self._cache = None
+        self.init_properties(obj)
+
+    # -- persistence (JSON only; FreeCAD 0.20.2 uses __getstate__, 0.21+ dumps) -----------
+
+    def __getstate__(self):
+        return {"Type": self.TYPE}
+
+    def __setstate__(self, state):
+        self.Type = self.TYPE
+        self._cache = None
+
+    def dumps(self):
+        return self.__getstate__()
+
+    def loads(self, state):
+        self.__setstate__(state)
+
+    def onDocumentRestored(self, obj):
+        self._cache = None
+        self.init_properties(obj)
+
+    # -- properties ------------------------------------------------------------------------
+
+    def init_properties(self, obj):
+        """Add the properties this object needs that it lacks (idempotent)."""
+        add_property(obj, "App::PropertyString", "Status", STATUS_GROUP,
+                     "Outcome of the last run: 'ok', or why the stage failed", "",
+                     read_only=True, output=True)
+        for name, tooltip in (("ResultId", "Hash of the stored result"),
+                              ("InputId", "ResultId of the inputs when the stage last ran"),
+                              ("ParamsId", "Hash of the parameters when the stage last ran")):
+            add_property(obj, "App::PropertyString", name, STATUS_GROUP, tooltip, "",
+                         hidden=True, output=True)
+
+    # -- running ---------------------------------------------------------------------------
+
+    def inputs(self, obj):
+        """The upstream stage objects, in ``INPUTS`` order; raises when a link is empty."""
+        found = []
+        for name in self.INPUTS:
+            upstream = getattr(obj, name)
+            if upstream is None or stage_kind(upstream) is None:
+                raise StageFailed(f"{obj.Label}: its '{name}' link must point to a Polycube "
+                                  "stage object")
+            found.append(upstream)
+        return found
+
+    def input_id(self, obj):
+        return fingerprint([upstream.ResultId for upstream in self.inputs(obj)])
+
+    def is_stale(self, obj):
+        """True when the stage must rerun: inputs or parameters changed, or no result yet."""
+        return (not obj.ResultId or obj.InputId != self.input_id(obj)
+                or obj.ParamsId != fingerprint(self.parameters(obj)))
+
+    def execute(self, obj):
+        session = _current()
+        progress = session.span(obj) if session is not None else NO_PROGRESS
+        try:
+            if self.is_stale(obj):
+                self._cache = None
+                self.run(obj, progress)
+                obj.InputId = self.input_id(obj)
+                obj.ParamsId = fingerprint(self.parameters(obj))
+            result_id = self.show(obj)
+            if result_id != obj.ResultId:  # a new or edited result: forget the cached one
+                self._cache = None
+                obj.ResultId = result_id
+        except Cancelled as exc:
+            self._fail(obj, session, "cancelled by the user", cancelled=True)
+            raise exc
+        except (PolycubeError, ImportError) as exc:
+            self._fail(obj, session, _one_line(exc))
+            raise
+        progress.report(self.TYPE.split("::")[1], 1.0)
+        obj.Status = "ok"
+
+    def _fail(self, obj, session, reason, cancelled=False):
+        obj.Status = reason
+        FreeCAD.Console.PrintError(f"Polycube: {obj.Label}: {reason}\n")
+        if session is not None:
+            session.failures[obj.Name] = reason
+            session.cancelled = session.cancelled or cancelled
+
+    def outputs(self, obj):
+        """Core state entries of this stage's result (cached; rebuilt after reopening)."""
+        if self._cache is None:
+            self._cache = self.load_outputs(obj)
+        return self._cache
+
+    def load_outputs(self, obj):
+        raise NotImplementedError(f"{type(self).__name__} must implement load_outputs")
+
+    def upstream_state(self, obj):
+        """The merged ``outputs`` of all stages before this one (a new dict)."""
+        state = {}
+        for upstream in self.inputs(obj):
+            state.update(upstream.Proxy.upstream_state(upstream))
+            state.update(upstream.Proxy.outputs(upstream))
+        return state
+
+
+def _one_line(exc):
+    text = " ".join(str(exc).split())
+    return text or type(exc).__name__
+
+
+def run_core_stages(state, stages, params, progress):
+    """Run core pipeline stages on ``state``; returns ``(state, report)``.
+
+    Raises
+    ------
+    Cancelled, PolycubeInputError
+        As raised by the stages.
+    StageFailed
+        A stage did not run to the end; the message names it and its reason.
+    """
+    from core.pipeline import run_stages
+
+    state, report, failed = run_stages(state, list(stages), params, progress)
+    if isinstance(failed, (Cancelled, PolycubeError)):
+        raise failed
+    for name in stages:
+        entry = report["stages"].get(name, {})
+        if entry.get("status") != "ok":
+            raise StageFailed(f"the '{name}' stage {entry.get('status', 'did not run')}: "
+                              f"{entry.get('message', '')}".rstrip(": "))
+    return state, report
+
+
+def stage_params(**values):
+    """``ReconstructionParams`` from the paper's defaults and the given fields."""
+    from core.params import ReconstructionParams
+
+    return ReconstructionParams.from_dict(values)

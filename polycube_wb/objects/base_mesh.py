@@ -1,0 +1,59 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""BaseMesh: the coarse quad base mesh (the cage) built from the polycube labeling.
+
+A ``Part::FeaturePython`` whose shape is the cage's vertices and edges, stored in the
+document (``polycube_wb.objects.cage``). It runs the core stages between the labeling and
+the fit (read from ``core.pipeline.CORE_STAGES``: the polycube and the base mesh).
+Editing ``CageVertices`` reruns only the stages after it (the fit starts from the edited
+cage).
+"""
+from polycube_wb.objects.base import StageProxy, add_property, fingerprint, run_core_stages, \
+    stage_params
+from polycube_wb.objects.cage import add_cage_properties, cage_shape, read_cage, store_cage
+
+
+def base_mesh_stages():
+    """Core stage names after ``labeling`` and before ``fit``."""
+    from core.pipeline import CORE_STAGES
+
+    return CORE_STAGES[CORE_STAGES.index("labeling") + 1:CORE_STAGES.index("fit")]
+
+
+class CageProxy(StageProxy):
+    """A stage whose result is a cage (base mesh or fitted base mesh)."""
+
+    def show(self, obj):
+        mesh = read_cage(obj)
+        obj.Shape = cage_shape(mesh)
+        return fingerprint(mesh.vertices, mesh.face_vertices, mesh.face_offsets)
+
+    def load_outputs(self, obj):
+        return {"base_mesh": read_cage(obj)}
+
+
+class BaseMeshProxy(CageProxy):
+    TYPE = "Polycube::BaseMesh"
+    INPUTS = ("Segmentation",)
+
+    def init_properties(self, obj):
+        from polycube_wb.preferences import default
+
+        super().init_properties(obj)
+        add_property(obj, "App::PropertyLink", "Segmentation", "Base mesh",
+                     "The segmentation (a valid polycube labeling)")
+        add_property(obj, "App::PropertyInteger", "TargetFaces", "Base mesh",
+                     "About how many faces the base mesh gets (the polycube grid is refined "
+                     "to it)", default("target_faces"))
+        add_property(obj, "App::PropertyInteger", "MaxBaseFaces", "Base mesh",
+                     "A base mesh with more faces stops the stage with a message",
+                     default("max_base_faces"))
+        add_cage_properties(obj)
+
+    def parameters(self, obj):
+        return {"target_faces": int(obj.TargetFaces), "max_base_faces": int(obj.MaxBaseFaces)}
+
+    def run(self, obj, progress):
+        state = self.upstream_state(obj)
+        state, _ = run_core_stages(state, base_mesh_stages(),
+                                   stage_params(**self.parameters(obj)), progress)
+        store_cage(obj, state["base_mesh"])

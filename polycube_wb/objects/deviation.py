@@ -1,0 +1,146 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Deviation: a colour map of the solid's distance to the target, with the check figures.
+
+A ``Mesh::FeaturePython`` holding a tessellation of the solid whose vertices are coloured
+by their signed distance to the target (blue inside, white on it, red outside), clipped
+at ``Scale`` (model units; 0 picks the largest distance). It also holds the figures of
+``Check result``: mean and max distance, volume outside the target and target volume not
+covered, and watertightness of the tessellation.
+"""
+import numpy as np
+
+from polycube_wb.objects.base import StageFailed, StageProxy, add_property, fingerprint
+
+FIGURES = (("MeanDeviation", "Mean unsigned distance of the solid's tessellation vertices "
+            "to the target, model units"),
+           ("MaxDeviation", "Largest such distance, model units"),
+           ("MaxDeviationPercent", "MaxDeviation in % of the target's bounding-box diagonal"),
+           ("MeanDeviationPercent", "MeanDeviation in % of the diagonal"),
+           ("OutsideVolume", "Solid volume outside the target, % of the target volume"),
+           ("UncoveredVolume", "Target volume the solid does not cover, % of the target "
+            "volume"),
+           ("ScaleUsed", "Distance shown at the ends of the colour scale, model units"))
+INSIDE, ON, OUTSIDE = (0.13, 0.31, 0.85), (0.95, 0.95, 0.95), (0.85, 0.13, 0.13)
+
+
+class DeviationProxy(StageProxy):
+    TYPE = "Polycube::Deviation"
+    INPUTS = ("Solid", "Target")
+
+    def init_properties(self, obj):
+        super().init_properties(obj)
+        add_property(obj, "App::PropertyLink", "Solid", "Deviation", "The result solid")
+        add_property(obj, "App::PropertyLink", "Target", "Deviation", "The target mesh")
+        add_property(obj, "App::PropertyFloat", "Tolerance", "Deviation",
+                     "Tessellation tolerance, fraction of the target's diagonal", 1e-3)
+        add_property(obj, "App::PropertyFloat", "Scale", "Deviation",
+                     "Distance at the ends of the colour scale, model units (0: the largest)",
+                     0.0)
+        for name, tooltip in FIGURES:
+            add_property(obj, "App::PropertyFloat", name, "Result", tooltip, 0.0,
+                         read_only=True, output=True)
+        add_property(obj, "App::PropertyBool", "Watertight", "Result",
+                     "The tessellation of the solid is closed and 2-manifold", False,
+                     read_only=True, output=True)
+        add_property(obj, "App::PropertyFloatList", "SignedDistance", "Result",
+                     "Signed distance of every vertex (positive outside the target)",
+                     hidden=True, output=True)
+        add_property(obj, "App::PropertyColorList", "VertexColors", "Display",
+                     "Colour of every vertex (shown by the view provider)", hidden=True,
+                     output=True)
+
+    def parameters(self, obj):
+        return {"tolerance": float(obj.Tolerance)}
+
+    def inputs(self, obj):
+        """The solid and the target: stage objects, or plain ones (a ``Part::Feature``
+        solid and a ``Mesh::Feature``, e.g. from ``api.reconstruct`` or an older version)."""
+        found = []
+        for name, kind in (("Solid", "Part::Feature"), ("Target", "Mesh::Feature")):
+            upstream = getattr(obj, name)
+            if upstream is None or not upstream.isDerivedFrom(kind):
+                raise StageFailed(f"{obj.Label}: its '{name}' link must point to a {kind} "
+                                  "object")
+            found.append(upstream)
+        return found
+
+    def input_id(self, obj):
+        """Result ids of stage objects; for plain objects, a hash of their geometry."""
+        ids = []
+        for upstream in self.inputs(obj):
+            if getattr(upstream, "ResultId", ""):
+                ids.append(upstream.ResultId)
+            elif upstream.isDerivedFrom("Mesh::Feature"):
+                ids.append(fingerprint(*_mesh_arrays(upstream)))
+            else:
+                shape = upstream.Shape
+                ids.append(fingerprint(len(shape.Faces), shape.Volume, shape.Area))
+        return fingerprint(ids)
+
+    def run(self, obj, progress):
+        from core.errors import ParameterError
+        from core.fitting.closest_point import TargetSurface
+        from core.quality import containment, is_watertight_manifold
+        from polycube_wb.brep import tessellate
+        from polycube_wb.convert import arrays_to_mesh
+
+        if not 0 < obj.Tolerance <= 0.1:
+            raise ParameterError(f"Tolerance must be in (0, 0.1], got {obj.Tolerance}")
+        solids = obj.Solid.Shape.Solids
+        if len(solids) != 1:
+            raise StageFailed(f"{obj.Solid.Label}: expected one solid, found {len(solids)}")
+        target_V, target_F = _mesh_arrays(obj.Target)
+        surface = TargetSurface(target_V, target_F)
+        progress.report("tessellate", 0.1)
+        V, F = tessellate(solids[0], obj.Tolerance * surface.diagonal)
+        progress.report("distances", 0.4)
+        signed = surface.signed_distance(V)[0]
+        progress.check_cancel()
+        progress.report("containment", 0.7)
+        inside = containment(V, F, target_V, target_F)
+        distance = np.abs(signed)
+        obj.MeanDeviation = float(distance.mean())
+        obj.MaxDeviation = float(distance.max())
+        obj.MeanDeviationPercent = 100.0 * obj.MeanDeviation / surface.diagonal
+        obj.MaxDeviationPercent = 100.0 * obj.MaxDeviation / surface.diagonal
+        obj.OutsideVolume = 100.0 * inside["outside_volume_fraction"]
+        obj.UncoveredVolume = 100.0 * inside["uncovered_volume_fraction"]
+        obj.Watertight = bool(is_watertight_manifold(V, F))
+        obj.SignedDistance = signed.tolist()
+        obj.Mesh = arrays_to_mesh(V, F)
+
+    def show(self, obj):
+        signed = np.asarray(obj.SignedDistance, dtype=np.float64)
+        if len(signed) != obj.Mesh.CountPoints:
+            raise StageFailed(f"{obj.Label}: no distances are stored; recompute it")
+        scale = obj.Scale if obj.Scale > 0 else float(np.abs(signed).max())
+        obj.ScaleUsed = scale
+        obj.VertexColors = deviation_colours(signed, scale)
+        return fingerprint(signed, scale)
+
+    def load_outputs(self, obj):
+        return {}
+
+
+def _mesh_arrays(obj):
+    from polycube_wb.convert import mesh_to_arrays
+
+    return mesh_to_arrays(obj.Mesh)
+
+
+def deviation_colours(signed, scale):
+    """RGB per value: blue (-scale) -> white (0) -> red (+scale), clipped beyond.
+
+    Parameters
+    ----------
+    signed : (n,) float64 signed distances (positive outside).
+    scale : float > 0 (0 gives all white).
+
+    Returns
+    -------
+    list of n (r, g, b) tuples in [0, 1].
+    """
+    t = np.clip(signed / scale, -1.0, 1.0) if scale > 0 else np.zeros_like(signed)
+    ends = np.where((t < 0)[:, None], np.asarray(INSIDE), np.asarray(OUTSIDE))
+    colours = np.asarray(ON) + np.abs(t)[:, None] * (ends - np.asarray(ON))
+    return [tuple(row) for row in colours.tolist()]

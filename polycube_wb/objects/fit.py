@@ -1,0 +1,68 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Fit: shape optimisation of a cage so its limit surface fills the target from inside.
+
+A ``Part::FeaturePython`` holding the fitted cage (``polycube_wb.objects.cage``). Its input
+is any cage object (a BaseMesh, or another Fit to refine further). Editing the fitted
+``CageVertices`` does not rerun the fit; the Solid after it follows the edit.
+"""
+from polycube_wb.objects.base import add_property, run_core_stages, stage_params
+from polycube_wb.objects.base_mesh import CageProxy
+from polycube_wb.objects.cage import add_cage_properties, store_cage
+
+FIGURES = (("MeanDistance", "mean_distance", "Mean distance of the limit surface to the target "
+            "(fraction of the bounding-box diagonal)"),
+           ("MaxDistance", "max_distance", "Largest distance to the target (fraction of the "
+            "diagonal)"),
+           ("OutsideVolume", "outside_volume_fraction", "Volume outside the target (fraction "
+            "of the target volume)"),
+           ("UncoveredVolume", "uncovered_volume_fraction", "Target volume not covered "
+            "(fraction of the target volume)"))
+
+
+class FitProxy(CageProxy):
+    TYPE = "Polycube::Fit"
+    INPUTS = ("BaseMesh",)
+
+    def init_properties(self, obj):
+        from polycube_wb.preferences import default
+
+        super().init_properties(obj)
+        add_property(obj, "App::PropertyLink", "BaseMesh", "Fit",
+                     "The cage to fit (a base mesh, possibly edited)")
+        add_property(obj, "App::PropertyInteger", "Iterations", "Fit",
+                     "Shape-optimisation iterations (paper: 100)", default("fit_iterations"))
+        add_property(obj, "App::PropertyInteger", "SubdivisionLevels", "Fit",
+                     "Catmull-Clark levels the fit works on (paper: 2; fewer on large cages)",
+                     default("subdivision_levels"))
+        if add_property(obj, "App::PropertyEnumeration", "Mode", "Fit",
+                        "'inside': the limit surface stays inside the target (paper); "
+                        "'nearest': the distance is penalised on both sides",
+                        ["inside", "nearest"]):
+            obj.Mode = default("fit_mode")
+        add_property(obj, "App::PropertyBool", "AutoMinThickness", "Fit",
+                     "Pick the minimal wall thickness from the cage and the target", True)
+        add_property(obj, "App::PropertyFloat", "MinThickness", "Fit",
+                     "Minimal wall thickness when not automatic, mm (0: no thickness "
+                     "constraint)", 0.0)
+        add_cage_properties(obj)
+        for name, _, tooltip in FIGURES:
+            add_property(obj, "App::PropertyFloat", name, "Result", tooltip, 0.0,
+                         read_only=True, output=True)
+        add_property(obj, "App::PropertyString", "Stopped", "Result",
+                     "Why the fit stopped ('iterations' or 'stalled')", "", read_only=True,
+                     output=True)
+
+    def parameters(self, obj):
+        return {"fit_iterations": int(obj.Iterations),
+                "subdivision_levels": int(obj.SubdivisionLevels), "fit_mode": obj.Mode,
+                "fit_t_min": None if obj.AutoMinThickness else float(obj.MinThickness)}
+
+    def run(self, obj, progress):
+        state = self.upstream_state(obj)
+        state, report = run_core_stages(state, ["fit"], stage_params(**self.parameters(obj)),
+                                        progress)
+        fit = report["fit"]
+        for name, key, _ in FIGURES:
+            setattr(obj, name, float(fit[key]))
+        obj.Stopped = str(fit.get("stopped", ""))
+        store_cage(obj, state["base_mesh"])

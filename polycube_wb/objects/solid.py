@@ -1,0 +1,67 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Solid: the limit surface of a cage as bicubic B-spline faces, a valid closed solid.
+
+A ``Part::FeaturePython`` (its ``Shape`` is saved in the document). Its input is any cage
+object: a Fit, or a BaseMesh to see the unfitted limit surface.
+"""
+from polycube_wb.objects.base import StageProxy, add_property
+
+FIGURES = (("BrepFaces", "faces", "App::PropertyInteger", "B-spline faces of the solid"),
+           ("BrepValid", "valid", "App::PropertyBool", "OpenCascade finds the solid valid"),
+           ("BrepVolume", "volume", "App::PropertyFloat", "Volume of the solid (model units^3)"),
+           ("MaxNormalJump", "max_normal_jump_deg", "App::PropertyFloat",
+            "Largest normal jump across patch boundaries, degrees"))
+
+
+class SolidProxy(StageProxy):
+    TYPE = "Polycube::Solid"
+    INPUTS = ("Cage",)
+
+    def init_properties(self, obj):
+        from polycube_wb.preferences import EXPORT_DEPTH_KEY, default
+
+        super().init_properties(obj)
+        add_property(obj, "App::PropertyLink", "Cage", "Solid",
+                     "The cage whose limit surface becomes the solid (a Fit or a BaseMesh)")
+        add_property(obj, "App::PropertyInteger", "Depth", "Solid",
+                     "Grading depth of the patches at extraordinary vertices (1..12; exact "
+                     "except in a cell of size 2^-depth)", default(EXPORT_DEPTH_KEY))
+        for name, _, kind, tooltip in FIGURES:
+            add_property(obj, kind, name, "Result", tooltip, read_only=True, output=True)
+
+    def parameters(self, obj):
+        return {"depth": int(obj.Depth)}
+
+    def run(self, obj, progress):
+        from core.errors import ParameterError
+        from core.progress import SubProgress
+        from core.export.bspline import limit_surface_patches
+        from polycube_wb.api import MAX_EXPORT_DEPTH
+        from polycube_wb.brep import build_solid
+
+        if not 1 <= obj.Depth <= MAX_EXPORT_DEPTH:
+            raise ParameterError(f"Depth must be between 1 and {MAX_EXPORT_DEPTH}, got "
+                                 f"{obj.Depth}")
+        base = self.upstream_state(obj)["base_mesh"]
+        progress.report("patches", 0.05)
+        patches = limit_surface_patches(base, depth=int(obj.Depth), measure=False)
+        progress.check_cancel()
+        solid, brep = build_solid(patches, SubProgress(progress, 0.5, 1.0))
+        obj.Shape = solid
+        jump = patches.info.get("normal_jump_max_deg")
+        brep["max_normal_jump_deg"] = -1.0 if jump is None else float(jump)
+        for name, key, _, _ in FIGURES:
+            setattr(obj, name, brep[key])
+
+    def show(self, obj):
+        """The solid is a function of the cage and the depth: its id is theirs (hashing the
+        B-rep of hundreds of B-spline faces would cost about a second)."""
+        from polycube_wb.objects.base import StageFailed, fingerprint
+
+        if obj.Shape.isNull():
+            raise StageFailed(f"{obj.Label}: no solid is stored; recompute it")
+        return fingerprint(obj.InputId, obj.ParamsId)
+
+    def load_outputs(self, obj):
+        return {}
+

@@ -1,0 +1,95 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Progress through the pipeline: one forward bar, the fit reports its iterations, cancel.
+
+Also the intake of an in-memory mesh (what the document's Target object uses) and the
+fit's mode and thickness parameters (what the Fit object sets).
+"""
+import numpy as np
+import pytest
+import trimesh
+
+from core.errors import Cancelled
+from core.params import ReconstructionParams
+from core.pipeline import run_stages
+from core.progress import Progress, SubProgress
+from core.subdivision.sample_cages import cube
+from core.types import TriMesh
+
+
+class Recorder(Progress):
+    """Keeps every report; cancels once ``cancel_after`` reports came from ``stage``."""
+
+    def __init__(self, stage=None, cancel_after=None):
+        self.reports = []
+        self.stage, self.cancel_after = stage, cancel_after
+
+    def report(self, stage, fraction, message=""):
+        self.reports.append((stage, fraction))
+
+    def check_cancel(self):
+        hits = sum(stage == self.stage for stage, _ in self.reports)
+        if self.cancel_after is not None and hits >= self.cancel_after:
+            raise Cancelled("test cancel")
+
+
+def _box_state():
+    box = trimesh.creation.box(extents=(12.0, 12.0, 12.0))
+    target = TriMesh(np.asarray(box.vertices, dtype=np.float64),
+                     np.asarray(box.faces, dtype=np.int64))
+    return {"target": target, "base_mesh": cube(10.0)}
+
+
+def test_sub_progress_maps_and_clamps_into_its_span():
+    parent = Recorder()
+    sub = SubProgress(parent, 0.25, 0.75)
+    for fraction in (-1.0, 0.0, 0.5, 1.0, 3.0):
+        sub.report("fit", fraction)
+    assert [f for _, f in parent.reports] == [0.25, 0.25, 0.5, 0.75, 0.75]
+
+
+def test_the_fit_reports_its_iterations_inside_its_share_of_the_run():
+    progress = Recorder()
+    state, report, failed = run_stages(_box_state(), ["fit", "patches"],
+                                       ReconstructionParams(fit_iterations=4), progress)
+    assert failed is None and report["stages"]["fit"]["status"] == "ok"
+    assert "progress" not in state
+    fractions = [fraction for _, fraction in progress.reports]
+    assert fractions == sorted(fractions), "the run's bar never goes back"
+    inside_fit = [f for stage, f in progress.reports if stage == "fit"]
+    # run_stages reports the fit's start (0); the fit its 4 iterations, within [0, 1/2].
+    assert len(inside_fit) == 1 + report["fit"]["iterations"]
+    assert all(0.0 <= f <= 0.5 + 1e-12 for f in inside_fit)
+    assert inside_fit[-1] == pytest.approx(0.5)
+
+
+def test_cancel_inside_the_fit_stops_the_run():
+    progress = Recorder(stage="fit", cancel_after=3)
+    state, report, failed = run_stages(_box_state(), ["fit", "patches"],
+                                       ReconstructionParams(fit_iterations=50), progress)
+    assert isinstance(failed, Cancelled)
+    assert report["stages"]["fit"]["status"] == "failed"
+    assert report["stages"]["patches"]["status"] == "skipped"
+    assert sum(stage == "fit" for stage, _ in progress.reports) == 3
+
+
+def test_intake_validates_an_in_memory_mesh():
+    box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    state = {"input_mesh": (np.asarray(box.vertices), np.asarray(box.faces)),
+             "input_path": "box in memory"}
+    state, report, failed = run_stages(state, ["intake"], ReconstructionParams())
+    assert failed is None
+    assert len(state["target"].faces) == 12 and report["intake"]["genus"] == 0
+    assert report["intake"]["file"] == "box in memory"
+
+
+def test_fit_mode_and_thickness_reach_the_fit():
+    from core.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="fit_mode must be one of inside, nearest"):
+        ReconstructionParams(fit_mode="outside")
+    with pytest.raises(ParameterError, match="fit_t_min must be between"):
+        ReconstructionParams(fit_t_min=-1.0)
+    params = ReconstructionParams(fit_iterations=2, fit_mode="nearest", fit_t_min=0.0)
+    _, report, failed = run_stages(_box_state(), ["fit"], params)
+    assert failed is None
+    assert report["fit"]["mode"] == "nearest" and report["fit"]["t_min"] == 0.0
