@@ -3,7 +3,7 @@
 
 A ``Part::FeaturePython`` whose shape is the cage's vertices and edges, stored in the
 document (``polycube_wb.objects.cage``). It runs the core stages between the labeling and
-the fit (read from ``core.pipeline.CORE_STAGES``: the polycube and the base mesh).
+the fit (read from ``core.pipeline.CORE_STAGES``: the quantized base mesh).
 Editing ``CageVertices`` reruns only the stages after it (the fit starts from the edited
 cage).
 """
@@ -42,8 +42,8 @@ class BaseMeshProxy(CageProxy):
         add_property(obj, "App::PropertyLink", "Segmentation", "Base mesh",
                      "The segmentation (a valid polycube labeling)")
         add_property(obj, "App::PropertyInteger", "TargetFaces", "Base mesh",
-                     "About how many faces the base mesh gets (the polycube grid is refined "
-                     "to it)", default("target_faces"))
+                     "Face budget of the base mesh (met within 25% when the labeling allows; "
+                     "otherwise the smallest layout found)", default("target_faces"))
         add_property(obj, "App::PropertyInteger", "MaxBaseFaces", "Base mesh",
                      "A base mesh with more faces stops the stage with a message",
                      default("max_base_faces"))
