@@ -103,9 +103,10 @@ def stage_frames(state, params):
 
     mesh = state["target"]
     blend = params.blend_factor * mean_edge_length(mesh.vertices, mesh.faces)
-    field = compute_frames(mesh, state["face_part"], blend_distance=blend)
+    field = compute_frames(mesh, state["face_part"], blend_distance=blend, lam=params.lam)
     report = {"parts": int(len(field.part_frames)), "interfaces": len(field.interfaces),
-              "blend_distance": float(field.blend_distance)}
+              "blend_distance": float(field.blend_distance),
+              "part_frame_source": list(field.part_frame_source)}
     return {"frames": field, "report": report}
 
 
