@@ -28,7 +28,7 @@ import numpy as np
 from core.mesh_topology import edge_faces
 from core.segmentation.frames import (align_about, cubic_energy, face_geometry, group_moments,
                                       orient_frame)
-from core.segmentation.labeling import LAMBDA, label_cost, nearest_direction_labels
+from core.segmentation.labeling import LAMBDA
 
 CANDIDATES = ("pca", "world", "aligned")
 
@@ -89,28 +89,36 @@ def candidate_frames(pca, normal4):
     return np.stack([pca, world, starts[int(np.argmin(energies))]])
 
 
-def labeling_energy(normals, neighbours_pairs, face_part, n_parts, face_frames, lam=LAMBDA):
+def labeling_energy(normals, neighbour_pairs, face_part, frames, lam=LAMBDA):
     """(P,) float64 energy ``E_p`` (module docstring) of nearest-direction labels per part.
 
     Parameters
     ----------
     normals : (m, 3) float64 unit face normals.
-    neighbours_pairs : (k, 2) int64 pairs of edge-adjacent faces of the same part.
+    neighbour_pairs : (k, 2) int64 pairs of edge-adjacent faces of the same part.
     face_part : (m,) int64 part of each face.
-    n_parts : int.
-    face_frames : (m, 3, 3) float64 frame of each face.
+    frames : (P, 3, 3) float64 frame of each part (rows x, y, z).
     lam : float, lambda of Eq. 3.
+
+    Notes
+    -----
+    The nearest of the six directions ``+-a_k`` is the axis of largest ``|n . a_k|`` with the sign
+    of ``n . a_k`` (as :func:`core.segmentation.labeling.nearest_direction_labels`), and its term-1
+    cost is ``2 - 2 |n . a_k|``; one frame per part keeps this a (m, 3) product.
     """
-    labels = nearest_direction_labels(normals, face_frames)
-    cost = label_cost(normals, face_frames)[np.arange(len(labels)), labels]
-    unary = np.bincount(face_part, weights=cost, minlength=n_parts)
-    a, b = neighbours_pairs[:, 0], neighbours_pairs[:, 1]
+    n_parts = len(frames)
+    local = np.einsum("fij,fj->fi", frames[face_part], normals)
+    axis = np.argmax(np.abs(local), axis=1)
+    best = local[np.arange(len(local)), axis]
+    labels = 2 * axis + (best < 0)
+    unary = np.bincount(face_part, weights=2.0 - 2.0 * np.abs(best), minlength=n_parts)
+    a, b = neighbour_pairs[:, 0], neighbour_pairs[:, 1]
     cut = np.bincount(face_part[a], weights=(labels[a] != labels[b]).astype(np.float64),
                       minlength=n_parts)
     return unary + lam * cut
 
 
-def choose_part_frames(vertices, faces, face_part, pca_frames, lam=LAMBDA):
+def choose_part_frames(vertices, faces, face_part, pca_frames, lam=LAMBDA, moments=None):
     """Frame of every part: the candidate of least labeling energy (module docstring).
 
     Parameters
@@ -120,6 +128,8 @@ def choose_part_frames(vertices, faces, face_part, pca_frames, lam=LAMBDA):
     pca_frames : (P, 3, 3) float64 PCA frame of each part
         (:func:`core.segmentation.frames.part_frames`).
     lam : float, lambda of Eq. 3.
+    moments : optional list of P :class:`core.segmentation.frames.SurfaceMoments` of the parts,
+        computed when omitted.
 
     Returns
     -------
@@ -128,15 +138,15 @@ def choose_part_frames(vertices, faces, face_part, pca_frames, lam=LAMBDA):
     faces = np.asarray(faces, dtype=np.int64)
     face_part = np.asarray(face_part, dtype=np.int64)
     n_parts = len(pca_frames)
-    moments = group_moments(vertices, faces, face_part, n_parts)
+    if moments is None:
+        moments = group_moments(vertices, faces, face_part, n_parts)
     cands = np.stack([candidate_frames(pca_frames[p], moments[p].normal4)
                       for p in range(n_parts)])
     normals = face_geometry(vertices, faces)[1]
     ef = edge_faces(faces)[1]
     ef = ef[(ef >= 0).all(axis=1)]
     pairs = ef[face_part[ef[:, 0]] == face_part[ef[:, 1]]]
-    energy = np.stack([labeling_energy(normals, pairs, face_part, n_parts,
-                                       cands[face_part, k], lam)
+    energy = np.stack([labeling_energy(normals, pairs, face_part, cands[:, k], lam)
                        for k in range(len(CANDIDATES))], axis=1)
     pick = np.argmin(energy, axis=1)
     frames = cands[np.arange(n_parts), pick]

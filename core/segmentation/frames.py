@@ -238,7 +238,7 @@ def frame_from_moments(moments, align_degenerate=True, tol=DEFAULT_DEGENERATE_TO
 
 
 def part_frames(vertices, faces, face_part, mode="area", align_degenerate=True,
-                tol=DEFAULT_DEGENERATE_TOL):
+                tol=DEFAULT_DEGENERATE_TOL, moments=None):
     """PCA frame of every part.
 
     Parameters
@@ -246,6 +246,8 @@ def part_frames(vertices, faces, face_part, mode="area", align_degenerate=True,
     vertices : (n, 3) float64; faces : (m, 3) int64.
     face_part : (m,) int, parts 0 .. P-1, each non-empty.
     mode : ``"area"`` (default) or ``"vertices"`` (Eq. 1 literally), see module docstring.
+    moments : optional list of P :class:`SurfaceMoments` of the parts (:func:`group_moments`),
+        computed when omitted.
 
     Returns
     -------
@@ -255,7 +257,8 @@ def part_frames(vertices, faces, face_part, mode="area", align_degenerate=True,
         raise ParameterError(f"frame mode must be one of {FRAME_MODES}, got {mode!r}")
     face_part = np.asarray(face_part, dtype=np.int64)
     n_parts = int(face_part.max()) + 1
-    moments = group_moments(vertices, faces, face_part, n_parts)
+    if moments is None:
+        moments = group_moments(vertices, faces, face_part, n_parts)
     frames = np.empty((n_parts, 3, 3))
     verts = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
@@ -549,12 +552,14 @@ def compute_frames(mesh, face_part, blend_distance=None, mode="area", align_dege
         raise ParameterError(f"degenerate_tol must be in [0, 1), got {degenerate_tol}")
     if choose not in FRAME_CHOICES:
         raise ParameterError(f"choose must be one of {FRAME_CHOICES}, got {choose!r}")
-    frames = part_frames(vertices, faces, face_part, mode, align_degenerate, degenerate_tol)
+    moments = group_moments(vertices, faces, face_part, int(face_part.max()) + 1)
+    frames = part_frames(vertices, faces, face_part, mode, align_degenerate, degenerate_tol,
+                         moments)
     source, energy = ("pca",) * len(frames), np.full((len(frames), 3), np.nan)
     if choose == "energy":
         from core.segmentation.frame_choice import choose_part_frames
 
-        chosen = choose_part_frames(vertices, faces, face_part, frames, lam)
+        chosen = choose_part_frames(vertices, faces, face_part, frames, lam, moments)
         frames, source, energy = chosen.frames, chosen.source, chosen.energy
     n_parts = len(frames)
     areas = np.bincount(face_part, weights=face_geometry(vertices, faces)[0], minlength=n_parts)

@@ -94,18 +94,18 @@ def test_best_aligned_frame_lowers_the_cubic_energy_to_zero_on_a_box():
 def test_labeling_energy_counts_cut_edges_and_normal_cost():
     # two faces of one part, normals +X and +Y, sharing an edge: cost 0 each, one cut edge
     normals = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-    frames = np.broadcast_to(np.eye(3), (3, 3, 3))
     part = np.array([0, 0, 1])
     pairs = np.array([[0, 1]])
-    e = labeling_energy(normals, pairs, part, 2, frames, lam=0.5)
+    e = labeling_energy(normals, pairs, part, np.stack([np.eye(3)] * 2), lam=0.5)
     assert e == pytest.approx([0.5, 0.0])
     # rotated 30 degrees about z: both faces cost 2 - 2 cos 30 and keep different labels
     c, s = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
     rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-    e = labeling_energy(normals, pairs, part, 2, np.broadcast_to(rot, (3, 3, 3)), lam=0.5)
+    frames = np.stack([rot, np.eye(3)])
+    e = labeling_energy(normals, pairs, part, frames, lam=0.5)
     assert e == pytest.approx([2 * (2 - 2 * c) + 0.5, 0.0])
     # lambda weighs the cut edges only
-    e0 = labeling_energy(normals, pairs, part, 2, np.broadcast_to(rot, (3, 3, 3)), lam=0.0)
+    e0 = labeling_energy(normals, pairs, part, frames, lam=0.0)
     assert e0 == pytest.approx([2 * (2 - 2 * c), 0.0])
 
 
