@@ -207,3 +207,36 @@ def test_dev_mesh_with_automatic_parts_ends_valid(name):
     near = nearest_direction_labels(n, field.face_frame)
     limit = mean_label_angle(n, near, field.face_frame) + 5.0
     assert mean_label_angle(n, out, field.face_frame) <= limit
+
+
+def test_fandisk_with_the_chosen_frame_has_no_chart_below_four_boundaries():
+    """With PCA frames fandisk kept a +X chart with two boundaries between +Y and +Z (a lens
+    whose tips are X, Y, Z corners, which no local split can make four-sided); the frame chosen by
+    labeling energy labels it validly and fits the normals better."""
+    from core.segmentation.frames import compute_frames
+    from core.types import TriMesh
+
+    path = os.path.join(MESHES, "fandisk.obj")
+    if not os.path.exists(path):
+        pytest.skip("dev mesh fandisk.obj not available")
+    mesh = trimesh.load(path, process=True)
+    tm = TriMesh(np.asarray(mesh.vertices, dtype=np.float64),
+                 np.asarray(mesh.faces, dtype=np.int64))
+    V, F = tm.vertices, tm.faces
+    parts = np.zeros(len(F), dtype=np.int64)
+    chosen = compute_frames(tm, parts)
+    pca = compute_frames(tm, parts, choose="pca")
+    assert chosen.part_frame_source[0] != "pca"
+    n = face_normals(V, F)
+    area = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+
+    def nearest_angle(field):
+        near = nearest_direction_labels(n, field.face_frame)
+        return mean_label_angle(n, near, field.face_frame, weights=area)
+
+    assert nearest_angle(chosen) < nearest_angle(pca) - 5.0
+    labels, _ = hbecvt_labeling(V, F, parts, chosen.face_frame)
+    out, rep = repair_labeling(V, F, parts, labels, chosen.face_frame)
+    assert rep["valid"], rep["unfixed"]
+    v = check_validity(V, F, parts, out, chosen.face_frame)
+    assert v.is_valid and v.layout.chart_boundary_count.min() >= 4
