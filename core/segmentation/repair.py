@@ -253,11 +253,13 @@ class _Judge:
         return float(np.degrees(np.arccos(np.clip(1.0 - 0.5 * c, -1.0, 1.0))) @ self.area)
 
 
-def _chart_candidates(val, labels, c, cost, unary, nb, colour, penalty, lams):
+def _chart_candidates(F, face_part, val, labels, c, cost, unary, nb, colour, penalty, lams):
     """Candidate labelings that change invalid chart ``c``: merges into each neighbouring label;
     for each label of another axis missing around the chart, the faces of the chart and its
-    neighbouring charts that fit that label better than their own take it; local
-    re-segmentations of the chart and its neighbours at coarser ``lam``."""
+    neighbouring charts that fit that label better than their own take it; growing the chart
+    over the faces of its part around its corners (so it gains a boundary with every chart that
+    only touched it at a corner) and over its one-ring; local re-segmentations of the chart and
+    its neighbours at coarser ``lam``."""
     lay = val.layout
     nbrs = lay.chart_neighbours[c].indices
     nbrs = nbrs[lay.chart_part[nbrs] == lay.chart_part[c]]
@@ -279,6 +281,16 @@ def _chart_candidates(val, labels, c, cost, unary, nb, colour, penalty, lams):
             cand = labels.copy()
             cand[grow] = lab
             out.append((f"grow_missing_{lab}", cand))
+    own_part = face_part == lay.chart_part[c]
+    ring = np.zeros(len(lay.vertex_sep_degree), dtype=bool)
+    ring[F[in_c]] = True
+    at_corner = ring & (lay.vertex_sep_degree >= 3)
+    for name, vmask in (("grow_at_corners", at_corner), ("grow_ring", ring)):
+        grow = _faces_at_vertices(F, vmask) & own_part & ~in_c
+        if grow.any():
+            cand = labels.copy()
+            cand[grow] = a
+            out.append((name, cand))
     for lam in lams:
         out.append((f"resegment_lambda_{lam:g}", _local_resegment(labels, unary, nb, colour,
                                                                    region, lam, penalty)))
@@ -328,8 +340,11 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     Invalid charts are handled in two ways. Small ones (``small_chart``) are merged in batches as
     in operator 3 of the module docstring; a batch is kept only if it lowers the invalid count.
     Otherwise each invalid chart, smallest first, gets trial candidates: merging it into each
-    neighbouring label, and re-running the HBECVT sweeps on the chart plus its neighbouring charts
-    from nearest-direction labels with lambda = 1, 2, 4, 8 (a coarser local segmentation). The
+    neighbouring label, growing it over the faces of its part around its corners or over its
+    one-ring (a chart that touched a neighbour only at a corner gains a boundary with it; this
+    fixes the small charts automatic parts leave along interfaces), and re-running the HBECVT
+    sweeps on the chart plus its neighbouring charts from nearest-direction labels with
+    lambda = 1, 2, 4, 8 (a coarser local segmentation). The
     candidate with the fewest invalid items (then the smallest mean angle) is kept if it has fewer
     invalid items than now and respects the angle budget; a chart with no such candidate is given
     up and reported.
@@ -454,8 +469,9 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
                     if key in gave_up or trials >= max_trials:
                         continue
                     best = None
-                    for name, cand in _chart_candidates(val, labels, c, cost, unary, nb, colour,
-                                                        penalty, (1.0, 2.0, 4.0, 8.0)):
+                    for name, cand in _chart_candidates(F, face_part, val, labels, c, cost,
+                                                        unary, nb, colour, penalty,
+                                                        (1.0, 2.0, 4.0, 8.0)):
                         if np.array_equal(cand, labels) or judge.angle(cand) > angle_cap:
                             continue
                         trials += 1

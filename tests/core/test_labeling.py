@@ -179,7 +179,8 @@ def test_dev_mesh_ends_valid_with_few_charts(name):
     assert mean_label_angle(n, out, frame) <= mean_label_angle(n, near, frame) + 5.0
 
 
-@pytest.mark.parametrize("name", ["idler_riser.stl", "to_simp_cantilever.stl"])
+@pytest.mark.parametrize("name", ["idler_riser.stl", "to_simp_cantilever.stl",
+                                  "gripper_domain.stl"])
 def test_dev_mesh_with_automatic_parts_ends_valid(name):
     # the interface x-axis of Eq. 3 term 4 and of the validity rules is one and the same
     from core.segmentation.frames import compute_frames, mean_edge_length
