@@ -322,7 +322,7 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     lam, penalty : float, Eq. 3 parameters used by smoothing and re-segmentation.
     topology : MeshTopology, optional.
     max_trials : int, cap on per-chart candidate evaluations over the whole repair (default
-        ``max(40, 1000000 // m)``: roughly a constant amount of work per mesh).
+        ``max(200, 2000000 // m)``: bounded work per mesh; hard multi-part cases need ~200).
     max_sideways : int, cap on consecutive moves that keep the invalid count (new states only).
 
     Returns
@@ -369,7 +369,7 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     if small_chart is None:
         small_chart = max(10, m // 2000)
     if max_trials is None:
-        max_trials = max(40, 1000000 // max(m, 1))
+        max_trials = max(200, 2000000 // max(m, 1))
     V = np.asarray(V, dtype=np.float64)
     normals = face_normals(V, F)
     area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
