@@ -138,6 +138,8 @@ def stage_labeling(state, params):
         "invalid_charts": int(v["invalid_charts"]["count"]),
         "invalid_boundaries": int(v["invalid_boundaries"]["count"]),
         "invalid_corners": int(v["invalid_corners"]["count"]),
+        "invalid_at_interfaces": {k: int(v[f"invalid_{k}"]["at_interfaces"])
+                                  for k in ("boundaries", "corners")},
         "turning_points": int(v["turning_points"]["count"]),
         "mean_angle_deg": float(mean_label_angle(normals, labels, field.face_frame)),
         "nearest_direction_mean_angle_deg": float(mean_label_angle(normals, nearest, field.face_frame)),

@@ -379,7 +379,10 @@ def check_validity(V, F, face_part, face_label, face_frame, topology=None, turni
         ``report`` holds ``valid`` (no invalid charts, boundaries or corners), ``monotone``,
         ``charts``, ``boundaries``, ``corners`` and, for ``invalid_charts``,
         ``invalid_boundaries``, ``invalid_corners`` and ``turning_points``, a ``count`` and a few
-        ``examples`` (ids, labels, an example face or vertex and its coordinates).
+        ``examples`` (ids, labels, an example face or vertex and its coordinates); for boundaries
+        and corners also ``at_interfaces``, how many of them are judged by the interface rules
+        (a label parallel to the interface x-axis; a corner on a part interface), which a check
+        that treats each part as its own polycube without the interface frames does not see.
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
@@ -433,6 +436,9 @@ def check_validity(V, F, face_part, face_label, face_frame, topology=None, turni
     tp_ex = [{"boundary": int(b), "vertex": int(v), "point": [float(x) for x in V[v]]}
              for b, v in tp[:max_examples].tolist()]
     n_ic, n_ib, n_iq = int(invalid_chart.sum()), int(invalid_boundary.sum()), len(invalid_corners)
+    ef = topology.edge_faces[lay.sep_edges]
+    on_iface = np.zeros(topology.n_vertices, dtype=bool)
+    on_iface[topology.edges[lay.sep_edges[face_part[ef[:, 0]] != face_part[ef[:, 1]]]]] = True
     report = {
         "valid": n_ic + n_ib + n_iq == 0,
         "monotone": len(tp) == 0 if turning else None,
@@ -440,8 +446,10 @@ def check_validity(V, F, face_part, face_label, face_frame, topology=None, turni
         "boundaries": lay.n_boundaries,
         "corners": len(lay.corners),
         "invalid_charts": {"count": n_ic, "examples": chart_ex},
-        "invalid_boundaries": {"count": n_ib, "examples": bnd_ex},
-        "invalid_corners": {"count": n_iq, "examples": corner_ex},
+        "invalid_boundaries": {"count": n_ib, "examples": bnd_ex,
+                               "at_interfaces": int((reason == 2).sum())},
+        "invalid_corners": {"count": n_iq, "examples": corner_ex,
+                            "at_interfaces": int(on_iface[invalid_corners].sum())},
         "turning_points": {"count": len(tp) if turning else None, "examples": tp_ex,
                            "tolerance": tau},
     }

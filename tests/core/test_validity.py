@@ -105,6 +105,7 @@ def test_opposite_boundary_and_its_corners_are_invalid():
     assert ex["point"][0] == pytest.approx(0.0) and ex["point"][2] == pytest.approx(1.0)
     # the two ends of that boundary are corners with an axis-less edge
     assert r["invalid_corners"]["count"] == 2
+    assert r["invalid_corners"]["at_interfaces"] == r["invalid_boundaries"]["at_interfaces"] == 0
     assert all(e["point"][0] == pytest.approx(0.0) for e in r["invalid_corners"]["examples"])
 
 
@@ -138,6 +139,10 @@ def test_label_parallel_to_interface_axis_is_invalid():
     reasons = {e["reason"] for e in r["invalid_boundaries"]["examples"]}
     assert "label_parallel_to_interface" in reasons
     assert not r["valid"]
+    # the interface-rule items are counted apart (an interface-blind check cannot see them)
+    v = judge(V, F, labels, parts)
+    assert r["invalid_boundaries"]["at_interfaces"] == int((v.boundary_reason == 2).sum()) >= 1
+    assert 1 <= r["invalid_corners"]["at_interfaces"] <= r["invalid_corners"]["count"]
 
 
 def test_single_chart_and_layout_bookkeeping():
