@@ -22,8 +22,14 @@ of priority (one kind per round, so every round works on a fresh judgement):
    relabelled to the neighbouring chart label of least normal cost among those that are not
    opposite to any label around the chart, so the chart merges into that neighbour without
    creating an opposite boundary. Without such a label it takes the least-cost neighbour label.
-4. *Invalid corners* left after 1-3 (at part interfaces): the faces of the part around the corner
-   vertex whose labels break the parity rule take the label of their largest neighbouring chart.
+4. *One-axis corners* (all separating edges at the vertex share one axis, e.g. a fan +X, +Y, -X,
+   -Y: opposite labels touching at a point), tried before the chart operators: the faces of the
+   part within two vertex rings take the label of that axis (the sign of least normal cost), a
+   new chart that shares a boundary with each chart of the fan and has X, Y, Z corners (kept if
+   it lowers the invalid count).
+5. *Invalid corners* left after 1-4 (mostly at part interfaces): the faces of the part around the
+   corner vertex whose labels break the corner rule take the label of their largest neighbouring
+   chart.
 
 After each merge round a boundary-smoothing pass runs the HBECVT sweeps restricted to the faces
 that touch a separating edge, with the extra rule that a face may only take a label already present
@@ -148,6 +154,43 @@ def _merge_charts(val, labels, cost, which):
     move = sel >= 0
     new[move] = sel[move]
     return new, len(chosen)
+
+
+def _one_axis_corners(topology, val):
+    """Invalid corners whose separating edges all have one and the same axis (e.g. a fan
+    +X, +Y, -X, -Y around the vertex: four edges along Z), and that axis: (k,) int64 each."""
+    lay = val.layout
+    ev = topology.edges[lay.sep_edges]
+    axis = val.boundary_axis[lay.sep_boundary]
+    v = np.concatenate([ev[:, 0], ev[:, 1]])
+    a = np.concatenate([axis, axis])
+    at = np.isin(v, val.invalid_corners)
+    v, a = v[at], a[at]
+    lo = np.full(topology.n_vertices, 9, dtype=np.int64)
+    hi = np.full(topology.n_vertices, -9, dtype=np.int64)
+    np.minimum.at(lo, v, a)
+    np.maximum.at(hi, v, a)
+    corners = val.invalid_corners
+    one = (lo[corners] == hi[corners]) & (lo[corners] >= 0)
+    return corners[one], lo[corners[one]]
+
+
+def _fix_one_axis_corners(F, topology, labels, face_part, cost, corners, axes, rings=2):
+    """Insert a chart of the corners' common axis: the faces of the corner's part within
+    ``rings`` vertex rings of each corner take that axis' label of least normal cost, so the
+    charts that met at a point (pairwise opposite across it) now each share a boundary with the
+    new chart, whose corners are X, Y, Z groups."""
+    new = labels.copy()
+    for v, k in zip(corners.tolist(), axes.tolist()):
+        vmask = np.zeros(topology.n_vertices, dtype=bool)
+        vmask[v] = True
+        for _ in range(rings):
+            vmask[F[_faces_at_vertices(F, vmask)]] = True
+        part_of_corner = face_part[np.flatnonzero(F == v)[0] // 3]
+        faces = np.flatnonzero(_faces_at_vertices(F, vmask) & (face_part == part_of_corner))
+        plus, minus = cost[faces, 2 * k].sum(), cost[faces, 2 * k + 1].sum()
+        new[faces] = 2 * k if plus <= minus else 2 * k + 1
+    return new, len(corners)
 
 
 def _fix_corners(F, topology, val, labels, face_part):
@@ -454,6 +497,14 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
             v_new = judge.validity(new)
             if v_new.n_invalid < val.n_invalid and hash(new.tobytes()) not in seen:
                 accepted = ("relabel_interface_parallel", count, new, v_new)
+        if accepted is None and len(val.invalid_corners):
+            corners, axes = _one_axis_corners(topology, val)
+            if len(corners):
+                new, count = _fix_one_axis_corners(F, topology, labels, face_part, cost, corners,
+                                                   axes)
+                v_new = judge.validity(new)
+                if v_new.n_invalid < val.n_invalid and hash(new.tobytes()) not in seen:
+                    accepted = ("insert_chart_at_one_axis_corners", count, new, v_new)
         if accepted is None and val.invalid_chart.any():
             lay = val.layout
             small = val.invalid_chart & (lay.chart_size <= small_chart)

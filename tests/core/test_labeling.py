@@ -241,3 +241,23 @@ def test_fandisk_with_the_chosen_frame_has_no_chart_below_four_boundaries():
     assert rep["valid"], rep["unfixed"]
     v = check_validity(V, F, parts, out, chosen.face_frame)
     assert v.is_valid and v.layout.chart_boundary_count.min() >= 4
+
+
+def test_saddle_of_alternating_labels_is_repaired():
+    """+X, +Y, -X, -Y quadrants in the middle of the cube's top: four 3-boundary charts and a
+    corner whose four boundaries all run along Z (opposite labels touching at a point)."""
+    V, F = cube(4)
+    m = len(F)
+    frames = identity_frames(m)
+    labels = nearest_direction_labels(face_normals(V, F), frames).astype(np.int64)
+    c = V[F].mean(axis=1)
+    saddle = (c[:, 2] > 0.99) & (np.abs(c[:, :2] - 0.5).max(axis=1) < 0.2)
+    east, north = c[:, 0] > 0.5, c[:, 1] > 0.5
+    quadrant = np.where(east, np.where(north, 0, 3), np.where(north, 2, 1))
+    labels[saddle] = quadrant[saddle]
+    parts = np.zeros(m, dtype=np.int64)
+    before = check_validity(V, F, parts, labels, frames).report
+    assert before["invalid_corners"]["count"] == 1 and before["invalid_charts"]["count"] == 4
+    out, rep = repair_labeling(V, F, parts, labels, frames)
+    assert rep["valid"], rep["unfixed"]
+    assert check_validity(V, F, parts, out, frames).is_valid
