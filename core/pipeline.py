@@ -113,6 +113,7 @@ def stage_frames(state, params):
 def stage_labeling(state, params):
     from core.segmentation.labeling import (face_normals, hbecvt_labeling, mean_label_angle,
                                             nearest_direction_labels)
+    from core.segmentation.monotone import straighten_boundaries
     from core.segmentation.repair import repair_labeling
     from core.segmentation.validity import check_validity
 
@@ -126,7 +127,11 @@ def stage_labeling(state, params):
         labels, repair_report = repair_labeling(mesh.vertices, mesh.faces, face_part, labels,
                                                 field.face_frame, field.face_interface_axis,
                                                 lam=params.lam, penalty=params.penalty)
-    validity = check_validity(mesh.vertices, mesh.faces, face_part, labels, field.face_frame)
+        labels, straighten_report, validity = straighten_boundaries(
+            mesh.vertices, mesh.faces, face_part, labels, field.face_frame)
+    else:
+        straighten_report = None
+        validity = check_validity(mesh.vertices, mesh.faces, face_part, labels, field.face_frame)
     normals = face_normals(mesh.vertices, mesh.faces)
     nearest = nearest_direction_labels(normals, field.face_frame)
     v = validity.report
@@ -145,6 +150,7 @@ def stage_labeling(state, params):
         "nearest_direction_mean_angle_deg": float(mean_label_angle(normals, nearest, field.face_frame)),
         "hbecvt": info,
         "unfixed": repair_report["unfixed"] if repair_report else None,
+        "straightened": straighten_report,
         "examples": {k: v[k]["examples"] for k in
                      ("invalid_charts", "invalid_boundaries", "invalid_corners", "turning_points")},
     }

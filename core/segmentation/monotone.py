@@ -104,7 +104,7 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
     topology : MeshTopology, optional.
     edge_interface_axis : (e, 3) float64, optional (:func:`edge_interface_axes`).
     max_rounds : int, rounds of fresh candidates.
-    max_checks : int, cap on whole-mesh judgements (default ``clip(1000000 // m, 3, 24)``: each
+    max_checks : int, cap on whole-mesh judgements (default ``clip(500000 // m, 2, 24)``: each
         judgement walks every boundary, so big meshes get fewer).
     max_angle_increase : float, degrees.
 
@@ -113,6 +113,8 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
     labels : (m,) int32.
     report : dict with ``turning_points_before``, ``turning_points_after``, ``moves`` (accepted),
         ``checks`` and ``angle_before`` / ``angle_after`` (area-weighted mean degrees).
+    validity : Validity of the returned labels (turning points included), so callers need not
+        judge them again.
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
@@ -121,7 +123,7 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
     if topology is None:
         topology = build_topology(F, len(V))
     if max_checks is None:
-        max_checks = int(np.clip(1000000 // max(len(F), 1), 3, 24))
+        max_checks = int(np.clip(500000 // max(len(F), 1), 2, 24))
     if edge_interface_axis is None:
         edge_interface_axis = edge_interface_axes(V, topology, face_part)
     cost = label_cost(face_normals(V, F), face_frame)
@@ -175,4 +177,4 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
     report = {"turning_points_before": int(tp0), "turning_points_after": len(val.turning_points),
               "moves": int(accepted), "checks": int(checks), "angle_before": angle0,
               "angle_after": angle(labels)}
-    return labels.astype(np.int32), report
+    return labels.astype(np.int32), report, val
