@@ -1,12 +1,10 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Per-part frame candidates (PCA, world axes, best normal-aligning rotation) and the choice by
 labeling energy, on shapes built here and on a dev mesh."""
-import os
-
 import manifold3d as m3
 import numpy as np
 import pytest
-import trimesh
+from dev_meshes import load_dev_mesh
 from scipy.spatial.transform import Rotation
 
 from core.segmentation.frame_choice import (CANDIDATES, best_aligned_frame, choose_part_frames,
@@ -15,9 +13,6 @@ from core.segmentation.frames import (CUBE_GROUP, compute_frames, cubic_energy, 
                                       part_frames)
 from core.segmentation.labeling import face_normals, mean_label_angle, nearest_direction_labels
 from core.types import TriMesh
-
-MESHES = os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data", "meshes")
-
 
 def _mesh(manifold):
     out = manifold.to_mesh()
@@ -127,11 +122,7 @@ def test_compute_frames_reports_the_choice_per_part_and_pca_mode_keeps_pca():
 def test_dev_mesh_frame_is_no_worse_than_world_or_pca(name):
     """On TO results the chosen frame's nearest-direction angle is at most that of the better of
     the world axes and PCA (the issue's figure: PCA was 10 degrees worse on the L-bracket)."""
-    path = os.path.join(MESHES, name)
-    if not os.path.exists(path):
-        pytest.skip(f"dev mesh {name} not available")
-    tm = trimesh.load(path, process=True)
-    mesh = TriMesh(np.asarray(tm.vertices, dtype=np.float64), np.asarray(tm.faces, dtype=np.int64))
+    mesh = load_dev_mesh(name)
     part = np.zeros(len(mesh.faces), dtype=np.int64)
     pca = part_frames(mesh.vertices, mesh.faces, part)
     choice = choose_part_frames(mesh.vertices, mesh.faces, part, pca)

@@ -214,15 +214,11 @@ def test_fandisk_with_the_chosen_frame_has_no_chart_below_four_boundaries():
     """With PCA frames fandisk kept a +X chart with two boundaries between +Y and +Z (a lens
     whose tips are X, Y, Z corners, which no local split can make four-sided); the frame chosen by
     labeling energy labels it validly and fits the normals better."""
-    from core.segmentation.frames import compute_frames
-    from core.types import TriMesh
+    from dev_meshes import load_dev_mesh
 
-    path = os.path.join(MESHES, "fandisk.obj")
-    if not os.path.exists(path):
-        pytest.skip("dev mesh fandisk.obj not available")
-    mesh = trimesh.load(path, process=True)
-    tm = TriMesh(np.asarray(mesh.vertices, dtype=np.float64),
-                 np.asarray(mesh.faces, dtype=np.int64))
+    from core.segmentation.frames import compute_frames
+
+    tm = load_dev_mesh("fandisk.obj")
     V, F = tm.vertices, tm.faces
     parts = np.zeros(len(F), dtype=np.int64)
     chosen = compute_frames(tm, parts)

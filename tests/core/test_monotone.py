@@ -1,10 +1,8 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Monotonicity pass (boundary hooks) on a cube and on a dev mesh."""
-import os
-
 import numpy as np
-import pytest
 import trimesh
+from dev_meshes import load_dev_mesh
 
 from core.segmentation.frames import compute_frames
 from core.segmentation.labeling import (face_normals, hbecvt_labeling, mean_label_angle,
@@ -12,9 +10,6 @@ from core.segmentation.labeling import (face_normals, hbecvt_labeling, mean_labe
 from core.segmentation.monotone import straighten_boundaries
 from core.segmentation.repair import repair_labeling
 from core.segmentation.validity import check_validity
-from core.types import TriMesh
-
-MESHES = os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data", "meshes")
 
 
 def test_monotone_labeling_is_left_alone():
@@ -23,19 +18,15 @@ def test_monotone_labeling_is_left_alone():
     V, F = np.asarray(V, dtype=np.float64), np.asarray(F, dtype=np.int64)
     frames = np.broadcast_to(np.eye(3), (len(F), 3, 3)).copy()
     labels = nearest_direction_labels(face_normals(V, F), frames)
-    out, rep = straighten_boundaries(V, F, np.zeros(len(F), dtype=np.int64), labels, frames)
+    out, rep, val = straighten_boundaries(V, F, np.zeros(len(F), dtype=np.int64), labels,
+                                          frames)
     assert np.array_equal(out, labels)
     assert rep["turning_points_before"] == rep["turning_points_after"] == 0
-    assert rep["moves"] == 0 and rep["checks"] == 1
+    assert rep["moves"] == 0 and rep["checks"] == 1 and val.is_valid
 
 
 def test_lbracket_hooks_are_straightened_without_losing_validity():
-    path = os.path.join(MESHES, "to_simp_lbracket.stl")
-    if not os.path.exists(path):
-        pytest.skip("dev mesh to_simp_lbracket.stl not available")
-    mesh = trimesh.load(path, process=True)
-    tm = TriMesh(np.asarray(mesh.vertices, dtype=np.float64),
-                 np.asarray(mesh.faces, dtype=np.int64))
+    tm = load_dev_mesh("to_simp_lbracket.stl")
     V, F = tm.vertices, tm.faces
     parts = np.zeros(len(F), dtype=np.int64)
     field = compute_frames(tm, parts)
@@ -43,8 +34,9 @@ def test_lbracket_hooks_are_straightened_without_losing_validity():
     labels, rep = repair_labeling(V, F, parts, labels, field.face_frame)
     assert rep["valid"]
     before = check_validity(V, F, parts, labels, field.face_frame)
-    out, mono = straighten_boundaries(V, F, parts, labels, field.face_frame)
+    out, mono, val = straighten_boundaries(V, F, parts, labels, field.face_frame)
     after = check_validity(V, F, parts, out, field.face_frame)
+    assert val.report == after.report
     assert mono["turning_points_before"] == len(before.turning_points) > 0
     assert mono["turning_points_after"] == len(after.turning_points)
     # hooks removed: at least a third fewer turning points, validity kept
