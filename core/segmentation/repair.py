@@ -23,10 +23,10 @@ of priority (one kind per round, so every round works on a fresh judgement):
    opposite to any label around the chart, so the chart merges into that neighbour without
    creating an opposite boundary. Without such a label it takes the least-cost neighbour label.
 4. *One-axis corners* (all separating edges at the vertex share one axis, e.g. a fan +X, +Y, -X,
-   -Y: opposite labels touching at a point), tried before the chart operators: the faces of the
-   part within two vertex rings take the label of that axis (the sign of least normal cost), a
-   new chart that shares a boundary with each chart of the fan and has X, Y, Z corners (kept if
-   it lowers the invalid count).
+   -Y: opposite labels touching at a point) left after 1-3: the faces of the part within two
+   vertex rings take the label of that axis (the sign of least normal cost), a new chart that
+   shares a boundary with each chart of the fan and has X, Y, Z corners (kept if it lowers the
+   invalid count within the angle budget).
 5. *Invalid corners* left after 1-4 (mostly at part interfaces): the faces of the part around the
    corner vertex whose labels break the corner rule take the label of their largest neighbouring
    chart.
@@ -497,14 +497,6 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
             v_new = judge.validity(new)
             if v_new.n_invalid < val.n_invalid and hash(new.tobytes()) not in seen:
                 accepted = ("relabel_interface_parallel", count, new, v_new)
-        if accepted is None and len(val.invalid_corners):
-            corners, axes = _one_axis_corners(topology, val)
-            if len(corners):
-                new, count = _fix_one_axis_corners(F, topology, labels, face_part, cost, corners,
-                                                   axes)
-                v_new = judge.validity(new)
-                if v_new.n_invalid < val.n_invalid and hash(new.tobytes()) not in seen:
-                    accepted = ("insert_chart_at_one_axis_corners", count, new, v_new)
         if accepted is None and val.invalid_chart.any():
             lay = val.layout
             small = val.invalid_chart & (lay.chart_size <= small_chart)
@@ -556,6 +548,15 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
                 if accepted is None and sideways is not None and n_sideways < max_sideways:
                     accepted = sideways + (judge.validity(sideways[2]),)
                     gave_up.clear()
+        if accepted is None and len(val.invalid_corners):
+            corners, axes = _one_axis_corners(topology, val)
+            if len(corners):
+                new, count = _fix_one_axis_corners(F, topology, labels, face_part, cost, corners,
+                                                   axes)
+                v_new = judge.validity(new)
+                if (v_new.n_invalid < val.n_invalid and judge.angle(new) <= angle_cap
+                        and hash(new.tobytes()) not in seen):
+                    accepted = ("insert_chart_at_one_axis_corners", count, new, v_new)
         if accepted is None and len(val.invalid_corners):
             new, count = _fix_corners(F, topology, val, labels, face_part)
             if hash(new.tobytes()) not in seen:
