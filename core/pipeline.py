@@ -107,15 +107,17 @@ def stage_frames(state, params):
 
     mesh = state["target"]
     blend = params.blend_factor * mean_edge_length(mesh.vertices, mesh.faces)
-    field = compute_frames(mesh, state["face_part"], blend_distance=blend)
+    field = compute_frames(mesh, state["face_part"], blend_distance=blend, lam=params.lam)
     report = {"parts": int(len(field.part_frames)), "interfaces": len(field.interfaces),
-              "blend_distance": float(field.blend_distance)}
+              "blend_distance": float(field.blend_distance),
+              "part_frame_source": list(field.part_frame_source)}
     return {"frames": field, "report": report}
 
 
 def stage_labeling(state, params):
     from core.segmentation.labeling import (face_normals, hbecvt_labeling, mean_label_angle,
                                             nearest_direction_labels)
+    from core.segmentation.monotone import straighten_boundaries
     from core.segmentation.repair import repair_labeling
     from core.segmentation.validity import check_validity
 
@@ -129,7 +131,11 @@ def stage_labeling(state, params):
         labels, repair_report = repair_labeling(mesh.vertices, mesh.faces, face_part, labels,
                                                 field.face_frame, field.face_interface_axis,
                                                 lam=params.lam, penalty=params.penalty)
-    validity = check_validity(mesh.vertices, mesh.faces, face_part, labels, field.face_frame)
+        labels, straighten_report, validity = straighten_boundaries(
+            mesh.vertices, mesh.faces, face_part, labels, field.face_frame)
+    else:
+        straighten_report = None
+        validity = check_validity(mesh.vertices, mesh.faces, face_part, labels, field.face_frame)
     normals = face_normals(mesh.vertices, mesh.faces)
     nearest = nearest_direction_labels(normals, field.face_frame)
     v = validity.report
@@ -141,11 +147,14 @@ def stage_labeling(state, params):
         "invalid_charts": int(v["invalid_charts"]["count"]),
         "invalid_boundaries": int(v["invalid_boundaries"]["count"]),
         "invalid_corners": int(v["invalid_corners"]["count"]),
+        "invalid_at_interfaces": {k: int(v[f"invalid_{k}"]["at_interfaces"])
+                                  for k in ("boundaries", "corners")},
         "turning_points": int(v["turning_points"]["count"]),
         "mean_angle_deg": float(mean_label_angle(normals, labels, field.face_frame)),
         "nearest_direction_mean_angle_deg": float(mean_label_angle(normals, nearest, field.face_frame)),
         "hbecvt": info,
         "unfixed": repair_report["unfixed"] if repair_report else None,
+        "straightened": straighten_report,
         "examples": {k: v[k]["examples"] for k in
                      ("invalid_charts", "invalid_boundaries", "invalid_corners", "turning_points")},
     }

@@ -32,9 +32,10 @@ from core.mesh_topology import edge_faces, unique_edges
 
 DEFAULT_DEGENERATE_TOL = 0.1
 FRAME_MODES = ("area", "vertices")
+FRAME_CHOICES = ("energy", "pca")
 
 
-def _orient(axes):
+def orient_frame(axes):
     """Sign convention for rows x, y of (3, 3) ``axes``; z = x cross y."""
     out = np.array(axes, dtype=np.float64)
     for k in (0, 1):
@@ -59,7 +60,7 @@ def frame_from_covariance(cov):
     """
     cov = np.asarray(cov, dtype=np.float64)
     vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
-    return _orient(vecs.T), vals
+    return orient_frame(vecs.T), vals
 
 
 def pca_frame(points, weights=None):
@@ -174,7 +175,7 @@ def _quartic(normal4, a, b, c, d):
     return float(left @ normal4.reshape(9, 9) @ right)
 
 
-def _align_about(frame, axis, normal4):
+def align_about(frame, axis, normal4):
     """Rotate ``frame`` about its row ``axis`` to minimise the cubic energy (closed form)."""
     i, j = [k for k in range(3) if k != axis]
     y, z = frame[i], frame[j]
@@ -220,12 +221,12 @@ def align_degenerate_axes(frame, eigenvalues, normal4, tol=DEFAULT_DEGENERATE_TO
     if low_pair and high_pair:
         for _ in range(3):
             for axis in range(3):
-                out = _align_about(out, axis, normal4)
+                out = align_about(out, axis, normal4)
     elif high_pair:
-        out = _align_about(out, 0, normal4)
+        out = align_about(out, 0, normal4)
     elif low_pair:
-        out = _align_about(out, 2, normal4)
-    return _orient(out)
+        out = align_about(out, 2, normal4)
+    return orient_frame(out)
 
 
 def frame_from_moments(moments, align_degenerate=True, tol=DEFAULT_DEGENERATE_TOL):
@@ -237,7 +238,7 @@ def frame_from_moments(moments, align_degenerate=True, tol=DEFAULT_DEGENERATE_TO
 
 
 def part_frames(vertices, faces, face_part, mode="area", align_degenerate=True,
-                tol=DEFAULT_DEGENERATE_TOL):
+                tol=DEFAULT_DEGENERATE_TOL, moments=None):
     """PCA frame of every part.
 
     Parameters
@@ -245,6 +246,8 @@ def part_frames(vertices, faces, face_part, mode="area", align_degenerate=True,
     vertices : (n, 3) float64; faces : (m, 3) int64.
     face_part : (m,) int, parts 0 .. P-1, each non-empty.
     mode : ``"area"`` (default) or ``"vertices"`` (Eq. 1 literally), see module docstring.
+    moments : optional list of P :class:`SurfaceMoments` of the parts (:func:`group_moments`),
+        computed when omitted.
 
     Returns
     -------
@@ -254,7 +257,8 @@ def part_frames(vertices, faces, face_part, mode="area", align_degenerate=True,
         raise ParameterError(f"frame mode must be one of {FRAME_MODES}, got {mode!r}")
     face_part = np.asarray(face_part, dtype=np.int64)
     n_parts = int(face_part.max()) + 1
-    moments = group_moments(vertices, faces, face_part, n_parts)
+    if moments is None:
+        moments = group_moments(vertices, faces, face_part, n_parts)
     frames = np.empty((n_parts, 3, 3))
     verts = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
@@ -477,7 +481,8 @@ class FrameField:
     """Frames of a part segmentation.
 
     face_frame : (m, 3, 3) float64 blended frame of each face (rows x, y, z).
-    part_frames : (P, 3, 3) float64 PCA frame of each part.
+    part_frames : (P, 3, 3) float64 frame of each part (the chosen candidate, see
+        :mod:`core.segmentation.frame_choice`; PCA with ``choose="pca"``).
     interfaces : list of Interface records with ``frame`` (3, 3) set.
     face_interface : (m,) int64 interface next to each face (a vertex on it), -1 where none.
     face_interface_axis : (m, 3) float64 x-axis of that interface (:func:`interface_x_axis`,
@@ -485,6 +490,10 @@ class FrameField:
     face_interface_distance : (m,) float64 geodesic distance to the nearest interface of
         the face's part (inf beyond the blend distance or without interface).
     blend_distance : float, in mesh units.
+    part_frame_source : tuple of P str, where each part's frame comes from (``"pca"``,
+        ``"world"`` or ``"aligned"``).
+    part_frame_energy : (P, 3) float64 labeling energy of the candidates ``pca``, ``world``,
+        ``aligned`` (:func:`core.segmentation.frame_choice.labeling_energy`), NaN when not scored.
     """
 
     face_frame: np.ndarray
@@ -494,12 +503,17 @@ class FrameField:
     face_interface_axis: np.ndarray
     face_interface_distance: np.ndarray
     blend_distance: float
+    part_frame_source: tuple = ()
+    part_frame_energy: np.ndarray = None
 
 
 def compute_frames(mesh, face_part, blend_distance=None, mode="area", align_degenerate=True,
-                   degenerate_tol=DEFAULT_DEGENERATE_TOL, interfaces=None):
+                   degenerate_tol=DEFAULT_DEGENERATE_TOL, interfaces=None, choose="energy",
+                   lam=0.5):
     """Part, interface and blended per-face frames (paper Sect. 2.2).
 
+    Each part's frame is the candidate (PCA, world axes, best normal-aligning rotation) of least
+    labeling energy (:mod:`core.segmentation.frame_choice`), or plain PCA with ``choose="pca"``.
     Each face of part p gets p's frame rotated towards the frame of every interface
     of p within ``blend_distance`` (geodesic, inside p). The interface frame is first
     re-expressed by the axis permutation/sign closest to p's frame (same six label
@@ -516,6 +530,8 @@ def compute_frames(mesh, face_part, blend_distance=None, mode="area", align_dege
     blend_distance : float > 0 in mesh units, default 4 x mean edge length.
     mode, align_degenerate, degenerate_tol : see :func:`part_frames`.
     interfaces : optional precomputed list from :func:`core.segmentation.parts.interfaces`.
+    choose : ``"energy"`` (default) or ``"pca"``.
+    lam : float, lambda of Eq. 3 in the candidates' labeling energy.
 
     Returns
     -------
@@ -534,7 +550,17 @@ def compute_frames(mesh, face_part, blend_distance=None, mode="area", align_dege
         raise ParameterError(f"blend_distance must be a positive length, got {blend_distance}")
     if not 0.0 <= degenerate_tol < 1.0:
         raise ParameterError(f"degenerate_tol must be in [0, 1), got {degenerate_tol}")
-    frames = part_frames(vertices, faces, face_part, mode, align_degenerate, degenerate_tol)
+    if choose not in FRAME_CHOICES:
+        raise ParameterError(f"choose must be one of {FRAME_CHOICES}, got {choose!r}")
+    moments = group_moments(vertices, faces, face_part, int(face_part.max()) + 1)
+    frames = part_frames(vertices, faces, face_part, mode, align_degenerate, degenerate_tol,
+                         moments)
+    source, energy = ("pca",) * len(frames), np.full((len(frames), 3), np.nan)
+    if choose == "energy":
+        from core.segmentation.frame_choice import choose_part_frames
+
+        chosen = choose_part_frames(vertices, faces, face_part, frames, lam, moments)
+        frames, source, energy = chosen.frames, chosen.source, chosen.energy
     n_parts = len(frames)
     areas = np.bincount(face_part, weights=face_geometry(vertices, faces)[0], minlength=n_parts)
     itfs = find_interfaces(mesh, face_part) if interfaces is None else interfaces
@@ -564,4 +590,5 @@ def compute_frames(mesh, face_part, blend_distance=None, mode="area", align_dege
         face_frame[touched] = quaternion_to_rotation(vecs[:, :, -1])
     face_interface, axis = face_interface_axes(faces, face_part, itfs, vertices)
     nearest = dist.min(axis=1) if itfs else np.full(len(faces), np.inf)
-    return FrameField(face_frame, frames, itfs, face_interface, axis, nearest, blend_distance)
+    return FrameField(face_frame, frames, itfs, face_interface, axis, nearest, blend_distance,
+                      source, energy)

@@ -22,8 +22,14 @@ of priority (one kind per round, so every round works on a fresh judgement):
    relabelled to the neighbouring chart label of least normal cost among those that are not
    opposite to any label around the chart, so the chart merges into that neighbour without
    creating an opposite boundary. Without such a label it takes the least-cost neighbour label.
-4. *Invalid corners* left after 1-3 (at part interfaces): the faces of the part around the corner
-   vertex whose labels break the parity rule take the label of their largest neighbouring chart.
+4. *One-axis corners* (all separating edges at the vertex share one axis, e.g. a fan +X, +Y, -X,
+   -Y: opposite labels touching at a point) left after 1-3: the faces of the part within two
+   vertex rings take the label of that axis (the sign of least normal cost), a new chart that
+   shares a boundary with each chart of the fan and has X, Y, Z corners (kept if it lowers the
+   invalid count within the angle budget).
+5. *Invalid corners* left after 1-4 (mostly at part interfaces): the faces of the part around the
+   corner vertex whose labels break the corner rule take the label of their largest neighbouring
+   chart.
 
 After each merge round a boundary-smoothing pass runs the HBECVT sweeps restricted to the faces
 that touch a separating edge, with the extra rule that a face may only take a label already present
@@ -150,6 +156,43 @@ def _merge_charts(val, labels, cost, which):
     return new, len(chosen)
 
 
+def _one_axis_corners(topology, val):
+    """Invalid corners whose separating edges all have one and the same axis (e.g. a fan
+    +X, +Y, -X, -Y around the vertex: four edges along Z), and that axis: (k,) int64 each."""
+    lay = val.layout
+    ev = topology.edges[lay.sep_edges]
+    axis = val.boundary_axis[lay.sep_boundary]
+    v = np.concatenate([ev[:, 0], ev[:, 1]])
+    a = np.concatenate([axis, axis])
+    at = np.isin(v, val.invalid_corners)
+    v, a = v[at], a[at]
+    lo = np.full(topology.n_vertices, 9, dtype=np.int64)
+    hi = np.full(topology.n_vertices, -9, dtype=np.int64)
+    np.minimum.at(lo, v, a)
+    np.maximum.at(hi, v, a)
+    corners = val.invalid_corners
+    one = (lo[corners] == hi[corners]) & (lo[corners] >= 0)
+    return corners[one], lo[corners[one]]
+
+
+def _fix_one_axis_corners(F, topology, labels, face_part, cost, corners, axes, rings=2):
+    """Insert a chart of the corners' common axis: the faces of the corner's part within
+    ``rings`` vertex rings of each corner take that axis' label of least normal cost, so the
+    charts that met at a point (pairwise opposite across it) now each share a boundary with the
+    new chart, whose corners are X, Y, Z groups."""
+    new = labels.copy()
+    for v, k in zip(corners.tolist(), axes.tolist()):
+        vmask = np.zeros(topology.n_vertices, dtype=bool)
+        vmask[v] = True
+        for _ in range(rings):
+            vmask[F[_faces_at_vertices(F, vmask)]] = True
+        part_of_corner = face_part[np.flatnonzero(F == v)[0] // 3]
+        faces = np.flatnonzero(_faces_at_vertices(F, vmask) & (face_part == part_of_corner))
+        plus, minus = cost[faces, 2 * k].sum(), cost[faces, 2 * k + 1].sum()
+        new[faces] = 2 * k if plus <= minus else 2 * k + 1
+    return new, len(corners)
+
+
 def _fix_corners(F, topology, val, labels, face_part):
     lay = val.layout
     vmask = np.zeros(topology.n_vertices, dtype=bool)
@@ -253,11 +296,13 @@ class _Judge:
         return float(np.degrees(np.arccos(np.clip(1.0 - 0.5 * c, -1.0, 1.0))) @ self.area)
 
 
-def _chart_candidates(val, labels, c, cost, unary, nb, colour, penalty, lams):
+def _chart_candidates(F, face_part, val, labels, c, cost, unary, nb, colour, penalty, lams):
     """Candidate labelings that change invalid chart ``c``: merges into each neighbouring label;
     for each label of another axis missing around the chart, the faces of the chart and its
-    neighbouring charts that fit that label better than their own take it; local
-    re-segmentations of the chart and its neighbours at coarser ``lam``."""
+    neighbouring charts that fit that label better than their own take it; growing the chart
+    over the faces of its part around its corners (so it gains a boundary with every chart that
+    only touched it at a corner) and over its one-ring; local re-segmentations of the chart and
+    its neighbours at coarser ``lam``."""
     lay = val.layout
     nbrs = lay.chart_neighbours[c].indices
     nbrs = nbrs[lay.chart_part[nbrs] == lay.chart_part[c]]
@@ -279,6 +324,16 @@ def _chart_candidates(val, labels, c, cost, unary, nb, colour, penalty, lams):
             cand = labels.copy()
             cand[grow] = lab
             out.append((f"grow_missing_{lab}", cand))
+    own_part = face_part == lay.chart_part[c]
+    ring = np.zeros(len(lay.vertex_sep_degree), dtype=bool)
+    ring[F[in_c]] = True
+    at_corner = ring & (lay.vertex_sep_degree >= 3)
+    for name, vmask in (("grow_at_corners", at_corner), ("grow_ring", ring)):
+        grow = _faces_at_vertices(F, vmask) & own_part & ~in_c
+        if grow.any():
+            cand = labels.copy()
+            cand[grow] = a
+            out.append((name, cand))
     for lam in lams:
         out.append((f"resegment_lambda_{lam:g}", _local_resegment(labels, unary, nb, colour,
                                                                    region, lam, penalty)))
@@ -310,7 +365,7 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     lam, penalty : float, Eq. 3 parameters used by smoothing and re-segmentation.
     topology : MeshTopology, optional.
     max_trials : int, cap on per-chart candidate evaluations over the whole repair (default
-        ``max(40, 1000000 // m)``: roughly a constant amount of work per mesh).
+        ``max(200, 2000000 // m)``: bounded work per mesh; hard multi-part cases need ~200).
     max_sideways : int, cap on consecutive moves that keep the invalid count (new states only).
 
     Returns
@@ -328,8 +383,11 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     Invalid charts are handled in two ways. Small ones (``small_chart``) are merged in batches as
     in operator 3 of the module docstring; a batch is kept only if it lowers the invalid count.
     Otherwise each invalid chart, smallest first, gets trial candidates: merging it into each
-    neighbouring label, and re-running the HBECVT sweeps on the chart plus its neighbouring charts
-    from nearest-direction labels with lambda = 1, 2, 4, 8 (a coarser local segmentation). The
+    neighbouring label, growing it over the faces of its part around its corners or over its
+    one-ring (a chart that touched a neighbour only at a corner gains a boundary with it; this
+    fixes the small charts automatic parts leave along interfaces), and re-running the HBECVT
+    sweeps on the chart plus its neighbouring charts from nearest-direction labels with
+    lambda = 1, 2, 4, 8 (a coarser local segmentation). The
     candidate with the fewest invalid items (then the smallest mean angle) is kept if it has fewer
     invalid items than now and respects the angle budget; a chart with no such candidate is given
     up and reported.
@@ -354,7 +412,7 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     if small_chart is None:
         small_chart = max(10, m // 2000)
     if max_trials is None:
-        max_trials = max(40, 1000000 // max(m, 1))
+        max_trials = max(200, 2000000 // max(m, 1))
     V = np.asarray(V, dtype=np.float64)
     normals = face_normals(V, F)
     area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
@@ -454,8 +512,9 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
                     if key in gave_up or trials >= max_trials:
                         continue
                     best = None
-                    for name, cand in _chart_candidates(val, labels, c, cost, unary, nb, colour,
-                                                        penalty, (1.0, 2.0, 4.0, 8.0)):
+                    for name, cand in _chart_candidates(F, face_part, val, labels, c, cost,
+                                                        unary, nb, colour, penalty,
+                                                        (1.0, 2.0, 4.0, 8.0)):
                         if np.array_equal(cand, labels) or judge.angle(cand) > angle_cap:
                             continue
                         trials += 1
@@ -489,6 +548,15 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
                 if accepted is None and sideways is not None and n_sideways < max_sideways:
                     accepted = sideways + (judge.validity(sideways[2]),)
                     gave_up.clear()
+        if accepted is None and len(val.invalid_corners):
+            corners, axes = _one_axis_corners(topology, val)
+            if len(corners):
+                new, count = _fix_one_axis_corners(F, topology, labels, face_part, cost, corners,
+                                                   axes)
+                v_new = judge.validity(new)
+                if (v_new.n_invalid < val.n_invalid and judge.angle(new) <= angle_cap
+                        and hash(new.tobytes()) not in seen):
+                    accepted = ("insert_chart_at_one_axis_corners", count, new, v_new)
         if accepted is None and len(val.invalid_corners):
             new, count = _fix_corners(F, topology, val, labels, face_part)
             if hash(new.tobytes()) not in seen:

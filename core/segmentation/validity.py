@@ -7,12 +7,16 @@ Rules (issue 5; charts, boundaries and corners as in :mod:`core.segmentation.cha
 - a boundary between opposite labels (e.g. +X / -X) of one part is invalid;
 - the *axis* of a boundary between labels ``a`` and ``b`` of one part is the frame axis
   perpendicular to both (a +X/+Y boundary runs along Z);
-- a corner is valid when, for every part that meets at it, the axes of the separating edges at
-  the corner pair up, or form one X, Y, Z group plus pairs: the counts of X, Y and Z edges are all
-  even or all odd, and none of the edges is invalid. Inside one part without opposite labels this
-  always holds (around a vertex of degree ``D`` with ``n_k`` charts of axis ``k`` the count of axis
-  ``k`` edges is ``D - 2 n_k``), so inside a part corners fail only through opposite labels; the rule
-  bites at part interfaces.
+- a corner is valid when, for every part that meets at it, none of the separating edges at the
+  corner is invalid and their axes pair up or form one X, Y, Z group plus pairs (the counts of X,
+  Y and Z edges are all even or all odd), except that edges of one axis alone are valid only as a
+  plain pass-through of exactly two (:func:`corner_axes_valid`; the rule of the independent
+  check, the validity-first polycube labeling work). The parity part always holds inside one part
+  without opposite labels (around a vertex of degree ``D`` with ``n_k`` charts of axis ``k`` the
+  count of axis ``k`` edges is ``D - 2 n_k``), but a fan alternating between two axes, e.g. +X, +Y,
+  -X, -Y, gives ``D`` edges of the third axis: two boundary curves parallel to one axis would cross
+  at the vertex, which no polycube realises, so the one-axis clause is what bites inside a part;
+  the parity clause bites at part interfaces.
 
 Interface rules (edges between two parts): the interface loops are the connected chains of edges
 between one pair of parts; each loop's x-axis is the smallest-eigenvalue eigenvector of the
@@ -198,6 +202,28 @@ def edge_interface_axes(V, topology, face_part):
     return edge_ix
 
 
+def corner_axes_valid(counts):
+    """Corner rule on the axis counts of the separating edges at a corner (one part's view).
+
+    Parameters
+    ----------
+    counts : (g, 4) int, per corner (and part) the number of separating edges of axis X, Y, Z
+        and of edges without a valid axis (opposite labels, label parallel to an interface).
+
+    Returns
+    -------
+    (g,) bool, True where valid: no axis-less edge, and either exactly two edges of a single axis
+    (a pass-through) or at least two axes with X, Y, Z counts all even or all odd (pairs, or one
+    X, Y, Z group plus pairs). One axis alone one, three or more times is invalid.
+    """
+    counts = np.asarray(counts, dtype=np.int64).reshape(-1, 4)
+    axes = counts[:, :3]
+    parity = axes % 2
+    paired = (parity == parity[:, :1]).all(axis=1)
+    one_axis = (axes > 0).sum(axis=1) == 1
+    return (counts[:, 3] == 0) & np.where(one_axis, axes.max(axis=1) == 2, paired)
+
+
 def _judge(topology, face_part, face_label, face_frame, edge_ix):
     """Layout and invalid items of a labeling (the rules of the module docstring).
 
@@ -253,8 +279,7 @@ def _judge(topology, face_part, face_label, face_frame, edge_ix):
     key, group = np.unique(inc_v * n_parts + inc_part, return_inverse=True)
     slot = group.reshape(-1) * 4 + np.where(inc_axis >= 0, inc_axis, 3)
     counts = np.bincount(slot, minlength=4 * len(key)).reshape(len(key), 4)
-    parity = counts[:, :3] % 2
-    group_ok = (counts[:, 3] == 0) & (parity == parity[:, :1]).all(axis=1)
+    group_ok = corner_axes_valid(counts)
     invalid_corners = np.unique(key[~group_ok] // n_parts)
     return {"layout": lay, "boundary_axis": boundary_axis, "reason": reason,
             "invalid_chart": invalid_chart, "invalid_corners": invalid_corners,
@@ -354,7 +379,10 @@ def check_validity(V, F, face_part, face_label, face_frame, topology=None, turni
         ``report`` holds ``valid`` (no invalid charts, boundaries or corners), ``monotone``,
         ``charts``, ``boundaries``, ``corners`` and, for ``invalid_charts``,
         ``invalid_boundaries``, ``invalid_corners`` and ``turning_points``, a ``count`` and a few
-        ``examples`` (ids, labels, an example face or vertex and its coordinates).
+        ``examples`` (ids, labels, an example face or vertex and its coordinates); for boundaries
+        and corners also ``at_interfaces``, how many of them are judged by the interface rules
+        (a label parallel to the interface x-axis; a corner on a part interface), which a check
+        that treats each part as its own polycube without the interface frames does not see.
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
@@ -408,6 +436,9 @@ def check_validity(V, F, face_part, face_label, face_frame, topology=None, turni
     tp_ex = [{"boundary": int(b), "vertex": int(v), "point": [float(x) for x in V[v]]}
              for b, v in tp[:max_examples].tolist()]
     n_ic, n_ib, n_iq = int(invalid_chart.sum()), int(invalid_boundary.sum()), len(invalid_corners)
+    ef = topology.edge_faces[lay.sep_edges]
+    on_iface = np.zeros(topology.n_vertices, dtype=bool)
+    on_iface[topology.edges[lay.sep_edges[face_part[ef[:, 0]] != face_part[ef[:, 1]]]]] = True
     report = {
         "valid": n_ic + n_ib + n_iq == 0,
         "monotone": len(tp) == 0 if turning else None,
@@ -415,8 +446,10 @@ def check_validity(V, F, face_part, face_label, face_frame, topology=None, turni
         "boundaries": lay.n_boundaries,
         "corners": len(lay.corners),
         "invalid_charts": {"count": n_ic, "examples": chart_ex},
-        "invalid_boundaries": {"count": n_ib, "examples": bnd_ex},
-        "invalid_corners": {"count": n_iq, "examples": corner_ex},
+        "invalid_boundaries": {"count": n_ib, "examples": bnd_ex,
+                               "at_interfaces": int((reason == 2).sum())},
+        "invalid_corners": {"count": n_iq, "examples": corner_ex,
+                            "at_interfaces": int(on_iface[invalid_corners].sum())},
         "turning_points": {"count": len(tp) if turning else None, "examples": tp_ex,
                            "tolerance": tau},
     }

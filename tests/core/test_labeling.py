@@ -179,7 +179,8 @@ def test_dev_mesh_ends_valid_with_few_charts(name):
     assert mean_label_angle(n, out, frame) <= mean_label_angle(n, near, frame) + 5.0
 
 
-@pytest.mark.parametrize("name", ["idler_riser.stl", "to_simp_cantilever.stl"])
+@pytest.mark.parametrize("name", ["idler_riser.stl", "to_simp_cantilever.stl",
+                                  "gripper_domain.stl"])
 def test_dev_mesh_with_automatic_parts_ends_valid(name):
     # the interface x-axis of Eq. 3 term 4 and of the validity rules is one and the same
     from core.segmentation.frames import compute_frames, mean_edge_length
@@ -207,3 +208,52 @@ def test_dev_mesh_with_automatic_parts_ends_valid(name):
     near = nearest_direction_labels(n, field.face_frame)
     limit = mean_label_angle(n, near, field.face_frame) + 5.0
     assert mean_label_angle(n, out, field.face_frame) <= limit
+
+
+def test_fandisk_with_the_chosen_frame_has_no_chart_below_four_boundaries():
+    """With PCA frames fandisk kept a +X chart with two boundaries between +Y and +Z (a lens
+    whose tips are X, Y, Z corners, which no local split can make four-sided); the frame chosen by
+    labeling energy labels it validly and fits the normals better."""
+    from dev_meshes import load_dev_mesh
+
+    from core.segmentation.frames import compute_frames
+
+    tm = load_dev_mesh("fandisk.obj")
+    V, F = tm.vertices, tm.faces
+    parts = np.zeros(len(F), dtype=np.int64)
+    chosen = compute_frames(tm, parts)
+    pca = compute_frames(tm, parts, choose="pca")
+    assert chosen.part_frame_source[0] != "pca"
+    n = face_normals(V, F)
+    area = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+
+    def nearest_angle(field):
+        near = nearest_direction_labels(n, field.face_frame)
+        return mean_label_angle(n, near, field.face_frame, weights=area)
+
+    assert nearest_angle(chosen) < nearest_angle(pca) - 5.0
+    labels, _ = hbecvt_labeling(V, F, parts, chosen.face_frame)
+    out, rep = repair_labeling(V, F, parts, labels, chosen.face_frame)
+    assert rep["valid"], rep["unfixed"]
+    v = check_validity(V, F, parts, out, chosen.face_frame)
+    assert v.is_valid and v.layout.chart_boundary_count.min() >= 4
+
+
+def test_saddle_of_alternating_labels_is_repaired():
+    """+X, +Y, -X, -Y quadrants in the middle of the cube's top: four 3-boundary charts and a
+    corner whose four boundaries all run along Z (opposite labels touching at a point)."""
+    V, F = cube(4)
+    m = len(F)
+    frames = identity_frames(m)
+    labels = nearest_direction_labels(face_normals(V, F), frames).astype(np.int64)
+    c = V[F].mean(axis=1)
+    saddle = (c[:, 2] > 0.99) & (np.abs(c[:, :2] - 0.5).max(axis=1) < 0.2)
+    east, north = c[:, 0] > 0.5, c[:, 1] > 0.5
+    quadrant = np.where(east, np.where(north, 0, 3), np.where(north, 2, 1))
+    labels[saddle] = quadrant[saddle]
+    parts = np.zeros(m, dtype=np.int64)
+    before = check_validity(V, F, parts, labels, frames).report
+    assert before["invalid_corners"]["count"] == 1 and before["invalid_charts"]["count"] == 4
+    out, rep = repair_labeling(V, F, parts, labels, frames)
+    assert rep["valid"], rep["unfixed"]
+    assert check_validity(V, F, parts, out, frames).is_valid

@@ -6,7 +6,7 @@ import trimesh
 
 from core.segmentation.charts import boundary_chains, build_topology, extract_layout
 from core.segmentation.labeling import face_normals, nearest_direction_labels
-from core.segmentation.validity import check_validity
+from core.segmentation.validity import check_validity, corner_axes_valid
 
 IDENTITY = np.eye(3)
 
@@ -105,6 +105,7 @@ def test_opposite_boundary_and_its_corners_are_invalid():
     assert ex["point"][0] == pytest.approx(0.0) and ex["point"][2] == pytest.approx(1.0)
     # the two ends of that boundary are corners with an axis-less edge
     assert r["invalid_corners"]["count"] == 2
+    assert r["invalid_corners"]["at_interfaces"] == r["invalid_boundaries"]["at_interfaces"] == 0
     assert all(e["point"][0] == pytest.approx(0.0) for e in r["invalid_corners"]["examples"])
 
 
@@ -138,6 +139,10 @@ def test_label_parallel_to_interface_axis_is_invalid():
     reasons = {e["reason"] for e in r["invalid_boundaries"]["examples"]}
     assert "label_parallel_to_interface" in reasons
     assert not r["valid"]
+    # the interface-rule items are counted apart (an interface-blind check cannot see them)
+    v = judge(V, F, labels, parts)
+    assert r["invalid_boundaries"]["at_interfaces"] == int((v.boundary_reason == 2).sum()) >= 1
+    assert 1 <= r["invalid_corners"]["at_interfaces"] <= r["invalid_corners"]["count"]
 
 
 def test_single_chart_and_layout_bookkeeping():
@@ -181,3 +186,64 @@ def test_local_count_matches_whole_mesh_judgement():
         full = judge(V, F, cand, parts)
         assert base.n_invalid + sum(new[:3]) - sum(old[:3]) == full.n_invalid
         assert new[3] == (full.boundary_reason == 1).sum()
+
+
+@pytest.mark.parametrize("counts, valid", [
+    ((1, 1, 1, 0), True),    # X, Y, Z group (a cube corner)
+    ((2, 2, 0, 0), True),    # two pairs
+    ((1, 1, 3, 0), True),    # a group plus a pair
+    ((0, 2, 4, 0), True),    # pairs of two axes
+    ((0, 0, 2, 0), True),    # plain pass-through of one axis
+    ((0, 0, 3, 0), False),   # one axis alone, three times
+    ((0, 0, 4, 0), False),   # one axis alone, four times
+    ((0, 6, 0, 0), False),
+    ((2, 1, 0, 0), False),   # parities differ
+    ((1, 1, 0, 0), False),
+    ((1, 1, 1, 1), False),   # an edge without axis (opposite labels)
+    ((0, 0, 0, 3), False),
+])
+def test_corner_axis_rule(counts, valid):
+    assert corner_axes_valid(np.array([counts]))[0] == valid
+
+
+def quadrant_top_labels(quadrant_labels):
+    """Cube labels by normals, the top face split into quadrants around (0.5, 0.5, 1) with
+    ``quadrant_labels`` for (NE, NW, SW, SE); returns V, F, labels and the centre vertex."""
+    V, F = cube()
+    labels = nearest_direction_labels(face_normals(V, F), frames(len(F))).astype(np.int64)
+    c = centroids(V, F)
+    top = c[:, 2] > 0.99
+    east, north = c[:, 0] > 0.5, c[:, 1] > 0.5
+    for (e, n), lab in zip([(True, True), (False, True), (False, False), (True, False)],
+                           quadrant_labels):
+        labels[top & (east == e) & (north == n)] = lab
+    centre = int(np.argmin(np.linalg.norm(V - [0.5, 0.5, 1.0], axis=1)))
+    return V, F, labels, centre
+
+
+def test_one_axis_corner_of_four_boundaries_is_invalid():
+    """Top quadrants +X, +Y, -X, -Y merge with the side faces; the four boundaries at the top
+    centre all run along Z (what the parity rule alone accepted)."""
+    V, F, labels, centre = quadrant_top_labels([0, 2, 1, 3])
+    r = judge(V, F, labels).report
+    assert r["invalid_boundaries"]["count"] == 0
+    assert r["invalid_corners"]["count"] == 1
+    ex = r["invalid_corners"]["examples"][0]
+    assert ex["vertex"] == centre and sorted(ex["axes"]) == ["Z"] * 4
+    assert not r["valid"]
+
+
+def test_pair_and_group_corners_are_valid():
+    """Top quadrants +Z, -X, +Z, -Y: the centre has edges X, X, Y, Y (two pairs); the other
+    corners are X, Y, Z groups; none is invalid."""
+    V, F, labels, centre = quadrant_top_labels([4, 1, 4, 3])
+    v = judge(V, F, labels)
+    r = v.report
+    assert centre in v.layout.corners.tolist()
+    lay = v.layout
+    at_centre = (build_topology(F, len(V)).edges[lay.sep_edges] == centre).any(axis=1)
+    assert sorted(v.boundary_axis[lay.sep_boundary[at_centre]].tolist()) == [0, 0, 1, 1]
+    assert r["invalid_corners"]["count"] == 0 and r["invalid_boundaries"]["count"] == 0
+    # the 8 cube corners minus (1, 0, 1) and (0, 1, 1), where only two charts meet now, plus
+    # the centre and the two points where a quadrant boundary reaches a side chart
+    assert r["corners"] == 9
