@@ -14,13 +14,13 @@ import time
 import numpy as np
 
 from core.errors import InvalidMeshError, ParameterError
-from core.fitting.closest_point import TargetSurface
 from core.fitting.responses import thickness, triangulate, volume
 from core.fitting.rgp import FitProblem, run_rgp
 from core.progress import NO_PROGRESS
 from core.quality import containment
 from core.subdivision.catmull_clark import build_hierarchy
 from core.subdivision.limit import limit_matrices
+from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
 MODES = ("inside", "nearest")
@@ -113,8 +113,7 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
 
 def _figures(X, T, target):
     """Distance and containment figures of fine limit points against the target."""
-    signed, *_ = target.signed_distance(X)
-    distance = np.abs(signed) / target.diagonal
+    distance = target.closest(X).distance / target.diagonal
     report = containment(X, T, target.vertices, target.faces)
     return {"mean_distance": float(distance.mean()),
             "max_distance": float(distance.max()),

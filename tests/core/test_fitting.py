@@ -6,7 +6,6 @@ import trimesh
 
 from core.errors import InvalidMeshError, ParameterError
 from core.fitting import TargetSurface, fit_base_mesh
-from core.fitting.closest_point import closest_on_triangles
 from core.fitting.responses import (packaging, thickness, thickness_constraint, triangulate,
                                     volume)
 from core.subdivision.catmull_clark import build_hierarchy
@@ -35,26 +34,6 @@ def limit_points(base, levels):
     h, fine, T = fine_mesh(base, levels)
     L, _, _ = limit_matrices(fine)
     return L @ h.composite(levels - 1) @ base.vertices, T
-
-
-def test_closest_points_match_brute_force():
-    mesh = trimesh.creation.icosphere(2)
-    target = TargetSurface(mesh.vertices, mesh.faces)
-    rng = np.random.default_rng(3)
-    points = rng.normal(size=(300, 3)) * 0.9
-    closest, face, normal, _ = target.query(points)
-    tri = np.asarray(mesh.triangles)
-    k = len(tri)
-    every, _, _ = closest_on_triangles(np.tile(tri, (len(points), 1, 1)),
-                                       np.repeat(points, k, axis=0))
-    brute = np.linalg.norm(every - np.repeat(points, k, axis=0), axis=1).reshape(-1, k).min(1)
-    assert np.allclose(np.linalg.norm(closest - points, axis=1), brute, atol=1e-12)
-    assert np.allclose(np.linalg.norm(normal, axis=1), 1.0)
-    # sign of (q - cpp) . pseudo-normal is the exact inside/outside test
-    radius = np.linalg.norm(points, axis=1)
-    clear = np.abs(radius - 0.97) > 0.04
-    signed = target.signed_distance(points)[0]
-    assert np.array_equal((signed < 0)[clear], (radius < 0.97)[clear])
 
 
 def test_volume_gradient_matches_finite_differences():
@@ -91,7 +70,7 @@ def test_packaging_gradient_matches_finite_differences_where_active():
         Xp, Xm = X.copy(), X.copy()
         Xp[active, k] += h
         Xm[active, k] -= h
-        fd = (target.signed_distance(Xp)[0] - target.signed_distance(Xm)[0]) / (2 * h)
+        fd = (target.closest(Xp).signed - target.closest(Xm).signed) / (2 * h)
         assert np.allclose(fd[active], grad[active, k], rtol=1e-6, atol=1e-6)
 
 
