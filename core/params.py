@@ -7,6 +7,7 @@ from core.errors import ParameterError
 PART_MODES = ("single", "auto", "file")
 COMPONENT_POLICIES = ("largest", "all", "error")
 UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
+FIT_MODES = ("inside", "best-fit", "none")
 
 
 @dataclass(frozen=True)
@@ -14,7 +15,8 @@ class ReconstructionParams:
     """Every user-settable parameter of :func:`core.pipeline.reconstruct`.
 
     units : length unit of the target file's coordinates (``mm``, ``cm``, ``m``, ``in``);
-        the solid is written in millimetres, FreeCAD's and STEP's usual unit.
+        intake scales the target to millimetres (``UNIT_TO_MM``), so the solid and the STEP
+        file are in millimetres, FreeCAD's and STEP's usual unit.
     components : what to do with several connected components (``largest``, ``all``, ``error``).
     check_self_intersections : run the triangle-triangle test at intake.
     parts : ``single`` (whole mesh one part), ``auto`` (curve-skeleton based) or ``file``
@@ -33,7 +35,10 @@ class ReconstructionParams:
     max_base_faces : a base mesh with more faces stops the run with a message (its fit would
         take many minutes, and such a model is not the few-patch result the tool is for).
     subdivision_levels : Catmull-Clark levels used by the fit (paper: 2).
-    fit_iterations : shape-optimisation iterations (paper: 100).
+    fit_iterations : most shape-optimisation iterations (paper: 100); the fit stops earlier
+        when it has converged.
+    fit_mode : ``inside`` (the paper's: the surface fills the target from inside),
+        ``best-fit`` (two-sided least squares) or ``none`` (the unfitted limit surface).
     """
 
     units: str = "mm"
@@ -50,6 +55,7 @@ class ReconstructionParams:
     max_base_faces: int = 2500
     subdivision_levels: int = 2
     fit_iterations: int = 100
+    fit_mode: str = "inside"
 
     def __post_init__(self):
         _choice("units", self.units, tuple(UNIT_TO_MM))
@@ -66,6 +72,7 @@ class ReconstructionParams:
         _range("max_base_faces", self.max_base_faces, 6, 1_000_000)
         _range("subdivision_levels", self.subdivision_levels, 1, 5)
         _range("fit_iterations", self.fit_iterations, 0, 100_000)
+        _choice("fit_mode", self.fit_mode, FIT_MODES)
 
     @classmethod
     def from_dict(cls, values):

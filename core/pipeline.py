@@ -44,7 +44,14 @@ def peak_memory_mb():
 
 
 def stage_intake(state, params):
+    """Read and validate the target; scale it from ``params.units`` to millimetres.
+
+    Every later stage, the solid and the STEP file are in millimetres; the report's
+    ``bbox_diagonal`` stays in the file's units, ``unit_to_mm`` is the factor applied.
+    """
     from core.mesh_io import read_triangle_soup
+    from core.params import UNIT_TO_MM
+    from core.types import TriMesh
     from core.validate import validate_target
 
     path = state["input_path"]
@@ -52,7 +59,9 @@ def stage_intake(state, params):
     mesh, summary = validate_target(vertices, faces, components=params.components,
                                     check_self_intersections=params.check_self_intersections,
                                     name=str(path))
-    report = {"file": str(path), "units": params.units, **summary}
+    factor = UNIT_TO_MM[params.units]
+    mesh = TriMesh(mesh.vertices * factor, mesh.faces)
+    report = {"file": str(path), "units": params.units, "unit_to_mm": factor, **summary}
     message = "; ".join(summary["warnings"])
     return {"target": mesh, "input_genus": summary["genus"], "report": report, "message": message}
 
@@ -226,9 +235,9 @@ def stage_fit(state, params):
     base = state["base_mesh"]
     levels = fit_levels(base.n_faces, params.subdivision_levels)
     fitted, info = fit_base_mesh(base, state["target"], levels=levels,
-                                 iterations=params.fit_iterations, mode="inside")
-    report = {"mode": "inside", "levels": levels, **{key: info[key] for key in (
-        "iterations", "stopped", "mean_distance", "max_distance", "outside_volume_fraction",
+                                 iterations=params.fit_iterations, mode=params.fit_mode)
+    report = {"mode": params.fit_mode, "levels": levels, **{key: info[key] for key in (
+        "rounds", "iterations", "stopped", "mean_distance", "max_distance", "outside_volume_fraction",
         "uncovered_volume_fraction", "initial_mean_distance", "initial_max_distance", "initial_outside_volume_fraction",
         "seconds") if key in info}}
     report["self_intersections"] = count_limit_self_intersections(fitted, levels)

@@ -206,8 +206,8 @@ def surface_distances(result_V, result_F, target_V, target_F, samples=20000, see
     rng = np.random.default_rng(seed)
     result_points = sample_surface(result_V, result_F, samples, rng)
     target_points = sample_surface(target_V, target_F, samples, rng)
-    to_target = TargetSurface(target_V, target_F).closest(np.vstack([result_points, result_V]))
-    to_result = TargetSurface(result_V, result_F, "result").closest(
+    to_target = TargetSurface(target_V, target_F).nearest(np.vstack([result_points, result_V]))
+    to_result = TargetSurface(result_V, result_F, "result").nearest(
         np.vstack([target_points, target_V]))
     forward, forward_vertices = np.split(to_target.distance / diagonal, [samples])
     backward, backward_vertices = np.split(to_result.distance / diagonal, [samples])
@@ -267,7 +267,7 @@ def point_surface_distance(points, V, F):
     """
     from core.target_surface import TargetSurface
 
-    return TargetSurface(V, F).closest(points).distance
+    return TargetSurface(V, F).nearest(points).distance
 
 
 def optional_module(name, package=None):

@@ -44,27 +44,34 @@ _RAY_BLOCK = 200000
 
 
 @dataclass
-class ClosestPoints:
-    """Closest points on a :class:`TargetSurface` to ``k`` query points.
+class NearestPoints:
+    """Closest points on a :class:`TargetSurface` to ``k`` query points, unsigned.
 
     point : (k, 3) float64 closest points on the surface.
     face : (k,) int64 triangle holding each closest point.
+    bary : (k, 3) float64 barycentric coordinates of ``point`` on ``face``.
     region : (k,) int8 where on that triangle: 0 inside, 1..3 edges (v0 v1), (v1 v2),
         (v2 v0), 4..6 corners v0, v1, v2.
-    normal : (k, 3) float64 unit pseudo-normal at the closest point.
-    signed : (k,) float64 signed distance (model units), positive outside.
+    distance : (k,) float64 distance (model units).
     """
 
     point: np.ndarray
     face: np.ndarray
+    bary: np.ndarray
     region: np.ndarray
-    normal: np.ndarray
-    signed: np.ndarray
+    distance: np.ndarray
 
-    @property
-    def distance(self):
-        """(k,) float64 unsigned distance (model units)."""
-        return np.abs(self.signed)
+
+@dataclass
+class ClosestPoints(NearestPoints):
+    """:class:`NearestPoints` with the pseudo-normal and the inside / outside sign.
+
+    normal : (k, 3) float64 unit pseudo-normal at the closest point.
+    signed : (k,) float64 signed distance (model units), positive outside.
+    """
+
+    normal: np.ndarray = None
+    signed: np.ndarray = None
 
 
 @dataclass
@@ -119,6 +126,23 @@ class TargetSurface:
         self._tree = optional_module("igl", "libigl").AABB()
         self._tree.init(V, F)
 
+    def nearest(self, points):
+        """Closest points and unsigned distances (no pseudo-normals).
+
+        Parameters
+        ----------
+        points : (k, 3) float, model units.
+
+        Returns
+        -------
+        NearestPoints
+        """
+        points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        _, face, _ = self._tree.squared_distance(self.vertices, self.faces, points)
+        face = np.asarray(face, dtype=np.int64)
+        point, bary, region = closest_on_triangles(self._tri[face], points)
+        return NearestPoints(point, face, bary, region, np.linalg.norm(points - point, axis=1))
+
     def closest(self, points):
         """Closest points, pseudo-normals and signed distances.
 
@@ -131,13 +155,11 @@ class TargetSurface:
         ClosestPoints
         """
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        _, face, _ = self._tree.squared_distance(self.vertices, self.faces, points)
-        face = np.asarray(face, dtype=np.int64)
-        point, _, region = closest_on_triangles(self._tri[face], points)
-        normal = self._normal_at(face, region)
-        offset = points - point
-        sign = np.where(np.einsum("ij,ij->i", offset, normal) >= 0, 1.0, -1.0)
-        return ClosestPoints(point, face, region, normal, sign * np.linalg.norm(offset, axis=1))
+        near = self.nearest(points)
+        normal = self._normal_at(near.face, near.region)
+        sign = np.where(np.einsum("ij,ij->i", points - near.point, normal) >= 0, 1.0, -1.0)
+        return ClosestPoints(near.point, near.face, near.bary, near.region, near.distance,
+                             normal, sign * near.distance)
 
     def first_exit(self, origins, directions, max_length):
         """Where rays starting inside (or on) the surface first leave the solid.

@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 from core.errors import InvalidMeshError, ParameterError
+from core.fitting.best_fit import best_fit
 from core.fitting.responses import thickness, triangulate, volume
 from core.fitting.rgp import FitProblem, run_rgp
 from core.progress import NO_PROGRESS
@@ -23,13 +24,15 @@ from core.subdivision.limit import limit_matrices
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
-MODES = ("inside", "nearest")
+MODES = ("inside", "best-fit", "none")
+STARTS = ("best-fit", "cage")
 SURFACES = ("limit", "control")
 
 
 def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="inside",
-                  progress=None, penalty=1e5, step_fraction=0.05, surface="limit"):
-    """Move the base-mesh vertices so the subdivision surface fills the target.
+                  progress=None, penalty=1e5, step_fraction=0.05, surface="limit",
+                  start="best-fit", rounds=10):
+    """Move the base-mesh vertices so the subdivision surface fills or fits the target.
 
     Parameters
     ----------
@@ -38,20 +41,29 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     levels : int in 1..4, subdivision level ``i`` on which the responses live.
     iterations : int >= 0, maximum RGP iterations (paper: 100).
     t_min : float or None, minimal wall thickness (model units) at every fine vertex;
-        ``None`` picks ``min(0.1 * mean base edge, 0.5 * thinnest initial wall)``;
-        0 disables the constraint.
-    mode : ``'inside'`` (paper: stay inside the target) or ``'nearest'`` (penalise
-        the distance on both sides).
+        ``None`` picks ``min(0.1 * mean base edge, 0.5 * thinnest wall of the start)``;
+        0 disables the constraint. The least-squares start does not see it: a given
+        ``t_min`` above the start's walls is a constraint the RGP has to restore, so use
+        ``start='cage'`` with a cage that satisfies it.
+    mode : ``'inside'`` (paper: fill the target from inside, relaxed gradient
+        projection), ``'best-fit'`` (two-sided least squares,
+        :func:`core.fitting.best_fit.best_fit`) or ``'none'`` (the cage unchanged, its
+        figures only).
     progress : core.progress.Progress or None
     penalty : float > 0, ``p`` of Eq. 6 (dimensionless, see :mod:`core.fitting.rgp`).
     step_fraction : float in (0, 1], largest base-vertex move per iteration as a
         fraction of the mean base edge length.
     surface : ``'limit'`` or ``'control'``, which fine positions the responses use.
+    start : ``'best-fit'`` (inside mode starts from the least-squares fit) or ``'cage'``
+        (from the cage as given, the paper's start).
+    rounds : int >= 0, most Gauss-Newton rounds of the least-squares fit.
 
     Returns
     -------
     fitted : PolyMesh, the base mesh with moved vertices (same faces).
-    info : dict with ``iterations``, ``stopped`` ('iterations' or 'stalled'),
+    info : dict with ``mode``, ``rounds`` (least-squares rounds run), ``rms`` (their
+        two-sided RMS distances, model units), ``iterations`` (RGP), ``stopped``
+        ('iterations', 'stalled', 'converged' or 'none'),
         ``best_iteration``, ``objective`` (list per iteration), ``volume`` (list),
         ``mean_distance`` / ``max_distance`` (distance of the fine limit points to the
         target over the target's bounding-box diagonal) and their ``initial_``
@@ -69,7 +81,8 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     """
     started = time.perf_counter()
     progress = NO_PROGRESS if progress is None else progress
-    _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface)
+    _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface, start,
+                      rounds)
     V0 = _check_base(base)
     target_surface = TargetSurface(target.vertices, target.faces)
     target_volume, _ = volume(target_surface.vertices, target_surface.faces)
@@ -84,36 +97,38 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     limit_map = (L @ S).tocsr()
     mapping = limit_map if surface == "limit" else S
     T = triangulate(fine.face_vertices, fine.face_offsets)
-    X0 = mapping @ V0
-    edge = _mean_edge_length(base)
-    step = step_fraction * edge
-    if t_min is None:
-        t_min = _default_t_min(X0, T, edge)
-    area = _area(X0, T)
-    problem = FitProblem(mapping, T, target_surface, penalty, mode, t_min, area)
-    result = run_rgp(problem, V0, step, iterations=iterations, progress=progress)
-    info = {
-        "iterations": result.iterations,
-        "stopped": result.stopped,
-        "best_iteration": result.best_iteration,
-        "objective": result.history["objective"],
-        "volume": result.history["volume"],
-        "t_min": float(t_min),
-        "step": float(step),
-        "levels": levels,
-        "surface": surface,
-        "mode": mode,
-    }
-    for prefix, vertices in (("initial_", V0), ("", result.vertices)):
+    info = {"mode": mode, "levels": levels, "surface": surface, "rounds": 0, "rms": [],
+            "iterations": 0, "stopped": "none", "objective": [], "volume": []}
+    vertices = V0
+    if mode == "best-fit" or (mode == "inside" and start == "best-fit"):
+        progress.report("fit", 0.0, "least-squares start")
+        fitted = best_fit(base, limit_map, T, target_surface, rounds=rounds)
+        vertices = fitted.vertices
+        info.update(rounds=fitted.rounds, rms=fitted.rms, stopped=fitted.stopped)
+    if mode == "inside":
+        edge = _mean_edge_length(base)
+        step = step_fraction * edge
+        X_start = mapping @ vertices
+        if t_min is None:
+            t_min = _default_t_min(X_start, T, edge)
+        problem = FitProblem(mapping, T, target_surface, penalty, "inside", t_min,
+                             _area(X_start, T))
+        result = run_rgp(problem, vertices, step, iterations=iterations, progress=progress)
+        vertices = result.vertices
+        info.update(iterations=result.iterations, stopped=result.stopped,
+                    best_iteration=result.best_iteration,
+                    objective=result.history["objective"], volume=result.history["volume"],
+                    t_min=float(t_min), step=float(step))
+    for prefix, points in (("initial_", V0), ("", vertices)):
         info.update({prefix + k: v for k, v in
-                     _figures(limit_map @ vertices, T, target_surface).items()})
+                     _figures(limit_map @ points, T, target_surface).items()})
     info["seconds"] = time.perf_counter() - started
-    return PolyMesh(result.vertices, base.face_vertices, base.face_offsets), info
+    return PolyMesh(vertices, base.face_vertices, base.face_offsets), info
 
 
 def _figures(X, T, target):
     """Distance and containment figures of fine limit points against the target."""
-    distance = target.closest(X).distance / target.diagonal
+    distance = target.nearest(X).distance / target.diagonal
     report = containment(X, T, target.vertices, target.faces)
     return {"mean_distance": float(distance.mean()),
             "max_distance": float(distance.max()),
@@ -121,7 +136,8 @@ def _figures(X, T, target):
             "uncovered_volume_fraction": report["uncovered_volume_fraction"]}
 
 
-def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface):
+def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface, start,
+                      rounds):
     if not isinstance(levels, (int, np.integer)) or not 1 <= levels <= 4:
         raise ParameterError(f"levels must be an integer in 1..4, got {levels!r}")
     if not isinstance(iterations, (int, np.integer)) or iterations < 0:
@@ -136,6 +152,10 @@ def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, s
         raise ParameterError(f"step_fraction must be in (0, 1], got {step_fraction!r}")
     if surface not in SURFACES:
         raise ParameterError(f"surface must be one of {SURFACES}, got {surface!r}")
+    if start not in STARTS:
+        raise ParameterError(f"start must be one of {STARTS}, got {start!r}")
+    if not isinstance(rounds, (int, np.integer)) or rounds < 0:
+        raise ParameterError(f"rounds must be an integer >= 0, got {rounds!r}")
 
 
 def _check_base(base):

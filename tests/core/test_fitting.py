@@ -118,14 +118,47 @@ def test_thickness_of_a_sphere_and_a_slab():
 def test_cube_cage_fills_a_sphere_from_inside():
     target = sphere_target(1.0)
     base = centred_cube(1.0)
-    fitted, info = fit_base_mesh(base, target, levels=2, iterations=60)
+    # the paper's start (the cage as given): the volume grows, nothing leaves the target
+    fitted, info = fit_base_mesh(base, target, levels=2, iterations=60, start="cage")
+    assert info["rounds"] == 0
     assert info["volume"][info["best_iteration"]] > 2.0 * info["volume"][0]
     assert info["outside_volume_fraction"] <= 1e-3
     assert info["mean_distance"] < 0.1 * info["initial_mean_distance"]
     assert np.array_equal(fitted.face_vertices, base.face_vertices)
-    again, info2 = fit_base_mesh(base, target, levels=2, iterations=60)
+    again, info2 = fit_base_mesh(base, target, levels=2, iterations=60, start="cage")
     assert np.array_equal(again.vertices, fitted.vertices)
     assert info2["objective"] == info["objective"]
+    # from the least-squares start (the default) it holds as well
+    _, lsq = fit_base_mesh(base, target, levels=2, iterations=60)
+    assert lsq["rounds"] >= 1 and lsq["outside_volume_fraction"] <= 1e-3
+    assert lsq["mean_distance"] < 0.1 * lsq["initial_mean_distance"]
+
+
+def test_best_fit_recovers_a_scaled_limit_surface():
+    # the target is the (finely sampled) limit surface of the cage scaled by 1.2; since
+    # the limit map is linear, the cage scaled by 1.2 fits it exactly (the fit may slide
+    # vertices along the surface, so the surfaces are compared, not the cages)
+    base = grid_sphere(3)
+    h, fine, T = fine_mesh(base, 4)
+    X = limit_matrices(fine)[0] @ h.composite(3) @ (1.2 * base.vertices)
+    target = TriMesh(X, T)
+    fitted, info = fit_base_mesh(base, target, levels=2, mode="best-fit", rounds=15)
+    assert info["initial_mean_distance"] > 0.03
+    assert info["mean_distance"] < 1e-3 and info["max_distance"] < 2e-3
+    assert info["rms"][-1] < 0.02 * info["rms"][0]
+    assert info["outside_volume_fraction"] < 5e-3 and info["uncovered_volume_fraction"] < 5e-3
+    again, _ = fit_base_mesh(base, target, levels=2, mode="best-fit", rounds=15)
+    assert np.array_equal(again.vertices, fitted.vertices)
+
+
+def test_mode_none_keeps_the_cage_and_reports_its_figures():
+    target = sphere_target(1.0, 3)
+    base = centred_cube(1.0)
+    fitted, info = fit_base_mesh(base, target, mode="none")
+    assert np.array_equal(fitted.vertices, base.vertices)
+    assert info["rounds"] == 0 and info["iterations"] == 0
+    assert info["mean_distance"] == info["initial_mean_distance"] > 0.05
+    assert info["outside_volume_fraction"] == info["initial_outside_volume_fraction"]
 
 
 def test_grid_sphere_converges_into_a_slightly_larger_sphere():
@@ -149,7 +182,8 @@ def test_thickness_constraint_holds_when_the_target_is_thin():
     t_min = 0.15
     walls = []
     for limit in (t_min, 0.0):
-        fitted, _ = fit_base_mesh(base, target, levels=2, iterations=40, t_min=limit)
+        fitted, _ = fit_base_mesh(base, target, levels=2, iterations=40, t_min=limit,
+                                  start="cage")
         X, T = limit_points(fitted, 2)
         walls.append(thickness(X, T, 1.0).thickness.min())
     assert walls[0] >= 0.95 * t_min
@@ -160,6 +194,7 @@ def test_thickness_constraint_holds_when_the_target_is_thin():
     {"levels": 0}, {"levels": 5}, {"levels": 1.5}, {"iterations": -1},
     {"t_min": -0.1}, {"t_min": float("nan")}, {"mode": "outside"}, {"penalty": 0.0},
     {"step_fraction": 0.0}, {"step_fraction": 2.0}, {"surface": "cage"},
+    {"mode": "nearest"}, {"start": "middle"}, {"rounds": -1}, {"rounds": 2.5},
 ])
 def test_bad_parameters_raise(kwargs):
     with pytest.raises(ParameterError):
