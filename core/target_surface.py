@@ -15,9 +15,11 @@ edge, the angle-weighted vertex normal at a corner; with it the sign of
 ``(q - closest) . normal`` is the exact inside / outside sign of ``q`` for a closed,
 outward-oriented mesh.
 
-Rays (:meth:`TargetSurface.first_exit`): the compiled first hit is accepted only if
-the exact float64 Moeller-Trumbore test on the same triangle confirms it and the ray
-leaves the solid there (``d . m > 0``). A compiled cast can miss a crossing exactly
+Rays (:meth:`TargetSurface.first_exit`): the compiled cast starts ``1e-6`` of the ray
+length along the ray (from a vertex it would otherwise stop on the vertex's own
+triangles); its first hit is accepted only if the exact float64 Moeller-Trumbore test
+of the whole ray on the same triangle confirms it and the ray leaves the solid there
+(``d . m > 0``). A compiled cast can miss a crossing exactly
 on an edge or a vertex (about 3 % of rays that start on a vertex, see
 ``shared/METHODS.md``); on a closed surface the crossing after a missed exit is an
 entry, so every such miss shows up as a rejected hit (or no hit at all) and those rays
@@ -41,6 +43,7 @@ REGION_FACE = 0
 # region codes 1, 2, 3: edges (v0 v1), (v1 v2), (v2 v0); 4, 5, 6: corners v0, v1, v2
 
 _RAY_BLOCK = 200000
+_START_OFFSET = 1e-6
 
 
 @dataclass
@@ -182,8 +185,11 @@ class TargetSurface:
         directions = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
         k = len(origins)
         t_low = 1e-9 * max_length
-        face, _, _ = self._tree.intersect_ray_first(self.vertices, self.faces, origins,
-                                                    directions)
+        # started a little along the ray, the compiled cast does not stop on the triangles
+        # around a start vertex; an exit it skips that way is caught like any other miss
+        face, _, _ = self._tree.intersect_ray_first(
+            self.vertices, self.faces, origins + (_START_OFFSET * max_length) * directions,
+            directions)
         face = np.asarray(face, dtype=np.int64)
         t = np.full(k, np.inf)
         uv = np.zeros((k, 2))

@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from core.errors import InvalidMeshError, ParameterError
-from core.fitting.best_fit import best_fit
+from core.fitting.best_fit import BestFitResult, best_fit
 from core.fitting.responses import thickness, triangulate, volume
 from core.fitting.rgp import FitProblem, run_rgp
 from core.progress import NO_PROGRESS
@@ -25,13 +25,14 @@ from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
 MODES = ("inside", "best-fit", "none")
+FINE_ROUNDS = 2
 STARTS = ("best-fit", "cage")
 SURFACES = ("limit", "control")
 
 
 def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="inside",
                   progress=None, penalty=1e5, step_fraction=0.05, surface="limit",
-                  start="best-fit", rounds=10):
+                  start="best-fit", rounds=10, tol=2e-3, patience=5):
     """Move the base-mesh vertices so the subdivision surface fills or fits the target.
 
     Parameters
@@ -57,6 +58,9 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     start : ``'best-fit'`` (inside mode starts from the least-squares fit) or ``'cage'``
         (from the cage as given, the paper's start).
     rounds : int >= 0, most Gauss-Newton rounds of the least-squares fit.
+    tol, patience : the RGP stops when its best objective improved by less than
+        ``tol * max(|best|, step)`` over the last ``patience`` iterations (see
+        :func:`core.fitting.rgp.run_rgp`); ``iterations`` is the cap.
 
     Returns
     -------
@@ -83,6 +87,10 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     progress = NO_PROGRESS if progress is None else progress
     _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface, start,
                       rounds)
+    if not (np.isfinite(tol) and tol >= 0) or not (isinstance(patience, (int, np.integer))
+                                                   and patience >= 1):
+        raise ParameterError(f"tol must be >= 0 and patience an integer >= 1, got {tol!r}, "
+                             f"{patience!r}")
     V0 = _check_base(base)
     target_surface = TargetSurface(target.vertices, target.faces)
     target_volume, _ = volume(target_surface.vertices, target_surface.faces)
@@ -101,10 +109,12 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
             "iterations": 0, "stopped": "none", "objective": [], "volume": []}
     vertices = V0
     if mode == "best-fit" or (mode == "inside" and start == "best-fit"):
-        progress.report("fit", 0.0, "least-squares start")
-        fitted = best_fit(base, limit_map, T, target_surface, rounds=rounds)
+        progress.report("fit", 0.0, "least-squares fit")
+        fitted, coarse = _two_level_best_fit(base, hierarchy, limit_map, T, target_surface,
+                                             rounds)
         vertices = fitted.vertices
-        info.update(rounds=fitted.rounds, rms=fitted.rms, stopped=fitted.stopped)
+        info.update(rounds=fitted.rounds + coarse.rounds, rms=fitted.rms,
+                    coarse_rms=coarse.rms, stopped=fitted.stopped)
     if mode == "inside":
         edge = _mean_edge_length(base)
         step = step_fraction * edge
@@ -113,7 +123,8 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
             t_min = _default_t_min(X_start, T, edge)
         problem = FitProblem(mapping, T, target_surface, penalty, "inside", t_min,
                              _area(X_start, T))
-        result = run_rgp(problem, vertices, step, iterations=iterations, progress=progress)
+        result = run_rgp(problem, vertices, step, iterations=iterations, stall_tol=tol,
+                         patience=patience, progress=progress)
         vertices = result.vertices
         info.update(iterations=result.iterations, stopped=result.stopped,
                     best_iteration=result.best_iteration,
@@ -124,6 +135,32 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
                      _figures(limit_map @ points, T, target_surface).items()})
     info["seconds"] = time.perf_counter() - started
     return PolyMesh(vertices, base.face_vertices, base.face_offsets), info
+
+
+def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds):
+    """Least-squares fit: ``rounds - FINE_ROUNDS`` rounds on the level-1 limit points
+    (a quarter of the points; the large moves), then up to ``FINE_ROUNDS`` on the fit's
+    level. Measured on the SIMP cantilever: 8 + 2 rounds reach a lower mean distance than
+    10 level-2 rounds in half the time.
+
+    Returns
+    -------
+    fine, coarse : BestFitResult of the two stages (``coarse`` has 0 rounds when the fit
+        itself is on level 1 or ``rounds <= FINE_ROUNDS``).
+    """
+    levels = len(hierarchy.meshes) - 1
+    coarse_rounds = rounds - FINE_ROUNDS if levels > 1 else 0
+    if coarse_rounds > 0:
+        coarse_mesh = hierarchy.meshes[1]
+        coarse_map = (limit_matrices(coarse_mesh)[0] @ hierarchy.composite(0)).tocsr()
+        coarse = best_fit(base, coarse_map,
+                          triangulate(coarse_mesh.face_vertices, coarse_mesh.face_offsets),
+                          target, rounds=coarse_rounds)
+    else:
+        coarse = BestFitResult(np.asarray(base.vertices, dtype=np.float64), 0, [], "rounds")
+    fine = best_fit(base, limit_map, T, target, rounds=rounds - coarse.rounds,
+                    start=coarse.vertices)
+    return fine, coarse
 
 
 def _figures(X, T, target):
