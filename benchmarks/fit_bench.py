@@ -41,7 +41,7 @@ sys.path.insert(0, REPO)
 
 from core.fitting import fit_base_mesh  # noqa: E402
 from core.fitting.responses import triangulate  # noqa: E402
-from core.pipeline import fit_levels, reconstruct  # noqa: E402
+from core.pipeline import count_limit_self_intersections, fit_levels, reconstruct  # noqa: E402
 from core.polymesh_io import write_polymesh  # noqa: E402
 from core.quality import containment, sample_surface, surface_distances  # noqa: E402
 from core.subdivision.catmull_clark import build_hierarchy  # noqa: E402
@@ -104,6 +104,7 @@ def our_fit(base, target, mode):
     V, F = limit_mesh(fitted)
     row = {"mode": mode, "seconds": seconds, "rounds": info["rounds"],
            "iterations": info["iterations"], "stopped": info["stopped"],
+           "self_intersections": count_limit_self_intersections(fitted, levels),
            "fine_points": int(limit_matrices(build_hierarchy(base, levels).meshes[levels])[0]
                               .shape[0])}
     row.update(surface_figures(V, F, target))
@@ -112,13 +113,14 @@ def our_fit(base, target, mode):
 
 def peer_fit(target, faces):
     """QuadriFlow remesh to about ``faces`` quads, Catmull-Clark level 3, 5 linear LSQ rounds."""
-    from pyQuadriFlow import pyquadriflow
+    from pyQuadriFlow.pyQuadriFlow import pyquadriflow
 
     start = time.perf_counter()
     out = pyquadriflow(int(faces), 0, target.vertices.tolist(), target.faces.tolist(),
                        False, False, False, False, False)
     remesh_seconds = time.perf_counter() - start
-    quad_V, quad_F = np.asarray(out[0], dtype=np.float64), np.asarray(out[1], dtype=np.int64)
+    quad_V = np.asarray(out["vertices"], dtype=np.float64)
+    quad_F = np.asarray(out["faces"], dtype=np.int64)
     cage = PolyMesh(quad_V, quad_F.reshape(-1), np.arange(0, quad_F.size + 1, 4))
     start = time.perf_counter()
     hierarchy = build_hierarchy(cage, EVAL_LEVEL)
@@ -187,10 +189,11 @@ def markdown(rows, info):
              f"level-{EVAL_LEVEL} mesh). Volumes are fractions of the target volume.", "",
              "## Per mode", "",
              "| mesh | triangles | cage faces | mode | seconds | rounds | RGP iterations | "
-             "mean | max | outside | uncovered |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "mean | max | outside | uncovered | self-intersecting pairs (level 2) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for row in rows:
         if "error" in row:
-            lines.append(f"| {row['name']} | | | {row['error']} | | | | | | | |")
+            lines.append(f"| {row['name']} | | | {row['error']} | | | | | | | | |")
             continue
         for m in row["modes"] + ([row["peer"]] if "seconds" in row.get("peer", {}) else []):
             label = m["mode"] if m["mode"] != "peer" else f"peer ({m['faces']} quads)"
@@ -198,9 +201,9 @@ def markdown(rows, info):
                 f"| {row['name']} | {row['triangles']} | {row['base_faces']} | {label} | "
                 f"{m['seconds']:.2f} | {m.get('rounds', PEER_ROUNDS)} | {m.get('iterations', '')} | "
                 f"{m['mean_distance']:.2e} | {m['max_distance']:.2e} | {_pct(m['outside'])} | "
-                f"{_pct(m['uncovered'])} |")
+                f"{_pct(m['uncovered'])} | {m.get('self_intersections', '')} |")
         if "error" in row.get("peer", {}):
-            lines.append(f"| {row['name']} | | | peer failed: {row['peer']['error']} | | | | | | | |")
+            lines.append(f"| {row['name']} | | | peer failed: {row['peer']['error']} | | | | | | | | |")
     lines += ["", "## Speed against the query floor", "",
               "| mesh | 100k closest points (s) | inside fit (s) | RGP iterations | "
               "fit per iteration / 100k queries | old inside fit (s) |", "|---|---|---|---|---|---|"]

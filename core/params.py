@@ -39,6 +39,10 @@ class ReconstructionParams:
         when it has converged.
     fit_mode : ``inside`` (the paper's: the surface fills the target from inside),
         ``best-fit`` (two-sided least squares) or ``none`` (the unfitted limit surface).
+    tolerance : largest deviation wanted, as a fraction of the target's bounding-box
+        diagonal; 0 = no refinement. Quad strips deviating more are split and refitted
+        until it is met or ``max_base_faces`` would be exceeded.
+    tolerance_mm : the same in millimetres (after ``units``); at most one of the two.
     """
 
     units: str = "mm"
@@ -56,6 +60,8 @@ class ReconstructionParams:
     subdivision_levels: int = 2
     fit_iterations: int = 100
     fit_mode: str = "inside"
+    tolerance: float = 0.0
+    tolerance_mm: float = 0.0
 
     def __post_init__(self):
         _choice("units", self.units, tuple(UNIT_TO_MM))
@@ -73,6 +79,13 @@ class ReconstructionParams:
         _range("subdivision_levels", self.subdivision_levels, 1, 5)
         _range("fit_iterations", self.fit_iterations, 0, 100_000)
         _choice("fit_mode", self.fit_mode, FIT_MODES)
+        _range("tolerance", self.tolerance, 0.0, 1.0)
+        _range("tolerance_mm", self.tolerance_mm, 0.0, 1e9)
+        if self.tolerance > 0 and self.tolerance_mm > 0:
+            raise ParameterError("give the tolerance once: as a fraction of the bounding-box "
+                                 "diagonal (tolerance) or in millimetres (tolerance_mm)")
+        if (self.tolerance > 0 or self.tolerance_mm > 0) and self.fit_mode == "none":
+            raise ParameterError("a tolerance needs a fit: fit_mode 'none' cannot refine")
 
     @classmethod
     def from_dict(cls, values):

@@ -232,18 +232,38 @@ def fit_levels(n_base_faces, wanted):
 def stage_fit(state, params):
     from core.fitting import fit_base_mesh
 
-    base = state["base_mesh"]
-    levels = fit_levels(base.n_faces, params.subdivision_levels)
-    fitted, info = fit_base_mesh(base, state["target"], levels=levels,
-                                 iterations=params.fit_iterations, mode=params.fit_mode)
+    base, target = state["base_mesh"], state["target"]
+
+    def fit(cage):
+        return fit_base_mesh(cage, target, levels=fit_levels(cage.n_faces, params.subdivision_levels),
+                             iterations=params.fit_iterations, mode=params.fit_mode)
+
+    diagonal_mm = float(np.linalg.norm(np.ptp(target.vertices, axis=0)))
+    tolerance = params.tolerance or params.tolerance_mm / diagonal_mm
+    refinement = None
+    if tolerance > 0:
+        from core.fitting.refine import fit_to_tolerance
+
+        refinement = fit_to_tolerance(base, target, tolerance, params.max_base_faces, fit)
+        fitted, info = refinement.mesh, refinement.info
+    else:
+        fitted, info = fit(base)
+    levels = info["levels"]
     report = {"mode": params.fit_mode, "levels": levels, **{key: info[key] for key in (
         "rounds", "iterations", "stopped", "mean_distance", "max_distance", "outside_volume_fraction",
         "uncovered_volume_fraction", "initial_mean_distance", "initial_max_distance", "initial_outside_volume_fraction",
         "seconds") if key in info}}
     report["self_intersections"] = count_limit_self_intersections(fitted, levels)
-    message = ("" if report["self_intersections"] == 0 else
-               f"warning: the fitted limit surface intersects itself "
-               f"({report['self_intersections']} triangle pairs at level {levels})")
+    warnings = [] if report["self_intersections"] == 0 else [
+        f"warning: the fitted limit surface intersects itself "
+        f"({report['self_intersections']} triangle pairs at level {levels})"]
+    if refinement is not None:
+        report["tolerance"] = {"value": tolerance, "value_mm": tolerance * diagonal_mm,
+                               "met": refinement.met, "reason": refinement.reason,
+                               "faces": int(fitted.n_faces), "rounds": refinement.rounds}
+        if not refinement.met:
+            warnings.append(f"warning: {refinement.reason}")
+    message = "; ".join(warnings)
     return {"initial_base_mesh": base, "base_mesh": fitted, "report": report, "message": message}
 
 

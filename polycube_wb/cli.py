@@ -66,6 +66,10 @@ def build_parser():
     rec.add_argument("--fit-iterations", type=int, default=defaults.fit_iterations,
                      help="most shape-optimisation iterations (paper: 100; the fit stops "
                           "earlier when converged)")
+    rec.add_argument("--tolerance", default="0", metavar="T",
+                     help="largest deviation wanted: a fraction of the bounding-box diagonal "
+                          "(0.002) or a length with its unit (0.5mm, 0.05cm, 0.02in); quad "
+                          "strips deviating more are split and refitted (default 0: off)")
     rec.add_argument("--fit-mode", choices=FIT_MODES, default=defaults.fit_mode,
                      help="inside: fill the target from inside (paper, default); best-fit: "
                           "two-sided least squares; none: the unfitted limit surface")
@@ -125,6 +129,7 @@ def _reconstruct(args):
                   blend_factor=args.blend_factor, lam=args.lam, penalty=args.penalty,
                   repair=not args.no_repair, target_faces=args.target_faces,
                   fit_iterations=args.fit_iterations, fit_mode=args.fit_mode,
+                  **_tolerance(args.tolerance),
                   max_base_faces=args.max_base_faces,
                   check_self_intersections=not args.skip_self_intersection_check)
     if args.stop_after == "solid" and args.output is None:
@@ -139,6 +144,19 @@ def _reconstruct(args):
         return EXIT_INTERNAL
     _print_summary(report)
     return EXIT_OK
+
+
+def _tolerance(text):
+    """``{"tolerance": fraction}`` or ``{"tolerance_mm": mm}`` from ``--tolerance`` text."""
+    text = text.strip()
+    unit = next((u for u in sorted(UNIT_TO_MM, key=len, reverse=True) if text.endswith(u)), None)
+    number = text[:-len(unit)] if unit else text
+    try:
+        value = float(number)
+    except ValueError:
+        raise PolycubeInputError(f"--tolerance must be a number, optionally followed by a unit "
+                                 f"({', '.join(UNIT_TO_MM)}), got {text!r}") from None
+    return {"tolerance_mm": value * UNIT_TO_MM[unit]} if unit else {"tolerance": value}
 
 
 def _print_summary(report):

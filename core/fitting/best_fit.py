@@ -11,7 +11,8 @@ Gauss-Newton round linearises both distances point-to-plane:
   closest point ``y_k = B_k X`` on the triangulated limit surface (``B`` the barycentric
   rows): ``r_k = m_k . (B_k M V - s_k)``;
 
-and minimises
+(a pair counts only if the two surfaces' normals there are within 60 degrees, so the
+far wall of a thin member does not pull the near one through), and minimises
 
     E(V) = mean_j r_j^2 + mean_k r_k^2 + lam * |D (V - V_init)|^2 / n_base
            + mu * |V - V_prev|^2 / n_base
@@ -29,11 +30,14 @@ import scipy.linalg
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
+from core.fitting.responses import vertex_normals
 from core.quality import sample_surface
 from core.subdivision.catmull_clark import mesh_topology
 from core.target_surface import TargetSurface
 
 _DENSE_UNKNOWNS = 3000
+COMPATIBLE = 0.5
+"""Pairs count only if their two unit normals have a dot product above this (60 degrees)."""
 
 
 @dataclass
@@ -54,7 +58,7 @@ class BestFitResult:
     stopped: str
 
 
-def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-3, damping=1e-3,
+def best_fit(base, mapping, triangles, target, rounds=10, smoothness=3e-3, damping=1e-3,
              tol=5e-3, samples=None, seed=0, start=None):
     """Fit the cage's limit surface to the target in the two-sided least-squares sense.
 
@@ -96,7 +100,8 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-3, dampi
     for done in range(rounds + 1):
         X = mapping @ V
         forward = target.closest(X)
-        back = TargetSurface(X, triangles, "fitted surface").nearest(points)
+        fitted = TargetSurface(X, triangles, "fitted surface")
+        back = fitted.nearest(points)
         rms.append(float(np.sqrt(0.5 * (np.mean(forward.distance ** 2)
                                         + np.mean(back.distance ** 2)))))
         if rms[-1] < best[0]:
@@ -108,10 +113,13 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-3, dampi
             break
         rows = sp.csr_matrix((back.bary.reshape(-1), triangles[back.face].reshape(-1),
                               np.arange(0, 3 * count + 1, 3)), shape=(count, n_fine))
-        J_f = _plane_rows(forward.normal, mapping)
-        J_b = _plane_rows(sample_normal, rows @ mapping)
-        b_f = np.einsum("ij,ij->i", forward.normal, forward.point)
-        b_b = np.einsum("ij,ij->i", sample_normal, points)
+        # pairs whose normals disagree (the far wall of a thin member) are left out
+        keep_f = _dot(vertex_normals(X, triangles), forward.normal) > COMPATIBLE
+        keep_b = _dot(fitted.face_normals[back.face], sample_normal) > COMPATIBLE
+        J_f = _plane_rows(forward.normal * keep_f[:, None], mapping)
+        J_b = _plane_rows(sample_normal * keep_b[:, None], rows @ mapping)
+        b_f = _dot(forward.normal, forward.point) * keep_f
+        b_b = _dot(sample_normal, points) * keep_b
         system = (J_f.T @ J_f) / n_fine + (J_b.T @ J_b) / count
         scale = float(system.diagonal().mean())
         system = system + (smoothness * scale) * smooth + (damping * scale) * identity
@@ -119,6 +127,10 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-3, dampi
                + (smoothness * scale) * (smooth @ v_init) + (damping * scale) * V.T.reshape(-1))
         V = _solve_spd(system, rhs).reshape(3, -1).T
     return BestFitResult(best[1], len(rms) - 1, rms, stopped)
+
+
+def _dot(a, b):
+    return np.einsum("ij,ij->i", a, b)
 
 
 def _solve_spd(system, rhs):

@@ -59,3 +59,26 @@ def test_cli_rejects_an_unknown_fit_mode():
                              "--stop-after", "fit", "--fit-mode", "outside"], cwd=REPO,
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and "fit-mode" in result.stderr
+
+
+def test_tolerance_in_millimetres_is_reported_per_round():
+    result = reconstruct(TINY, {"fit_mode": "best-fit", "tolerance_mm": 0.1}, stop_after="fit")
+    section = result.report["fit"]["tolerance"]
+    diagonal = result.report["input"]["bbox_diagonal"]
+    assert section["value_mm"] == pytest.approx(0.1)
+    assert section["value"] == pytest.approx(0.1 / diagonal)
+    rounds = section["rounds"]
+    assert rounds and all(key in rounds[0] for key in ("faces", "max_deviation",
+                                                       "mean_deviation"))
+    if section["met"]:
+        assert rounds[-1]["max_deviation"] <= section["value"]
+    else:
+        assert "max_base_faces" in section["reason"] or "fits" in section["reason"]
+    assert result.state["base_mesh"].n_faces == section["faces"] == rounds[-1]["faces"]
+
+
+def test_tolerance_without_a_fit_is_refused():
+    with pytest.raises(ParameterError, match="tolerance"):
+        ReconstructionParams(fit_mode="none", tolerance=0.01)
+    with pytest.raises(ParameterError, match="once"):
+        ReconstructionParams(tolerance=0.01, tolerance_mm=1.0)
