@@ -58,7 +58,7 @@ class BestFitResult:
     stopped: str
 
 
-def best_fit(base, mapping, triangles, target, rounds=10, smoothness=3e-3, damping=1e-3,
+def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, damping=1e-3,
              tol=5e-3, samples=None, seed=0, start=None):
     """Fit the cage's limit surface to the target in the two-sided least-squares sense.
 
