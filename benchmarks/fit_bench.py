@@ -245,7 +245,7 @@ def markdown(rows, info):
         inside, fitted, unfitted = modes["inside"], modes["best-fit"], modes["none"]
         lines.append(
             f"- {row['name']}: inside outside {_pct(inside['outside'])} "
-            f"({'<=' if (inside['outside'] or 1) <= 0.005 else '>'} 0.5%); best-fit mean "
+            f"({'<=' if _within(inside['outside'], 0.005) else 'not <='} 0.5%); best-fit mean "
             f"{fitted['mean_distance'] / unfitted['mean_distance']:.2f} of the unfitted; "
             f"best-fit {fitted['seconds'] - fitted['measure_seconds']:.2f} s, inside "
             f"{inside['seconds'] - inside['measure_seconds']:.2f} s without the figures.")
@@ -254,6 +254,10 @@ def markdown(rows, info):
                   f"maximum no worse than the peer's on {sum(ok for _, ok in ratios)} of "
                   f"{len(ratios)} meshes."]
     return "\n".join(lines) + "\n"
+
+
+def _within(value, limit):
+    return value is not None and value <= limit
 
 
 def _figure_time(row):

@@ -32,7 +32,7 @@ SURFACES = ("limit", "control")
 
 def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="inside",
                   progress=None, penalty=1e5, step_fraction=0.05, surface="limit",
-                  start="best-fit", rounds=10, tol=2e-3, patience=5):
+                  start="best-fit", rounds=10, tol=2e-3, patience=10):
     """Move the base-mesh vertices so the subdivision surface fills or fits the target.
 
     Parameters
