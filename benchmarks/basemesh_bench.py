@@ -134,7 +134,8 @@ def markdown(rows, meta):
     lines.append("")
     header = ["mesh", "parts", "labeling", "base mesh", "faces", "budget met", "quads %", "EVs",
               "valence", "genus (target)", "inverted", "crossings", "labeling s", "base mesh s"]
-    if any("solid" in r for r in rows):
+    with_solid = any("solid" in r for r in rows)
+    if with_solid:
         header += ["STEP valid", "mean dist %", "max dist %"]
     lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for r in rows:
@@ -151,14 +152,12 @@ def markdown(rows, meta):
         else:
             cells += ["–"] * 8
         cells += [str(r.get("labeling_seconds", "–")), str(r.get("basemesh_seconds", "–"))]
-        if "solid" in header[-3:] or len(header) > 14:
-            solid = r.get("solid")
-            metrics = (solid or {}).get("evaluation", {})
-            brep = metrics.get("brep", {})
-            dist = metrics.get("distance", metrics.get("distances", {}))
-            cells += [str(brep.get("valid", "–") if solid else "–"),
-                      _percent(dist.get("mean_rel") if isinstance(dist, dict) else None),
-                      _percent(dist.get("max_rel") if isinstance(dist, dict) else None)]
+        if with_solid:
+            metrics = (r.get("solid") or {}).get("evaluation", {})
+            symmetric = metrics.get("distance", {}).get("symmetric", {})
+            valid = metrics.get("brep", {}).get("is_valid")
+            cells += ["–" if valid is None else ("yes" if valid else "no"),
+                      _percent(symmetric.get("mean_frac")), _percent(symmetric.get("max_frac"))]
         lines.append("| " + " | ".join(cells) + " |")
     lines += ["", "Where the base mesh was not reached, the stage's message:", ""]
     for r in rows:

@@ -6,9 +6,9 @@ from core.errors import ParameterError
 
 PART_MODES = ("single", "auto", "file")
 COMPONENT_POLICIES = ("largest", "all", "error")
-FIT_MODES = ("inside", "nearest")
-"""The modes of ``core.fitting.fit_base_mesh`` (its ``MODES``; checked here so a bad mode
-is reported before any stage runs)."""
+FIT_MODES = ("inside", "best-fit", "none")
+"""The modes of ``core.fitting.fit_base_mesh`` (checked here so a bad mode is reported before
+any stage runs)."""
 UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 
 
@@ -17,7 +17,8 @@ class ReconstructionParams:
     """Every user-settable parameter of :func:`core.pipeline.reconstruct`.
 
     units : length unit of the target file's coordinates (``mm``, ``cm``, ``m``, ``in``);
-        the solid is written in millimetres, FreeCAD's and STEP's usual unit.
+        intake scales the target to millimetres (``UNIT_TO_MM``), so the solid and the STEP
+        file are in millimetres, FreeCAD's and STEP's usual unit.
     components : what to do with several connected components (``largest``, ``all``, ``error``).
     check_self_intersections : run the triangle-triangle test at intake.
     parts : ``single`` (whole mesh one part), ``auto`` (curve-skeleton based) or ``file``
@@ -37,9 +38,14 @@ class ReconstructionParams:
     max_base_faces : a base mesh with more faces stops the run with a message (its fit would
         take many minutes, and such a model is not the few-patch result the tool is for).
     subdivision_levels : Catmull-Clark levels used by the fit (paper: 2).
-    fit_iterations : shape-optimisation iterations (paper: 100).
-    fit_mode : ``inside`` (paper: the limit surface stays inside the target) or ``nearest``
-        (the distance is penalised on both sides).
+    fit_iterations : most shape-optimisation iterations (paper: 100); the fit stops earlier
+        when it has converged.
+    fit_mode : ``inside`` (the paper's: the surface fills the target from inside),
+        ``best-fit`` (two-sided least squares) or ``none`` (the unfitted limit surface).
+    tolerance : largest deviation wanted, as a fraction of the target's bounding-box
+        diagonal; 0 = no refinement. Quad strips deviating more are split and refitted
+        until it is met or ``max_base_faces`` would be exceeded.
+    tolerance_mm : the same in millimetres (after ``units``); at most one of the two.
     fit_t_min : minimal wall thickness of the fit in model units; None picks it from the
         base mesh and the target (see ``core.fitting.fit_base_mesh``), 0 disables it.
     """
@@ -60,6 +66,8 @@ class ReconstructionParams:
     fit_iterations: int = 100
     fit_mode: str = "inside"
     fit_t_min: float = None
+    tolerance: float = 0.0
+    tolerance_mm: float = 0.0
 
     def __post_init__(self):
         _choice("units", self.units, tuple(UNIT_TO_MM))
@@ -79,6 +87,13 @@ class ReconstructionParams:
         _choice("fit_mode", self.fit_mode, FIT_MODES)
         if self.fit_t_min is not None:
             _range("fit_t_min", self.fit_t_min, 0.0, 1e9)
+        _range("tolerance", self.tolerance, 0.0, 1.0)
+        _range("tolerance_mm", self.tolerance_mm, 0.0, 1e9)
+        if self.tolerance > 0 and self.tolerance_mm > 0:
+            raise ParameterError("give the tolerance once: as a fraction of the bounding-box "
+                                 "diagonal (tolerance) or in millimetres (tolerance_mm)")
+        if (self.tolerance > 0 or self.tolerance_mm > 0) and self.fit_mode == "none":
+            raise ParameterError("a tolerance needs a fit: fit_mode 'none' cannot refine")
 
     @classmethod
     def from_dict(cls, values):

@@ -44,7 +44,14 @@ def peak_memory_mb():
 
 
 def stage_intake(state, params):
+    """Read and validate the target; scale it from ``params.units`` to millimetres.
+
+    Every later stage, the solid and the STEP file are in millimetres; the report's
+    ``bbox_diagonal`` stays in the file's units, ``unit_to_mm`` is the factor applied.
+    """
     from core.mesh_io import read_triangle_soup
+    from core.params import UNIT_TO_MM
+    from core.types import TriMesh
     from core.validate import validate_target
 
     if "input_mesh" in state:  # (vertices, faces) arrays given in memory, e.g. by a document
@@ -56,7 +63,9 @@ def stage_intake(state, params):
     mesh, summary = validate_target(vertices, faces, components=params.components,
                                     check_self_intersections=params.check_self_intersections,
                                     name=str(path))
-    report = {"file": str(path), "units": params.units, **summary}
+    factor = UNIT_TO_MM[params.units]
+    mesh = TriMesh(mesh.vertices * factor, mesh.faces)
+    report = {"file": str(path), "units": params.units, "unit_to_mm": factor, **summary}
     message = "; ".join(summary["warnings"])
     return {"target": mesh, "input_genus": summary["genus"], "report": report, "message": message}
 
@@ -206,19 +215,39 @@ def fit_levels(n_base_faces, wanted):
 def stage_fit(state, params):
     from core.fitting import fit_base_mesh
 
-    base = state["base_mesh"]
-    levels = fit_levels(base.n_faces, params.subdivision_levels)
-    fitted, info = fit_base_mesh(base, state["target"], levels=levels,
-                                 iterations=params.fit_iterations, mode=params.fit_mode,
-                                 t_min=params.fit_t_min, progress=state.get("progress"))
+    base, target = state["base_mesh"], state["target"]
+
+    def fit(cage):
+        return fit_base_mesh(cage, target, levels=fit_levels(cage.n_faces, params.subdivision_levels),
+                             iterations=params.fit_iterations, mode=params.fit_mode,
+                             t_min=params.fit_t_min, progress=state.get("progress"))
+
+    diagonal_mm = float(np.linalg.norm(np.ptp(target.vertices, axis=0)))
+    tolerance = params.tolerance or params.tolerance_mm / diagonal_mm
+    refinement = None
+    if tolerance > 0:
+        from core.fitting.refine import fit_to_tolerance
+
+        refinement = fit_to_tolerance(base, target, tolerance, params.max_base_faces, fit)
+        fitted, info = refinement.mesh, refinement.info
+    else:
+        fitted, info = fit(base)
+    levels = info["levels"]
     report = {"mode": params.fit_mode, "levels": levels, **{key: info[key] for key in (
-        "iterations", "stopped", "mean_distance", "max_distance", "outside_volume_fraction",
+        "start", "rounds", "iterations", "stopped", "mean_distance", "max_distance", "outside_volume_fraction",
         "uncovered_volume_fraction", "initial_mean_distance", "initial_max_distance", "initial_outside_volume_fraction",
-        "t_min", "seconds") if key in info}}
+        "t_min", "seconds", "measure_seconds") if key in info}}
     report["self_intersections"] = count_limit_self_intersections(fitted, levels)
-    message = ("" if report["self_intersections"] == 0 else
-               f"warning: the fitted limit surface intersects itself "
-               f"({report['self_intersections']} triangle pairs at level {levels})")
+    warnings = [] if report["self_intersections"] == 0 else [
+        f"warning: the fitted limit surface intersects itself "
+        f"({report['self_intersections']} triangle pairs at level {levels})"]
+    if refinement is not None:
+        report["tolerance"] = {"value": tolerance, "value_mm": tolerance * diagonal_mm,
+                               "met": refinement.met, "reason": refinement.reason,
+                               "faces": int(fitted.n_faces), "rounds": refinement.rounds}
+        if not refinement.met:
+            warnings.append(f"warning: {refinement.reason}")
+    message = "; ".join(warnings)
     return {"base_mesh": fitted, "report": report, "message": message}
 
 

@@ -5,32 +5,24 @@
 - containment: volumes of (result - target) and (target - result) from manifold3d
   booleans, as fractions of the target volume;
 - two-sided surface distances: exact point-to-triangle distances from area-weighted
-  samples (plus all vertices for the maxima) of one surface to the other, found with a
-  scipy cKDTree over triangle centroids and an exact pruning bound (trimesh's
-  ``proximity`` needs the optional ``rtree`` package, which is not a dependency).
+  samples (plus all vertices for the maxima) of one surface to the other, from one
+  compiled :class:`core.target_surface.TargetSurface` per surface.
 
-trimesh and manifold3d are imported only when a check needs them, so this module
-imports in FreeCAD's own Python (which lacks both); a missing one gives an ImportError
-with an install hint.
+trimesh, manifold3d and libigl are imported only when a check needs them, so this module
+imports in a Python that lacks them; a missing one gives an ImportError with an install
+hint.
 """
 import importlib
-from itertools import chain
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from core.errors import InvalidMeshError, ParameterError
-from core.geometry import radius_classes
 
 INSTALL_HINT = (
     "the {name} package is needed for the mesh quality checks; install it into the Python "
     "that runs this code with `python -m pip install {name}` (for the FreeCAD GUI: "
     "`python -m pip install --target <UserAppData>/AdditionalPythonPackages {name}`, where "
     "<UserAppData> is FreeCAD.getUserAppDataDir())")
-
-_NEAREST_TRIANGLES = 8
-_POINT_BLOCK = 4096
-
 
 def validate_triangles(V, F, name="mesh"):
     """Check and coerce a triangle mesh's arrays.
@@ -102,7 +94,7 @@ def manifold_report(V, F):
         ``volume`` (float, signed, manifold3d; 0 when not a manifold) and ``genus``
         (int, None when not a manifold).
     """
-    trimesh = _optional_module("trimesh")
+    trimesh = optional_module("trimesh")
     V, F = validate_triangles(V, F)
     mesh = trimesh.Trimesh(V, F, process=False)
     solid = _to_manifold(V, F)
@@ -200,6 +192,8 @@ def surface_distances(result_V, result_F, target_V, target_F, samples=20000, see
         the random samples; maxima are over the samples and all vertices, so they are
         lower bounds of the true one-sided Hausdorff distances.
     """
+    from core.target_surface import TargetSurface
+
     samples = int(samples)
     if samples < 1:
         raise ParameterError(f"samples must be a positive integer, got {samples}")
@@ -212,10 +206,11 @@ def surface_distances(result_V, result_F, target_V, target_F, samples=20000, see
     rng = np.random.default_rng(seed)
     result_points = sample_surface(result_V, result_F, samples, rng)
     target_points = sample_surface(target_V, target_F, samples, rng)
-    forward = point_surface_distance(result_points, target_V, target_F) / diagonal
-    forward_vertices = point_surface_distance(result_V, target_V, target_F) / diagonal
-    backward = point_surface_distance(target_points, result_V, result_F) / diagonal
-    backward_vertices = point_surface_distance(target_V, result_V, result_F) / diagonal
+    to_target = TargetSurface(target_V, target_F).nearest(np.vstack([result_points, result_V]))
+    to_result = TargetSurface(result_V, result_F, "result").nearest(
+        np.vstack([target_points, target_V]))
+    forward, forward_vertices = np.split(to_target.distance / diagonal, [samples])
+    backward, backward_vertices = np.split(to_result.distance / diagonal, [samples])
     report = {
         "result_to_target_mean": float(forward.mean()),
         "result_to_target_max": float(max(forward.max(), forward_vertices.max())),
@@ -223,8 +218,8 @@ def surface_distances(result_V, result_F, target_V, target_F, samples=20000, see
         "target_to_result_max": float(max(backward.max(), backward_vertices.max())),
         "bbox_diagonal": diagonal,
         "samples": samples,
-        "method": "exact point-to-triangle distance (scipy cKDTree pruning + "
-                  "trimesh.triangles.closest_point) at area-weighted samples and vertices",
+        "method": "exact point-to-triangle distance (libigl AABB tree, float64 closest "
+                  "point on the triangle found) at area-weighted samples and vertices",
     }
     report["hausdorff"] = max(report["result_to_target_max"], report["target_to_result_max"])
     return report
@@ -268,76 +263,28 @@ def point_surface_distance(points, V, F):
 
     Returns
     -------
-    (p,) float64
-
-    Notes
-    -----
-    An upper bound ``U`` comes from the nearest triangles by centroid. A triangle with
-    centroid ``c`` and circumscribing radius ``r`` (about ``c``) can only be closer than
-    ``U`` if ``|q - c| <= U + r``; triangles are grouped into radius classes (halving
-    radii) and each class's centroid tree is searched with radius ``U + r_class_max``.
-    Candidates whose lower bound ``max(|q - c| - r, distance to the triangle's plane)``
-    exceeds ``U`` are dropped; every remaining triangle is tested exactly.
+    (p,) float64, model units (closest points from :class:`core.target_surface.TargetSurface`).
     """
-    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-    tri = V[F]
-    centroids = tri.mean(axis=1)
-    radius = np.linalg.norm(tri - centroids[:, None, :], axis=2).max(axis=1)
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    length = np.linalg.norm(normal, axis=1)
-    normal = np.divide(normal, length[:, None], out=np.zeros_like(normal),
-                       where=length[:, None] > 0)
-    classes = radius_classes(radius)
-    trees = [(members, cKDTree(centroids[members]), radius[members].max()) for members in classes]
-    nearest = cKDTree(centroids)
-    k = min(_NEAREST_TRIANGLES, len(F))
-    out = np.empty(len(points), dtype=np.float64)
-    for start in range(0, len(points), _POINT_BLOCK):
-        block = points[start:start + _POINT_BLOCK]
-        _, near = nearest.query(block, k=k)
-        near = near.reshape(len(block), k)
-        owner = np.repeat(np.arange(len(block)), k)
-        best = _pair_distance(tri[near.ravel()], block[owner]).reshape(len(block), k).min(axis=1)
-        for members, tree, class_radius in trees:
-            lists = tree.query_ball_point(block, r=best + class_radius)
-            lengths = np.fromiter(map(len, lists), np.int64, len(lists))
-            if not lengths.any():
-                continue
-            candidates = members[np.fromiter(chain.from_iterable(lists), np.int64, lengths.sum())]
-            owner = np.repeat(np.arange(len(block)), lengths)
-            # exact lower bounds (bounding sphere, supporting plane) drop most candidates
-            offset = block[owner] - centroids[candidates]
-            lower = np.maximum(np.linalg.norm(offset, axis=1) - radius[candidates],
-                               np.abs(np.einsum("ij,ij->i", offset, normal[candidates])))
-            keep = lower <= best[owner]
-            candidates, owner = candidates[keep], owner[keep]
-            if not len(owner):
-                continue
-            distance = _pair_distance(tri[candidates], block[owner])
-            starts = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
-            hit = owner[starts]
-            best[hit] = np.minimum(best[hit], np.minimum.reduceat(distance, starts))
-        out[start:start + len(block)] = best
-    return out
+    from core.target_surface import TargetSurface
+
+    return TargetSurface(V, F).nearest(points).distance
 
 
-def _pair_distance(triangles, points):
-    """(k,) distance from ``points[i]`` to ``triangles[i]``, both (k, ...) float64."""
-    closest = _optional_module("trimesh.triangles").closest_point(triangles, points)
-    return np.linalg.norm(closest - points, axis=1)
+def optional_module(name, package=None):
+    """Import module ``name`` or raise ImportError with an install hint.
 
-
-def _optional_module(name):
-    """Import ``name`` (a module of trimesh or manifold3d) or raise ImportError with a hint."""
+    ``package`` is the PyPI name to install when it differs from the module's top-level
+    name (``igl`` comes from ``libigl``).
+    """
     try:
         return importlib.import_module(name)
     except ImportError as exc:
-        raise ImportError(INSTALL_HINT.format(name=name.split(".")[0])) from exc
+        raise ImportError(INSTALL_HINT.format(name=package or name.split(".")[0])) from exc
 
 
 def _to_manifold(V, F):
     """``manifold3d.Manifold`` of validated float64 / int64 arrays (double precision)."""
-    manifold3d = _optional_module("manifold3d")
+    manifold3d = optional_module("manifold3d")
     mesh = manifold3d.Mesh64(np.ascontiguousarray(V, dtype=np.float64),
                              np.ascontiguousarray(F, dtype=np.uint64))
     return manifold3d.Manifold(mesh)

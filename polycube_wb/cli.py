@@ -11,7 +11,8 @@ import sys
 import traceback
 
 from core.errors import PolycubeInputError
-from core.params import COMPONENT_POLICIES, PART_MODES, UNIT_TO_MM, ReconstructionParams
+from core.params import (COMPONENT_POLICIES, FIT_MODES, PART_MODES, UNIT_TO_MM,
+                         ReconstructionParams)
 from core.pipeline import STOP_AFTER_CHOICES
 
 EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT = 0, 1, 2
@@ -42,7 +43,8 @@ def build_parser():
     rec.add_argument("--stop-after", choices=STOP_AFTER_CHOICES, default="solid",
                      help="run the pipeline up to this stage (default: solid)")
     rec.add_argument("--units", choices=tuple(UNIT_TO_MM), default=defaults.units,
-                     help="length unit of the target's coordinates (default: mm)")
+                     help="length unit of the target's coordinates (default: mm); the result "
+                          "is written in millimetres")
     rec.add_argument("--components", choices=COMPONENT_POLICIES, default=defaults.components,
                      help="several connected components: keep the largest (with a warning), "
                           "keep all, or reject (default: largest)")
@@ -62,7 +64,15 @@ def build_parser():
     rec.add_argument("--max-base-faces", type=int, default=defaults.max_base_faces,
                      help="stop when the base mesh has more faces than this (default 2500)")
     rec.add_argument("--fit-iterations", type=int, default=defaults.fit_iterations,
-                     help="shape-optimisation iterations (paper: 100; 0 skips the fit)")
+                     help="most shape-optimisation iterations (paper: 100; the fit stops "
+                          "earlier when converged)")
+    rec.add_argument("--tolerance", default="0", metavar="T",
+                     help="largest deviation wanted: a fraction of the bounding-box diagonal "
+                          "(0.002) or a length with its unit (0.5mm, 0.05cm, 0.02in); quad "
+                          "strips deviating more are split and refitted (default 0: off)")
+    rec.add_argument("--fit-mode", choices=FIT_MODES, default=defaults.fit_mode,
+                     help="inside: fill the target from inside (paper, default); best-fit: "
+                          "two-sided least squares; none: the unfitted limit surface")
     rec.add_argument("--no-repair", action="store_true", help="skip the labeling repair loop")
     rec.add_argument("--skip-self-intersection-check", action="store_true",
                      help="do not run the triangle-triangle intersection test at intake")
@@ -118,7 +128,9 @@ def _reconstruct(args):
                   parts_file=args.parts_file or "",
                   blend_factor=args.blend_factor, lam=args.lam, penalty=args.penalty,
                   repair=not args.no_repair, target_faces=args.target_faces,
-                  fit_iterations=args.fit_iterations, max_base_faces=args.max_base_faces,
+                  fit_iterations=args.fit_iterations, fit_mode=args.fit_mode,
+                  **_tolerance(args.tolerance),
+                  max_base_faces=args.max_base_faces,
                   check_self_intersections=not args.skip_self_intersection_check)
     if args.stop_after == "solid" and args.output is None:
         raise PolycubeInputError("reconstruct needs -o OUT.step (or --stop-after an earlier stage)")
@@ -134,10 +146,24 @@ def _reconstruct(args):
     return EXIT_OK
 
 
+def _tolerance(text):
+    """``{"tolerance": fraction}`` or ``{"tolerance_mm": mm}`` from ``--tolerance`` text."""
+    text = text.strip()
+    unit = next((u for u in sorted(UNIT_TO_MM, key=len, reverse=True) if text.endswith(u)), None)
+    number = text[:-len(unit)] if unit else text
+    try:
+        value = float(number)
+    except ValueError:
+        raise PolycubeInputError(f"--tolerance must be a number, optionally followed by a unit "
+                                 f"({', '.join(UNIT_TO_MM)}), got {text!r}") from None
+    return {"tolerance_mm": value * UNIT_TO_MM[unit]} if unit else {"tolerance": value}
+
+
 def _print_summary(report):
     source = report.get("input", {})
     print(f"input: {source.get('file')}: {source.get('triangles')} triangles, genus "
-          f"{source.get('genus')}, bbox diagonal {source.get('bbox_diagonal', 0):.4g} {source.get('units')}")
+          f"{source.get('genus')}, bbox diagonal {source.get('bbox_diagonal', 0):.4g} {source.get('units')}"
+          f" (x {source.get('unit_to_mm', 1.0):g} to mm)")
     for warning in source.get("warnings", []):
         print(f"  warning: {warning}")
     for name, entry in report.get("stages", {}).items():

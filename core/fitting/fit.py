@@ -14,22 +14,26 @@ import time
 import numpy as np
 
 from core.errors import InvalidMeshError, ParameterError
-from core.fitting.closest_point import TargetSurface
+from core.fitting.best_fit import BestFitResult, best_fit
 from core.fitting.responses import thickness, triangulate, volume
 from core.fitting.rgp import FitProblem, run_rgp
 from core.progress import NO_PROGRESS
 from core.quality import containment
 from core.subdivision.catmull_clark import build_hierarchy
 from core.subdivision.limit import limit_matrices
+from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
-MODES = ("inside", "nearest")
+MODES = ("inside", "best-fit", "none")
+FINE_ROUNDS = 2
+STARTS = ("best-fit", "cage")
 SURFACES = ("limit", "control")
 
 
 def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="inside",
-                  progress=None, penalty=1e5, step_fraction=0.05, surface="limit"):
-    """Move the base-mesh vertices so the subdivision surface fills the target.
+                  progress=None, penalty=1e5, step_fraction=0.05, surface="limit",
+                  start="best-fit", rounds=10, tol=2e-3, patience=10):
+    """Move the base-mesh vertices so the subdivision surface fills or fits the target.
 
     Parameters
     ----------
@@ -38,26 +42,39 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     levels : int in 1..4, subdivision level ``i`` on which the responses live.
     iterations : int >= 0, maximum RGP iterations (paper: 100).
     t_min : float or None, minimal wall thickness (model units) at every fine vertex;
-        ``None`` picks ``min(0.1 * mean base edge, 0.5 * thinnest initial wall)``;
-        0 disables the constraint.
-    mode : ``'inside'`` (paper: stay inside the target) or ``'nearest'`` (penalise
-        the distance on both sides).
+        ``None`` picks ``min(0.1 * mean base edge, 0.5 * thinnest wall of the start)``;
+        0 disables the constraint. The least-squares start does not see it: a given
+        ``t_min`` above the start's walls is a constraint the RGP has to restore, so use
+        ``start='cage'`` with a cage that satisfies it.
+    mode : ``'inside'`` (paper: fill the target from inside, relaxed gradient
+        projection), ``'best-fit'`` (two-sided least squares,
+        :func:`core.fitting.best_fit.best_fit`) or ``'none'`` (the cage unchanged, its
+        figures only).
     progress : core.progress.Progress or None
     penalty : float > 0, ``p`` of Eq. 6 (dimensionless, see :mod:`core.fitting.rgp`).
     step_fraction : float in (0, 1], largest base-vertex move per iteration as a
         fraction of the mean base edge length.
     surface : ``'limit'`` or ``'control'``, which fine positions the responses use.
+    start : ``'best-fit'`` (inside mode starts from the least-squares fit) or ``'cage'``
+        (from the cage as given, the paper's start).
+    rounds : int >= 0, most Gauss-Newton rounds of the least-squares fit.
+    tol, patience : the RGP stops when its best objective improved by less than
+        ``tol * max(|best|, step)`` over the last ``patience`` iterations (see
+        :func:`core.fitting.rgp.run_rgp`); ``iterations`` is the cap.
 
     Returns
     -------
     fitted : PolyMesh, the base mesh with moved vertices (same faces).
-    info : dict with ``iterations``, ``stopped`` ('iterations' or 'stalled'),
+    info : dict with ``mode``, ``rounds`` (least-squares rounds run), ``rms`` (their
+        two-sided RMS distances, model units), ``iterations`` (RGP), ``stopped``
+        ('iterations', 'stalled', 'converged' or 'none'),
         ``best_iteration``, ``objective`` (list per iteration), ``volume`` (list),
         ``mean_distance`` / ``max_distance`` (distance of the fine limit points to the
         target over the target's bounding-box diagonal) and their ``initial_``
         counterparts, ``outside_volume_fraction`` and ``initial_outside_volume_fraction``
         (triangulated fine limit mesh minus target, over the target volume), ``t_min``,
-        ``step`` (model units), ``seconds``.
+        ``step`` (model units), ``seconds`` (all of it) and ``measure_seconds`` (the
+        part spent on those figures, two manifold3d booleans).
 
     Raises
     ------
@@ -69,7 +86,12 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     """
     started = time.perf_counter()
     progress = NO_PROGRESS if progress is None else progress
-    _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface)
+    _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface, start,
+                      rounds)
+    if not (np.isfinite(tol) and tol >= 0) or not (isinstance(patience, (int, np.integer))
+                                                   and patience >= 1):
+        raise ParameterError(f"tol must be >= 0 and patience an integer >= 1, got {tol!r}, "
+                             f"{patience!r}")
     V0 = _check_base(base)
     target_surface = TargetSurface(target.vertices, target.faces)
     target_volume, _ = volume(target_surface.vertices, target_surface.faces)
@@ -84,37 +106,81 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     limit_map = (L @ S).tocsr()
     mapping = limit_map if surface == "limit" else S
     T = triangulate(fine.face_vertices, fine.face_offsets)
-    X0 = mapping @ V0
-    edge = _mean_edge_length(base)
-    step = step_fraction * edge
-    if t_min is None:
-        t_min = _default_t_min(X0, T, edge)
-    area = _area(X0, T)
-    problem = FitProblem(mapping, T, target_surface, penalty, mode, t_min, area)
-    result = run_rgp(problem, V0, step, iterations=iterations, progress=progress)
-    info = {
-        "iterations": result.iterations,
-        "stopped": result.stopped,
-        "best_iteration": result.best_iteration,
-        "objective": result.history["objective"],
-        "volume": result.history["volume"],
-        "t_min": float(t_min),
-        "step": float(step),
-        "levels": levels,
-        "surface": surface,
-        "mode": mode,
-    }
-    for prefix, vertices in (("initial_", V0), ("", result.vertices)):
+    info = {"mode": mode, "levels": levels, "surface": surface, "rounds": 0, "rms": [],
+            "iterations": 0, "stopped": "none", "objective": [], "volume": []}
+    vertices = V0
+    if mode == "best-fit" or (mode == "inside" and start == "best-fit"):
+        progress.report("fit", 0.0, "least-squares fit")
+        fitted, coarse = _two_level_best_fit(base, hierarchy, limit_map, T, target_surface,
+                                             rounds)
+        vertices = fitted.vertices
+        info.update(rounds=fitted.rounds + coarse.rounds, rms=fitted.rms,
+                    coarse_rms=coarse.rms, stopped=fitted.stopped, start=start)
+        if mode == "inside" and _crosses_itself(limit_map @ vertices, T) \
+                and not _crosses_itself(limit_map @ V0, T):
+            # the two-sided fit pulled a thin member through itself: start from the cage
+            vertices = V0
+            info["start"] = "cage (the least-squares start crossed itself)"
+    if mode == "inside":
+        edge = _mean_edge_length(base)
+        step = step_fraction * edge
+        X_start = mapping @ vertices
+        if t_min is None:
+            t_min = _default_t_min(X_start, T, edge)
+        problem = FitProblem(mapping, T, target_surface, penalty, "inside", t_min,
+                             _area(X_start, T))
+        result = run_rgp(problem, vertices, step, iterations=iterations, stall_tol=tol,
+                         patience=patience, progress=progress)
+        vertices = result.vertices
+        info.update(iterations=result.iterations, stopped=result.stopped,
+                    best_iteration=result.best_iteration,
+                    objective=result.history["objective"], volume=result.history["volume"],
+                    t_min=float(t_min), step=float(step))
+    measuring = time.perf_counter()
+    for prefix, points in (("initial_", V0), ("", vertices)):
         info.update({prefix + k: v for k, v in
-                     _figures(limit_map @ vertices, T, target_surface).items()})
+                     _figures(limit_map @ points, T, target_surface).items()})
     info["seconds"] = time.perf_counter() - started
-    return PolyMesh(result.vertices, base.face_vertices, base.face_offsets), info
+    info["measure_seconds"] = time.perf_counter() - measuring
+    return PolyMesh(vertices, base.face_vertices, base.face_offsets), info
+
+
+def _crosses_itself(points, triangles):
+    """True when the triangle mesh ``points[triangles]`` intersects itself."""
+    from core.self_intersection import find_self_intersections
+
+    return len(find_self_intersections(points, triangles)) > 0
+
+
+def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds):
+    """Least-squares fit: ``rounds - FINE_ROUNDS`` rounds on the level-1 limit points
+    (a quarter of the points; the large moves), then up to ``FINE_ROUNDS`` on the fit's
+    level. Measured on the SIMP cantilever: 8 + 2 rounds reach a lower mean distance than
+    10 level-2 rounds in half the time.
+
+    Returns
+    -------
+    fine, coarse : BestFitResult of the two stages (``coarse`` has 0 rounds when the fit
+        itself is on level 1 or ``rounds <= FINE_ROUNDS``).
+    """
+    levels = len(hierarchy.meshes) - 1
+    coarse_rounds = rounds - FINE_ROUNDS if levels > 1 else 0
+    if coarse_rounds > 0:
+        coarse_mesh = hierarchy.meshes[1]
+        coarse_map = (limit_matrices(coarse_mesh)[0] @ hierarchy.composite(0)).tocsr()
+        coarse = best_fit(base, coarse_map,
+                          triangulate(coarse_mesh.face_vertices, coarse_mesh.face_offsets),
+                          target, rounds=coarse_rounds)
+    else:
+        coarse = BestFitResult(np.asarray(base.vertices, dtype=np.float64), 0, [], "rounds")
+    fine = best_fit(base, limit_map, T, target, rounds=rounds - coarse.rounds,
+                    start=coarse.vertices)
+    return fine, coarse
 
 
 def _figures(X, T, target):
     """Distance and containment figures of fine limit points against the target."""
-    signed, *_ = target.signed_distance(X)
-    distance = np.abs(signed) / target.diagonal
+    distance = target.nearest(X).distance / target.diagonal
     report = containment(X, T, target.vertices, target.faces)
     return {"mean_distance": float(distance.mean()),
             "max_distance": float(distance.max()),
@@ -122,7 +188,8 @@ def _figures(X, T, target):
             "uncovered_volume_fraction": report["uncovered_volume_fraction"]}
 
 
-def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface):
+def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface, start,
+                      rounds):
     if not isinstance(levels, (int, np.integer)) or not 1 <= levels <= 4:
         raise ParameterError(f"levels must be an integer in 1..4, got {levels!r}")
     if not isinstance(iterations, (int, np.integer)) or iterations < 0:
@@ -137,6 +204,10 @@ def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, s
         raise ParameterError(f"step_fraction must be in (0, 1], got {step_fraction!r}")
     if surface not in SURFACES:
         raise ParameterError(f"surface must be one of {SURFACES}, got {surface!r}")
+    if start not in STARTS:
+        raise ParameterError(f"start must be one of {STARTS}, got {start!r}")
+    if not isinstance(rounds, (int, np.integer)) or rounds < 0:
+        raise ParameterError(f"rounds must be an integer >= 0, got {rounds!r}")
 
 
 def _check_base(base):

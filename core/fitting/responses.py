@@ -15,13 +15,10 @@ base mesh (Eq. 11) is the caller's job.
   smooth aggregate constraint ``t_j >= t_min``.
 """
 from dataclasses import dataclass
-from itertools import chain
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-_RAY_BLOCK = 200000
-_EDGE_TOL = 1e-9
+from core.target_surface import TargetSurface
 
 
 def triangulate(face_vertices, face_offsets):
@@ -47,6 +44,16 @@ def triangulate(face_vertices, face_offsets):
     return np.stack([fv[start], fv[start + j], fv[start + j + 1]], axis=1)
 
 
+def scatter_add(index, values, n):
+    """(n, 3) float64 sums of the rows of ``values`` ((p, 3)) by ``index`` ((p,) int64).
+
+    The unbuffered ``np.add.at`` of numpy 1.24 is several times slower than one
+    ``np.bincount`` per coordinate.
+    """
+    return np.stack([np.bincount(index, weights=values[:, k], minlength=n)
+                     for k in range(values.shape[1])], axis=1)
+
+
 def volume(X, T):
     """Enclosed volume (Eq. 7) and its exact gradient.
 
@@ -58,11 +65,10 @@ def volume(X, T):
         area-weighted normal of its one-ring.
     """
     a, b, c = X[T[:, 0]], X[T[:, 1]], X[T[:, 2]]
-    value = float(np.einsum("ij,ij->", a, np.cross(b, c))) / 6.0
-    grad = np.zeros_like(X)
-    for corner, (p, q) in enumerate(((b, c), (c, a), (a, b))):
-        np.add.at(grad, T[:, corner], np.cross(p, q) / 6.0)
-    return value, grad
+    bc = np.cross(b, c)
+    value = float(np.einsum("ij,ij->", a, bc)) / 6.0
+    per_corner = np.concatenate([bc, np.cross(c, a), np.cross(a, b)]) / 6.0
+    return value, scatter_add(T.T.reshape(-1), per_corner, len(X))
 
 
 def packaging(X, target, mode="inside"):
@@ -71,7 +77,7 @@ def packaging(X, target, mode="inside"):
     Parameters
     ----------
     X : (n, 3) float64
-    target : core.fitting.closest_point.TargetSurface
+    target : core.target_surface.TargetSurface
     mode : ``'inside'`` sums ``max(d_j, 0)`` (penetration out of the target, the
         paper's form); ``'nearest'`` sums ``|d_j|``.
 
@@ -84,10 +90,11 @@ def packaging(X, target, mode="inside"):
         vertices that do not contribute.
     signed : (n,) float64 signed distance ``d_j`` to the target, positive outside.
     """
-    signed, closest, _, normal, region = target.signed_distance(X)
-    offset = X - closest
+    near = target.closest(X)
+    signed, region = near.signed, near.region
+    offset = X - near.point
     length = np.abs(signed)
-    direction = np.divide(offset, length[:, None], out=normal.copy(),
+    direction = np.divide(offset, length[:, None], out=near.normal.copy(),
                           where=(region[:, None] != 0) & (length[:, None] > 0))
     direction[region != 0] *= np.sign(signed[region != 0])[:, None]
     if mode == "inside":
@@ -106,9 +113,7 @@ def vertex_normals(X, T):
     """(n, 3) float64 unit area-weighted vertex normals (the volume gradient's direction)."""
     a, b, c = X[T[:, 0]], X[T[:, 1]], X[T[:, 2]]
     face_normal = np.cross(b - a, c - a)
-    summed = np.zeros_like(X)
-    for corner in range(3):
-        np.add.at(summed, T[:, corner], face_normal)
+    summed = scatter_add(T.T.reshape(-1), np.tile(face_normal, (3, 1)), len(X))
     length = np.linalg.norm(summed, axis=1, keepdims=True)
     return np.divide(summed, length, out=np.zeros_like(summed), where=length > 0)
 
@@ -141,10 +146,9 @@ def thickness(X, T, max_length):
     A ray leaves each vertex along ``-n_j`` (area-weighted vertex normal); the first
     triangle it exits through (hit with ``d . m > 0``, ``m`` the triangle's outward
     normal, at a distance ``> 1e-9 * max_length``) ends it. The triangles of the
-    vertex's own one-ring are entered, not exited, so they never count. Broad phase:
-    a cKDTree over triangle centroids returns the triangles whose bounding sphere can
-    meet the segment ``[X_j, X_j - max_length n_j]``; the Moeller-Trumbore test runs
-    on those pairs, vectorised.
+    vertex's own one-ring are entered, not exited, so they never count. The rays are
+    cast by :meth:`core.target_surface.TargetSurface.first_exit` (compiled, with an
+    exact float64 check and a tolerant re-cast of rays through edges and vertices).
 
     Parameters
     ----------
@@ -156,73 +160,14 @@ def thickness(X, T, max_length):
     -------
     Thickness
     """
-    n = len(X)
     normal = vertex_normals(X, T)
     direction = -normal
-    tri = X[T]
-    centroid = tri.mean(axis=1)
-    radius = np.linalg.norm(tri - centroid[:, None], axis=2).max(axis=1)
-    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-    face_normal = np.cross(e1, e2)
-    face_normal /= np.maximum(np.linalg.norm(face_normal, axis=1, keepdims=True), 1e-300)
-    cand, owner = _ray_candidates(X + 0.5 * max_length * direction, 0.5 * max_length,
-                                  centroid, radius)
-    best = np.full(n, np.inf)
-    best_face = np.full(n, -1, dtype=np.int64)
-    best_uv = np.zeros((n, 2))
-    for start in range(0, len(cand), _RAY_BLOCK):
-        f, o = cand[start:start + _RAY_BLOCK], owner[start:start + _RAY_BLOCK]
-        t, u, v, ok = _ray_triangle(X[o], direction[o], tri[f, 0], e1[f], e2[f])
-        ok &= np.einsum("ij,ij->i", direction[o], face_normal[f]) > 0
-        ok &= (t > 1e-9 * max_length) & (t <= max_length)
-        f, o, t, u, v = f[ok], o[ok], t[ok], u[ok], v[ok]
-        if not len(o):
-            continue
-        order = np.lexsort((t, o))
-        first = order[np.flatnonzero(np.r_[True, o[order][1:] != o[order][:-1]])]
-        take = t[first] < best[o[first]]
-        who = o[first][take]
-        best[who] = t[first][take]
-        best_face[who] = f[first][take]
-        best_uv[who] = np.stack([u[first][take], v[first][take]], axis=1)
-    hit = best_face >= 0
-    value = np.where(hit, best, max_length)
-    bary = np.zeros((n, 3))
-    bary[hit] = np.stack([1 - best_uv[hit].sum(axis=1), best_uv[hit, 0], best_uv[hit, 1]],
-                         axis=1)
-    hit_normal = np.zeros((n, 3))
-    hit_normal[hit] = face_normal[best_face[hit]]
-    slope = np.zeros(n)
-    slope[hit] = 1.0 / np.einsum("ij,ij->i", direction[hit], hit_normal[hit])
-    return Thickness(value, best_face, bary, normal, slope, hit_normal)
-
-
-def _ray_candidates(centre, reach, centroid, radius):
-    """Triangles whose bounding sphere meets the sphere ``(centre_j, reach)`` of each ray.
-
-    Triangles are split at the 90th percentile of their bounding radius; each class gets
-    its own k-d tree searched with its own largest radius, so a few large triangles do
-    not widen the search for all.
-
-    Returns
-    -------
-    candidates : (p,) int64 triangle ids; owners : (p,) int64 ray ids.
-    """
-    split = float(np.quantile(radius, 0.9))
-    found_t, found_o = [], []
-    for members in (np.flatnonzero(radius <= split), np.flatnonzero(radius > split)):
-        if not len(members):
-            continue
-        lists = cKDTree(centroid[members]).query_ball_point(
-            centre, r=reach + float(radius[members].max()))
-        lengths = np.fromiter(map(len, lists), np.int64, len(centre))
-        if lengths.sum():
-            found_t.append(members[np.fromiter(chain.from_iterable(lists), np.int64,
-                                               int(lengths.sum()))])
-            found_o.append(np.repeat(np.arange(len(centre)), lengths))
-    if not found_t:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    return np.concatenate(found_t), np.concatenate(found_o)
+    hits = TargetSurface(X, T, "fitted surface").first_exit(X, direction, max_length)
+    hit = hits.face >= 0
+    value = np.where(hit, hits.t, max_length)
+    slope = np.zeros(len(X))
+    slope[hit] = 1.0 / np.einsum("ij,ij->i", direction[hit], hits.normal[hit])
+    return Thickness(value, hits.face, hits.bary, normal, slope, hits.normal)
 
 
 def thickness_gradient(X, T, result):
@@ -279,22 +224,5 @@ def thickness_constraint(X, T, t_min, rho=50.0, max_factor=2.0):
     value = float(top + np.log(w.sum()) / rho)
     weight = w / w.sum() / -t_min
     rows, cols, vals = thickness_gradient(X, T, result)
-    grad = np.zeros_like(X)
-    np.add.at(grad, cols, vals * weight[rows, None])
+    grad = scatter_add(cols, vals * weight[rows, None], len(X))
     return value, grad, float(result.thickness.min())
-
-
-def _ray_triangle(origin, direction, a, e1, e2):
-    """Moeller-Trumbore on row-wise pairs; returns (t, u, v, hit) arrays of length p."""
-    p = np.cross(direction, e2)
-    det = np.einsum("ij,ij->i", e1, p)
-    ok = np.abs(det) > 1e-300
-    inv = np.divide(1.0, det, out=np.zeros_like(det), where=ok)
-    s = origin - a
-    u = np.einsum("ij,ij->i", s, p) * inv
-    q = np.cross(s, e1)
-    v = np.einsum("ij,ij->i", direction, q) * inv
-    t = np.einsum("ij,ij->i", e2, q) * inv
-    # a small tolerance so rays through an edge or a vertex hit one of its triangles
-    ok &= (u >= -_EDGE_TOL) & (v >= -_EDGE_TOL) & (u + v <= 1 + _EDGE_TOL)
-    return t, u, v, ok

@@ -58,7 +58,7 @@ class FitProblem:
     ----------
     mapping : (n_fine, n_base) scipy sparse matrix ``M``, ``X = M @ V0``.
     triangles : (t, 3) int64 triangles of the fine mesh (outward orientation).
-    target : core.fitting.closest_point.TargetSurface
+    target : core.target_surface.TargetSurface
     penalty : float > 0, ``p`` of Eq. 6.
     mode : ``'inside'`` or ``'nearest'`` (see :func:`core.fitting.responses.packaging`).
     t_min : float >= 0, minimal wall thickness in model units; 0 disables it.

@@ -6,7 +6,7 @@ than 90 degrees away from the target's normal at the target point closest to tha
 """
 import numpy as np
 
-from core.fitting.closest_point import TargetSurface
+from core.target_surface import TargetSurface
 from core.subdivision.catmull_clark import subdivide
 from core.subdivision.limit import limit_matrices
 
@@ -34,5 +34,5 @@ def inverted_faces(base, target_vertices, target_faces):
     base : PolyMesh base mesh; target_vertices : (n, 3) float64; target_faces : (m, 3) int64.
     """
     points, normals = face_centre_limit(base)
-    _, _, target_normal, _ = TargetSurface(target_vertices, target_faces).query(points)
+    target_normal = TargetSurface(target_vertices, target_faces).closest(points).normal
     return np.einsum("fk,fk->f", normals, target_normal) < 0.0

@@ -11,7 +11,7 @@ chart or side, never onto the nearest surface, keeps points on their sheet acros
 """
 import numpy as np
 
-from core.fitting.closest_point import TargetSurface
+from core.target_surface import TargetSurface
 from core.quadmesh.embed import arc_fractions, point_on_chain
 
 RELAX_ROUNDS = 8
@@ -96,7 +96,7 @@ def relax_on_target(mesh, V, F, face_chart, vertex_side, vertex_step, side_lengt
         moved = _neighbour_mean(PolyMesh(positions, mesh.face_vertices, mesh.face_offsets))
         for chart, surface in surfaces.items():
             rows = np.flatnonzero(vertex_chart == chart)
-            positions[rows] = surface.query(moved[rows])[0]
+            positions[rows] = surface.nearest(moved[rows]).point
         for side, chain in chains.items():
             rows = np.flatnonzero(vertex_side == side)
             positions[rows] = _slide_along(moved[rows], chain, vertex_step[rows],

@@ -36,7 +36,7 @@ FIELDS = {
     "Fit": (
         ("Iterations", "Iterations", "int", (0, 100000), "fit_iterations"),
         ("SubdivisionLevels", "Subdivision levels", "int", (1, 5), "subdivision_levels"),
-        ("Mode", "Mode", "choice", ("inside", "nearest"), "fit_mode"),
+        ("Mode", "Mode", "choice", ("inside", "best-fit", "none"), "fit_mode"),
         ("AutoMinThickness", "Automatic minimal thickness", "bool", None, None),
         ("MinThickness", "Minimal thickness, mm (0: none)", "float", (0.0, 1e6), None)),
     "Solid": (("Depth", "Grading depth at extraordinary vertices", "int", (1, 12), None),),

@@ -79,7 +79,7 @@ class DeviationProxy(StageProxy):
 
     def run(self, obj, progress):
         from core.errors import ParameterError
-        from core.fitting.closest_point import TargetSurface
+        from core.target_surface import TargetSurface
         from core.quality import containment, is_watertight_manifold
         from polycube_wb.brep import tessellate
         from polycube_wb.convert import arrays_to_mesh
@@ -94,7 +94,7 @@ class DeviationProxy(StageProxy):
         progress.report("tessellate", 0.1)
         V, F = tessellate(solids[0], obj.Tolerance * surface.diagonal)
         progress.report("distances", 0.4)
-        signed = surface.signed_distance(V)[0]
+        signed = surface.closest(V).signed
         progress.check_cancel()
         progress.report("containment", 0.7)
         inside = containment(V, F, target_V, target_F)

@@ -5,6 +5,7 @@ A ``Part::FeaturePython`` holding the fitted cage (``polycube_wb.objects.cage``)
 is any cage object (a BaseMesh, or another Fit to refine further). Editing the fitted
 ``CageVertices`` does not rerun the fit; the Solid after it follows the edit.
 """
+from core.params import FIT_MODES
 from polycube_wb.objects.base import add_property, run_core_stages, stage_params
 from polycube_wb.objects.base_mesh import CageProxy
 from polycube_wb.objects.cage import add_cage_properties, store_cage
@@ -35,9 +36,9 @@ class FitProxy(CageProxy):
                      "Catmull-Clark levels the fit works on (paper: 2; fewer on large cages)",
                      default("subdivision_levels"))
         if add_property(obj, "App::PropertyEnumeration", "Mode", "Fit",
-                        "'inside': the limit surface stays inside the target (paper); "
-                        "'nearest': the distance is penalised on both sides",
-                        ["inside", "nearest"]):
+                        "'inside': the limit surface fills the target from inside (paper); "
+                        "'best-fit': two-sided least squares; 'none': the unfitted surface",
+                        list(FIT_MODES)):
             obj.Mode = default("fit_mode")
         add_property(obj, "App::PropertyBool", "AutoMinThickness", "Fit",
                      "Pick the minimal wall thickness from the cage and the target", True)

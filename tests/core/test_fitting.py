@@ -6,7 +6,6 @@ import trimesh
 
 from core.errors import InvalidMeshError, ParameterError
 from core.fitting import TargetSurface, fit_base_mesh
-from core.fitting.closest_point import closest_on_triangles
 from core.fitting.responses import (packaging, thickness, thickness_constraint, triangulate,
                                     volume)
 from core.subdivision.catmull_clark import build_hierarchy
@@ -35,26 +34,6 @@ def limit_points(base, levels):
     h, fine, T = fine_mesh(base, levels)
     L, _, _ = limit_matrices(fine)
     return L @ h.composite(levels - 1) @ base.vertices, T
-
-
-def test_closest_points_match_brute_force():
-    mesh = trimesh.creation.icosphere(2)
-    target = TargetSurface(mesh.vertices, mesh.faces)
-    rng = np.random.default_rng(3)
-    points = rng.normal(size=(300, 3)) * 0.9
-    closest, face, normal, _ = target.query(points)
-    tri = np.asarray(mesh.triangles)
-    k = len(tri)
-    every, _, _ = closest_on_triangles(np.tile(tri, (len(points), 1, 1)),
-                                       np.repeat(points, k, axis=0))
-    brute = np.linalg.norm(every - np.repeat(points, k, axis=0), axis=1).reshape(-1, k).min(1)
-    assert np.allclose(np.linalg.norm(closest - points, axis=1), brute, atol=1e-12)
-    assert np.allclose(np.linalg.norm(normal, axis=1), 1.0)
-    # sign of (q - cpp) . pseudo-normal is the exact inside/outside test
-    radius = np.linalg.norm(points, axis=1)
-    clear = np.abs(radius - 0.97) > 0.04
-    signed = target.signed_distance(points)[0]
-    assert np.array_equal((signed < 0)[clear], (radius < 0.97)[clear])
 
 
 def test_volume_gradient_matches_finite_differences():
@@ -91,7 +70,7 @@ def test_packaging_gradient_matches_finite_differences_where_active():
         Xp, Xm = X.copy(), X.copy()
         Xp[active, k] += h
         Xm[active, k] -= h
-        fd = (target.signed_distance(Xp)[0] - target.signed_distance(Xm)[0]) / (2 * h)
+        fd = (target.closest(Xp).signed - target.closest(Xm).signed) / (2 * h)
         assert np.allclose(fd[active], grad[active, k], rtol=1e-6, atol=1e-6)
 
 
@@ -139,14 +118,47 @@ def test_thickness_of_a_sphere_and_a_slab():
 def test_cube_cage_fills_a_sphere_from_inside():
     target = sphere_target(1.0)
     base = centred_cube(1.0)
-    fitted, info = fit_base_mesh(base, target, levels=2, iterations=60)
+    # the paper's start (the cage as given): the volume grows, nothing leaves the target
+    fitted, info = fit_base_mesh(base, target, levels=2, iterations=60, start="cage")
+    assert info["rounds"] == 0
     assert info["volume"][info["best_iteration"]] > 2.0 * info["volume"][0]
     assert info["outside_volume_fraction"] <= 1e-3
     assert info["mean_distance"] < 0.1 * info["initial_mean_distance"]
     assert np.array_equal(fitted.face_vertices, base.face_vertices)
-    again, info2 = fit_base_mesh(base, target, levels=2, iterations=60)
+    again, info2 = fit_base_mesh(base, target, levels=2, iterations=60, start="cage")
     assert np.array_equal(again.vertices, fitted.vertices)
     assert info2["objective"] == info["objective"]
+    # from the least-squares start (the default) it holds as well
+    _, lsq = fit_base_mesh(base, target, levels=2, iterations=60)
+    assert lsq["rounds"] >= 1 and lsq["outside_volume_fraction"] <= 1e-3
+    assert lsq["mean_distance"] < 0.1 * lsq["initial_mean_distance"]
+
+
+def test_best_fit_recovers_a_scaled_limit_surface():
+    # the target is the (finely sampled) limit surface of the cage scaled by 1.2; since
+    # the limit map is linear, the cage scaled by 1.2 fits it exactly (the fit may slide
+    # vertices along the surface, so the surfaces are compared, not the cages)
+    base = grid_sphere(3)
+    h, fine, T = fine_mesh(base, 4)
+    X = limit_matrices(fine)[0] @ h.composite(3) @ (1.2 * base.vertices)
+    target = TriMesh(X, T)
+    fitted, info = fit_base_mesh(base, target, levels=2, mode="best-fit", rounds=15)
+    assert info["initial_mean_distance"] > 0.03
+    assert info["mean_distance"] < 1e-3 and info["max_distance"] < 2e-3
+    assert info["rms"][-1] < 0.02 * info["coarse_rms"][0]
+    assert info["outside_volume_fraction"] < 5e-3 and info["uncovered_volume_fraction"] < 5e-3
+    again, _ = fit_base_mesh(base, target, levels=2, mode="best-fit", rounds=15)
+    assert np.array_equal(again.vertices, fitted.vertices)
+
+
+def test_mode_none_keeps_the_cage_and_reports_its_figures():
+    target = sphere_target(1.0, 3)
+    base = centred_cube(1.0)
+    fitted, info = fit_base_mesh(base, target, mode="none")
+    assert np.array_equal(fitted.vertices, base.vertices)
+    assert info["rounds"] == 0 and info["iterations"] == 0
+    assert info["mean_distance"] == info["initial_mean_distance"] > 0.05
+    assert info["outside_volume_fraction"] == info["initial_outside_volume_fraction"]
 
 
 def test_grid_sphere_converges_into_a_slightly_larger_sphere():
@@ -170,7 +182,8 @@ def test_thickness_constraint_holds_when_the_target_is_thin():
     t_min = 0.15
     walls = []
     for limit in (t_min, 0.0):
-        fitted, _ = fit_base_mesh(base, target, levels=2, iterations=40, t_min=limit)
+        fitted, _ = fit_base_mesh(base, target, levels=2, iterations=40, t_min=limit,
+                                  start="cage")
         X, T = limit_points(fitted, 2)
         walls.append(thickness(X, T, 1.0).thickness.min())
     assert walls[0] >= 0.95 * t_min
@@ -181,6 +194,7 @@ def test_thickness_constraint_holds_when_the_target_is_thin():
     {"levels": 0}, {"levels": 5}, {"levels": 1.5}, {"iterations": -1},
     {"t_min": -0.1}, {"t_min": float("nan")}, {"mode": "outside"}, {"penalty": 0.0},
     {"step_fraction": 0.0}, {"step_fraction": 2.0}, {"surface": "cage"},
+    {"mode": "nearest"}, {"start": "middle"}, {"rounds": -1}, {"rounds": 2.5},
 ])
 def test_bad_parameters_raise(kwargs):
     with pytest.raises(ParameterError):

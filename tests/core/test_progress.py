@@ -56,8 +56,9 @@ def test_the_fit_reports_its_iterations_inside_its_share_of_the_run():
     fractions = [fraction for _, fraction in progress.reports]
     assert fractions == sorted(fractions), "the run's bar never goes back"
     inside_fit = [f for stage, f in progress.reports if stage == "fit"]
-    # run_stages reports the fit's start (0); the fit its 4 iterations, within [0, 1/2].
-    assert len(inside_fit) == 1 + report["fit"]["iterations"]
+    # run_stages reports the fit's start (0); the fit its least-squares start (0) and its
+    # iterations, within [0, 1/2].
+    assert len(inside_fit) == 2 + report["fit"]["iterations"]
     assert all(0.0 <= f <= 0.5 + 1e-12 for f in inside_fit)
     assert inside_fit[-1] == pytest.approx(0.5)
 
@@ -85,11 +86,14 @@ def test_intake_validates_an_in_memory_mesh():
 def test_fit_mode_and_thickness_reach_the_fit():
     from core.errors import ParameterError
 
-    with pytest.raises(ParameterError, match="fit_mode must be one of inside, nearest"):
+    with pytest.raises(ParameterError, match="fit_mode must be one of inside, best-fit, none"):
         ReconstructionParams(fit_mode="outside")
     with pytest.raises(ParameterError, match="fit_t_min must be between"):
         ReconstructionParams(fit_t_min=-1.0)
-    params = ReconstructionParams(fit_iterations=2, fit_mode="nearest", fit_t_min=0.0)
+    params = ReconstructionParams(fit_iterations=2, fit_mode="inside", fit_t_min=0.0)
     _, report, failed = run_stages(_box_state(), ["fit"], params)
     assert failed is None
-    assert report["fit"]["mode"] == "nearest" and report["fit"]["t_min"] == 0.0
+    assert report["fit"]["mode"] == "inside" and report["fit"]["t_min"] == 0.0
+    _, report, failed = run_stages(_box_state(), ["fit"],
+                                   ReconstructionParams(fit_iterations=2, fit_mode="best-fit"))
+    assert failed is None and report["fit"]["mode"] == "best-fit"

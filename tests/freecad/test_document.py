@@ -353,9 +353,9 @@ def test_preferences_give_new_objects_their_defaults():
     try:
         set_default("fit_iterations", 7)
         set_default("lam", 0.25)
-        set_default("fit_mode", "nearest")
+        set_default("fit_mode", "best-fit")
         fit = api.make_fit(doc, None)
-        assert fit.Iterations == 7 and fit.Mode == "nearest" and default("lam") == 0.25
+        assert fit.Iterations == 7 and fit.Mode == "best-fit" and default("lam") == 0.25
         assert fit.Proxy.parameters(fit)["fit_t_min"] is None, "automatic by default"
         fit.AutoMinThickness = False
         fit.MinThickness = 0.5

@@ -1,0 +1,296 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Fit benchmark: modes, speed against the query floor, and the remesh-and-fit peer.
+
+Usage::
+
+    .venv/bin/python benchmarks/fit_bench.py [--only NAME ...] [--baseline OLD_TREE]
+                                             [--out benchmarks]
+
+For every dev mesh whose pipeline reaches the base mesh (the base mesh is built in this run),
+each fit mode (``none``, ``best-fit``, ``inside``) is timed and measured: rounds and
+iterations, two-sided distances between the triangulated level-3 limit mesh and the target
+(``core.quality.surface_distances``, fractions of the bounding-box diagonal), and the volume
+outside / not covered (``core.quality.containment``). The floor is 100k closest-point
+queries on the same compiled target, in the same run; the ratio says how many such query
+sets one fit iteration costs.
+
+The peer, in the same run and at the same face count: QuadriFlow (PyPI ``pyquadriflow``, a
+benchmark-only dependency) remeshes the target into quads, Catmull-Clark level 3, and a linear
+least-squares fit of the cage to the closest target points of the level-3 vertices, five
+rounds. ``--baseline DIR`` also times the inside fit of an older checkout's ``core`` (for
+example ``git archive 9ea2d9c core | tar -x -C DIR``) on the same base mesh, in a subprocess.
+
+Writes ``FIT_RESULTS.md`` and ``fit_results.json`` into ``--out``. Timings are wall-clock
+seconds on a shared 2-core machine; the load average at the start is recorded.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+sys.path.insert(0, REPO)
+
+from core.fitting import fit_base_mesh  # noqa: E402
+from core.fitting.responses import triangulate  # noqa: E402
+from core.pipeline import count_limit_self_intersections, fit_levels, reconstruct  # noqa: E402
+from core.polymesh_io import write_polymesh  # noqa: E402
+from core.quality import containment, sample_surface, surface_distances  # noqa: E402
+from core.subdivision.catmull_clark import build_hierarchy  # noqa: E402
+from core.subdivision.limit import limit_matrices  # noqa: E402
+from core.target_surface import TargetSurface  # noqa: E402
+from core.types import PolyMesh  # noqa: E402
+
+MESHES = os.path.join(REPO, "..", "shared", "data", "meshes")
+CASES = {
+    "to_simp_cantilever": os.path.join(REPO, "examples", "to_simp_cantilever.stl"),
+    "polycube_bone": os.path.join(MESHES, "polycube_bone.obj"),
+    "polycube_mambo_b0": os.path.join(MESHES, "polycube_mambo_b0.obj"),
+    "to_levelset_cantilever_tiny": os.path.join(MESHES, "to_levelset_cantilever_tiny.stl"),
+    "idler_riser": os.path.join(MESHES, "idler_riser.stl"),
+}
+MODES = ("none", "best-fit", "inside")
+EVAL_LEVEL = 3
+FLOOR_QUERIES = 100_000
+PEER_ROUNDS = 5
+
+
+def limit_mesh(base, level=EVAL_LEVEL):
+    """(vertices, triangles) of the triangulated level-``level`` limit mesh of a cage."""
+    hierarchy = build_hierarchy(base, level)
+    fine = hierarchy.meshes[level]
+    L, _, _ = limit_matrices(fine)
+    return L @ fine.vertices, triangulate(fine.face_vertices, fine.face_offsets)
+
+
+def surface_figures(V, F, target):
+    """Two-sided distances and containment of a triangle mesh against the target."""
+    d = surface_distances(V, F, target.vertices, target.faces, samples=20000)
+    figures = {"mean_distance": 0.5 * (d["result_to_target_mean"] + d["target_to_result_mean"]),
+               "max_distance": d["hausdorff"],
+               "result_to_target_mean": d["result_to_target_mean"],
+               "target_to_result_mean": d["target_to_result_mean"]}
+    try:
+        c = containment(V, F, target.vertices, target.faces)
+        figures.update(outside=c["outside_volume_fraction"], uncovered=c["uncovered_volume_fraction"])
+    except Exception as exc:  # a self-intersecting result has no boolean; say so
+        figures.update(outside=None, uncovered=None, containment_error=str(exc))
+    return figures
+
+
+def floor_seconds(target):
+    """Seconds for 100k closest-point queries on the compiled target (built once, not timed)."""
+    surface = TargetSurface(target.vertices, target.faces)
+    points = sample_surface(target.vertices, target.faces, FLOOR_QUERIES, np.random.default_rng(0))
+    points += 0.01 * surface.diagonal * np.random.default_rng(1).normal(size=points.shape)
+    start = time.perf_counter()
+    surface.closest(points)
+    return time.perf_counter() - start
+
+
+def our_fit(base, target, mode):
+    levels = fit_levels(base.n_faces, 2)
+    start = time.perf_counter()
+    fitted, info = fit_base_mesh(base, target, levels=levels, iterations=100, mode=mode)
+    seconds = time.perf_counter() - start
+    V, F = limit_mesh(fitted)
+    row = {"mode": mode, "seconds": seconds, "measure_seconds": info["measure_seconds"],
+           "rounds": info["rounds"],
+           "iterations": info["iterations"], "stopped": info["stopped"],
+           "self_intersections": count_limit_self_intersections(fitted, levels),
+           "fine_points": int(limit_matrices(build_hierarchy(base, levels).meshes[levels])[0]
+                              .shape[0])}
+    row.update(surface_figures(V, F, target))
+    return row
+
+
+def peer_fit(target, faces):
+    """QuadriFlow remesh to about ``faces`` quads, Catmull-Clark level 3, 5 linear LSQ rounds."""
+    from pyQuadriFlow.pyQuadriFlow import pyquadriflow
+
+    start = time.perf_counter()
+    out = pyquadriflow(int(faces), 0, target.vertices.tolist(), target.faces.tolist(),
+                       False, False, False, False, False)
+    remesh_seconds = time.perf_counter() - start
+    quad_V = np.asarray(out["vertices"], dtype=np.float64)
+    quad_F = np.asarray(out["faces"], dtype=np.int64)
+    cage = PolyMesh(quad_V, quad_F.reshape(-1), np.arange(0, quad_F.size + 1, 4))
+    start = time.perf_counter()
+    hierarchy = build_hierarchy(cage, EVAL_LEVEL)
+    S = hierarchy.composite(EVAL_LEVEL - 1).tocsr()
+    surface = TargetSurface(target.vertices, target.faces)
+    normal = (S.T @ S).tocsc() + 1e-9 * sp.identity(S.shape[1], format="csc")
+    solver = splu(normal)
+    V = quad_V
+    for _ in range(PEER_ROUNDS):
+        closest = surface.nearest(S @ V).point
+        V = solver.solve(np.asarray(S.T @ closest))
+    fit_seconds = time.perf_counter() - start
+    fine = hierarchy.meshes[EVAL_LEVEL]
+    row = {"mode": "peer", "faces": int(len(quad_F)), "remesh_seconds": remesh_seconds,
+           "seconds": fit_seconds}
+    row.update(surface_figures(S @ V, triangulate(fine.face_vertices, fine.face_offsets), target))
+    return row
+
+
+def baseline_seconds(tree, base_path, target_path):
+    """Seconds of the inside fit of an older ``core`` tree on the same base mesh (subprocess)."""
+    code = (
+        "import sys, time, json; sys.path.insert(0, sys.argv[1])\n"
+        "from core.polymesh_io import read_polymesh\n"
+        "from core.mesh_io import read_triangle_soup\n"
+        "from core.validate import validate_target\n"
+        "from core.fitting import fit_base_mesh\n"
+        "t, _ = validate_target(*read_triangle_soup(sys.argv[3]), check_self_intersections=False)\n"
+        "b = read_polymesh(sys.argv[2]); s = time.perf_counter()\n"
+        "_, info = fit_base_mesh(b, t, 2, 100)\n"
+        "print(json.dumps({'seconds': time.perf_counter() - s, 'iterations': info['iterations'],"
+        " 'outside': info['outside_volume_fraction'],"
+        " 'uncovered': info['uncovered_volume_fraction']}))\n")
+    done = subprocess.run([sys.executable, "-c", code, tree, base_path, target_path],
+                          capture_output=True, text=True, timeout=1800, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def run_case(name, path, baseline, work):
+    result = reconstruct(path, stop_after="basemesh")
+    if "base_mesh" not in result.state:
+        stage = [k for k, v in result.report["stages"].items() if v["status"] != "ok"]
+        return {"name": name, "error": f"no base mesh ({', '.join(stage)})"}
+    base, target = result.state["base_mesh"], result.state["target"]
+    row = {"name": name, "triangles": int(len(target.faces)), "base_faces": int(base.n_faces)}
+    row["floor_seconds"] = floor_seconds(target)
+    row["modes"] = [our_fit(base, target, mode) for mode in MODES]
+    try:
+        row["peer"] = peer_fit(target, base.n_faces)
+    except Exception as exc:  # recorded: the peer failing on a mesh is a result too
+        row["peer"] = {"error": f"{type(exc).__name__}: {exc}"}
+    if baseline:
+        base_path = os.path.join(work, f"{name}_base.obj")
+        write_polymesh(base_path, base)
+        row["baseline"] = baseline_seconds(baseline, base_path, path)
+    return row
+
+
+def markdown(rows, info):
+    lines = ["# Fit benchmark (`benchmarks/fit_bench.py`)", "",
+             f"Run {info['date']} on {info['cpu_count']} cores, load average at start "
+             f"{info['load']:.2f} (the machine is shared: wall-clock times are noisy). "
+             "Distances are fractions of the target's bounding-box diagonal, two-sided "
+             "(mean of both directions' means; max = Hausdorff lower bound from 20k samples "
+             f"and vertices), on the triangulated level-{EVAL_LEVEL} limit mesh (peer: its "
+             f"level-{EVAL_LEVEL} mesh). Volumes are fractions of the target volume.", "",
+             "## Per mode", "",
+             "Seconds: the whole `fit_base_mesh` call; in brackets the part of it spent on "
+             "its report figures (two manifold3d booleans). Peer: the least-squares rounds "
+             "only (its remesh time is in the last table).", "",
+             "| mesh | triangles | cage faces | mode | seconds (figures) | rounds | RGP iterations | "
+             "mean | max | outside | uncovered | self-intersecting pairs (level 2) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        if "error" in row:
+            lines.append(f"| {row['name']} | | | {row['error']} | | | | | | | | |")
+            continue
+        for m in row["modes"] + ([row["peer"]] if "seconds" in row.get("peer", {}) else []):
+            label = m["mode"] if m["mode"] != "peer" else f"peer ({m['faces']} quads)"
+            lines.append(
+                f"| {row['name']} | {row['triangles']} | {row['base_faces']} | {label} | "
+                f"{m['seconds']:.2f}{_figure_time(m)} | {m.get('rounds', PEER_ROUNDS)} | {m.get('iterations', '')} | "
+                f"{m['mean_distance']:.2e} | {m['max_distance']:.2e} | {_pct(m['outside'])} | "
+                f"{_pct(m['uncovered'])} | {m.get('self_intersections', '')} |")
+        if "error" in row.get("peer", {}):
+            lines.append(f"| {row['name']} | | | peer failed: {row['peer']['error']} | | | | | | | | |")
+    lines += ["", "## Speed against the query floor", "",
+              "One iteration = one least-squares round or one RGP iteration (figures excluded). "
+              "Old inside fit: `--baseline` tree (the k-d tree queries, 100 RGP iterations "
+              "from the cage), same base mesh, same run.", "",
+              "| mesh | 100k closest points (s) | inside fit (s) | RGP iterations | "
+              "fit per iteration / 100k queries | old inside fit (s) |", "|---|---|---|---|---|---|"]
+    for row in rows:
+        if "error" in row:
+            continue
+        inside = next(m for m in row["modes"] if m["mode"] == "inside")
+        per = ((inside["seconds"] - inside["measure_seconds"])
+               / max(inside["iterations"] + inside["rounds"], 1))
+        old = row.get("baseline", {}).get("seconds")
+        lines.append(f"| {row['name']} | {row['floor_seconds']:.3f} | {inside['seconds']:.2f} | "
+                     f"{inside['iterations']} | {per / row['floor_seconds']:.2f} | "
+                     f"{'' if old is None else f'{old:.2f}'} |")
+    lines += ["", "## Against the peer (best-fit, same face count)", "",
+              "| mesh | our mean / peer mean | our max / peer max | our seconds | peer seconds "
+              "(remesh + fit) |", "|---|---|---|---|---|"]
+    ratios = []
+    for row in rows:
+        peer = row.get("peer", {})
+        if "error" in row or "seconds" not in peer:
+            continue
+        ours = next(m for m in row["modes"] if m["mode"] == "best-fit")
+        ratio = ours["mean_distance"] / peer["mean_distance"]
+        ratios.append((ratio, ours["max_distance"] <= peer["max_distance"]))
+        lines.append(f"| {row['name']} | {ratio:.2f} | "
+                     f"{ours['max_distance'] / peer['max_distance']:.2f} | {ours['seconds']:.2f} | "
+                     f"{peer['remesh_seconds'] + peer['seconds']:.2f} |")
+    lines += ["", "## Done-when checks", ""]
+    measured = [row for row in rows if "error" not in row]
+    for row in measured:
+        modes = {m["mode"]: m for m in row["modes"]}
+        inside, fitted, unfitted = modes["inside"], modes["best-fit"], modes["none"]
+        lines.append(
+            f"- {row['name']}: inside outside {_pct(inside['outside'])} "
+            f"({'<=' if _within(inside['outside'], 0.005) else 'not <='} 0.5%); best-fit mean "
+            f"{fitted['mean_distance'] / unfitted['mean_distance']:.2f} of the unfitted; "
+            f"best-fit {fitted['seconds'] - fitted['measure_seconds']:.2f} s, inside "
+            f"{inside['seconds'] - inside['measure_seconds']:.2f} s without the figures.")
+    if ratios:
+        lines += ["", f"Median mean-distance ratio {np.median([r for r, _ in ratios]):.2f}; our "
+                  f"maximum no worse than the peer's on {sum(ok for _, ok in ratios)} of "
+                  f"{len(ratios)} meshes."]
+    return "\n".join(lines) + "\n"
+
+
+def _within(value, limit):
+    return value is not None and value <= limit
+
+
+def _figure_time(row):
+    return f" ({row['measure_seconds']:.2f})" if "measure_seconds" in row else ""
+
+
+def _pct(value):
+    return "n/a" if value is None else f"{100 * value:.2f}%"
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", nargs="*", choices=sorted(CASES), default=None)
+    parser.add_argument("--baseline", help="folder holding an older checkout's core/")
+    parser.add_argument("--out", default=HERE)
+    args = parser.parse_args(argv)
+    info = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "cpu_count": os.cpu_count(),
+            "load": os.getloadavg()[0]}
+    names = args.only or list(CASES)
+    rows = []
+    with tempfile.TemporaryDirectory() as work:
+        for name in names:
+            print(f"fit_bench: {name}", flush=True)
+            rows.append(run_case(name, CASES[name], args.baseline, work))
+    os.makedirs(args.out, exist_ok=True)
+    for filename, text in (("fit_results.json", json.dumps({"info": info, "rows": rows}, indent=1)),
+                           ("FIT_RESULTS.md", markdown(rows, info))):
+        path = os.path.join(args.out, filename)
+        with open(path + ".tmp", "w", encoding="utf-8") as handle:
+            handle.write(text)
+        os.replace(path + ".tmp", path)
+        print(f"fit_bench: wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

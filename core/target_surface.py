@@ -1,0 +1,385 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""One compiled spatial-query object per closed triangle mesh: closest points, signed
+distances with pseudo-normals, and first exits of rays.
+
+:class:`TargetSurface` builds libigl's axis-aligned bounding-box tree (``igl.AABB``,
+compiled C++) once and answers any number of queries; the fit (packaging response),
+the thickness rays and the quality check's surface distances all use it.
+
+Closest points: the tree returns the nearest triangle of every query point; the point,
+its barycentric coordinates and where on the triangle it lies (face, edge or corner)
+are then recomputed exactly in float64 on that triangle (Ericson's Voronoi-region
+test). The normal at the closest point is the angle-weighted pseudo-normal (Baerentzen
+and Aanaes 2005): the face normal inside a face, the mean of the two face normals on an
+edge, the angle-weighted vertex normal at a corner; with it the sign of
+``(q - closest) . normal`` is the exact inside / outside sign of ``q`` for a closed,
+outward-oriented mesh.
+
+Rays (:meth:`TargetSurface.first_exit`): the compiled cast starts ``1e-6`` of the ray
+length along the ray (from a vertex it would otherwise stop on the vertex's own
+triangles); its first hit is accepted only if the exact float64 Moeller-Trumbore test
+of the whole ray on the same triangle confirms it and the ray leaves the solid there
+(``d . m > 0``). A compiled cast can miss a crossing exactly
+on an edge or a vertex (about 3 % of rays that start on a vertex, see
+``shared/METHODS.md``); on a closed surface the crossing after a missed exit is an
+entry, so every such miss shows up as a rejected hit (or no hit at all) and those rays
+are cast again by a vectorised numpy search whose barycentric test has a tolerance of
+``EDGE_TOL``, so a ray through an edge or a vertex hits one of its triangles.
+"""
+from dataclasses import dataclass
+from functools import cached_property
+from itertools import chain
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from core.geometry import radius_classes
+from core.quality import optional_module, validate_triangles
+
+EDGE_TOL = 1e-9
+"""Barycentric tolerance of the exact ray-triangle test (dimensionless)."""
+
+REGION_FACE = 0
+# region codes 1, 2, 3: edges (v0 v1), (v1 v2), (v2 v0); 4, 5, 6: corners v0, v1, v2
+
+_RAY_BLOCK = 200000
+_START_OFFSET = 1e-6
+
+
+@dataclass
+class NearestPoints:
+    """Closest points on a :class:`TargetSurface` to ``k`` query points, unsigned.
+
+    point : (k, 3) float64 closest points on the surface.
+    face : (k,) int64 triangle holding each closest point.
+    bary : (k, 3) float64 barycentric coordinates of ``point`` on ``face``.
+    region : (k,) int8 where on that triangle: 0 inside, 1..3 edges (v0 v1), (v1 v2),
+        (v2 v0), 4..6 corners v0, v1, v2.
+    distance : (k,) float64 distance (model units).
+    """
+
+    point: np.ndarray
+    face: np.ndarray
+    bary: np.ndarray
+    region: np.ndarray
+    distance: np.ndarray
+
+
+@dataclass
+class ClosestPoints(NearestPoints):
+    """:class:`NearestPoints` with the pseudo-normal and the inside / outside sign.
+
+    normal : (k, 3) float64 unit pseudo-normal at the closest point.
+    signed : (k,) float64 signed distance (model units), positive outside.
+    """
+
+    normal: np.ndarray = None
+    signed: np.ndarray = None
+
+
+@dataclass
+class RayHits:
+    """First exits of ``k`` rays through a :class:`TargetSurface`.
+
+    t : (k,) float64 distance along the (unit) ray to the exit; ``inf`` where none.
+    face : (k,) int64 triangle exited through, ``-1`` where none.
+    bary : (k, 3) float64 barycentric coordinates of the exit on ``face`` (zeros where none).
+    normal : (k, 3) float64 unit outward normal of ``face`` (zeros where none).
+    recast : int, rays the compiled cast did not settle and the tolerant search did.
+    """
+
+    t: np.ndarray
+    face: np.ndarray
+    bary: np.ndarray
+    normal: np.ndarray
+    recast: int
+
+
+class TargetSurface:
+    """Compiled closest-point and ray queries on a fixed closed triangle mesh.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float, model units.
+    faces : (m, 3) int, counter-clockwise seen from outside.
+    name : str, what to call the mesh in error messages.
+
+    Attributes
+    ----------
+    vertices : (n, 3) float64
+    faces : (m, 3) int64
+    face_normals : (m, 3) float64 unit outward normals (zero for degenerate faces).
+    diagonal : float, bounding-box diagonal (model units).
+
+    Raises
+    ------
+    InvalidMeshError
+        Malformed arrays (see :func:`core.quality.validate_triangles`).
+    ImportError
+        libigl is not installed (the message says how to install it).
+    """
+
+    def __init__(self, vertices, faces, name="target"):
+        V, F = validate_triangles(vertices, faces, name)
+        self.vertices, self.faces = V, F
+        self._tri = V[F]
+        self.face_normals = _unit(np.cross(self._tri[:, 1] - self._tri[:, 0],
+                                           self._tri[:, 2] - self._tri[:, 0]))
+        self.diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+        self._tree = optional_module("igl", "libigl").AABB()
+        self._tree.init(V, F)
+
+    def nearest(self, points):
+        """Closest points and unsigned distances (no pseudo-normals).
+
+        Parameters
+        ----------
+        points : (k, 3) float, model units.
+
+        Returns
+        -------
+        NearestPoints
+        """
+        points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        _, face, _ = self._tree.squared_distance(self.vertices, self.faces, points)
+        face = np.asarray(face, dtype=np.int64)
+        point, bary, region = closest_on_triangles(self._tri[face], points)
+        return NearestPoints(point, face, bary, region, np.linalg.norm(points - point, axis=1))
+
+    def closest(self, points):
+        """Closest points, pseudo-normals and signed distances.
+
+        Parameters
+        ----------
+        points : (k, 3) float, model units.
+
+        Returns
+        -------
+        ClosestPoints
+        """
+        points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        near = self.nearest(points)
+        normal = self._normal_at(near.face, near.region)
+        sign = np.where(np.einsum("ij,ij->i", points - near.point, normal) >= 0, 1.0, -1.0)
+        return ClosestPoints(near.point, near.face, near.bary, near.region, near.distance,
+                             normal, sign * near.distance)
+
+    def first_exit(self, origins, directions, max_length):
+        """Where rays starting inside (or on) the surface first leave the solid.
+
+        A hit counts if the ray crosses a triangle from inside to outside (``d . m > 0``,
+        ``m`` its outward normal) at ``1e-9 * max_length < t <= max_length``, so the
+        triangles around a ray's own start vertex, which it enters, never count.
+
+        Parameters
+        ----------
+        origins : (k, 3) float, model units.
+        directions : (k, 3) float, unit vectors.
+        max_length : float > 0, ray length (model units).
+
+        Returns
+        -------
+        RayHits
+        """
+        origins = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
+        directions = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
+        k = len(origins)
+        t_low = 1e-9 * max_length
+        # started a little along the ray, the compiled cast does not stop on the triangles
+        # around a start vertex; an exit it skips that way is caught like any other miss
+        face, _, _ = self._tree.intersect_ray_first(
+            self.vertices, self.faces, origins + (_START_OFFSET * max_length) * directions,
+            directions)
+        face = np.asarray(face, dtype=np.int64)
+        t = np.full(k, np.inf)
+        uv = np.zeros((k, 2))
+        hit = np.flatnonzero(face >= 0)
+        e1, e2 = self._edges
+        t_h, u_h, v_h, ok = _ray_triangle(origins[hit], directions[hit], self._tri[face[hit], 0],
+                                          e1[face[hit]], e2[face[hit]])
+        ok &= (t_h > t_low) & (np.einsum("ij,ij->i", directions[hit],
+                                         self.face_normals[face[hit]]) > 0)
+        t[hit[ok]] = t_h[ok]
+        uv[hit[ok]] = np.stack([u_h[ok], v_h[ok]], axis=1)
+        settled = np.zeros(k, dtype=bool)
+        settled[hit[ok]] = True
+        face[~settled] = -1
+        recast = np.flatnonzero(~settled)
+        if len(recast):
+            t_r, f_r, uv_r = self._tolerant_first_exit(origins[recast], directions[recast],
+                                                       max_length, t_low)
+            t[recast], face[recast], uv[recast] = t_r, f_r, uv_r
+        far = t > max_length
+        t[far], face[far], uv[far] = np.inf, -1, 0.0
+        found = face >= 0
+        bary = np.zeros((k, 3))
+        bary[found] = np.stack([1.0 - uv[found].sum(axis=1), uv[found, 0], uv[found, 1]], axis=1)
+        normal = np.zeros((k, 3))
+        normal[found] = self.face_normals[face[found]]
+        return RayHits(t, face, bary, normal, int(len(recast)))
+
+    @cached_property
+    def _edges(self):
+        """(m, 3) edge vectors ``v1 - v0`` and ``v2 - v0`` of every triangle."""
+        return self._tri[:, 1] - self._tri[:, 0], self._tri[:, 2] - self._tri[:, 0]
+
+    @cached_property
+    def _spheres(self):
+        """Bounding spheres (centres (m, 3), radii (m,)) and per-size-class centroid trees."""
+        centroid = self._tri.mean(axis=1)
+        radius = np.linalg.norm(self._tri - centroid[:, None], axis=2).max(axis=1)
+        classes = [(members, cKDTree(centroid[members]), float(radius[members].max()))
+                   for members in radius_classes(radius)]
+        return centroid, radius, classes
+
+    def _tolerant_first_exit(self, origins, directions, max_length, t_low):
+        """Numpy first exits with the barycentric tolerance ``EDGE_TOL``.
+
+        Broad phase: the triangles whose bounding sphere meets the sphere around the
+        segment's midpoint of radius ``max_length / 2`` (one k-d tree per size class);
+        narrow phase: exact Moeller-Trumbore on those pairs.
+
+        Returns
+        -------
+        t : (r,) float64, ``inf`` where none; face : (r,) int64, ``-1`` where none;
+        uv : (r, 2) float64 barycentric ``(u, v)`` of the exit.
+        """
+        r = len(origins)
+        centre = origins + 0.5 * max_length * directions
+        _, _, classes = self._spheres
+        found_f, found_o = [], []
+        for members, tree, class_radius in classes:
+            lists = tree.query_ball_point(centre, r=0.5 * max_length + class_radius)
+            lengths = np.fromiter(map(len, lists), np.int64, r)
+            if lengths.sum():
+                found_f.append(members[np.fromiter(chain.from_iterable(lists), np.int64,
+                                                   int(lengths.sum()))])
+                found_o.append(np.repeat(np.arange(r), lengths))
+        best = np.full(r, np.inf)
+        best_face = np.full(r, -1, dtype=np.int64)
+        best_uv = np.zeros((r, 2))
+        if not found_f:
+            return best, best_face, best_uv
+        cand, owner = np.concatenate(found_f), np.concatenate(found_o)
+        e1, e2 = self._edges
+        for start in range(0, len(cand), _RAY_BLOCK):
+            f, o = cand[start:start + _RAY_BLOCK], owner[start:start + _RAY_BLOCK]
+            t, u, v, ok = _ray_triangle(origins[o], directions[o], self._tri[f, 0], e1[f], e2[f])
+            ok &= np.einsum("ij,ij->i", directions[o], self.face_normals[f]) > 0
+            ok &= (t > t_low) & (t <= max_length)
+            f, o, t, u, v = f[ok], o[ok], t[ok], u[ok], v[ok]
+            if not len(o):
+                continue
+            order = np.lexsort((t, o))
+            first = order[np.flatnonzero(np.r_[True, o[order][1:] != o[order][:-1]])]
+            take = t[first] < best[o[first]]
+            who = o[first][take]
+            best[who] = t[first][take]
+            best_face[who] = f[first][take]
+            best_uv[who] = np.stack([u[first][take], v[first][take]], axis=1)
+        return best, best_face, best_uv
+
+    @cached_property
+    def _pseudo_normals(self):
+        """(m, 3, 3) per face-edge and (n, 3) per vertex unit pseudo-normals."""
+        F, V, fn = self.faces, self.vertices, self.face_normals
+        pairs = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
+        _, edge_id = np.unique(np.sort(pairs, axis=1), axis=0, return_inverse=True)
+        edge_id = edge_id.reshape(-1)
+        summed = np.zeros((edge_id.max() + 1, 3))
+        np.add.at(summed, edge_id, np.repeat(fn, 3, axis=0))
+        edge_normals = _unit(summed)[edge_id].reshape(-1, 3, 3)
+        tri = self._tri
+        e1 = _unit(np.roll(tri, -1, axis=1) - tri)
+        e2 = _unit(np.roll(tri, -2, axis=1) - tri)
+        angles = np.arccos(np.clip(np.einsum("ijk,ijk->ij", e1, e2), -1.0, 1.0))
+        vertex_sum = np.zeros_like(V)
+        np.add.at(vertex_sum, F.reshape(-1), (angles[:, :, None] * fn[:, None, :]).reshape(-1, 3))
+        return edge_normals, _unit(vertex_sum)
+
+    def _normal_at(self, face, region):
+        edge_normals, vertex_normals = self._pseudo_normals
+        normal = self.face_normals[face].copy()
+        on_edge = (region >= 1) & (region <= 3)
+        normal[on_edge] = edge_normals[face[on_edge], region[on_edge] - 1]
+        on_vertex = region >= 4
+        normal[on_vertex] = vertex_normals[self.faces[face[on_vertex], region[on_vertex] - 4]]
+        return normal
+
+
+def closest_on_triangles(triangles, points):
+    """Closest point on ``triangles[i]`` to ``points[i]`` (Ericson's region test).
+
+    Parameters
+    ----------
+    triangles : (k, 3, 3) float64, corners ``a, b, c``.
+    points : (k, 3) float64
+
+    Returns
+    -------
+    closest : (k, 3) float64
+    bary : (k, 3) float64 barycentric coordinates of ``closest`` (sum 1).
+    region : (k,) int8, 0 face interior, 1..3 edges ab, bc, ca, 4..6 corners a, b, c.
+    """
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    ab, ac = b - a, c - a
+    ap, bp, cp = points - a, points - b, points - c
+    d1, d2 = _dot(ab, ap), _dot(ac, ap)
+    d3, d4 = _dot(ab, bp), _dot(ac, bp)
+    d5, d6 = _dot(ab, cp), _dot(ac, cp)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    k = len(points)
+    v = np.zeros(k)
+    w = np.zeros(k)
+    region = np.full(k, -1, dtype=np.int8)
+
+    def claim(mask, code, vv, ww):
+        take = mask & (region < 0)
+        region[take] = code
+        v[take] = vv[take] if np.ndim(vv) else vv
+        w[take] = ww[take] if np.ndim(ww) else ww
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        claim((d1 <= 0) & (d2 <= 0), 4, 0.0, 0.0)
+        claim((d3 >= 0) & (d4 <= d3), 5, 1.0, 0.0)
+        claim((vc <= 0) & (d1 >= 0) & (d3 <= 0), 1, d1 / (d1 - d3), 0.0)
+        claim((d6 >= 0) & (d5 <= d6), 6, 0.0, 1.0)
+        claim((vb <= 0) & (d2 >= 0) & (d6 <= 0), 3, 0.0, d2 / (d2 - d6))
+        e = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        claim((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), 2, 1.0 - e, e)
+        denom = va + vb + vc
+        safe = np.where(denom != 0, denom, 1.0)
+        claim(np.ones(k, dtype=bool), REGION_FACE, vb / safe, vc / safe)
+    closest = a + v[:, None] * ab + w[:, None] * ac
+    bary = np.stack([1.0 - v - w, v, w], axis=1)
+    return closest, bary, region
+
+
+def _ray_triangle(origin, direction, a, e1, e2):
+    """Moeller-Trumbore on row-wise pairs, float64, barycentric tolerance ``EDGE_TOL``.
+
+    Returns
+    -------
+    t, u, v : (p,) float64 ray parameter and barycentric coordinates of the crossing.
+    hit : (p,) bool, the ray's line crosses the triangle (edges and corners included).
+    """
+    p = np.cross(direction, e2)
+    det = _dot(e1, p)
+    ok = np.abs(det) > 1e-300
+    inv = np.divide(1.0, det, out=np.zeros_like(det), where=ok)
+    s = origin - a
+    u = _dot(s, p) * inv
+    q = np.cross(s, e1)
+    v = _dot(direction, q) * inv
+    t = _dot(e2, q) * inv
+    ok &= (u >= -EDGE_TOL) & (v >= -EDGE_TOL) & (u + v <= 1 + EDGE_TOL)
+    return t, u, v, ok
+
+
+def _dot(x, y):
+    return np.einsum("ij,ij->i", x, y)
+
+
+def _unit(x):
+    length = np.linalg.norm(x, axis=1, keepdims=True)
+    return np.divide(x, length, out=np.zeros_like(x), where=length > 0)

@@ -1,0 +1,84 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""The fit stage in the pipeline: --units, --fit-mode, and their reports."""
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from core.errors import ParameterError
+from core.params import ReconstructionParams
+from core.pipeline import reconstruct
+
+REPO = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+TINY = os.path.join(REPO, "..", "shared", "data", "meshes", "to_levelset_cantilever_tiny.stl")
+
+
+def test_units_scale_the_target_to_millimetres():
+    mm = reconstruct(TINY, {"units": "mm"}, stop_after="basemesh")
+    inches = reconstruct(TINY, {"units": "in"}, stop_after="basemesh")
+    assert inches.report["input"]["units"] == "in"
+    assert inches.report["input"]["unit_to_mm"] == 25.4
+    assert mm.report["input"]["unit_to_mm"] == 1.0
+    # the file's own figures stay in its units
+    assert inches.report["input"]["bbox_diagonal"] == mm.report["input"]["bbox_diagonal"]
+    assert np.allclose(inches.state["target"].vertices, 25.4 * mm.state["target"].vertices,
+                       rtol=0, atol=1e-12 * 25.4 * 12)
+    # the stages are scale free: the base mesh is the same shape, 25.4 times larger
+    a, b = mm.state["base_mesh"].vertices, inches.state["base_mesh"].vertices
+    assert a.shape == b.shape
+    assert np.max(np.abs(b - 25.4 * a)) <= 1e-9 * 25.4 * np.abs(a).max()
+
+
+def test_fit_mode_is_checked():
+    with pytest.raises(ParameterError, match="fit_mode"):
+        ReconstructionParams(fit_mode="outside")
+
+
+@pytest.mark.parametrize("mode", ["best-fit", "none"])
+def test_cli_fit_mode_is_run_and_reported(tmp_path, mode):
+    result = subprocess.run([sys.executable, "-m", "polycube_wb", "reconstruct", TINY,
+                             "--stop-after", "fit", "--fit-mode", mode, "--report",
+                             str(tmp_path / "r.json")], cwd=REPO, capture_output=True,
+                            text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    fit = json.loads((tmp_path / "r.json").read_text())["fit"]
+    assert fit["mode"] == mode
+    if mode == "none":
+        assert fit["rounds"] == 0 and fit["mean_distance"] == fit["initial_mean_distance"]
+    else:
+        assert fit["rounds"] >= 1
+        assert fit["mean_distance"] <= 0.5 * fit["initial_mean_distance"]
+        assert fit["outside_volume_fraction"] < 0.01
+
+
+def test_cli_rejects_an_unknown_fit_mode():
+    result = subprocess.run([sys.executable, "-m", "polycube_wb", "reconstruct", TINY,
+                             "--stop-after", "fit", "--fit-mode", "outside"], cwd=REPO,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and "fit-mode" in result.stderr
+
+
+def test_tolerance_in_millimetres_is_reported_per_round():
+    result = reconstruct(TINY, {"fit_mode": "best-fit", "tolerance_mm": 0.1}, stop_after="fit")
+    section = result.report["fit"]["tolerance"]
+    diagonal = result.report["input"]["bbox_diagonal"]
+    assert section["value_mm"] == pytest.approx(0.1)
+    assert section["value"] == pytest.approx(0.1 / diagonal)
+    rounds = section["rounds"]
+    assert rounds and all(key in rounds[0] for key in ("faces", "max_deviation",
+                                                       "mean_deviation"))
+    if section["met"]:
+        assert rounds[-1]["max_deviation"] <= section["value"]
+    else:
+        assert "max_base_faces" in section["reason"] or "fits" in section["reason"]
+    assert result.state["base_mesh"].n_faces == section["faces"] == rounds[-1]["faces"]
+
+
+def test_tolerance_without_a_fit_is_refused():
+    with pytest.raises(ParameterError, match="tolerance"):
+        ReconstructionParams(fit_mode="none", tolerance=0.01)
+    with pytest.raises(ParameterError, match="once"):
+        ReconstructionParams(tolerance=0.01, tolerance_mm=1.0)

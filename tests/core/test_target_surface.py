@@ -1,0 +1,153 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""The compiled target surface: closest points, signs, pseudo-normals and ray exits."""
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from core.errors import InvalidMeshError
+from core.fitting.responses import thickness, vertex_normals
+from core.mesh_io import read_triangle_soup
+from core.target_surface import TargetSurface, closest_on_triangles
+
+MESHES = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "meshes"
+
+
+def brute_force_distance(tri, points):
+    """(p,) distance from every point to the nearest of all triangles (no tree)."""
+    k = len(tri)
+    every, _, _ = closest_on_triangles(np.tile(tri, (len(points), 1, 1)),
+                                       np.repeat(points, k, axis=0))
+    return np.linalg.norm(every - np.repeat(points, k, axis=0), axis=1).reshape(-1, k).min(1)
+
+
+def brute_force_exit(X, T, origins, directions, max_length):
+    """(r,) first exit along each ray, testing every triangle (numpy, tolerance 1e-9)."""
+    tri = X[T]
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    m = np.cross(e1, e2)
+    m /= np.linalg.norm(m, axis=1, keepdims=True)
+    out = np.full(len(origins), np.inf)
+    for i, (o, d) in enumerate(zip(origins, directions)):
+        p = np.cross(d, e2)
+        det = np.einsum("ij,ij->i", e1, p)
+        s = o - tri[:, 0]
+        q = np.cross(s, e1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = np.einsum("ij,ij->i", s, p) / det
+            v = (q @ d) / det
+            t = np.einsum("ij,ij->i", e2, q) / det
+            ok = (u >= -1e-9) & (v >= -1e-9) & (u + v <= 1 + 1e-9) & (m @ d > 0)
+            ok &= (t > 1e-9 * max_length) & (t <= max_length)
+        if ok.any():
+            out[i] = t[ok].min()
+    return out
+
+
+def test_closest_points_match_brute_force():
+    mesh = trimesh.creation.icosphere(2)
+    target = TargetSurface(mesh.vertices, mesh.faces)
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(300, 3)) * 0.9
+    near = target.closest(points)
+    brute = brute_force_distance(np.asarray(mesh.triangles), points)
+    assert np.allclose(np.linalg.norm(near.point - points, axis=1), brute, atol=1e-12)
+    assert np.allclose(near.distance, brute, atol=1e-12)
+    assert np.allclose(np.linalg.norm(near.normal, axis=1), 1.0)
+    # the closest point lies on the face reported
+    again, _, _ = closest_on_triangles(np.asarray(mesh.triangles)[near.face], points)
+    assert np.allclose(again, near.point, atol=1e-14)
+    # sign of (q - cpp) . pseudo-normal is the exact inside/outside test
+    radius = np.linalg.norm(points, axis=1)
+    clear = np.abs(radius - 0.97) > 0.04
+    assert np.array_equal((near.signed < 0)[clear], (radius < 0.97)[clear])
+
+
+def test_signs_at_edges_and_corners_of_a_cube():
+    # points nearest to an edge or a corner of a box: the face normal of either face
+    # could give the wrong sign, the pseudo-normal must not
+    box = trimesh.creation.box(extents=(2.0, 2.0, 2.0))
+    target = TargetSurface(box.vertices, box.faces)
+    outside = np.array([[1.5, 1.5, 0.0], [1.2, 1.3, 1.4], [1.01, 0.0, 1.01]])
+    inside = np.array([[0.9, 0.95, 0.0], [0.99, 0.98, 0.97], [0.5, 0.0, 0.999]])
+    near = target.closest(np.vstack([outside, inside]))
+    assert np.all(near.signed[:3] > 0) and np.all(near.signed[3:] < 0)
+    assert np.all(near.region[:2] >= 1)
+    expected = np.linalg.norm(np.maximum(np.abs(outside) - 1.0, 0.0), axis=1)
+    assert np.allclose(near.signed[:3], expected, atol=1e-12)
+
+
+def test_mixed_triangle_sizes_on_a_real_mesh():
+    V, F = read_triangle_soup(MESHES / "idler_riser.stl")
+    target = TargetSurface(V, F)
+    rng = np.random.default_rng(5)
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    points = lo + (hi - lo) * rng.uniform(-0.1, 1.1, size=(200, 3))
+    brute = brute_force_distance(V[F], points)
+    assert np.max(np.abs(target.closest(points).distance - brute)) <= 1e-12 * target.diagonal
+
+
+def test_ray_exits_of_a_sphere_match_brute_force():
+    sphere = trimesh.creation.icosphere(3)
+    X, T = np.asarray(sphere.vertices), np.asarray(sphere.faces, dtype=np.int64)
+    direction = -vertex_normals(X, T)
+    hits = TargetSurface(X, T).first_exit(X, direction, 5.0)
+    assert np.all(hits.face >= 0)
+    assert np.allclose(hits.t, brute_force_exit(X, T, X, direction, 5.0), atol=1e-12)
+    # the hit point is on the hit triangle's plane and its barycentric coordinates sum to 1
+    point = X + hits.t[:, None] * direction
+    on_face = np.einsum("ij,ijk->ik", hits.bary, X[T[hits.face]])
+    assert np.allclose(point, on_face, atol=1e-12)
+    assert np.all(np.einsum("ij,ij->i", direction, hits.normal) > 0)
+
+
+def test_rays_through_vertices_and_edges_of_a_slab_are_not_lost():
+    # vertices above vertices: every vertical ray leaves exactly through a vertex or edge
+    slab = trimesh.creation.box(extents=(2.0, 2.0, 0.1)).subdivide().subdivide()
+    X, T = np.asarray(slab.vertices), np.asarray(slab.faces, dtype=np.int64)
+    top = np.flatnonzero((X[:, 2] > 0) & (np.abs(X[:, :2]) < 0.9).all(axis=1))
+    down = np.tile([0.0, 0.0, -1.0], (len(top), 1))
+    surface = TargetSurface(X, T)
+    hits = surface.first_exit(X[top], down, 1.0)
+    assert np.all(hits.face >= 0)
+    assert np.allclose(hits.t, 0.1, atol=1e-12)
+    # along the vertex normals (diagonal at the rim) the exits match the brute force
+    direction = -vertex_normals(X, T)
+    hits = surface.first_exit(X, direction, 1.0)
+    brute = brute_force_exit(X, T, X, direction, 1.0)
+    assert np.array_equal(np.isfinite(hits.t), np.isfinite(brute))
+    assert np.allclose(hits.t[np.isfinite(brute)], brute[np.isfinite(brute)], atol=1e-12)
+    assert hits.recast > 0  # some of them went through the tolerant search
+
+
+def test_ray_exits_on_a_real_mesh_match_brute_force():
+    V, F = read_triangle_soup(MESHES / "to_levelset_cantilever_tiny.stl")
+    surface = TargetSurface(V, F)
+    direction = -vertex_normals(V, F)
+    hits = surface.first_exit(V, direction, surface.diagonal)
+    brute = brute_force_exit(V, F, V, direction, surface.diagonal)
+    assert np.array_equal(np.isfinite(hits.t), np.isfinite(brute))
+    finite = np.isfinite(brute)
+    assert np.allclose(hits.t[finite], brute[finite], atol=1e-12 * surface.diagonal)
+    # thickness uses the same rays: walls no thinner than the exits found
+    assert np.allclose(thickness(V, F, surface.diagonal).thickness[finite], brute[finite],
+                       atol=1e-12 * surface.diagonal)
+
+
+def test_rays_longer_than_the_wall_limit_report_no_hit():
+    sphere = trimesh.creation.icosphere(2)
+    X, T = np.asarray(sphere.vertices), np.asarray(sphere.faces, dtype=np.int64)
+    hits = TargetSurface(X, T).first_exit(X, -vertex_normals(X, T), 1.5)
+    assert np.all(hits.face == -1) and np.all(np.isinf(hits.t))
+    assert np.all(hits.bary == 0)
+
+
+def test_malformed_arrays_and_missing_libigl(monkeypatch):
+    sphere = trimesh.creation.icosphere(1)
+    with pytest.raises(InvalidMeshError, match="target"):
+        TargetSurface(sphere.vertices, np.asarray(sphere.faces) + 100)
+    monkeypatch.setitem(sys.modules, "igl", None)
+    with pytest.raises(ImportError, match="pip install libigl"):
+        TargetSurface(sphere.vertices, sphere.faces)
