@@ -22,7 +22,8 @@ from core.quadmesh.embed import (interior_point_positions, side_point_positions,
                                  tutte_coordinates)
 from core.quadmesh.lattice import OverlappingChartsError, build_lattice, chart_orientation
 from core.quadmesh.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapsible_sides,
-                                    loop_tables, quantize_for_budget, rectangular_refinement)
+                                    loop_tables, quantize, quantize_for_budget,
+                                    rectangular_refinement)
 from core.quadmesh.relax import relax_on_target
 from core.quadmesh.side_signs import make_loops_rectilinear
 from core.types import PolyMesh
@@ -84,11 +85,17 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     embedded quads are not a closed 2-manifold (a collapse that pinched a vertex).
     """
     refine, unrefinable, last = {}, set(), None
+    scale, rounds = None, []
     for _ in range(REFINEMENT_ROUNDS):
         refinement = rectangular_refinement(complex_, tables, refine)
         try:
-            polycube, rounds = quantize_for_budget(complex_, tables, refinement, target_faces,
-                                                   collapsible)
+            if scale is None:
+                # the face budget is searched once without refinements and once at the end;
+                # refinement rounds in between keep that scale (one program each)
+                polycube, rounds = quantize_for_budget(complex_, tables, refinement,
+                                                       target_faces, collapsible)
+            else:
+                polycube = quantize(complex_, tables, refinement, scale, collapsible)
         except LabelingError:
             if last is None:
                 raise
@@ -110,13 +117,17 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
                 "--max-base-faces or simplify the labeling (--parts auto)")
         try:
             lattice = build_lattice(complex_, tables, polycube)
-            break
         except OverlappingChartsError as exc:
             candidates = [c for c in exc.charts if c not in refine and c not in unrefinable]
             if not candidates:
                 raise
             last = candidates[0]
             refine[last] = REFINEMENTS[0]
+            scale = polycube.scale
+            continue
+        if scale is None or abs(polycube.faces - target_faces) <= BUDGET_TOLERANCE * target_faces:
+            break
+        scale, last = None, None  # refined layout found: search the budget with it
     else:
         raise OverlappingChartsError(sorted(set(refine) | unrefinable))
     orientation = chart_orientation(complex_, tables, polycube.corner_uv)
