@@ -94,6 +94,21 @@ def summarise(results):
     return summary
 
 
+TOPIC_RESULTS = (
+    ("Base mesh: quantized layouts on every dev mesh, cages over targets, whole pipeline to STEP",
+     "BASEMESH_RESULTS.md", "benchmarks/basemesh_bench.py"),
+    ("Labeling: validity by the independent check, frames chosen, angles, turning points",
+     "LABELING_RESULTS.md", "benchmarks/labeling_bench.py"),
+    ("Fit: compiled queries, modes, the QuadriFlow peer", "FIT_RESULTS.md",
+     "benchmarks/fit_bench.py"),
+    ("Export: shared-edge solids, mixed cages, STEP speed", "EXPORT_RESULTS.md",
+     "benchmarks/export_bench.py"),
+    ("Workbench: recompute, cancel, reopen", "workbench_RESULTS.md",
+     "benchmarks/workbench_bench.py"),
+)
+"""Topic result files beside RESULTS.md: (title, file name, script)."""
+
+
 def _header(results):
     m = results["machine"]
     s = results["summary"]
@@ -101,6 +116,11 @@ def _header(results):
         "# Benchmark results",
         "",
         "Written by `benchmarks/run.py`, the one place these figures come from; do not edit by hand.",
+        "",
+        "Per-topic benchmarks, each written by its own script (newer than this run where their",
+        "date says so; they supersede the matching sections below):",
+        "",
+    ] + [f"- [{title}]({name}) (`{script}`)" for title, name, script in TOPIC_RESULTS] + [
         "",
         f"- Date: {m['date']}; run took {results['total_seconds']:.0f} s "
         f"({'quick mode' if results['quick'] else 'full run'}).",
