@@ -4,16 +4,16 @@
 Usage::
 
     .venv/bin/python benchmarks/basemesh_bench.py [--meshes DIR] [--only NAME ...]
-                                                  [--solid] [--timeout SECONDS]
+                                                  [--solid NAME ...] [--timeout SECONDS]
 
 Writes ``benchmarks/BASEMESH_RESULTS.md``, ``benchmarks/basemesh_results.json`` and a PNG of
 each cage over its target (``benchmarks/images/basemesh_*.png``). Every case runs in its own
 process with a timeout. Per case: the stage reached, base faces against the budget, quads,
 extraordinary vertices, valence range, genus against the target's, inverted faces (limit
 normal more than 90 degrees from the target's, :mod:`core.quadmesh.orientation`), crossing
-triangle pairs of the level-2 limit surface, and the labeling and base-mesh seconds. With
-``--solid`` the whole pipeline then writes a STEP file, judged by the independent
-``../shared/tools/evaluate.py``.
+triangle pairs of the level-2 limit surface, and the labeling and base-mesh seconds. For the
+meshes named after ``--solid`` the whole pipeline then writes a STEP file, judged by the
+independent ``../shared/tools/evaluate.py``.
 """
 import argparse
 import json
@@ -178,12 +178,13 @@ def main(argv):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--meshes", default=DEFAULT_MESHES)
     parser.add_argument("--only", nargs="*")
-    parser.add_argument("--solid", action="store_true")
+    parser.add_argument("--solid", nargs="*", default=[],
+                        help="meshes whose whole pipeline to STEP is run and evaluated")
     parser.add_argument("--timeout", type=float, default=600.0)
     parser.add_argument("--case", nargs=4, metavar=("PATH", "MODE", "JSON", "PNG"))
     args = parser.parse_args(argv)
     if args.case:
-        run_case(*args.case, solid=args.solid)
+        run_case(*args.case, solid=bool(args.solid))
         return 0
     names = sorted(f for f in os.listdir(args.meshes) if f.endswith((".stl", ".obj")))
     if args.only:
@@ -202,8 +203,8 @@ def main(argv):
                 image = os.path.join(HERE, "images", f"basemesh_{stem}_{mode}.png")
                 command = [sys.executable, os.path.abspath(__file__), "--case",
                            os.path.join(args.meshes, name), mode, out, image]
-                if args.solid:
-                    command.append("--solid")
+                if stem in args.solid:
+                    command += ["--solid", stem]
                 try:
                     done = subprocess.run(command, capture_output=True, text=True,
                                           timeout=args.timeout, cwd=REPO)
