@@ -26,6 +26,7 @@ touch an opposite label (from the nearest-direction start) are pushed to a perpe
 import numpy as np
 
 from core.errors import InvalidMeshError, ParameterError
+from core.geometry import face_cross
 from core.segmentation.charts import OPPOSITE, build_topology
 
 LAMBDA = 0.5
@@ -39,7 +40,7 @@ def face_normals(V, F):
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
-    cr = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    cr = face_cross(V, F)
     norm = np.linalg.norm(cr, axis=1)
     diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))) if len(V) else 0.0
     bad = np.flatnonzero(~(norm > 1e-12 * diag * diag))
