@@ -43,11 +43,12 @@ import scipy.sparse as sp
 from core.export.brep_topology import BRepTopology, EdgeCurve
 from core.export.patch_mesh import build_patch_mesh
 from core.geometry import triangle_mesh_volume  # noqa: F401  (public here since before the kernel)
+from core.params import EXPORT_DEPTH
 from core.subdivision.catmull_clark import mesh_topology
 from core.subdivision.limit import LimitEvaluator, corner_frame, limit_matrices
 from core.types import BSplinePatch, PatchSet
 
-DEFAULT_DEPTH = 8
+DEFAULT_DEPTH = EXPORT_DEPTH
 BEZIER = 0
 GRADED = 1
 

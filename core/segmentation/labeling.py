@@ -27,10 +27,12 @@ import numpy as np
 
 from core.errors import InvalidMeshError, ParameterError
 from core.geometry import face_cross
+from core.params import ReconstructionParams
 from core.segmentation.charts import OPPOSITE, build_topology
 
-LAMBDA = 0.5
-PENALTY = 1e5
+LAMBDA = ReconstructionParams.lam
+PENALTY = ReconstructionParams.penalty
+MAX_SWEEPS = ReconstructionParams.max_sweeps
 
 
 def face_normals(V, F):
@@ -159,8 +161,8 @@ def interface_penalty(face_frame, face_interface_axis):
     return pen
 
 
-def hbecvt_sweeps(unary, neighbours, labels, colour, lam=LAMBDA, penalty=PENALTY, max_sweeps=200,
-                  active=None):
+def hbecvt_sweeps(unary, neighbours, labels, colour, lam=LAMBDA, penalty=PENALTY,
+                  max_sweeps=MAX_SWEEPS, active=None):
     """Minimise Eq. 3 face by face with coloured sweeps (in place on a copy).
 
     Parameters
@@ -207,7 +209,7 @@ def hbecvt_sweeps(unary, neighbours, labels, colour, lam=LAMBDA, penalty=PENALTY
 
 
 def hbecvt_labeling(V, F, face_part, face_frame, face_interface_axis=None, lam=LAMBDA,
-                    penalty=PENALTY, max_sweeps=200, topology=None):
+                    penalty=PENALTY, max_sweeps=MAX_SWEEPS, topology=None):
     """HBECVT labels of every face (Eqs. 2-3; see the module docstring).
 
     Parameters
