@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Small geometric helpers shared by several stages."""
+"""Triangle-mesh geometry shared by every stage: face cross products and areas, volumes,
+and the radius classes of k-d tree searches (topology tables are in ``core.mesh_topology``)."""
 import numpy as np
 
 
@@ -25,3 +26,41 @@ def radius_classes(radius, max_classes=12):
     level = np.floor(-np.log2(np.maximum(radius, np.finfo(float).tiny) / r_max))
     level = np.minimum(level, max_classes - 1).astype(np.int64)
     return [np.flatnonzero(level == value) for value in np.unique(level)]
+
+
+def face_cross(vertices, faces):
+    """(m, 3) float64 ``(b - a) x (c - a)`` of each triangle: its normal times twice its area.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64; faces : (m, 3) int64 (counter-clockwise seen from outside).
+    """
+    tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
+    return np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+
+
+def face_areas(vertices, faces):
+    """(m,) float64 triangle areas (model units squared)."""
+    return 0.5 * np.linalg.norm(face_cross(vertices, faces), axis=1)
+
+
+def triangle_signed_volumes(vertices, faces):
+    """(m,) float64 signed volume of the tetrahedron (origin, a, b, c) of each triangle.
+
+    Their sum over a closed, outward-oriented mesh is its enclosed volume (divergence
+    theorem); summed per component they give each component's volume.
+    """
+    tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
+    return np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0
+
+
+def triangle_mesh_volume(vertices, faces):
+    """Enclosed volume of a closed, outward-oriented triangle mesh (float).
+
+    The tetrahedra are taken from the vertex centroid, which keeps the sum accurate far
+    from the origin.
+    """
+    V = np.asarray(vertices, dtype=np.float64)
+    V = V - V.mean(axis=0)
+    a, b, c = V[faces[:, 0]], V[faces[:, 1]], V[faces[:, 2]]
+    return float(np.sum(a * np.cross(b, c))) / 6.0

@@ -97,3 +97,28 @@ def connected_face_components(faces):
 
     _, labels = connected_components(face_adjacency_matrix(faces), directed=False)
     return labels.astype(np.int64)
+
+
+def next_corners(face_offsets):
+    """(k,) int64 next corner in the same face of every corner of a polygon mesh.
+
+    Parameters
+    ----------
+    face_offsets : (m + 1,) int64 CSR offsets of the faces into the corner array.
+    """
+    fo = np.asarray(face_offsets, dtype=np.int64)
+    following = np.arange(int(fo[-1]), dtype=np.int64) + 1
+    following[fo[1:] - 1] = fo[:-1]
+    return following
+
+
+def euler_characteristic(n_vertices, faces):
+    """``V - E + F`` of a triangle mesh with ``n_vertices`` vertices (int)."""
+    edges, _ = unique_edges(faces)
+    return n_vertices - len(edges) + len(faces)
+
+
+def genus_of(n_vertices, faces, n_components):
+    """Total genus of a closed manifold mesh from the Euler characteristic."""
+    chi = euler_characteristic(n_vertices, faces)
+    return int(round((2 * n_components - chi) / 2))

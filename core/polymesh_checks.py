@@ -9,6 +9,7 @@ from scipy.sparse.csgraph import connected_components
 import scipy.sparse as sp
 
 from core.errors import InvalidMeshError
+from core.mesh_topology import next_corners
 
 AREA_TOLERANCE = 1e-14
 """Faces with area below this times the squared bounding-box diagonal are degenerate."""
@@ -75,8 +76,7 @@ def check_polymesh(mesh):
     if dup.any():
         faces_dup = np.unique(face[dup])
         _fail("has faces that repeat a corner vertex", "degenerate_faces", faces_dup, faces_dup)
-    nxt = np.arange(len(fv)) + 1
-    nxt[fo[1:] - 1] = fo[:-1]
+    nxt = next_corners(fo)
     newell = np.zeros((m, 3))
     np.add.at(newell, face, np.cross(V[fv], V[fv[nxt]]))
     area = 0.5 * np.linalg.norm(newell, axis=1)

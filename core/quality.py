@@ -17,6 +17,7 @@ import importlib
 import numpy as np
 
 from core.errors import InvalidMeshError, ParameterError
+from core.geometry import face_areas
 
 INSTALL_HINT = (
     "the {name} package is needed for the mesh quality checks; install it into the Python "
@@ -240,7 +241,7 @@ def sample_surface(V, F, count, rng):
     (count, 3) float64
     """
     tri = V[F]
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    area = face_areas(V, F)
     total = area.sum()
     if not total > 0:
         raise InvalidMeshError("mesh has zero surface area", "degenerate_faces", len(F))

@@ -11,7 +11,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from core.errors import InvalidMeshError, ParameterError
-from core.mesh_topology import directed_edges, unique_edges
+from core.geometry import face_areas, triangle_signed_volumes
+from core.mesh_topology import directed_edges, genus_of, unique_edges
 from core.self_intersection import find_self_intersections
 from core.types import TriMesh
 
@@ -83,7 +84,7 @@ def check_degenerate_faces(vertices, faces, name="mesh"):
     """Raise ``degenerate_faces`` for faces with a repeated vertex or (near) zero area."""
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
     tri = vertices[faces]
-    double_area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    double_area = 2.0 * face_areas(vertices, faces)
     diag = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
     bad = repeated | (double_area <= 1e-14 * diag * diag)
     if bad.any():
@@ -190,7 +191,7 @@ def orient_consistently(vertices, faces, name="mesh"):
                 reason="orientation", count=int(same_direction.sum()))
     faces = np.where(flip[:, None].astype(bool), faces[:, ::-1], faces)
     _, component = connected_components(_face_graph(m, f1, f2), directed=False)
-    volume = np.bincount(component, weights=_signed_volumes(vertices, faces))
+    volume = np.bincount(component, weights=triangle_signed_volumes(vertices, faces))
     inward = volume[component] < 0
     faces = np.where(inward[:, None], faces[:, ::-1], faces)
     return faces, int(np.count_nonzero(flip.astype(bool) ^ inward))
@@ -227,18 +228,6 @@ def _solve_flip_parity(m, f1, f2, same_direction):
         parent = grand
 
 
-def _signed_volumes(vertices, faces):
-    tri = vertices[faces]
-    return np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6.0
-
-
-def genus_of(n_vertices, faces, n_components):
-    """Total genus of a closed manifold mesh from the Euler characteristic."""
-    edges, _ = unique_edges(faces)
-    chi = n_vertices - len(edges) + len(faces)
-    return int(round((2 * n_components - chi) / 2))
-
-
 def select_components(vertices, faces, policy, name="mesh"):
     """Apply the multiple-components policy.
 
@@ -252,7 +241,7 @@ def select_components(vertices, faces, policy, name="mesh"):
     n = int(component.max()) + 1
     if n == 1 or policy == "all":
         return vertices, faces, n, []
-    volume = np.abs(np.bincount(component, weights=_signed_volumes(vertices, faces)))
+    volume = np.abs(np.bincount(component, weights=triangle_signed_volumes(vertices, faces)))
     largest = int(np.argmax(volume))
     if policy == "error":
         others = [c for c in range(n) if c != largest]
@@ -330,7 +319,7 @@ def validate_target(vertices, faces, components="largest", check_self_intersecti
         "genus": genus_of(len(vertices), faces, kept_components),
         "components": int(n_components),
         "bbox_diagonal": float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))),
-        "volume": float(_signed_volumes(vertices, faces).sum()),
+        "volume": float(triangle_signed_volumes(vertices, faces).sum()),
         "merged_vertices": int(merged),
         "reoriented_faces": int(flipped),
         "warnings": warnings,

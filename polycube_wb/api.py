@@ -12,15 +12,13 @@ import numpy as np
 
 from core.errors import StageNotAvailableError
 from core.output_files import check_output_path, write_json_atomic
+from core.params import EXPORT_DEPTH, MAX_EXPORT_DEPTH
 from core.pipeline import (LAST_CORE_STAGE, STOP_AFTER_CHOICES, peak_memory_mb,
                            reconstruct as run_pipeline)
 from core.progress import NO_PROGRESS
 
-DEFAULT_EXPORT_DEPTH = 8
-"""Grading depth of B-spline patches at extraordinary vertices (see core.export.bspline)."""
-MAX_EXPORT_DEPTH = 12
-"""Deeper grading adds (2 depth + 3)^2 poles per patch at an extraordinary vertex for no
-visible gain (the error is already ~1e-6 of the diagonal at depth 8)."""
+DEFAULT_EXPORT_DEPTH = EXPORT_DEPTH
+"""Grading depth of B-spline patches at extraordinary vertices (``core.params.EXPORT_DEPTH``)."""
 
 
 def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_path=None,

@@ -11,8 +11,8 @@ import sys
 import traceback
 
 from core.errors import PolycubeInputError
-from core.params import (COMPONENT_POLICIES, FIT_MODES, PART_MODES, UNIT_TO_MM,
-                         ReconstructionParams)
+from core.params import (COMPONENT_POLICIES, EXPORT_DEPTH, FIT_MODES, MAX_EXPORT_DEPTH,
+                         PART_MODES, UNIT_TO_MM, ReconstructionParams)
 from core.pipeline import STOP_AFTER_CHOICES
 
 EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT = 0, 1, 2
@@ -59,10 +59,14 @@ def build_parser():
                      help="HBECVT neighbour weight lambda (paper: 0.5)")
     rec.add_argument("--penalty", type=float, default=defaults.penalty,
                      help="HBECVT penalty p (paper: 1e5)")
+    rec.add_argument("--max-sweeps", type=int, default=defaults.max_sweeps,
+                     help=f"most HBECVT sweeps (default {defaults.max_sweeps})")
     rec.add_argument("--target-faces", type=int, default=defaults.target_faces,
                      help="approximate number of base-mesh faces (default 300)")
     rec.add_argument("--max-base-faces", type=int, default=defaults.max_base_faces,
                      help="stop when the base mesh has more faces than this (default 2500)")
+    rec.add_argument("--subdivision-levels", type=int, default=defaults.subdivision_levels,
+                     help=f"Catmull-Clark levels of the fit (paper: {defaults.subdivision_levels})")
     rec.add_argument("--fit-iterations", type=int, default=defaults.fit_iterations,
                      help="most shape-optimisation iterations (paper: 100; the fit stops "
                           "earlier when converged)")
@@ -84,8 +88,9 @@ def build_parser():
     sub.add_argument("base_mesh", help="closed polygon mesh, OBJ")
     sub.add_argument("-o", "--output", required=True, help="STEP file to write")
     sub.add_argument("--report", help="write the JSON report here")
-    sub.add_argument("--depth", type=int, default=8,
-                     help="patch grading depth at extraordinary vertices (default 8)")
+    sub.add_argument("--depth", type=int, default=EXPORT_DEPTH,
+                     help=f"patch grading depth at extraordinary vertices, 1..{MAX_EXPORT_DEPTH} "
+                          f"(default {EXPORT_DEPTH})")
     sub.add_argument("--no-measure", action="store_true",
                      help="skip measuring approximation error and continuity (faster)")
     sub.add_argument("--debug", action="store_true", help="print tracebacks")
@@ -127,6 +132,7 @@ def _reconstruct(args):
     params = dict(units=args.units, components=args.components, parts=parts,
                   parts_file=args.parts_file or "",
                   blend_factor=args.blend_factor, lam=args.lam, penalty=args.penalty,
+                  max_sweeps=args.max_sweeps, subdivision_levels=args.subdivision_levels,
                   repair=not args.no_repair, target_faces=args.target_faces,
                   fit_iterations=args.fit_iterations, fit_mode=args.fit_mode,
                   **_tolerance(args.tolerance),

@@ -19,6 +19,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from core.errors import ExportError
+from core.mesh_topology import next_corners
 
 SIDE_NAMES = ("v=min", "u=max", "v=max", "u=min")
 """Patch sides in loop order (counter-clockwise in ``(u, v)``): side ``k`` runs from
@@ -194,8 +195,7 @@ def check_topology(topology, patches, tolerance, samples=5):
     loop_start = np.where(t.use_reversed, ends[:, 1], ends[:, 0])
     loop_end = np.where(t.use_reversed, ends[:, 0], ends[:, 1])
     offsets = t.loop_offsets()
-    nxt = np.arange(len(t.use_edge)) + 1
-    nxt[offsets[1:] - 1] = offsets[:-1]
+    nxt = next_corners(offsets)
     open_use = np.flatnonzero(loop_end != loop_start[nxt])
     if len(open_use):
         u = int(open_use[0])

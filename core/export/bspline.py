@@ -42,11 +42,13 @@ import scipy.sparse as sp
 
 from core.export.brep_topology import BRepTopology, EdgeCurve
 from core.export.patch_mesh import build_patch_mesh
+from core.geometry import triangle_mesh_volume  # noqa: F401  (public here since before the kernel)
+from core.params import EXPORT_DEPTH
 from core.subdivision.catmull_clark import mesh_topology
 from core.subdivision.limit import LimitEvaluator, corner_frame, limit_matrices
 from core.types import BSplinePatch, PatchSet
 
-DEFAULT_DEPTH = 8
+DEFAULT_DEPTH = EXPORT_DEPTH
 BEZIER = 0
 GRADED = 1
 
@@ -776,11 +778,3 @@ def enclosed_volume(patches, chunk=64):
                               evaluate_patch_grid(sel, su, sv, 0, 1))
             total += float(np.einsum("i,nijk,nijk,j->", wu, S, normal, wv))
     return total / 3.0
-
-
-def triangle_mesh_volume(vertices, faces):
-    """Enclosed volume of a closed, outward-oriented triangle mesh (divergence theorem)."""
-    V = np.asarray(vertices, dtype=np.float64)
-    V = V - V.mean(axis=0)
-    a, b, c = V[faces[:, 0]], V[faces[:, 1]], V[faces[:, 2]]
-    return float(np.sum(a * np.cross(b, c))) / 6.0

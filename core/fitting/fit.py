@@ -17,6 +17,8 @@ from core.errors import InvalidMeshError, ParameterError
 from core.fitting.best_fit import BestFitResult, best_fit
 from core.fitting.responses import thickness, triangulate, volume
 from core.fitting.rgp import FitProblem, run_rgp
+from core.geometry import face_areas
+from core.mesh_topology import next_corners
 from core.progress import NO_PROGRESS
 from core.quality import containment
 from core.subdivision.catmull_clark import build_hierarchy
@@ -226,16 +228,14 @@ def _check_base(base):
 
 def _mean_edge_length(mesh):
     fv, fo = mesh.face_vertices, mesh.face_offsets
-    nxt = np.arange(len(fv)) + 1
-    nxt[fo[1:] - 1] = fo[:-1]
+    nxt = next_corners(fo)
     pairs = np.unique(np.sort(np.stack([fv, fv[nxt]], axis=1), axis=1), axis=0)
     V = mesh.vertices
     return float(np.linalg.norm(V[pairs[:, 0]] - V[pairs[:, 1]], axis=1).mean())
 
 
 def _area(X, T):
-    a, b, c = X[T[:, 0]], X[T[:, 1]], X[T[:, 2]]
-    return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+    return float(face_areas(X, T).sum())
 
 
 def _default_t_min(X, T, edge):

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core.geometry import face_cross
 from core.target_surface import TargetSurface
 
 
@@ -111,8 +112,7 @@ def packaging(X, target, mode="inside"):
 
 def vertex_normals(X, T):
     """(n, 3) float64 unit area-weighted vertex normals (the volume gradient's direction)."""
-    a, b, c = X[T[:, 0]], X[T[:, 1]], X[T[:, 2]]
-    face_normal = np.cross(b - a, c - a)
+    face_normal = face_cross(X, T)
     summed = scatter_add(T.T.reshape(-1), np.tile(face_normal, (3, 1)), len(X))
     length = np.linalg.norm(summed, axis=1, keepdims=True)
     return np.divide(summed, length, out=np.zeros_like(summed), where=length > 0)

@@ -28,6 +28,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
 from core.errors import ParameterError
+from core.geometry import face_cross
 from core.mesh_topology import edge_faces, unique_edges
 
 DEFAULT_DEGENERATE_TOL = 0.1
@@ -118,7 +119,7 @@ class SurfaceMoments:
 def face_geometry(vertices, faces):
     """Per-face area (m,), unit normal (m, 3) and second moment (m, 3, 3) about the origin."""
     tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
-    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    cross = face_cross(vertices, faces)
     dbl = np.linalg.norm(cross, axis=1)
     area = 0.5 * dbl
     normal = cross / np.where(dbl > 0, dbl, 1.0)[:, None]

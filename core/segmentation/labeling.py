@@ -26,10 +26,13 @@ touch an opposite label (from the nearest-direction start) are pushed to a perpe
 import numpy as np
 
 from core.errors import InvalidMeshError, ParameterError
+from core.geometry import face_cross
+from core.params import ReconstructionParams
 from core.segmentation.charts import OPPOSITE, build_topology
 
-LAMBDA = 0.5
-PENALTY = 1e5
+LAMBDA = ReconstructionParams.lam
+PENALTY = ReconstructionParams.penalty
+MAX_SWEEPS = ReconstructionParams.max_sweeps
 
 
 def face_normals(V, F):
@@ -39,7 +42,7 @@ def face_normals(V, F):
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
-    cr = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    cr = face_cross(V, F)
     norm = np.linalg.norm(cr, axis=1)
     diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))) if len(V) else 0.0
     bad = np.flatnonzero(~(norm > 1e-12 * diag * diag))
@@ -158,8 +161,8 @@ def interface_penalty(face_frame, face_interface_axis):
     return pen
 
 
-def hbecvt_sweeps(unary, neighbours, labels, colour, lam=LAMBDA, penalty=PENALTY, max_sweeps=200,
-                  active=None):
+def hbecvt_sweeps(unary, neighbours, labels, colour, lam=LAMBDA, penalty=PENALTY,
+                  max_sweeps=MAX_SWEEPS, active=None):
     """Minimise Eq. 3 face by face with coloured sweeps (in place on a copy).
 
     Parameters
@@ -206,7 +209,7 @@ def hbecvt_sweeps(unary, neighbours, labels, colour, lam=LAMBDA, penalty=PENALTY
 
 
 def hbecvt_labeling(V, F, face_part, face_frame, face_interface_axis=None, lam=LAMBDA,
-                    penalty=PENALTY, max_sweeps=200, topology=None):
+                    penalty=PENALTY, max_sweeps=MAX_SWEEPS, topology=None):
     """HBECVT labels of every face (Eqs. 2-3; see the module docstring).
 
     Parameters

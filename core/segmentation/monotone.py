@@ -22,6 +22,7 @@ which this pass does not insert.
 """
 import numpy as np
 
+from core.geometry import face_areas
 from core.segmentation.charts import boundary_chains, build_topology
 from core.segmentation.labeling import face_normals, label_cost
 from core.segmentation.validity import check_validity, edge_interface_axes
@@ -127,8 +128,7 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
     if edge_interface_axis is None:
         edge_interface_axis = edge_interface_axes(V, topology, face_part)
     cost = label_cost(face_normals(V, F), face_frame)
-    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]),
-                                axis=1)
+    area = face_areas(V, F)
     weight = area / area.sum()
     rows = np.arange(len(F))
 

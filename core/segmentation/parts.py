@@ -20,6 +20,7 @@ from scipy.sparse.linalg import splu
 from scipy.spatial import cKDTree
 
 from core.errors import ParameterError
+from core.geometry import face_areas, face_cross
 from core.mesh_topology import edge_faces, unique_edges
 from core.segmentation.frames import (cubic_energy, frame_from_moments, group_moments,
                                       mean_edge_length)
@@ -541,7 +542,7 @@ def planar_cuts(vertices, faces, skel, nearest, face_part, straight_angle=STRAIG
     face_part = np.asarray(face_part, dtype=np.int64).copy()
     centroid = vertices[faces].mean(axis=1)
     point_part = skeleton_point_parts(skel, nearest, face_part)
-    area = np.bincount(face_part, weights=_face_areas(vertices, faces))
+    area = np.bincount(face_part, weights=face_areas(vertices, faces))
     cos_straight = np.cos(np.radians(straight_angle))
     pts, rad, pitch = skel.points, skel.radius, skel.pitch
     for a, b, ends_a, ends_b in _cut_groups(skel, point_part):
@@ -612,7 +613,7 @@ def smooth_boundaries(vertices, faces, face_part, width, max_iter=8):
     gap = np.maximum(np.linalg.norm(centroid[f0] - centroid[f1], axis=1), 1e-12)
     w = length / gap
     m = len(faces)
-    area = _face_areas(vertices, faces)
+    area = face_areas(vertices, faces)
     lap = csr_matrix((np.concatenate([w, w]), (np.concatenate([f0, f1]),
                                                np.concatenate([f1, f0]))), shape=(m, m))
     lap = diags(np.asarray(lap.sum(axis=1)).ravel()) - lap
@@ -675,8 +676,7 @@ def absorb_patches(vertices, faces, face_part, max_normal=PATCH_NORMAL):
     Patches are taken one at a time, most one-sided first. Returns (m,) int64.
     """
     label = np.asarray(face_part, dtype=np.int64).copy()
-    tri = vertices[faces]
-    vec = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    vec = 0.5 * face_cross(vertices, faces)
     area = np.linalg.norm(vec, axis=1)
     while True:
         parts = np.unique(label)
@@ -718,11 +718,6 @@ def close_interfaces(vertices, faces, face_part):
         key = {tuple(p): w for p, w in zip(pairs.tolist(), lengths)}
         a, b = max(open_pairs, key=lambda pr: (key[pr], -pr[0], -pr[1]))
         label[label == b] = a
-
-
-def _face_areas(vertices, faces):
-    tri = vertices[faces]
-    return 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
 
 
 def skeleton_segmentation(mesh, resolution=160, voxels_across=4.0, max_voxels=3_000_000,

@@ -44,6 +44,7 @@ Per-chart trials are capped (``max_trials``) and so are consecutive sideways mov
 import numpy as np
 
 from core.errors import ParameterError
+from core.geometry import face_areas
 from core.segmentation.charts import OPPOSITE, build_topology
 from core.segmentation.labeling import (LAMBDA, PENALTY, check_frames, face_colouring,
                                         face_normals, hbecvt_sweeps, interface_penalty,
@@ -415,7 +416,7 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
         max_trials = max(200, 2000000 // max(m, 1))
     V = np.asarray(V, dtype=np.float64)
     normals = face_normals(V, F)
-    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    area = face_areas(V, F)
     cost = label_cost(normals, face_frame)
     if face_interface_axis is None and face_part.max(initial=0) > 0:
         face_interface_axis = _interface_axis_from_loops(V, F, topology, face_part)

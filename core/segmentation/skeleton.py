@@ -15,6 +15,7 @@ from scipy import ndimage
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from core.errors import ParameterError
+from core.geometry import face_cross
 
 PAD = 2
 # fractional grid offsets (in voxels) that keep column centres off mesh vertices/edges
@@ -45,7 +46,7 @@ def choose_pitch(vertices, faces, resolution=160, voxels_across=4.0, max_voxels=
     """
     v = np.asarray(vertices, dtype=np.float64)
     tri = v[np.asarray(faces, dtype=np.int64)]
-    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    cross = face_cross(v, faces)
     area = 0.5 * np.linalg.norm(cross, axis=1).sum()
     volume = abs(np.einsum("fi,fi->", tri[:, 0], cross)) / 6.0
     extent = v.max(axis=0) - v.min(axis=0)

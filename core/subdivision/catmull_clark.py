@@ -22,6 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from core.errors import InvalidMeshError
+from core.mesh_topology import next_corners
 from core.types import PolyMesh
 
 
@@ -79,8 +80,7 @@ def mesh_topology(face_vertices, face_offsets, n_vertices):
     sizes = np.diff(fo)
     face_of_corner = np.repeat(np.arange(len(sizes), dtype=np.int64), sizes)
     idx = np.arange(k, dtype=np.int64)
-    next_corner = idx + 1
-    next_corner[fo[1:] - 1] = fo[:-1]
+    next_corner = next_corners(fo)
     prev_corner = idx - 1
     prev_corner[fo[:-1]] = fo[1:] - 1
     a = fv

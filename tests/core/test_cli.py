@@ -109,9 +109,33 @@ def test_wrong_format_and_missing_file(tmp_path):
 @pytest.mark.parametrize("option, value, words", [
     ("--lam", "-1", ["lam"]), ("--blend-factor", "nan", ["blend_factor"]),
     ("--penalty", "1e30", ["penalty"]), ("--units", "furlong", ["invalid choice"]),
+    ("--max-sweeps", "0", ["max_sweeps"]), ("--subdivision-levels", "9", ["subdivision_levels"]),
 ])
 def test_absurd_parameters_exit_2(option, value, words):
     assert_rejected(run("reconstruct", SAMPLE, "--stop-after", "intake", option, value), *words)
+
+
+def test_option_defaults_are_the_parameter_defaults():
+    """Every reconstruct option named after a parameter defaults to core.params' value
+    (``--parts-file`` and ``--tolerance`` are parsed from text into their parameters)."""
+    from core.params import EXPORT_DEPTH, ReconstructionParams
+    from polycube_wb.cli import build_parser
+
+    parser = build_parser()
+    parsed = vars(parser.parse_args(["reconstruct", "target.stl"]))
+    shared = {name: value for name, value in ReconstructionParams().to_dict().items()
+              if name in parsed and name not in ("parts_file", "tolerance")}
+    assert {"lam", "penalty", "max_sweeps", "subdivision_levels", "fit_iterations"} <= set(shared)
+    assert {name: parsed[name] for name in shared} == shared
+    assert parser.parse_args(["subd-to-step", "cage.obj", "-o", "x.step"]).depth == EXPORT_DEPTH
+
+
+def test_max_sweeps_and_subdivision_levels_reach_the_run(tmp_path):
+    result = run("reconstruct", SAMPLE, "--stop-after", "labeling", "--max-sweeps", "3",
+                 "--subdivision-levels", "1", "--report", tmp_path / "r.json")
+    assert result.returncode == 0, result.stderr
+    parameters = json.loads((tmp_path / "r.json").read_text())["parameters"]
+    assert (parameters["max_sweeps"], parameters["subdivision_levels"]) == (3, 1)
 
 
 def test_output_over_the_input_is_refused(tmp_path):

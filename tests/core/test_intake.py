@@ -10,6 +10,7 @@ import trimesh
 
 from core.errors import InvalidMeshError, ParameterError
 from core.mesh_io import read_triangle_soup
+from core.self_intersection import _candidate_pairs, find_self_intersections
 from core.validate import validate_target
 
 MESHES = os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data", "meshes")
@@ -129,11 +130,21 @@ def test_self_intersecting_pair_is_rejected():
 
 
 def test_two_touching_faces_are_not_self_intersections():
+    """Two boxes face to face (shared plane x = 0.5, no shared vertices) only touch;
+    pushed 1e-3 into each other, the same boxes intersect."""
     V1, F1 = box(center=(0, 0, 0))
-    V2, F2 = box(center=(1.0 + 1e-3, 0, 0))
-    mesh, summary = validate_target(np.vstack([V1, V2]), np.vstack([F1, F2 + len(V1)]),
-                                    components="all")
-    assert summary["components"] == 2 and summary["genus"] == 0
+    for shift, touching in ((0.0, True), (-1e-3, False)):
+        V2, F2 = box(center=(1.0 + shift, 0.5, 0.25))
+        V, F = np.vstack([V1, V2]), np.vstack([F1, F2 + len(V1)])
+        assert len(_candidate_pairs(V[F])) > 100, "the narrow phase sees the contact"
+        if touching:
+            assert len(find_self_intersections(V, F)) == 0
+            mesh, summary = validate_target(V, F, components="all")
+            assert summary["components"] == 2 and summary["genus"] == 0
+            assert summary["volume"] == pytest.approx(2.0, abs=1e-12)
+        else:
+            assert len(find_self_intersections(V, F)) > 0
+            assert reason_of(V, F, components="all").reason == "self_intersecting"
 
 
 def test_components_policy():

@@ -1,6 +1,8 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """PatchSet -> FreeCAD solid -> STEP, on hand-built closed patch sets."""
 import os
+import shutil
+import tempfile
 
 import numpy as np
 import pytest
@@ -136,17 +138,58 @@ def test_write_path_errors_are_clear(curved, tmp_path):
     assert os.listdir(tmp_path) == []
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root can write to read-only folders")
-def test_write_into_read_only_folder_is_refused(curved, tmp_path):
+UNPRIVILEGED_UID = 65534
+"""``nobody``: root passes every permission check, so as root the write is tried by a
+forked child running as this user."""
+
+
+def _write_step_refusal(solid, target):
+    """The ``StepPathError`` message of ``write_step(solid, target)``, or ``""`` when it
+    wrote the file; as root, in a forked child running as ``UNPRIVILEGED_UID``."""
+    def attempt():
+        try:
+            write_step(solid, target)
+        except StepPathError as error:
+            return str(error)
+        return ""
+
+    if os.geteuid() != 0:
+        return attempt()
+    read_end, write_end = os.pipe()
+    child = os.fork()
+    if child == 0:
+        code = 1
+        try:
+            os.close(read_end)
+            os.setgid(UNPRIVILEGED_UID)
+            os.setuid(UNPRIVILEGED_UID)
+            os.write(write_end, attempt().encode())
+            code = 0
+        finally:
+            os._exit(code)
+    os.close(write_end)
+    with os.fdopen(read_end, "rb") as pipe:
+        message = pipe.read().decode()
+    _, status = os.waitpid(child, 0)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0, "the child failed"
+    return message
+
+
+def test_write_into_read_only_folder_is_refused(curved):
     _, solid = curved
-    folder = tmp_path / "ro"
-    folder.mkdir()
-    folder.chmod(0o500)
+    folder = tempfile.mkdtemp(prefix="polycube_ro_")  # in /tmp: reachable by any user
     try:
-        with pytest.raises(StepPathError, match="not writable"):
-            write_step(solid, folder / "out.step")
+        if os.geteuid() == 0:
+            os.chown(folder, UNPRIVILEGED_UID, UNPRIVILEGED_UID)
+        os.chmod(folder, 0o500)
+        message = _write_step_refusal(solid, os.path.join(folder, "out.step"))
+        assert "not writable" in message, message
+        assert os.listdir(folder) == []
+        os.chmod(folder, 0o700)
+        assert _write_step_refusal(solid, os.path.join(folder, "out.step")) == ""
+        assert os.path.getsize(os.path.join(folder, "out.step")) > 1000
     finally:
-        folder.chmod(0o700)
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def test_read_step_errors(tmp_path):

@@ -251,30 +251,6 @@ def test_deviation_map_colours_and_figures(chain_doc):
                           axis=1)) > 0.0
 
 
-def test_deviation_of_plain_objects(tmp_path):
-    """The map also checks a plain solid against a plain mesh (api.reconstruct's objects)."""
-    from polycube_wb import api
-    from polycube_wb.brep import tessellate
-    from polycube_wb.document import add_solid, add_target_mesh
-    from core.types import TriMesh
-
-    cage = tmp_path / "torus.obj"
-    write_polymesh(cage, sample_cages.torus())
-    solid, _ = api.subd_to_solid(cage, measure=False)
-    doc = FreeCAD.newDocument("PolycubePlainCheck")
-    try:
-        solid_obj = add_solid(doc, solid, "Solid")
-        V, F = tessellate(solid, 1e-3 * solid.BoundBox.DiagonalLength)
-        target = add_target_mesh(doc, TriMesh(V, F), "Target")
-        deviation = api.make_deviation(doc, solid_obj, target)
-        assert api.recompute(doc).ok
-        # The target is a chordal tessellation of the solid: within 1e-3 of the diagonal.
-        assert deviation.MaxDeviationPercent < 0.1 + 1e-9
-        assert deviation.Watertight and deviation.UncoveredVolume < 0.1
-    finally:
-        FreeCAD.closeDocument(doc.Name)
-
-
 def test_moving_the_target_moves_the_labeling(tmp_path):
     from polycube_wb import api
 
@@ -369,28 +345,43 @@ def test_preferences_give_new_objects_their_defaults():
     assert default("fit_mode") == "inside"
 
 
-def test_solid_and_target_survive_save_and_reopen(tmp_path):
-    from core.mesh_io import read_triangle_soup
-    from core.validate import validate_target
-    from polycube_wb.api import subd_to_solid
+def test_plain_results_reopen_and_are_checked_and_exported(tmp_path):
+    """api.reconstruct's plain objects, saved and reopened, still work with our code: the
+    target's arrays come back (float32 in FreeCAD's mesh), the deviation map checks the
+    reopened solid against the reopened target, and the solid exports to STEP."""
+    from polycube_wb import api
+    from polycube_wb.brep import tessellate
+    from polycube_wb.convert import mesh_to_arrays
     from polycube_wb.document import add_solid, add_target_mesh
+    from polycube_wb.step_io import read_step
+    from core.types import TriMesh
 
     cage = tmp_path / "torus.obj"
     write_polymesh(cage, sample_cages.torus())
-    solid, _ = subd_to_solid(cage, measure=False)
-    target, _ = validate_target(*read_triangle_soup(SAMPLE))
-    doc = FreeCAD.newDocument("PolycubeSaveTest")
-    add_target_mesh(doc, target, "Target")
+    solid, _ = api.subd_to_solid(cage, measure=False)
+    diagonal = solid.BoundBox.DiagonalLength
+    V, F = tessellate(solid, 1e-3 * diagonal)
+    doc = FreeCAD.newDocument("PolycubePlainSave")
+    add_target_mesh(doc, TriMesh(V, F), "Target")
     add_solid(doc, solid, "Solid")
     path = str(tmp_path / "saved.FCStd")
     doc.saveAs(path)
     FreeCAD.closeDocument(doc.Name)
     reopened = FreeCAD.openDocument(path)
     try:
-        shape = reopened.getObject("Solid").Shape
-        assert shape.isValid() and len(shape.Faces) == 48
-        assert abs(shape.Volume - solid.Volume) <= 1e-9 * solid.Volume
-        assert reopened.getObject("Target").Mesh.CountFacets == len(target.faces)
+        target, solid_obj = reopened.getObject("Target"), reopened.getObject("Solid")
+        V2, F2 = mesh_to_arrays(target.Mesh)
+        assert np.array_equal(F2, F)
+        assert np.abs(V2 - V).max() <= 1e-6 * diagonal, "float32 rounding only"
+        deviation = api.make_deviation(reopened, solid_obj, target)
+        assert api.recompute(reopened).ok
+        # The target is a chordal tessellation of the solid: within 1e-3 of the diagonal.
+        assert 0 < deviation.MaxDeviationPercent < 0.1 + 1e-9
+        assert deviation.Watertight and deviation.UncoveredVolume < 0.1
+        step = api.export_step(solid_obj, str(tmp_path / "reopened.step"))
+        read = read_step(step)
+        assert len(read.Solids) == 1 and len(read.Faces) == 48
+        assert abs(read.Volume - solid.Volume) <= 1e-6 * solid.Volume
     finally:
         FreeCAD.closeDocument(reopened.Name)
 

@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """The workbench in FreeCAD's own Python: ``freecadcmd`` subprocesses and the .venv.
 
+- FreeCAD runs with the temporary user folder of ``tests/conftest.py``;
 - the runtime packages (trimesh, manifold3d) import inside ``freecadcmd``;
 - a FreeCADCmd script turns a SubD cage into a STEP solid through ``polycube_wb.api``;
 - the parametric stage objects recompute, save and reopen in ``freecadcmd``;
@@ -60,6 +61,31 @@ def _script(body):
         """) + textwrap.dedent(body) + textwrap.dedent(f"""\
         print({RESULT_TAG!r} + json.dumps(result))
         """)
+
+
+@needs_freecadcmd
+def test_freecad_uses_the_temporary_user_folder(tmp_path):
+    """tests/conftest.py gives FreeCAD a temporary user folder, here and in freecadcmd: no
+    workbench from the user's ``Mod`` folder loads, the runtime packages still import."""
+    import FreeCAD
+
+    home = os.path.realpath(os.environ["FREECAD_USER_HOME"])
+    assert os.path.realpath(FreeCAD.getUserAppDataDir()) == home
+    assert not home.startswith(os.path.realpath(os.path.expanduser("~")) + os.sep)
+    result = _freecadcmd(_script("""
+        import os
+        import FreeCAD, trimesh
+        result = {"data": os.path.realpath(FreeCAD.getUserAppDataDir()),
+                  "config": os.path.realpath(FreeCAD.ConfigGet("UserConfigPath")),
+                  "trimesh": os.path.realpath(trimesh.__file__),
+                  "user_mods": [p for p in sys.path if os.path.realpath(p).startswith((
+                      os.path.expanduser("~/.local/share/FreeCAD/Mod"),
+                      os.path.join(FreeCAD.getUserAppDataDir(), "Mod")))]}
+    """), tmp_path)
+    assert result["data"] == result["config"] == home
+    assert result["user_mods"] == []
+    packages = os.path.realpath(os.path.join(home, "AdditionalPythonPackages"))
+    assert result["trimesh"].startswith(packages + os.sep)
 
 
 @needs_freecadcmd

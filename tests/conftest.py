@@ -1,0 +1,54 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Every test run gets a FreeCAD of its own: a temporary user-data folder.
+
+FreeCAD 0.20.2 takes its user data and settings folder (``user.cfg``, ``Mod``,
+``AdditionalPythonPackages``, macros) from ``$FREECAD_USER_HOME`` when it is set, for
+``import FreeCAD`` in this process and for the ``freecadcmd`` and ``freecad``
+subprocesses, which inherit the environment. A workbench the user installed in their
+own ``Mod`` folder (another copy of this one, say) is therefore not loaded, and the
+preferences the tests set never touch the user's. The runtime packages that
+``scripts/setup.sh`` installs into the user's ``AdditionalPythonPackages`` stay
+visible through a link of that name in the temporary folder.
+"""
+import os
+import shutil
+import sys
+import tempfile
+
+USER_HOME_VARIABLE = "FREECAD_USER_HOME"
+PACKAGES_FOLDER = "AdditionalPythonPackages"
+
+
+def runtime_packages_folder():
+    """The user's ``AdditionalPythonPackages`` folder on ``sys.path`` (the ``.venv``'s
+    ``.pth`` file puts it there), or None."""
+    for entry in sys.path:
+        if os.path.basename(os.path.normpath(entry)) == PACKAGES_FOLDER and os.path.isdir(entry):
+            return os.path.realpath(entry)
+    return None
+
+
+def _make_user_home():
+    """Create the temporary user folder, link the runtime packages into it, point
+    ``$FREECAD_USER_HOME`` at it; returns (folder, the variable's previous value)."""
+    home = tempfile.mkdtemp(prefix="polycube_freecad_home_")
+    packages = runtime_packages_folder()
+    if packages is not None:
+        os.symlink(packages, os.path.join(home, PACKAGES_FOLDER))
+    previous = os.environ.get(USER_HOME_VARIABLE)
+    os.environ[USER_HOME_VARIABLE] = home
+    return home, previous
+
+
+# At import, not in pytest_configure: pytest imports tests/freecad/conftest.py (which
+# imports FreeCAD) before calling any hook, and always after this parent conftest.
+_USER_HOME = _make_user_home()
+
+
+def pytest_unconfigure(config):
+    home, previous = _USER_HOME
+    if previous is None:
+        os.environ.pop(USER_HOME_VARIABLE, None)
+    else:
+        os.environ[USER_HOME_VARIABLE] = previous
+    shutil.rmtree(home, ignore_errors=True)

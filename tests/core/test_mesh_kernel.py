@@ -1,0 +1,36 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""The mesh kernel (``core.geometry``, ``core.mesh_topology``) on meshes with known answers."""
+import numpy as np
+import pytest
+import trimesh
+
+from core.geometry import face_areas, face_cross, triangle_mesh_volume, triangle_signed_volumes
+from core.mesh_topology import euler_characteristic, genus_of, next_corners
+
+
+def test_box_areas_normals_and_volumes_far_from_the_origin():
+    box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    V, F = np.asarray(box.vertices) + 1e6, np.asarray(box.faces)
+    assert face_areas(V, F).sum() == pytest.approx(2 * (2 + 3 + 6), rel=1e-9)
+    unit = face_cross(V, F) / (2 * face_areas(V, F))[:, None]
+    assert np.allclose(unit, box.face_normals, atol=1e-9), "outward normals"
+    assert triangle_mesh_volume(V, F) == pytest.approx(6.0, rel=1e-12)
+    assert triangle_signed_volumes(V, F).sum() == pytest.approx(6.0, rel=1e-6)
+    assert triangle_mesh_volume(V, F[:, ::-1]) == pytest.approx(-6.0, rel=1e-12)
+
+
+@pytest.mark.parametrize("mesh, components, genus", [
+    (trimesh.creation.icosphere(2), 1, 0),
+    (trimesh.creation.torus(2.0, 0.5), 1, 1),
+])
+def test_euler_characteristic_and_genus(mesh, components, genus):
+    F = np.asarray(mesh.faces)
+    assert euler_characteristic(len(mesh.vertices), F) == 2 - 2 * genus
+    assert genus_of(len(mesh.vertices), F, components) == genus
+
+
+def test_next_corners_cycle_within_each_face():
+    offsets = np.array([0, 4, 7, 12])
+    following = next_corners(offsets)
+    assert following.tolist() == [1, 2, 3, 0, 5, 6, 4, 8, 9, 10, 11, 7]
+    assert next_corners(np.array([0])).tolist() == []
