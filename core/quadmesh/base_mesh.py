@@ -16,6 +16,7 @@ import time
 import numpy as np
 
 from core.errors import InvalidMeshError, LabelingError, ParameterError
+from core.mesh_topology import connected_face_components, genus_of
 from core.polymesh_checks import check_polymesh
 from core.quadmesh.chart_complex import build_chart_complex
 from core.quadmesh.embed import (interior_point_positions, side_point_positions,
@@ -38,11 +39,11 @@ def polymesh_genus(mesh):
     from scipy.sparse.csgraph import connected_components
     import scipy.sparse as sp
 
+    from core.mesh_topology import next_corners
+
     fv, fo = mesh.face_vertices, mesh.face_offsets
     face = np.repeat(np.arange(mesh.n_faces), np.diff(fo))
-    nxt = np.arange(len(fv)) + 1
-    nxt[fo[1:] - 1] = fo[:-1]
-    a, b = fv, fv[nxt]
+    a, b = fv, fv[next_corners(fo)]
     n = np.int64(len(mesh.vertices))
     edges = np.unique(np.minimum(a, b) * n + np.maximum(a, b))
     graph = sp.csr_matrix((np.ones(len(fv)), (fv, face)), shape=(len(mesh.vertices), mesh.n_faces))
@@ -173,14 +174,6 @@ def _merge_points(n, pairs):
     return lowest[component]
 
 
-def euler_genus(V, F):
-    """Genus of a closed triangle mesh with one component (Euler characteristic)."""
-    from core.mesh_topology import unique_edges
-
-    edges, _ = unique_edges(F)
-    return int((2 - (len(V) - len(edges) + len(F))) // 2)
-
-
 def build_base_mesh(target, face_part, face_label, face_frame, part_frames, target_faces=300,
                     max_base_faces=2500, face_interface_axis=None):
     """Closed all-quad base mesh on the target from a valid polycube labeling.
@@ -222,7 +215,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     complex_ = build_chart_complex(V, F, np.asarray(face_part)[parent],
                                    np.asarray(face_label)[parent], np.asarray(face_frame)[parent],
                                    interface_axis)
-    target_genus = euler_genus(V, F)
+    target_genus = genus_of(len(V), F, int(connected_face_components(F).max()) + 1)
     collapsible = collapsible_sides(complex_, int(target_faces))
     try:
         layout_complex, flipped = make_loops_rectilinear(complex_, collapsible)

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.errors import LabelingError
+from core.geometry import face_areas
 from core.segmentation.charts import build_topology, extract_layout
 
 
@@ -342,7 +343,7 @@ def build_chart_complex(V, F, face_part, face_label, face_frame, face_interface_
     sizes = np.array([len(r) for r in loop_side_lists], dtype=np.int64)
     loop_offsets = np.zeros(len(sizes) + 1, dtype=np.int64)
     loop_offsets[1:] = np.cumsum(sizes)
-    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    area = face_areas(V, F)
     return ChartComplex(
         face_chart=face_chart, chart_label=chart_label, chart_part=layout.chart_part,
         chart_area=np.bincount(face_chart, weights=area, minlength=layout.n_charts),
