@@ -26,6 +26,44 @@ class _Parser(argparse.ArgumentParser):
         sys.exit(EXIT_BAD_INPUT)
 
 
+def add_pipeline_options(parser, defaults):
+    """Add the pipeline parameters shared by ``reconstruct`` and ``batch`` to ``parser``."""
+    parser.add_argument("--units", choices=tuple(UNIT_TO_MM), default=defaults.units,
+                        help="length unit of the target's coordinates (default: mm); the result "
+                        "is written in millimetres")
+    parser.add_argument("--components", choices=COMPONENT_POLICIES, default=defaults.components,
+                        help="several connected components: keep the largest (with a warning), "
+                        "keep all, or reject (default: largest)")
+    parser.add_argument("--parts", choices=PART_MODES, default=defaults.parts,
+                        help="part segmentation: whole mesh one part, or curve-skeleton based")
+    parser.add_argument("--parts-file", metavar="JSON",
+                        help="user parts: JSON with 'face_part' (per-face part ids), 'groups' "
+                        "(face-index lists) or 'planes' ([point, normal] pairs); implies --parts file")
+    parser.add_argument("--blend-factor", type=float, default=defaults.blend_factor,
+                        help="frame blending distance in mean edge lengths (paper: 4)")
+    parser.add_argument("--lam", type=float, default=defaults.lam,
+                        help="HBECVT neighbour weight lambda (paper: 0.5)")
+    parser.add_argument("--penalty", type=float, default=defaults.penalty,
+                        help="HBECVT penalty p (paper: 1e5)")
+    parser.add_argument("--target-faces", type=int, default=defaults.target_faces,
+                        help="approximate number of base-mesh faces (default 300)")
+    parser.add_argument("--max-base-faces", type=int, default=defaults.max_base_faces,
+                        help="stop when the base mesh has more faces than this (default 2500)")
+    parser.add_argument("--fit-iterations", type=int, default=defaults.fit_iterations,
+                        help="most shape-optimisation iterations (paper: 100; the fit stops "
+                        "earlier when converged)")
+    parser.add_argument("--tolerance", default="0", metavar="T",
+                        help="largest deviation wanted: a fraction of the bounding-box diagonal "
+                        "(0.002) or a length with its unit (0.5mm, 0.05cm, 0.02in); quad "
+                        "strips deviating more are split and refitted (default 0: off)")
+    parser.add_argument("--fit-mode", choices=FIT_MODES, default=defaults.fit_mode,
+                        help="inside: fill the target from inside (paper, default); best-fit: "
+                        "two-sided least squares; none: the unfitted limit surface")
+    parser.add_argument("--no-repair", action="store_true", help="skip the labeling repair loop")
+    parser.add_argument("--skip-self-intersection-check", action="store_true",
+                        help="do not run the triangle-triangle intersection test at intake")
+
+
 def build_parser():
     defaults = ReconstructionParams()
     parser = _Parser(prog="python -m polycube_wb",
@@ -42,40 +80,7 @@ def build_parser():
     rec.add_argument("--labels", help="write the per-face parts and polycube labels (binary PLY)")
     rec.add_argument("--stop-after", choices=STOP_AFTER_CHOICES, default="solid",
                      help="run the pipeline up to this stage (default: solid)")
-    rec.add_argument("--units", choices=tuple(UNIT_TO_MM), default=defaults.units,
-                     help="length unit of the target's coordinates (default: mm); the result "
-                          "is written in millimetres")
-    rec.add_argument("--components", choices=COMPONENT_POLICIES, default=defaults.components,
-                     help="several connected components: keep the largest (with a warning), "
-                          "keep all, or reject (default: largest)")
-    rec.add_argument("--parts", choices=PART_MODES, default=defaults.parts,
-                     help="part segmentation: whole mesh one part, or curve-skeleton based")
-    rec.add_argument("--parts-file", metavar="JSON",
-                     help="user parts: JSON with 'face_part' (per-face part ids), 'groups' "
-                          "(face-index lists) or 'planes' ([point, normal] pairs); implies --parts file")
-    rec.add_argument("--blend-factor", type=float, default=defaults.blend_factor,
-                     help="frame blending distance in mean edge lengths (paper: 4)")
-    rec.add_argument("--lam", type=float, default=defaults.lam,
-                     help="HBECVT neighbour weight lambda (paper: 0.5)")
-    rec.add_argument("--penalty", type=float, default=defaults.penalty,
-                     help="HBECVT penalty p (paper: 1e5)")
-    rec.add_argument("--target-faces", type=int, default=defaults.target_faces,
-                     help="approximate number of base-mesh faces (default 300)")
-    rec.add_argument("--max-base-faces", type=int, default=defaults.max_base_faces,
-                     help="stop when the base mesh has more faces than this (default 2500)")
-    rec.add_argument("--fit-iterations", type=int, default=defaults.fit_iterations,
-                     help="most shape-optimisation iterations (paper: 100; the fit stops "
-                          "earlier when converged)")
-    rec.add_argument("--tolerance", default="0", metavar="T",
-                     help="largest deviation wanted: a fraction of the bounding-box diagonal "
-                          "(0.002) or a length with its unit (0.5mm, 0.05cm, 0.02in); quad "
-                          "strips deviating more are split and refitted (default 0: off)")
-    rec.add_argument("--fit-mode", choices=FIT_MODES, default=defaults.fit_mode,
-                     help="inside: fill the target from inside (paper, default); best-fit: "
-                          "two-sided least squares; none: the unfitted limit surface")
-    rec.add_argument("--no-repair", action="store_true", help="skip the labeling repair loop")
-    rec.add_argument("--skip-self-intersection-check", action="store_true",
-                     help="do not run the triangle-triangle intersection test at intake")
+    add_pipeline_options(rec, defaults)
     rec.add_argument("--debug", action="store_true", help="print tracebacks")
 
     sub = commands.add_parser("subd-to-step", help="Catmull-Clark cage (OBJ) -> STEP solid",
@@ -123,15 +128,7 @@ def _reconstruct(args):
     from core.errors import StageNotAvailableError
     from polycube_wb.api import reconstruct_to_step
 
-    parts = "file" if args.parts_file else args.parts
-    params = dict(units=args.units, components=args.components, parts=parts,
-                  parts_file=args.parts_file or "",
-                  blend_factor=args.blend_factor, lam=args.lam, penalty=args.penalty,
-                  repair=not args.no_repair, target_faces=args.target_faces,
-                  fit_iterations=args.fit_iterations, fit_mode=args.fit_mode,
-                  **_tolerance(args.tolerance),
-                  max_base_faces=args.max_base_faces,
-                  check_self_intersections=not args.skip_self_intersection_check)
+    params = pipeline_params(args)
     if args.stop_after == "solid" and args.output is None:
         raise PolycubeInputError("reconstruct needs -o OUT.step (or --stop-after an earlier stage)")
     try:
@@ -144,6 +141,19 @@ def _reconstruct(args):
         return EXIT_INTERNAL
     _print_summary(report)
     return EXIT_OK
+
+
+def pipeline_params(args):
+    """Keyword arguments of ``reconstruct_to_step`` from the options of :func:`add_pipeline_options`."""
+    parts = "file" if args.parts_file else args.parts
+    return dict(units=args.units, components=args.components, parts=parts,
+                parts_file=args.parts_file or "",
+                blend_factor=args.blend_factor, lam=args.lam, penalty=args.penalty,
+                repair=not args.no_repair, target_faces=args.target_faces,
+                fit_iterations=args.fit_iterations, fit_mode=args.fit_mode,
+                **_tolerance(args.tolerance),
+                max_base_faces=args.max_base_faces,
+                check_self_intersections=not args.skip_self_intersection_check)
 
 
 def _tolerance(text):
