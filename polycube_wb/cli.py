@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Command line: ``python -m polycube_wb {reconstruct, subd-to-step, check} ...``.
+"""Command line: ``python -m polycube_wb {reconstruct, batch, subd-to-step, check} ...``.
 
 Exit codes: 0 success; 2 bad input (one line on stderr starting ``error:``);
 1 internal failure or a stage that is not available yet (message; the traceback
@@ -7,6 +7,7 @@ only with ``--debug``).
 """
 import argparse
 import json
+import os
 import sys
 import traceback
 
@@ -82,6 +83,29 @@ def build_parser():
                      help="run the pipeline up to this stage (default: solid)")
     add_pipeline_options(rec, defaults)
     rec.add_argument("--debug", action="store_true", help="print tracebacks")
+
+    bat = commands.add_parser("batch", help="many target meshes -> STEP solids + summary",
+                              description="Run the reconstruct pipeline on many meshes (files, "
+                                          "folders, glob patterns), each in its own process; "
+                                          "writes OUT_DIR/summary.csv and summary.html.")
+    bat.add_argument("inputs", nargs="+", help="mesh files, folders of meshes or glob patterns")
+    bat.add_argument("-o", "--output-dir", required=True, help="folder for every output")
+    bat.add_argument("--overrides", metavar="JSON",
+                     help="per-mesh parameters: {\"file name or glob\": {\"fit_iterations\": 50}}")
+    bat.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                     help="meshes at once on this machine (default: the number of cores)")
+    bat.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
+                     help="time cap per mesh; a mesh over it is stopped and reported")
+    bat.add_argument("--memory-limit", type=float, default=None, metavar="MIB",
+                     help="address-space cap per mesh process in MiB (Linux RLIMIT_AS)")
+    bat.add_argument("--scheduler", metavar="ADDRESS",
+                     help="send the meshes to this Dask distributed scheduler (tcp://host:8786); "
+                          "inputs and OUT_DIR must be on a path every worker shares")
+    bat.add_argument("--force", action="store_true",
+                     help="run meshes again even when their outputs are up to date")
+    bat.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_pipeline_options(bat, defaults)
+    bat.add_argument("--debug", action="store_true", help="print tracebacks")
 
     sub = commands.add_parser("subd-to-step", help="Catmull-Clark cage (OBJ) -> STEP solid",
                               description="Turn a closed polygon base mesh (SubD cage) into a "
@@ -222,4 +246,26 @@ def _check(args):
     return EXIT_OK
 
 
-_COMMANDS = {"reconstruct": _reconstruct, "subd-to-step": _subd_to_step, "check": _check}
+def _batch(args):
+    from polycube_wb.batch import run_batch_command
+
+    for value, what in ((args.jobs, "--jobs"), (args.timeout, "--timeout"),
+                        (args.memory_limit, "--memory-limit")):
+        if value is not None and value <= 0:
+            raise PolycubeInputError(f"{what} must be positive, got {value:g}")
+    progress = not args.quiet and sys.stderr.isatty()
+    result = run_batch_command(args.inputs, args.output_dir, pipeline_params(args),
+                               overrides_path=args.overrides, jobs=args.jobs,
+                               timeout=args.timeout, memory_mb=args.memory_limit,
+                               scheduler=args.scheduler, force=args.force, progress=progress)
+    if not args.quiet:
+        print(f"{len(result.rows)} meshes, {len(result.rows) - result.failures} solids, "
+              f"{result.failures} failed, {result.seconds:.1f} s")
+        for row in result.rows:
+            if row.status != "ok":
+                print(f"  {row.name}: {row.status} at {row.failed_stage or '-'}: {row.message}")
+        print(f"wrote {result.summary_csv}\nwrote {result.summary_html}")
+    return EXIT_OK
+
+
+_COMMANDS = {"reconstruct": _reconstruct, "batch": _batch, "subd-to-step": _subd_to_step, "check": _check}
