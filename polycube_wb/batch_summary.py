@@ -3,7 +3,8 @@
 
 The page is one self-contained file next to the per-mesh outputs: a table with each mesh's
 thumbnail (a relative link to its PNG in the same folder), sortable by clicking a column
-heading (inline script), failures first. It fetches nothing from elsewhere.
+heading (inline script), failures first. Once loaded, the page replaces a thumbnail that
+did not load by a note and records how many did in ``<body data-thumbnails>``. It fetches nothing from elsewhere.
 """
 import csv
 import html
@@ -109,6 +110,16 @@ document.querySelectorAll("#summary th[data-k]").forEach(function (th) {{
     }});
     rows.forEach(function (r) {{ body.appendChild(r); }});
   }});
+}});
+window.addEventListener("load", function () {{
+  var shown = 0;
+  document.querySelectorAll("#summary img").forEach(function (img) {{
+    if (img.complete && img.naturalWidth > 0) {{ shown++; return; }}
+    var note = document.createElement("span");
+    note.className = "none"; note.textContent = "thumbnail missing: " + img.getAttribute("src");
+    img.replaceWith(note);
+  }});
+  document.body.dataset.thumbnails = shown;
 }});
 </script>
 </body></html>
