@@ -248,7 +248,7 @@ def run_isolated(job):
         filter(None, [package_root, os.environ.get("PYTHONPATH")])))
     started = time.perf_counter()
     try:
-        done = subprocess.run([sys.executable, "-m", "polycube_wb.batch_worker"],
+        done = subprocess.run([_python(), "-m", "polycube_wb.batch_worker"],
                               input=json.dumps(job.to_dict()), capture_output=True, text=True,
                               timeout=job.timeout, env=env, cwd=package_root)
     except subprocess.TimeoutExpired:
@@ -259,6 +259,19 @@ def run_isolated(job):
         return _cut_short(job, started, "crashed",
                           f"worker process exited with code {done.returncode}: {tail}")
     return MeshRow(**json.loads(rows[-1][len(ROW_PREFIX):]))
+
+
+def _python():
+    """This process's Python interpreter, which runs the per-mesh processes.
+
+    Inside FreeCAD (GUI or freecadcmd) ``sys.executable`` is FreeCAD itself, which cannot run
+    ``-m`` modules; the batch then needs the project's ``.venv`` interpreter.
+    """
+    if not os.path.basename(sys.executable).lower().startswith("python"):
+        raise RuntimeError(f"the batch runs each mesh with a Python interpreter, but this "
+                           f"process runs {sys.executable}; start it from the project's "
+                           f".venv: .venv/bin/python -m polycube_wb batch ...")
+    return sys.executable
 
 
 def _cut_short(job, started, status, message):
