@@ -15,7 +15,7 @@ import os
 import subprocess
 import sys
 import time
-from concurrent.futures import ThreadPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 
 from core.errors import ParameterError
@@ -31,6 +31,8 @@ RESULT_OUTPUTS = ("step", "base_mesh", "labels", "thumbnail")
 RERUN_STATUSES = ("timeout", "crashed")
 """Batch statuses of a mesh that say nothing about the mesh itself: always run again."""
 ROW_PREFIX = "ROW "
+REDRAW_SECONDS = 1.0
+"""The progress line is redrawn at least this often while meshes run locally."""
 
 
 @dataclass
@@ -303,25 +305,32 @@ def run_batch(jobs, jobs_at_once=1, scheduler=None, force=False, progress=None):
             rows[k] = row_from_report(job, report, skipped=True)
     counts = {"done": len(jobs) - len(todo), "failed": sum(r.status != "ok" for r in rows if r)}
 
+    def redraw():
+        if progress:
+            running = min(len(jobs) - counts["done"], width)
+            progress(counts["done"], counts["failed"], running, len(jobs))
+
     def finished(k, row):
         rows[k] = row
         counts["done"] += 1
         counts["failed"] += row.status != "ok"
-        if progress:
-            running = min(len(jobs) - counts["done"], width)
-            progress(counts["done"], counts["failed"], running, len(jobs))
+        redraw()
 
     if scheduler is not None:
         width = len(todo)
         _run_on_dask(scheduler, jobs, todo, finished)
     else:
         width = max(1, int(jobs_at_once))
-        if progress:
-            progress(counts["done"], counts["failed"], min(len(todo), width), len(jobs))
+        redraw()
         with ThreadPoolExecutor(max_workers=width) as pool:
             futures = {pool.submit(run_isolated, jobs[k]): k for k in todo}
-            for future in as_completed(futures):
-                finished(futures[future], future.result())
+            pending = set(futures)
+            while pending:
+                ready, pending = wait(pending, timeout=REDRAW_SECONDS, return_when=FIRST_COMPLETED)
+                for future in sorted(ready, key=futures.get):
+                    finished(futures[future], future.result())
+                if not ready:
+                    redraw()
     return rows
 
 
