@@ -1,8 +1,7 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Batch reconstruction: many meshes, the same pipeline as ``reconstruct``, one row per mesh.
 
-Each mesh runs in its own process (:mod:`polycube_wb.batch_worker`) with a time cap and an
-optional memory cap, either on this machine (``jobs`` at once) or on the workers of a Dask
+Each mesh runs in its own process (:mod:`polycube_wb.batch_worker`) with a time cap, either on this machine (``jobs`` at once) or on the workers of a Dask
 distributed scheduler, which run the same process on a path they share. A mesh whose report
 says it was done with the same parameters, and whose outputs are all there and newer than
 the input, is skipped unless ``force``. One failing mesh never stops the others.
@@ -44,7 +43,6 @@ class MeshJob:
     out_dir : absolute output folder.
     params : keyword arguments of ``reconstruct_to_step`` (ReconstructionParams fields).
     timeout : seconds the mesh may take, or None.
-    memory_mb : address-space cap of the mesh's process in MiB, or None.
     """
 
     source: str
@@ -52,7 +50,6 @@ class MeshJob:
     out_dir: str
     params: dict
     timeout: float = None
-    memory_mb: float = None
 
     def paths(self):
         """dict of output kind -> absolute path (see ``OUTPUT_SUFFIXES``)."""
@@ -166,7 +163,7 @@ def load_overrides(path):
     return data
 
 
-def plan_jobs(sources, out_dir, params, overrides=None, timeout=None, memory_mb=None):
+def plan_jobs(sources, out_dir, params, overrides=None, timeout=None):
     """One MeshJob per source; output names are the file stems, made unique with ``-2``, ``-3``."""
     out_dir = os.path.abspath(out_dir)
     jobs, used = [], set()
@@ -181,7 +178,7 @@ def plan_jobs(sources, out_dir, params, overrides=None, timeout=None, memory_mb=
         for pattern, values in (overrides or {}).items():
             if fnmatch.fnmatch(os.path.basename(source), pattern):
                 merged.update(values)
-        jobs.append(MeshJob(source, name, out_dir, merged, timeout, memory_mb))
+        jobs.append(MeshJob(source, name, out_dir, merged, timeout))
     return jobs
 
 
@@ -352,7 +349,7 @@ def _run_on_dask(scheduler, jobs, todo, finished):
 
 
 def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, timeout=None,
-                      memory_mb=None, scheduler=None, force=False, progress=False):
+                      scheduler=None, force=False, progress=False):
     """The ``batch`` command: collect, plan, run, and write both summaries into ``out_dir``.
 
     Parameters
@@ -361,7 +358,7 @@ def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, time
     out_dir : output folder (created when missing; its parent must exist).
     params : keyword arguments of ``reconstruct_to_step`` for every mesh.
     overrides_path : optional JSON of per-mesh parameters (see :func:`load_overrides`).
-    jobs, scheduler, force : see :func:`run_batch`; timeout, memory_mb : see :class:`MeshJob`.
+    jobs, scheduler, force : see :func:`run_batch`; timeout : see :class:`MeshJob`.
     progress : bool, draw the progress bar on stderr.
 
     Returns
@@ -385,7 +382,7 @@ def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, time
                 source.endswith(tuple(OUTPUT_SUFFIXES.values())):
             raise ParameterError(f"input {source} is in the output folder and could be "
                                  f"overwritten; choose another output folder")
-    jobs_list = plan_jobs(sources, out_dir, params, overrides, timeout, memory_mb)
+    jobs_list = plan_jobs(sources, out_dir, params, overrides, timeout)
     bar = ProgressBar() if progress else None
     rows = run_batch(jobs_list, jobs, scheduler, force, bar.update if bar else None)
     if bar:

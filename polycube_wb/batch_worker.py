@@ -10,7 +10,6 @@ out of memory) leaves no row, which the batch reports as ``crashed``.
 """
 import json
 import os
-import resource
 import sys
 import time
 import traceback
@@ -27,6 +26,7 @@ def run_job(job):
     """
     from core.errors import PolycubeInputError, StageNotAvailableError
     from core.output_files import write_json_atomic
+    from core.pipeline import peak_memory_mb
     from polycube_wb.api import reconstruct_to_step
 
     paths = job.paths()
@@ -48,7 +48,7 @@ def run_job(job):
         entry["message"] = entry.get("message") or f"{type(exc).__name__}: {exc}"
         report["traceback"] = traceback.format_exc(limit=8)
     report.setdefault("outputs", {})
-    report.setdefault("peak_memory_mb", round(_peak_memory_mb(), 1))
+    report.setdefault("peak_memory_mb", round(peak_memory_mb(), 1))
     if "step" in report["outputs"]:
         try:
             from polycube_wb.batch_thumbnail import render_solid_thumbnail
@@ -76,18 +76,11 @@ def _first_failed(report):
                  if entry.get("status") in ("failed", "not_available")), None)
 
 
-def _peak_memory_mb():
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-
-
 def main():
     """Entry point of the worker process (see the module docstring)."""
     from polycube_wb.batch import MeshJob, row_from_report
 
     job = MeshJob.from_dict(json.load(sys.stdin))
-    if job.memory_mb:
-        limit = int(job.memory_mb * 1024 * 1024)
-        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
     report = run_job(job)
     sys.stdout.write("\nROW " + json.dumps(row_from_report(job, report).to_dict()) + "\n")
     return 0

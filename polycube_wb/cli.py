@@ -96,8 +96,6 @@ def build_parser():
                      help="meshes at once on this machine (default: the number of cores)")
     bat.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
                      help="time cap per mesh; a mesh over it is stopped and reported")
-    bat.add_argument("--memory-limit", type=float, default=None, metavar="MIB",
-                     help="address-space cap per mesh process in MiB (Linux RLIMIT_AS)")
     bat.add_argument("--scheduler", metavar="ADDRESS",
                      help="send the meshes to this Dask distributed scheduler (tcp://host:8786); "
                           "inputs and OUT_DIR must be on a path every worker shares")
@@ -249,14 +247,13 @@ def _check(args):
 def _batch(args):
     from polycube_wb.batch import run_batch_command
 
-    for value, what in ((args.jobs, "--jobs"), (args.timeout, "--timeout"),
-                        (args.memory_limit, "--memory-limit")):
+    for value, what in ((args.jobs, "--jobs"), (args.timeout, "--timeout")):
         if value is not None and value <= 0:
             raise PolycubeInputError(f"{what} must be positive, got {value:g}")
     progress = not args.quiet and sys.stderr.isatty()
     result = run_batch_command(args.inputs, args.output_dir, pipeline_params(args),
                                overrides_path=args.overrides, jobs=args.jobs,
-                               timeout=args.timeout, memory_mb=args.memory_limit,
+                               timeout=args.timeout,
                                scheduler=args.scheduler, force=args.force, progress=progress)
     if not args.quiet:
         print(f"{len(result.rows)} meshes, {len(result.rows) - result.failures} solids, "
