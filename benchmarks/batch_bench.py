@@ -7,7 +7,7 @@ Usage::
                                                [-- BATCH OPTIONS ...]
 
 Runs ``python -m polycube_wb batch DIR -o benchmarks/tmp/batch-jobsN --jobs N --force`` for
-N = 1 and then N = 2 with the same options (default ``--fit-iterations 10 --timeout 60``),
+N = 1 and then N = 2 with the same options (default ``--fit-iterations 10 --timeout 30``),
 times each whole command (wall clock), and writes ``BATCH_RESULTS.md`` into ``--out``: both
 wall times, the speed-up, whether both runs gave every mesh the same status, stage and face
 count, and the per-mesh rows of the ``--jobs 2`` run. Timings are on a shared 2-core
@@ -23,7 +23,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 MESHES = os.path.join(REPO, "..", "shared", "data", "meshes")
-DEFAULT_OPTIONS = ("--fit-iterations", "10", "--timeout", "60")
+DEFAULT_OPTIONS = ("--fit-iterations", "10", "--timeout", "30")
 
 
 def run(meshes, jobs, options):
