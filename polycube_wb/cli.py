@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Command line: ``python -m polycube_wb {reconstruct, subd-to-step, check} ...``.
+"""Command line: ``python -m polycube_wb {reconstruct, batch, subd-to-step, check} ...``.
 
 Exit codes: 0 success; 2 bad input (one line on stderr starting ``error:``);
 1 internal failure or a stage that is not available yet (message; the traceback
@@ -7,6 +7,7 @@ only with ``--debug``).
 """
 import argparse
 import json
+import os
 import sys
 import traceback
 
@@ -26,6 +27,48 @@ class _Parser(argparse.ArgumentParser):
         sys.exit(EXIT_BAD_INPUT)
 
 
+def add_pipeline_options(parser, defaults):
+    """Add the pipeline parameters shared by ``reconstruct`` and ``batch`` to ``parser``."""
+    parser.add_argument("--units", choices=tuple(UNIT_TO_MM), default=defaults.units,
+                        help="length unit of the target's coordinates (default: mm); the result "
+                        "is written in millimetres")
+    parser.add_argument("--components", choices=COMPONENT_POLICIES, default=defaults.components,
+                        help="several connected components: keep the largest (with a warning), "
+                        "keep all, or reject (default: largest)")
+    parser.add_argument("--parts", choices=PART_MODES, default=defaults.parts,
+                        help="part segmentation: whole mesh one part, or curve-skeleton based")
+    parser.add_argument("--parts-file", metavar="JSON",
+                        help="user parts: JSON with 'face_part' (per-face part ids), 'groups' "
+                        "(face-index lists) or 'planes' ([point, normal] pairs); implies --parts file")
+    parser.add_argument("--blend-factor", type=float, default=defaults.blend_factor,
+                        help="frame blending distance in mean edge lengths (paper: 4)")
+    parser.add_argument("--lam", type=float, default=defaults.lam,
+                        help="HBECVT neighbour weight lambda (paper: 0.5)")
+    parser.add_argument("--penalty", type=float, default=defaults.penalty,
+                        help="HBECVT penalty p (paper: 1e5)")
+    parser.add_argument("--max-sweeps", type=int, default=defaults.max_sweeps,
+                        help=f"most HBECVT sweeps (default {defaults.max_sweeps})")
+    parser.add_argument("--subdivision-levels", type=int, default=defaults.subdivision_levels,
+                        help=f"Catmull-Clark levels of the fit (paper: {defaults.subdivision_levels})")
+    parser.add_argument("--target-faces", type=int, default=defaults.target_faces,
+                        help="approximate number of base-mesh faces (default 300)")
+    parser.add_argument("--max-base-faces", type=int, default=defaults.max_base_faces,
+                        help="stop when the base mesh has more faces than this (default 2500)")
+    parser.add_argument("--fit-iterations", type=int, default=defaults.fit_iterations,
+                        help="most shape-optimisation iterations (paper: 100; the fit stops "
+                        "earlier when converged)")
+    parser.add_argument("--tolerance", default="0", metavar="T",
+                        help="largest deviation wanted: a fraction of the bounding-box diagonal "
+                        "(0.002) or a length with its unit (0.5mm, 0.05cm, 0.02in); quad "
+                        "strips deviating more are split and refitted (default 0: off)")
+    parser.add_argument("--fit-mode", choices=FIT_MODES, default=defaults.fit_mode,
+                        help="inside: fill the target from inside (paper, default); best-fit: "
+                        "two-sided least squares; none: the unfitted limit surface")
+    parser.add_argument("--no-repair", action="store_true", help="skip the labeling repair loop")
+    parser.add_argument("--skip-self-intersection-check", action="store_true",
+                        help="do not run the triangle-triangle intersection test at intake")
+
+
 def build_parser():
     defaults = ReconstructionParams()
     parser = _Parser(prog="python -m polycube_wb",
@@ -42,45 +85,29 @@ def build_parser():
     rec.add_argument("--labels", help="write the per-face parts and polycube labels (binary PLY)")
     rec.add_argument("--stop-after", choices=STOP_AFTER_CHOICES, default="solid",
                      help="run the pipeline up to this stage (default: solid)")
-    rec.add_argument("--units", choices=tuple(UNIT_TO_MM), default=defaults.units,
-                     help="length unit of the target's coordinates (default: mm); the result "
-                          "is written in millimetres")
-    rec.add_argument("--components", choices=COMPONENT_POLICIES, default=defaults.components,
-                     help="several connected components: keep the largest (with a warning), "
-                          "keep all, or reject (default: largest)")
-    rec.add_argument("--parts", choices=PART_MODES, default=defaults.parts,
-                     help="part segmentation: whole mesh one part, or curve-skeleton based")
-    rec.add_argument("--parts-file", metavar="JSON",
-                     help="user parts: JSON with 'face_part' (per-face part ids), 'groups' "
-                          "(face-index lists) or 'planes' ([point, normal] pairs); implies --parts file")
-    rec.add_argument("--blend-factor", type=float, default=defaults.blend_factor,
-                     help="frame blending distance in mean edge lengths (paper: 4)")
-    rec.add_argument("--lam", type=float, default=defaults.lam,
-                     help="HBECVT neighbour weight lambda (paper: 0.5)")
-    rec.add_argument("--penalty", type=float, default=defaults.penalty,
-                     help="HBECVT penalty p (paper: 1e5)")
-    rec.add_argument("--max-sweeps", type=int, default=defaults.max_sweeps,
-                     help=f"most HBECVT sweeps (default {defaults.max_sweeps})")
-    rec.add_argument("--target-faces", type=int, default=defaults.target_faces,
-                     help="approximate number of base-mesh faces (default 300)")
-    rec.add_argument("--max-base-faces", type=int, default=defaults.max_base_faces,
-                     help="stop when the base mesh has more faces than this (default 2500)")
-    rec.add_argument("--subdivision-levels", type=int, default=defaults.subdivision_levels,
-                     help=f"Catmull-Clark levels of the fit (paper: {defaults.subdivision_levels})")
-    rec.add_argument("--fit-iterations", type=int, default=defaults.fit_iterations,
-                     help="most shape-optimisation iterations (paper: 100; the fit stops "
-                          "earlier when converged)")
-    rec.add_argument("--tolerance", default="0", metavar="T",
-                     help="largest deviation wanted: a fraction of the bounding-box diagonal "
-                          "(0.002) or a length with its unit (0.5mm, 0.05cm, 0.02in); quad "
-                          "strips deviating more are split and refitted (default 0: off)")
-    rec.add_argument("--fit-mode", choices=FIT_MODES, default=defaults.fit_mode,
-                     help="inside: fill the target from inside (paper, default); best-fit: "
-                          "two-sided least squares; none: the unfitted limit surface")
-    rec.add_argument("--no-repair", action="store_true", help="skip the labeling repair loop")
-    rec.add_argument("--skip-self-intersection-check", action="store_true",
-                     help="do not run the triangle-triangle intersection test at intake")
+    add_pipeline_options(rec, defaults)
     rec.add_argument("--debug", action="store_true", help="print tracebacks")
+
+    bat = commands.add_parser("batch", help="many target meshes -> STEP solids + summary",
+                              description="Run the reconstruct pipeline on many meshes (files, "
+                                          "folders, glob patterns), each in its own process; "
+                                          "writes OUT_DIR/summary.csv and summary.html.")
+    bat.add_argument("inputs", nargs="+", help="mesh files, folders of meshes or glob patterns")
+    bat.add_argument("-o", "--output-dir", required=True, help="folder for every output")
+    bat.add_argument("--overrides", metavar="JSON",
+                     help="per-mesh parameters: {\"file name or glob\": {\"fit_iterations\": 50}}")
+    bat.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                     help="meshes at once on this machine (default: the number of cores)")
+    bat.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
+                     help="time cap per mesh; a mesh over it is stopped and reported")
+    bat.add_argument("--scheduler", metavar="ADDRESS",
+                     help="send the meshes to this Dask distributed scheduler (tcp://host:8786); "
+                          "inputs and OUT_DIR must be on a path every worker shares")
+    bat.add_argument("--force", action="store_true",
+                     help="run meshes again even when their outputs are up to date")
+    bat.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_pipeline_options(bat, defaults)
+    bat.add_argument("--debug", action="store_true", help="print tracebacks")
 
     sub = commands.add_parser("subd-to-step", help="Catmull-Clark cage (OBJ) -> STEP solid",
                               description="Turn a closed polygon base mesh (SubD cage) into a "
@@ -128,16 +155,7 @@ def _reconstruct(args):
     from core.errors import StageNotAvailableError
     from polycube_wb.api import reconstruct_to_step
 
-    parts = "file" if args.parts_file else args.parts
-    params = dict(units=args.units, components=args.components, parts=parts,
-                  parts_file=args.parts_file or "",
-                  blend_factor=args.blend_factor, lam=args.lam, penalty=args.penalty,
-                  max_sweeps=args.max_sweeps, subdivision_levels=args.subdivision_levels,
-                  repair=not args.no_repair, target_faces=args.target_faces,
-                  fit_iterations=args.fit_iterations, fit_mode=args.fit_mode,
-                  **_tolerance(args.tolerance),
-                  max_base_faces=args.max_base_faces,
-                  check_self_intersections=not args.skip_self_intersection_check)
+    params = pipeline_params(args)
     if args.stop_after == "solid" and args.output is None:
         raise PolycubeInputError("reconstruct needs -o OUT.step (or --stop-after an earlier stage)")
     try:
@@ -150,6 +168,20 @@ def _reconstruct(args):
         return EXIT_INTERNAL
     _print_summary(report)
     return EXIT_OK
+
+
+def pipeline_params(args):
+    """Keyword arguments of ``reconstruct_to_step`` from the options of :func:`add_pipeline_options`."""
+    parts = "file" if args.parts_file else args.parts
+    return dict(units=args.units, components=args.components, parts=parts,
+                parts_file=args.parts_file or "",
+                blend_factor=args.blend_factor, lam=args.lam, penalty=args.penalty,
+                max_sweeps=args.max_sweeps, subdivision_levels=args.subdivision_levels,
+                repair=not args.no_repair, target_faces=args.target_faces,
+                fit_iterations=args.fit_iterations, fit_mode=args.fit_mode,
+                **_tolerance(args.tolerance),
+                max_base_faces=args.max_base_faces,
+                check_self_intersections=not args.skip_self_intersection_check)
 
 
 def _tolerance(text):
@@ -218,4 +250,25 @@ def _check(args):
     return EXIT_OK
 
 
-_COMMANDS = {"reconstruct": _reconstruct, "subd-to-step": _subd_to_step, "check": _check}
+def _batch(args):
+    from polycube_wb.batch import run_batch_command
+
+    for value, what in ((args.jobs, "--jobs"), (args.timeout, "--timeout")):
+        if value is not None and value <= 0:
+            raise PolycubeInputError(f"{what} must be positive, got {value:g}")
+    progress = not args.quiet and sys.stderr.isatty()
+    result = run_batch_command(args.inputs, args.output_dir, pipeline_params(args),
+                               overrides_path=args.overrides, jobs=args.jobs,
+                               timeout=args.timeout,
+                               scheduler=args.scheduler, force=args.force, progress=progress)
+    if not args.quiet:
+        print(f"{len(result.rows)} meshes, {len(result.rows) - result.failures} solids, "
+              f"{result.failures} failed, {result.seconds:.1f} s")
+        for row in result.rows:
+            if row.status != "ok":
+                print(f"  {row.name}: {row.status} at {row.failed_stage or '-'}: {row.message}")
+        print(f"wrote {result.summary_csv}\nwrote {result.summary_html}")
+    return EXIT_OK
+
+
+_COMMANDS = {"reconstruct": _reconstruct, "batch": _batch, "subd-to-step": _subd_to_step, "check": _check}

@@ -1,0 +1,392 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Batch reconstruction: many meshes, the same pipeline as ``reconstruct``, one row per mesh.
+
+Each mesh runs in its own process (:mod:`polycube_wb.batch_worker`) with a time cap, either on this machine (``jobs`` at once) or on the workers of a Dask
+distributed scheduler, which run the same process on a path they share. A mesh whose report
+says it was done with the same parameters, and whose outputs are all there and newer than
+the input, is skipped unless ``force``. One failing mesh never stops the others.
+"""
+import dataclasses
+import fnmatch
+import glob
+import json
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+from dataclasses import dataclass, field
+
+from core.errors import ParameterError
+from core.output_files import write_json_atomic
+from core.params import ReconstructionParams
+
+MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off")
+OUTPUT_SUFFIXES = {"step": ".step", "base_mesh": ".base.obj", "labels": ".labels.ply",
+                   "report": ".json", "thumbnail": ".png"}
+"""Per-mesh output file names: ``OUT_DIR/<name><suffix>``."""
+RESULT_OUTPUTS = ("step", "base_mesh", "labels", "thumbnail")
+"""Outputs checked for freshness when the report lists them."""
+RERUN_STATUSES = ("timeout", "crashed")
+"""Batch statuses of a mesh that say nothing about the mesh itself: always run again."""
+ROW_PREFIX = "ROW "
+REDRAW_SECONDS = 1.0
+"""The progress line is redrawn at least this often while meshes run locally."""
+
+
+@dataclass
+class MeshJob:
+    """One mesh of a batch and where its outputs go.
+
+    source : absolute path of the target mesh.
+    name : output stem (the file name without its suffix, made unique in the batch).
+    out_dir : absolute output folder.
+    params : keyword arguments of ``reconstruct_to_step`` (ReconstructionParams fields).
+    timeout : seconds the mesh may take, or None.
+    """
+
+    source: str
+    name: str
+    out_dir: str
+    params: dict
+    timeout: float = None
+
+    def paths(self):
+        """dict of output kind -> absolute path (see ``OUTPUT_SUFFIXES``)."""
+        return {kind: os.path.join(self.out_dir, self.name + suffix)
+                for kind, suffix in OUTPUT_SUFFIXES.items()}
+
+    def batch_section(self, seconds, status=None, message=""):
+        """The report's ``batch`` section: parameters, status and wall time of this mesh."""
+        return {"params": self.params, "seconds": round(seconds, 3),
+                **({"status": status, "message": message} if status else {})}
+
+    def to_dict(self):
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data):
+        return cls(**data)
+
+
+@dataclass
+class MeshRow:
+    """One row of the summary (``summary.csv`` / ``summary.html``).
+
+    status : ``ok`` (a STEP solid), ``failed`` (a stage stopped; ``failed_stage`` and
+        ``message`` say which and why), ``timeout`` or ``crashed`` (the process).
+    stage_reached : last stage whose status is ``ok``.
+    mean_deviation, max_deviation : fitted surface to target, fractions of the bbox diagonal.
+    outside_volume : fraction of the target volume the fitted surface leaves outside it.
+    seconds : wall time of the mesh; peak_memory_mb : peak resident memory of its process.
+    skipped : the outputs were up to date and the mesh was not run again.
+    """
+
+    name: str
+    source: str
+    status: str
+    triangles: int = None
+    genus: int = None
+    stage_reached: str = ""
+    failed_stage: str = ""
+    faces: int = None
+    mean_deviation: float = None
+    max_deviation: float = None
+    outside_volume: float = None
+    seconds: float = None
+    peak_memory_mb: float = None
+    message: str = ""
+    thumbnail: str = ""
+    skipped: bool = False
+
+    def to_dict(self):
+        return dataclasses.asdict(self)
+
+
+@dataclass
+class BatchResult:
+    """rows : list of MeshRow in input order; summary_csv, summary_html : paths written."""
+
+    rows: list
+    summary_csv: str
+    summary_html: str
+    seconds: float
+    failures: int = field(init=False)
+
+    def __post_init__(self):
+        self.failures = sum(row.status != "ok" for row in self.rows)
+
+
+def collect_inputs(items):
+    """Mesh files named by ``items`` (files, folders, glob patterns), sorted, duplicates removed.
+
+    Raises ParameterError naming the item that matches no mesh file.
+    """
+    found = []
+    for item in items:
+        if os.path.isdir(item):
+            matches = [os.path.join(item, n) for n in sorted(os.listdir(item))
+                       if n.lower().endswith(MESH_SUFFIXES)
+                       and os.path.isfile(os.path.join(item, n))]
+        elif os.path.isfile(item):
+            matches = [item]
+        else:
+            matches = [p for p in sorted(glob.glob(item)) if os.path.isfile(p)
+                       and p.lower().endswith(MESH_SUFFIXES)]
+        if not matches:
+            raise ParameterError(f"batch input {item!r} is not a mesh file, a folder with mesh "
+                                 f"files ({', '.join(MESH_SUFFIXES)}) or a pattern matching one")
+        found.extend(os.path.abspath(p) for p in matches)
+    return list(dict.fromkeys(found))
+
+
+def load_overrides(path):
+    """Per-mesh parameter overrides: JSON ``{"file name or glob": {"param": value, ...}, ...}``.
+
+    Keys are matched against the mesh file's name (``fnmatch``); later keys win. Values are
+    ``ReconstructionParams`` fields. Raises ParameterError on unreadable JSON or unknown fields.
+    """
+    try:
+        with open(path, encoding="utf-8") as handle:
+            data = json.load(handle)
+    except (OSError, ValueError) as exc:
+        raise ParameterError(f"cannot read the override file {path}: {exc}") from None
+    if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
+        raise ParameterError(f"override file {path}: expected an object of "
+                             f"{{\"pattern\": {{\"parameter\": value}}}}")
+    known = {f.name for f in dataclasses.fields(ReconstructionParams)}
+    for pattern, values in data.items():
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ParameterError(f"override file {path}: pattern {pattern!r} sets unknown "
+                                 f"parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+    return data
+
+
+def plan_jobs(sources, out_dir, params, overrides=None, timeout=None):
+    """One MeshJob per source; output names are the file stems, made unique with ``-2``, ``-3``."""
+    out_dir = os.path.abspath(out_dir)
+    jobs, used = [], set()
+    for source in sources:
+        stem = os.path.splitext(os.path.basename(source))[0]
+        name, k = stem, 1
+        while name in used:
+            k += 1
+            name = f"{stem}-{k}"
+        used.add(name)
+        merged = dict(params)
+        for pattern, values in (overrides or {}).items():
+            if fnmatch.fnmatch(os.path.basename(source), pattern):
+                merged.update(values)
+        jobs.append(MeshJob(source, name, out_dir, merged, timeout))
+    return jobs
+
+
+def up_to_date_report(job):
+    """The mesh's existing report when its outputs are complete and current, else None.
+
+    Current means: the report was written with the same parameters, after the input was last
+    changed, the run was not cut short (timeout, crash), and every result file it lists exists
+    and is newer than the input.
+    """
+    paths = job.paths()
+    try:
+        with open(paths["report"], encoding="utf-8") as handle:
+            report = json.load(handle)
+        source_time = os.path.getmtime(job.source)
+        if os.path.getmtime(paths["report"]) < source_time:
+            return None
+    except (OSError, ValueError):
+        return None
+    batch = report.get("batch", {})
+    if batch.get("params") != json.loads(json.dumps(job.params)) or \
+            batch.get("status") in RERUN_STATUSES:
+        return None
+    for kind in RESULT_OUTPUTS:
+        listed = report.get("outputs", {}).get(kind)
+        if listed and not (os.path.isfile(listed) and os.path.getmtime(listed) >= source_time):
+            return None
+    return report
+
+
+def row_from_report(job, report, skipped=False):
+    """The summary row of a mesh from its report (see :class:`MeshRow`)."""
+    stages = report.get("stages", {})
+    source = report.get("input", {})
+    ok = [name for name, entry in stages.items() if entry.get("status") == "ok"]
+    failed = next(((name, entry) for name, entry in stages.items()
+                   if entry.get("status") in ("failed", "not_available")), None)
+    batch = report.get("batch", {})
+    fit, brep = report.get("fit", {}), report.get("brep", {})
+    has_step = bool(report.get("outputs", {}).get("step"))
+    status = batch.get("status") or ("ok" if has_step and failed is None else "failed")
+    message = batch.get("message") or (failed[1].get("message", "") if failed else "")
+    if status == "ok" and report.get("thumbnail_error"):
+        message = f"no thumbnail: {report['thumbnail_error']}"
+    thumbnail = report.get("outputs", {}).get("thumbnail") or ""
+    return MeshRow(name=job.name, source=job.source, status=status,
+                   triangles=source.get("triangles"), genus=source.get("genus"),
+                   stage_reached=ok[-1] if ok else "", failed_stage=failed[0] if failed else "",
+                   faces=brep.get("faces"), mean_deviation=fit.get("mean_distance"),
+                   max_deviation=fit.get("max_distance"),
+                   outside_volume=fit.get("outside_volume_fraction"),
+                   seconds=batch.get("seconds"), peak_memory_mb=report.get("peak_memory_mb"),
+                   message=message, thumbnail=os.path.basename(thumbnail) if thumbnail else "",
+                   skipped=skipped)
+
+
+def run_isolated(job):
+    """Run one mesh in a fresh worker process with the job's time cap; returns its MeshRow.
+
+    Used locally and, unchanged, as the task a Dask worker runs. A process that runs over
+    ``job.timeout`` is killed (status ``timeout``); one that dies without a row (killed, out
+    of memory) is ``crashed``, with the end of its stderr as the message. Both get a report.
+    """
+    package_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        filter(None, [package_root, os.environ.get("PYTHONPATH")])))
+    started = time.perf_counter()
+    try:
+        done = subprocess.run([_python(), "-m", "polycube_wb.batch_worker"],
+                              input=json.dumps(job.to_dict()), capture_output=True, text=True,
+                              timeout=job.timeout, env=env, cwd=package_root)
+    except subprocess.TimeoutExpired:
+        return _cut_short(job, started, "timeout", f"stopped after the {job.timeout:g} s time cap")
+    rows = [line for line in done.stdout.splitlines() if line.startswith(ROW_PREFIX)]
+    if done.returncode != 0 or not rows:
+        tail = " ".join(done.stderr.strip().splitlines()[-3:]) or "no output"
+        return _cut_short(job, started, "crashed",
+                          f"worker process exited with code {done.returncode}: {tail}")
+    return MeshRow(**json.loads(rows[-1][len(ROW_PREFIX):]))
+
+
+def _python():
+    """This process's Python interpreter, which runs the per-mesh processes.
+
+    Inside FreeCAD (GUI or freecadcmd) ``sys.executable`` is FreeCAD itself, which cannot run
+    ``-m`` modules; the batch then needs the project's ``.venv`` interpreter.
+    """
+    if not os.path.basename(sys.executable).lower().startswith("python"):
+        raise RuntimeError(f"the batch runs each mesh with a Python interpreter, but this "
+                           f"process runs {sys.executable}; start it from the project's "
+                           f".venv: .venv/bin/python -m polycube_wb batch ...")
+    return sys.executable
+
+
+def _cut_short(job, started, status, message):
+    report = {"input": {"file": job.source}, "stages": {}, "outputs": {},
+              "batch": job.batch_section(time.perf_counter() - started, status, message)}
+    write_json_atomic(job.paths()["report"], report, (job.source,))
+    return row_from_report(job, report)
+
+
+def run_batch(jobs, jobs_at_once=1, scheduler=None, force=False, progress=None):
+    """Run every job not up to date; returns the MeshRows in job order.
+
+    Parameters
+    ----------
+    jobs : list of MeshJob.
+    jobs_at_once : int >= 1, meshes run at the same time on this machine.
+    scheduler : address of a Dask distributed scheduler (``tcp://host:8786``) or a
+        ``distributed.Client``; the work goes to its workers instead, ``jobs_at_once`` unused.
+    force : run meshes whose outputs are up to date too.
+    progress : callable(done, failed, running, total) or None, called as meshes finish.
+    """
+    rows = [None] * len(jobs)
+    todo = []
+    for k, job in enumerate(jobs):
+        report = None if force else up_to_date_report(job)
+        if report is None:
+            todo.append(k)
+        else:
+            rows[k] = row_from_report(job, report, skipped=True)
+    counts = {"done": len(jobs) - len(todo), "failed": sum(r.status != "ok" for r in rows if r)}
+
+    def redraw():
+        if progress:
+            running = min(len(jobs) - counts["done"], width)
+            progress(counts["done"], counts["failed"], running, len(jobs))
+
+    def finished(k, row):
+        rows[k] = row
+        counts["done"] += 1
+        counts["failed"] += row.status != "ok"
+        redraw()
+
+    if scheduler is not None:
+        width = len(todo)
+        _run_on_dask(scheduler, jobs, todo, finished)
+    else:
+        width = max(1, int(jobs_at_once))
+        redraw()
+        with ThreadPoolExecutor(max_workers=width) as pool:
+            futures = {pool.submit(run_isolated, jobs[k]): k for k in todo}
+            pending = set(futures)
+            while pending:
+                ready, pending = wait(pending, timeout=REDRAW_SECONDS, return_when=FIRST_COMPLETED)
+                for future in sorted(ready, key=futures.get):
+                    finished(futures[future], future.result())
+                if not ready:
+                    redraw()
+    return rows
+
+
+def _run_on_dask(scheduler, jobs, todo, finished):
+    try:
+        from distributed import Client, as_completed as dask_completed
+    except ImportError:
+        raise ParameterError("--scheduler needs the Dask distributed package "
+                             "(pip install 'dask[distributed]' into the .venv)") from None
+    client = scheduler if isinstance(scheduler, Client) else Client(scheduler, timeout="30s")
+    try:
+        futures = {client.submit(run_isolated, jobs[k], key=f"polycube-{k}-{jobs[k].name}",
+                                 pure=False): k for k in todo}
+        for future in dask_completed(futures):
+            finished(futures[future], future.result())
+    finally:
+        if client is not scheduler:
+            client.close()
+
+
+def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, timeout=None,
+                      scheduler=None, force=False, progress=False):
+    """The ``batch`` command: collect, plan, run, and write both summaries into ``out_dir``.
+
+    Parameters
+    ----------
+    inputs : list of mesh files, folders or glob patterns.
+    out_dir : output folder (created when missing; its parent must exist).
+    params : keyword arguments of ``reconstruct_to_step`` for every mesh.
+    overrides_path : optional JSON of per-mesh parameters (see :func:`load_overrides`).
+    jobs, scheduler, force : see :func:`run_batch`; timeout : see :class:`MeshJob`.
+    progress : bool, draw the progress bar on stderr.
+
+    Returns
+    -------
+    BatchResult
+    """
+    from polycube_wb.batch_progress import ProgressBar
+    from polycube_wb.batch_summary import write_summary_csv, write_summary_html
+
+    started = time.perf_counter()
+    sources = collect_inputs(inputs)
+    overrides = load_overrides(overrides_path) if overrides_path else None
+    out_dir = os.path.abspath(out_dir)
+    if not os.path.isdir(out_dir):
+        if not os.path.isdir(os.path.dirname(out_dir)):
+            raise ParameterError(f"cannot create the output folder {out_dir}: its parent "
+                                 f"does not exist")
+        os.mkdir(out_dir)
+    for source in sources:
+        if os.path.dirname(source) == out_dir and \
+                source.endswith(tuple(OUTPUT_SUFFIXES.values())):
+            raise ParameterError(f"input {source} is in the output folder and could be "
+                                 f"overwritten; choose another output folder")
+    jobs_list = plan_jobs(sources, out_dir, params, overrides, timeout)
+    bar = ProgressBar() if progress else None
+    rows = run_batch(jobs_list, jobs, scheduler, force, bar.update if bar else None)
+    if bar:
+        bar.close()
+    csv_path = write_summary_csv(os.path.join(out_dir, "summary.csv"), rows, sources)
+    html_path = write_summary_html(os.path.join(out_dir, "summary.html"), rows, sources)
+    return BatchResult(rows, csv_path, html_path, time.perf_counter() - started)

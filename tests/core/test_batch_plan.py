@@ -1,0 +1,69 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""The batch's planning (inputs, names, overrides) and its progress line, without running meshes."""
+import io
+import json
+import os
+
+import pytest
+
+from core.errors import ParameterError
+from polycube_wb.batch import collect_inputs, load_overrides, plan_jobs
+from polycube_wb.batch_progress import ProgressBar
+
+
+def touch(path):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("solid x\nendsolid x\n")
+    return str(path)
+
+
+def test_inputs_from_files_folders_and_patterns_sorted_without_duplicates(tmp_path):
+    a = touch(tmp_path / "a" / "part.stl")
+    b = touch(tmp_path / "b" / "part.obj")
+    c = touch(tmp_path / "b" / "z.off")
+    touch(tmp_path / "b" / "notes.txt")
+    found = collect_inputs([str(tmp_path / "b"), a, str(tmp_path / "*" / "*.stl")])
+    assert found == [b, c, a]
+    with pytest.raises(ParameterError, match="is not a mesh file, a folder"):
+        collect_inputs([str(tmp_path / "b" / "missing.stl")])
+    with pytest.raises(ParameterError, match="'.*nothing' is not a mesh file"):
+        collect_inputs([a, str(tmp_path / "nothing")])
+
+
+def test_names_are_unique_and_overrides_match_file_names(tmp_path):
+    overrides = tmp_path / "o.json"
+    overrides.write_text(json.dumps({"*.stl": {"fit_iterations": 7},
+                                     "part.*": {"target_faces": 99}}))
+    sources = ["/x/part.stl", "/y/part.obj", "/y/other.obj"]
+    jobs = plan_jobs(sources, tmp_path, {"fit_iterations": 3, "target_faces": 300},
+                     load_overrides(overrides), timeout=5.0)
+    assert [job.name for job in jobs] == ["part", "part-2", "other"]
+    assert [job.params for job in jobs] == [{"fit_iterations": 7, "target_faces": 99},
+                                            {"fit_iterations": 3, "target_faces": 99},
+                                            {"fit_iterations": 3, "target_faces": 300}]
+    assert jobs[1].paths()["step"] == os.path.join(str(tmp_path), "part-2.step")
+    assert jobs[0].timeout == 5.0
+
+
+@pytest.mark.parametrize("text, words", [("[1, 2]", "expected an object"),
+                                         ("{\"*\": {\"lamda\": 1}}", "unknown parameter(s) lamda"),
+                                         ("{", "cannot read the override file")])
+def test_bad_override_files_say_what_is_wrong(tmp_path, text, words):
+    path = tmp_path / "o.json"
+    path.write_text(text)
+    with pytest.raises(ParameterError, match=words.replace("(", r"\(").replace(")", r"\)")):
+        load_overrides(path)
+
+
+def test_progress_line_counts_and_remaining_time():
+    stream = io.StringIO()
+    bar = ProgressBar(stream)
+    bar.update(2, 0, 2, 10)          # two meshes skipped: no estimate yet
+    assert "2/10 done, 0 failed, 2 running" in stream.getvalue() and "? left" in stream.getvalue()
+    bar.started -= 40.0              # 40 s later, two more done (one failed): 20 s each, 6 left
+    bar.update(4, 1, 2, 10)
+    line = stream.getvalue().split("\r")[-1]
+    assert line.startswith("[" + "#" * 12 + "." * 18 + "]")
+    assert "4/10 done, 1 failed, 2 running, 0:00:40 elapsed, 0:02:00 left" in line
+    bar.close()
+    assert stream.getvalue().endswith("\n")
