@@ -105,6 +105,8 @@ TOPIC_RESULTS = (
      "benchmarks/export_bench.py"),
     ("Workbench: recompute, cancel, reopen", "workbench_RESULTS.md",
      "benchmarks/workbench_bench.py"),
+    ("Batch: all dev meshes with --jobs 1 and --jobs 2", "BATCH_RESULTS.md",
+     "benchmarks/batch_bench.py"),
 )
 """Topic result files beside RESULTS.md: (title, file name, script)."""
 
