@@ -161,28 +161,10 @@ def make_loops_rectilinear(complex_, collapsible=None):
         add([(y, 1.0), (f, -big)], -np.inf, 0.0)
         add([(y, 1.0), (l, -1.0)], -np.inf, 0.0)
         add([(y, 1.0), (l, -1.0), (f, -big)], -big, np.inf)
-    for loop in range(n_loops):
-        k, d, _ = _loop_directions(complex_, loop)
-        key = np.searchsorted(used, k)
-        axis = np.argmax(np.abs(d), axis=1)
-        for along in np.unique(axis):
-            entries = []
-            for j in np.flatnonzero(axis == along):
-                coefficient = float(d[j, along])
-                entries += [(length0 + key_side[key[j]], coefficient),
-                            (flipped0 + key[j], -2.0 * coefficient)]
-            add(entries, 0.0, 0.0)
-    for walk in complex_.slit_walks():
-        k, d = _reference_directions(complex_, walk)
-        key = np.searchsorted(used, k)
-        axis = np.argmax(np.abs(d), axis=1)
-        for along in np.unique(axis):
-            entries = []
-            for j in np.flatnonzero(axis == along):
-                coefficient = float(d[j, along])
-                entries += [(length0 + key_side[key[j]], coefficient),
-                            (flipped0 + key[j], -2.0 * coefficient)]
-            add(entries, 0.0, 0.0)
+    for keys, coefficients in _closure_rows(complex_):
+        key = np.searchsorted(used, keys)
+        add([(length0 + key_side[k], c) for k, c in zip(key, coefficients)]
+            + [(flipped0 + k, -2.0 * c) for k, c in zip(key, coefficients)], 0.0, 0.0)
     matrix = sp.csr_matrix((vals, (rows, cols)), shape=(len(lo), nvar))
     matrix.sum_duplicates()
     extent = complex_.side_extent.reshape(-1)[used]
@@ -224,34 +206,35 @@ def loops_are_rectilinear(complex_):
     return bool((outer[has_loop] == 1).all())
 
 
+def _closure_rows(complex_):
+    """Closure equations of every loop and every slit walk, one per axis they run along.
+
+    Yields ``(keys, coefficients)``: (k,) int64 sign keys (``side * 2 + column``) and (k,)
+    float64 signed unit directions; the lengths of those sides times the coefficients add up
+    to zero when the walk closes along that axis.
+    """
+    walks = [np.arange(complex_.loop_offsets[loop], complex_.loop_offsets[loop + 1])
+             for loop in range(len(complex_.loop_chart))] + complex_.slit_walks()
+    for walk in walks:
+        keys, d = _reference_directions(complex_, walk)
+        axis = np.argmax(np.abs(d), axis=1)
+        for along in np.unique(axis):
+            j = np.flatnonzero(axis == along)
+            yield keys[j], d[j, along]
+
+
 def charts_close(complex_, collapsible=None):
     """True when side lengths >= 1 (>= 0 for ``collapsible`` sides) close every loop (an LP)."""
     from scipy.optimize import linprog
 
-    rows, cols, vals = [], [], []
-    row = 0
-    for loop in range(len(complex_.loop_chart)):
-        k, d, _ = _loop_directions(complex_, loop)
-        axis = np.argmax(np.abs(d), axis=1)
-        for along in np.unique(axis):
-            j = np.flatnonzero(axis == along)
-            rows += [row] * len(j)
-            cols += (k[j] // 2).tolist()
-            vals += d[j, along].tolist()
-            row += 1
-    for walk in complex_.slit_walks():
-        k, d = _reference_directions(complex_, walk)
-        axis = np.argmax(np.abs(d), axis=1)
-        for along in np.unique(axis):
-            j = np.flatnonzero(axis == along)
-            rows += [row] * len(j)
-            cols += (k[j] // 2).tolist()
-            vals += d[j, along].tolist()
-            row += 1
-    matrix = sp.csr_matrix((vals, (rows, cols)), shape=(row, complex_.n_sides))
+    equations = list(_closure_rows(complex_))
+    rows = np.concatenate([np.full(len(keys), i) for i, (keys, _) in enumerate(equations)])
+    cols = np.concatenate([keys // 2 for keys, _ in equations])
+    vals = np.concatenate([coefficients for _, coefficients in equations])
+    matrix = sp.csr_matrix((vals, (rows, cols)), shape=(len(equations), complex_.n_sides))
     matrix.sum_duplicates()
-    result = linprog(np.zeros(complex_.n_sides), A_eq=matrix, b_eq=np.zeros(row),
-                     bounds=[(0.0 if c else 1.0, None) for c in (
-                         np.zeros(complex_.n_sides, dtype=bool) if collapsible is None
-                         else collapsible)], method="highs")
+    zero_ok = (np.zeros(complex_.n_sides, dtype=bool) if collapsible is None
+               else np.asarray(collapsible, dtype=bool))
+    result = linprog(np.zeros(complex_.n_sides), A_eq=matrix, b_eq=np.zeros(len(equations)),
+                     bounds=[(0.0 if c else 1.0, None) for c in zero_ok], method="highs")
     return result.status == 0
