@@ -189,3 +189,30 @@ def test_every_component_is_a_part_with_components_all(tmp_path):
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["input"]["components"] == 2 and report["parts"]["parts"] == 2
     assert report["labeling"]["valid"] and report["labeling"]["charts"] == 12
+
+
+@pytest.mark.parametrize("option, value, message", [
+    ("--target-faces", "3", "target_faces must be between 6 and 200000, got 3"),
+    ("--max-base-faces", "0", "max_base_faces must be between 6 and 1000000, got 0"),
+    ("--target-faces", "many", "argument --target-faces: invalid int value: 'many'")])
+def test_bad_base_mesh_options_exit_2_and_write_nothing(tmp_path, option, value, message):
+    before = digest(SAMPLE)
+    result = run("reconstruct", SAMPLE, "-o", tmp_path / "out.step", "--report",
+                 tmp_path / "r.json", option, value)
+    assert result.returncode == 2 and result.stderr.startswith("error: " + message), result.stderr
+    assert list(tmp_path.iterdir()) == [] and digest(SAMPLE) == before
+
+
+def test_a_labeling_that_cannot_be_quantized_exits_1_naming_the_charts(tmp_path):
+    # the SIMP pylon's labeling is valid but winds around its handles: no rectilinear
+    # chart polygons close together (benchmarks/BASEMESH_RESULTS.md)
+    pylon = os.path.join(REPO, "..", "shared", "data", "meshes", "to_simp_pylon.stl")
+    before = digest(pylon)
+    result = run("reconstruct", pylon, "-o", tmp_path / "out.step", "--report", tmp_path / "r.json",
+                 "--base-mesh", tmp_path / "base.obj")
+    assert result.returncode == 1 and "failed:" in result.stderr and "charts" in result.stderr
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["stages"]["labeling"]["status"] == "ok"
+    assert report["stages"]["basemesh"]["status"] == "failed"
+    assert report["stages"]["fit"]["status"] == "skipped"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"] and digest(pylon) == before
