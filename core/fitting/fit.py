@@ -120,9 +120,15 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
                     coarse_rms=coarse.rms, stopped=fitted.stopped, start=start)
         if mode == "inside" and _crosses_itself(limit_map @ vertices, T) \
                 and not _crosses_itself(limit_map @ V0, T):
-            # the two-sided fit pulled a thin member through itself: start from the cage
-            vertices = V0
-            info["start"] = "cage (the least-squares start crossed itself)"
+            # the two-sided fit pulled a thin member through itself: start from the largest
+            # part of its move that leaves the surface free of crossings, else from the cage
+            fraction = next((t for t in START_FRACTIONS
+                             if not _crosses_itself(limit_map @ (V0 + t * (vertices - V0)), T)),
+                            0.0)
+            vertices = V0 + fraction * (vertices - V0)
+            info["start"] = (f"{fraction:g} of the least-squares fit (the whole fit crossed "
+                             "itself)" if fraction else
+                             "cage (the least-squares start crossed itself)")
     if mode == "inside":
         edge = _mean_edge_length(base)
         step = step_fraction * edge
@@ -145,6 +151,10 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     info["seconds"] = time.perf_counter() - started
     info["measure_seconds"] = time.perf_counter() - measuring
     return PolyMesh(vertices, base.face_vertices, base.face_offsets), info
+
+
+START_FRACTIONS = (0.5, 0.25)
+"""Parts of the least-squares move tried, largest first, when the whole move crosses itself."""
 
 
 def _crosses_itself(points, triangles):
