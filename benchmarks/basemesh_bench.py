@@ -124,7 +124,9 @@ def markdown(rows, meta):
     lines = ["# Base-mesh benchmark (issue 8)", "",
              "Written by `benchmarks/basemesh_bench.py`; do not edit by hand.", "",
              f"- Date: {meta['date']}; commit {meta['commit']}; load (1 min) at start "
-             f"{meta['load']}; every case in its own process (timeout {meta['timeout']} s).",
+             f"{meta['load']}; every case in its own process (timeout {meta['timeout']} s)."
+             + (f" Rows of meshes not re-run are from {meta['updated_from']['date']}, commit "
+                f"{meta['updated_from']['commit']}." if "updated_from" in meta else ""),
              "- Budget: `--target-faces 300` (met when within 25%); genus is the base mesh's "
              "against the target's; inverted: base faces whose limit normal points more than 90 "
              "degrees from the target's at the closest point; crossings: intersecting triangle "
@@ -170,6 +172,11 @@ def markdown(rows, meta):
     return "\n".join(lines) + "\n"
 
 
+def _order(row):
+    """SIMP topology-optimisation results first, then the other meshes; one part first."""
+    return (not row["mesh"].startswith("to_simp"), row["mesh"], MODES.index(row["mode"]))
+
+
 def _percent(value):
     return "–" if value is None else f"{100.0 * value:.2f}"
 
@@ -181,6 +188,8 @@ def main(argv):
     parser.add_argument("--solid", nargs="*", default=[],
                         help="meshes whose whole pipeline to STEP is run and evaluated")
     parser.add_argument("--timeout", type=float, default=600.0)
+    parser.add_argument("--update", action="store_true",
+                        help="keep the other rows of basemesh_results.json, replace these")
     parser.add_argument("--case", nargs=4, metavar=("PATH", "MODE", "JSON", "PNG"))
     args = parser.parse_args(argv)
     if args.case:
@@ -194,6 +203,14 @@ def main(argv):
             "timeout": args.timeout,
             "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO,
                                      capture_output=True, text=True).stdout.strip()}
+    results_json = os.path.join(HERE, "basemesh_results.json")
+    kept = []
+    if args.update and os.path.exists(results_json):
+        with open(results_json, encoding="utf-8") as handle:
+            previous = json.load(handle)
+        ran = {os.path.splitext(n)[0] for n in names}
+        kept = [r for r in previous["rows"] if r["mesh"] not in ran]
+        meta["updated_from"] = previous["meta"]
     rows = []
     for name in names:
         stem = os.path.splitext(name)[0]
@@ -218,7 +235,8 @@ def main(argv):
             rows.append(row)
             print(stem, mode, row.get("stages", {}).get("basemesh", row.get("error")),
                   row.get("base_mesh", {}).get("faces"), flush=True)
-    with open(os.path.join(HERE, "basemesh_results.json"), "w", encoding="utf-8") as handle:
+    rows = sorted(kept + rows, key=_order)
+    with open(results_json, "w", encoding="utf-8") as handle:
         json.dump({"meta": meta, "rows": rows}, handle, indent=1)
     with open(os.path.join(HERE, "BASEMESH_RESULTS.md"), "w", encoding="utf-8") as handle:
         handle.write(markdown(rows, meta))

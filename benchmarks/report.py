@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Summary figures and the Markdown page (``RESULTS.md``) of a benchmark run."""
+import json
 
 TARGETS = {
     "step_2k": ("~2,000-face base mesh (grid_sphere(18)) to a valid STEP file, default settings "
@@ -111,6 +112,41 @@ TOPIC_RESULTS = (
 """Topic result files beside RESULTS.md: (title, file name, script)."""
 
 
+def _current_pipeline_table():
+    """Lines of a compact table of ``basemesh_results.json`` (SIMP results first), if present."""
+    import os
+
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "basemesh_results.json")
+    if not os.path.exists(path):
+        return []
+    with open(path, encoding="utf-8") as handle:
+        data = json.load(handle)
+    lines = [f"### Current pipeline on every dev mesh (from `basemesh_results.json`, "
+             f"{data['meta']['date']}, commit {data['meta']['commit']})", "",
+             "Distances are symmetric, fractions of the bounding-box diagonal, by the independent "
+             "`../shared/tools/evaluate.py` on the STEP file (run for the meshes listed there).", "",
+             "| mesh | parts | base mesh | faces | genus (target) | inverted faces | STEP valid | "
+             "mean dist % | max dist % |", "|---|---|---|---|---|---|---|---|---|"]
+    for row in data["rows"]:
+        base = row.get("base_mesh") or {}
+        metrics = (row.get("solid") or {}).get("evaluation", {})
+        symmetric = metrics.get("distance", {}).get("symmetric", {})
+        valid = metrics.get("brep", {}).get("is_valid")
+        cells = [f"`{row['mesh']}`", row["mode"],
+                 row.get("stages", {}).get("basemesh", row.get("error", "?")),
+                 str(base.get("faces", "–")),
+                 f"{base['genus']} ({row['input_genus']})" if base else "–",
+                 str(row.get("inverted_faces", "–")),
+                 "–" if valid is None else ("yes" if valid else "no"),
+                 _pct(symmetric.get("mean_frac")), _pct(symmetric.get("max_frac"))]
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines + [""]
+
+
+def _pct(value):
+    return "–" if value is None else f"{100.0 * value:.2f}"
+
+
 def _header(results):
     m = results["machine"]
     s = results["summary"]
@@ -124,6 +160,7 @@ def _header(results):
         "",
     ] + [f"- [{title}]({name}) (`{script}`)" for title, name, script in TOPIC_RESULTS] + [
         "",
+    ] + _current_pipeline_table() + [
         f"- Date: {m['date']}; run took {results['total_seconds']:.0f} s "
         f"({'quick mode' if results['quick'] else 'full run'}).",
         f"- Machine: {m['cpu_model']}, {m['cpu_count']} CPUs, {m['memory_gb']} GiB RAM, {m['platform']}.",
