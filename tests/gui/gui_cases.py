@@ -409,6 +409,7 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
     def test_6_edit_the_cage_and_undo(self):
         fit, solid = self.one("Fit"), self.one("Solid")
         iterations, before = fit.Iterations, solid.Shape.BoundBox
+        volume = solid.Shape.Volume
         points = fit.CageVertices
         top = max(range(len(points)), key=lambda k: points[k].z)
         FreeCADGui.Selection.clearSelection()
@@ -427,7 +428,9 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
         panel.reject()
         self.doc.undo()
         self.assertAlmostEqual(fit.CageVertices[top].z, points[top].z, places=9)
-        self.assertAlmostEqual(solid.Shape.BoundBox.ZMax, before.ZMax, places=6)
+        # the solid is the one before the edit: same volume (its bounding box can differ by
+        # ~1e-3 mm, depending on whether OpenCascade boxes the displayed triangulation or poles)
+        self.assertAlmostEqual(solid.Shape.Volume / volume, 1.0, places=9)
 
     def test_7_save_reopen_without_the_source_and_recompute(self):
         from polycube_wb import api
