@@ -37,7 +37,8 @@ def run_case(path, mode, out_json, image, solid):
     """One mesh in one parts mode; writes a JSON dict to ``out_json``."""
     import numpy as np
 
-    from core.pipeline import count_limit_self_intersections, reconstruct
+    from core.pipeline import reconstruct
+    from core.stages.fit import count_limit_self_intersections
     from core.quadmesh.orientation import inverted_faces
 
     started = time.perf_counter()
@@ -49,10 +50,10 @@ def run_case(path, mode, out_json, image, solid):
            "labeling_seconds": report["stages"].get("labeling", {}).get("seconds"),
            "basemesh_seconds": report["stages"].get("basemesh", {}).get("seconds"),
            "input_genus": report["input"]["genus"], "triangles": report["input"]["triangles"]}
-    base = result.state.get("base_mesh")
+    base = result.state.cage
     if base is not None:
         info = report["base_mesh"]
-        target = result.state["target"]
+        target = result.state.intake.target
         row["base_mesh"] = {key: info[key] for key in (
             "faces", "quads", "extraordinary_vertices", "min_valence", "max_valence", "genus",
             "target_faces", "within_budget", "minimum_reason", "scale", "solver_status",

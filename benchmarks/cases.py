@@ -47,7 +47,7 @@ class _StageMemory:
         self.before = {}
 
     def report(self, stage, fraction, message=""):
-        self.before[stage] = peak_mb()
+        self.before.setdefault(stage, peak_mb())
 
     def check_cancel(self):
         pass
@@ -86,6 +86,7 @@ def _error_line(exc):
 def mesh_case(spec):
     """Figures of one mesh and one part mode (see module docstring)."""
     from core.errors import PolycubeInputError
+    from core.params import ReconstructionParams
     from core.pipeline import reconstruct
     from core.segmentation.labeling import (face_normals, hbecvt_labeling,
                                             nearest_direction_labels)
@@ -97,7 +98,8 @@ def mesh_case(spec):
     memory = _StageMemory()
     started = time.perf_counter()
     try:
-        result = reconstruct(spec["path"], {"parts": mode}, memory, stop_after="labeling")
+        params = ReconstructionParams(parts=mode)
+        result = reconstruct(spec["path"], params, memory, stop_after="labeling")
     except PolycubeInputError as exc:
         return {"status": "rejected", "error": _error_line(exc),
                 "seconds": round(time.perf_counter() - started, 3), "peak_memory_mb": peak_mb()}
@@ -118,9 +120,8 @@ def mesh_case(spec):
     if "labeling" not in report:
         return out
     state = result.state
-    mesh, field, face_part = state["target"], state["frames"], state["face_part"]
+    mesh, field, face_part = state.intake.target, state.frames.frame_field, state.parts.face_part
     V, F = mesh.vertices, mesh.faces
-    params = state["params"]
     out["labeling"] = {k: v for k, v in report["labeling"].items() if k != "examples"}
 
     clock = time.perf_counter()
@@ -133,7 +134,7 @@ def mesh_case(spec):
 
     with tempfile.TemporaryDirectory(prefix="polycube-bench-") as tmp:
         ply = os.path.join(tmp, "labels.ply")
-        write_labels_ply(ply, V, F, face_part, state["face_label"], field.face_frame)
+        write_labels_ply(ply, V, F, face_part, state.labeling.face_label, field.face_frame)
         judged = validity_from_labels_file(ply)
         out["labels_file"] = {**_counts(judged), "examples": _examples(judged)}
         out["labels_file"]["bytes"] = os.path.getsize(ply)
@@ -149,7 +150,7 @@ def mesh_case(spec):
                                                          identity).report)
     out["peak_memory_mb"]["total"] = peak_mb()
     if spec.get("images"):
-        out["images"] = _render_mesh(spec, V, F, face_part, state["face_label"], out)
+        out["images"] = _render_mesh(spec, V, F, face_part, state.labeling.face_label, out)
     return out
 
 

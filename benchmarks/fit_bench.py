@@ -41,7 +41,8 @@ sys.path.insert(0, REPO)
 
 from core.fitting import fit_base_mesh  # noqa: E402
 from core.fitting.responses import triangulate  # noqa: E402
-from core.pipeline import count_limit_self_intersections, fit_levels, reconstruct  # noqa: E402
+from core.pipeline import reconstruct  # noqa: E402
+from core.stages.fit import count_limit_self_intersections, fit_levels  # noqa: E402
 from core.polymesh_io import write_polymesh  # noqa: E402
 from core.quality import containment, sample_surface, surface_distances  # noqa: E402
 from core.subdivision.catmull_clark import build_hierarchy  # noqa: E402
@@ -162,10 +163,10 @@ def baseline_seconds(tree, base_path, target_path):
 
 def run_case(name, path, baseline, work):
     result = reconstruct(path, stop_after="basemesh")
-    if "base_mesh" not in result.state:
+    if result.state.basemesh is None:
         stage = [k for k, v in result.report["stages"].items() if v["status"] != "ok"]
         return {"name": name, "error": f"no base mesh ({', '.join(stage)})"}
-    base, target = result.state["base_mesh"], result.state["target"]
+    base, target = result.state.basemesh.cage, result.state.intake.target
     row = {"name": name, "triangles": int(len(target.faces)), "base_faces": int(base.n_faces)}
     row["floor_seconds"] = floor_seconds(target)
     row["modes"] = [our_fit(base, target, mode) for mode in MODES]

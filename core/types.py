@@ -57,31 +57,6 @@ class PolyMesh:
 
 
 @dataclass
-class Segmentation:
-    """Parts and polycube labels of a target mesh's faces.
-
-    face_part : (m,) int32, part index of each face (0 .. n_parts-1).
-    face_label : (m,) int32, 0..5 = +X, -X, +Y, -Y, +Z, -Z of the face's frame.
-    face_frame : (m, 3, 3) float64, rows are the face's (blended) local x, y, z axes
-        in world coordinates, right-handed.
-    part_frames : (n_parts, 3, 3) float64, PCA frame of each part (rows x, y, z).
-    """
-
-    face_part: np.ndarray
-    face_label: np.ndarray
-    face_frame: np.ndarray
-    part_frames: np.ndarray
-    info: dict = field(default_factory=dict)
-
-    def label_directions(self):
-        """(m, 3) float64 unit vector of each face's label in world coordinates."""
-        axis = self.face_label // 2
-        sign = np.where(self.face_label % 2 == 0, 1.0, -1.0)
-        rows = self.face_frame[np.arange(len(axis)), axis]
-        return rows * sign[:, None]
-
-
-@dataclass
 class BSplinePatch:
     """One B-spline surface patch in OpenCascade's form (distinct knots + multiplicities).
 
@@ -117,3 +92,138 @@ class PatchSet:
     face_of_patch: np.ndarray
     info: dict = field(default_factory=dict)
     topology: object = None
+
+
+# -- stage results ------------------------------------------------------------------------
+# One dataclass per pipeline stage (``core.stages``). Each holds the stage's data for later
+# stages, ``report`` (its JSON section of the run report, built by the stage) and
+# ``message`` (one line for the run's stage table: warnings, or "" when there is nothing
+# to say). Arrays are never copied between stages; treat them as read-only.
+
+
+@dataclass(frozen=True)
+class MeshSource:
+    """What the intake reads: a mesh file, or arrays already in memory.
+
+    path : str, the file (STL, OBJ, PLY, OFF), or the name to report for ``arrays``.
+    arrays : None, or ``(vertices (n, 3) float64, faces (m, 3) int64)`` to validate
+        instead of reading ``path`` (a FreeCAD document's mesh).
+    """
+
+    path: str
+    arrays: tuple = None
+
+
+@dataclass(frozen=True)
+class IntakeResult:
+    """The validated target, in millimetres (report key ``input``).
+
+    target : TriMesh, watertight, 2-manifold, outward, scaled by ``report["unit_to_mm"]``.
+    genus : int, genus of the target (every later stage keeps it).
+    """
+
+    target: TriMesh
+    genus: int
+    report: dict = field(default_factory=dict)
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class PartsResult:
+    """The part of every target face (report key ``parts``).
+
+    face_part : (m,) int32, part 0 .. P-1 of each face of ``IntakeResult.target``.
+    """
+
+    face_part: np.ndarray
+    report: dict = field(default_factory=dict)
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class FramesResult:
+    """Part, interface and blended face frames (report key ``frames``).
+
+    frame_field : core.segmentation.frames.FrameField.
+    """
+
+    frame_field: object
+    report: dict = field(default_factory=dict)
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class LabelingResult:
+    """The polycube labeling and its validity (report key ``labeling``).
+
+    face_label : (m,) int, 0..5 = +X, -X, +Y, -Y, +Z, -Z of each face's frame.
+    validity : core.segmentation.validity.Validity of ``face_label``.
+    """
+
+    face_label: np.ndarray
+    validity: object
+    report: dict = field(default_factory=dict)
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class BaseMeshResult:
+    """The coarse quad base mesh (cage) on the target (report key ``base_mesh``).
+
+    cage : PolyMesh, closed, 2-manifold, outward, the target's genus.
+    """
+
+    cage: PolyMesh
+    report: dict = field(default_factory=dict)
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """The fitted cage (report key ``fit``).
+
+    cage : PolyMesh whose Catmull-Clark limit surface approximates the target (possibly
+        refined: more faces than the base mesh when ``tolerance`` split quad strips).
+    """
+
+    cage: PolyMesh
+    report: dict = field(default_factory=dict)
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class PatchesResult:
+    """The fitted cage's limit surface as B-spline patches (report key ``patches``).
+
+    patches : PatchSet.
+    """
+
+    patches: PatchSet
+    report: dict = field(default_factory=dict)
+    message: str = ""
+
+
+@dataclass
+class PipelineState:
+    """What the stages of one run have produced so far: one field per stage, None until it ran.
+
+    ``source`` is the intake's input; every other field is the result of the stage of the
+    same name (``core.pipeline.STAGES``), which reads only the fields it declares.
+    """
+
+    source: MeshSource = None
+    intake: IntakeResult = None
+    parts: PartsResult = None
+    frames: FramesResult = None
+    labeling: LabelingResult = None
+    basemesh: BaseMeshResult = None
+    fit: FitResult = None
+    patches: PatchesResult = None
+
+    @property
+    def cage(self):
+        """The latest cage: the fitted one when the fit ran, else the base mesh, else None."""
+        for result in (self.fit, self.basemesh):
+            if result is not None:
+                return result.cage
+        return None

@@ -56,27 +56,28 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
     outputs = {}
     missing = []
     if labels_path is not None:
-        if "face_label" in state:
+        if state.labeling is not None:
             from core.segmentation.labels_file import write_labels_ply
 
-            mesh = state["target"]
-            write_labels_ply(labels_path, mesh.vertices, mesh.faces, state["face_part"],
-                             state["face_label"], state["frames"].face_frame, protect=inputs)
+            mesh = state.intake.target
+            write_labels_ply(labels_path, mesh.vertices, mesh.faces, state.parts.face_part,
+                             state.labeling.face_label, state.frames.frame_field.face_frame,
+                             protect=inputs)
             outputs["labels"] = os.path.abspath(labels_path)
         else:
             missing.append(("labels file", "labeling"))
     if base_mesh_path is not None:
-        if "base_mesh" in state:
+        if state.cage is not None:
             from core.polymesh_io import write_polymesh
 
-            write_polymesh(base_mesh_path, state["base_mesh"], inputs)
+            write_polymesh(base_mesh_path, state.cage, inputs)
             outputs["base_mesh"] = os.path.abspath(base_mesh_path)
         else:
             missing.append(("base mesh", "basemesh"))
     if stop_after == "solid":
-        if "patches" in state:
+        if state.patches is not None:
             started = time.perf_counter()
-            solid_section = _solid_and_step(state["patches"], step_path, inputs)
+            solid_section = _solid_and_step(state.patches.patches, step_path, inputs)
             report["stages"]["solid"] = {"status": "ok", "message": "",
                                          "seconds": round(time.perf_counter() - started, 4)}
             report["brep"] = solid_section
@@ -226,10 +227,10 @@ def _refuse_self_intersections(base, path, budget=10_000):
     """InvalidMeshError if the limit surface of ``base`` intersects itself.
 
     Tested on the limit mesh at the subdivision level (1..3) with at most ``budget``
-    quads (``core.pipeline.limit_self_intersections``, the check the fit reports).
+    quads (``core.stages.fit.limit_self_intersections``, the check the fit reports).
     """
     from core.errors import InvalidMeshError
-    from core.pipeline import limit_self_intersections
+    from core.stages.fit import limit_self_intersections
 
     levels = int(np.clip(np.floor(np.log(budget / max(base.n_faces, 1)) / np.log(4.0)), 1, 3))
     pairs, faces, points = limit_self_intersections(base, levels)
@@ -335,17 +336,17 @@ def reconstruct(doc, mesh_path, progress=NO_PROGRESS, **params):
 
     result = run_pipeline(mesh_path, params, progress, "solid")
     name = os.path.splitext(os.path.basename(mesh_path))[0]
-    add_target_mesh(doc, result.state["target"], name + "_target")
+    add_target_mesh(doc, result.state.intake.target, name + "_target")
     if result.failed is not None:
         raise result.failed
-    if "patches" not in result.state:
+    if result.state.patches is None:
         stage = _first_unavailable(result.report)
         raise StageNotAvailableError(
             f"the solid needs the '{stage}' stage, which is not available yet: "
             f"{result.report['stages'][stage]['message']}")
     from polycube_wb.brep import patches_to_solid
 
-    return add_solid(doc, patches_to_solid(result.state["patches"]), name + "_solid")
+    return add_solid(doc, patches_to_solid(result.state.patches.patches), name + "_solid")
 
 
 # ----------------------------------------------------------------------------------------

@@ -157,8 +157,9 @@ class StageProxy:
     objects), and implement ``init_properties``, ``parameters(obj)`` (a JSON-able dict),
     ``run(obj, progress)`` (run the stage and store its result, may raise) and
     ``show(obj)`` (rebuild the display from the stored result; returns its ``ResultId``).
-    ``outputs(obj)`` returns the core state entries later stages need, cached in memory
-    and rebuilt from the document when missing (after reopening).
+    ``outputs(obj)`` returns the typed core results later stages need (a dict from
+    ``core.types.PipelineState`` field to stage result), cached in memory and rebuilt from
+    the document when missing (after reopening).
     """
 
     TYPE = "Polycube::Stage"
@@ -253,7 +254,8 @@ class StageProxy:
             session.cancelled = session.cancelled or cancelled
 
     def outputs(self, obj):
-        """Core state entries of this stage's result (cached; rebuilt after reopening)."""
+        """``{PipelineState field: core stage result}`` of this stage (cached; rebuilt after
+        reopening)."""
         if self._cache is None:
             self._cache = self.load_outputs(obj)
         return self._cache
@@ -261,13 +263,19 @@ class StageProxy:
     def load_outputs(self, obj):
         raise NotImplementedError(f"{type(self).__name__} must implement load_outputs")
 
-    def upstream_state(self, obj):
+    def upstream_results(self, obj):
         """The merged ``outputs`` of all stages before this one (a new dict)."""
-        state = {}
+        results = {}
         for upstream in self.inputs(obj):
-            state.update(upstream.Proxy.upstream_state(upstream))
-            state.update(upstream.Proxy.outputs(upstream))
-        return state
+            results.update(upstream.Proxy.upstream_results(upstream))
+            results.update(upstream.Proxy.outputs(upstream))
+        return results
+
+    def upstream_state(self, obj):
+        """A new ``core.types.PipelineState`` with the results of all stages before this one."""
+        from core.types import PipelineState
+
+        return PipelineState(**self.upstream_results(obj))
 
 
 def _one_line(exc):
@@ -276,7 +284,7 @@ def _one_line(exc):
 
 
 def run_core_stages(state, stages, params, progress):
-    """Run core pipeline stages on ``state``; returns ``(state, report)``.
+    """Run core pipeline stages on ``state`` (a ``core.types.PipelineState``); returns it.
 
     Raises
     ------
@@ -295,7 +303,7 @@ def run_core_stages(state, stages, params, progress):
         if entry.get("status") != "ok":
             raise StageFailed(f"the '{name}' stage {entry.get('status', 'did not run')}: "
                               f"{entry.get('message', '')}".rstrip(": "))
-    return state, report
+    return state
 
 
 def stage_params(**values):

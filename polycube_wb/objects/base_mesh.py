@@ -20,7 +20,12 @@ def base_mesh_stages():
 
 
 class CageProxy(StageProxy):
-    """A stage whose result is a cage (base mesh or fitted base mesh)."""
+    """A stage whose result is a cage (base mesh or fitted base mesh).
+
+    ``RESULT`` is the ``core.types.PipelineState`` field the stored cage fills.
+    """
+
+    RESULT = "basemesh"
 
     def show(self, obj):
         mesh = read_cage(obj)
@@ -28,7 +33,10 @@ class CageProxy(StageProxy):
         return fingerprint(mesh.vertices, mesh.face_vertices, mesh.face_offsets)
 
     def load_outputs(self, obj):
-        return {"base_mesh": read_cage(obj)}
+        from core.types import BaseMeshResult, FitResult
+
+        result_type = {"basemesh": BaseMeshResult, "fit": FitResult}[self.RESULT]
+        return {self.RESULT: result_type(read_cage(obj))}
 
 
 class BaseMeshProxy(CageProxy):
@@ -53,7 +61,6 @@ class BaseMeshProxy(CageProxy):
         return {"target_faces": int(obj.TargetFaces), "max_base_faces": int(obj.MaxBaseFaces)}
 
     def run(self, obj, progress):
-        state = self.upstream_state(obj)
-        state, _ = run_core_stages(state, base_mesh_stages(),
-                                   stage_params(**self.parameters(obj)), progress)
-        store_cage(obj, state["base_mesh"])
+        state = run_core_stages(self.upstream_state(obj), base_mesh_stages(),
+                                stage_params(**self.parameters(obj)), progress)
+        store_cage(obj, state.basemesh.cage)

@@ -23,6 +23,7 @@ FIGURES = (("MeanDistance", "mean_distance", "Mean distance of the limit surface
 class FitProxy(CageProxy):
     TYPE = "Polycube::Fit"
     INPUTS = ("BaseMesh",)
+    RESULT = "fit"
 
     def init_properties(self, obj):
         from polycube_wb.preferences import default
@@ -59,11 +60,14 @@ class FitProxy(CageProxy):
                 "fit_t_min": None if obj.AutoMinThickness else float(obj.MinThickness)}
 
     def run(self, obj, progress):
+        from core.types import BaseMeshResult
+
         state = self.upstream_state(obj)
-        state, report = run_core_stages(state, ["fit"], stage_params(**self.parameters(obj)),
-                                        progress)
-        fit = report["fit"]
+        # the cage to fit is the linked object's, possibly edited: a base mesh or an earlier fit
+        state.basemesh = BaseMeshResult(state.cage)
+        state = run_core_stages(state, ["fit"], stage_params(**self.parameters(obj)), progress)
+        fit = state.fit.report
         for name, key, _ in FIGURES:
             setattr(obj, name, float(fit[key]))
         obj.Stopped = str(fit.get("stopped", ""))
-        store_cage(obj, state["base_mesh"])
+        store_cage(obj, state.fit.cage)

@@ -74,24 +74,22 @@ class SegmentationProxy(StageProxy):
                 "max_sweeps": int(obj.MaxSweeps), "repair": bool(obj.Repair)}
 
     def run(self, obj, progress):
-        state = self.upstream_state(obj)
-        state, report = run_core_stages(state, STAGES, stage_params(**self.parameters(obj)),
-                                        progress)
-        labeling = report["labeling"]
-        obj.FacePart = state["face_part"].astype(int).tolist()
-        obj.FaceLabel = state["face_label"].astype(int).tolist()
+        state = run_core_stages(self.upstream_state(obj), STAGES,
+                                stage_params(**self.parameters(obj)), progress)
+        labeling = state.labeling.report
+        obj.FacePart = state.parts.face_part.astype(int).tolist()
+        obj.FaceLabel = state.labeling.face_label.astype(int).tolist()
         obj.Valid = bool(labeling["valid"])
         for name, key in zip(FIGURES, ("parts", "charts", "corners", "invalid_charts",
                                        "invalid_boundaries", "invalid_corners",
                                        "turning_points")):
             setattr(obj, name, int(labeling[key]))
-        self._cache = {key: state[key] for key in ("face_part", "frames", "face_label",
-                                                   "validity")}
+        self._cache = {key: getattr(state, key) for key in STAGES}
 
     def show(self, obj):
         from polycube_wb.convert import arrays_to_mesh
 
-        target = self.upstream_state(obj)["target"]
+        target = self.upstream_state(obj).intake.target
         face_part, face_label = stored_arrays(obj, len(target.faces))
         obj.Mesh = arrays_to_mesh(target.vertices, target.faces)
         obj.FaceColors = face_colours(face_part, face_label, obj.ColourBy)
@@ -104,17 +102,18 @@ class SegmentationProxy(StageProxy):
 
     def load_outputs(self, obj):
         from core.segmentation.validity import check_validity
+        from core.types import LabelingResult, PartsResult
 
         state = self.upstream_state(obj)
-        mesh = state["target"]
+        mesh = state.intake.target
         face_part, face_label = stored_arrays(obj, len(mesh.faces))
-        state["face_part"] = face_part
-        state, _ = run_core_stages(state, ["frames"], stage_params(**self.parameters(obj)),
-                                   _no_progress())
+        state.parts = PartsResult(face_part)
+        state = run_core_stages(state, ["frames"], stage_params(**self.parameters(obj)),
+                                _no_progress())
         validity = check_validity(mesh.vertices, mesh.faces, face_part, face_label,
-                                  state["frames"].face_frame)
-        return {"face_part": face_part, "frames": state["frames"], "face_label": face_label,
-                "validity": validity}
+                                  state.frames.frame_field.face_frame)
+        return {"parts": state.parts, "frames": state.frames,
+                "labeling": LabelingResult(face_label, validity, validity.report)}
 
 
 def _no_progress():

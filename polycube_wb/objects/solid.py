@@ -42,7 +42,7 @@ class SolidProxy(StageProxy):
         if not 1 <= obj.Depth <= MAX_EXPORT_DEPTH:
             raise ParameterError(f"Depth must be between 1 and {MAX_EXPORT_DEPTH}, got "
                                  f"{obj.Depth}")
-        base = self.upstream_state(obj)["base_mesh"]
+        base = self.upstream_state(obj).cage
         progress.report("patches", 0.05)
         patches = limit_surface_patches(base, depth=int(obj.Depth), measure=False)
         progress.check_cancel()

@@ -41,8 +41,9 @@ class TargetProxy(StageProxy):
 
     def run(self, obj, progress):
         self._cache = self._intake(obj, progress)
-        obj.Genus = int(self._cache["input_genus"])
-        obj.Triangles = int(len(self._cache["target"].faces))
+        intake = self._cache["intake"]
+        obj.Genus = intake.genus
+        obj.Triangles = int(len(intake.target.faces))
 
     def show(self, obj):
         V, F = _mesh_arrays(obj)
@@ -53,13 +54,13 @@ class TargetProxy(StageProxy):
 
     def _intake(self, obj, progress=None):
         from core.progress import NO_PROGRESS
+        from core.types import MeshSource, PipelineState
 
         V, F = _mesh_arrays(obj)
         params = stage_params(check_self_intersections=bool(obj.CheckSelfIntersections))
-        state = {"input_mesh": (V, F), "input_path": obj.Label}
-        state, report = run_core_stages(state, ["intake"], params, progress or NO_PROGRESS)
-        return {"target": state["target"], "input_genus": state["input_genus"],
-                "intake": report.get("intake", {})}
+        state = PipelineState(source=MeshSource(obj.Label, (V, F)))
+        state = run_core_stages(state, ["intake"], params, progress or NO_PROGRESS)
+        return {"intake": state.intake}
 
 
 def _mesh_arrays(obj):

@@ -24,10 +24,10 @@ def test_units_scale_the_target_to_millimetres():
     assert mm.report["input"]["unit_to_mm"] == 1.0
     # the file's own figures stay in its units
     assert inches.report["input"]["bbox_diagonal"] == mm.report["input"]["bbox_diagonal"]
-    assert np.allclose(inches.state["target"].vertices, 25.4 * mm.state["target"].vertices,
+    assert np.allclose(inches.state.intake.target.vertices, 25.4 * mm.state.intake.target.vertices,
                        rtol=0, atol=1e-12 * 25.4 * 12)
     # the stages are scale free: the base mesh is the same shape, 25.4 times larger
-    a, b = mm.state["base_mesh"].vertices, inches.state["base_mesh"].vertices
+    a, b = mm.state.basemesh.cage.vertices, inches.state.basemesh.cage.vertices
     assert a.shape == b.shape
     assert np.max(np.abs(b - 25.4 * a)) <= 1e-9 * 25.4 * np.abs(a).max()
 
@@ -74,7 +74,7 @@ def test_tolerance_in_millimetres_is_reported_per_round():
         assert rounds[-1]["max_deviation"] <= section["value"]
     else:
         assert "max_base_faces" in section["reason"] or "fits" in section["reason"]
-    assert result.state["base_mesh"].n_faces == section["faces"] == rounds[-1]["faces"]
+    assert result.state.fit.cage.n_faces == section["faces"] == rounds[-1]["faces"]
 
 
 def test_tolerance_without_a_fit_is_refused():

@@ -13,7 +13,7 @@ from core.params import ReconstructionParams
 from core.pipeline import run_stages
 from core.progress import Progress, SubProgress
 from core.subdivision.sample_cages import cube
-from core.types import TriMesh
+from core.types import BaseMeshResult, IntakeResult, MeshSource, PipelineState, TriMesh
 
 
 class Recorder(Progress):
@@ -36,7 +36,7 @@ def _box_state():
     box = trimesh.creation.box(extents=(12.0, 12.0, 12.0))
     target = TriMesh(np.asarray(box.vertices, dtype=np.float64),
                      np.asarray(box.faces, dtype=np.int64))
-    return {"target": target, "base_mesh": cube(10.0)}
+    return PipelineState(intake=IntakeResult(target, genus=0), basemesh=BaseMeshResult(cube(10.0)))
 
 
 def test_sub_progress_maps_and_clamps_into_its_span():
@@ -52,7 +52,7 @@ def test_the_fit_reports_its_iterations_inside_its_share_of_the_run():
     state, report, failed = run_stages(_box_state(), ["fit", "patches"],
                                        ReconstructionParams(fit_iterations=4), progress)
     assert failed is None and report["stages"]["fit"]["status"] == "ok"
-    assert "progress" not in state
+    assert state.patches is not None and state.fit.cage.n_faces == 6
     fractions = [fraction for _, fraction in progress.reports]
     assert fractions == sorted(fractions), "the run's bar never goes back"
     inside_fit = [f for stage, f in progress.reports if stage == "fit"]
@@ -75,12 +75,46 @@ def test_cancel_inside_the_fit_stops_the_run():
 
 def test_intake_validates_an_in_memory_mesh():
     box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
-    state = {"input_mesh": (np.asarray(box.vertices), np.asarray(box.faces)),
-             "input_path": "box in memory"}
-    state, report, failed = run_stages(state, ["intake"], ReconstructionParams())
+    source = MeshSource("box in memory", (np.asarray(box.vertices), np.asarray(box.faces)))
+    state, report, failed = run_stages(PipelineState(source=source), ["intake"],
+                                       ReconstructionParams(units="cm"))
     assert failed is None
-    assert len(state["target"].faces) == 12 and report["intake"]["genus"] == 0
-    assert report["intake"]["file"] == "box in memory"
+    assert isinstance(state.intake, IntakeResult) and state.intake.genus == 0
+    assert len(state.intake.target.faces) == 12
+    # the target is scaled to millimetres; the report keeps the file's units
+    assert np.ptp(state.intake.target.vertices, axis=0) == pytest.approx([10.0, 20.0, 30.0])
+    assert report["input"]["genus"] == 0 and report["input"]["file"] == "box in memory"
+    assert report["input"]["bbox_diagonal"] == pytest.approx(np.sqrt(14.0))
+
+
+def test_a_stage_without_its_inputs_is_refused_before_anything_runs():
+    progress = Recorder()
+    with pytest.raises(ValueError, match="'fit' stage needs the basemesh result"):
+        run_stages(PipelineState(intake=_box_state().intake), ["fit"], ReconstructionParams(),
+                   progress)
+    assert progress.reports == []
+    with pytest.raises(ValueError, match="'frames' stage needs the parts result"):
+        run_stages(PipelineState(intake=_box_state().intake), ["frames"], ReconstructionParams())
+    # an earlier stage of the same run provides it
+    state, report, failed = run_stages(PipelineState(intake=_box_state().intake),
+                                       ["parts", "frames"], ReconstructionParams())
+    assert failed is None and state.frames.report["parts"] == 1 == report["frames"]["parts"]
+
+
+def test_cancel_inside_the_labeling_stops_before_the_repair():
+    box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    source = MeshSource("box", (np.asarray(box.vertices), np.asarray(box.faces)))
+    progress = Recorder(stage="labeling", cancel_after=2)
+    state, report, failed = run_stages(PipelineState(source=source),
+                                       ["intake", "parts", "frames", "labeling", "basemesh"],
+                                       ReconstructionParams(), progress)
+    assert isinstance(failed, Cancelled)
+    assert report["stages"]["labeling"]["status"] == "failed"
+    assert report["stages"]["basemesh"]["status"] == "skipped"
+    assert state.frames is not None and state.labeling is None
+    # the runner's start of the stage, then the labeling's own report after HBECVT
+    assert [f for stage, f in progress.reports if stage == "labeling"] == [
+        pytest.approx(3 / 5), pytest.approx(3 / 5 + 0.5 / 5)]
 
 
 def test_fit_mode_and_thickness_reach_the_fit():

@@ -199,8 +199,8 @@ def test_real_simp_cantilever_base_mesh():
 
     result = reconstruct(EXAMPLES / "to_simp_cantilever.stl", stop_after="basemesh")
     assert result.report["stages"]["basemesh"]["status"] == "ok", result.report["stages"]
-    base = result.state["base_mesh"]
-    target = result.state["target"]
+    base = result.state.basemesh.cage
+    target = result.state.intake.target
     check_polymesh(base)
     info = result.report["base_mesh"]
     assert info["genus"] == result.report["input"]["genus"] == 0

@@ -1,0 +1,108 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Fit stage: move the cage so its limit surface fits the target (paper Sect. 2.5, Eqs. 6-12),
+refining quad strips until a tolerance is met when one is asked for."""
+import numpy as np
+
+from core.types import FitResult
+
+FIT_FACE_BUDGET = 40_000
+"""Most faces of the subdivided mesh the fit works on: above it, fewer levels are used
+(the closest-point queries and thickness rays of every iteration scale with it)."""
+
+FIT_REPORT_KEYS = ("start", "rounds", "iterations", "stopped", "mean_distance", "max_distance",
+                   "outside_volume_fraction", "uncovered_volume_fraction", "initial_mean_distance",
+                   "initial_max_distance", "initial_outside_volume_fraction", "t_min", "seconds",
+                   "measure_seconds")
+"""Figures of ``core.fitting.fit_base_mesh``'s info copied into the report, when present."""
+
+
+def fit_levels(n_base_faces, wanted):
+    """Subdivision levels for the fit: ``wanted``, fewer if the fine mesh would exceed the budget."""
+    affordable = int(np.floor(np.log(FIT_FACE_BUDGET / max(n_base_faces, 1)) / np.log(4.0)))
+    return int(max(1, min(wanted, affordable)))
+
+
+def run_fit(intake, basemesh, params, progress):
+    """Fit the base mesh's cage to the target (``params.fit_mode``), to a tolerance if asked.
+
+    Parameters
+    ----------
+    intake : core.types.IntakeResult; basemesh : core.types.BaseMeshResult (its ``cage``
+        may be one the user edited).
+    params : core.params.ReconstructionParams (``fit_mode``, ``fit_iterations``,
+        ``subdivision_levels``, ``fit_t_min``, ``tolerance`` or ``tolerance_mm``,
+        ``max_base_faces``).
+    progress : core.progress.Progress; the fit reports its iterations and cancels inside.
+
+    Returns
+    -------
+    core.types.FitResult; the report has the fit's figures, ``self_intersections`` of the
+    fitted limit surface (triangle pairs at the fit's level) and, with a tolerance, a
+    ``tolerance`` section per refinement round. The message warns about crossings and a
+    tolerance not met.
+    """
+    from core.fitting import fit_base_mesh
+
+    base, target = basemesh.cage, intake.target
+
+    def fit(cage):
+        return fit_base_mesh(cage, target, levels=fit_levels(cage.n_faces, params.subdivision_levels),
+                             iterations=params.fit_iterations, mode=params.fit_mode,
+                             t_min=params.fit_t_min, progress=progress)
+
+    diagonal_mm = float(np.linalg.norm(np.ptp(target.vertices, axis=0)))
+    tolerance = params.tolerance or params.tolerance_mm / diagonal_mm
+    refinement = None
+    if tolerance > 0:
+        from core.fitting.refine import fit_to_tolerance
+
+        refinement = fit_to_tolerance(base, target, tolerance, params.max_base_faces, fit)
+        fitted, info = refinement.mesh, refinement.info
+    else:
+        fitted, info = fit(base)
+    levels = info["levels"]
+    report = {"mode": params.fit_mode, "levels": levels,
+              **{key: info[key] for key in FIT_REPORT_KEYS if key in info}}
+    report["self_intersections"] = count_limit_self_intersections(fitted, levels)
+    warnings = [] if report["self_intersections"] == 0 else [
+        f"warning: the fitted limit surface intersects itself "
+        f"({report['self_intersections']} triangle pairs at level {levels})"]
+    if refinement is not None:
+        report["tolerance"] = {"value": tolerance, "value_mm": tolerance * diagonal_mm,
+                               "met": refinement.met, "reason": refinement.reason,
+                               "faces": int(fitted.n_faces), "rounds": refinement.rounds}
+        if not refinement.met:
+            warnings.append(f"warning: {refinement.reason}")
+    return FitResult(fitted, report, "; ".join(warnings))
+
+
+def count_limit_self_intersections(base, levels):
+    """Intersecting triangle pairs of the level-``levels`` limit mesh of ``base`` (0 = clean)."""
+    return int(len(limit_self_intersections(base, levels)[0]))
+
+
+def limit_self_intersections(base, levels):
+    """Where the level-``levels`` limit mesh of ``base`` intersects itself.
+
+    The base mesh is subdivided ``levels >= 1`` times, its vertices moved to their
+    limit positions and its quads split into two triangles each.
+
+    Returns
+    -------
+    pairs : (k, 2) int64 intersecting triangle pairs (``core.self_intersection``).
+    base_faces : (k, 2) int64 the base faces the two triangles of each pair lie on.
+    points : (k, 3) float64 the centroid of the first triangle of each pair.
+    """
+    from core.fitting.responses import triangulate
+    from core.self_intersection import find_self_intersections
+    from core.subdivision.catmull_clark import build_hierarchy
+    from core.subdivision.limit import limit_matrices
+
+    fine = build_hierarchy(base, levels).meshes[levels]
+    limit, _, _ = limit_matrices(fine)
+    points = limit @ fine.vertices
+    triangles = triangulate(fine.face_vertices, fine.face_offsets)
+    pairs = find_self_intersections(points, triangles)
+    level_one_face = pairs // 2 // 4 ** (levels - 1)
+    base_faces = np.repeat(np.arange(base.n_faces), base.face_sizes)[level_one_face]
+    return pairs, base_faces, points[triangles[pairs[:, 0]]].mean(axis=1)

@@ -1,0 +1,76 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Labeling stage: HBECVT polycube labeling (paper Sect. 2.3, Eqs. 2-3), repair, validity."""
+from core.types import LabelingResult
+
+VALIDITY_COUNTS = ("invalid_charts", "invalid_boundaries", "invalid_corners", "turning_points")
+"""Sections of ``Validity.report`` with a ``count`` and ``examples``, in report order."""
+
+
+def run_labeling(intake, parts, frames, params, progress):
+    """Label every face with one of six directions of its frame, repair, check validity.
+
+    HBECVT (Eqs. 2-3), then, with ``params.repair``, the repair loop and the straightening
+    of boundary hooks (which returns the validity it ends with); otherwise the validity of
+    the HBECVT labels (the corner rules are the independent check).
+
+    Parameters
+    ----------
+    intake : core.types.IntakeResult; parts : core.types.PartsResult;
+    frames : core.types.FramesResult.
+    params : core.params.ReconstructionParams (``lam``, ``penalty``, ``max_sweeps``,
+        ``repair``).
+    progress : core.progress.Progress; reported after each step, cancellable between them.
+
+    Returns
+    -------
+    core.types.LabelingResult; an invalid labeling is a result too (its report says what
+    is invalid), the base-mesh stage refuses it.
+    """
+    from core.segmentation.labeling import (face_normals, hbecvt_labeling, mean_label_angle,
+                                            nearest_direction_labels)
+    from core.segmentation.monotone import straighten_boundaries
+    from core.segmentation.repair import repair_labeling
+    from core.segmentation.validity import check_validity
+
+    mesh, face_part, field = intake.target, parts.face_part, frames.frame_field
+    labels, info = hbecvt_labeling(mesh.vertices, mesh.faces, face_part, field.face_frame,
+                                   field.face_interface_axis, lam=params.lam,
+                                   penalty=params.penalty, max_sweeps=params.max_sweeps)
+    progress.report("labeling", 0.5)
+    progress.check_cancel()
+    repair_report = straighten_report = None
+    if params.repair:
+        labels, repair_report = repair_labeling(mesh.vertices, mesh.faces, face_part, labels,
+                                                field.face_frame, field.face_interface_axis,
+                                                lam=params.lam, penalty=params.penalty)
+        progress.report("labeling", 0.8)
+        progress.check_cancel()
+        labels, straighten_report, validity = straighten_boundaries(
+            mesh.vertices, mesh.faces, face_part, labels, field.face_frame)
+    else:
+        validity = check_validity(mesh.vertices, mesh.faces, face_part, labels, field.face_frame)
+    normals = face_normals(mesh.vertices, mesh.faces)
+    nearest = nearest_direction_labels(normals, field.face_frame)
+    v = validity.report
+    report = {
+        "valid": bool(v["valid"]),
+        "parts": int(face_part.max()) + 1,
+        "charts": int(v["charts"]),
+        "corners": int(v["corners"]),
+        "invalid_charts": int(v["invalid_charts"]["count"]),
+        "invalid_boundaries": int(v["invalid_boundaries"]["count"]),
+        "invalid_corners": int(v["invalid_corners"]["count"]),
+        "invalid_at_interfaces": {k: int(v[f"invalid_{k}"]["at_interfaces"])
+                                  for k in ("boundaries", "corners")},
+        "turning_points": int(v["turning_points"]["count"]),
+        "mean_angle_deg": float(mean_label_angle(normals, labels, field.face_frame)),
+        "nearest_direction_mean_angle_deg": float(mean_label_angle(normals, nearest, field.face_frame)),
+        "hbecvt": info,
+        "unfixed": repair_report["unfixed"] if repair_report else None,
+        "straightened": straighten_report,
+        "examples": {k: v[k]["examples"] for k in VALIDITY_COUNTS},
+    }
+    message = "valid polycube labeling" if report["valid"] else (
+        f"labeling still has {report['invalid_charts']} invalid charts, "
+        f"{report['invalid_boundaries']} invalid boundaries, {report['invalid_corners']} invalid corners")
+    return LabelingResult(labels, validity, report, message)
