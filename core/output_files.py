@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Checks and atomic writes for output files: never half-written, never over an input."""
+import contextlib
 import json
 import os
 import tempfile
@@ -45,23 +46,67 @@ def _same_file(a, b):
         return False
 
 
-def write_text_atomic(path, text, inputs=(), what="output"):
-    """Write ``text`` to ``path`` through a temporary file in the same folder and a rename."""
+def new_file_mode(target):
+    """Permission bits for an output: those of the file it replaces, else 0o666 minus umask."""
+    if os.path.exists(target):
+        return os.stat(target).st_mode & 0o777
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+@contextlib.contextmanager
+def atomic_output(path, inputs=(), what="output"):
+    """Write an output file through a temporary file in its folder and one rename.
+
+    The path is checked first (:func:`check_output_path`: never over one of ``inputs``).
+    The block writes the temporary file, whose path it is given; when the block ends
+    normally the file is flushed to disk, gets the permissions of the file it replaces
+    (else the umask's) and is renamed over ``path``; on any exception it is removed and
+    an existing ``path`` is left untouched.
+
+    Parameters
+    ----------
+    path : str or os.PathLike, the output file.
+    inputs : iterable of paths that must never be overwritten.
+    what : str, names the file in messages ("STEP file", "report", ...).
+
+    Yields
+    ------
+    str, the temporary file (next to ``path``, ending in ``.tmp`` plus ``path``'s suffix,
+    so writers that choose the format by suffix see the right one); it exists and is empty.
+
+    Raises
+    ------
+    ParameterError from :func:`check_output_path`.
+    """
     target = check_output_path(path, inputs, what)
+    suffix = ".tmp" + os.path.splitext(target)[1]
     handle, temporary = tempfile.mkstemp(prefix="." + os.path.basename(target) + ".",
-                                         suffix=".tmp", dir=os.path.dirname(target))
+                                         suffix=suffix, dir=os.path.dirname(target))
+    os.close(handle)
     try:
-        with os.fdopen(handle, "w", encoding="utf-8") as stream:
-            stream.write(text)
-            stream.flush()
+        yield temporary
+        with open(temporary, "rb+") as stream:
             os.fsync(stream.fileno())
-        os.chmod(temporary, 0o644)
+        os.chmod(temporary, new_file_mode(target))
         os.replace(temporary, target)
-    except BaseException:
+    finally:
         if os.path.exists(temporary):
             os.remove(temporary)
-        raise
-    return target
+
+
+def write_text_atomic(path, text, inputs=(), what="output"):
+    """Write ``text`` (UTF-8) to ``path`` atomically (:func:`atomic_output`).
+
+    Returns
+    -------
+    str, the absolute path written.
+    """
+    with atomic_output(path, inputs, what) as temporary:
+        with open(temporary, "w", encoding="utf-8") as stream:
+            stream.write(text)
+    return os.path.abspath(os.fspath(path))
 
 
 def write_json_atomic(path, data, inputs=(), what="report"):

@@ -6,13 +6,12 @@ must end in ``.step`` or ``.stp`` (any case); the temporary file written next to
 target gets a ``.step`` suffix for the same reason.
 """
 import os
-import tempfile
 
 import FreeCAD  # noqa: F401  (importing Part before FreeCAD segfaults in 0.20.2)
 import Part
 
 from core.errors import ExportError, ParameterError, PolycubeInputError
-from core.output_files import check_output_path, write_text_atomic
+from core.output_files import atomic_output, check_output_path, write_text_atomic
 
 STEP_SUFFIXES = (".step", ".stp")
 
@@ -54,29 +53,19 @@ def write_step(shape, path, input_paths=(), overwrite=True, name=None):
     ExportError
         The shape is null or OpenCascade fails to write it.
     """
-    target, _ = _checked_target(path, input_paths, overwrite)
+    target, input_paths = _checked_target(path, input_paths, overwrite)
     if shape is None or shape.isNull():
         raise ExportError("cannot write a null shape to STEP")
     for key, value in (("write.step.schema", "AP214IS"), ("write.step.unit", "MM"),
                        ("write.step.product.name", _product_name(target, name))):
         Part.setStaticValue(key, value)
-    handle, temp = tempfile.mkstemp(prefix="." + os.path.basename(target) + ".",
-                                    suffix=".tmp.step", dir=os.path.dirname(target))
-    os.close(handle)
-    try:
+    with atomic_output(target, input_paths, "STEP file") as temp:
         try:
             shape.exportStep(temp)
         except Part.OCCError as exc:
             raise ExportError(f"OpenCascade failed to write STEP for {target}: {exc}") from exc
         if os.path.getsize(temp) == 0:
             raise ExportError(f"OpenCascade wrote an empty STEP file for {target}")
-        with open(temp, "rb+") as stream:
-            os.fsync(stream.fileno())
-        os.chmod(temp, _new_file_mode(target))
-        os.replace(temp, target)
-    finally:
-        if os.path.exists(temp):
-            os.remove(temp)
     return target
 
 
@@ -105,12 +94,10 @@ def write_solid_step(built, patchset, path, input_paths=(), overwrite=True, name
     target, inputs = _checked_target(path, input_paths, overwrite)
     text = step_text(patchset.patches, built.topology, _product_name(target, name), TOLERANCE,
                      built.reverse)
-    mode = _new_file_mode(target)
     try:
         write_text_atomic(target, text, inputs, "STEP file")
     except ParameterError as exc:
         raise StepPathError(str(exc)) from exc
-    os.chmod(target, mode)
     return target
 
 
@@ -218,11 +205,3 @@ def _step_path(path):
         raise StepPathError(f"STEP file name must end in .step or .stp, got {text}")
     return text
 
-
-def _new_file_mode(target):
-    """Permission bits for the output: those of the file replaced, else 0o666 minus umask."""
-    if os.path.exists(target):
-        return os.stat(target).st_mode & 0o777
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask

@@ -14,11 +14,11 @@ Vertices are written as float64 (``double``) so coordinates round-trip exactly; 
 order they are given in. MeshLab, CloudCompare and trimesh read it as is.
 """
 import os
-import tempfile
 
 import numpy as np
 
 from core.errors import ExportError, InvalidMeshError, ParameterError
+from core.output_files import atomic_output
 from core.segmentation.validity import check_validity
 
 LABEL_COLOURS = np.array([[230, 25, 75],    # +X red
@@ -40,14 +40,8 @@ _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short":
               "double": "<f8", "float64": "<f8"}
 
 
-def _same_path(a, b):
-    if os.path.exists(a) and os.path.exists(b):
-        return os.path.samefile(a, b)
-    return os.path.realpath(a) == os.path.realpath(b)
-
-
 def write_labels_ply(path, V, F, face_part, face_label, face_frame, protect=()):
-    """Write the labels file atomically (temporary file in the same folder, then ``os.replace``).
+    """Write the labels file atomically (``core.output_files.atomic_output``).
 
     Parameters
     ----------
@@ -61,14 +55,12 @@ def write_labels_ply(path, V, F, face_part, face_label, face_frame, protect=()):
 
     Raises
     ------
-    ParameterError if ``path`` is a protected path or the arrays do not match;
+    ParameterError if ``path`` is a protected path, its folder is missing or not writable,
+    or the arrays do not match;
     ExportError if the file cannot be written.
     """
     if isinstance(protect, (str, os.PathLike)):
         protect = (protect,)
-    for p in protect:
-        if _same_path(os.fspath(path), os.fspath(p)):
-            raise ParameterError(f"refusing to write the labels file onto the input {p!r}")
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     m = len(F)
@@ -104,22 +96,13 @@ def write_labels_ply(path, V, F, face_part, face_label, face_frame, protect=()):
               f"element face {m}\nproperty list uchar int vertex_indices\nproperty int part\n"
               "property int label\nproperty float ax\nproperty float ay\nproperty float az\n"
               "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n")
-    folder = os.path.dirname(os.path.abspath(path))
-    tmp = None
     try:
-        with tempfile.NamedTemporaryFile("wb", dir=folder, prefix=".labels-", suffix=".ply",
-                                         delete=False) as fh:
-            tmp = fh.name
-            fh.write(header.encode("ascii"))
-            fh.write(np.ascontiguousarray(V, dtype="<f8").tobytes())
-            fh.write(rec.tobytes())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
+        with atomic_output(path, protect, "labels file") as temporary:
+            with open(temporary, "wb") as fh:
+                fh.write(header.encode("ascii"))
+                fh.write(np.ascontiguousarray(V, dtype="<f8").tobytes())
+                fh.write(rec.tobytes())
     except OSError as exc:
-        if tmp is not None and os.path.exists(tmp):
-            os.unlink(tmp)
         raise ExportError(f"cannot write labels file {path!r}: {exc}") from exc
 
 
