@@ -40,7 +40,7 @@ REPO = os.path.dirname(HERE)
 sys.path.insert(0, REPO)
 
 from core.fitting import fit_base_mesh  # noqa: E402
-from core.fitting.responses import triangulate  # noqa: E402
+from core.geometry import triangulate  # noqa: E402
 from core.pipeline import reconstruct  # noqa: E402
 from core.stages.fit import count_limit_self_intersections, fit_levels  # noqa: E402
 from core.polymesh_io import write_polymesh  # noqa: E402

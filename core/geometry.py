@@ -55,12 +55,55 @@ def triangle_signed_volumes(vertices, faces):
 
 
 def triangle_mesh_volume(vertices, faces):
-    """Enclosed volume of a closed, outward-oriented triangle mesh (float).
+    """Enclosed volume of a closed, outward-oriented triangle mesh (float, units cubed).
 
     The tetrahedra are taken from the vertex centroid, which keeps the sum accurate far
-    from the origin.
+    from the origin (:func:`triangle_signed_volumes` of the centred mesh).
     """
     V = np.asarray(vertices, dtype=np.float64)
-    V = V - V.mean(axis=0)
-    a, b, c = V[faces[:, 0]], V[faces[:, 1]], V[faces[:, 2]]
-    return float(np.sum(a * np.cross(b, c))) / 6.0
+    return float(triangle_signed_volumes(V - V.mean(axis=0), faces).sum())
+
+
+def triangulate(face_vertices, face_offsets):
+    """Fan triangulation of a CSR polygon mesh (``core.types.PolyMesh`` layout).
+
+    Parameters
+    ----------
+    face_vertices : (k,) int64
+    face_offsets : (m + 1,) int64
+
+    Returns
+    -------
+    (t, 3) int64 triangles ``(c0, c_j, c_{j+1})`` of every face, same orientation; quads
+    give ``(0, 1, 2), (0, 2, 3)``; faces of size n give n - 2 triangles, in face order.
+    """
+    fv = np.asarray(face_vertices, dtype=np.int64)
+    fo = np.asarray(face_offsets, dtype=np.int64)
+    sizes = np.diff(fo)
+    count = np.maximum(sizes - 2, 0)
+    face = np.repeat(np.arange(len(sizes)), count)
+    j = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + 1
+    start = fo[face]
+    return np.stack([fv[start], fv[start + j], fv[start + j + 1]], axis=1)
+
+
+def polymesh_volume(vertices, face_vertices, face_offsets):
+    """Enclosed volume of a closed, outward polygon mesh, faces fan-triangulated (float).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64; face_vertices, face_offsets : CSR faces (``PolyMesh``).
+    """
+    return triangle_mesh_volume(vertices, triangulate(face_vertices, face_offsets))
+
+
+def unit_face_normals(vertices, faces):
+    """(m, 3) float64 unit normals of the triangles, zero rows for zero-area triangles.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64; faces : (m, 3) int64 (counter-clockwise seen from outside).
+    """
+    cross = face_cross(vertices, faces)
+    length = np.linalg.norm(cross, axis=1, keepdims=True)
+    return np.divide(cross, length, out=np.zeros_like(cross), where=length > 0)

@@ -9,6 +9,7 @@ from scipy.sparse.csgraph import connected_components
 import scipy.sparse as sp
 
 from core.errors import InvalidMeshError
+from core.geometry import polymesh_volume
 from core.mesh_topology import next_corners
 
 AREA_TOLERANCE = 1e-14
@@ -120,11 +121,7 @@ def check_polymesh(mesh):
         bad = fan_count > 1
         _fail("has non-manifold vertices (faces meet only at the vertex)", "non_manifold",
               bad, np.flatnonzero(bad))
-    centroid = V.mean(axis=0)
-    tri_a = V[fv[fo[:-1]][face]] - centroid
-    tri_b = V[fv] - centroid
-    tri_c = V[fv[nxt]] - centroid
-    volume = float(np.sum(tri_a * np.cross(tri_b, tri_c))) / 6.0
+    volume = polymesh_volume(V, fv, fo)
     if volume < 0:
         raise InvalidMeshError(
             f"base mesh faces point inward: all {m} faces are clockwise seen from outside "

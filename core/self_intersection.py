@@ -11,6 +11,8 @@ overlaps are not reported.
 """
 import numpy as np
 
+from core.geometry import unit_face_normals
+
 _CHUNK = 400_000
 
 
@@ -29,8 +31,7 @@ def find_self_intersections(vertices, faces):
     tri = vertices[faces]
     pairs = _candidate_pairs(tri)
     eps = 1e-9 * float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+    normal = unit_face_normals(vertices, faces)
     offset = np.einsum("ij,ij->i", normal, tri[:, 0])
     hits = []
     for start in range(0, len(pairs), _CHUNK):

@@ -33,7 +33,7 @@ from itertools import chain
 import numpy as np
 from scipy.spatial import cKDTree
 
-from core.geometry import face_cross, radius_classes
+from core.geometry import radius_classes, unit_face_normals
 from core.quality import optional_module, validate_triangles
 
 EDGE_TOL = 1e-9
@@ -123,7 +123,7 @@ class TargetSurface:
         V, F = validate_triangles(vertices, faces, name)
         self.vertices, self.faces = V, F
         self._tri = V[F]
-        self.face_normals = _unit(face_cross(V, F))
+        self.face_normals = unit_face_normals(V, F)
         self.diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
         self._tree = optional_module("igl", "libigl").AABB()
         self._tree.init(V, F)

@@ -14,6 +14,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: E402
 
+from core.geometry import unit_face_normals  # noqa: E402
+
 VIEW = (25.0, 35.0)
 """(elevation, azimuth) in degrees."""
 SIZE = (4.0, 3.0)
@@ -53,7 +55,7 @@ def render_solid_thumbnail(path, target_path, step_path, units="mm"):
     cmap = plt.get_cmap("Reds")
     solid_rgba = cmap(0.05 + 0.95 * distance / scale)
     eye = _view_direction(*VIEW)
-    normals = _unit_normals(V, F)
+    normals = unit_face_normals(V, F)
     solid_rgba[:, :3] *= (0.45 + 0.55 * np.abs(normals @ eye))[:, None]
     triangles = np.concatenate([target_V[target_F], V[F]])
     colours = np.concatenate([np.tile(TARGET_RGBA, (len(target_F), 1)), solid_rgba])
@@ -79,31 +81,17 @@ def render_solid_thumbnail(path, target_path, step_path, units="mm"):
 
 def _save_atomic(fig, path):
     import os
-    import tempfile
 
-    from core.output_files import check_output_path
+    from core.output_files import atomic_output
 
-    target = check_output_path(path, (), "thumbnail")
-    handle, temporary = tempfile.mkstemp(prefix="." + os.path.basename(target) + ".",
-                                         suffix=".png", dir=os.path.dirname(target))
-    os.close(handle)
     try:
-        fig.savefig(temporary, dpi=DPI)
-        os.chmod(temporary, 0o644)
-        os.replace(temporary, target)
+        with atomic_output(path, (), "thumbnail") as temporary:
+            fig.savefig(temporary, dpi=DPI, format="png")
     finally:
         plt.close(fig)
-        if os.path.exists(temporary):
-            os.remove(temporary)
-    return target
+    return os.path.abspath(os.fspath(path))
 
 
 def _view_direction(elev, azim):
     e, a = np.radians(elev), np.radians(azim)
     return np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
-
-
-def _unit_normals(V, F):
-    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    length = np.linalg.norm(n, axis=1)
-    return n / np.where(length > 0, length, 1.0)[:, None]

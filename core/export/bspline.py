@@ -42,7 +42,6 @@ import scipy.sparse as sp
 
 from core.export.brep_topology import BRepTopology, EdgeCurve
 from core.export.patch_mesh import build_patch_mesh
-from core.geometry import triangle_mesh_volume  # noqa: F401  (public here since before the kernel)
 from core.params import EXPORT_DEPTH
 from core.subdivision.catmull_clark import mesh_topology
 from core.subdivision.limit import LimitEvaluator, corner_frame, limit_matrices

@@ -15,9 +15,9 @@ import numpy as np
 
 from core.errors import InvalidMeshError, ParameterError
 from core.fitting.best_fit import BestFitResult, best_fit
-from core.fitting.responses import thickness, triangulate, volume
+from core.fitting.responses import thickness, volume
 from core.fitting.rgp import FitProblem, run_rgp
-from core.geometry import face_areas
+from core.geometry import face_areas, triangulate
 from core.mesh_topology import next_corners
 from core.progress import NO_PROGRESS
 from core.quality import containment

@@ -22,29 +22,6 @@ from core.geometry import face_cross
 from core.target_surface import TargetSurface
 
 
-def triangulate(face_vertices, face_offsets):
-    """Fan triangulation of a CSR polygon mesh.
-
-    Parameters
-    ----------
-    face_vertices : (k,) int64
-    face_offsets : (m + 1,) int64
-
-    Returns
-    -------
-    (t, 3) int64 triangles ``(c0, c_j, c_{j+1})`` of every face, same orientation; quads
-    give ``(0, 1, 2), (0, 2, 3)``.
-    """
-    fv = np.asarray(face_vertices, dtype=np.int64)
-    fo = np.asarray(face_offsets, dtype=np.int64)
-    sizes = np.diff(fo)
-    count = np.maximum(sizes - 2, 0)
-    face = np.repeat(np.arange(len(sizes)), count)
-    j = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count) + 1
-    start = fo[face]
-    return np.stack([fv[start], fv[start + j], fv[start + j + 1]], axis=1)
-
-
 def scatter_add(index, values, n):
     """(n, 3) float64 sums of the rows of ``values`` ((p, 3)) by ``index`` ((p,) int64).
 

@@ -93,7 +93,7 @@ def limit_self_intersections(base, levels):
     base_faces : (k, 2) int64 the base faces the two triangles of each pair lie on.
     points : (k, 3) float64 the centroid of the first triangle of each pair.
     """
-    from core.fitting.responses import triangulate
+    from core.geometry import triangulate
     from core.self_intersection import find_self_intersections
     from core.subdivision.catmull_clark import build_hierarchy
     from core.subdivision.limit import limit_matrices

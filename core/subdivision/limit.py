@@ -12,6 +12,7 @@
 import numpy as np
 import scipy.sparse as sp
 
+from core.geometry import polymesh_volume
 from core.subdivision.catmull_clark import build_hierarchy, mesh_topology, subdivision_operator
 
 TEMPLATE_RADIUS = 3
@@ -404,16 +405,6 @@ def quad_mesh_of(mesh):
     return build_hierarchy(mesh, 1).meshes[1]
 
 
-def _closed_quad_volume(points, face_vertices):
-    """Enclosed volume of a closed quad mesh, each quad split into two triangles."""
-    q = points[face_vertices.reshape(-1, 4)]
-    c = points.mean(axis=0)
-    q = q - c
-    t1 = np.sum(q[:, 0] * np.cross(q[:, 1], q[:, 2]), axis=1)
-    t2 = np.sum(q[:, 0] * np.cross(q[:, 2], q[:, 3]), axis=1)
-    return float(np.sum(t1 + t2)) / 6.0
-
-
 def limit_volume(mesh, level=5):
     """Volume enclosed by the Catmull-Clark limit surface of a closed polygon mesh.
 
@@ -438,5 +429,5 @@ def limit_volume(mesh, level=5):
     for lev in (level - 1, level):
         m = h.meshes[lev]
         L, _, _ = limit_matrices(m)
-        vols.append(_closed_quad_volume(L @ m.vertices, m.face_vertices))
+        vols.append(polymesh_volume(L @ m.vertices, m.face_vertices, m.face_offsets))
     return (4.0 * vols[1] - vols[0]) / 3.0

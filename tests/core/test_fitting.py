@@ -6,8 +6,8 @@ import trimesh
 
 from core.errors import InvalidMeshError, ParameterError
 from core.fitting import TargetSurface, fit_base_mesh
-from core.fitting.responses import (packaging, thickness, thickness_constraint, triangulate,
-                                    volume)
+from core.fitting.responses import packaging, thickness, thickness_constraint, volume
+from core.geometry import triangulate
 from core.subdivision.catmull_clark import build_hierarchy
 from core.subdivision.limit import limit_matrices
 from core.subdivision.sample_cages import cube, grid_sphere

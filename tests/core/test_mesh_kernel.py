@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from core.geometry import face_areas, face_cross, triangle_mesh_volume, triangle_signed_volumes
+from core.geometry import (face_areas, face_cross, polymesh_volume, triangle_mesh_volume,
+                           triangle_signed_volumes, triangulate, unit_face_normals)
 from core.mesh_topology import euler_characteristic, genus_of, next_corners
+from core.subdivision.sample_cages import cube, genus3_block
 
 
 def test_box_areas_normals_and_volumes_far_from_the_origin():
@@ -34,3 +36,29 @@ def test_next_corners_cycle_within_each_face():
     following = next_corners(offsets)
     assert following.tolist() == [1, 2, 3, 0, 5, 6, 4, 8, 9, 10, 11, 7]
     assert next_corners(np.array([0])).tolist() == []
+
+
+def test_unit_normals_are_outward_and_zero_on_a_degenerate_triangle():
+    box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    V, F = np.asarray(box.vertices), np.asarray(box.faces)
+    assert np.allclose(unit_face_normals(V, F), box.face_normals, atol=1e-12)
+    sliver = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    assert unit_face_normals(sliver, np.array([[0, 1, 2]])).tolist() == [[0.0, 0.0, 0.0]]
+
+
+def test_fan_triangulation_keeps_orientation_and_gives_n_minus_2_triangles():
+    # a quad, a triangle and a pentagon
+    offsets = np.array([0, 4, 7, 12])
+    corners = np.arange(12)
+    T = triangulate(corners, offsets)
+    assert T.tolist() == [[0, 1, 2], [0, 2, 3], [4, 5, 6], [7, 8, 9], [7, 9, 10], [7, 10, 11]]
+
+
+@pytest.mark.parametrize("cage, volume", [(cube(2.0), 8.0), (genus3_block(1.0), 7 * 3 * 1 - 3)])
+def test_polygon_mesh_volume_of_closed_cages(cage, volume):
+    V = cage.vertices + np.array([1e5, -2e5, 3e5])  # far from the origin
+    assert polymesh_volume(V, cage.face_vertices, cage.face_offsets) == pytest.approx(volume,
+                                                                                        rel=1e-9)
+    reversed_faces = np.concatenate([f[::-1] for f in cage.faces()])
+    assert polymesh_volume(V, reversed_faces, cage.face_offsets) == pytest.approx(-volume,
+                                                                                   rel=1e-9)

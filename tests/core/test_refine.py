@@ -7,7 +7,7 @@ import trimesh
 from core.errors import ParameterError
 from core.fitting import fit_base_mesh
 from core.fitting.refine import fit_to_tolerance, split_quad_strips
-from core.fitting.responses import triangulate
+from core.geometry import triangulate
 from core.polymesh_checks import check_polymesh
 from core.quality import surface_distances
 from core.subdivision.catmull_clark import build_hierarchy
