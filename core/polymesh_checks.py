@@ -11,9 +11,8 @@ import scipy.sparse as sp
 from core.errors import InvalidMeshError
 from core.geometry import polymesh_volume
 from core.mesh_topology import next_corners
+from core.tolerances import ZERO_AREA
 
-AREA_TOLERANCE = 1e-14
-"""Faces with area below this times the squared bounding-box diagonal are degenerate."""
 MAX_EXPORT_COORDINATE = 1e7
 """Largest |coordinate| (mm) of a cage exported to a B-rep: there a float64 still resolves
 steps of 2e-9, well below the B-rep tolerance of 1e-7 (OpenCascade's Precision::Confusion)."""
@@ -80,9 +79,8 @@ def check_polymesh(mesh):
     nxt = next_corners(fo)
     newell = np.zeros((m, 3))
     np.add.at(newell, face, np.cross(V[fv], V[fv[nxt]]))
-    area = 0.5 * np.linalg.norm(newell, axis=1)
     diag2 = float(np.sum((V.max(axis=0) - V.min(axis=0)) ** 2))
-    zero = area <= AREA_TOLERANCE * max(diag2, 1e-300)
+    zero = np.linalg.norm(newell, axis=1) <= ZERO_AREA * max(diag2, 1e-300)
     if zero.any():
         _fail("has faces of zero area", "degenerate_faces", zero, np.flatnonzero(zero))
 

@@ -6,12 +6,13 @@ pairs whose boxes overlap. Narrow phase: two non-coplanar triangles
 intersect exactly when an edge of one crosses the other; for triangles sharing a
 vertex only the edges opposite that vertex can cross. Edge-adjacent pairs cannot
 cross without a fold that the orientation check already rejects, so they are skipped.
-Touching contacts within ``1e-9`` of the bounding-box diagonal and exactly coplanar
-overlaps are not reported.
+Touching contacts within ``core.tolerances.CONTACT`` of the bounding-box diagonal and
+exactly coplanar overlaps are not reported.
 """
 import numpy as np
 
 from core.geometry import unit_face_normals
+from core.tolerances import CONTACT
 
 _CHUNK = 400_000
 
@@ -30,7 +31,7 @@ def find_self_intersections(vertices, faces):
     """
     tri = vertices[faces]
     pairs = _candidate_pairs(tri)
-    eps = 1e-9 * float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+    eps = CONTACT * float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
     normal = unit_face_normals(vertices, faces)
     offset = np.einsum("ij,ij->i", normal, tri[:, 0])
     hits = []

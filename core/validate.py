@@ -14,6 +14,7 @@ from core.errors import InvalidMeshError, ParameterError
 from core.geometry import face_areas, triangle_signed_volumes
 from core.mesh_topology import directed_edges, genus_of, unique_edges
 from core.self_intersection import find_self_intersections
+from core.tolerances import MERGE, ZERO_AREA
 from core.types import TriMesh
 
 COMPONENT_POLICIES = ("largest", "all", "error")
@@ -32,12 +33,6 @@ def check_finite(vertices, name="mesh"):
             f"{name}: {len(idx)} vertices have NaN or infinite coordinates, "
             f"e.g. vertex {idx[0]} = {_fmt(vertices[idx[0]])}",
             reason="non_finite", count=len(idx), examples=idx[:5].tolist())
-
-
-MERGE_TOLERANCE = 1e-8
-"""Vertices closer than this fraction of the bounding-box diagonal (per coordinate,
-after rounding to that grid) are one vertex: STL stores every triangle's corners
-separately, often printed with a few digits of noise."""
 
 
 def _unique_rows(rows):
@@ -60,7 +55,7 @@ def _unique_rows(rows):
 
 
 def merge_identical_vertices(vertices, faces):
-    """Merge vertices that coincide up to ``MERGE_TOLERANCE`` and drop unreferenced ones.
+    """Merge vertices that coincide up to ``core.tolerances.MERGE`` and drop unreferenced ones.
 
     Returns
     -------
@@ -69,7 +64,7 @@ def merge_identical_vertices(vertices, faces):
     n_merged : int, how many input vertices were merged away or dropped.
     """
     diag = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))) or 1.0
-    grid = np.round(vertices / (MERGE_TOLERANCE * diag)).astype(np.int64)
+    grid = np.round(vertices / (MERGE * diag)).astype(np.int64)
     first_of_key, inverse = _unique_rows(grid)
     unique = vertices[first_of_key]
     faces = inverse.reshape(-1)[faces]
@@ -86,7 +81,7 @@ def check_degenerate_faces(vertices, faces, name="mesh"):
     tri = vertices[faces]
     double_area = 2.0 * face_areas(vertices, faces)
     diag = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
-    bad = repeated | (double_area <= 1e-14 * diag * diag)
+    bad = repeated | (double_area <= ZERO_AREA * diag * diag)
     if bad.any():
         idx = np.flatnonzero(bad)
         f = idx[0]

@@ -45,6 +45,7 @@ from core.export.patch_mesh import build_patch_mesh
 from core.params import EXPORT_DEPTH
 from core.subdivision.catmull_clark import mesh_topology
 from core.subdivision.limit import LimitEvaluator, corner_frame, limit_matrices
+from core.tolerances import CONTACT
 from core.types import BSplinePatch, PatchSet
 
 DEFAULT_DEPTH = EXPORT_DEPTH
@@ -642,7 +643,7 @@ def normal_jumps(patchset, base, samples=None, _context=None):
         from scipy.spatial import cKDTree
 
         near = cKDTree(ev_points).query(ends.reshape(-1, 3))[0].reshape(n_edges, 2)
-        ev_edge = (near <= 1e-9 * ctx.bbox_diagonal).any(axis=1)
+        ev_edge = (near <= CONTACT * ctx.bbox_diagonal).any(axis=1)
     if samples is None:
         dense_t = _measure_params(graded_knots(max(ctx.depth, DEFAULT_DEPTH)))
         plain_t = np.linspace(0.0, 1.0, 9)

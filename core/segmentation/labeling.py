@@ -29,6 +29,7 @@ from core.errors import InvalidMeshError, ParameterError
 from core.geometry import face_cross
 from core.params import ReconstructionParams
 from core.segmentation.charts import OPPOSITE, build_topology
+from core.tolerances import ZERO_AREA
 
 LAMBDA = ReconstructionParams.lam
 PENALTY = ReconstructionParams.penalty
@@ -38,14 +39,15 @@ MAX_SWEEPS = ReconstructionParams.max_sweeps
 def face_normals(V, F):
     """(m, 3) float64 unit normals; raises ``InvalidMeshError`` on zero-area faces.
 
-    A face counts as zero-area when twice its area is below ``1e-12 * bbox_diagonal^2``.
+    A face counts as zero-area when twice its area is at most ``core.tolerances.ZERO_AREA``
+    times the squared bounding-box diagonal (the intake's test).
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     cr = face_cross(V, F)
     norm = np.linalg.norm(cr, axis=1)
     diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))) if len(V) else 0.0
-    bad = np.flatnonzero(~(norm > 1e-12 * diag * diag))
+    bad = np.flatnonzero(~(norm > ZERO_AREA * diag * diag))
     if len(bad):
         raise InvalidMeshError(
             f"F has {len(bad)} zero-area faces (e.g. face {int(bad[0])}); labeling needs normals",

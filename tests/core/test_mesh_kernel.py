@@ -62,3 +62,37 @@ def test_polygon_mesh_volume_of_closed_cages(cage, volume):
     reversed_faces = np.concatenate([f[::-1] for f in cage.faces()])
     assert polymesh_volume(V, reversed_faces, cage.face_offsets) == pytest.approx(-volume,
                                                                                    rel=1e-9)
+
+
+@pytest.mark.parametrize("height", [0.0, 1e-16, 1e-14, 2e-14, 1e-13, 1e-12, 1e-6])
+def test_intake_labeling_and_cage_check_agree_on_zero_area_faces(height):
+    """One zero-area tolerance (``core.tolerances.ZERO_AREA``): a face the intake keeps is
+    one the labeling can take the normal of, and the cage check agrees."""
+    from core.errors import InvalidMeshError
+    from core.polymesh_checks import check_polymesh
+    from core.segmentation.labeling import face_normals
+    from core.types import PolyMesh
+    from core.validate import check_degenerate_faces
+
+    # a unit-diagonal triangle fixes the diagonal; the sliver has twice-area = height
+    V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0],
+                  [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, height, 0.0]])
+    F = np.array([[0, 1, 2], [3, 4, 5]])
+    diagonal2 = 2.0
+    zero = height <= 1e-14 * diagonal2
+
+    def rejected(check):
+        try:
+            check()
+        except InvalidMeshError as exc:
+            return exc.reason == "degenerate_faces"
+        return False
+
+    assert rejected(lambda: check_degenerate_faces(V, F)) == zero
+    assert rejected(lambda: face_normals(V, F)) == zero
+    # the same face as a polygon of a cage (the cage is open: only the area verdict counts)
+    cage = PolyMesh.from_faces(V, [[3, 4, 5], [0, 1, 2]])
+    try:
+        check_polymesh(cage)
+    except InvalidMeshError as exc:
+        assert (exc.reason == "degenerate_faces") == zero, exc

@@ -1,0 +1,22 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Geometric tolerances shared by the stages, as fractions of the bounding-box diagonal.
+
+Every test that decides whether two points coincide or a face has no area uses one of
+these, scaled by the diagonal of the mesh it looks at (so the decisions do not depend on
+the model's units). Tolerances that belong to one algorithm (a solver's stall test, the
+quantization's face budget) stay with it.
+"""
+
+MERGE = 1e-8
+"""Intake merges vertices closer than ``MERGE * diagonal`` (per coordinate, after rounding
+to that grid): STL stores every triangle's corners separately, often printed with a few
+digits of noise."""
+
+ZERO_AREA = 1e-14
+"""A face whose ``|(b - a) x (c - a)|`` (twice its area; a polygon's Newell vector) is at
+most ``ZERO_AREA * diagonal^2`` has no area: intake rejects it, the labeling refuses to
+take its normal, the cage check rejects it."""
+
+CONTACT = 1e-9
+"""Points closer than ``CONTACT * diagonal`` touch: triangles meeting only that closely are
+not self-intersecting, a patch corner that near an extraordinary vertex is at it."""
