@@ -43,18 +43,44 @@ def edge_faces(faces):
         edge has only one face (open mesh). Edges with more than two faces keep
         the first two (check manifoldness before relying on this).
     """
-    faces = np.asarray(faces, dtype=np.int64)
     edges, he_edge = unique_edges(faces)
-    face_of_half = np.repeat(np.arange(len(faces)), 3)
-    order = np.argsort(he_edge, kind="stable")
-    sorted_edges = he_edge[order]
-    first = np.searchsorted(sorted_edges, np.arange(len(edges)), side="left")
-    count = np.bincount(he_edge, minlength=len(edges))
-    result = np.full((len(edges), 2), -1, dtype=np.int64)
+    return edges, halfedge_faces(he_edge, len(edges))
+
+
+def halfedge_faces(halfedge_edge, n_edges):
+    """The two faces of every edge from the half-edge -> edge map of :func:`unique_edges`.
+
+    Returns
+    -------
+    (n_edges, 2) int64, faces in half-edge order, ``-1`` where an edge has one face.
+    """
+    face_of_half = np.arange(len(halfedge_edge)) // 3
+    order = np.argsort(halfedge_edge, kind="stable")
+    first = np.searchsorted(halfedge_edge[order], np.arange(n_edges), side="left")
+    count = np.bincount(halfedge_edge, minlength=n_edges)
+    result = np.full((n_edges, 2), -1, dtype=np.int64)
     result[:, 0] = face_of_half[order[first]]
     has_two = count >= 2
     result[has_two, 1] = face_of_half[order[first[has_two] + 1]]
-    return edges, result
+    return result
+
+
+def faces_across(faces_of_edge, halfedge_edge):
+    """(m, 3) int64 face across each edge (corner k to k+1) of every face, -1 on open edges.
+
+    Parameters
+    ----------
+    faces_of_edge : (e, 2) int64 from :func:`halfedge_faces`; halfedge_edge : (3m,) int64.
+    """
+    own = np.arange(len(halfedge_edge)) // 3
+    fe = faces_of_edge[halfedge_edge]
+    return np.where(fe[:, 0] == own, fe[:, 1], fe[:, 0]).reshape(-1, 3)
+
+
+def face_neighbours(faces):
+    """(m, 3) int64 face across each edge (corner k to k+1) of every face, -1 on open edges."""
+    edges, he_edge = unique_edges(faces)
+    return faces_across(halfedge_faces(he_edge, len(edges)), he_edge)
 
 
 def face_adjacency(faces):

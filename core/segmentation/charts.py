@@ -19,7 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from core.mesh_topology import unique_edges
+from core.mesh_topology import faces_across, halfedge_faces, unique_edges
 
 OPPOSITE = np.array([1, 0, 3, 2, 5, 4], dtype=np.int64)
 """Label opposite to each label 0..5 (+X <-> -X, +Y <-> -Y, +Z <-> -Z)."""
@@ -58,22 +58,11 @@ def build_topology(F, n_vertices=None):
     F = np.asarray(F, dtype=np.int64)
     m = len(F)
     edges, he_edge = unique_edges(F)
-    face_edges = he_edge.reshape(m, 3)
-    order = np.argsort(he_edge, kind="stable")
-    sorted_e = he_edge[order]
-    first = np.searchsorted(sorted_e, np.arange(len(edges)), side="left")
-    count = np.bincount(he_edge, minlength=len(edges))
-    face_of_half = order // 3
-    edge_faces = np.full((len(edges), 2), -1, dtype=np.int64)
-    edge_faces[:, 0] = face_of_half[first]
-    two = count >= 2
-    edge_faces[two, 1] = face_of_half[first[two] + 1]
-    ef = edge_faces[face_edges]
-    own = np.arange(m)[:, None]
-    neighbours = np.where(ef[:, :, 0] == own, ef[:, :, 1], ef[:, :, 0])
+    edge_faces = halfedge_faces(he_edge, len(edges))
     if n_vertices is None:
         n_vertices = int(F.max()) + 1 if m else 0
-    return MeshTopology(edges, edge_faces, face_edges, neighbours, int(n_vertices))
+    return MeshTopology(edges, edge_faces, he_edge.reshape(m, 3), faces_across(edge_faces, he_edge),
+                        int(n_vertices))
 
 
 @dataclass(frozen=True)

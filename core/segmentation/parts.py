@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 
 from core.errors import ParameterError
 from core.geometry import face_areas, face_cross
-from core.mesh_topology import edge_faces, unique_edges
+from core.mesh_topology import edge_faces, face_adjacency, face_neighbours
 from core.segmentation.frames import (cubic_energy, frame_from_moments, group_moments,
                                       mean_edge_length)
 from core.segmentation.skeleton import choose_pitch, skeleton_pieces
@@ -36,25 +36,9 @@ def _arrays(mesh):
             np.asarray(mesh.faces, dtype=np.int64))
 
 
-def face_neighbours(faces):
-    """(m, 3) int64 face across each edge (corner k to k+1) of every face, -1 on open edges."""
-    faces = np.asarray(faces, dtype=np.int64)
-    _, he_edge = unique_edges(faces)
-    _, faces_of_edge = edge_faces(faces)
-    own = np.repeat(np.arange(len(faces)), 3)
-    fe = faces_of_edge[he_edge]
-    return np.where(fe[:, 0] == own, fe[:, 1], fe[:, 0]).reshape(-1, 3)
-
-
-def adjacent_face_pairs(faces):
-    """(p, 2) int64 pairs of faces sharing an edge (each interior edge once)."""
-    _, fe = edge_faces(np.asarray(faces, dtype=np.int64))
-    return fe[(fe >= 0).all(axis=1)]
-
-
 def part_components(pairs, face_part):
     """(m,) int64 id of the edge-connected component of each face within its part,
-    and the number of components; ``pairs`` from :func:`adjacent_face_pairs`."""
+    and the number of components; ``pairs`` from ``core.mesh_topology.face_adjacency``."""
     face_part = np.asarray(face_part)
     same = pairs[face_part[pairs[:, 0]] == face_part[pairs[:, 1]]]
     m = len(face_part)
@@ -103,7 +87,7 @@ def validate_face_part(mesh, face_part):
     if len(empty):
         raise ParameterError(f"part ids must be 0..{n_parts - 1} without gaps; {len(empty)} "
                              f"parts are empty (e.g. part {empty[0]})")
-    comp, _ = part_components(adjacent_face_pairs(faces), arr)
+    comp, _ = part_components(face_adjacency(faces), arr)
     n_comp = np.bincount(arr[np.unique(comp, return_index=True)[1]], minlength=n_parts)
     split = np.flatnonzero(n_comp > 1)
     if len(split):
@@ -120,7 +104,7 @@ def single_part(mesh):
 
 def split_disconnected(faces, face_part):
     """Give every edge-connected piece of every part its own part; canonical (m,) int32."""
-    comp, _ = part_components(adjacent_face_pairs(faces), np.asarray(face_part, dtype=np.int64))
+    comp, _ = part_components(face_adjacency(faces), np.asarray(face_part, dtype=np.int64))
     return canonical_order(comp)
 
 
@@ -791,7 +775,7 @@ def skeleton_segmentation(mesh, resolution=160, voxels_across=4.0, max_voxels=3_
     _, nearest = cKDTree(skel.points).query(centroid)
     neighbours = face_neighbours(faces)
     piece = majority_smooth(neighbours, skel.piece[nearest])
-    adj = adjacent_face_pairs(faces)
+    adj = face_adjacency(faces)
     piece = absorb_fragments(adj, neighbours, piece)
     piece = canonical_order(part_components(adj, piece)[0]).astype(np.int64)
     n_pieces = int(piece.max()) + 1

@@ -6,7 +6,8 @@ import trimesh
 
 from core.geometry import (face_areas, face_cross, polymesh_volume, triangle_mesh_volume,
                            triangle_signed_volumes, triangulate, unit_face_normals)
-from core.mesh_topology import euler_characteristic, genus_of, next_corners
+from core.mesh_topology import (edge_faces, euler_characteristic, face_neighbours, genus_of,
+                                next_corners)
 from core.subdivision.sample_cages import cube, genus3_block
 
 
@@ -96,3 +97,23 @@ def test_intake_labeling_and_cage_check_agree_on_zero_area_faces(height):
         check_polymesh(cage)
     except InvalidMeshError as exc:
         assert (exc.reason == "degenerate_faces") == zero, exc
+
+
+def test_face_neighbours_share_the_edge_and_point_back():
+    mesh = trimesh.creation.torus(2.0, 0.5)
+    F = np.asarray(mesh.faces, dtype=np.int64)
+    across = face_neighbours(F)
+    m = len(F)
+    assert (across >= 0).all(), "closed mesh: every edge has a face on the other side"
+    own = np.repeat(np.arange(m), 3)
+    # the neighbour across edge k of f has f across one of its edges
+    assert ((across[across.reshape(-1)] == own[:, None]).sum(axis=1) == 1).all()
+    # and holds both ends of that edge
+    a, b = F.reshape(-1), np.roll(F, -1, axis=1).reshape(-1)
+    other = F[across.reshape(-1)]
+    assert ((other == a[:, None]).any(axis=1) & (other == b[:, None]).any(axis=1)).all()
+    edges, faces_of_edge = edge_faces(F)
+    assert len(edges) == 3 * m // 2 and (faces_of_edge >= 0).all()
+    # an open mesh: the removed face's neighbours see -1 there
+    open_across = face_neighbours(F[1:])
+    assert (open_across == -1).sum() == 3
