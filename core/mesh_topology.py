@@ -138,6 +138,15 @@ def next_corners(face_offsets):
     return following
 
 
+def previous_corners(face_offsets):
+    """(k,) int64 previous corner in the same face of every corner (inverse of
+    :func:`next_corners`)."""
+    fo = np.asarray(face_offsets, dtype=np.int64)
+    preceding = np.arange(int(fo[-1]), dtype=np.int64) - 1
+    preceding[fo[:-1]] = fo[1:] - 1
+    return preceding
+
+
 def euler_characteristic(n_vertices, faces):
     """``V - E + F`` of a triangle mesh with ``n_vertices`` vertices (int)."""
     edges, _ = unique_edges(faces)

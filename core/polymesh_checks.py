@@ -10,7 +10,7 @@ import scipy.sparse as sp
 
 from core.errors import InvalidMeshError
 from core.geometry import polymesh_volume
-from core.mesh_topology import next_corners
+from core.mesh_topology import next_corners, previous_corners
 from core.tolerances import ZERO_AREA
 
 MAX_EXPORT_COORDINATE = 1e7
@@ -107,9 +107,7 @@ def check_polymesh(mesh):
     order = np.argsort(directed)
     twin_key = b * n + a
     twin = order[np.searchsorted(directed[order], twin_key)]
-    prev = np.arange(len(fv)) - 1
-    prev[fo[:-1]] = fo[1:] - 1
-    rot = twin[prev]
+    rot = twin[previous_corners(fo)]
     graph = sp.coo_matrix((np.ones(len(fv)), (np.arange(len(fv)), rot)),
                           shape=(len(fv), len(fv)))
     _, comp = connected_components(graph, directed=False)

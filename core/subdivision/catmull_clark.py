@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from core.errors import InvalidMeshError
-from core.mesh_topology import next_corners
+from core.mesh_topology import next_corners, previous_corners
 from core.types import PolyMesh
 
 
@@ -79,10 +79,8 @@ def mesh_topology(face_vertices, face_offsets, n_vertices):
     k = len(fv)
     sizes = np.diff(fo)
     face_of_corner = np.repeat(np.arange(len(sizes), dtype=np.int64), sizes)
-    idx = np.arange(k, dtype=np.int64)
     next_corner = next_corners(fo)
-    prev_corner = idx - 1
-    prev_corner[fo[:-1]] = fo[1:] - 1
+    prev_corner = previous_corners(fo)
     a = fv
     b = fv[next_corner]
     lo = np.minimum(a, b)

@@ -7,7 +7,7 @@ import trimesh
 from core.geometry import (face_areas, face_cross, polymesh_volume, triangle_mesh_volume,
                            triangle_signed_volumes, triangulate, unit_face_normals)
 from core.mesh_topology import (edge_faces, euler_characteristic, face_neighbours, genus_of,
-                                next_corners)
+                                next_corners, previous_corners)
 from core.subdivision.sample_cages import cube, genus3_block
 
 
@@ -36,6 +36,7 @@ def test_next_corners_cycle_within_each_face():
     offsets = np.array([0, 4, 7, 12])
     following = next_corners(offsets)
     assert following.tolist() == [1, 2, 3, 0, 5, 6, 4, 8, 9, 10, 11, 7]
+    assert previous_corners(offsets)[following].tolist() == list(range(12))
     assert next_corners(np.array([0])).tolist() == []
 
 
