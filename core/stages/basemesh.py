@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Base-mesh stage: the coarse quad cage from a valid labeling (paper Sect. 2.4, quantized
-polycube and embedding on the target: ``core.quadmesh``, docs/DESIGN.md)."""
+"""Base-mesh stage: the coarse quad cage from a valid labeling (paper Sect. 2.3; a quantized
+polycube embedded on the target instead of a deformed mesh: ``core.quadmesh``, docs/DESIGN.md)."""
 from core.types import BaseMeshResult
 
 

@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Fit stage: move the cage so its limit surface fits the target (paper Sect. 2.5, Eqs. 6-12),
-refining quad strips until a tolerance is met when one is asked for."""
+"""Fit stage: move the cage so its limit surface fits the target (paper Sect. 2.4-2.5,
+Eqs. 4-11), refining quad strips until a tolerance is met when one is asked for."""
 import numpy as np
 
 from core.types import FitResult

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Intake stage: read and validate the target, scale it to millimetres (paper Sect. 2.1)."""
+"""Intake stage: read and validate the target, scale it to millimetres (paper Sect. 2: the
+watertight surface mesh the method starts from)."""
 from core.params import UNIT_TO_MM
 from core.types import IntakeResult, TriMesh
 

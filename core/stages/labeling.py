@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Labeling stage: HBECVT polycube labeling (paper Sect. 2.3, Eqs. 2-3), repair, validity."""
+"""Labeling stage: HBECVT polycube labeling (paper Sect. 2.2, Eqs. 2-3), repair, validity."""
 from core.types import LabelingResult
 
 VALIDITY_COUNTS = ("invalid_charts", "invalid_boundaries", "invalid_corners", "turning_points")

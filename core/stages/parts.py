@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Parts stage: split the target into parts, each labelled in its own frame (paper Sect. 2.2)."""
+"""Parts stage: split the target into parts, each labelled in its own frame (paper Sect. 2.1)."""
 import json
 
 import numpy as np

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Patches stage: the fitted cage's limit surface as bicubic B-spline patches (paper Sect. 2.6)."""
+"""Patches stage: the fitted cage's limit surface as bicubic B-spline patches (paper Sect. 2.4:
+the limit of the subdivision surface; the B-spline form is ours, docs/DESIGN.md)."""
 from core.types import PatchesResult
 
 
