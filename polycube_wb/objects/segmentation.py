@@ -112,8 +112,10 @@ class SegmentationProxy(StageProxy):
                                 _no_progress())
         validity = check_validity(mesh.vertices, mesh.faces, face_part, face_label,
                                   state.frames.frame_field.face_frame)
+        # results rebuilt from the document carry no report section (the run that made
+        # them wrote it)
         return {"parts": state.parts, "frames": state.frames,
-                "labeling": LabelingResult(face_label, validity, validity.report)}
+                "labeling": LabelingResult(face_label, validity)}
 
 
 def _no_progress():
