@@ -13,7 +13,6 @@ and the run stops there.
 import resource
 import time
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -41,7 +40,7 @@ class Stage:
     """
 
     name: str
-    run: Callable
+    run: object
     inputs: tuple
     report_key: str
 
