@@ -17,9 +17,6 @@ from core.pipeline import (LAST_CORE_STAGE, STOP_AFTER_CHOICES, peak_memory_mb,
                            reconstruct as run_pipeline)
 from core.progress import NO_PROGRESS
 
-DEFAULT_EXPORT_DEPTH = EXPORT_DEPTH
-"""Grading depth of B-spline patches at extraordinary vertices (``core.params.EXPORT_DEPTH``)."""
-
 
 def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_path=None,
                         labels_path=None, stop_after="solid", progress=NO_PROGRESS, **params):
@@ -141,7 +138,7 @@ def _input_name(path):
     return os.path.splitext(os.path.basename(os.fspath(path)))[0]
 
 
-def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=DEFAULT_EXPORT_DEPTH,
+def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT_DEPTH,
                   measure=True, progress=NO_PROGRESS):
     """Turn a closed polygon base mesh (a SubD cage, OBJ) into a FreeCAD solid.
 
@@ -705,7 +702,7 @@ def describe(obj):
     return obj.Label
 
 
-def import_subd_cage(doc, path, progress=NO_PROGRESS, depth=DEFAULT_EXPORT_DEPTH):
+def import_subd_cage(doc, path, progress=NO_PROGRESS, depth=EXPORT_DEPTH):
     """Turn a SubD cage (closed polygon OBJ) into a B-spline solid ``Part::Feature`` in ``doc``.
 
     Returns

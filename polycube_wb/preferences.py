@@ -28,9 +28,9 @@ def paper_defaults():
 def default(name):
     """The default for a new object's parameter ``name`` (a ``ReconstructionParams`` field,
     or ``export_depth``): the user's preference if set, else the paper's value."""
-    from polycube_wb.api import DEFAULT_EXPORT_DEPTH
+    from core.params import EXPORT_DEPTH
 
-    fallback = DEFAULT_EXPORT_DEPTH if name == EXPORT_DEPTH_KEY else paper_defaults()[name]
+    fallback = EXPORT_DEPTH if name == EXPORT_DEPTH_KEY else paper_defaults()[name]
     group = FreeCAD.ParamGet(PREFERENCES)
     if isinstance(fallback, bool):
         return bool(group.GetBool(name, fallback))
@@ -47,10 +47,10 @@ def set_default(name, value):
     The paper's value is stored as no preference at all, so the user follows the code's
     default until choosing another value.
     """
-    from polycube_wb.api import DEFAULT_EXPORT_DEPTH
+    from core.params import EXPORT_DEPTH
 
     group = FreeCAD.ParamGet(PREFERENCES)
-    paper = DEFAULT_EXPORT_DEPTH if name == EXPORT_DEPTH_KEY else paper_defaults()[name]
+    paper = EXPORT_DEPTH if name == EXPORT_DEPTH_KEY else paper_defaults()[name]
     if value == paper:
         _forget(group, name)
     elif isinstance(value, bool):

@@ -48,7 +48,6 @@ from core.subdivision.limit import LimitEvaluator, corner_frame, limit_matrices
 from core.tolerances import CONTACT
 from core.types import BSplinePatch, PatchSet
 
-DEFAULT_DEPTH = EXPORT_DEPTH
 BEZIER = 0
 GRADED = 1
 
@@ -411,7 +410,7 @@ def _topology(ctx, vertex_pos, edge_poles):
                         topo.corner_edge.astype(np.int64), reversed_use, uv)
 
 
-def limit_surface_patches(base, depth=DEFAULT_DEPTH, measure=True):
+def limit_surface_patches(base, depth=EXPORT_DEPTH, measure=True):
     """Bicubic B-spline patches of the Catmull-Clark limit surface of ``base``.
 
     Parameters
@@ -645,7 +644,7 @@ def normal_jumps(patchset, base, samples=None, _context=None):
         near = cKDTree(ev_points).query(ends.reshape(-1, 3))[0].reshape(n_edges, 2)
         ev_edge = (near <= CONTACT * ctx.bbox_diagonal).any(axis=1)
     if samples is None:
-        dense_t = _measure_params(graded_knots(max(ctx.depth, DEFAULT_DEPTH)))
+        dense_t = _measure_params(graded_knots(max(ctx.depth, EXPORT_DEPTH)))
         plain_t = np.linspace(0.0, 1.0, 9)
     else:
         dense_t = plain_t = np.asarray(samples, dtype=np.float64)

@@ -46,9 +46,9 @@ class PreferencesPage:
             set_default(key, widget_value(widget, kind))
 
     def paper_defaults(self):
-        from polycube_wb.api import DEFAULT_EXPORT_DEPTH
+        from core.params import EXPORT_DEPTH
         from polycube_wb.preferences import paper_defaults
 
-        defaults = dict(paper_defaults(), export_depth=DEFAULT_EXPORT_DEPTH)
+        defaults = dict(paper_defaults(), export_depth=EXPORT_DEPTH)
         for key, (widget, kind) in self.widgets.items():
             set_widget_value(widget, kind, defaults[key])
