@@ -178,19 +178,25 @@ def stage_basemesh(state, params):
     from core.quadmesh import build_base_mesh
 
     labeling = state["validity"].report
+    method = params.base_mesh
+    invalid = None
     if not labeling["valid"]:
-        raise LabelingError(
-            "the base mesh needs a valid labeling; it still has "
-            f"{labeling['invalid_charts']['count']} invalid charts, "
-            f"{labeling['invalid_boundaries']['count']} invalid boundaries and "
-            f"{labeling['invalid_corners']['count']} invalid corners (see the labeling section)")
+        invalid = (f"{labeling['invalid_charts']['count']} invalid charts, "
+                   f"{labeling['invalid_boundaries']['count']} invalid boundaries and "
+                   f"{labeling['invalid_corners']['count']} invalid corners")
+        if method == "polycube":
+            raise LabelingError(f"the polycube base mesh needs a valid labeling; it still has "
+                                f"{invalid} (see the labeling section)")
+        method = "decimation"
     field = state["frames"]
     interface_axis = field.face_interface_axis if len(field.interfaces) else None
     base, info = build_base_mesh(state["target"], state["face_part"], state["face_label"],
                                  field.face_frame, field.part_frames,
                                  target_faces=params.target_faces,
                                  max_base_faces=params.max_base_faces,
-                                 face_interface_axis=interface_axis)
+                                 face_interface_axis=interface_axis, method=method)
+    if invalid is not None and params.base_mesh == "auto":
+        info["fallback_reason"] = f"the labeling is not a valid polycube labeling ({invalid})"
     target_genus = state["input_genus"]
     if info["genus"] != target_genus:
         raise LabelingError(
@@ -198,6 +204,9 @@ def stage_basemesh(state, params):
     message = ("" if info["within_budget"] else
                f"{info['faces']} faces for a budget of {info['target_faces']}: "
                f"{info['minimum_reason'] or 'the closest layout found'}")
+    if info["method"] != "polycube":
+        message = "; ".join(filter(None, [f"{info['method']} ({info['fallback_reason']})",
+                                          message]))
     return {"base_mesh": base, "report": info, "message": message}
 
 
