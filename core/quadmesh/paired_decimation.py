@@ -11,11 +11,12 @@ genus and orientation:
    twice the face budget in triangles. Collapses that would change the topology are refused.
 2. Blossom-Quad (Remacle et al., "Blossom-Quad: a non-uniform quadrilateral mesh generator using
    a minimum-cost perfect matching algorithm", IJNME 2012): every pair of triangles sharing an
-   edge is a candidate quad, weighted by its corner angles and its flatness; a maximum-weight
-   matching of maximum cardinality on the dual graph picks the pairs. The dual graph of a closed
-   triangle surface is cubic and bridgeless, so a perfect matching exists (Petersen) and the
-   result is all quads in practice; unmatched triangles stay triangles (Catmull-Clark and the
-   export take mixed cages). Vertices with only two faces are merged away, and the vertices
+   edge is a candidate quad, weighted by its corner angles and its flatness; a matching on the
+   dual graph picks the pairs (greedy by weight, then augmenting paths towards a perfect
+   matching, :func:`_match_pairs`, instead of the paper's exact minimum-cost perfect matching).
+   The dual graph of a closed triangle surface is cubic and bridgeless, so a perfect matching
+   exists (Petersen) and the result is all quads in practice; unmatched triangles stay
+   triangles (Catmull-Clark and the export take mixed cages). Vertices with only two faces are merged away, and the vertices
    are moved onto the target.
 """
 from dataclasses import dataclass
@@ -89,17 +90,63 @@ def _candidate_quads(vertices, faces):
 
 
 def _match_pairs(n_faces, pairs, weight):
-    """(e,) bool candidate pairs in a maximum-cardinality, maximum-weight matching."""
-    import networkx as nx
+    """(e,) bool candidate pairs chosen: heaviest first, then augmented towards perfect.
 
-    graph = nx.Graph()
-    graph.add_nodes_from(range(n_faces))
-    for index, ((a, b), w) in enumerate(zip(pairs.tolist(), weight.tolist())):
-        graph.add_edge(a, b, weight=w, index=index)
+    A greedy matching in decreasing weight (ties by index, so deterministic) leaves a few
+    triangles whose neighbours are all taken. Each of them then searches, breadth first, an
+    augmenting path: alternately an unchosen and a chosen pair, ending at another unmatched
+    triangle; flipping the path matches both ends. (Without Edmonds' blossom contraction an
+    augmenting path through an odd cycle can be missed; such a triangle stays a triangle.)
+    Linear in the faces per unmatched triangle: 0.01-0.08 s for 600-2,000 triangles, where an
+    exact maximum-weight blossom matching (``networkx``) took 7 s and 108 s on this machine;
+    its total weight was 89% of the exact optimum's on ``to_simp_mbb`` (600 triangles), and
+    every dev mesh tried was matched perfectly (all quads).
+    """
+    mate = np.full(n_faces, -1, dtype=np.int64)
+    via = np.full(n_faces, -1, dtype=np.int64)
+    for index in np.argsort(-weight, kind="stable").tolist():
+        a, b = pairs[index]
+        if mate[a] < 0 and mate[b] < 0:
+            mate[a], mate[b] = b, a
+            via[a] = via[b] = index
+    neighbours = [[] for _ in range(n_faces)]
+    for index, (a, b) in enumerate(pairs.tolist()):
+        neighbours[a].append((b, index))
+        neighbours[b].append((a, index))
+    for start in np.flatnonzero(mate < 0).tolist():
+        if mate[start] >= 0:
+            continue
+        _augment(start, mate, via, neighbours)
     chosen = np.zeros(len(pairs), dtype=bool)
-    for a, b in nx.max_weight_matching(graph, maxcardinality=True):
-        chosen[graph.edges[a, b]["index"]] = True
+    chosen[via[via >= 0]] = True
     return chosen
+
+
+def _augment(start, mate, via, neighbours):
+    """Match ``start`` along one augmenting path found breadth first; False if none found."""
+    parent = {start: (-1, -1)}  # outer face -> (previous outer face, pair index taken to it)
+    queue = [start]
+    for outer in queue:
+        for inner, index in neighbours[outer]:
+            if inner in parent or inner == mate[outer]:
+                continue
+            if mate[inner] < 0:
+                # flip the path: inner-outer, then each outer's old mate with its parent
+                a, b, pair = inner, outer, index
+                while b >= 0:
+                    previous, taken = parent[b]
+                    old = mate[b]
+                    mate[a], mate[b] = b, a
+                    via[a] = via[b] = pair
+                    a, b, pair = old, previous, taken
+                return True
+            other = int(mate[inner])
+            if other in parent:
+                continue
+            parent[inner] = (-2, -2)  # reached, as the inner end of a chosen pair
+            parent[other] = (outer, index)
+            queue.append(other)
+    return False
 
 
 def paired_decimation_base_mesh(vertices, faces, target_faces):

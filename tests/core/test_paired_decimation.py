@@ -77,3 +77,17 @@ def test_real_simp_result_with_handles():
     assert polymesh_genus(result.mesh) == 2
     assert result.quads >= 0.9 * result.mesh.n_faces
     assert abs(result.mesh.n_faces - 300) <= 75
+
+
+def test_augmenting_path_completes_a_greedy_matching():
+    from core.quadmesh.paired_decimation import _match_pairs
+
+    # a chain 0-1-2-3 whose heaviest pair (1, 2) would strand 0 and 3
+    pairs = np.array([[0, 1], [1, 2], [2, 3]])
+    chosen = _match_pairs(4, pairs, np.array([1.0, 2.0, 1.0]))
+    assert chosen.tolist() == [True, False, True]
+    # a triangle of faces plus a pendant: an odd cycle; three of the four still pair up
+    pairs = np.array([[0, 1], [1, 2], [2, 0], [2, 3]])
+    chosen = _match_pairs(4, pairs, np.array([3.0, 1.0, 1.0, 0.5]))
+    assert chosen.sum() == 2
+    assert np.bincount(pairs[chosen].ravel(), minlength=4).max() == 1
