@@ -6,7 +6,7 @@ Usage::
     .venv/bin/python benchmarks/basemesh_bench.py [--meshes DIR] [--only NAME ...]
                                                   [--solid NAME ...] [--timeout SECONDS]
                                                   [--modes single auto]
-                                                  [--base-mesh auto|polycube|decimation]
+                                                  [--base-mesh-method auto|polycube|decimation]
                                                   [--update]
 
 Writes ``benchmarks/BASEMESH_RESULTS.md``, ``benchmarks/basemesh_results.json`` and a PNG of
@@ -17,7 +17,7 @@ normal more than 90 degrees from the target's, :mod:`core.quadmesh.orientation`)
 triangle pairs of the level-2 limit surface, and the labeling and base-mesh seconds. For the
 meshes named after ``--solid`` the whole pipeline then writes a STEP file, judged by the
 independent ``../shared/tools/evaluate.py``. Rows are kept per mesh, parts mode and requested
-``--base-mesh`` route, so the routes can be compared side by side (``--update``).
+``--base-mesh-method`` route, so the routes can be compared side by side (``--update``).
 """
 import argparse
 import json
@@ -47,7 +47,7 @@ def run_case(path, mode, method, out_json, image, solid):
     from core.quadmesh.orientation import inverted_faces
 
     started = time.perf_counter()
-    result = reconstruct(path, {"parts": mode, "base_mesh": method}, stop_after="basemesh")
+    result = reconstruct(path, {"parts": mode, "base_mesh_method": method}, stop_after="basemesh")
     report = result.report
     row = {"stages": {k: v["status"] for k, v in report["stages"].items()},
            "messages": {k: v["message"] for k, v in report["stages"].items() if v["message"]},
@@ -81,7 +81,7 @@ def run_solid(path, mode, method):
         step = os.path.join(tmp, "result.step")
         started = time.perf_counter()
         done = subprocess.run([sys.executable, "-m", "polycube_wb", "reconstruct", path, "-o", step,
-                               "--parts", mode, "--base-mesh", method], cwd=REPO, capture_output=True, text=True)
+                               "--parts", mode, "--base-mesh-method", method], cwd=REPO, capture_output=True, text=True)
         seconds = round(time.perf_counter() - started, 2)
         if done.returncode != 0:
             return {"reached": False, "seconds": seconds, "error": done.stderr.strip()[-300:]}
@@ -210,7 +210,7 @@ def main(argv):
     parser.add_argument("--update", action="store_true",
                         help="keep the other rows of basemesh_results.json, replace these")
     parser.add_argument("--modes", nargs="*", choices=MODES, default=list(MODES))
-    parser.add_argument("--base-mesh", choices=BASE_MESH_METHODS, default="auto")
+    parser.add_argument("--base-mesh-method", choices=BASE_MESH_METHODS, default="auto")
     parser.add_argument("--case", nargs=5, metavar=("PATH", "MODE", "METHOD", "JSON", "PNG"))
     args = parser.parse_args(argv)
     if args.case:
@@ -229,7 +229,7 @@ def main(argv):
     if args.update and os.path.exists(results_json):
         with open(results_json, encoding="utf-8") as handle:
             previous = json.load(handle)
-        ran = {(os.path.splitext(n)[0], mode, args.base_mesh) for n in names
+        ran = {(os.path.splitext(n)[0], mode, args.base_mesh_method) for n in names
                for mode in args.modes}
         kept = [r for r in previous["rows"]
                 if (r["mesh"], r["mode"], r.get("method", "auto")) not in ran]
@@ -240,9 +240,9 @@ def main(argv):
         for mode in args.modes:
             with tempfile.TemporaryDirectory(prefix="basemesh-case-") as tmp:
                 out = os.path.join(tmp, "row.json")
-                image = os.path.join(HERE, "images", _image_name(stem, mode, args.base_mesh))
+                image = os.path.join(HERE, "images", _image_name(stem, mode, args.base_mesh_method))
                 command = [sys.executable, os.path.abspath(__file__), "--case",
-                           os.path.join(args.meshes, name), mode, args.base_mesh, out, image]
+                           os.path.join(args.meshes, name), mode, args.base_mesh_method, out, image]
                 if stem in args.solid:
                     command += ["--solid", stem]
                 try:
@@ -254,7 +254,7 @@ def main(argv):
                     row = {"error": f"timed out after {args.timeout} s"}
             if isinstance(row.get("error"), list):
                 row["error"] = " ".join(row["error"])
-            row.update({"mesh": stem, "mode": mode, "method": args.base_mesh})
+            row.update({"mesh": stem, "mode": mode, "method": args.base_mesh_method})
             rows.append(row)
             print(stem, mode, row.get("stages", {}).get("basemesh", row.get("error")),
                   row.get("base_mesh", {}).get("faces"), flush=True)

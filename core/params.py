@@ -46,7 +46,7 @@ class ReconstructionParams:
         used and the report says why.
     max_base_faces : a base mesh with more faces stops the run with a message (its fit would
         take many minutes, and such a model is not the few-patch result the tool is for).
-    base_mesh : ``auto`` (the quantized polycube layout; where it cannot be built, needs more
+    base_mesh_method : ``auto`` (the quantized polycube layout; where it cannot be built, needs more
         than twice the budget or has inverted faces, the paired decimation of the target),
         ``polycube`` (never falls back) or ``decimation`` (the paired decimation only).
     subdivision_levels : Catmull-Clark levels used by the fit (paper: 2).
@@ -74,7 +74,7 @@ class ReconstructionParams:
     repair: bool = True
     target_faces: int = 300
     max_base_faces: int = 2500
-    base_mesh: str = "auto"
+    base_mesh_method: str = "auto"
     subdivision_levels: int = 2
     fit_iterations: int = 100
     fit_mode: str = "inside"
@@ -95,7 +95,7 @@ class ReconstructionParams:
         _range("max_sweeps", self.max_sweeps, 1, 100_000)
         _range("target_faces", self.target_faces, 6, 200_000)
         _range("max_base_faces", self.max_base_faces, 6, 1_000_000)
-        _choice("base_mesh", self.base_mesh, BASE_MESH_METHODS)
+        _choice("base_mesh_method", self.base_mesh_method, BASE_MESH_METHODS)
         _range("subdivision_levels", self.subdivision_levels, 1, 5)
         _range("fit_iterations", self.fit_iterations, 0, 100_000)
         _choice("fit_mode", self.fit_mode, FIT_MODES)

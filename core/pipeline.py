@@ -178,7 +178,7 @@ def stage_basemesh(state, params):
     from core.quadmesh import build_base_mesh
 
     labeling = state["validity"].report
-    method = params.base_mesh
+    method = params.base_mesh_method
     invalid = None
     if not labeling["valid"]:
         invalid = (f"{labeling['invalid_charts']['count']} invalid charts, "
@@ -195,7 +195,7 @@ def stage_basemesh(state, params):
                                  target_faces=params.target_faces,
                                  max_base_faces=params.max_base_faces,
                                  face_interface_axis=interface_axis, method=method)
-    if invalid is not None and params.base_mesh == "auto":
+    if invalid is not None and params.base_mesh_method == "auto":
         info["fallback_reason"] = f"the labeling is not a valid polycube labeling ({invalid})"
     target_genus = state["input_genus"]
     if info["genus"] != target_genus:

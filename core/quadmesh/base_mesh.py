@@ -242,7 +242,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
                              f"got {method!r}")
     target_v = np.asarray(target.vertices, dtype=np.float64)
     target_f = np.asarray(target.faces, dtype=np.int64)
-    reason = "asked for (--base-mesh decimation)" if method == "decimation" else None
+    reason = "asked for (--base-mesh-method decimation)" if method == "decimation" else None
     if method == "polycube":
         mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames,
                                          int(target_faces), max_base_faces, face_interface_axis,

@@ -54,12 +54,12 @@ class BaseMeshProxy(CageProxy):
                         "where the layout fails, needs more than twice the budget or has "
                         "inverted faces; 'polycube': never fall back; 'decimation': the "
                         "paired decimation only", list(BASE_MESH_METHODS)):
-            obj.Method = default("base_mesh")
+            obj.Method = default("base_mesh_method")
         add_cage_properties(obj)
 
     def parameters(self, obj):
         return {"target_faces": int(obj.TargetFaces), "max_base_faces": int(obj.MaxBaseFaces),
-                "base_mesh": str(obj.Method)}
+                "base_mesh_method": str(obj.Method)}
 
     def run(self, obj, progress):
         state = self.upstream_state(obj)
