@@ -5,6 +5,9 @@ Usage::
 
     .venv/bin/python benchmarks/basemesh_bench.py [--meshes DIR] [--only NAME ...]
                                                   [--solid NAME ...] [--timeout SECONDS]
+                                                  [--modes single auto]
+                                                  [--base-mesh-method auto|polycube|decimation]
+                                                  [--update]
 
 Writes ``benchmarks/BASEMESH_RESULTS.md``, ``benchmarks/basemesh_results.json`` and a PNG of
 each cage over its target (``benchmarks/images/basemesh_*.png``). Every case runs in its own
@@ -13,7 +16,8 @@ extraordinary vertices, valence range, genus against the target's, inverted face
 normal more than 90 degrees from the target's, :mod:`core.quadmesh.orientation`), crossing
 triangle pairs of the level-2 limit surface, and the labeling and base-mesh seconds. For the
 meshes named after ``--solid`` the whole pipeline then writes a STEP file, judged by the
-independent ``../shared/tools/evaluate.py``.
+independent ``../shared/tools/evaluate.py``. Rows are kept per mesh, parts mode and requested
+``--base-mesh-method`` route, so the routes can be compared side by side (``--update``).
 """
 import argparse
 import json
@@ -26,15 +30,17 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 sys.path.insert(0, REPO)
+from core.params import BASE_MESH_METHODS  # noqa: E402
 DEFAULT_MESHES = os.path.join(REPO, "..", "shared", "data", "meshes")
 EVALUATE = os.path.join(REPO, "..", "shared", "tools", "evaluate.py")
 MODES = ("single", "auto")
+
 RENDER_FACES = 30000
 """Target triangles drawn under the cage (a random subset of larger targets)."""
 
 
-def run_case(path, mode, out_json, image, solid):
-    """One mesh in one parts mode; writes a JSON dict to ``out_json``."""
+def run_case(path, mode, method, out_json, image, solid):
+    """One mesh in one parts mode and base-mesh route; writes a JSON dict to ``out_json``."""
     import numpy as np
 
     from core.pipeline import reconstruct
@@ -42,7 +48,7 @@ def run_case(path, mode, out_json, image, solid):
     from core.quadmesh.orientation import inverted_faces
 
     started = time.perf_counter()
-    result = reconstruct(path, {"parts": mode}, stop_after="basemesh")
+    result = reconstruct(path, {"parts": mode, "base_mesh_method": method}, stop_after="basemesh")
     report = result.report
     row = {"stages": {k: v["status"] for k, v in report["stages"].items()},
            "messages": {k: v["message"] for k, v in report["stages"].items() if v["message"]},
@@ -54,28 +60,29 @@ def run_case(path, mode, out_json, image, solid):
     if base is not None:
         info = report["base_mesh"]
         target = result.state.intake.target
-        row["base_mesh"] = {key: info[key] for key in (
-            "faces", "quads", "extraordinary_vertices", "min_valence", "max_valence", "genus",
-            "target_faces", "within_budget", "minimum_reason", "scale", "solver_status",
-            "collapsed_sides", "side_directions_flipped", "rectangles")}
+        row["base_mesh"] = {key: info.get(key) for key in (
+            "method", "fallback_reason", "faces", "quads", "triangles",
+            "extraordinary_vertices", "min_valence", "max_valence", "genus", "target_faces",
+            "within_budget", "minimum_reason", "scale", "solver_status", "collapsed_sides",
+            "side_directions_flipped", "rectangles")}
         row["inverted_faces"] = int(inverted_faces(base, target.vertices, target.faces).sum())
         row["limit_self_intersections"] = count_limit_self_intersections(base, 2)
         render_cage(image, target.vertices, target.faces, base,
                     f"{os.path.basename(path)} ({mode}): {base.n_faces} faces")
         if solid:
-            row["solid"] = run_solid(path, mode)
+            row["solid"] = run_solid(path, mode, method)
     row["seconds"] = round(time.perf_counter() - started, 2)
     with open(out_json, "w", encoding="utf-8") as handle:
         json.dump(row, handle)
 
 
-def run_solid(path, mode):
+def run_solid(path, mode, method):
     """The whole pipeline to STEP, then the independent evaluation (dict)."""
     with tempfile.TemporaryDirectory(prefix="basemesh-bench-") as tmp:
         step = os.path.join(tmp, "result.step")
         started = time.perf_counter()
         done = subprocess.run([sys.executable, "-m", "polycube_wb", "reconstruct", path, "-o", step,
-                               "--parts", mode], cwd=REPO, capture_output=True, text=True)
+                               "--parts", mode, "--base-mesh-method", method], cwd=REPO, capture_output=True, text=True)
         seconds = round(time.perf_counter() - started, 2)
         if done.returncode != 0:
             return {"reached": False, "seconds": seconds, "error": done.stderr.strip()[-300:]}
@@ -99,7 +106,8 @@ def render_cage(path, V, F, base, title):
 
     rng = np.random.default_rng(0)
     shown = F if len(F) <= RENDER_FACES else F[rng.choice(len(F), RENDER_FACES, replace=False)]
-    quads = base.vertices[base.face_vertices.reshape(-1, 4)]
+    quads = [base.vertices[base.face_vertices[a:b]]
+             for a, b in zip(base.face_offsets[:-1], base.face_offsets[1:])]
     fig = plt.figure(figsize=(12, 6))
     centre = V.mean(axis=0)
     radius = float(np.ptp(V, axis=0).max()) / 2
@@ -135,7 +143,7 @@ def markdown(rows, meta):
     reached = [r for r in rows if r.get("base_mesh")]
     lines.append(f"Base mesh reached on **{len(reached)} of {len(rows)}** cases.")
     lines.append("")
-    header = ["mesh", "parts", "labeling", "base mesh", "faces", "budget met", "quads %", "EVs",
+    header = ["mesh", "parts", "asked", "labeling", "base mesh", "route", "faces", "budget met", "quads %", "EVs",
               "valence", "genus (target)", "inverted", "crossings", "labeling s", "base mesh s"]
     with_solid = any("solid" in r for r in rows)
     if with_solid:
@@ -144,16 +152,16 @@ def markdown(rows, meta):
     for r in rows:
         b = r.get("base_mesh")
         status = r.get("stages", {}).get("basemesh", r.get("error", "?"))
-        cells = [f"`{r['mesh']}`", r["mode"], "valid" if r.get("labeling_valid") else "invalid",
-                 status]
+        cells = [f"`{r['mesh']}`", r["mode"], r.get("method", "auto"),
+                 "valid" if r.get("labeling_valid") else "invalid", status]
         if b:
-            cells += [str(b["faces"]), "yes" if b["within_budget"] else "no (minimum)",
+            cells += [b.get("method") or "polycube", str(b["faces"]), "yes" if b["within_budget"] else "no (minimum)",
                       f"{100.0 * b['quads'] / b['faces']:.0f}", str(b["extraordinary_vertices"]),
                       f"{b['min_valence']}-{b['max_valence']}",
                       f"{b['genus']} ({r['input_genus']})", str(r["inverted_faces"]),
                       str(r["limit_self_intersections"])]
         else:
-            cells += ["–"] * 8
+            cells += ["–"] * 9
         cells += [str(r.get("labeling_seconds", "–")), str(r.get("basemesh_seconds", "–"))]
         if with_solid:
             metrics = (r.get("solid") or {}).get("evaluation", {})
@@ -162,20 +170,31 @@ def markdown(rows, meta):
             cells += ["–" if valid is None else ("yes" if valid else "no"),
                       _percent(symmetric.get("mean_frac")), _percent(symmetric.get("max_frac"))]
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "Where the base mesh was not reached, the stage's message:", ""]
+    lines += ["", "Where the base mesh was not reached, the stage's message; where the route "
+              "fell back from the polycube layout, why:", ""]
     for r in rows:
+        reason = (r.get("base_mesh") or {}).get("fallback_reason")
         if not r.get("base_mesh"):
             message = r.get("messages", {}).get("basemesh") or r.get("error") or ""
-            lines.append(f"- `{r['mesh']}` ({r['mode']}): {message[:300]}")
+            lines.append(f"- `{r['mesh']}` ({r['mode']}, {r.get('method', 'auto')}): "
+                         f"not reached: {message[:300]}")
+        elif reason and r.get("method", "auto") == "auto":
+            lines.append(f"- `{r['mesh']}` ({r['mode']}): {reason[:300]}")
     lines += ["", "## Cages over their targets", ""]
     for r in reached:
-        lines.append(f"![{r['mesh']} {r['mode']}](images/basemesh_{r['mesh']}_{r['mode']}.png)")
+        lines.append(f"![{r['mesh']} {r['mode']} {r.get('method', 'auto')}]"
+                     f"(images/{_image_name(r['mesh'], r['mode'], r.get('method', 'auto'))})")
     return "\n".join(lines) + "\n"
 
 
 def _order(row):
     """SIMP topology-optimisation results first, then the other meshes; one part first."""
-    return (not row["mesh"].startswith("to_simp"), row["mesh"], MODES.index(row["mode"]))
+    return (not row["mesh"].startswith("to_simp"), row["mesh"], MODES.index(row["mode"]),
+            BASE_MESH_METHODS.index(row.get("method", "auto")))
+
+
+def _image_name(stem, mode, method):
+    return f"basemesh_{stem}_{mode}" + ("" if method == "auto" else f"_{method}") + ".png"
 
 
 def _percent(value):
@@ -191,7 +210,9 @@ def main(argv):
     parser.add_argument("--timeout", type=float, default=600.0)
     parser.add_argument("--update", action="store_true",
                         help="keep the other rows of basemesh_results.json, replace these")
-    parser.add_argument("--case", nargs=4, metavar=("PATH", "MODE", "JSON", "PNG"))
+    parser.add_argument("--modes", nargs="*", choices=MODES, default=list(MODES))
+    parser.add_argument("--base-mesh-method", choices=BASE_MESH_METHODS, default="auto")
+    parser.add_argument("--case", nargs=5, metavar=("PATH", "MODE", "METHOD", "JSON", "PNG"))
     args = parser.parse_args(argv)
     if args.case:
         run_case(*args.case, solid=bool(args.solid))
@@ -209,18 +230,20 @@ def main(argv):
     if args.update and os.path.exists(results_json):
         with open(results_json, encoding="utf-8") as handle:
             previous = json.load(handle)
-        ran = {os.path.splitext(n)[0] for n in names}
-        kept = [r for r in previous["rows"] if r["mesh"] not in ran]
+        ran = {(os.path.splitext(n)[0], mode, args.base_mesh_method) for n in names
+               for mode in args.modes}
+        kept = [r for r in previous["rows"]
+                if (r["mesh"], r["mode"], r.get("method", "auto")) not in ran]
         meta["updated_from"] = previous["meta"]
     rows = []
     for name in names:
         stem = os.path.splitext(name)[0]
-        for mode in MODES:
+        for mode in args.modes:
             with tempfile.TemporaryDirectory(prefix="basemesh-case-") as tmp:
                 out = os.path.join(tmp, "row.json")
-                image = os.path.join(HERE, "images", f"basemesh_{stem}_{mode}.png")
+                image = os.path.join(HERE, "images", _image_name(stem, mode, args.base_mesh_method))
                 command = [sys.executable, os.path.abspath(__file__), "--case",
-                           os.path.join(args.meshes, name), mode, out, image]
+                           os.path.join(args.meshes, name), mode, args.base_mesh_method, out, image]
                 if stem in args.solid:
                     command += ["--solid", stem]
                 try:
@@ -232,7 +255,7 @@ def main(argv):
                     row = {"error": f"timed out after {args.timeout} s"}
             if isinstance(row.get("error"), list):
                 row["error"] = " ".join(row["error"])
-            row.update({"mesh": stem, "mode": mode})
+            row.update({"mesh": stem, "mode": mode, "method": args.base_mesh_method})
             rows.append(row)
             print(stem, mode, row.get("stages", {}).get("basemesh", row.get("error")),
                   row.get("base_mesh", {}).get("faces"), flush=True)

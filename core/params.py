@@ -9,6 +9,9 @@ COMPONENT_POLICIES = ("largest", "all", "error")
 FIT_MODES = ("inside", "best-fit", "none")
 """The modes of ``core.fitting.fit_base_mesh`` (checked here so a bad mode is reported before
 any stage runs)."""
+BASE_MESH_METHODS = ("auto", "polycube", "decimation")
+"""The base-mesh routes of ``core.quadmesh.build_base_mesh``: the polycube layout with the
+paired decimation as fallback (``auto``), either one alone."""
 UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 EXPORT_DEPTH = 8
 """Grading depth of the B-spline patches at extraordinary vertices (``core.export.bspline``):
@@ -43,6 +46,9 @@ class ReconstructionParams:
         used and the report says why.
     max_base_faces : a base mesh with more faces stops the run with a message (its fit would
         take many minutes, and such a model is not the few-patch result the tool is for).
+    base_mesh_method : ``auto`` (the quantized polycube layout; where it cannot be built, needs more
+        than twice the budget or has inverted faces, the paired decimation of the target),
+        ``polycube`` (never falls back) or ``decimation`` (the paired decimation only).
     subdivision_levels : Catmull-Clark levels used by the fit (paper: 2).
     fit_iterations : most shape-optimisation iterations (paper: 100); the fit stops earlier
         when it has converged.
@@ -68,6 +74,7 @@ class ReconstructionParams:
     repair: bool = True
     target_faces: int = 300
     max_base_faces: int = 2500
+    base_mesh_method: str = "auto"
     subdivision_levels: int = 2
     fit_iterations: int = 100
     fit_mode: str = "inside"
@@ -88,6 +95,7 @@ class ReconstructionParams:
         _range("max_sweeps", self.max_sweeps, 1, 100_000)
         _range("target_faces", self.target_faces, 6, 200_000)
         _range("max_base_faces", self.max_base_faces, 6, 1_000_000)
+        _choice("base_mesh_method", self.base_mesh_method, BASE_MESH_METHODS)
         _range("subdivision_levels", self.subdivision_levels, 1, 5)
         _range("fit_iterations", self.fit_iterations, 0, 100_000)
         _choice("fit_mode", self.fit_mode, FIT_MODES)

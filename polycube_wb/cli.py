@@ -12,7 +12,7 @@ import sys
 import traceback
 
 from core.errors import PolycubeInputError
-from core.params import (COMPONENT_POLICIES, EXPORT_DEPTH, FIT_MODES, MAX_EXPORT_DEPTH,
+from core.params import (BASE_MESH_METHODS, COMPONENT_POLICIES, EXPORT_DEPTH, FIT_MODES, MAX_EXPORT_DEPTH,
                          PART_MODES, UNIT_TO_MM, ReconstructionParams)
 from core.pipeline import STOP_AFTER_CHOICES
 
@@ -54,6 +54,12 @@ def add_pipeline_options(parser, defaults):
                         help="approximate number of base-mesh faces (default 300)")
     parser.add_argument("--max-base-faces", type=int, default=defaults.max_base_faces,
                         help="stop when the base mesh has more faces than this (default 2500)")
+    parser.add_argument("--base-mesh-method", choices=BASE_MESH_METHODS,
+                        default=defaults.base_mesh_method,
+                        help="auto: the polycube layout, falling back to a paired decimation "
+                        "of the target where the layout fails, needs more than twice "
+                        "--target-faces or has inverted faces; polycube: never fall back; "
+                        "decimation: the paired decimation only (default auto)")
     parser.add_argument("--fit-iterations", type=int, default=defaults.fit_iterations,
                         help="most shape-optimisation iterations (paper: 100; the fit stops "
                         "earlier when converged)")
@@ -179,6 +185,7 @@ def pipeline_params(args):
                 max_sweeps=args.max_sweeps, subdivision_levels=args.subdivision_levels,
                 repair=not args.no_repair, target_faces=args.target_faces,
                 fit_iterations=args.fit_iterations, fit_mode=args.fit_mode,
+                base_mesh_method=args.base_mesh_method,
                 **_tolerance(args.tolerance),
                 max_base_faces=args.max_base_faces,
                 check_self_intersections=not args.skip_self_intersection_check)

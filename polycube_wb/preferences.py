@@ -11,8 +11,8 @@ import FreeCAD
 PREFERENCES = "User parameter:BaseApp/Preferences/Mod/Polycube"
 
 PREFERENCE_FIELDS = ("parts", "blend_factor", "lam", "penalty", "max_sweeps", "repair",
-                     "target_faces", "max_base_faces", "subdivision_levels", "fit_iterations",
-                     "fit_mode")
+                     "target_faces", "max_base_faces", "base_mesh_method", "subdivision_levels",
+                     "fit_iterations", "fit_mode")
 """``ReconstructionParams`` fields the preferences page offers."""
 EXPORT_DEPTH_KEY = "export_depth"
 

@@ -16,12 +16,15 @@ import time
 import numpy as np
 
 from core.errors import InvalidMeshError, LabelingError, ParameterError
+from core.params import BASE_MESH_METHODS
 from core.mesh_topology import connected_face_components, genus_of
 from core.polymesh_checks import check_polymesh
 from core.quadmesh.chart_complex import build_chart_complex
 from core.quadmesh.embed import (interior_point_positions, side_point_positions,
                                  tutte_coordinates)
 from core.quadmesh.lattice import OverlappingChartsError, build_lattice, chart_orientation
+from core.quadmesh.orientation import inverted_faces
+from core.quadmesh.paired_decimation import paired_decimation_base_mesh
 from core.quadmesh.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapsible_sides,
                                     loop_tables, quantize, quantize_for_budget,
                                     rectangular_refinement)
@@ -52,6 +55,14 @@ def polymesh_genus(mesh):
     return int((2 * components - euler) // 2)
 
 
+class LayoutTooLargeError(LabelingError):
+    """The quantized layout needs more quads than the caller accepts."""
+
+
+FALLBACK_OVER_BUDGET = 2.0
+"""Polycube layouts with more faces than this many times the budget give way to the paired
+decimation (which meets the budget)."""
+
 REFINEMENT_ROUNDS = 24
 """Rounds of quantization, each splitting one more overlapping chart into rectangles."""
 
@@ -73,7 +84,8 @@ def refined_target(target):
     return V, np.asarray(F, dtype=np.int64), parent
 
 
-def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, collapsible):
+def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, collapsible,
+                      give_up_faces):
     """Quantize, lay out and embed; returns ``(mesh, polycube, rounds, refinement, folded)``.
 
     Charts whose integer polygon overlaps itself are split into rectangles, lazily and one at a
@@ -82,7 +94,8 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
 
     Raises
     ------
-    LabelingError (no layout, or more than ``max_base_faces`` quads); InvalidMeshError when the
+    LabelingError (no layout, or more than ``give_up_faces`` quads, at most
+    ``max_base_faces``); InvalidMeshError when the
     embedded quads are not a closed 2-manifold (a collapse that pinched a vertex).
     """
     refine, unrefinable, last = {}, set(), None
@@ -94,7 +107,7 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
                 # the face budget is searched once without refinements and once at the end;
                 # refinement rounds in between keep that scale (one program each)
                 polycube, rounds = quantize_for_budget(complex_, tables, refinement,
-                                                       target_faces, collapsible)
+                                                       target_faces, collapsible, give_up_faces)
             else:
                 polycube = quantize(complex_, tables, refinement, scale, collapsible)
         except LabelingError:
@@ -110,12 +123,14 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
                 unrefinable.add(last)
                 last = None
             continue
-        if polycube.faces > max_base_faces:
-            raise LabelingError(
+        if polycube.faces > give_up_faces:
+            limit = (f"max_base_faces={max_base_faces}; raise --max-base-faces or simplify "
+                     "the labeling (--parts auto)" if give_up_faces >= max_base_faces else
+                     f"{give_up_faces}, {FALLBACK_OVER_BUDGET:g} times the budget")
+            raise LayoutTooLargeError(
                 f"the smallest quantized layout found has {polycube.faces} quads, more than "
-                f"max_base_faces={max_base_faces} ({complex_.n_charts} charts, "
-                f"{complex_.n_sides} sides, each at least one unit long); raise "
-                "--max-base-faces or simplify the labeling (--parts auto)")
+                f"{limit} ({complex_.n_charts} charts, {complex_.n_sides} sides, each at least "
+                "one unit long)")
         try:
             lattice = build_lattice(complex_, tables, polycube)
         except OverlappingChartsError as exc:
@@ -175,8 +190,18 @@ def _merge_points(n, pairs):
 
 
 def build_base_mesh(target, face_part, face_label, face_frame, part_frames, target_faces=300,
-                    max_base_faces=2500, face_interface_axis=None):
-    """Closed all-quad base mesh on the target from a valid polycube labeling.
+                    max_base_faces=2500, face_interface_axis=None, method="auto"):
+    """Closed quad base mesh on the target: the polycube layout, else the paired decimation.
+
+    With ``method="auto"`` the quantized polycube layout of the labeling (this module's
+    docstring) is built first. Where it cannot be built, exceeds ``max_base_faces`` or needs
+    more than ``FALLBACK_OVER_BUDGET`` times the budget, the stage falls back to
+    :mod:`core.quadmesh.paired_decimation`, which needs no labeling, and the report says why
+    (``method``, ``fallback_reason``); where it has inverted faces
+    (:func:`core.quadmesh.orientation.inverted_faces`), the paired decimation is built too and
+    the one with fewer inverted faces is kept. ``method="polycube"`` never falls back (its errors are
+    raised; layouts up to ``max_base_faces`` are kept); ``method="decimation"`` skips the
+    polycube layout.
 
     Parameters
     ----------
@@ -189,25 +214,97 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     max_base_faces : int, refuse layouts with more faces than this.
     face_interface_axis : (m, 3) float64 normal of the part interface next to each face, NaN
         rows where none (``FrameField.face_interface_axis``), or None.
+    method : one of ``BASE_MESH_METHODS``.
 
     Returns
     -------
-    mesh : core.types.PolyMesh, quads only, vertices on the target, closed, 2-manifold, outward.
-    info : dict (JSON-serialisable) with ``faces``, ``quads``, ``triangles``, ``other``,
-        ``vertices``, ``extraordinary_vertices``, ``min_valence``, ``max_valence``, ``genus``,
-        ``target_faces``, ``within_budget``, ``minimum_reason``, ``scale``, ``solver_status``,
-        ``scale_rounds``, ``charts``, ``sides``, ``corners``, ``side_directions_flipped``,
-        ``folded_points``, ``rectangles``, ``collapsed_sides`` and ``seconds``.
+    mesh : core.types.PolyMesh, quads (a few triangles possible in the fallback), closed,
+        2-manifold, outward, vertices on the target.
+    info : dict (JSON-serialisable) with ``method`` ("polycube" or "paired decimation"),
+        ``fallback_reason`` (None for the polycube layout), ``faces``, ``quads``,
+        ``triangles``, ``other``, ``vertices``, ``extraordinary_vertices``, ``min_valence``,
+        ``max_valence``, ``genus``, ``target_faces``, ``within_budget``, ``minimum_reason``,
+        ``inverted_faces`` and ``seconds``; the polycube layout adds ``scale``,
+        ``solver_status``, ``scale_rounds``, ``charts``, ``sides``, ``corners``,
+        ``side_directions_flipped``, ``folded_points``, ``rectangles`` and ``collapsed_sides``.
 
     Raises
     ------
-    ParameterError for a bad budget; LabelingError when the labeling cannot be quantized or
-    laid out (the message names the charts), or the layout exceeds ``max_base_faces``.
+    ParameterError for a bad budget or method; with ``method="polycube"``, LabelingError or
+    InvalidMeshError as :func:`_polycube_base_mesh`.
     """
     started = time.perf_counter()
     if isinstance(target_faces, bool) or not isinstance(target_faces, (int, np.integer)) \
             or target_faces < 6:
         raise ParameterError(f"target_faces must be an integer >= 6, got {target_faces!r}")
+    if method not in BASE_MESH_METHODS:
+        raise ParameterError(f"base-mesh method must be one of {', '.join(BASE_MESH_METHODS)}, "
+                             f"got {method!r}")
+    target_v = np.asarray(target.vertices, dtype=np.float64)
+    target_f = np.asarray(target.faces, dtype=np.int64)
+    reason = "asked for (--base-mesh-method decimation)" if method == "decimation" else None
+    if method == "polycube":
+        mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames,
+                                         int(target_faces), max_base_faces, face_interface_axis,
+                                         max_base_faces)
+        info["inverted_faces"] = int(inverted_faces(mesh, target_v, target_f).sum())
+    elif method == "auto":
+        give_up = int(min(max_base_faces, FALLBACK_OVER_BUDGET * target_faces))
+        try:
+            mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame,
+                                             part_frames, int(target_faces), max_base_faces,
+                                             face_interface_axis, give_up)
+        except (LabelingError, InvalidMeshError) as exc:
+            reason = f"the polycube layout failed: {exc}"
+        else:
+            info["inverted_faces"] = int(inverted_faces(mesh, target_v, target_f).sum())
+            if info["inverted_faces"]:
+                other_mesh, other_info = _paired_decimation_base_mesh(
+                    target_v, target_f, int(target_faces),
+                    f"the polycube layout has {info['inverted_faces']} inverted faces")
+                if other_info["inverted_faces"] < info["inverted_faces"]:
+                    other_info["fallback_reason"] += f", this one {other_info['inverted_faces']}"
+                    mesh, info = other_mesh, other_info
+    if reason is not None:
+        mesh, info = _paired_decimation_base_mesh(target_v, target_f, int(target_faces), reason)
+    info["seconds"] = round(time.perf_counter() - started, 4)
+    return mesh, info
+
+
+def _paired_decimation_base_mesh(target_v, target_f, target_faces, reason):
+    """The fallback base mesh and its report section (see :func:`build_base_mesh`)."""
+    result = paired_decimation_base_mesh(target_v, target_f, target_faces)
+    mesh = result.mesh
+    valence = np.bincount(mesh.face_vertices, minlength=len(mesh.vertices))
+    info = {
+        "method": "paired decimation", "fallback_reason": reason,
+        "faces": int(mesh.n_faces), "quads": result.quads, "triangles": result.triangles,
+        "other": 0, "vertices": int(len(mesh.vertices)),
+        "extraordinary_vertices": int((valence != 4).sum()),
+        "min_valence": int(valence.min()), "max_valence": int(valence.max()),
+        "genus": polymesh_genus(mesh), "target_faces": int(target_faces),
+        "within_budget": bool(abs(mesh.n_faces - target_faces)
+                              <= BUDGET_TOLERANCE * target_faces),
+        "minimum_reason": None, "decimated_triangles": result.decimated_triangles,
+        "inverted_faces": int(inverted_faces(mesh, target_v, target_f).sum()),
+    }
+    return mesh, info
+
+
+def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, target_faces,
+                        max_base_faces, face_interface_axis, give_up_faces):
+    """Closed all-quad base mesh on the target from a valid polycube labeling.
+
+    Parameters as :func:`build_base_mesh`; ``give_up_faces``: the budget search stops and
+    raises once the layout needs more quads than this. Returns ``(mesh, info)`` as there, without
+    ``inverted_faces`` and ``seconds``.
+
+    Raises
+    ------
+    LabelingError when the labeling cannot be quantized or laid out (the message names the
+    charts), or the layout exceeds ``max_base_faces``; InvalidMeshError when the layout does not
+    embed as a closed 2-manifold.
+    """
     V, F, parent = refined_target(target)
     part_frames = np.asarray(part_frames, dtype=np.float64).reshape(-1, 3, 3)
     interface_axis = (None if face_interface_axis is None
@@ -221,9 +318,12 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         layout_complex, flipped = make_loops_rectilinear(complex_, collapsible)
         tables = loop_tables(layout_complex, V, part_frames)
         mesh, polycube, rounds, refinement, folded = _layout_on_target(
-            V, F, layout_complex, tables, int(target_faces), max_base_faces, collapsible)
+            V, F, layout_complex, tables, int(target_faces), max_base_faces, collapsible,
+            give_up_faces)
         if polymesh_genus(mesh) != target_genus:
             raise LabelingError("collapsing sliver charts changed the genus")
+    except LayoutTooLargeError:
+        raise  # keeping the slivers would only make it larger
     except (LabelingError, InvalidMeshError):
         # slivers that cannot vanish cleanly keep at least one unit
         collapsible = np.zeros(complex_.n_sides, dtype=bool)
@@ -231,7 +331,8 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         tables = loop_tables(layout_complex, V, part_frames)
         try:
             mesh, polycube, rounds, refinement, folded = _layout_on_target(
-                V, F, layout_complex, tables, int(target_faces), max_base_faces, collapsible)
+                V, F, layout_complex, tables, int(target_faces), max_base_faces, collapsible,
+                give_up_faces)
         except InvalidMeshError as exc:
             raise LabelingError(f"the quantized layout does not embed as a closed 2-manifold: "
                                 f"{exc}; try another labeling or --parts") from exc
@@ -244,6 +345,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         minimum_reason = (f"{complex_.n_sides} sides of at least one unit each around "
                           f"{complex_.n_charts} charts need at least about {polycube.faces} quads")
     info = {
+        "method": "polycube", "fallback_reason": None,
         "faces": int(mesh.n_faces), "quads": int(mesh.n_faces), "triangles": 0, "other": 0,
         "vertices": int(len(points)),
         "extraordinary_vertices": int((valence != 4).sum()),
@@ -256,6 +358,5 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         "corners": int(complex_.n_corners), "side_directions_flipped": int(len(flipped)),
         "folded_points": int(folded), "rectangles": refinement.rectangles,
         "collapsed_sides": int((polycube.side_length == 0).sum()),
-        "seconds": round(time.perf_counter() - started, 4),
     }
     return mesh, info

@@ -410,14 +410,17 @@ def collapsible_sides(complex_, target_faces):
     return measured_lengths(complex_) * first_scale(complex_, target_faces) < COLLAPSE_BELOW
 
 
-def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=None):
+def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=None,
+                        give_up_faces=None):
     """The quantization whose face count is closest to ``target_faces``.
 
     Starts from the scale that gives the target area in unit squares; the face count grows
     roughly with the square of the scale but in steps, so the scale is then bisected (in log
     scale) between the largest one giving too few faces and the smallest giving too many.
     Stops when the count is within ``BUDGET_TOLERANCE`` of the budget; when even a tiny scale
-    gives too many faces, that is the minimum the constraints allow.
+    gives too many faces, that is the minimum the constraints allow. With ``give_up_faces``, the
+    search also stops once a scale of at most a quarter of the first one still gives more faces
+    than that (the caller will not use so large a layout).
 
     Returns
     -------
@@ -437,6 +440,9 @@ def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=
             break
         if len(rounds) >= 3 and len({r["faces"] for r in rounds[-3:]}) == 1:
             break  # the constraints' minimum: smaller scales give the same layout
+        if (give_up_faces is not None and result.faces > give_up_faces
+                and scale <= 0.25 * rounds[0]["scale"]):
+            break
         if result.faces < target_faces:
             low = scale if low is None else max(low, scale)
         else:

@@ -22,6 +22,10 @@ from core.errors import LabelingError
 AXES = np.eye(3)
 MILP_TIME_LIMIT = 20.0
 """Seconds HiGHS may spend on the sign repair."""
+DISAGREEMENT_WEIGHT = 2.0
+"""Cost of giving a side different directions in its two charts, relative to its measured
+extent (flipping it in both charts costs the extent once): the charts still close and glue,
+but the layout stops being a polycube there."""
 CLOSURE_BOUND = 1000.0
 """Largest side length (relative to the shortest, 1) in the closure check."""
 
@@ -47,9 +51,8 @@ def _reference_directions(complex_, positions):
     refs = complex_.loop_sides[positions]
     sides = np.where(refs >= 0, refs, ~refs)
     column = np.where(complex_.side_chart[sides, 0] == chart, 0, 1)
-    interface = (complex_.chart_part[complex_.side_chart[sides, 0]]
-                 != complex_.chart_part[complex_.side_chart[sides, 1]])
-    key_column = np.where(interface, column, 0)
+    slit = complex_.side_chart[sides, 0] == complex_.side_chart[sides, 1]
+    key_column = np.where(slit, 0, column)
     walk = np.where(refs >= 0, 1.0, -1.0)
     directions = (AXES[complex_.side_axis[sides, column]]
                   * (complex_.side_sign[sides, column] * walk)[:, None])
@@ -165,15 +168,26 @@ def make_loops_rectilinear(complex_, collapsible=None):
         key = np.searchsorted(used, keys)
         add([(length0 + key_side[k], c) for k, c in zip(key, coefficients)]
             + [(flipped0 + k, -2.0 * c) for k, c in zip(key, coefficients)], 0.0, 0.0)
+    # disagreements z >= |f(side, 0) - f(side, 1)| of the two charts of a side within one part
+    coupled = _coupled_sides(complex_, used)
+    disagree0 = nvar
+    for i, (k0, k1) in enumerate(coupled):
+        add([(disagree0 + i, 1.0), (k0, -1.0), (k1, 1.0)], 0.0, np.inf)
+        add([(disagree0 + i, 1.0), (k0, 1.0), (k1, -1.0)], 0.0, np.inf)
+    nd = len(coupled)
+    nvar += nd
     matrix = sp.csr_matrix((vals, (rows, cols)), shape=(len(lo), nvar))
     matrix.sum_duplicates()
     extent = complex_.side_extent.reshape(-1)[used]
-    cost = np.concatenate([extent + 1e-9 * (1.0 + np.arange(nf)),
-                           np.zeros(npairs + n_loops + n_sides + nf)])
-    integrality = np.concatenate([np.ones(nf + npairs + n_loops), np.zeros(n_sides + nf)])
+    disagree_cost = DISAGREEMENT_WEIGHT * 0.5 * (extent[coupled[:, 0]] + extent[coupled[:, 1]])
+    cost = np.concatenate([0.5 * extent + 1e-9 * (1.0 + np.arange(nf)),
+                           np.zeros(npairs + n_loops + n_sides + nf), disagree_cost])
+    integrality = np.concatenate([np.ones(nf + npairs + n_loops), np.zeros(n_sides + nf),
+                                  np.zeros(nd)])
     lower = np.concatenate([np.zeros(nf + npairs + n_loops), np.where(collapsible, 0.0, 1.0),
-                            np.zeros(nf)])
-    upper = np.concatenate([np.ones(nf + npairs + n_loops), np.full(n_sides + nf, big)])
+                            np.zeros(nf + nd)])
+    upper = np.concatenate([np.ones(nf + npairs + n_loops), np.full(n_sides + nf, big),
+                            np.ones(nd)])
     result = milp(cost, integrality=integrality, bounds=Bounds(lower, upper),
                   constraints=[LinearConstraint(matrix, lo, hi)],
                   options={"time_limit": MILP_TIME_LIMIT})
@@ -189,11 +203,22 @@ def make_loops_rectilinear(complex_, collapsible=None):
     flat = complex_.side_sign.reshape(-1).copy()
     flat[used[flip]] *= -1
     sign = flat.reshape(-1, 2)
-    same_part = (complex_.chart_part[complex_.side_chart[:, 0]]
-                 == complex_.chart_part[complex_.side_chart[:, 1]])
-    sign[same_part, 1] = sign[same_part, 0]
+    slit = complex_.side_chart[:, 0] == complex_.side_chart[:, 1]
+    sign[slit, 1] = sign[slit, 0]
     flipped = np.stack(np.divmod(used[flip], 2), axis=1)
     return replace(complex_, side_sign=sign), flipped
+
+
+def _coupled_sides(complex_, used):
+    """(c, 2) int64 variable indices (into ``used``) of the two directions of every side whose
+    charts lie in one part: a polycube gives them the same direction."""
+    side, column = np.divmod(used, 2)
+    same_part = (complex_.chart_part[complex_.side_chart[side, 0]]
+                 == complex_.chart_part[complex_.side_chart[side, 1]])
+    first = np.flatnonzero((column == 0) & same_part)
+    second = np.searchsorted(used, used[first] + 1)
+    ok = (second < len(used)) & (used[np.minimum(second, len(used) - 1)] == used[first] + 1)
+    return np.stack([first[ok], second[ok]], axis=1).astype(np.int64).reshape(-1, 2)
 
 
 def loops_are_rectilinear(complex_):

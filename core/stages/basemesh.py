@@ -1,39 +1,50 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Base-mesh stage: the coarse quad cage from a valid labeling (paper Sect. 2.3; a quantized
-polycube embedded on the target instead of a deformed mesh: ``core.quadmesh``, docs/DESIGN.md)."""
+"""Base-mesh stage: the coarse quad cage from the labeling (paper Sect. 2.3; a quantized
+polycube embedded on the target instead of a deformed mesh, or a paired decimation of the
+target as fallback: ``core.quadmesh``, docs/DESIGN.md)."""
 from core.types import BaseMeshResult
 
 
 def run_basemesh(intake, parts, frames, labeling, params, progress):
-    """Quantize the labeling's polycube and lay its unit quads on the target.
+    """Quantize the labeling's polycube and lay its unit quads on the target, or decimate.
+
+    With ``base_mesh_method="auto"`` an invalid labeling, or a layout that fails, needs
+    more than twice the budget or has inverted faces, falls back to the paired decimation
+    of the target (``core.quadmesh.build_base_mesh``).
 
     Parameters
     ----------
     intake : core.types.IntakeResult; parts : core.types.PartsResult;
-    frames : core.types.FramesResult; labeling : core.types.LabelingResult (valid).
-    params : core.params.ReconstructionParams (``target_faces``, ``max_base_faces``).
+    frames : core.types.FramesResult; labeling : core.types.LabelingResult.
+    params : core.params.ReconstructionParams (``target_faces``, ``max_base_faces``,
+        ``base_mesh_method``).
     progress : core.progress.Progress; cancellable before the layout starts.
 
     Returns
     -------
-    core.types.BaseMeshResult; its report is ``build_base_mesh``'s info, its message says
-    when the face budget could not be met.
+    core.types.BaseMeshResult; its report is ``build_base_mesh``'s info (with
+    ``fallback_reason`` when the labeling was invalid), its message names a fallback and
+    says when the face budget could not be met.
 
     Raises
     ------
-    LabelingError when the labeling is invalid, cannot be quantized or laid out, or the
-    cage's genus differs from the target's.
+    LabelingError when ``base_mesh_method="polycube"`` and the labeling is invalid, the base
+    mesh cannot be built, or the cage's genus differs from the target's.
     """
     from core.errors import LabelingError
     from core.quadmesh.base_mesh import build_base_mesh
 
     validity = labeling.validity.report
+    method = params.base_mesh_method
+    invalid = None
     if not validity["valid"]:
-        raise LabelingError(
-            "the base mesh needs a valid labeling; it still has "
-            f"{validity['invalid_charts']['count']} invalid charts, "
-            f"{validity['invalid_boundaries']['count']} invalid boundaries and "
-            f"{validity['invalid_corners']['count']} invalid corners (see the labeling section)")
+        invalid = (f"{validity['invalid_charts']['count']} invalid charts, "
+                   f"{validity['invalid_boundaries']['count']} invalid boundaries and "
+                   f"{validity['invalid_corners']['count']} invalid corners")
+        if method == "polycube":
+            raise LabelingError(f"the polycube base mesh needs a valid labeling; it still has "
+                                f"{invalid} (see the labeling section)")
+        method = "decimation"
     progress.check_cancel()
     field = frames.frame_field
     interface_axis = field.face_interface_axis if len(field.interfaces) else None
@@ -41,11 +52,16 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
                                  field.face_frame, field.part_frames,
                                  target_faces=params.target_faces,
                                  max_base_faces=params.max_base_faces,
-                                 face_interface_axis=interface_axis)
+                                 face_interface_axis=interface_axis, method=method)
+    if invalid is not None and params.base_mesh_method == "auto":
+        info["fallback_reason"] = f"the labeling is not a valid polycube labeling ({invalid})"
     if info["genus"] != intake.genus:
         raise LabelingError(
             f"the base mesh has genus {info['genus']} but the target has genus {intake.genus}")
     message = ("" if info["within_budget"] else
                f"{info['faces']} faces for a budget of {info['target_faces']}: "
                f"{info['minimum_reason'] or 'the closest layout found'}")
+    if info["method"] != "polycube":
+        message = "; ".join(filter(None, [f"{info['method']} ({info['fallback_reason']})",
+                                          message]))
     return BaseMeshResult(cage, info, message)

@@ -32,7 +32,9 @@ FIELDS = {
         ("ColourBy", "Colour by", "choice", ("Labels", "Parts"), None)),
     "BaseMesh": (
         ("TargetFaces", "Target faces", "int", (6, 200000), "target_faces"),
-        ("MaxBaseFaces", "Most faces", "int", (6, 1000000), "max_base_faces")),
+        ("MaxBaseFaces", "Most faces", "int", (6, 1000000), "max_base_faces"),
+        ("Method", "Route", "choice", ("auto", "polycube", "decimation"),
+         "base_mesh_method")),
     "Fit": (
         ("Iterations", "Iterations", "int", (0, 100000), "fit_iterations"),
         ("SubdivisionLevels", "Subdivision levels", "int", (1, 5), "subdivision_levels"),

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""BaseMesh: the coarse quad base mesh (the cage) built from the polycube labeling.
+"""BaseMesh: the coarse quad base mesh (the cage) built from the polycube labeling (or, as
+fallback, from a paired decimation of the target; ``Method``).
 
 A ``Part::FeaturePython`` whose shape is the cage's vertices and edges, stored in the
 document (``polycube_wb.objects.cage``). It runs the core stages between the labeling and
@@ -7,6 +8,7 @@ the fit (read from ``core.pipeline.CORE_STAGES``: the quantized base mesh).
 Editing ``CageVertices`` reruns only the stages after it (the fit starts from the edited
 cage).
 """
+from core.params import BASE_MESH_METHODS
 from polycube_wb.objects.base import StageProxy, add_property, fingerprint, run_core_stages, \
     stage_params
 from polycube_wb.objects.cage import add_cage_properties, cage_shape, read_cage, store_cage
@@ -55,10 +57,17 @@ class BaseMeshProxy(CageProxy):
         add_property(obj, "App::PropertyInteger", "MaxBaseFaces", "Base mesh",
                      "A base mesh with more faces stops the stage with a message",
                      default("max_base_faces"))
+        if add_property(obj, "App::PropertyEnumeration", "Method", "Base mesh",
+                        "'auto': the polycube layout, or a paired decimation of the target "
+                        "where the layout fails, needs more than twice the budget or has "
+                        "inverted faces; 'polycube': never fall back; 'decimation': the "
+                        "paired decimation only", list(BASE_MESH_METHODS)):
+            obj.Method = default("base_mesh_method")
         add_cage_properties(obj)
 
     def parameters(self, obj):
-        return {"target_faces": int(obj.TargetFaces), "max_base_faces": int(obj.MaxBaseFaces)}
+        return {"target_faces": int(obj.TargetFaces), "max_base_faces": int(obj.MaxBaseFaces),
+                "base_mesh_method": str(obj.Method)}
 
     def run(self, obj, progress):
         state = run_core_stages(self.upstream_state(obj), base_mesh_stages(),

@@ -46,12 +46,13 @@ def identity_frames(m, parts=1):
     return np.tile(np.eye(3), (m, 1, 1)), np.tile(np.eye(3), (parts, 1, 1))
 
 
-def base_of(boxes, face_part=None, target_faces=300, **kwargs):
+def base_of(boxes, face_part=None, target_faces=300, method="polycube", **kwargs):
+    """The polycube base mesh (no fallback) of a union of boxes with nearest-axis labels."""
     V, F = union_of_boxes(boxes)
     face_part = np.zeros(len(F), dtype=np.int64) if face_part is None else face_part(V, F)
     face_frame, part_frames = identity_frames(len(F), int(face_part.max()) + 1)
     base, info = build_base_mesh(TriMesh(V, F), face_part, nearest_labels(V, F), face_frame,
-                                 part_frames, target_faces, **kwargs)
+                                 part_frames, target_faces, method=method, **kwargs)
     return V, F, base, info
 
 
@@ -143,7 +144,7 @@ def test_a_wrongly_measured_short_side_is_flipped_back():
     broken = dataclasses.replace(box, side_sign=broken_sign)
     assert not loops_are_rectilinear(broken)
     repaired, flipped = make_loops_rectilinear(broken)
-    assert flipped.tolist() == [[3, 0]]
+    assert flipped.tolist() == [[3, 0], [3, 1]]  # its direction in both of its charts
     assert np.array_equal(repaired.side_sign, box.side_sign)
 
 
@@ -191,7 +192,14 @@ def test_opposite_labels_on_one_boundary_are_refused():
     face_frame, part_frames = identity_frames(len(F))
     with pytest.raises(LabelingError, match="same or opposite labels"):
         build_base_mesh(TriMesh(V, F), np.zeros(len(F), dtype=np.int64), labels, face_frame,
-                        part_frames, 300)
+                        part_frames, 300, method="polycube")
+    # the default falls back to the paired decimation and says why
+    base, info = build_base_mesh(TriMesh(V, F), np.zeros(len(F), dtype=np.int64), labels,
+                                 face_frame, part_frames, 300)
+    check_polymesh(base)
+    assert info["method"] == "paired decimation"
+    assert "same or opposite labels" in info["fallback_reason"]
+    assert info["genus"] == 0 and info["within_budget"]
 
 
 def test_real_simp_cantilever_base_mesh():

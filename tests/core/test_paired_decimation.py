@@ -1,0 +1,93 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Paired-decimation base mesh (core.quadmesh.paired_decimation): closed, the target's genus,
+quads, on budget, near the target; on a torus built here and on a real SIMP result."""
+import numpy as np
+import pytest
+
+from core.geometry import triangle_mesh_volume
+from core.polymesh_checks import check_polymesh
+from core.quadmesh.base_mesh import polymesh_genus
+from core.quadmesh.paired_decimation import MIN_WEIGHT, _candidate_quads, paired_decimation_base_mesh
+from core.quality import point_surface_distance
+from dev_meshes import load_dev_mesh
+
+
+def torus(major=3.0, minor=1.0, sections=64, rings=32):
+    """Closed outward triangle torus around z (genus 1)."""
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, sections, endpoint=False),
+                       np.linspace(0, 2 * np.pi, rings, endpoint=False), indexing="ij")
+    V = np.stack([(major + minor * np.cos(v)) * np.cos(u), (major + minor * np.cos(v)) * np.sin(u),
+                  minor * np.sin(v)], axis=-1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(sections), np.arange(rings), indexing="ij")
+    a = i * rings + j
+    b = ((i + 1) % sections) * rings + j
+    c = ((i + 1) % sections) * rings + (j + 1) % rings
+    d = i * rings + (j + 1) % rings
+    F = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
+                        np.stack([a, c, d], -1).reshape(-1, 3)])
+    return V, F
+
+
+def polymesh_volume(mesh):
+    """Enclosed volume of a polygon mesh, its faces fanned from their first corner."""
+    tris = []
+    for f in range(mesh.n_faces):
+        corners = mesh.face_vertices[mesh.face_offsets[f]:mesh.face_offsets[f + 1]]
+        tris += [[corners[0], corners[k], corners[k + 1]] for k in range(1, len(corners) - 1)]
+    return triangle_mesh_volume(mesh.vertices, np.asarray(tris))
+
+
+def test_two_right_triangles_make_a_perfect_quad_and_a_fold_the_worst():
+    # a unit square split along its diagonal, closed by a second square below it (a flat,
+    # degenerate "pillow" is enough for the weights)
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
+    F = np.array([[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]])
+    pairs, quads, weight = _candidate_quads(V, F)
+    flat = [k for k, (a, b) in enumerate(pairs.tolist()) if {a, b} in ({0, 1}, {2, 3})]
+    assert np.allclose(weight[flat], 1.0 + MIN_WEIGHT)
+    # the pairs across the square's border fold by 180 degrees
+    folded = [k for k in range(len(pairs)) if k not in flat]
+    assert np.allclose(weight[folded], MIN_WEIGHT)
+    for quad in quads[flat]:
+        assert sorted(quad.tolist()) == [0, 1, 2, 3]
+
+
+@pytest.mark.parametrize("budget", [100, 300])
+def test_torus_gives_a_closed_quad_mesh_of_genus_one_on_budget(budget):
+    V, F = torus()
+    result = paired_decimation_base_mesh(V, F, budget)
+    mesh = result.mesh
+    check_polymesh(mesh)  # closed, 2-manifold, consistently oriented, no degenerate face
+    assert polymesh_genus(mesh) == 1
+    assert result.quads + result.triangles == mesh.n_faces
+    assert result.quads >= 0.9 * mesh.n_faces
+    assert abs(mesh.n_faces - budget) <= 0.25 * budget
+    # outward like the target: positive volume; its vertices lie on the target, so it is an
+    # inscribed polyhedron: less volume, but at least 75% of the target's at 100 faces
+    ratio = polymesh_volume(mesh) / triangle_mesh_volume(V, F)
+    assert 0.75 <= ratio <= 1.0
+    # the vertices are moved onto the target
+    assert point_surface_distance(mesh.vertices, V, F).max() < 1e-9 * 8.0
+
+
+def test_real_simp_result_with_handles():
+    target = load_dev_mesh("to_simp_pylon.stl")
+    result = paired_decimation_base_mesh(target.vertices, target.faces, 300)
+    check_polymesh(result.mesh)
+    assert polymesh_genus(result.mesh) == 2
+    assert result.quads >= 0.9 * result.mesh.n_faces
+    assert abs(result.mesh.n_faces - 300) <= 75
+
+
+def test_augmenting_path_completes_a_greedy_matching():
+    from core.quadmesh.paired_decimation import _match_pairs
+
+    # a chain 0-1-2-3 whose heaviest pair (1, 2) would strand 0 and 3
+    pairs = np.array([[0, 1], [1, 2], [2, 3]])
+    chosen = _match_pairs(4, pairs, np.array([1.0, 2.0, 1.0]))
+    assert chosen.tolist() == [True, False, True]
+    # a triangle of faces plus a pendant: an odd cycle; three of the four still pair up
+    pairs = np.array([[0, 1], [1, 2], [2, 0], [2, 3]])
+    chosen = _match_pairs(4, pairs, np.array([3.0, 1.0, 1.0, 0.5]))
+    assert chosen.sum() == 2
+    assert np.bincount(pairs[chosen].ravel(), minlength=4).max() == 1
