@@ -39,7 +39,7 @@ CASES = (
     ("to_simp_pylon.stl", "basemesh", {}),
 )
 """(mesh, --stop-after, parameters): every stage, the tolerance refinement, automatic parts,
-genus 3, and a mesh whose base mesh fails (the failure must read the same)."""
+genus 3, and a mesh whose polycube layout fails (the base-mesh fallback's report)."""
 VOLATILE = {"seconds", "total_seconds", "measure_seconds", "peak_memory_mb"}
 
 RUN_CASE = """
