@@ -1,8 +1,9 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Batch reconstruction: many meshes, the same pipeline as ``reconstruct``, one row per mesh.
 
-Each mesh runs in its own process (:mod:`polycube_wb.batch_worker`) with a time cap, either on this machine (``jobs`` at once) or on the workers of a Dask
-distributed scheduler, which run the same process on a path they share. A mesh whose report
+Each mesh runs in its own process (:mod:`polycube_wb.batch_worker`) with a time cap and a
+memory cap (:mod:`polycube_wb.batch_memory`), either on this machine (``jobs`` at once) or on
+the workers of a Dask distributed scheduler, which run the same process on a path they share. A mesh whose report
 says it was done with the same parameters, and whose outputs are all there and newer than
 the input, is skipped unless ``force``. One failing mesh never stops the others.
 """
@@ -28,8 +29,10 @@ OUTPUT_SUFFIXES = {"step": ".step", "base_mesh": ".base.obj", "labels": ".labels
 RESULT_OUTPUTS = ("step", "base_mesh", "labels", "thumbnail")
 """Outputs checked for freshness when the report lists them."""
 RERUN_STATUSES = ("timeout", "crashed")
-"""Batch statuses of a mesh that say nothing about the mesh itself: always run again."""
+"""Batch statuses of a mesh that say nothing about the mesh itself: always run again (so
+does a mesh stopped by its memory cap, ``batch.memory_limit_exceeded`` in its report)."""
 ROW_PREFIX = "ROW "
+AUTO_MEMORY = "auto"
 REDRAW_SECONDS = 1.0
 """The progress line is redrawn at least this often while meshes run locally."""
 
@@ -43,6 +46,9 @@ class MeshJob:
     out_dir : absolute output folder.
     params : keyword arguments of ``reconstruct_to_step`` (ReconstructionParams fields).
     timeout : seconds the mesh may take, or None.
+    memory_mb : address-space cap of the mesh's process in MiB, None for none, or
+        ``AUTO_MEMORY``: the default share of the machine that runs it with one mesh per
+        core (:func:`polycube_wb.batch_memory.default_memory_limit_mb`; Dask workers).
     """
 
     source: str
@@ -50,6 +56,7 @@ class MeshJob:
     out_dir: str
     params: dict
     timeout: float = None
+    memory_mb: object = None
 
     def paths(self):
         """dict of output kind -> absolute path (see ``OUTPUT_SUFFIXES``)."""
@@ -163,7 +170,7 @@ def load_overrides(path):
     return data
 
 
-def plan_jobs(sources, out_dir, params, overrides=None, timeout=None):
+def plan_jobs(sources, out_dir, params, overrides=None, timeout=None, memory_mb=None):
     """One MeshJob per source; output names are the file stems, made unique with ``-2``, ``-3``."""
     out_dir = os.path.abspath(out_dir)
     jobs, used = [], set()
@@ -178,7 +185,7 @@ def plan_jobs(sources, out_dir, params, overrides=None, timeout=None):
         for pattern, values in (overrides or {}).items():
             if fnmatch.fnmatch(os.path.basename(source), pattern):
                 merged.update(values)
-        jobs.append(MeshJob(source, name, out_dir, merged, timeout))
+        jobs.append(MeshJob(source, name, out_dir, merged, timeout, memory_mb))
     return jobs
 
 
@@ -186,7 +193,7 @@ def up_to_date_report(job):
     """The mesh's existing report when its outputs are complete and current, else None.
 
     Current means: the report was written with the same parameters, after the input was last
-    changed, the run was not cut short (timeout, crash), and every result file it lists exists
+    changed, the run was not cut short (timeout, crash, memory cap), and every result file it lists exists
     and is newer than the input.
     """
     paths = job.paths()
@@ -200,7 +207,7 @@ def up_to_date_report(job):
         return None
     batch = report.get("batch", {})
     if batch.get("params") != json.loads(json.dumps(job.params)) or \
-            batch.get("status") in RERUN_STATUSES:
+            batch.get("status") in RERUN_STATUSES or batch.get("memory_limit_exceeded"):
         return None
     for kind in RESULT_OUTPUTS:
         listed = report.get("outputs", {}).get(kind)
@@ -236,28 +243,78 @@ def row_from_report(job, report, skipped=False):
 
 
 def run_isolated(job):
-    """Run one mesh in a fresh worker process with the job's time cap; returns its MeshRow.
+    """Run one mesh in a fresh worker process with the job's time and memory caps; its MeshRow.
 
     Used locally and, unchanged, as the task a Dask worker runs. A process that runs over
-    ``job.timeout`` is killed (status ``timeout``); one that dies without a row (killed, out
-    of memory) is ``crashed``, with the end of its stderr as the message. Both get a report.
+    ``job.timeout`` is killed (status ``timeout``); one whose resident memory passes
+    ``job.memory_mb`` is killed too (status ``failed``, "memory limit of N MB exceeded at
+    stage S", peak memory as last read); one that dies without a row is ``crashed``, with the
+    end of its stderr as the message. Each gets a report naming the stage it was in.
     """
+    from polycube_wb.batch_memory import default_memory_limit_mb, memory_message
+    from polycube_wb.batch_worker import STAGE_PREFIX
+
+    if job.memory_mb == AUTO_MEMORY:
+        job = dataclasses.replace(job, memory_mb=default_memory_limit_mb(os.cpu_count() or 1))
     package_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         filter(None, [package_root, os.environ.get("PYTHONPATH")])))
     started = time.perf_counter()
-    try:
-        done = subprocess.run([_python(), "-m", "polycube_wb.batch_worker"],
-                              input=json.dumps(job.to_dict()), capture_output=True, text=True,
-                              timeout=job.timeout, env=env, cwd=package_root)
-    except subprocess.TimeoutExpired:
-        return _cut_short(job, started, "timeout", f"stopped after the {job.timeout:g} s time cap")
-    rows = [line for line in done.stdout.splitlines() if line.startswith(ROW_PREFIX)]
-    if done.returncode != 0 or not rows:
-        tail = " ".join(done.stderr.strip().splitlines()[-3:]) or "no output"
-        return _cut_short(job, started, "crashed",
-                          f"worker process exited with code {done.returncode}: {tail}")
+    process = subprocess.Popen([_python(), "-m", "polycube_wb.batch_worker"],
+                               stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, env=env, cwd=package_root)
+    stdout, stderr, stop, resident = _watch(process, job, started)
+    stage = _last_stage(stderr, STAGE_PREFIX)
+    if stop == "timeout":
+        return _cut_short(job, started, "timeout",
+                          f"stopped after the {job.timeout:g} s time cap at stage {stage}", stage)
+    if stop == "memory":
+        return _cut_short(job, started, "failed", memory_message(job.memory_mb, stage), stage,
+                          {"memory_limit_exceeded": True}, resident)
+    rows = [line for line in stdout.splitlines() if line.startswith(ROW_PREFIX)]
+    if process.returncode != 0 or not rows:
+        lines = [line for line in stderr.strip().splitlines() if not line.startswith(STAGE_PREFIX)]
+        tail = " ".join(lines[-3:]) or "no output"
+        return _cut_short(job, started, "crashed", f"worker process exited with code "
+                                                   f"{process.returncode} at stage {stage}: {tail}",
+                          stage)
     return MeshRow(**json.loads(rows[-1][len(ROW_PREFIX):]))
+
+
+def _watch(process, job, started):
+    """Feed the job to the worker and wait, killing it at the time or memory cap.
+
+    Returns ``(stdout, stderr, stop, resident_mb)``: ``stop`` is None (it ended by itself),
+    ``"timeout"`` or ``"memory"``; ``resident_mb`` is its resident memory when last read.
+    """
+    from polycube_wb.batch_memory import POLL_SECONDS, can_watch_memory, resident_memory_mb
+
+    watch_memory = bool(job.memory_mb) and can_watch_memory()
+    feed = json.dumps(job.to_dict())
+    resident, stop = None, None
+    while True:
+        try:
+            stdout, stderr = process.communicate(feed, timeout=POLL_SECONDS)
+            return stdout, stderr, stop, resident
+        except subprocess.TimeoutExpired:
+            feed = None
+        if stop is None and watch_memory:
+            resident = resident_memory_mb(process.pid) or resident
+            if resident is not None and resident > job.memory_mb:
+                stop = "memory"
+        if stop is None and job.timeout and time.perf_counter() - started > job.timeout:
+            stop = "timeout"
+        if stop is not None:
+            process.kill()
+
+
+def _last_stage(stderr, prefix):
+    """The stage a worker process last announced on its stderr (text or bytes), or "startup" (none yet)."""
+    if isinstance(stderr, bytes):
+        stderr = stderr.decode("utf-8", "replace")
+    stages = [line[len(prefix):].strip() for line in (stderr or "").splitlines()
+              if line.startswith(prefix)]
+    return stages[-1] if stages else "startup"
 
 
 def _python():
@@ -273,9 +330,13 @@ def _python():
     return sys.executable
 
 
-def _cut_short(job, started, status, message):
-    report = {"input": {"file": job.source}, "stages": {}, "outputs": {},
-              "batch": job.batch_section(time.perf_counter() - started, status, message)}
+def _cut_short(job, started, status, message, stage, batch_extra=None, peak_mb=None):
+    stages = {stage: {"status": "failed", "seconds": 0.0, "message": message}}
+    report = {"input": {"file": job.source}, "stages": stages, "outputs": {},
+              "batch": {**job.batch_section(time.perf_counter() - started, status, message),
+                        **(batch_extra or {})}}
+    if peak_mb is not None:
+        report["peak_memory_mb"] = round(peak_mb, 1)
     write_json_atomic(job.paths()["report"], report, (job.source,))
     return row_from_report(job, report)
 
@@ -349,7 +410,7 @@ def _run_on_dask(scheduler, jobs, todo, finished):
 
 
 def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, timeout=None,
-                      scheduler=None, force=False, progress=False):
+                      memory_mb=None, scheduler=None, force=False, progress=False):
     """The ``batch`` command: collect, plan, run, and write both summaries into ``out_dir``.
 
     Parameters
@@ -359,12 +420,16 @@ def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, time
     params : keyword arguments of ``reconstruct_to_step`` for every mesh.
     overrides_path : optional JSON of per-mesh parameters (see :func:`load_overrides`).
     jobs, scheduler, force : see :func:`run_batch`; timeout : see :class:`MeshJob`.
+    memory_mb : cap per mesh process in MiB; 0 for none; None for the default share of the
+        RAM per mesh at once (:func:`polycube_wb.batch_memory.default_memory_limit_mb`),
+        on a Dask worker that of its own machine with one mesh per core.
     progress : bool, draw the progress bar on stderr.
 
     Returns
     -------
     BatchResult
     """
+    from polycube_wb.batch_memory import default_memory_limit_mb
     from polycube_wb.batch_progress import ProgressBar
     from polycube_wb.batch_summary import write_summary_csv, write_summary_html
 
@@ -382,7 +447,9 @@ def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, time
                 source.endswith(tuple(OUTPUT_SUFFIXES.values())):
             raise ParameterError(f"input {source} is in the output folder and could be "
                                  f"overwritten; choose another output folder")
-    jobs_list = plan_jobs(sources, out_dir, params, overrides, timeout)
+    if memory_mb is None:
+        memory_mb = AUTO_MEMORY if scheduler is not None else default_memory_limit_mb(jobs)
+    jobs_list = plan_jobs(sources, out_dir, params, overrides, timeout, memory_mb or None)
     bar = ProgressBar() if progress else None
     rows = run_batch(jobs_list, jobs, scheduler, force, bar.update if bar else None)
     if bar:

@@ -100,6 +100,10 @@ def build_parser():
                      help="meshes at once on this machine (default: the number of cores)")
     bat.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
                      help="time cap per mesh; a mesh over it is stopped and reported")
+    bat.add_argument("--memory-limit", type=float, default=None, metavar="MB",
+                     help="address-space cap per mesh process in MiB (Linux RLIMIT_AS); 0 for "
+                          "none (default: 80%% of the RAM shared by the meshes at once, at "
+                          "least 2048)")
     bat.add_argument("--scheduler", metavar="ADDRESS",
                      help="send the meshes to this Dask distributed scheduler (tcp://host:8786); "
                           "inputs and OUT_DIR must be on a path every worker shares")
@@ -256,10 +260,13 @@ def _batch(args):
     for value, what in ((args.jobs, "--jobs"), (args.timeout, "--timeout")):
         if value is not None and value <= 0:
             raise PolycubeInputError(f"{what} must be positive, got {value:g}")
+    if args.memory_limit is not None and args.memory_limit < 0:
+        raise PolycubeInputError(f"--memory-limit must be positive (MiB) or 0 for no cap, "
+                                 f"got {args.memory_limit:g}")
     progress = not args.quiet and sys.stderr.isatty()
     result = run_batch_command(args.inputs, args.output_dir, pipeline_params(args),
                                overrides_path=args.overrides, jobs=args.jobs,
-                               timeout=args.timeout,
+                               timeout=args.timeout, memory_mb=args.memory_limit,
                                scheduler=args.scheduler, force=args.force, progress=progress)
     if not args.quiet:
         print(f"{len(result.rows)} meshes, {len(result.rows) - result.failures} solids, "
