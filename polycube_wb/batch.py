@@ -341,7 +341,7 @@ def _cut_short(job, started, status, message, stage, batch_extra=None, peak_mb=N
     return row_from_report(job, report)
 
 
-def run_batch(jobs, jobs_at_once=1, scheduler=None, force=False, progress=None):
+def run_batch(jobs, jobs_at_once=1, scheduler=None, force=False, progress=None, on_row=None):
     """Run every job not up to date; returns the MeshRows in job order.
 
     Parameters
@@ -352,6 +352,8 @@ def run_batch(jobs, jobs_at_once=1, scheduler=None, force=False, progress=None):
         ``distributed.Client``; the work goes to its workers instead, ``jobs_at_once`` unused.
     force : run meshes whose outputs are up to date too.
     progress : callable(done, failed, running, total) or None, called as meshes finish.
+    on_row : callable(MeshRow) or None, called with each mesh's row when it is known
+        (skipped ones first).
     """
     rows = [None] * len(jobs)
     todo = []
@@ -361,6 +363,8 @@ def run_batch(jobs, jobs_at_once=1, scheduler=None, force=False, progress=None):
             todo.append(k)
         else:
             rows[k] = row_from_report(job, report, skipped=True)
+            if on_row:
+                on_row(rows[k])
     counts = {"done": len(jobs) - len(todo), "failed": sum(r.status != "ok" for r in rows if r)}
 
     def redraw():
@@ -370,6 +374,8 @@ def run_batch(jobs, jobs_at_once=1, scheduler=None, force=False, progress=None):
 
     def finished(k, row):
         rows[k] = row
+        if on_row:
+            on_row(row)
         counts["done"] += 1
         counts["failed"] += row.status != "ok"
         redraw()
@@ -410,7 +416,7 @@ def _run_on_dask(scheduler, jobs, todo, finished):
 
 
 def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, timeout=None,
-                      memory_mb=None, scheduler=None, force=False, progress=False):
+                      memory_mb=None, scheduler=None, force=False, progress=None):
     """The ``batch`` command: collect, plan, run, and write both summaries into ``out_dir``.
 
     Parameters
@@ -423,14 +429,14 @@ def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, time
     memory_mb : cap per mesh process in MiB; 0 for none; None for the default share of the
         RAM per mesh at once (:func:`polycube_wb.batch_memory.default_memory_limit_mb`),
         on a Dask worker that of its own machine with one mesh per core.
-    progress : bool, draw the progress bar on stderr.
+    progress : None, or a reporter with ``update(done, failed, running, total)``, ``row(row)``
+        and ``close()``: ``polycube_wb.batch_progress.ProgressBar`` or ``ProgressLines``.
 
     Returns
     -------
     BatchResult
     """
     from polycube_wb.batch_memory import default_memory_limit_mb
-    from polycube_wb.batch_progress import ProgressBar
     from polycube_wb.batch_summary import write_summary_csv, write_summary_html
 
     started = time.perf_counter()
@@ -450,10 +456,10 @@ def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, time
     if memory_mb is None:
         memory_mb = AUTO_MEMORY if scheduler is not None else default_memory_limit_mb(jobs)
     jobs_list = plan_jobs(sources, out_dir, params, overrides, timeout, memory_mb or None)
-    bar = ProgressBar() if progress else None
-    rows = run_batch(jobs_list, jobs, scheduler, force, bar.update if bar else None)
-    if bar:
-        bar.close()
+    rows = run_batch(jobs_list, jobs, scheduler, force, progress.update if progress else None,
+                     progress.row if progress else None)
+    if progress:
+        progress.close()
     csv_path = write_summary_csv(os.path.join(out_dir, "summary.csv"), rows, sources)
     html_path = write_summary_html(os.path.join(out_dir, "summary.html"), rows, sources)
     return BatchResult(rows, csv_path, html_path, time.perf_counter() - started)

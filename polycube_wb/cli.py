@@ -110,6 +110,9 @@ def build_parser():
     bat.add_argument("--force", action="store_true",
                      help="run meshes again even when their outputs are up to date")
     bat.add_argument("--quiet", action="store_true", help="no progress bar")
+    bat.add_argument("--progress-lines", action="store_true",
+                     help="progress as lines for another program on stdout: PROGRESS {json} "
+                          "and MESH {json} (the GUI's Reconstruct folder reads them)")
     add_pipeline_options(bat, defaults)
     bat.add_argument("--debug", action="store_true", help="print tracebacks")
 
@@ -263,7 +266,10 @@ def _batch(args):
     if args.memory_limit is not None and args.memory_limit < 0:
         raise PolycubeInputError(f"--memory-limit must be positive (MiB) or 0 for no cap, "
                                  f"got {args.memory_limit:g}")
-    progress = not args.quiet and sys.stderr.isatty()
+    from polycube_wb.batch_progress import ProgressBar, ProgressLines
+
+    progress = ProgressLines() if args.progress_lines else \
+        ProgressBar() if not args.quiet and sys.stderr.isatty() else None
     result = run_batch_command(args.inputs, args.output_dir, pipeline_params(args),
                                overrides_path=args.overrides, jobs=args.jobs,
                                timeout=args.timeout, memory_mb=args.memory_limit,

@@ -100,3 +100,21 @@ def test_default_memory_cap_is_a_share_of_the_ram_per_job():
     assert MIN_DEFAULT_MB <= two <= one <= total
     assert two == max(MIN_DEFAULT_MB, int(0.8 * total / 2))
     assert default_memory_limit_mb(10**6) == MIN_DEFAULT_MB
+
+
+def test_progress_lines_for_the_gui_are_one_json_object_each():
+    from polycube_wb.batch import MeshRow
+    from polycube_wb.batch_progress import MESH_PREFIX, PROGRESS_PREFIX, ProgressLines
+
+    stream = io.StringIO()
+    lines = ProgressLines(stream)
+    lines.update(1, 0, 2, 5)
+    lines.row(MeshRow(name="m", source="/x/m.stl", status="failed", failed_stage="fit",
+                      message="memory limit of 9 MB exceeded at stage fit", seconds=1.5))
+    first, second = stream.getvalue().splitlines()
+    assert first.startswith(PROGRESS_PREFIX) and second.startswith(MESH_PREFIX)
+    assert json.loads(first[len(PROGRESS_PREFIX):]) == {"done": 1, "failed": 0, "running": 2,
+                                                        "total": 5}
+    assert json.loads(second[len(MESH_PREFIX):]) == {
+        "name": "m", "status": "failed", "failed_stage": "fit", "seconds": 1.5,
+        "message": "memory limit of 9 MB exceeded at stage fit", "skipped": False}
