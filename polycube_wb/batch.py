@@ -3,9 +3,10 @@
 
 Each mesh runs in its own process (:mod:`polycube_wb.batch_worker`) with a time cap and a
 memory cap (:mod:`polycube_wb.batch_memory`), either on this machine (``jobs`` at once) or on
-the workers of a Dask distributed scheduler, which run the same process on a path they share. A mesh whose report
-says it was done with the same parameters, and whose outputs are all there and newer than
-the input, is skipped unless ``force``. One failing mesh never stops the others.
+the workers of a Dask distributed scheduler, which run the same process on a path they
+share. A mesh whose report says it was done with the same parameters, and whose outputs are
+all there and newer than the input, is skipped unless ``force``. One failing mesh never
+stops the others.
 """
 import dataclasses
 import fnmatch
@@ -56,7 +57,7 @@ class MeshJob:
     out_dir: str
     params: dict
     timeout: float = None
-    memory_mb: object = None
+    memory_mb: float | str | None = None
 
     def paths(self):
         """dict of output kind -> absolute path (see ``OUTPUT_SUFFIXES``)."""
@@ -85,7 +86,9 @@ class MeshRow:
     stage_reached : last stage whose status is ``ok``.
     mean_deviation, max_deviation : fitted surface to target, fractions of the bbox diagonal.
     outside_volume : fraction of the target volume the fitted surface leaves outside it.
-    seconds : wall time of the mesh; peak_memory_mb : peak resident memory of its process.
+    seconds : wall time of the mesh; peak_memory_mb : peak resident memory of its process in
+        MiB (its own ``VmHWM`` at its end; for a process the batch stopped or that died, the
+        largest of the batch's readings every ``batch_memory.POLL_SECONDS``).
     skipped : the outputs were up to date and the mesh was not run again.
     """
 
@@ -248,8 +251,9 @@ def run_isolated(job):
     Used locally and, unchanged, as the task a Dask worker runs. A process that runs over
     ``job.timeout`` is killed (status ``timeout``); one whose resident memory passes
     ``job.memory_mb`` is killed too (status ``failed``, "memory limit of N MB exceeded at
-    stage S", peak memory as last read); one that dies without a row is ``crashed``, with the
-    end of its stderr as the message. Each gets a report naming the stage it was in.
+    stage S"); one that dies without a row is ``crashed``, with the end of its stderr as the
+    message. Each gets a report naming the stage it was in, with the largest of the resident
+    memory readings as its peak memory.
     """
     from polycube_wb.batch_memory import default_memory_limit_mb, memory_message
     from polycube_wb.batch_worker import STAGE_PREFIX
@@ -263,44 +267,47 @@ def run_isolated(job):
     process = subprocess.Popen([_python(), "-m", "polycube_wb.batch_worker"],
                                stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True, env=env, cwd=package_root)
-    stdout, stderr, stop, resident = _watch(process, job, started)
+    stdout, stderr, stop, peak = _watch(process, job, started)
     stage = _last_stage(stderr, STAGE_PREFIX)
     if stop == "timeout":
         return _cut_short(job, started, "timeout",
-                          f"stopped after the {job.timeout:g} s time cap at stage {stage}", stage)
+                          f"stopped after the {job.timeout:g} s time cap at stage {stage}", stage,
+                          peak_mb=peak)
     if stop == "memory":
         return _cut_short(job, started, "failed", memory_message(job.memory_mb, stage), stage,
-                          {"memory_limit_exceeded": True}, resident)
+                          {"memory_limit_exceeded": True}, peak)
     rows = [line for line in stdout.splitlines() if line.startswith(ROW_PREFIX)]
     if process.returncode != 0 or not rows:
         lines = [line for line in stderr.strip().splitlines() if not line.startswith(STAGE_PREFIX)]
         tail = " ".join(lines[-3:]) or "no output"
         return _cut_short(job, started, "crashed", f"worker process exited with code "
                                                    f"{process.returncode} at stage {stage}: {tail}",
-                          stage)
+                          stage, peak_mb=peak)
     return MeshRow(**json.loads(rows[-1][len(ROW_PREFIX):]))
 
 
 def _watch(process, job, started):
     """Feed the job to the worker and wait, killing it at the time or memory cap.
 
-    Returns ``(stdout, stderr, stop, resident_mb)``: ``stop`` is None (it ended by itself),
-    ``"timeout"`` or ``"memory"``; ``resident_mb`` is its resident memory when last read.
+    Returns ``(stdout, stderr, stop, peak_mb)``: ``stop`` is None (it ended by itself),
+    ``"timeout"`` or ``"memory"``; ``peak_mb`` is the largest of its resident memory readings
+    (every ``POLL_SECONDS`` where the platform allows, else None).
     """
     from polycube_wb.batch_memory import POLL_SECONDS, can_watch_memory, resident_memory_mb
 
-    watch_memory = bool(job.memory_mb) and can_watch_memory()
+    watch_memory = can_watch_memory()
     feed = json.dumps(job.to_dict())
-    resident, stop = None, None
+    peak, stop = None, None
     while True:
         try:
             stdout, stderr = process.communicate(feed, timeout=POLL_SECONDS)
-            return stdout, stderr, stop, resident
+            return stdout, stderr, stop, peak
         except subprocess.TimeoutExpired:
             feed = None
         if stop is None and watch_memory:
-            resident = resident_memory_mb(process.pid) or resident
-            if resident is not None and resident > job.memory_mb:
+            resident = resident_memory_mb(process.pid)
+            peak = max(peak or 0.0, resident or 0.0) or None
+            if job.memory_mb and resident is not None and resident > job.memory_mb:
                 stop = "memory"
         if stop is None and job.timeout and time.perf_counter() - started > job.timeout:
             stop = "timeout"
@@ -309,10 +316,8 @@ def _watch(process, job, started):
 
 
 def _last_stage(stderr, prefix):
-    """The stage a worker process last announced on its stderr (text or bytes), or "startup" (none yet)."""
-    if isinstance(stderr, bytes):
-        stderr = stderr.decode("utf-8", "replace")
-    stages = [line[len(prefix):].strip() for line in (stderr or "").splitlines()
+    """The stage a worker last announced on its stderr text; "startup" if none."""
+    stages = [line[len(prefix):].strip() for line in stderr.splitlines()
               if line.startswith(prefix)]
     return stages[-1] if stages else "startup"
 
