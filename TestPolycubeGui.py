@@ -5,29 +5,32 @@
 
 (``-t`` before ``-M``: FreeCAD 0.20.2 rejects the other order). FreeCAD loads the
 module by name, so this root-level file has a unique name and loads the cases from
-``tests/gui/gui_cases.py`` by path; a ``tests`` package of another addon cannot shadow
-them. Screenshots go to ``$POLYCUBE_GUI_OUTPUT`` or ``tests/gui/output/``.
+``tests/gui/gui_cases.py`` and ``tests/gui/gui_cases_batch.py`` by path; a ``tests``
+package of another addon cannot shadow them. Screenshots go to ``$POLYCUBE_GUI_OUTPUT`` or
+``tests/gui/output/``.
 """
 import importlib.util
 import os
 import sys
 
-_CASES_NAME = "polycube_gui_cases"
-_CASES_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "tests", "gui",
-                           "gui_cases.py")
+_CASES_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "tests", "gui")
+_CASES = (("polycube_gui_cases", "gui_cases.py"),
+          ("polycube_gui_cases_batch", "gui_cases_batch.py"))
+"""(module name, file in tests/gui) of every group of GUI cases."""
 
 
-def _cases_module():
-    module = sys.modules.get(_CASES_NAME)
+def _cases_module(name, file_name):
+    module = sys.modules.get(name)
     if module is None:
-        spec = importlib.util.spec_from_file_location(_CASES_NAME, _CASES_PATH)
+        spec = importlib.util.spec_from_file_location(name, os.path.join(_CASES_DIR, file_name))
         module = importlib.util.module_from_spec(spec)
-        sys.modules[_CASES_NAME] = module
+        sys.modules[name] = module
         spec.loader.exec_module(module)
     return module
 
 
 def load_tests(loader, standard_tests, pattern):
-    """unittest's load_tests protocol: the cases of tests/gui/gui_cases.py."""
-    standard_tests.addTests(loader.loadTestsFromModule(_cases_module()))
+    """unittest's load_tests protocol: the cases of every file in ``_CASES``."""
+    for name, file_name in _CASES:
+        standard_tests.addTests(loader.loadTestsFromModule(_cases_module(name, file_name)))
     return standard_tests

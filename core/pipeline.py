@@ -11,6 +11,7 @@ A stage that is not built yet raises ``StageNotAvailableError``; the runner reco
 and the run stops there.
 """
 import resource
+import sys
 import time
 from dataclasses import dataclass
 
@@ -78,8 +79,22 @@ class PipelineResult:
 
 
 def peak_memory_mb():
-    """Peak resident memory of this process so far, in MiB."""
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    """Peak resident memory of this process so far, in MiB.
+
+    Linux's ``VmHWM`` (the high-water mark of this process's own address space); the
+    ``ru_maxrss`` of ``getrusage`` is not used there because a process started by
+    ``fork``/``vfork`` + ``exec`` inherits its parent's peak in it. Elsewhere ``ru_maxrss``
+    (bytes on macOS, KiB on other systems).
+    """
+    try:
+        with open("/proc/self/status", encoding="ascii") as handle:
+            for line in handle:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2.0**20 if sys.platform == "darwin" else peak / 1024.0
 
 
 def _check_inputs(state, stages):
@@ -186,6 +201,7 @@ def reconstruct(input_path, params=None, progress=NO_PROGRESS, stop_after="solid
     state = PipelineState(source=MeshSource(str(input_path)))
     report = {"parameters": params.to_dict(), "stages": {}}
     state, report, failed = run_stages(state, CORE_STAGES[:last + 1], params, progress, report)
+    report.setdefault("input", {"file": str(input_path)})  # the intake failed or was cancelled
     report["total_seconds"] = round(time.perf_counter() - started, 4)
     report["peak_memory_mb"] = round(peak_memory_mb(), 1)
     return PipelineResult(state, _json_safe(report), failed)

@@ -1,10 +1,12 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Batch reconstruction: many meshes, the same pipeline as ``reconstruct``, one row per mesh.
 
-Each mesh runs in its own process (:mod:`polycube_wb.batch_worker`) with a time cap, either on this machine (``jobs`` at once) or on the workers of a Dask
-distributed scheduler, which run the same process on a path they share. A mesh whose report
-says it was done with the same parameters, and whose outputs are all there and newer than
-the input, is skipped unless ``force``. One failing mesh never stops the others.
+Each mesh runs in its own process (:mod:`polycube_wb.batch_worker`) with a time cap and a
+memory cap (:mod:`polycube_wb.batch_memory`), either on this machine (``jobs`` at once) or on
+the workers of a Dask distributed scheduler, which run the same process on a path they
+share. A mesh whose report says it was done with the same parameters, and whose outputs are
+all there and newer than the input, is skipped unless ``force``. One failing mesh never
+stops the others.
 """
 import dataclasses
 import fnmatch
@@ -28,8 +30,10 @@ OUTPUT_SUFFIXES = {"step": ".step", "base_mesh": ".base.obj", "labels": ".labels
 RESULT_OUTPUTS = ("step", "base_mesh", "labels", "thumbnail")
 """Outputs checked for freshness when the report lists them."""
 RERUN_STATUSES = ("timeout", "crashed")
-"""Batch statuses of a mesh that say nothing about the mesh itself: always run again."""
+"""Batch statuses of a mesh that say nothing about the mesh itself: always run again (so
+does a mesh stopped by its memory cap, ``batch.memory_limit_exceeded`` in its report)."""
 ROW_PREFIX = "ROW "
+AUTO_MEMORY = "auto"
 REDRAW_SECONDS = 1.0
 """The progress line is redrawn at least this often while meshes run locally."""
 
@@ -43,6 +47,9 @@ class MeshJob:
     out_dir : absolute output folder.
     params : keyword arguments of ``reconstruct_to_step`` (ReconstructionParams fields).
     timeout : seconds the mesh may take, or None.
+    memory_mb : address-space cap of the mesh's process in MiB, None for none, or
+        ``AUTO_MEMORY``: the default share of the machine that runs it with one mesh per
+        core (:func:`polycube_wb.batch_memory.default_memory_limit_mb`; Dask workers).
     """
 
     source: str
@@ -50,6 +57,7 @@ class MeshJob:
     out_dir: str
     params: dict
     timeout: float = None
+    memory_mb: float | str | None = None
 
     def paths(self):
         """dict of output kind -> absolute path (see ``OUTPUT_SUFFIXES``)."""
@@ -78,7 +86,9 @@ class MeshRow:
     stage_reached : last stage whose status is ``ok``.
     mean_deviation, max_deviation : fitted surface to target, fractions of the bbox diagonal.
     outside_volume : fraction of the target volume the fitted surface leaves outside it.
-    seconds : wall time of the mesh; peak_memory_mb : peak resident memory of its process.
+    seconds : wall time of the mesh; peak_memory_mb : peak resident memory of its process in
+        MiB (its own ``VmHWM`` at its end; for a process the batch stopped or that died, the
+        largest of the batch's readings every ``batch_memory.POLL_SECONDS``).
     skipped : the outputs were up to date and the mesh was not run again.
     """
 
@@ -163,7 +173,7 @@ def load_overrides(path):
     return data
 
 
-def plan_jobs(sources, out_dir, params, overrides=None, timeout=None):
+def plan_jobs(sources, out_dir, params, overrides=None, timeout=None, memory_mb=None):
     """One MeshJob per source; output names are the file stems, made unique with ``-2``, ``-3``."""
     out_dir = os.path.abspath(out_dir)
     jobs, used = [], set()
@@ -178,7 +188,7 @@ def plan_jobs(sources, out_dir, params, overrides=None, timeout=None):
         for pattern, values in (overrides or {}).items():
             if fnmatch.fnmatch(os.path.basename(source), pattern):
                 merged.update(values)
-        jobs.append(MeshJob(source, name, out_dir, merged, timeout))
+        jobs.append(MeshJob(source, name, out_dir, merged, timeout, memory_mb))
     return jobs
 
 
@@ -186,7 +196,7 @@ def up_to_date_report(job):
     """The mesh's existing report when its outputs are complete and current, else None.
 
     Current means: the report was written with the same parameters, after the input was last
-    changed, the run was not cut short (timeout, crash), and every result file it lists exists
+    changed, the run was not cut short (timeout, crash, memory cap), and every result file it lists exists
     and is newer than the input.
     """
     paths = job.paths()
@@ -200,7 +210,7 @@ def up_to_date_report(job):
         return None
     batch = report.get("batch", {})
     if batch.get("params") != json.loads(json.dumps(job.params)) or \
-            batch.get("status") in RERUN_STATUSES:
+            batch.get("status") in RERUN_STATUSES or batch.get("memory_limit_exceeded"):
         return None
     for kind in RESULT_OUTPUTS:
         listed = report.get("outputs", {}).get(kind)
@@ -236,28 +246,80 @@ def row_from_report(job, report, skipped=False):
 
 
 def run_isolated(job):
-    """Run one mesh in a fresh worker process with the job's time cap; returns its MeshRow.
+    """Run one mesh in a fresh worker process with the job's time and memory caps; its MeshRow.
 
     Used locally and, unchanged, as the task a Dask worker runs. A process that runs over
-    ``job.timeout`` is killed (status ``timeout``); one that dies without a row (killed, out
-    of memory) is ``crashed``, with the end of its stderr as the message. Both get a report.
+    ``job.timeout`` is killed (status ``timeout``); one whose resident memory passes
+    ``job.memory_mb`` is killed too (status ``failed``, "memory limit of N MB exceeded at
+    stage S"); one that dies without a row is ``crashed``, with the end of its stderr as the
+    message. Each gets a report naming the stage it was in, with the largest of the resident
+    memory readings as its peak memory.
     """
+    from polycube_wb.batch_memory import default_memory_limit_mb, memory_message
+    from polycube_wb.batch_worker import STAGE_PREFIX
+
+    if job.memory_mb == AUTO_MEMORY:
+        job = dataclasses.replace(job, memory_mb=default_memory_limit_mb(os.cpu_count() or 1))
     package_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         filter(None, [package_root, os.environ.get("PYTHONPATH")])))
     started = time.perf_counter()
-    try:
-        done = subprocess.run([_python(), "-m", "polycube_wb.batch_worker"],
-                              input=json.dumps(job.to_dict()), capture_output=True, text=True,
-                              timeout=job.timeout, env=env, cwd=package_root)
-    except subprocess.TimeoutExpired:
-        return _cut_short(job, started, "timeout", f"stopped after the {job.timeout:g} s time cap")
-    rows = [line for line in done.stdout.splitlines() if line.startswith(ROW_PREFIX)]
-    if done.returncode != 0 or not rows:
-        tail = " ".join(done.stderr.strip().splitlines()[-3:]) or "no output"
-        return _cut_short(job, started, "crashed",
-                          f"worker process exited with code {done.returncode}: {tail}")
+    process = subprocess.Popen([_python(), "-m", "polycube_wb.batch_worker"],
+                               stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, env=env, cwd=package_root)
+    stdout, stderr, stop, peak = _watch(process, job, started)
+    stage = _last_stage(stderr, STAGE_PREFIX)
+    if stop == "timeout":
+        return _cut_short(job, started, "timeout",
+                          f"stopped after the {job.timeout:g} s time cap at stage {stage}", stage,
+                          peak_mb=peak)
+    if stop == "memory":
+        return _cut_short(job, started, "failed", memory_message(job.memory_mb, stage), stage,
+                          {"memory_limit_exceeded": True}, peak)
+    rows = [line for line in stdout.splitlines() if line.startswith(ROW_PREFIX)]
+    if process.returncode != 0 or not rows:
+        lines = [line for line in stderr.strip().splitlines() if not line.startswith(STAGE_PREFIX)]
+        tail = " ".join(lines[-3:]) or "no output"
+        return _cut_short(job, started, "crashed", f"worker process exited with code "
+                                                   f"{process.returncode} at stage {stage}: {tail}",
+                          stage, peak_mb=peak)
     return MeshRow(**json.loads(rows[-1][len(ROW_PREFIX):]))
+
+
+def _watch(process, job, started):
+    """Feed the job to the worker and wait, killing it at the time or memory cap.
+
+    Returns ``(stdout, stderr, stop, peak_mb)``: ``stop`` is None (it ended by itself),
+    ``"timeout"`` or ``"memory"``; ``peak_mb`` is the largest of its resident memory readings
+    (every ``POLL_SECONDS`` where the platform allows, else None).
+    """
+    from polycube_wb.batch_memory import POLL_SECONDS, can_watch_memory, resident_memory_mb
+
+    watch_memory = can_watch_memory()
+    feed = json.dumps(job.to_dict())
+    peak, stop = None, None
+    while True:
+        try:
+            stdout, stderr = process.communicate(feed, timeout=POLL_SECONDS)
+            return stdout, stderr, stop, peak
+        except subprocess.TimeoutExpired:
+            feed = None
+        if stop is None and watch_memory:
+            resident = resident_memory_mb(process.pid)
+            peak = max(peak or 0.0, resident or 0.0) or None
+            if job.memory_mb and resident is not None and resident > job.memory_mb:
+                stop = "memory"
+        if stop is None and job.timeout and time.perf_counter() - started > job.timeout:
+            stop = "timeout"
+        if stop is not None:
+            process.kill()
+
+
+def _last_stage(stderr, prefix):
+    """The stage a worker last announced on its stderr text; "startup" if none."""
+    stages = [line[len(prefix):].strip() for line in stderr.splitlines()
+              if line.startswith(prefix)]
+    return stages[-1] if stages else "startup"
 
 
 def _python():
@@ -273,14 +335,18 @@ def _python():
     return sys.executable
 
 
-def _cut_short(job, started, status, message):
-    report = {"input": {"file": job.source}, "stages": {}, "outputs": {},
-              "batch": job.batch_section(time.perf_counter() - started, status, message)}
+def _cut_short(job, started, status, message, stage, batch_extra=None, peak_mb=None):
+    stages = {stage: {"status": "failed", "seconds": 0.0, "message": message}}
+    report = {"input": {"file": job.source}, "stages": stages, "outputs": {},
+              "batch": {**job.batch_section(time.perf_counter() - started, status, message),
+                        **(batch_extra or {})}}
+    if peak_mb is not None:
+        report["peak_memory_mb"] = round(peak_mb, 1)
     write_json_atomic(job.paths()["report"], report, (job.source,))
     return row_from_report(job, report)
 
 
-def run_batch(jobs, jobs_at_once=1, scheduler=None, force=False, progress=None):
+def run_batch(jobs, jobs_at_once=1, scheduler=None, force=False, progress=None, on_row=None):
     """Run every job not up to date; returns the MeshRows in job order.
 
     Parameters
@@ -291,6 +357,8 @@ def run_batch(jobs, jobs_at_once=1, scheduler=None, force=False, progress=None):
         ``distributed.Client``; the work goes to its workers instead, ``jobs_at_once`` unused.
     force : run meshes whose outputs are up to date too.
     progress : callable(done, failed, running, total) or None, called as meshes finish.
+    on_row : callable(MeshRow) or None, called with each mesh's row when it is known
+        (skipped ones first).
     """
     rows = [None] * len(jobs)
     todo = []
@@ -300,6 +368,8 @@ def run_batch(jobs, jobs_at_once=1, scheduler=None, force=False, progress=None):
             todo.append(k)
         else:
             rows[k] = row_from_report(job, report, skipped=True)
+            if on_row:
+                on_row(rows[k])
     counts = {"done": len(jobs) - len(todo), "failed": sum(r.status != "ok" for r in rows if r)}
 
     def redraw():
@@ -309,6 +379,8 @@ def run_batch(jobs, jobs_at_once=1, scheduler=None, force=False, progress=None):
 
     def finished(k, row):
         rows[k] = row
+        if on_row:
+            on_row(row)
         counts["done"] += 1
         counts["failed"] += row.status != "ok"
         redraw()
@@ -349,7 +421,7 @@ def _run_on_dask(scheduler, jobs, todo, finished):
 
 
 def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, timeout=None,
-                      scheduler=None, force=False, progress=False):
+                      memory_mb=None, scheduler=None, force=False, progress=None):
     """The ``batch`` command: collect, plan, run, and write both summaries into ``out_dir``.
 
     Parameters
@@ -359,13 +431,17 @@ def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, time
     params : keyword arguments of ``reconstruct_to_step`` for every mesh.
     overrides_path : optional JSON of per-mesh parameters (see :func:`load_overrides`).
     jobs, scheduler, force : see :func:`run_batch`; timeout : see :class:`MeshJob`.
-    progress : bool, draw the progress bar on stderr.
+    memory_mb : cap per mesh process in MiB; 0 for none; None for the default share of the
+        RAM per mesh at once (:func:`polycube_wb.batch_memory.default_memory_limit_mb`),
+        on a Dask worker that of its own machine with one mesh per core.
+    progress : None, or a reporter with ``update(done, failed, running, total)``, ``row(row)``
+        and ``close()``: ``polycube_wb.batch_progress.ProgressBar`` or ``ProgressLines``.
 
     Returns
     -------
     BatchResult
     """
-    from polycube_wb.batch_progress import ProgressBar
+    from polycube_wb.batch_memory import default_memory_limit_mb
     from polycube_wb.batch_summary import write_summary_csv, write_summary_html
 
     started = time.perf_counter()
@@ -382,11 +458,13 @@ def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, time
                 source.endswith(tuple(OUTPUT_SUFFIXES.values())):
             raise ParameterError(f"input {source} is in the output folder and could be "
                                  f"overwritten; choose another output folder")
-    jobs_list = plan_jobs(sources, out_dir, params, overrides, timeout)
-    bar = ProgressBar() if progress else None
-    rows = run_batch(jobs_list, jobs, scheduler, force, bar.update if bar else None)
-    if bar:
-        bar.close()
+    if memory_mb is None:
+        memory_mb = AUTO_MEMORY if scheduler is not None else default_memory_limit_mb(jobs)
+    jobs_list = plan_jobs(sources, out_dir, params, overrides, timeout, memory_mb or None)
+    rows = run_batch(jobs_list, jobs, scheduler, force, progress.update if progress else None,
+                     progress.row if progress else None)
+    if progress:
+        progress.close()
     csv_path = write_summary_csv(os.path.join(out_dir, "summary.csv"), rows, sources)
     html_path = write_summary_html(os.path.join(out_dir, "summary.html"), rows, sources)
     return BatchResult(rows, csv_path, html_path, time.perf_counter() - started)

@@ -1,5 +1,7 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""The batch's terminal progress bar: meshes done, failed, running, elapsed and remaining."""
+"""The batch's progress: a terminal bar (meshes done, failed, running, elapsed and remaining)
+and machine-readable lines for the GUI."""
+import json
 import sys
 import time
 
@@ -36,7 +38,45 @@ class ProgressBar:
                           f"{left} left ")
         self.stream.flush()
 
+    def row(self, row):
+        """Nothing: the bar shows counts only."""
+
     def close(self):
         """End the line."""
         self.stream.write("\n")
+        self.stream.flush()
+
+
+PROGRESS_PREFIX = "PROGRESS "
+MESH_PREFIX = "MESH "
+
+
+class ProgressLines:
+    """The batch's progress for another program (the GUI's *Reconstruct folder*): one line
+    per event on ``stream`` (stdout), a prefix and a JSON object.
+
+    ``PROGRESS {"done", "failed", "running", "total"}`` when the counts change or once a
+    second, ``MESH {"name", "status", "failed_stage", "message", "seconds", "skipped"}`` when
+    a mesh finishes (or is found up to date).
+    """
+
+    def __init__(self, stream=None):
+        self.stream = stream or sys.stdout
+
+    def update(self, done, failed, running, total):
+        """Write a ``PROGRESS`` line (``done`` counts the failed and skipped meshes too)."""
+        self._write(PROGRESS_PREFIX, {"done": done, "failed": failed, "running": running,
+                                      "total": total})
+
+    def row(self, row):
+        """Write the ``MESH`` line of a finished ``polycube_wb.batch.MeshRow``."""
+        self._write(MESH_PREFIX, {"name": row.name, "status": row.status,
+                                  "failed_stage": row.failed_stage, "message": row.message,
+                                  "seconds": row.seconds, "skipped": row.skipped})
+
+    def close(self):
+        """Nothing to end (every line is complete)."""
+
+    def _write(self, prefix, data):
+        self.stream.write(prefix + json.dumps(data) + "\n")
         self.stream.flush()

@@ -7,6 +7,11 @@ renders the thumbnail, writes the per-mesh JSON report with its ``batch`` sectio
 the summary row as one JSON line on stdout. Whatever happens to the mesh, the exit code is 0
 and the row says which stage failed and why; only a crash of the process itself (killed,
 out of memory) leaves no row, which the batch reports as ``crashed``.
+
+Each stage's start is announced on stderr as a line ``STAGE <name>``, so that the batch can
+name the stage of a process it stops (time or memory cap) or that dies without a row. The
+report's ``peak_memory_mb`` is the process's resident peak at its very end (thumbnail
+included).
 """
 import json
 import os
@@ -15,14 +20,44 @@ import time
 import traceback
 
 import polycube_wb  # noqa: F401  (installs the guard that makes ``core`` ours)
+from core.progress import NO_PROGRESS, Progress
+
+STAGE_PREFIX = "STAGE "
+ANNOUNCED = ("intake", "parts", "frames", "labeling", "basemesh", "fit", "patches")
+"""Stage names of the pipeline that are announced."""
 
 
-def run_job(job):
+class StageLines(Progress):
+    """Progress that writes ``STAGE <name>`` on ``stream`` (stderr) when a stage starts.
+
+    The pipeline's final ``done`` after ``patches`` starts the solid (built after the core
+    stages by ``reconstruct_to_step``).
+    """
+
+    def __init__(self, stream=None):
+        self.stream = stream or sys.stderr
+        self.stage = None
+
+    def report(self, stage, fraction, message=""):
+        if stage == "done" and self.stage == "patches":
+            self.announce("solid")
+        elif stage != self.stage and stage in ANNOUNCED:
+            self.announce(stage)
+
+    def announce(self, stage):
+        """Write the line of ``stage``."""
+        self.stage = stage
+        self.stream.write(f"{STAGE_PREFIX}{stage}\n")
+        self.stream.flush()
+
+
+def run_job(job, stages=None):
     """Run one mesh and write its outputs; returns the report (dict) with its ``batch`` section.
 
     Parameters
     ----------
     job : polycube_wb.batch.MeshJob
+    stages : StageLines announcing the stages, or None for none.
     """
     from core.errors import PolycubeInputError, StageNotAvailableError
     from core.output_files import write_json_atomic
@@ -31,25 +66,29 @@ def run_job(job):
 
     paths = job.paths()
     started = time.perf_counter()
+    started_wall = time.time()
     report = None
     try:
         report = reconstruct_to_step(job.source, paths["step"], paths["base_mesh"],
-                                     paths["report"], paths["labels"], "solid", **job.params)
+                                     paths["report"], paths["labels"], "solid",
+                                     progress=stages or NO_PROGRESS, **job.params)
     except StageNotAvailableError as exc:
         report = getattr(exc, "report", None)
     except PolycubeInputError as exc:
         report = {"input": {"file": job.source},
                   "stages": {"intake": {"status": "failed", "seconds": 0.0, "message": str(exc)}}}
     except Exception as exc:  # a stage failed unexpectedly: the pipeline wrote its report first
-        report = _read_report(paths["report"]) or {"input": {"file": job.source}, "stages": {}}
+        report = _read_report(paths["report"], started_wall) or \
+            {"input": {"file": job.source}, "stages": {}}
         stage = _first_failed(report) or "solid"
         entry = report["stages"].setdefault(stage, {"status": "failed", "seconds": 0.0})
         entry["status"] = "failed"
         entry["message"] = entry.get("message") or f"{type(exc).__name__}: {exc}"
         report["traceback"] = traceback.format_exc(limit=8)
     report.setdefault("outputs", {})
-    report.setdefault("peak_memory_mb", round(peak_memory_mb(), 1))
     if "step" in report["outputs"]:
+        if stages is not None:
+            stages.announce("thumbnail")
         try:
             from polycube_wb.batch_thumbnail import render_solid_thumbnail
 
@@ -57,14 +96,18 @@ def run_job(job):
                 paths["thumbnail"], job.source, paths["step"], job.params.get("units", "mm"))
         except Exception as exc:  # a picture must not fail the mesh; the row says why it is missing
             report["thumbnail_error"] = f"{type(exc).__name__}: {exc}"
+    report["peak_memory_mb"] = round(peak_memory_mb(), 1)
     report["batch"] = job.batch_section(time.perf_counter() - started)
     write_json_atomic(paths["report"], report, (job.source,))
     report["outputs"]["report"] = os.path.abspath(paths["report"])
     return report
 
 
-def _read_report(path):
+def _read_report(path, not_before):
+    """The report at ``path`` if it was written at or after ``not_before`` (epoch s), else None."""
     try:
+        if os.path.getmtime(path) < not_before - 1e-3:
+            return None
         with open(path, encoding="utf-8") as handle:
             return json.load(handle)
     except (OSError, ValueError):
@@ -81,7 +124,7 @@ def main():
     from polycube_wb.batch import MeshJob, row_from_report
 
     job = MeshJob.from_dict(json.load(sys.stdin))
-    report = run_job(job)
+    report = run_job(job, StageLines())
     sys.stdout.write("\nROW " + json.dumps(row_from_report(job, report).to_dict()) + "\n")
     return 0
 

@@ -106,12 +106,19 @@ def build_parser():
                      help="meshes at once on this machine (default: the number of cores)")
     bat.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
                      help="time cap per mesh; a mesh over it is stopped and reported")
+    bat.add_argument("--memory-limit", type=float, default=None, metavar="MB",
+                     help="address-space cap per mesh process in MiB (Linux RLIMIT_AS); 0 for "
+                          "none (default: 80%% of the RAM shared by the meshes at once, at "
+                          "least 2048)")
     bat.add_argument("--scheduler", metavar="ADDRESS",
                      help="send the meshes to this Dask distributed scheduler (tcp://host:8786); "
                           "inputs and OUT_DIR must be on a path every worker shares")
     bat.add_argument("--force", action="store_true",
                      help="run meshes again even when their outputs are up to date")
     bat.add_argument("--quiet", action="store_true", help="no progress bar")
+    bat.add_argument("--progress-lines", action="store_true",
+                     help="progress as lines for another program on stdout: PROGRESS {json} "
+                          "and MESH {json} (the GUI's Reconstruct folder reads them)")
     add_pipeline_options(bat, defaults)
     bat.add_argument("--debug", action="store_true", help="print tracebacks")
 
@@ -263,10 +270,16 @@ def _batch(args):
     for value, what in ((args.jobs, "--jobs"), (args.timeout, "--timeout")):
         if value is not None and value <= 0:
             raise PolycubeInputError(f"{what} must be positive, got {value:g}")
-    progress = not args.quiet and sys.stderr.isatty()
+    if args.memory_limit is not None and args.memory_limit < 0:
+        raise PolycubeInputError(f"--memory-limit must be positive (MiB) or 0 for no cap, "
+                                 f"got {args.memory_limit:g}")
+    from polycube_wb.batch_progress import ProgressBar, ProgressLines
+
+    progress = ProgressLines() if args.progress_lines else \
+        ProgressBar() if not args.quiet and sys.stderr.isatty() else None
     result = run_batch_command(args.inputs, args.output_dir, pipeline_params(args),
                                overrides_path=args.overrides, jobs=args.jobs,
-                               timeout=args.timeout,
+                               timeout=args.timeout, memory_mb=args.memory_limit,
                                scheduler=args.scheduler, force=args.force, progress=progress)
     if not args.quiet:
         print(f"{len(result.rows)} meshes, {len(result.rows) - result.failures} solids, "

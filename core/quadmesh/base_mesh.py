@@ -65,6 +65,9 @@ decimation (which meets the budget)."""
 
 REFINEMENT_ROUNDS = 24
 """Rounds of quantization, each splitting one more overlapping chart into rectangles."""
+FALLBACK_REFINEMENT_ROUNDS = 8
+"""The same where the paired decimation can take over: on the dev meshes, layouts within the
+budget needed at most five refinements, and each round is a mixed-integer program (1-2 s)."""
 
 
 def refined_target(target):
@@ -85,7 +88,7 @@ def refined_target(target):
 
 
 def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, collapsible,
-                      give_up_faces):
+                      give_up_faces, refinement_rounds):
     """Quantize, lay out and embed; returns ``(mesh, polycube, rounds, refinement, folded)``.
 
     Charts whose integer polygon overlaps itself are split into rectangles, lazily and one at a
@@ -100,7 +103,7 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     """
     refine, unrefinable, last = {}, set(), None
     scale, rounds = None, []
-    for _ in range(REFINEMENT_ROUNDS):
+    for _ in range(refinement_rounds):
         refinement = rectangular_refinement(complex_, tables, refine)
         try:
             if scale is None:
@@ -253,7 +256,8 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         try:
             mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame,
                                              part_frames, int(target_faces), max_base_faces,
-                                             face_interface_axis, give_up)
+                                             face_interface_axis, give_up,
+                                             FALLBACK_REFINEMENT_ROUNDS)
         except (LabelingError, InvalidMeshError) as exc:
             reason = f"the polycube layout failed: {exc}"
         else:
@@ -292,11 +296,13 @@ def _paired_decimation_base_mesh(target_v, target_f, target_faces, reason):
 
 
 def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, target_faces,
-                        max_base_faces, face_interface_axis, give_up_faces):
+                        max_base_faces, face_interface_axis, give_up_faces,
+                        refinement_rounds=REFINEMENT_ROUNDS):
     """Closed all-quad base mesh on the target from a valid polycube labeling.
 
     Parameters as :func:`build_base_mesh`; ``give_up_faces``: the budget search stops and
-    raises once the layout needs more quads than this. Returns ``(mesh, info)`` as there, without
+    raises once the layout needs more quads than this; ``refinement_rounds``: most
+    quantizations that split overlapping charts into rectangles. Returns ``(mesh, info)`` as there, without
     ``inverted_faces`` and ``seconds``.
 
     Raises
@@ -319,7 +325,7 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
         tables = loop_tables(layout_complex, V, part_frames)
         mesh, polycube, rounds, refinement, folded = _layout_on_target(
             V, F, layout_complex, tables, int(target_faces), max_base_faces, collapsible,
-            give_up_faces)
+            give_up_faces, refinement_rounds)
         if polymesh_genus(mesh) != target_genus:
             raise LabelingError("collapsing sliver charts changed the genus")
     except LayoutTooLargeError:
@@ -332,7 +338,7 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
         try:
             mesh, polycube, rounds, refinement, folded = _layout_on_target(
                 V, F, layout_complex, tables, int(target_faces), max_base_faces, collapsible,
-                give_up_faces)
+                give_up_faces, refinement_rounds)
         except InvalidMeshError as exc:
             raise LabelingError(f"the quantized layout does not embed as a closed 2-manifold: "
                                 f"{exc}; try another labeling or --parts") from exc

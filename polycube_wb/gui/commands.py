@@ -21,6 +21,7 @@ import FreeCAD
 import FreeCADGui
 
 from polycube_wb.gui import icon_path
+from polycube_wb.gui.batch_command import ReconstructFolderCommand
 
 MESH_FILTER = "Triangle meshes (*.stl *.obj *.ply *.off);;All files (*)"
 CAGE_FILTER = "Polygon meshes (*.obj);;All files (*)"
@@ -546,13 +547,13 @@ def _no_target(title):
 
 COMMANDS = (ImportTargetCommand, SegmentPartsCommand, LabelPolycubeCommand,
             BuildBaseMeshCommand, FitTargetCommand, MakeSolidCommand, ReconstructAllCommand,
-            RecomputeCommand, CheckResultCommand, EditCageCommand, ImportSubDCommand,
+            ReconstructFolderCommand, RecomputeCommand, CheckResultCommand, EditCageCommand, ImportSubDCommand,
             ExportStepCommand)
 TOOLBAR = tuple(command.ID for command in COMMANDS)
 MENU = (ImportTargetCommand.ID, "Separator", SegmentPartsCommand.ID, LabelPolycubeCommand.ID,
         BuildBaseMeshCommand.ID, FitTargetCommand.ID, MakeSolidCommand.ID, "Separator",
-        ReconstructAllCommand.ID, RecomputeCommand.ID, "Separator", CheckResultCommand.ID,
-        EditCageCommand.ID, "Separator", ImportSubDCommand.ID, ExportStepCommand.ID)
+        ReconstructAllCommand.ID, ReconstructFolderCommand.ID, RecomputeCommand.ID, "Separator",
+        CheckResultCommand.ID, EditCageCommand.ID, "Separator", ImportSubDCommand.ID, ExportStepCommand.ID)
 
 
 def register():

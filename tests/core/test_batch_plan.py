@@ -1,8 +1,11 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""The batch's planning (inputs, names, overrides) and its progress line, without running meshes."""
+"""The batch's planning (inputs, names, overrides), its progress line, its default memory cap
+and the peak-memory measure, without running meshes."""
 import io
 import json
 import os
+import subprocess
+import sys
 
 import pytest
 
@@ -67,3 +70,51 @@ def test_progress_line_counts_and_remaining_time():
     assert "4/10 done, 1 failed, 2 running, 0:00:40 elapsed, 0:02:00 left" in line
     bar.close()
     assert stream.getvalue().endswith("\n")
+
+
+def test_peak_memory_counts_this_process_only():
+    """The peak rises with memory this process touches, and a child started from a parent
+    holding 300 MiB reports its own small peak (``ru_maxrss`` would report the parent's)."""
+    code = ("import numpy as np, subprocess, sys\n"
+            "from core.pipeline import peak_memory_mb\n"
+            "before = peak_memory_mb()\n"
+            "held = np.ones(300 * 2**20 // 8)\n"
+            "after = peak_memory_mb()\n"
+            "child = subprocess.run([sys.executable, '-c', 'from core.pipeline import "
+            "peak_memory_mb; print(peak_memory_mb())'], capture_output=True, text=True,"
+            " check=True)\n"
+            "print(before, after, float(child.stdout))\n")
+    repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=repo, env=dict(os.environ, PYTHONPATH=repo), check=True)
+    before, after, child = map(float, done.stdout.split())
+    assert after - before > 290.0
+    assert child < after - 250.0
+
+
+def test_default_memory_cap_is_a_share_of_the_ram_per_job():
+    from polycube_wb.batch_memory import MIN_DEFAULT_MB, default_memory_limit_mb, machine_memory_mb
+
+    total = machine_memory_mb()
+    one, two = default_memory_limit_mb(1), default_memory_limit_mb(2)
+    assert MIN_DEFAULT_MB <= two <= one <= total
+    assert two == max(MIN_DEFAULT_MB, int(0.8 * total / 2))
+    assert default_memory_limit_mb(10**6) == MIN_DEFAULT_MB
+
+
+def test_progress_lines_for_the_gui_are_one_json_object_each():
+    from polycube_wb.batch import MeshRow
+    from polycube_wb.batch_progress import MESH_PREFIX, PROGRESS_PREFIX, ProgressLines
+
+    stream = io.StringIO()
+    lines = ProgressLines(stream)
+    lines.update(1, 0, 2, 5)
+    lines.row(MeshRow(name="m", source="/x/m.stl", status="failed", failed_stage="fit",
+                      message="memory limit of 9 MB exceeded at stage fit", seconds=1.5))
+    first, second = stream.getvalue().splitlines()
+    assert first.startswith(PROGRESS_PREFIX) and second.startswith(MESH_PREFIX)
+    assert json.loads(first[len(PROGRESS_PREFIX):]) == {"done": 1, "failed": 0, "running": 2,
+                                                        "total": 5}
+    assert json.loads(second[len(MESH_PREFIX):]) == {
+        "name": "m", "status": "failed", "failed_stage": "fit", "seconds": 1.5,
+        "message": "memory limit of 9 MB exceeded at stage fit", "skipped": False}

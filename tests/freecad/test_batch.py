@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """``python -m polycube_wb batch``: per-mesh outputs, failures per row, skip/--force, time cap,
-bad input, the same batch on a two-worker Dask LocalCluster, and the summary page in chromium.
+memory cap, honest peak memory, bad input, the same batch on a two-worker Dask LocalCluster, and the summary page in chromium.
 
 Small meshes only (the tiny level-set cantilever, a box built here, a broken file) with a few
 fit iterations, so the whole module stays at a minute or so.
@@ -136,7 +136,8 @@ def test_time_cap_stops_a_mesh_and_it_runs_again_next_time(tmp_path):
     result = run_batch(TINY, "-o", out, "--timeout", "1")
     assert result.returncode == 0, result.stderr
     row = read_rows(out)["to_levelset_cantilever_tiny"]
-    assert row["status"] == "timeout" and "1 s time cap" in row["message"]
+    assert row["status"] == "timeout" and "1 s time cap at stage" in row["message"]
+    assert float(row["peak_memory_mb"]) > 0.0  # the largest reading before it was stopped
     assert not (out / "to_levelset_cantilever_tiny.step").exists()
     report = json.loads((out / "to_levelset_cantilever_tiny.json").read_text())
     assert report["batch"]["status"] == "timeout"
@@ -144,11 +145,65 @@ def test_time_cap_stops_a_mesh_and_it_runs_again_next_time(tmp_path):
     assert read_rows(out)["to_levelset_cantilever_tiny"]["skipped"] == "False"
 
 
+STAGES = ("startup", "intake", "parts", "frames", "labeling", "basemesh", "fit", "patches",
+          "solid", "thumbnail")
+CAP_MESSAGE = re.compile(r"memory limit of 120 MB exceeded at stage (\w+)$")
+
+
+def test_memory_cap_fails_the_mesh_at_its_stage_and_it_runs_again_next_time(tmp_path):
+    if not os.path.exists(TINY):
+        pytest.skip("dev mesh to_levelset_cantilever_tiny.stl not available")
+    out = tmp_path / "out"
+    result = run_batch(TINY, "-o", out, "--memory-limit", "120", *FAST)
+    assert result.returncode == 0, result.stderr
+    row = read_rows(out)["to_levelset_cantilever_tiny"]
+    match = CAP_MESSAGE.match(row["message"])
+    assert row["status"] == "failed" and match, row
+    assert row["failed_stage"] == match.group(1) and match.group(1) in STAGES[1:]
+    assert float(row["peak_memory_mb"]) > 120.0  # its resident memory when it was stopped
+    assert f"failed at {match.group(1)}: memory limit of 120 MB" in result.stdout
+    assert not (out / "to_levelset_cantilever_tiny.step").exists()
+    report = json.loads((out / "to_levelset_cantilever_tiny.json").read_text())
+    assert report["batch"]["memory_limit_exceeded"] is True
+    run_batch(TINY, "-o", out, "--memory-limit", "120", *FAST)
+    assert read_rows(out)["to_levelset_cantilever_tiny"]["skipped"] == "False"
+
+
+def test_a_mesh_over_its_cap_does_not_stop_the_others(tmp_path):
+    if not os.path.exists(TINY):
+        pytest.skip("dev mesh to_levelset_cantilever_tiny.stl not available")
+    from polycube_wb.batch import plan_jobs, run_batch as run_jobs
+
+    box = make_box(tmp_path / "box.stl")
+    params = {"fit_iterations": 3, "target_faces": 60}
+    capped, free = plan_jobs([TINY, str(box)], tmp_path / "out", params, memory_mb=120.0)
+    (tmp_path / "out").mkdir()
+    free.memory_mb = None
+    rows = run_jobs([capped, free], jobs_at_once=2)
+    assert rows[0].status == "failed" and CAP_MESSAGE.match(rows[0].message)
+    assert rows[1].status == "ok" and rows[1].stage_reached == "solid" and rows[1].faces > 0
+    assert 0.0 < rows[1].peak_memory_mb  # measured, below the default cap of the machine
+
+
+def test_peak_memory_is_the_worker_s_own(batch_run):
+    """A worker's peak is its own resident peak at its end, not its parent's (ru_maxrss
+    inherits the parent's across fork + exec) and not the pipeline's before the thumbnail."""
+    _, out, _ = batch_run
+    rows = read_rows(out)
+    for name in ("tiny", "box"):
+        report = json.loads((out / f"{name}.json").read_text())
+        assert float(rows[name]["peak_memory_mb"]) == report["peak_memory_mb"]
+        assert 50.0 < report["peak_memory_mb"] < 2000.0, report["peak_memory_mb"]
+    broken = float(rows["broken"]["peak_memory_mb"])
+    assert 0.0 < broken < float(rows["box"]["peak_memory_mb"])  # stopped at intake: less
+
+
 @pytest.mark.parametrize("case, words", [
     ("missing", "is not a mesh file, a folder"),
     ("overrides", "unknown parameter(s) fit_iters"),
     ("no_parent", "its parent does not exist"),
     ("jobs", "--jobs must be positive"),
+    ("memory", "--memory-limit must be positive (MiB) or 0 for no cap"),
 ])
 def test_bad_input_exits_2_and_writes_nothing(tmp_path, case, words):
     box = make_box(tmp_path / "box.stl")
@@ -158,7 +213,8 @@ def test_bad_input_exits_2_and_writes_nothing(tmp_path, case, words):
     args = {"missing": (tmp_path / "nothing*.stl", "-o", out),
             "overrides": (box, "-o", out, "--overrides", overrides),
             "no_parent": (box, "-o", tmp_path / "a" / "b"),
-            "jobs": (box, "-o", out, "--jobs", "0")}[case]
+            "jobs": (box, "-o", out, "--jobs", "0"),
+            "memory": (box, "-o", out, "--memory-limit", "-5")}[case]
     result = run_batch(*args)
     assert result.returncode == 2
     assert result.stderr.startswith("error:") and words in result.stderr, result.stderr

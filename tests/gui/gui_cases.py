@@ -172,7 +172,7 @@ class WorkbenchTest(unittest.TestCase):
         self.assertEqual(workbench.name(), WORKBENCH)
         known = set(FreeCADGui.listCommands())
         ids = [command.ID for command in commands.COMMANDS]
-        self.assertEqual(len(ids), 12)
+        self.assertEqual(len(ids), 13)
         for command_id in ids:
             self.assertTrue(command_id.startswith("PolyCube_"))
             self.assertIn(command_id, known)
