@@ -50,7 +50,7 @@ from core.segmentation.labeling import (LAMBDA, PENALTY, check_frames, face_colo
                                         face_normals, hbecvt_sweeps, interface_penalty,
                                         label_cost, label_vectors, part_neighbours)
 from core.segmentation.validity import (COS_45, check_validity, edge_interface_axes, interface_loops,
-                                         local_invalid_count)
+                                         local_counts, local_invalid_count)
 
 
 def _chart_costs(cost, face_chart, n_charts):
@@ -244,7 +244,7 @@ def _local_resegment(labels, unary, nb, colour, region, lam, penalty):
     return out.astype(np.int64)
 
 
-class _Judge:
+class CandidateJudge:
     """Validity and mean-angle bookkeeping for candidate labelings.
 
     :meth:`validity` judges a whole labeling; :meth:`delta` judges a candidate against the current
@@ -269,14 +269,19 @@ class _Judge:
         """Submesh faces (sorted) and changed-vertex mask for judging ``cand`` against
         ``labels`` (whose layout is ``lay``): the charts touching a changed vertex plus the faces
         around their vertices."""
-        F = self.F
         vmask = np.zeros(self.topology.n_vertices, dtype=bool)
-        vmask[F[cand != labels]] = True
+        vmask[self.F[cand != labels]] = True
+        return self.zone_of(lay, vmask), vmask
+
+    def zone_of(self, lay, vmask):
+        """(s,) int64 sorted submesh faces for judging changes of faces whose vertices all lie in
+        ``vmask`` against a labeling of layout ``lay`` (see :meth:`zone`)."""
+        F = self.F
         charts = np.zeros(lay.n_charts, dtype=bool)
         charts[lay.face_chart[_faces_at_vertices(F, vmask)]] = True
         vz = np.zeros_like(vmask)
         vz[F[charts[lay.face_chart]]] = True
-        return np.flatnonzero(_faces_at_vertices(F, vz)), vmask
+        return np.flatnonzero(_faces_at_vertices(F, vz))
 
     def delta(self, labels, val, cand):
         """(change of the invalid-item count from ``labels`` (judged as ``val``) to ``cand``,
@@ -291,6 +296,16 @@ class _Judge:
         old = local_invalid_count(*args, labels, self.face_frame, self.edge_ix, faces, vmask)
         new = local_invalid_count(*args, cand, self.face_frame, self.edge_ix, faces, vmask)
         return sum(new[:3]) - sum(old[:3]), new[3]
+
+    def local(self, labels, faces, vmask, tau, sub=None, max_invalid=None):
+        """(invalid items, turning points (hysteresis ``tau``)) of ``labels`` touching ``vmask``,
+        judged on the zone ``faces`` of :meth:`zone_of` (exact differences between labelings that
+        differ only on faces with all vertices in ``vmask``, see
+        :func:`core.segmentation.validity.local_counts`; ``sub`` its submesh topology; the turning
+        points are None when the invalid items exceed ``max_invalid``)."""
+        c = local_counts(self.V, self.F, self.topology, self.part, labels, self.face_frame,
+                         self.edge_ix, faces, vmask, tau, sub, max_invalid)
+        return sum(c[:3]), c[4]
 
     def angle(self, labels):
         c = self.cost[np.arange(len(labels)), labels]
@@ -424,7 +439,7 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     unary = cost + penalty * iface_pen
     nb = part_neighbours(topology, face_part)
     colour = face_colouring(nb)
-    judge = _Judge(V, F, face_part, face_frame, topology, cost, area)
+    judge = CandidateJudge(V, F, face_part, face_frame, topology, cost, area)
     angle0 = judge.angle(labels)
     angle_cap = angle0 + max_angle_increase
 
