@@ -124,27 +124,35 @@ def stage_frames(state, params):
 
 
 def stage_labeling(state, params):
-    from core.segmentation.labeling import (face_normals, hbecvt_labeling, mean_label_angle,
-                                            nearest_direction_labels)
+    from core.segmentation.charts import build_topology
+    from core.segmentation.labeling import (face_colouring, face_normals, hbecvt_labeling,
+                                            mean_label_angle, nearest_direction_labels,
+                                            part_neighbours)
     from core.segmentation.monotone import straighten_boundaries
     from core.segmentation.repair import repair_labeling
     from core.segmentation.validity import check_validity
 
     mesh, field = state["target"], state["frames"]
     face_part = state["face_part"]
+    # one edge table and one colouring serve the sweeps, the repair and the monotonicity pass
+    topology = build_topology(mesh.faces, len(mesh.vertices))
+    colour = face_colouring(part_neighbours(topology, face_part))
     labels, info = hbecvt_labeling(mesh.vertices, mesh.faces, face_part, field.face_frame,
                                    field.face_interface_axis, lam=params.lam,
-                                   penalty=params.penalty, max_sweeps=params.max_sweeps)
+                                   penalty=params.penalty, max_sweeps=params.max_sweeps,
+                                   topology=topology, colour=colour)
     repair_report = None
     if params.repair:
         labels, repair_report = repair_labeling(mesh.vertices, mesh.faces, face_part, labels,
                                                 field.face_frame, field.face_interface_axis,
-                                                lam=params.lam, penalty=params.penalty)
+                                                lam=params.lam, penalty=params.penalty,
+                                                topology=topology, colour=colour)
         labels, straighten_report, validity = straighten_boundaries(
-            mesh.vertices, mesh.faces, face_part, labels, field.face_frame)
+            mesh.vertices, mesh.faces, face_part, labels, field.face_frame, topology=topology)
     else:
         straighten_report = None
-        validity = check_validity(mesh.vertices, mesh.faces, face_part, labels, field.face_frame)
+        validity = check_validity(mesh.vertices, mesh.faces, face_part, labels, field.face_frame,
+                                  topology)
     normals = face_normals(mesh.vertices, mesh.faces)
     nearest = nearest_direction_labels(normals, field.face_frame)
     v = validity.report

@@ -198,6 +198,7 @@ def _vertex_faces(F, n_vertices):
 
 def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None,
                           edge_interface_axis=None, max_rounds=6, max_evaluations=None,
+                          max_visits=None,
                           max_angle_increase=1.0, lam=LAMBDA):
     """Remove turning points by hook moves and turn charts without losing validity (module docstring).
 
@@ -211,6 +212,8 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
     max_evaluations : int, cap on candidate judgements per turning point and round (default 8 on
         meshes of at most 50000 faces, 1 above: each judgement walks the charts around the
         candidate).
+    max_visits : int, cap on turning points visited (candidates made and judged) over the pass
+        (default ``max(24, 3000000 // m)``: the work per visit grows with the charts around it).
     max_angle_increase : float, degrees.
     lam : float, Eq. 3 lambda used to rank candidates.
 
@@ -218,7 +221,7 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
     -------
     labels : (m,) int32.
     report : dict with ``turning_points_before``, ``turning_points_after``, ``moves`` (accepted, by
-        operator), ``evaluations``, ``rounds`` and ``angle_before`` / ``angle_after``
+        operator), ``evaluations``, ``visits``, ``rounds`` and ``angle_before`` / ``angle_after``
         (area-weighted mean degrees).
     validity : Validity of the returned labels (turning points included), so callers need not
         judge them again.
@@ -232,13 +235,14 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
         topology = build_topology(F, len(V))
     if max_evaluations is None:
         max_evaluations = 8 if m <= 50000 else 1
+    if max_visits is None:
+        max_visits = max(24, 3000000 // max(m, 1))
     cost = label_cost(face_normals(V, F), face_frame)
     area = face_areas(V, F)
     judge = CandidateJudge(V, F, face_part, face_frame, topology, cost, area)
     if edge_interface_axis is not None:
         judge.edge_ix = edge_interface_axis
-    weight = area / area.sum()
-    ang = np.degrees(np.arccos(np.clip(1.0 - 0.5 * cost, -1.0, 1.0))) * weight[:, None]
+    ang = judge.weighted_angle
     edge_length = np.linalg.norm(V[topology.edges[:, 0]] - V[topology.edges[:, 1]], axis=1)
     tau = float(edge_length.mean())
     vf_ptr, vf = _vertex_faces(F, topology.n_vertices)
@@ -254,6 +258,7 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
     cap = angle0 + max_angle_increase
     moves = {"notch": 0, "hook": 0, "turn_cut": 0}
     evaluations = 0
+    visits = 0
     rounds = 0
     tried = set()
     strict = False
@@ -268,7 +273,7 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
         edge_chart = np.where(ef >= 0, lay.face_chart[np.maximum(ef, 0)], -1)
         dirty = np.zeros(m, dtype=bool)
         accepted = 0
-        start = (labels, angle_now, dict(moves), set(tried))
+        start = (labels, angle_now, dict(moves), set(tried), visits)
         for b, v in val.turning_points.tolist():
             # tried again once either chart has changed
             pair = lay.boundary_charts[b]
@@ -276,9 +281,10 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
             if key in tried:
                 continue
             around = vf[vf_ptr[v]:vf_ptr[v + 1]]
-            if dirty[around].any():
+            if dirty[around].any() or visits >= max_visits:
                 continue
             tried.add(key)
+            visits += 1
             cands = [("hook", f, n) for f, n in hook_move(F, cost, lay, chains[b], b, v)]
             if val.boundary_axis[b] >= 0:
                 k = int(val.boundary_axis[b])
@@ -328,11 +334,12 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
                            or len(new_val.turning_points) >= len(val.turning_points)):
             # moves judged against a layout that earlier moves of the round had changed did
             # not add up: redo the round with disjoint judging zones
-            labels, angle_now, moves, tried = start
+            labels, angle_now, moves, tried, visits = start
             strict = True
             continue
         val = new_val
     report = {"turning_points_before": int(tp0), "turning_points_after": len(val.turning_points),
-              "moves": moves, "evaluations": int(evaluations), "rounds": int(rounds),
+              "moves": moves, "evaluations": int(evaluations), "visits": int(visits),
+              "rounds": int(rounds),
               "angle_before": angle0, "angle_after": float(ang[np.arange(m), labels].sum())}
     return labels.astype(np.int32), report, val
