@@ -213,7 +213,7 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
         meshes of at most 50000 faces, 1 above: each judgement walks the charts around the
         candidate).
     max_visits : int, cap on turning points visited (candidates made and judged) over the pass
-        (default ``max(24, 3000000 // m)``: the work per visit grows with the charts around it).
+        (default ``max(16, 2400000 // m)``: the work per visit grows with the charts around it).
     max_angle_increase : float, degrees.
     lam : float, Eq. 3 lambda used to rank candidates.
 
@@ -236,7 +236,7 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
     if max_evaluations is None:
         max_evaluations = 8 if m <= 50000 else 1
     if max_visits is None:
-        max_visits = max(24, 3000000 // max(m, 1))
+        max_visits = max(16, 2400000 // max(m, 1))
     cost = label_cost(face_normals(V, F), face_frame)
     area = face_areas(V, F)
     judge = CandidateJudge(V, F, face_part, face_frame, topology, cost, area)
