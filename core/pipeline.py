@@ -329,7 +329,7 @@ def run_stages(state, stages, params, progress=NO_PROGRESS, report=None):
         progress.check_cancel()
         progress.report(name, index / len(stages))
         state["progress"] = SubProgress(progress, index / len(stages), (index + 1) / len(stages))
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.process_time()
         try:
             output = STAGE_FUNCTIONS[name](state, params)
         except StageNotAvailableError as exc:
@@ -346,6 +346,7 @@ def run_stages(state, stages, params, progress=NO_PROGRESS, report=None):
             state.update(output)
             report[name] = stage_report
         entry["seconds"] = round(time.perf_counter() - start, 4)
+        entry["cpu_seconds"] = round(time.process_time() - cpu_start, 4)  # what load does not add
         report["stages"][name] = entry
     state.pop("progress", None)
     progress.report("done", 1.0)
