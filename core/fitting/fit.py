@@ -35,7 +35,7 @@ SURFACES = ("limit", "control")
 
 def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="inside",
                   progress=None, penalty=1e5, step_fraction=0.05, surface="limit",
-                  start="best-fit", rounds=10, tol=2e-3, patience=10):
+                  start="best-fit", rounds=10, tol=2e-3, patience=5):
     """Move the base-mesh vertices so the subdivision surface fills or fits the target.
 
     Parameters
@@ -76,10 +76,13 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         ``best_iteration``, ``objective`` (list per iteration), ``volume`` (list),
         ``mean_distance`` / ``max_distance`` (distance of the fine limit points to the
         target over the target's bounding-box diagonal) and their ``initial_``
-        counterparts, ``outside_volume_fraction`` and ``initial_outside_volume_fraction``
-        (triangulated fine limit mesh minus target, over the target volume), ``t_min``,
+        counterparts (the cage's), ``outside_volume_fraction`` and
+        ``uncovered_volume_fraction`` (triangulated fine limit mesh minus target and
+        target minus it, over the target volume; of the result only), ``t_min``,
         ``step`` (model units), ``seconds`` (all of it) and ``measure_seconds`` (the
-        part spent on those figures, one manifold3d boolean per surface); inside mode
+        part spent on those figures, one manifold3d boolean); ``self_intersections``
+        (intersecting triangle pairs of the fine limit mesh) where the fit checked them
+        anyway (inside mode, ``surface='limit'``); inside mode
         also ``start_margin`` (depth of the start below the target, model units),
         ``held_back`` and ``rgp_held_back`` (base vertices whose least-squares start or
         RGP move was cut back because the limit surface crossed itself there). The
@@ -130,7 +133,7 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
             # the RGP starts just inside the target, and nowhere crossing itself
             vertices, info["start_margin"] = _pulled_inside(base, limit_map, target_surface,
                                                             vertices)
-            vertices, held = hold_back_crossings(V0, vertices, limit_map, T)
+            vertices, held, _ = hold_back_crossings(V0, vertices, limit_map, T)
             info["held_back"] = held
             if held:
                 info["start"] = f"{start}, held back at {held} base vertices (it crossed itself)"
@@ -144,17 +147,18 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
                              _area(X_start, T))
         result = run_rgp(problem, vertices, step, iterations=iterations, stall_tol=tol,
                          patience=patience, progress=progress)
-        vertices, held = hold_back_crossings(vertices, result.vertices, mapping, T)
+        vertices, held, crossings = hold_back_crossings(vertices, result.vertices, mapping, T)
         info["rgp_held_back"] = held
+        if surface == "limit":
+            info["self_intersections"] = crossings
         info.update(iterations=result.iterations, stopped=result.stopped,
                     best_iteration=result.best_iteration,
                     objective=result.history["objective"], volume=result.history["volume"],
                     t_min=float(t_min), step=float(step))
     measuring = time.perf_counter()
-    final = _figures(limit_map @ vertices, T, target_surface)
-    initial = final if mode == "none" else _figures(limit_map @ V0, T, target_surface)
+    info.update(_figures(limit_map @ vertices, T, target_surface))
+    initial = _distances(limit_map @ V0, target_surface)
     info.update({"initial_" + k: v for k, v in initial.items()})
-    info.update(final)
     info["seconds"] = time.perf_counter() - started
     info["measure_seconds"] = time.perf_counter() - measuring
     return PolyMesh(vertices, base.face_vertices, base.face_offsets), info
@@ -203,19 +207,20 @@ def hold_back_crossings(reference, moved, mapping, triangles):
     vertices : (n, 3) float64, ``moved`` where nothing crosses.
     held : int, base vertices whose move was cut (0 when ``moved`` is clean, or when
         ``reference`` itself crosses and nothing can be restored).
+    crossings : int, intersecting triangle pairs of the returned fine mesh.
     """
     fraction = np.ones(len(moved))
     for halving in range(HALVINGS + 2):
         W = reference + fraction[:, None] * (moved - reference)
         pairs = find_self_intersections(mapping @ W, triangles)
         if not len(pairs):
-            return W, int((fraction < 1).sum())
+            return W, int((fraction < 1).sum()), 0
         if halving == HALVINGS + 1:
             break
         fine = np.unique(triangles[pairs].reshape(-1))
         columns = np.unique(mapping[fine].indices)
         fraction[columns] = 0.0 if halving == HALVINGS else 0.5 * fraction[columns]
-    return moved, 0
+    return moved, 0, int(len(find_self_intersections(mapping @ moved, triangles)))
 
 
 def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds):
@@ -246,12 +251,16 @@ def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds):
 
 def _figures(X, T, target):
     """Distance and containment figures of fine limit points against the target."""
-    distance = target.nearest(X).distance / target.diagonal
     report = containment(X, T, target.vertices, target.faces)
-    return {"mean_distance": float(distance.mean()),
-            "max_distance": float(distance.max()),
+    return {**_distances(X, target),
             "outside_volume_fraction": report["outside_volume_fraction"],
             "uncovered_volume_fraction": report["uncovered_volume_fraction"]}
+
+
+def _distances(X, target):
+    """Mean and largest distance of fine limit points to the target, over its diagonal."""
+    distance = target.nearest(X).distance / target.diagonal
+    return {"mean_distance": float(distance.mean()), "max_distance": float(distance.max())}
 
 
 def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface, start,
