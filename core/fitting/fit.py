@@ -122,6 +122,7 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     info = {"mode": mode, "levels": levels, "surface": surface, "rounds": 0, "rms": [],
             "iterations": 0, "stopped": "none", "objective": [], "volume": []}
     vertices = V0
+    start_crossings = None
     if mode == "best-fit" or (mode == "inside" and start == "best-fit"):
         progress.report("fit", 0.0, "least-squares fit")
         fitted, coarse = _two_level_best_fit(base, hierarchy, limit_map, T, target_surface,
@@ -133,7 +134,7 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
             # the RGP starts just inside the target, and nowhere crossing itself
             vertices, info["start_margin"] = _pulled_inside(base, limit_map, target_surface,
                                                             vertices)
-            vertices, held, _ = hold_back_crossings(V0, vertices, limit_map, T)
+            vertices, held, start_crossings = hold_back_crossings(V0, vertices, limit_map, T)
             info["held_back"] = held
             if held:
                 info["start"] = f"{start}, held back at {held} base vertices (it crossed itself)"
@@ -147,7 +148,12 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
                              _area(X_start, T))
         result = run_rgp(problem, vertices, step, iterations=iterations, stall_tol=tol,
                          patience=patience, progress=progress)
-        vertices, held, crossings = hold_back_crossings(vertices, result.vertices, mapping, T)
+        if surface == "limit" and start_crossings is not None \
+                and np.array_equal(result.vertices, vertices):
+            held, crossings = 0, start_crossings  # the RGP's best is its start, checked above
+        else:
+            vertices, held, crossings = hold_back_crossings(vertices, result.vertices, mapping,
+                                                            T)
         info["rgp_held_back"] = held
         if surface == "limit":
             info["self_intersections"] = crossings
