@@ -267,9 +267,10 @@ def stage_fit(state, params):
     levels = info["levels"]
     report = {"mode": params.fit_mode, "levels": levels, **{key: info[key] for key in (
         "start", "rounds", "iterations", "stopped", "mean_distance", "max_distance", "outside_volume_fraction",
-        "uncovered_volume_fraction", "initial_mean_distance", "initial_max_distance", "initial_outside_volume_fraction",
+        "uncovered_volume_fraction", "initial_mean_distance", "initial_max_distance",
         "t_min", "seconds", "measure_seconds") if key in info}}
-    report["self_intersections"] = count_limit_self_intersections(fitted, levels)
+    report["self_intersections"] = (info["self_intersections"] if "self_intersections" in info
+                                    else count_limit_self_intersections(fitted, levels))
     warnings = [] if report["self_intersections"] == 0 else [
         f"warning: the fitted limit surface intersects itself "
         f"({report['self_intersections']} triangle pairs at level {levels})"]
