@@ -11,8 +11,10 @@ For every dev mesh and part mode (``single``, ``auto``) this runs, in a fresh pr
 ``../shared/tools/labelcheck.py`` (run as its own process, never imported into the project) and
 compares its verdict with the project's report. From the labels file it measures, per part, the
 area-weighted mean angle between face normals and label directions, and the same for the
-nearest-of-six-directions labels in the world axes and in the part's PCA frame. Writes
-``benchmarks/LABELING_RESULTS.md`` (or ``--out``).
+nearest-of-six-directions labels in the world axes and in the part's PCA frame. For the SIMP
+dev meshes with one part it also runs ``--stop-after basemesh`` and records whether the base mesh
+is reached (against :data:`BASEMESH_BEFORE`, measured the same way before the turning-point work).
+Writes ``benchmarks/LABELING_RESULTS.md`` (or ``--out``).
 """
 import argparse
 import datetime
@@ -35,6 +37,19 @@ MODES = ("single", "auto")
 TIMEOUT = 600.0
 TINY_CHART = 20
 """Charts of at most this many faces count as tiny."""
+BASEMESH_BEFORE = {
+    "commit": "038d80c",
+    "turning_points": {"to_simp_cantilever": 8, "to_simp_lbracket": 3, "to_simp_mbb": 0,
+                       "to_simp_pylon": 2, "to_simp_torsion_arm": 5,
+                       "to_simp_torsion_arm_fine3": 38},
+    "reached": {"to_simp_cantilever": "yes", "to_simp_lbracket": "yes",
+                "to_simp_mbb": "no: 1 integer chart polygon overlaps itself",
+                "to_simp_pylon": "no: 4 charts do not turn by four",
+                "to_simp_torsion_arm": "no: 18 charts do not turn by four",
+                "to_simp_torsion_arm_fine3": "no: 2553 quads > max_base_faces 2500"},
+}
+"""Turning points and base-mesh outcome of the SIMP dev meshes (one part) on main at ``commit``,
+before the turning-point pass of issue 14 (same command as :func:`basemesh_case`)."""
 
 
 def _read_labels(path):
@@ -115,6 +130,7 @@ def run_case(path, mode, tmp):
     with open(rep, encoding="utf-8") as fh:
         report = json.load(fh)
     out["stages"] = {k: v.get("seconds") for k, v in report["stages"].items()}
+    out["cpu"] = {k: v.get("cpu_seconds") for k, v in report["stages"].items()}
     out["faces"] = report["input"]["triangles"]
     if "labeling" not in report or not os.path.exists(ply):
         out["error"] = (proc.stderr.strip().splitlines() or ["no labeling"])[-1]
@@ -131,6 +147,28 @@ def run_case(path, mode, tmp):
     V, F, part, label, axis = _read_labels(ply)
     out["parts"] = part_angles(V, F, part, axis)
     out["shapes"] = chart_shapes(V, F, part, label)
+    return out
+
+
+def basemesh_case(path, tmp):
+    """Whether ``reconstruct --stop-after basemesh`` (one part) reaches a base mesh: a dict with
+    ``reached``, ``faces`` (when reached), ``turning_points`` and the failure ``message``."""
+    stem = os.path.splitext(os.path.basename(path))[0]
+    rep = os.path.join(tmp, f"{stem}_basemesh.json")
+    cmd = [sys.executable, "-m", "polycube_wb", "reconstruct", path, "-o",
+           os.path.join(tmp, f"{stem}.step"), "--report", rep, "--stop-after", "basemesh"]
+    proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=TIMEOUT)
+    out = {"mesh": stem, "exit": proc.returncode, "reached": False}
+    if not os.path.exists(rep):
+        out["message"] = (proc.stderr.strip().splitlines() or ["no report"])[-1]
+        return out
+    with open(rep, encoding="utf-8") as fh:
+        report = json.load(fh)
+    out["turning_points"] = report.get("labeling", {}).get("turning_points")
+    stage = report["stages"].get("basemesh", {})
+    out["reached"] = stage.get("status") == "ok"
+    out["faces"] = report.get("base_mesh", {}).get("faces")
+    out["message"] = stage.get("message", "")
     return out
 
 
@@ -153,7 +191,29 @@ def _agree_without_interfaces(lc, rp):
             and lc["invalid_corners"] == rp["invalid_corners"] - itf["corners"])
 
 
-def markdown(results, started):
+def basemesh_markdown(rows):
+    """The base-mesh section: per SIMP mesh, turning points and outcome before and now."""
+    before = BASEMESH_BEFORE
+    lines = ["", "## Base mesh reached (SIMP dev meshes, one part)", "",
+             "`reconstruct MESH --stop-after basemesh` with default options. *Before*: main at "
+             f"`{before['commit']}` (the monotonicity pass then moved boundary hooks only).", "",
+             "| mesh | turning points before | turning points now | base mesh before "
+             "| base mesh now |", "|---|---|---|---|---|"]
+    for r in rows:
+        now = (f"yes ({r['faces']} faces)" if r["reached"] else
+               f"no: {r.get('message', '')[:160]}")
+        lines.append(f"| {r['mesh']} | {before['turning_points'].get(r['mesh'], '?')} | "
+                     f"{r.get('turning_points', '?')} | {before['reached'].get(r['mesh'], '?')} "
+                     f"| {now} |")
+    n_before = sum(v == "yes" for v in before["reached"].values())
+    lines += ["", f"Reached: {n_before} of {len(before['reached'])} before, "
+              f"{sum(r['reached'] for r in rows)} of {len(rows)} now; turning points "
+              f"{sum(before['turning_points'].values())} before, "
+              f"{sum(r.get('turning_points') or 0 for r in rows)} now."]
+    return lines
+
+
+def markdown(results, started, basemesh_rows=()):
     lines = ["# Labeling benchmark", "",
              f"Written by `benchmarks/labeling_bench.py` on {started} "
              f"(machine: {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f} at the end).", "",
@@ -166,12 +226,14 @@ def markdown(results, started):
              "part got, the labeling's angle, the nearest-of-six-directions angle in the world "
              "axes and in the part's PCA frame, and the labeling's excess over the better of "
              "those two. Seconds are the pipeline's own stage times (frames, labeling = "
-             "HBECVT + repair + validity) in a process of their own.", "",
+             "HBECVT + repair + monotonicity pass + validity) in a process of their own, wall "
+             "clock and, in brackets, the process's CPU time (what the stage costs without the "
+             "other jobs on the machine).", "",
              "Chart shapes (what the base mesh needs): *non-disk* charts, charts with *<4 "
              f"corners* on their boundary, *tiny* charts of at most {TINY_CHART} faces.", "",
              "| mesh | parts | faces | valid (labelcheck) | agree | charts "
              "| inv. charts/bnd/corners | turning points | non-disk / <4 corners / tiny "
-             "| frames s | labeling s | per part |",
+             "| frames s | labeling s (CPU s) | per part |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         if "labelcheck" not in r:
@@ -190,7 +252,8 @@ def markdown(results, started):
             f"{rp['turning_points']} | "
             f"{sh['non_disk']} / {sh['under_4_corners']} / {sh['tiny']} | "
             f"{st.get('frames') or 0:.2f} | "
-            f"{st.get('labeling') or 0:.2f} | {_fmt_parts(r['parts'], r['frames'])} |")
+            f"{st.get('labeling') or 0:.2f} ({r['cpu'].get('labeling') or 0:.2f}) | "
+            f"{_fmt_parts(r['parts'], r['frames'])} |")
     ok = [r for r in results if "labelcheck" in r]
     lines += ["", "## Summary", ""]
     for mode in MODES:
@@ -206,7 +269,11 @@ def markdown(results, started):
     if big:
         r = max(big, key=lambda r: r["faces"])
         lines.append(f"- Largest mesh {r['mesh']} ({r['faces']} triangles): frames "
-                     f"{r['stages']['frames']:.2f} s, labeling {r['stages']['labeling']:.2f} s.")
+                     f"{r['stages']['frames']:.2f} s, labeling {r['stages']['labeling']:.2f} s "
+                     f"wall ({r['cpu']['labeling']:.2f} s of CPU: the wall time on the shared "
+                     "machine includes waiting for the other jobs' cores).")
+    if basemesh_rows:
+        lines += basemesh_markdown(basemesh_rows)
     return "\n".join(lines) + "\n"
 
 
@@ -229,7 +296,13 @@ def main(argv=None):
                 print(json.dumps({k: r.get(k) for k in ("mesh", "mode", "labelcheck", "frames")}),
                       flush=True)
                 results.append(r)
-    text = markdown(results, started)
+        basemesh_rows = []
+        for name in names:
+            if name.startswith("to_simp"):
+                b = basemesh_case(os.path.join(args.meshes, name), tmp)
+                print(json.dumps(b), flush=True)
+                basemesh_rows.append(b)
+    text = markdown(results, started, basemesh_rows)
     tmp_out = args.out + ".tmp"
     with open(tmp_out, "w", encoding="utf-8") as fh:
         fh.write(text)

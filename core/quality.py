@@ -160,11 +160,14 @@ def containment(result_V, result_F, target_V, target_F):
     result = _checked_manifold(result_V, result_F, "result")
     target = _checked_manifold(target_V, target_F, "target")
     target_volume = float(target.volume())
-    outside = float((result - target).volume())
-    uncovered = float((target - result).volume())
+    result_volume = float(result.volume())
+    # one boolean: vol(A - B) = vol(A) - vol(A n B) for both differences
+    common = float((result ^ target).volume())
+    outside = max(result_volume - common, 0.0)
+    uncovered = max(target_volume - common, 0.0)
     return {
         "target_volume": target_volume,
-        "result_volume": float(result.volume()),
+        "result_volume": result_volume,
         "outside_volume": outside,
         "uncovered_volume": uncovered,
         "outside_volume_fraction": outside / target_volume,

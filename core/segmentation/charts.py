@@ -207,8 +207,13 @@ def extract_layout(topology, face_part, face_label):
                        chart_boundary_count, nb, degree, corners)
 
 
-def boundary_chains(topology, layout):
-    """Ordered vertex chains of every boundary.
+def boundary_chains(topology, layout, which=None):
+    """Ordered vertex chains of every boundary (or of the boundaries flagged in ``which``).
+
+    Parameters
+    ----------
+    topology : MeshTopology; layout : ChartLayout.
+    which : (b,) bool, optional; boundaries not flagged get ``None`` instead of a chain.
 
     Returns
     -------
@@ -218,26 +223,33 @@ def boundary_chains(topology, layout):
     Walks start at a corner (lowest corner vertex) or, for corner-free loops, at the lowest vertex.
     """
     sep = layout.sep_edges
-    ev = topology.edges[sep]
-    degree = layout.vertex_sep_degree
+    # vertices renumbered compactly (the walk touches only boundary vertices)
+    verts_used, ev_local = np.unique(topology.edges[sep], return_inverse=True)
+    ev_local = ev_local.reshape(-1, 2)
+    degree = layout.vertex_sep_degree[verts_used]
     # incidence: for each vertex the separating edges (local ids) at it
-    inc_v = ev.reshape(-1)
+    inc_v = ev_local.reshape(-1)
     inc_e = np.repeat(np.arange(len(sep)), 2)
     order = np.lexsort((inc_e, inc_v))
     inc_v, inc_e = inc_v[order], inc_e[order]
-    start = np.searchsorted(inc_v, np.arange(topology.n_vertices + 1))
-    members = [[] for _ in range(layout.n_boundaries)]
-    for local, b in enumerate(layout.sep_boundary.tolist()):
-        members[b].append(local)
+    start = np.searchsorted(inc_v, np.arange(len(verts_used) + 1))
+    by_b = np.argsort(layout.sep_boundary, kind="stable")
+    cuts = np.cumsum(layout.boundary_size)[:-1]
+    members = [m.tolist() for m in np.split(by_b, cuts)] if layout.n_boundaries else []
     chains = []
-    ev_list = ev.tolist()
+    ev_list = ev_local.tolist()
+    degree = degree.tolist()
+    inc_e, start = inc_e.tolist(), start.tolist()
     for b, local_edges in enumerate(members):
+        if which is not None and not which[b]:
+            chains.append(None)
+            continue
         verts = {v for e in local_edges for v in ev_list[e]}
         corner_verts = sorted(v for v in verts if degree[v] != 2)
         closed = not corner_verts
         v0 = corner_verts[0] if corner_verts else min(verts)
         bset = set(local_edges)
-        cand = [e for e in inc_e[start[v0]:start[v0 + 1]].tolist() if e in bset]
+        cand = [e for e in inc_e[start[v0]:start[v0 + 1]] if e in bset]
         e_cur = cand[0]
         chain_v = [v0]
         chain_e = [e_cur]
@@ -249,12 +261,12 @@ def boundary_chains(topology, layout):
             chain_v.append(v)
             if degree[v] != 2 or len(used) == len(local_edges):
                 break
-            nxt = [e for e in inc_e[start[v]:start[v + 1]].tolist() if e not in used and e in bset]
+            nxt = [e for e in inc_e[start[v]:start[v + 1]] if e not in used and e in bset]
             if not nxt:
                 break
             e_cur = nxt[0]
             used.add(e_cur)
             chain_e.append(e_cur)
-        chains.append((np.array(chain_v, dtype=np.int64), sep[np.array(chain_e, dtype=np.int64)],
-                       closed))
+        chains.append((verts_used[np.array(chain_v, dtype=np.int64)],
+                       sep[np.array(chain_e, dtype=np.int64)], closed))
     return chains

@@ -211,7 +211,7 @@ def hbecvt_sweeps(unary, neighbours, labels, colour, lam=LAMBDA, penalty=PENALTY
 
 
 def hbecvt_labeling(V, F, face_part, face_frame, face_interface_axis=None, lam=LAMBDA,
-                    penalty=PENALTY, max_sweeps=MAX_SWEEPS, topology=None):
+                    penalty=PENALTY, max_sweeps=MAX_SWEEPS, topology=None, colour=None):
     """HBECVT labels of every face (Eqs. 2-3; see the module docstring).
 
     Parameters
@@ -226,6 +226,8 @@ def hbecvt_labeling(V, F, face_part, face_frame, face_interface_axis=None, lam=L
     lam : float, lambda (default 0.5); penalty : float, p (default 1e5).
     max_sweeps : int, iteration cap.
     topology : MeshTopology, optional.
+    colour : (m,) int64, optional :func:`face_colouring` of :func:`part_neighbours` (computed
+        when omitted).
 
     Returns
     -------
@@ -251,7 +253,8 @@ def hbecvt_labeling(V, F, face_part, face_frame, face_interface_axis=None, lam=L
     unary = label_cost(normals, face_frame) + penalty * interface_penalty(face_frame,
                                                                           face_interface_axis)
     nb = part_neighbours(topology, face_part)
-    colour = face_colouring(nb)
+    if colour is None:
+        colour = face_colouring(nb)
     start = np.argmin(unary, axis=1)
     labels, sweeps = hbecvt_sweeps(unary, nb, start, colour, lam, penalty, max_sweeps)
     info = {"sweeps": int(sweeps), "converged": bool(sweeps < max_sweeps),

@@ -50,7 +50,7 @@ from core.segmentation.labeling import (LAMBDA, PENALTY, check_frames, face_colo
                                         face_normals, hbecvt_sweeps, interface_penalty,
                                         label_cost, label_vectors, part_neighbours)
 from core.segmentation.validity import (COS_45, check_validity, edge_interface_axes, interface_loops,
-                                         local_invalid_count)
+                                         local_counts, local_invalid_count)
 
 
 def _chart_costs(cost, face_chart, n_charts):
@@ -244,7 +244,7 @@ def _local_resegment(labels, unary, nb, colour, region, lam, penalty):
     return out.astype(np.int64)
 
 
-class _Judge:
+class CandidateJudge:
     """Validity and mean-angle bookkeeping for candidate labelings.
 
     :meth:`validity` judges a whole labeling; :meth:`delta` judges a candidate against the current
@@ -259,6 +259,9 @@ class _Judge:
         self.topology = topology
         self.cost = cost
         self.area = area / area.sum()
+        # (m, 6) angle of every label times the face's area share: sums to the mean angle
+        self.weighted_angle = (np.degrees(np.arccos(np.clip(1.0 - 0.5 * cost, -1.0, 1.0)))
+                               * self.area[:, None])
         self.edge_ix = edge_interface_axes(V, topology, face_part)
 
     def validity(self, labels):
@@ -269,14 +272,19 @@ class _Judge:
         """Submesh faces (sorted) and changed-vertex mask for judging ``cand`` against
         ``labels`` (whose layout is ``lay``): the charts touching a changed vertex plus the faces
         around their vertices."""
-        F = self.F
         vmask = np.zeros(self.topology.n_vertices, dtype=bool)
-        vmask[F[cand != labels]] = True
+        vmask[self.F[cand != labels]] = True
+        return self.zone_of(lay, vmask), vmask
+
+    def zone_of(self, lay, vmask):
+        """(s,) int64 sorted submesh faces for judging changes of faces whose vertices all lie in
+        ``vmask`` against a labeling of layout ``lay`` (see :meth:`zone`)."""
+        F = self.F
         charts = np.zeros(lay.n_charts, dtype=bool)
         charts[lay.face_chart[_faces_at_vertices(F, vmask)]] = True
         vz = np.zeros_like(vmask)
         vz[F[charts[lay.face_chart]]] = True
-        return np.flatnonzero(_faces_at_vertices(F, vz)), vmask
+        return np.flatnonzero(_faces_at_vertices(F, vz))
 
     def delta(self, labels, val, cand):
         """(change of the invalid-item count from ``labels`` (judged as ``val``) to ``cand``,
@@ -292,9 +300,19 @@ class _Judge:
         new = local_invalid_count(*args, cand, self.face_frame, self.edge_ix, faces, vmask)
         return sum(new[:3]) - sum(old[:3]), new[3]
 
+    def local(self, labels, faces, vmask, tau, sub=None, max_invalid=None):
+        """(invalid items, turning points (hysteresis ``tau``)) of ``labels`` touching ``vmask``,
+        judged on the zone ``faces`` of :meth:`zone_of` (exact differences between labelings that
+        differ only on faces with all vertices in ``vmask``, see
+        :func:`core.segmentation.validity.local_counts`; ``sub`` its submesh topology; the turning
+        points are None when the invalid items exceed ``max_invalid``)."""
+        c = local_counts(self.V, self.F, self.topology, self.part, labels, self.face_frame,
+                         self.edge_ix, faces, vmask, tau, sub, max_invalid)
+        return sum(c[:3]), c[4]
+
     def angle(self, labels):
-        c = self.cost[np.arange(len(labels)), labels]
-        return float(np.degrees(np.arccos(np.clip(1.0 - 0.5 * c, -1.0, 1.0))) @ self.area)
+        """Area-weighted mean angle in degrees between normals and the label directions."""
+        return float(self.weighted_angle[np.arange(len(labels)), labels].sum())
 
 
 def _chart_candidates(F, face_part, val, labels, c, cost, unary, nb, colour, penalty, lams):
@@ -344,7 +362,7 @@ def _chart_candidates(F, face_part, val, labels, c, cost, unary, nb, colour, pen
 def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis=None,
                     max_rounds=60, smooth=True, max_angle_increase=4.0, small_chart=None,
                     lam=LAMBDA, penalty=PENALTY, topology=None, max_trials=None,
-                    max_sideways=4):
+                    max_sideways=4, colour=None):
     """Drive the invalid charts, boundaries and corners of a labeling towards zero.
 
     Parameters
@@ -368,13 +386,15 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     max_trials : int, cap on per-chart candidate evaluations over the whole repair (default
         ``max(200, 2000000 // m)``: bounded work per mesh; hard multi-part cases need ~200).
     max_sideways : int, cap on consecutive moves that keep the invalid count (new states only).
+    colour : (m,) int64, optional :func:`face_colouring` of the part neighbours (computed when
+        omitted; the labeling computes the same one).
 
     Returns
     -------
     labels : (m,) int32 repaired labels.
     report : dict with ``rounds``, ``valid``, ``stopped`` (``valid``, ``stuck`` or
         ``round_cap``), ``operations`` (per-round operator and item count), ``before`` and
-        ``after`` (the validity reports, turning points included), ``angle_before`` /
+        ``after`` (the validity reports, without turning points: the monotonicity pass counts them), ``angle_before`` /
         ``angle_after`` (area-weighted mean degrees), ``gave_up`` (charts no candidate
         improved: example face, label, faces) and ``unfixed`` (the remaining invalid items with
         examples, empty when valid).
@@ -423,8 +443,9 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     iface_pen = interface_penalty(face_frame, face_interface_axis)
     unary = cost + penalty * iface_pen
     nb = part_neighbours(topology, face_part)
-    colour = face_colouring(nb)
-    judge = _Judge(V, F, face_part, face_frame, topology, cost, area)
+    if colour is None:
+        colour = face_colouring(nb)
+    judge = CandidateJudge(V, F, face_part, face_frame, topology, cost, area)
     angle0 = judge.angle(labels)
     angle_cap = angle0 + max_angle_increase
 
@@ -449,7 +470,7 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
         n_s = val.n_invalid + judge.delta(labels, val, s)[0]
         return (s, n_s) if n_s <= n_cand else (cand, n_cand)
 
-    before = check_validity(V, F, face_part, labels, face_frame, topology,
+    before = check_validity(V, F, face_part, labels, face_frame, topology, turning=False,
                             edge_interface_axis=judge.edge_ix)
     val = before
     ops = []
@@ -573,7 +594,7 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     else:
         if val.is_valid:
             stopped = "valid"
-    final = check_validity(V, F, face_part, labels, face_frame, topology,
+    final = check_validity(V, F, face_part, labels, face_frame, topology, turning=False,
                            edge_interface_axis=judge.edge_ix)
     r = final.report
     unfixed = {k: r[k] for k in ("invalid_charts", "invalid_boundaries", "invalid_corners")

@@ -148,10 +148,15 @@ def _interface_side_axis(face_frame, face, label, ix):
     return np.where(parallel, -1, axis).astype(np.int64)
 
 
-def _turning_points(V, topology, layout, face_frame, boundary_axis, tau):
+def _turning_points(V, topology, layout, face_frame, boundary_axis, tau, which=None):
+    """(t, 2) int64 rows (boundary, vertex) of the turning points (module docstring); only the
+    boundaries flagged in ``which`` ((b,) bool) are walked when it is given."""
     rows = []
-    chains = boundary_chains(topology, layout)
-    for b, (verts, edges, closed) in enumerate(chains):
+    chains = boundary_chains(topology, layout, which)
+    for b, chain in enumerate(chains):
+        if chain is None:
+            continue
+        verts, edges, closed = chain
         k = boundary_axis[b]
         if k < 0 or len(edges) < 2:
             continue
@@ -235,12 +240,8 @@ def _judge(topology, face_part, face_label, face_frame, edge_ix):
     ef = topology.edge_faces
 
     # boundaries
-    ca, cb = lay.boundary_charts[:, 0], lay.boundary_charts[:, 1]
-    la, lb = lay.chart_label[ca], lay.chart_label[cb]
-    same_part = lay.chart_part[ca] == lay.chart_part[cb]
-    opposite = same_part & (la // 2 == lb // 2)
-    boundary_axis = np.where(same_part, np.where(opposite, -1, 3 - la // 2 - lb // 2), -2)
-    reason = np.where(opposite, 1, 0).astype(np.int8)
+    boundary_axis = _boundary_axes(lay)
+    reason = np.where(boundary_axis == -1, 1, 0).astype(np.int8)
 
     # per separating edge and side: the axis seen from that side's part
     sep = lay.sep_edges
@@ -341,6 +342,12 @@ def local_invalid_count(F, topology, face_part, face_label, face_frame, edge_ix,
     """
     sub, edge_ids = sub_topology(topology, faces)
     j = _judge(sub, face_part[faces], face_label[faces], face_frame[faces], edge_ix[edge_ids])
+    return _local_invalid(F, sub, j, faces, vertex_mask)
+
+
+def _local_invalid(F, sub, j, faces, vertex_mask):
+    """The counts of :func:`local_invalid_count` from the submesh judgement ``j`` (of
+    :func:`_judge` on ``sub``, the topology of ``faces``)."""
     lay = j["layout"]
     fv = F[faces]
     touch_face = vertex_mask[fv[:, 0]] | vertex_mask[fv[:, 1]] | vertex_mask[fv[:, 2]]
@@ -352,6 +359,54 @@ def local_invalid_count(F, topology, face_part, face_label, face_frame, edge_ix,
     reason = j["reason"]
     return (int((charts & j["invalid_chart"]).sum()), int((bnd & (reason > 0)).sum()),
             int(vertex_mask[j["invalid_corners"]].sum()), int((bnd & (reason == 1)).sum()))
+
+
+def local_counts(V, F, topology, face_part, face_label, face_frame, edge_ix, faces, vertex_mask,
+                 tau, sub=None, max_invalid=None):
+    """:func:`local_invalid_count` and the turning points on the boundaries with an edge at
+    ``vertex_mask``, from one submesh layout.
+
+    Exact under the condition of :func:`local_invalid_count`: those boundaries are then whole in
+    the submesh and walked as on the whole mesh; a boundary without an edge at ``vertex_mask`` is
+    the same in two labelings that differ only on faces whose vertices are all in ``vertex_mask``
+    (its edges' faces and its vertices' separating edges are unchanged), so the difference of this
+    count between such labelings is the difference of their whole-mesh turning-point counts.
+
+    Parameters
+    ----------
+    V : (n, 3) float64; the other parameters as in :func:`local_invalid_count`.
+    tau : float, the hysteresis of :func:`check_validity` (mesh units).
+    sub : optional ``sub_topology(topology, faces)``, for judging several labelings on one zone.
+    max_invalid : int, optional; when the invalid charts + boundaries + corners exceed it, the
+        turning points are not walked and ``turning`` is None.
+
+    Returns
+    -------
+    (charts, boundaries, corners, opposite, turning) : int counts, the first four those of
+    :func:`local_invalid_count`.
+    """
+    sub, edge_ids = sub_topology(topology, faces) if sub is None else sub
+    j = _judge(sub, face_part[faces], face_label[faces], face_frame[faces], edge_ix[edge_ids])
+    counts = _local_invalid(F, sub, j, faces, vertex_mask)
+    if max_invalid is not None and sum(counts[:3]) > max_invalid:
+        return counts + (None,)
+    lay = j["layout"]
+    # a boundary without an edge at vertex_mask is the same in both labelings: not walked
+    ev = sub.edges[lay.sep_edges]
+    which = np.zeros(lay.n_boundaries, dtype=bool)
+    which[lay.sep_boundary[vertex_mask[ev[:, 0]] | vertex_mask[ev[:, 1]]]] = True
+    tp = _turning_points(V, sub, lay, face_frame[faces], j["boundary_axis"], tau, which)
+    return counts + (len(tp),)
+
+
+def _boundary_axes(lay):
+    """(b,) int64 axis 0..2 of each within-part boundary, -1 between opposite labels, -2 between
+    parts (the ``boundary_axis`` of :class:`Validity`)."""
+    ca, cb = lay.boundary_charts[:, 0], lay.boundary_charts[:, 1]
+    la, lb = lay.chart_label[ca], lay.chart_label[cb]
+    same_part = lay.chart_part[ca] == lay.chart_part[cb]
+    opposite = same_part & (la // 2 == lb // 2)
+    return np.where(same_part, np.where(opposite, -1, 3 - la // 2 - lb // 2), -2)
 
 
 def check_validity(V, F, face_part, face_label, face_frame, topology=None, turning=True,

@@ -26,29 +26,37 @@ def run_labeling(intake, parts, frames, params, progress):
     core.types.LabelingResult; an invalid labeling is a result too (its report says what
     is invalid), the base-mesh stage refuses it.
     """
-    from core.segmentation.labeling import (face_normals, hbecvt_labeling, mean_label_angle,
-                                            nearest_direction_labels)
+    from core.segmentation.charts import build_topology
+    from core.segmentation.labeling import (face_colouring, face_normals, hbecvt_labeling,
+                                            mean_label_angle, nearest_direction_labels,
+                                            part_neighbours)
     from core.segmentation.monotone import straighten_boundaries
     from core.segmentation.repair import repair_labeling
     from core.segmentation.validity import check_validity
 
     mesh, face_part, field = intake.target, parts.face_part, frames.frame_field
+    # one edge table and one colouring serve the sweeps, the repair and the monotonicity pass
+    topology = build_topology(mesh.faces, len(mesh.vertices))
+    colour = face_colouring(part_neighbours(topology, face_part))
     labels, info = hbecvt_labeling(mesh.vertices, mesh.faces, face_part, field.face_frame,
                                    field.face_interface_axis, lam=params.lam,
-                                   penalty=params.penalty, max_sweeps=params.max_sweeps)
+                                   penalty=params.penalty, max_sweeps=params.max_sweeps,
+                                   topology=topology, colour=colour)
     progress.report("labeling", 0.5)
     progress.check_cancel()
     repair_report = straighten_report = None
     if params.repair:
         labels, repair_report = repair_labeling(mesh.vertices, mesh.faces, face_part, labels,
                                                 field.face_frame, field.face_interface_axis,
-                                                lam=params.lam, penalty=params.penalty)
+                                                lam=params.lam, penalty=params.penalty,
+                                                topology=topology, colour=colour)
         progress.report("labeling", 0.8)
         progress.check_cancel()
         labels, straighten_report, validity = straighten_boundaries(
-            mesh.vertices, mesh.faces, face_part, labels, field.face_frame)
+            mesh.vertices, mesh.faces, face_part, labels, field.face_frame, topology=topology)
     else:
-        validity = check_validity(mesh.vertices, mesh.faces, face_part, labels, field.face_frame)
+        validity = check_validity(mesh.vertices, mesh.faces, face_part, labels, field.face_frame,
+                                  topology)
     normals = face_normals(mesh.vertices, mesh.faces)
     nearest = nearest_direction_labels(normals, field.face_frame)
     v = validity.report
