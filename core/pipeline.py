@@ -60,10 +60,10 @@ def stage_intake(state, params):
     else:
         path = state["input_path"]
         vertices, faces = read_triangle_soup(path)
+    factor = UNIT_TO_MM[params.units]
     mesh, summary = validate_target(vertices, faces, components=params.components,
                                     check_self_intersections=params.check_self_intersections,
-                                    name=str(path))
-    factor = UNIT_TO_MM[params.units]
+                                    name=str(path), unit_to_mm=factor)
     mesh = TriMesh(mesh.vertices * factor, mesh.faces)
     report = {"file": str(path), "units": params.units, "unit_to_mm": factor, **summary}
     message = "; ".join(summary["warnings"])
@@ -71,7 +71,7 @@ def stage_intake(state, params):
 
 
 def stage_parts(state, params):
-    from core.segmentation.parts import parts_from_user, single_part, skeleton_segmentation
+    from core.segmentation.parts import single_part, skeleton_segmentation
 
     mesh = state["target"]
     if params.parts == "single":
@@ -84,7 +84,7 @@ def stage_parts(state, params):
         return {"face_part": face_part,
                 "report": {"mode": "single", "parts": int(face_part.max()) + 1}}
     if params.parts == "file":
-        face_part = parts_from_user(mesh, read_parts_file(params.parts_file))
+        face_part = parts_from_file(mesh, params.parts_file)
         return {"face_part": face_part,
                 "report": {"mode": "file", "file": params.parts_file,
                            "parts": int(face_part.max()) + 1}}
@@ -93,7 +93,11 @@ def stage_parts(state, params):
 
 
 def read_parts_file(path):
-    """The user's part specification from a JSON file (see ``ReconstructionParams.parts_file``)."""
+    """The user's part specification from a JSON file (see ``ReconstructionParams.parts_file``).
+
+    Returns ``(kind, value)``: ``kind`` is the file's one key, ``face_part``, ``groups`` or
+    ``planes``; ``value`` its (m,) array or list.
+    """
     import json
 
     from core.errors import ParameterError
@@ -108,7 +112,24 @@ def read_parts_file(path):
         raise ParameterError(f"the parts file {path} must hold exactly one of the keys "
                              "'face_part', 'groups' or 'planes'")
     value = data[kinds[0]]
-    return np.asarray(value) if kinds[0] == "face_part" else value
+    if kinds[0] != "face_part" and not isinstance(value, list):
+        raise ParameterError(f"the parts file {path}: '{kinds[0]}' must be a list, got {value!r}")
+    return kinds[0], np.asarray(value) if kinds[0] == "face_part" else value
+
+
+def parts_from_file(mesh, path):
+    """(m,) int32 face_part of ``mesh`` from the parts file ``path``; a ParameterError names
+    the file."""
+    from core.errors import ParameterError
+    from core.segmentation.parts import parts_from_face_groups, parts_from_planes, validate_face_part
+
+    kind, value = read_parts_file(path)
+    build = {"face_part": validate_face_part, "groups": parts_from_face_groups,
+             "planes": parts_from_planes}[kind]
+    try:
+        return build(mesh, value)
+    except ParameterError as exc:
+        raise ParameterError(f"the parts file {path}: {exc}") from None
 
 
 def stage_frames(state, params):
@@ -376,7 +397,7 @@ def reconstruct(input_path, params=None, progress=NO_PROGRESS, stop_after="solid
     state = {"input_path": str(input_path), "params": params}
     report = {"parameters": params.to_dict(), "stages": {}}
     state, report, failed = run_stages(state, CORE_STAGES[:last + 1], params, progress, report)
-    report["input"] = report.pop("intake")
+    report["input"] = report.pop("intake", {"file": str(input_path)})
     if "basemesh" in report:
         report["base_mesh"] = report.pop("basemesh")
     report["total_seconds"] = round(time.perf_counter() - started, 4)

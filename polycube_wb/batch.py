@@ -164,7 +164,11 @@ def load_overrides(path):
 
 
 def plan_jobs(sources, out_dir, params, overrides=None, timeout=None):
-    """One MeshJob per source; output names are the file stems, made unique with ``-2``, ``-3``."""
+    """One MeshJob per source; output names are the file stems, made unique with ``-2``, ``-3``.
+
+    Raises ParameterError naming the first mesh whose parameters (``params`` with its
+    overrides) are out of range, so a bad value stops the batch before any mesh runs.
+    """
     out_dir = os.path.abspath(out_dir)
     jobs, used = [], set()
     for source in sources:
@@ -178,6 +182,10 @@ def plan_jobs(sources, out_dir, params, overrides=None, timeout=None):
         for pattern, values in (overrides or {}).items():
             if fnmatch.fnmatch(os.path.basename(source), pattern):
                 merged.update(values)
+        try:
+            ReconstructionParams(**merged)
+        except ParameterError as exc:
+            raise ParameterError(f"parameters of {source}: {exc}") from None
         jobs.append(MeshJob(source, name, out_dir, merged, timeout))
     return jobs
 
@@ -372,17 +380,17 @@ def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, time
     sources = collect_inputs(inputs)
     overrides = load_overrides(overrides_path) if overrides_path else None
     out_dir = os.path.abspath(out_dir)
-    if not os.path.isdir(out_dir):
-        if not os.path.isdir(os.path.dirname(out_dir)):
-            raise ParameterError(f"cannot create the output folder {out_dir}: its parent "
-                                 f"does not exist")
-        os.mkdir(out_dir)
+    if not os.path.isdir(out_dir) and not os.path.isdir(os.path.dirname(out_dir)):
+        raise ParameterError(f"cannot create the output folder {out_dir}: its parent "
+                             f"does not exist")
     for source in sources:
         if os.path.dirname(source) == out_dir and \
                 source.endswith(tuple(OUTPUT_SUFFIXES.values())):
             raise ParameterError(f"input {source} is in the output folder and could be "
                                  f"overwritten; choose another output folder")
     jobs_list = plan_jobs(sources, out_dir, params, overrides, timeout)
+    if not os.path.isdir(out_dir):
+        os.mkdir(out_dir)
     bar = ProgressBar() if progress else None
     rows = run_batch(jobs_list, jobs, scheduler, force, bar.update if bar else None)
     if bar:
