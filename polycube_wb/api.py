@@ -42,7 +42,9 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
 
     Raises
     ------
-    PolycubeInputError for bad input (nothing is written);
+    PolycubeInputError for bad input (nothing is written): a bad file or parameter, an
+    output over an input (the mesh or the parts file), two outputs on one path, or an
+    output that no stage up to ``stop_after`` makes;
     StageNotAvailableError when an output needs a stage that is not built yet (the report
     and the outputs that exist are written first; the exception's ``report`` holds it).
     """
