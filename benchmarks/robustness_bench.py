@@ -13,8 +13,9 @@ through every stage in a process of its own: intake (read + validate), parts, fr
 labeling, base mesh, fit, patches and the FreeCAD solid with its STEP file, as far as the
 stages go. Per stage the wall time and the peak resident memory of the process while the
 stage ran (sampled every 20 ms from ``/proc/self/status``) are recorded. Writes
-``ROBUSTNESS_RESULTS.md`` and ``robustness_results.json`` into ``--out``. The machine is
-a shared 2-core box: the load average before each case is recorded with it.
+``ROBUSTNESS_RESULTS.md`` and ``robustness_results.json`` into ``--out``, keeping the
+cases of an earlier run that ``--cases`` leaves out. The machine is a shared 2-core box:
+the load average before each case is recorded with it.
 """
 import argparse
 import json
@@ -175,6 +176,17 @@ def _run_child(name, fit_iterations, timeout):
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+def _merged(path, results):
+    """``results`` plus the cases of an earlier run (``path``) not run this time, in the
+    order of :data:`CASES`."""
+    by_name = {}
+    if os.path.isfile(path):
+        with open(path, encoding="utf-8") as handle:
+            by_name = {case["case"]: case for case in json.load(handle) if case["case"] in CASES}
+    by_name.update({case["case"]: case for case in results})
+    return [by_name[name] for name in CASES if name in by_name]
+
+
 def _finished_stages(stderr):
     entries = []
     for line in stderr.splitlines():
@@ -245,6 +257,7 @@ def main(argv=None):
         print(json.dumps(results[-1])[:600], flush=True)
     from core.output_files import write_json_atomic, write_text_atomic
 
+    results = _merged(os.path.join(args.out, "robustness_results.json"), results)
     write_json_atomic(os.path.join(args.out, "robustness_results.json"), results)
     write_text_atomic(os.path.join(args.out, "ROBUSTNESS_RESULTS.md"),
                       markdown(results, args.fit_iterations), what="results")
