@@ -38,10 +38,12 @@ class Case:
     subprocess: bool = False
 
 
-def intake(name, file, data, codes=(2,), words=(), extra=(), stop="intake", sub=False):
-    """A ``reconstruct`` case on one input file that writes a report over an existing one."""
+def intake(name, file, data, codes=(2,), words=(), extra=(), stop="intake", sub=False,
+           more_files=None):
+    """A ``reconstruct`` case on one input file (plus ``more_files``, name -> bytes) that
+    writes a report over an existing one."""
     argv = ("reconstruct", "{in}/" + file, "--stop-after", stop, "--report", "{old}/r.json") + tuple(extra)
-    return Case(name, argv, {file: data}, codes, words, sub)
+    return Case(name, argv, {file: data, **(more_files or {})}, codes, words, sub)
 
 
 SHAPES = {
@@ -301,10 +303,9 @@ def parts_file_cases():
         "binary": bytes(range(256)),
     }
     cases = [intake(f"parts-file-{name}", "b.stl", box, (2,), ("parts file",),
-                    extra=("--parts-file", "{in}/parts.json"), stop="parts")
-             for name in texts]
-    cases = [Case(c.name, c.argv, {**c.files, "parts.json": texts[c.name[len("parts-file-"):]]},
-                  c.codes, c.words) for c in cases]
+                    extra=("--parts-file", "{in}/parts.json"), stop="parts",
+                    more_files={"parts.json": text})
+             for name, text in texts.items()]
     cases.append(intake("parts-file-missing", "b.stl", box, (2,), ("cannot read the parts file",),
                         extra=("--parts-file", "{in}/none.json"), stop="parts"))
     cases.append(Case("parts-file-is-the-report",
