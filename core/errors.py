@@ -23,7 +23,8 @@ class InvalidMeshError(PolycubeInputError):
     reason : str
         Machine-readable kind: ``empty``, ``unreadable``, ``format``, ``open``,
         ``non_manifold``, ``orientation``, ``degenerate_faces``, ``duplicate_faces``,
-        ``non_finite``, ``self_intersecting``, ``multiple_components``.
+        ``non_finite``, ``self_intersecting``, ``multiple_components``,
+        ``coordinate_range``, ``unused_vertices``.
     count : int
         How many offending items were found.
     examples : list

@@ -30,13 +30,14 @@ def check_output_path(path, inputs=(), what="output"):
     if os.path.isdir(target):
         raise ParameterError(f"cannot write the {what} {target}: it is a folder")
     for source in inputs:
-        if source is not None and _same_file(target, source):
+        if source is not None and same_file(target, source):
             raise ParameterError(f"refusing to overwrite the input file {os.fspath(source)} "
                                  f"with the {what} {target}")
     return target
 
 
-def _same_file(a, b):
+def same_file(a, b):
+    """True if paths ``a`` and ``b`` name one file (the same path, a link to it, or a hard link)."""
     a, b = os.path.realpath(os.fspath(a)), os.path.realpath(os.fspath(b))
     if a == b:
         return True

@@ -39,7 +39,8 @@ def check_polymesh(mesh):
     ------
     InvalidMeshError
         with ``reason`` one of ``empty`` (no faces or vertices), ``format`` (bad
-        offsets or vertex indices out of range), ``non_finite`` (NaN/inf
+        offsets or vertex indices out of range), ``unused_vertices`` (a vertex in no
+        face), ``non_finite`` (NaN/inf
         coordinates), ``degenerate_faces`` (fewer than 3 corners, a repeated corner or
         zero area), ``open`` (an edge with one face), ``non_manifold`` (an edge with
         more than two faces, or a vertex whose faces form several fans),
@@ -117,6 +118,10 @@ def check_polymesh(mesh):
         bad = fan_count > 1
         _fail("has non-manifold vertices (faces meet only at the vertex)", "non_manifold",
               bad, np.flatnonzero(bad))
+    unused = fan_count == 0
+    if unused.any():
+        _fail("has vertices used by no face (a vertex of the limit surface needs its faces)",
+              "unused_vertices", unused, np.flatnonzero(unused))
     volume = polymesh_volume(V, fv, fo)
     if volume < 0:
         raise InvalidMeshError(
@@ -135,22 +140,68 @@ def check_export_range(mesh):
     Raises
     ------
     InvalidMeshError
-        ``coordinate_range`` when a coordinate exceeds :data:`MAX_EXPORT_COORDINATE` in
-        magnitude (the message gives the largest and a vertex having it) or the
-        bounding-box diagonal is below :data:`MIN_EXPORT_DIAGONAL`.
+        ``coordinate_range``, see :func:`check_coordinate_range`.
     """
-    V = np.asarray(mesh.vertices, dtype=np.float64)
-    size = np.abs(V).max(axis=1)
+    check_coordinate_range(mesh.vertices, "base mesh", "scale or move the cage closer to the origin")
+
+
+def check_coordinate_range(vertices, what, hint, unit_to_mm=1.0):
+    """Check that coordinates suit a B-rep with a 1e-7 mm tolerance.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64, finite, in the file's units.
+    what : str, what the coordinates belong to, starts the message (``"base mesh"``).
+    hint : str, what to do about it, ends the message.
+    unit_to_mm : float, millimetres per unit of ``vertices``.
+
+    Raises
+    ------
+    InvalidMeshError
+        ``coordinate_range`` when a coordinate exceeds :data:`MAX_EXPORT_COORDINATE` mm in
+        magnitude (the message gives the largest and a vertex having it) or the
+        bounding-box diagonal is below :data:`MIN_EXPORT_DIAGONAL` mm.
+    """
+    V = np.asarray(vertices, dtype=np.float64)
+    raw = np.abs(V).max(axis=1)
+    with np.errstate(over="ignore"):
+        size = raw * unit_to_mm
     if size.max() > MAX_EXPORT_COORDINATE:
         far = np.flatnonzero(size > MAX_EXPORT_COORDINATE)
+        scale = " mm" if unit_to_mm == 1.0 else f" x {unit_to_mm:g} = {size.max():.3g} mm"
         raise InvalidMeshError(
-            f"base mesh coordinates reach {size.max():.3g} mm ({len(far)} vertices beyond "
+            f"{what} coordinates reach {raw.max():.3g}{scale} ({len(far)} vertices beyond "
             f"+-{MAX_EXPORT_COORDINATE:.0e} mm, e.g. vertex {int(np.argmax(size))}): a B-rep with "
-            "tolerance 1e-07 mm cannot resolve them; scale or move the cage closer to the origin",
+            f"tolerance 1e-07 mm cannot resolve them; {hint}",
             reason="coordinate_range", count=len(far), examples=far[:5].tolist())
-    diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))) * unit_to_mm
     if diagonal < MIN_EXPORT_DIAGONAL:
         raise InvalidMeshError(
-            f"base mesh is {diagonal:.3g} mm across (bounding-box diagonal), less than "
-            f"{MIN_EXPORT_DIAGONAL:g} mm: too small for a B-rep with tolerance 1e-07 mm; scale it up",
+            f"{what} is {diagonal:.3g} mm across (bounding-box diagonal), less than "
+            f"{MIN_EXPORT_DIAGONAL:g} mm: too small for a B-rep with tolerance 1e-07 mm; {hint}",
             reason="coordinate_range", count=1, examples=[0])
+
+
+def check_single_shell(mesh):
+    """Check that a closed cage is one connected surface (a solid needs one shell).
+
+    Parameters
+    ----------
+    mesh : core.types.PolyMesh that passed :func:`check_polymesh`.
+
+    Raises
+    ------
+    InvalidMeshError
+        ``multiple_components`` naming how many pieces and a face of the second one.
+    """
+    fv = np.asarray(mesh.face_vertices, dtype=np.int64)
+    face = np.repeat(np.arange(mesh.n_faces), np.diff(np.asarray(mesh.face_offsets)))
+    n = len(mesh.vertices)
+    graph = sp.coo_matrix((np.ones(len(fv)), (face, fv)), shape=(mesh.n_faces, n)).tocsr()
+    count, piece = connected_components(graph @ graph.T, directed=False)
+    if count > 1:
+        f = int(np.flatnonzero(piece != piece[0])[0])
+        raise InvalidMeshError(
+            f"base mesh has {count} separate components (faces sharing no vertex), e.g. face "
+            f"{f} is not connected to face 0; a STEP solid needs one closed shell",
+            reason="multiple_components", count=count, examples=[f])

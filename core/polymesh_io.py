@@ -52,7 +52,7 @@ def parse_obj(text, name="OBJ"):
                                    reason="format", count=1, examples=[lineno]) from None
     if not verts or not faces:
         raise InvalidMeshError(f"{name} has {len(verts)} vertices and {len(faces)} faces; "
-                               "a base mesh needs both", reason="empty")
+                               "a mesh needs both", reason="empty")
     return PolyMesh.from_faces(np.array(verts, dtype=np.float64), faces)
 
 

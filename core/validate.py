@@ -13,6 +13,7 @@ from scipy.sparse.csgraph import connected_components
 from core.errors import InvalidMeshError, ParameterError
 from core.geometry import face_areas, triangle_signed_volumes
 from core.mesh_topology import directed_edges, genus_of, unique_edges
+from core.polymesh_checks import check_coordinate_range
 from core.self_intersection import find_self_intersections
 from core.tolerances import MERGE, ZERO_AREA
 from core.types import TriMesh
@@ -254,7 +255,7 @@ def select_components(vertices, faces, policy, name="mesh"):
 
 
 def validate_target(vertices, faces, components="largest", check_self_intersections=True,
-                    name="mesh"):
+                    name="mesh", unit_to_mm=1.0):
     """Validate raw triangle data and return a clean closed mesh plus a summary.
 
     Parameters
@@ -267,6 +268,9 @@ def validate_target(vertices, faces, components="largest", check_self_intersecti
         Run the triangle-triangle intersection test (on by default).
     name : str
         Used in error messages (usually the file name).
+    unit_to_mm : float
+        Millimetres per unit of ``vertices``: the coordinates in millimetres must suit a
+        B-rep (``core.polymesh_checks.check_coordinate_range``).
 
     Returns
     -------
@@ -285,9 +289,15 @@ def validate_target(vertices, faces, components="largest", check_self_intersecti
         raise InvalidMeshError(f"{name}: the mesh has no faces", reason="empty")
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise InvalidMeshError(f"{name}: face indices outside 0..{len(vertices) - 1}", reason="unreadable")
-    check_finite(vertices[np.unique(faces)], name)
+    n_input_vertices = len(vertices)
+    used, faces = np.unique(faces, return_inverse=True)
+    vertices, faces = vertices[used], faces.reshape(-1, 3)
+    check_finite(vertices, name)
+    check_coordinate_range(vertices, f"{name}:", "scale the mesh or give its --units",
+                           unit_to_mm)
     warnings = []
-    vertices, faces, merged = merge_identical_vertices(vertices, faces)
+    vertices, faces, _ = merge_identical_vertices(vertices, faces)
+    merged = n_input_vertices - len(vertices)
     check_degenerate_faces(vertices, faces, name)
     check_duplicate_faces(vertices, faces, name)
     check_edges(vertices, faces, name)

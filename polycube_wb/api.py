@@ -39,15 +39,16 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
 
     Raises
     ------
-    PolycubeInputError for bad input (nothing is written);
+    PolycubeInputError for bad input (nothing is written): a bad file or parameter, an
+    output over an input (the mesh or the parts file), two outputs on one path, or an
+    output that no stage up to ``stop_after`` makes;
     StageNotAvailableError when an output needs a stage that is not built yet (the report
     and the outputs that exist are written first; the exception's ``report`` holds it).
     """
-    inputs = (mesh_path,)
-    for path, what in ((step_path, "STEP file"), (base_mesh_path, "base mesh"),
-                       (report_path, "report"), (labels_path, "labels file")):
-        if path is not None:
-            check_output_path(path, inputs, what)
+    inputs = (mesh_path,) + ((params["parts_file"],) if params.get("parts_file") else ())
+    _check_outputs(((step_path, "STEP file", "solid"), (base_mesh_path, "base mesh", "basemesh"),
+                    (report_path, "report", "intake"), (labels_path, "labels file", "labeling")),
+                   inputs, stop_after)
     result = run_pipeline(mesh_path, params, progress, stop_after)
     report, state = result.report, result.state
     outputs = {}
@@ -106,6 +107,29 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
     return report
 
 
+def _check_outputs(outputs, inputs, stop_after):
+    """ParameterError unless every requested output can be written and is made by a stage
+    up to ``stop_after``.
+
+    outputs : ``(path or None, what, first --stop-after choice that makes it)`` triples.
+    """
+    from core.errors import ParameterError
+    from core.output_files import same_file
+
+    wanted = [(path, what, stage) for path, what, stage in outputs if path is not None]
+    for index, (path, what, stage) in enumerate(wanted):
+        check_output_path(path, inputs, what)
+        if stop_after in STOP_AFTER_CHOICES and \
+                STOP_AFTER_CHOICES.index(stop_after) < STOP_AFTER_CHOICES.index(stage):
+            raise ParameterError(f"cannot write the {what} {os.fspath(path)}: the run stops after "
+                                 f"'{stop_after}' (--stop-after), before the '{stage}' stage "
+                                 f"that makes it")
+        for other, other_what, _ in wanted[:index]:
+            if same_file(path, other):
+                raise ParameterError(f"the {other_what} and the {what} are the same file "
+                                     f"{os.fspath(path)}; give each output its own path")
+
+
 def _first_unavailable(report):
     for name, entry in report["stages"].items():
         if entry["status"] in ("not_available", "failed"):
@@ -158,7 +182,7 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT
     (Part.Solid, dict report)
     """
     from core.export.bspline import limit_surface_patches
-    from core.polymesh_checks import check_export_range, check_polymesh
+    from core.polymesh_checks import check_export_range, check_polymesh, check_single_shell
     from core.polymesh_io import read_polymesh
     from core.subdivision.limit import limit_volume
     from polycube_wb.brep import make_solid
@@ -178,6 +202,7 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT
     clock = time.perf_counter()
     base = read_polymesh(base_mesh_path)
     check_polymesh(base)
+    check_single_shell(base)
     check_export_range(base)
     _refuse_self_intersections(base, base_mesh_path)
     stages["intake"] = _ok(clock)

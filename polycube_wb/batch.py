@@ -174,7 +174,11 @@ def load_overrides(path):
 
 
 def plan_jobs(sources, out_dir, params, overrides=None, timeout=None, memory_mb=None):
-    """One MeshJob per source; output names are the file stems, made unique with ``-2``, ``-3``."""
+    """One MeshJob per source; output names are the file stems, made unique with ``-2``, ``-3``.
+
+    Raises ParameterError naming the first mesh whose parameters (``params`` with its
+    overrides) are out of range, so a bad value stops the batch before any mesh runs.
+    """
     out_dir = os.path.abspath(out_dir)
     jobs, used = [], set()
     for source in sources:
@@ -188,6 +192,10 @@ def plan_jobs(sources, out_dir, params, overrides=None, timeout=None, memory_mb=
         for pattern, values in (overrides or {}).items():
             if fnmatch.fnmatch(os.path.basename(source), pattern):
                 merged.update(values)
+        try:
+            ReconstructionParams(**merged)
+        except ParameterError as exc:
+            raise ParameterError(f"parameters of {source}: {exc}") from None
         jobs.append(MeshJob(source, name, out_dir, merged, timeout, memory_mb))
     return jobs
 
@@ -448,11 +456,9 @@ def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, time
     sources = collect_inputs(inputs)
     overrides = load_overrides(overrides_path) if overrides_path else None
     out_dir = os.path.abspath(out_dir)
-    if not os.path.isdir(out_dir):
-        if not os.path.isdir(os.path.dirname(out_dir)):
-            raise ParameterError(f"cannot create the output folder {out_dir}: its parent "
-                                 f"does not exist")
-        os.mkdir(out_dir)
+    if not os.path.isdir(out_dir) and not os.path.isdir(os.path.dirname(out_dir)):
+        raise ParameterError(f"cannot create the output folder {out_dir}: its parent "
+                             f"does not exist")
     for source in sources:
         if os.path.dirname(source) == out_dir and \
                 source.endswith(tuple(OUTPUT_SUFFIXES.values())):
@@ -461,6 +467,8 @@ def run_batch_command(inputs, out_dir, params, overrides_path=None, jobs=1, time
     if memory_mb is None:
         memory_mb = AUTO_MEMORY if scheduler is not None else default_memory_limit_mb(jobs)
     jobs_list = plan_jobs(sources, out_dir, params, overrides, timeout, memory_mb or None)
+    if not os.path.isdir(out_dir):
+        os.mkdir(out_dir)
     rows = run_batch(jobs_list, jobs, scheduler, force, progress.update if progress else None,
                      progress.row if progress else None)
     if progress:

@@ -254,9 +254,11 @@ def _subd_to_step(args):
 
 
 def _check(args):
-    from core.output_files import write_json_atomic
+    from core.output_files import check_output_path, write_json_atomic
     from polycube_wb.api import check
 
+    if args.report:
+        check_output_path(args.report, (args.target, args.result), "report")
     result = check(args.target, args.result)
     if args.report:
         write_json_atomic(args.report, result, (args.target, args.result))
@@ -268,7 +270,7 @@ def _batch(args):
     from polycube_wb.batch import run_batch_command
 
     for value, what in ((args.jobs, "--jobs"), (args.timeout, "--timeout")):
-        if value is not None and value <= 0:
+        if value is not None and not value > 0:
             raise PolycubeInputError(f"{what} must be positive, got {value:g}")
     if args.memory_limit is not None and args.memory_limit < 0:
         raise PolycubeInputError(f"--memory-limit must be positive (MiB) or 0 for no cap, "

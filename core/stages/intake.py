@@ -34,10 +34,10 @@ def run_intake(source, params, progress):
     else:
         vertices, faces = read_triangle_soup(source.path)
     progress.check_cancel()
+    factor = UNIT_TO_MM[params.units]
     mesh, summary = validate_target(vertices, faces, components=params.components,
                                     check_self_intersections=params.check_self_intersections,
-                                    name=str(source.path))
-    factor = UNIT_TO_MM[params.units]
+                                    name=str(source.path), unit_to_mm=factor)
     report = {"file": str(source.path), "units": params.units, "unit_to_mm": factor, **summary}
     return IntakeResult(target=TriMesh(mesh.vertices * factor, mesh.faces),
                         genus=int(summary["genus"]), report=report,

@@ -23,7 +23,7 @@ def run_parts(intake, params, progress):
     ``components="all"``) is its own part.
     """
     from core.mesh_topology import connected_face_components
-    from core.segmentation.parts import parts_from_user, single_part, skeleton_segmentation
+    from core.segmentation.parts import single_part, skeleton_segmentation
 
     mesh = intake.target
     if params.parts == "single":
@@ -32,7 +32,7 @@ def run_parts(intake, params, progress):
             face_part = single_part(mesh)
         return PartsResult(face_part, {"mode": "single", "parts": int(face_part.max()) + 1})
     if params.parts == "file":
-        face_part = parts_from_user(mesh, read_parts_file(params.parts_file))
+        face_part = parts_from_file(mesh, params.parts_file)
         return PartsResult(face_part, {"mode": "file", "file": params.parts_file,
                                        "parts": int(face_part.max()) + 1})
     result = skeleton_segmentation(mesh)
@@ -44,11 +44,13 @@ def read_parts_file(path):
 
     Returns
     -------
-    (m,) array for ``face_part``, else the ``groups`` or ``planes`` list as read.
+    ``(kind, value)``: ``kind`` is the file's one key, ``face_part``, ``groups`` or
+    ``planes``; ``value`` its (m,) array or list.
 
     Raises
     ------
-    ParameterError when the file cannot be read or holds not exactly one of the keys.
+    ParameterError when the file cannot be read, holds not exactly one of the keys, or a
+    ``groups`` / ``planes`` value that is not a list.
     """
     try:
         with open(path, encoding="utf-8") as handle:
@@ -60,4 +62,20 @@ def read_parts_file(path):
         raise ParameterError(f"the parts file {path} must hold exactly one of the keys "
                              "'face_part', 'groups' or 'planes'")
     value = data[kinds[0]]
-    return np.asarray(value) if kinds[0] == "face_part" else value
+    if kinds[0] != "face_part" and not isinstance(value, list):
+        raise ParameterError(f"the parts file {path}: '{kinds[0]}' must be a list, got {value!r}")
+    return kinds[0], np.asarray(value) if kinds[0] == "face_part" else value
+
+
+def parts_from_file(mesh, path):
+    """(m,) int32 face_part of ``mesh`` from the parts file ``path``; a ParameterError names
+    the file."""
+    from core.segmentation.parts import parts_from_face_groups, parts_from_planes, validate_face_part
+
+    kind, value = read_parts_file(path)
+    build = {"face_part": validate_face_part, "groups": parts_from_face_groups,
+             "planes": parts_from_planes}[kind]
+    try:
+        return build(mesh, value)
+    except ParameterError as exc:
+        raise ParameterError(f"the parts file {path}: {exc}") from None

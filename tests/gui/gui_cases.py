@@ -10,6 +10,7 @@ map, a cage edit, undo, save / reopen without the source file. Screenshots go to
 """
 import os
 import shutil
+import subprocess
 import tempfile
 import time
 import unittest
@@ -503,3 +504,51 @@ class ReconstructAllTest(unittest.TestCase, _ScreenshotAssertions):
             reset_defaults()
             stubs.restore()
             FreeCAD.closeDocument(doc.Name)
+
+
+class EntryPointTest(unittest.TestCase):
+    """The GUI gives the command line's result: the same fitted base-mesh bytes and a
+    solid with the poles and volume of the command line's STEP solid (the issue saw two
+    different ``BoundBox`` values: the box of a displayed, hence tessellated, shape comes
+    from its triangulation, so it is no measure of the geometry and is not compared)."""
+
+    FIT = 3
+    TOLERANCE = 1e-9
+    """Relative to the diagonal (poles) or to the volume: STEP text and OpenCascade round-off."""
+
+    def test_gui_gives_the_command_line_base_mesh_and_solid(self):
+        import numpy as np
+        import Part
+
+        from polycube_wb import api
+
+        python = os.path.join(REPO, ".venv", "bin", "python")
+        if not os.path.isfile(python):
+            self.skipTest("no .venv to run the command line with (make setup)")
+        tmp = tempfile.mkdtemp(prefix="polycube_entry_")
+        doc = FreeCAD.newDocument("PolycubeEntryPoints")
+        try:
+            paths = {name: os.path.join(tmp, name) for name in ("cli.obj", "cli.step", "gui.obj")}
+            done = subprocess.run([python, "-m", "polycube_wb", "reconstruct", SAMPLE_MESH,
+                                   "--fit-iterations", str(self.FIT), "-o", paths["cli.step"],
+                                   "--base-mesh", paths["cli.obj"]], cwd=REPO,
+                                  capture_output=True, text=True, timeout=900)
+            self.assertEqual(done.returncode, 0, done.stderr)
+            api.reconstruct_to_step(SAMPLE_MESH, None, paths["gui.obj"], None, None, "fit",
+                                    fit_iterations=self.FIT)
+            with open(paths["cli.obj"], "rb") as cli, open(paths["gui.obj"], "rb") as gui:
+                self.assertEqual(cli.read(), gui.read(), "the base meshes differ")
+            solid = api.reconstruct(doc, SAMPLE_MESH, fit_iterations=self.FIT).Shape
+            FreeCADGui.updateGui()
+            step = Part.read(paths["cli.step"])
+
+            def poles(shape):
+                return np.array(sorted(tuple(p) for face in shape.Faces
+                                       for row in face.Surface.getPoles() for p in row))
+
+            gap = np.abs(poles(solid) - poles(step)).max()
+            self.assertLessEqual(gap, self.TOLERANCE * step.BoundBox.DiagonalLength)
+            self.assertLessEqual(abs(solid.Volume - step.Volume), self.TOLERANCE * step.Volume)
+        finally:
+            FreeCAD.closeDocument(doc.Name)
+            shutil.rmtree(tmp, ignore_errors=True)
