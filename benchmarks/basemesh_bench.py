@@ -135,7 +135,8 @@ def markdown(rows, meta):
              f"- Date: {meta['date']}; commit {meta['commit']}; load (1 min) at start "
              f"{meta['load']}; every case in its own process (timeout {meta['timeout']} s)."
              + (f" Rows of meshes not re-run are from {meta['updated_from']['date']}, commit "
-                f"{meta['updated_from']['commit']}." if "updated_from" in meta else ""),
+                f"{meta['updated_from']['commit']}." if "updated_from" in meta else "")
+             + (f" {meta['note']}." if "note" in meta else ""),
              "- Budget: `--target-faces 300` (met when within 25%); genus is the base mesh's "
              "against the target's; inverted: base faces whose limit normal points more than 90 "
              "degrees from the target's at the closest point; crossings: intersecting triangle "

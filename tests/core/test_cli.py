@@ -219,8 +219,8 @@ def test_a_labeling_that_cannot_be_quantized_exits_1_naming_the_charts_or_falls_
     assert report["stages"]["fit"]["status"] == "skipped"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"] and digest(mesh) == before
     # the default route falls back to the paired decimation and says why
-    result = run("reconstruct", mesh, "-o", tmp_path / "out.step", "--report", tmp_path / "a.json",
-                 "--parts", "auto", "--stop-after", "basemesh")
+    result = run("reconstruct", mesh, "--report", tmp_path / "a.json", "--parts", "auto",
+                 "--stop-after", "basemesh")
     assert result.returncode == 0, result.stderr
     base = json.loads((tmp_path / "a.json").read_text())["base_mesh"]
     assert base["method"] == "paired decimation" and "charts" in base["fallback_reason"]
