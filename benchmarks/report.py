@@ -96,7 +96,8 @@ def summarise(results):
 
 
 TOPIC_RESULTS = (
-    ("Base mesh: quantized layouts on every dev mesh, cages over targets, whole pipeline to STEP",
+    ("Base mesh: quantized layouts and the paired-decimation fallback on every dev mesh, cages "
+     "over targets, whole pipeline to STEP",
      "BASEMESH_RESULTS.md", "benchmarks/basemesh_bench.py"),
     ("Labeling: validity by the independent check, frames chosen, angles, turning points",
      "LABELING_RESULTS.md", "benchmarks/labeling_bench.py"),
@@ -108,6 +109,12 @@ TOPIC_RESULTS = (
      "benchmarks/workbench_bench.py"),
     ("Batch: all dev meshes with --jobs 1 and --jobs 2", "BATCH_RESULTS.md",
      "benchmarks/batch_bench.py"),
+    ("Batch memory: the summary's peak against GNU time, the per-mesh cap", "MEMORY_RESULTS.md",
+     "benchmarks/memory_bench.py"),
+    ("Robustness: a million triangles, time and peak memory per stage", "ROBUSTNESS_RESULTS.md",
+     "benchmarks/robustness_bench.py"),
+    ("Structure: typed stage results against the previous runner, same reports",
+     "STRUCTURE_RESULTS.md", "benchmarks/structure_bench.py"),
 )
 """Topic result files beside RESULTS.md: (title, file name, script)."""
 
@@ -125,8 +132,8 @@ def _current_pipeline_table():
              f"{data['meta']['date']}, commit {data['meta']['commit']})", "",
              "Distances are symmetric, fractions of the bounding-box diagonal, by the independent "
              "`../shared/tools/evaluate.py` on the STEP file (run for the meshes listed there).", "",
-             "| mesh | parts | base mesh | faces | genus (target) | inverted faces | STEP valid | "
-             "mean dist % | max dist % |", "|---|---|---|---|---|---|---|---|---|"]
+             "| mesh | parts | base mesh | route | faces | genus (target) | inverted faces | "
+             "STEP valid | mean dist % | max dist % |", "|---|---|---|---|---|---|---|---|---|---|"]
     for row in data["rows"]:
         base = row.get("base_mesh") or {}
         metrics = (row.get("solid") or {}).get("evaluation", {})
@@ -134,6 +141,7 @@ def _current_pipeline_table():
         valid = metrics.get("brep", {}).get("is_valid")
         cells = [f"`{row['mesh']}`", row["mode"],
                  row.get("stages", {}).get("basemesh", row.get("error", "?")),
+                 base.get("method") or ("polycube" if base else "–"),
                  str(base.get("faces", "–")),
                  f"{base['genus']} ({row['input_genus']})" if base else "–",
                  str(row.get("inverted_faces", "–")),
