@@ -157,3 +157,19 @@ def genus_of(n_vertices, faces, n_components):
     """Total genus of a closed manifold mesh from the Euler characteristic."""
     chi = euler_characteristic(n_vertices, faces)
     return int(round((2 * n_components - chi) / 2))
+
+
+def polymesh_genus(mesh):
+    """Total genus of a closed polygon mesh (``core.types.PolyMesh``, any face sizes) from the
+    Euler characteristic, its components counted through shared vertices."""
+    from scipy.sparse.csgraph import connected_components
+
+    fv, fo = mesh.face_vertices, mesh.face_offsets
+    face = np.repeat(np.arange(mesh.n_faces), np.diff(fo))
+    a, b = fv, fv[next_corners(fo)]
+    n = np.int64(len(mesh.vertices))
+    edges = np.unique(np.minimum(a, b) * n + np.maximum(a, b))
+    graph = sp.csr_matrix((np.ones(len(fv)), (fv, face)), shape=(len(mesh.vertices), mesh.n_faces))
+    components, _ = connected_components(graph @ graph.T, directed=False)
+    euler = len(mesh.vertices) - len(edges) + mesh.n_faces
+    return int((2 * components - euler) // 2)

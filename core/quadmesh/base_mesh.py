@@ -16,8 +16,8 @@ import time
 import numpy as np
 
 from core.errors import InvalidMeshError, LabelingError, ParameterError
+from core.mesh_topology import connected_face_components, genus_of, polymesh_genus
 from core.params import BASE_MESH_METHODS
-from core.mesh_topology import connected_face_components, genus_of
 from core.polymesh_checks import check_polymesh
 from core.quadmesh.chart_complex import build_chart_complex
 from core.quadmesh.embed import (interior_point_positions, side_point_positions,
@@ -35,24 +35,6 @@ from core.types import PolyMesh
 REFINE_BELOW = 8000
 """Targets with fewer triangles are split by midpoint subdivision (same surface) until they have
 at least this many, so every chart has interior vertices for its Tutte map and its slits."""
-
-
-def polymesh_genus(mesh):
-    """Genus of a closed, connected-per-component polygon mesh (Euler characteristic)."""
-    from scipy.sparse.csgraph import connected_components
-    import scipy.sparse as sp
-
-    from core.mesh_topology import next_corners
-
-    fv, fo = mesh.face_vertices, mesh.face_offsets
-    face = np.repeat(np.arange(mesh.n_faces), np.diff(fo))
-    a, b = fv, fv[next_corners(fo)]
-    n = np.int64(len(mesh.vertices))
-    edges = np.unique(np.minimum(a, b) * n + np.maximum(a, b))
-    graph = sp.csr_matrix((np.ones(len(fv)), (fv, face)), shape=(len(mesh.vertices), mesh.n_faces))
-    components, _ = connected_components(graph @ graph.T, directed=False)
-    euler = len(mesh.vertices) - len(edges) + mesh.n_faces
-    return int((2 * components - euler) // 2)
 
 
 class LayoutTooLargeError(LabelingError):

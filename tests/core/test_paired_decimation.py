@@ -6,7 +6,7 @@ import pytest
 
 from core.geometry import triangle_mesh_volume
 from core.polymesh_checks import check_polymesh
-from core.quadmesh.base_mesh import polymesh_genus
+from core.mesh_topology import polymesh_genus
 from core.quadmesh.paired_decimation import MIN_WEIGHT, _candidate_quads, paired_decimation_base_mesh
 from core.quality import point_surface_distance
 from dev_meshes import load_dev_mesh
