@@ -30,6 +30,7 @@ from core.quadmesh.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapsible_s
                                     rectangular_refinement)
 from core.quadmesh.relax import relax_on_target
 from core.quadmesh.side_signs import make_loops_rectilinear
+from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
 REFINE_BELOW = 8000
@@ -227,12 +228,13 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
                              f"got {method!r}")
     target_v = np.asarray(target.vertices, dtype=np.float64)
     target_f = np.asarray(target.faces, dtype=np.int64)
+    surface = TargetSurface(target_v, target_f)  # one search tree for every check below
     reason = "asked for (--base-mesh-method decimation)" if method == "decimation" else None
     if method == "polycube":
         mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames,
                                          int(target_faces), max_base_faces, face_interface_axis,
                                          max_base_faces)
-        info["inverted_faces"] = int(inverted_faces(mesh, target_v, target_f).sum())
+        info["inverted_faces"] = int(inverted_faces(mesh, target_v, target_f, surface).sum())
     elif method == "auto":
         give_up = int(min(max_base_faces, FALLBACK_OVER_BUDGET * target_faces))
         try:
@@ -243,36 +245,42 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         except (LabelingError, InvalidMeshError) as exc:
             reason = f"the polycube layout failed: {exc}"
         else:
-            info["inverted_faces"] = int(inverted_faces(mesh, target_v, target_f).sum())
+            info["inverted_faces"] = int(inverted_faces(mesh, target_v, target_f, surface).sum())
             if info["inverted_faces"]:
                 other_mesh, other_info = _paired_decimation_base_mesh(
-                    target_v, target_f, int(target_faces),
+                    target_v, target_f, surface, int(target_faces),
                     f"the polycube layout has {info['inverted_faces']} inverted faces")
                 if other_info["inverted_faces"] < info["inverted_faces"]:
                     other_info["fallback_reason"] += f", this one {other_info['inverted_faces']}"
                     mesh, info = other_mesh, other_info
     if reason is not None:
-        mesh, info = _paired_decimation_base_mesh(target_v, target_f, int(target_faces), reason)
+        mesh, info = _paired_decimation_base_mesh(target_v, target_f, surface, int(target_faces),
+                                                  reason)
     info["seconds"] = round(time.perf_counter() - started, 4)
     return mesh, info
 
 
-def _paired_decimation_base_mesh(target_v, target_f, target_faces, reason):
-    """The fallback base mesh and its report section (see :func:`build_base_mesh`)."""
-    result = paired_decimation_base_mesh(target_v, target_f, target_faces)
-    mesh = result.mesh
+def _mesh_figures(mesh):
+    """Report figures every base mesh has: faces, vertices, valences and genus (a dict)."""
     valence = np.bincount(mesh.face_vertices, minlength=len(mesh.vertices))
+    return {"faces": int(mesh.n_faces), "vertices": int(len(mesh.vertices)),
+            "extraordinary_vertices": int((valence != 4).sum()),
+            "min_valence": int(valence.min()), "max_valence": int(valence.max()),
+            "genus": polymesh_genus(mesh)}
+
+
+def _paired_decimation_base_mesh(target_v, target_f, surface, target_faces, reason):
+    """The fallback base mesh and its report section (see :func:`build_base_mesh`)."""
+    result = paired_decimation_base_mesh(target_v, target_f, target_faces, surface)
+    mesh = result.mesh
     info = {
         "method": "paired decimation", "fallback_reason": reason,
-        "faces": int(mesh.n_faces), "quads": result.quads, "triangles": result.triangles,
-        "other": 0, "vertices": int(len(mesh.vertices)),
-        "extraordinary_vertices": int((valence != 4).sum()),
-        "min_valence": int(valence.min()), "max_valence": int(valence.max()),
-        "genus": polymesh_genus(mesh), "target_faces": int(target_faces),
+        **_mesh_figures(mesh), "quads": result.quads, "triangles": result.triangles,
+        "other": 0, "target_faces": int(target_faces),
         "within_budget": bool(abs(mesh.n_faces - target_faces)
                               <= BUDGET_TOLERANCE * target_faces),
         "minimum_reason": None, "decimated_triangles": result.decimated_triangles,
-        "inverted_faces": int(inverted_faces(mesh, target_v, target_f).sum()),
+        "inverted_faces": int(inverted_faces(mesh, target_v, target_f, surface).sum()),
     }
     return mesh, info
 
@@ -325,8 +333,6 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
             raise LabelingError(f"the quantized layout does not embed as a closed 2-manifold: "
                                 f"{exc}; try another labeling or --parts") from exc
     complex_ = layout_complex
-    points = mesh.vertices
-    valence = np.bincount(mesh.face_vertices, minlength=len(points))
     within = abs(polycube.faces - target_faces) <= BUDGET_TOLERANCE * target_faces
     minimum_reason = None
     if not within and polycube.faces > target_faces:
@@ -334,11 +340,7 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
                           f"{complex_.n_charts} charts need at least about {polycube.faces} quads")
     info = {
         "method": "polycube", "fallback_reason": None,
-        "faces": int(mesh.n_faces), "quads": int(mesh.n_faces), "triangles": 0, "other": 0,
-        "vertices": int(len(points)),
-        "extraordinary_vertices": int((valence != 4).sum()),
-        "min_valence": int(valence.min()), "max_valence": int(valence.max()),
-        "genus": polymesh_genus(mesh),
+        **_mesh_figures(mesh), "quads": int(mesh.n_faces), "triangles": 0, "other": 0,
         "target_faces": int(target_faces), "within_budget": bool(within),
         "minimum_reason": minimum_reason,
         "scale": polycube.scale, "solver_status": polycube.status, "scale_rounds": rounds,

@@ -26,13 +26,16 @@ def face_centre_limit(base):
     return points, normal / np.linalg.norm(normal, axis=1, keepdims=True)
 
 
-def inverted_faces(base, target_vertices, target_faces):
+def inverted_faces(base, target_vertices, target_faces, surface=None):
     """(f,) bool base faces whose limit normal is more than 90 degrees from the target's.
 
     Parameters
     ----------
     base : PolyMesh base mesh; target_vertices : (n, 3) float64; target_faces : (m, 3) int64.
+    surface : TargetSurface of that target already built, or None (built here).
     """
     points, normals = face_centre_limit(base)
-    target_normal = TargetSurface(target_vertices, target_faces).closest(points).normal
+    if surface is None:
+        surface = TargetSurface(target_vertices, target_faces)
+    target_normal = surface.closest(points).normal
     return np.einsum("fk,fk->f", normals, target_normal) < 0.0

@@ -149,13 +149,14 @@ def _augment(start, mate, via, neighbours):
     return False
 
 
-def paired_decimation_base_mesh(vertices, faces, target_faces):
+def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None):
     """Quad-dominant base mesh of about ``target_faces`` faces (module docstring).
 
     Parameters
     ----------
     vertices : (n, 3) float64 target vertices; faces : (m, 3) int64 closed, outward 2-manifold.
     target_faces : int >= 6, faces wanted (the decimation keeps twice as many triangles).
+    surface : TargetSurface of the target already built, or None (built here).
 
     Returns
     -------
@@ -188,16 +189,19 @@ def paired_decimation_base_mesh(vertices, faces, target_faces):
     renumber = np.full(len(decimated_v), -1, dtype=np.int64)
     renumber[used] = np.arange(len(used))
     mesh = PolyMesh.from_faces(decimated_v[used], [renumber[f] for f in face_list])
-    mesh = _projected_on_target(mesh, vertices, faces)
+    if surface is None:
+        surface = TargetSurface(vertices, faces)
+    mesh = _projected_on_target(mesh, surface)
     sizes = mesh.face_sizes
     return PairedDecimation(mesh, int(len(decimated_f)), int((sizes == 4).sum()),
                             int((sizes == 3).sum()))
 
 
-def _projected_on_target(mesh, vertices, faces):
-    """``mesh`` with its vertices moved to their closest target points (QSlim places them off
-    the surface by up to its quadric error); unchanged if that degenerates a face."""
-    projected = PolyMesh(TargetSurface(vertices, faces).closest(mesh.vertices).point,
+def _projected_on_target(mesh, surface):
+    """``mesh`` with its vertices moved to their closest points on the target ``surface``
+    (QSlim places them off it by up to its quadric error); unchanged if that degenerates a
+    face."""
+    projected = PolyMesh(surface.nearest(mesh.vertices).point,
                          mesh.face_vertices, mesh.face_offsets)
     try:
         check_polymesh(projected)

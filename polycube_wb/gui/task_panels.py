@@ -15,6 +15,7 @@ import FreeCAD
 import FreeCADGui
 from PySide import QtGui
 
+from core.params import BASE_MESH_METHODS, FIT_MODES
 from polycube_wb.gui import icon_path
 
 FIELDS = {
@@ -33,12 +34,12 @@ FIELDS = {
     "BaseMesh": (
         ("TargetFaces", "Target faces", "int", (6, 200000), "target_faces"),
         ("MaxBaseFaces", "Most faces", "int", (6, 1000000), "max_base_faces"),
-        ("Method", "Route", "choice", ("auto", "polycube", "decimation"),
+        ("Method", "Route", "choice", BASE_MESH_METHODS,
          "base_mesh_method")),
     "Fit": (
         ("Iterations", "Iterations", "int", (0, 100000), "fit_iterations"),
         ("SubdivisionLevels", "Subdivision levels", "int", (1, 5), "subdivision_levels"),
-        ("Mode", "Mode", "choice", ("inside", "best-fit", "none"), "fit_mode"),
+        ("Mode", "Mode", "choice", FIT_MODES, "fit_mode"),
         ("AutoMinThickness", "Automatic minimal thickness", "bool", None, None),
         ("MinThickness", "Minimal thickness, mm (0: none)", "float", (0.0, 1e6), None)),
     "Solid": (("Depth", "Grading depth at extraordinary vertices", "int", (1, 12), None),),

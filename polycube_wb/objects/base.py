@@ -110,14 +110,14 @@ def stage_kind(obj):
 
 
 def add_property(obj, kind, name, group, tooltip, default=None, read_only=False, hidden=False,
-                 output=False):
+                 output=False, choice=None):
     """Add a property if ``obj`` lacks it (idempotent: new objects and old documents).
 
     Parameters
     ----------
     kind : FreeCAD property type (``App::PropertyInteger``, ...).
     default : value set only when the property is added (a list for an enumeration: its
-        choices, the first being the default).
+        choices, the first being the default unless ``choice`` names another).
     read_only, hidden : editor modes; ``output`` marks a result that does not touch the
         object when set (so storing a result does not schedule another recompute).
     """
@@ -127,7 +127,7 @@ def add_property(obj, kind, name, group, tooltip, default=None, read_only=False,
     if default is not None:
         setattr(obj, name, default)
         if isinstance(default, list) and kind == "App::PropertyEnumeration":
-            setattr(obj, name, default[0])
+            setattr(obj, name, choice if choice in default else default[0])
     if hidden:
         obj.setEditorMode(name, 2)
     elif read_only:

@@ -57,12 +57,11 @@ class BaseMeshProxy(CageProxy):
         add_property(obj, "App::PropertyInteger", "MaxBaseFaces", "Base mesh",
                      "A base mesh with more faces stops the stage with a message",
                      default("max_base_faces"))
-        if add_property(obj, "App::PropertyEnumeration", "Method", "Base mesh",
-                        "'auto': the polycube layout, or a paired decimation of the target "
-                        "where the layout fails, needs more than twice the budget or has "
-                        "inverted faces; 'polycube': never fall back; 'decimation': the "
-                        "paired decimation only", list(BASE_MESH_METHODS)):
-            obj.Method = default("base_mesh_method")
+        add_property(obj, "App::PropertyEnumeration", "Method", "Base mesh",
+                     "'auto': the polycube layout, or a paired decimation of the target where "
+                     "the layout fails, needs more than twice the budget or has inverted "
+                     "faces; 'polycube': never fall back; 'decimation': the paired "
+                     "decimation only", list(BASE_MESH_METHODS), choice=default("base_mesh_method"))
         add_cage_properties(obj)
 
     def parameters(self, obj):

@@ -36,11 +36,10 @@ class FitProxy(CageProxy):
         add_property(obj, "App::PropertyInteger", "SubdivisionLevels", "Fit",
                      "Catmull-Clark levels the fit works on (paper: 2; fewer on large cages)",
                      default("subdivision_levels"))
-        if add_property(obj, "App::PropertyEnumeration", "Mode", "Fit",
-                        "'inside': the limit surface fills the target from inside (paper); "
-                        "'best-fit': two-sided least squares; 'none': the unfitted surface",
-                        list(FIT_MODES)):
-            obj.Mode = default("fit_mode")
+        add_property(obj, "App::PropertyEnumeration", "Mode", "Fit",
+                     "'inside': the limit surface fills the target from inside (paper); "
+                     "'best-fit': two-sided least squares; 'none': the unfitted surface",
+                     list(FIT_MODES), choice=default("fit_mode"))
         add_property(obj, "App::PropertyBool", "AutoMinThickness", "Fit",
                      "Pick the minimal wall thickness from the cage and the target", True)
         add_property(obj, "App::PropertyFloat", "MinThickness", "Fit",

@@ -34,10 +34,9 @@ class SegmentationProxy(StageProxy):
 
         super().init_properties(obj)
         add_property(obj, "App::PropertyLink", "Target", "Segmentation", "The target mesh")
-        if add_property(obj, "App::PropertyEnumeration", "PartMode", "Parts",
-                        "'single': the whole mesh is one part; 'auto': parts along the curve "
-                        "skeleton", list(PART_MODES)):
-            obj.PartMode = default("parts") if default("parts") in PART_MODES else "single"
+        add_property(obj, "App::PropertyEnumeration", "PartMode", "Parts",
+                     "'single': the whole mesh is one part; 'auto': parts along the curve "
+                     "skeleton", list(PART_MODES), choice=default("parts"))
         add_property(obj, "App::PropertyFloat", "BlendFactor", "Frames",
                      "Frame blending distance near part interfaces, in mean edge lengths "
                      "(paper: 4)", default("blend_factor"))

@@ -182,6 +182,12 @@ def test_bad_budgets_and_too_many_faces_are_clear_errors():
         base_of(L_SHAPE, target_faces=3)
     with pytest.raises(LabelingError, match="max_base_faces=100"):
         base_of(L_SHAPE, target_faces=1000, max_base_faces=100)
+    with pytest.raises(ParameterError, match="base-mesh method"):
+        base_of(L_SHAPE, method="quadriflow")
+    from core.params import ReconstructionParams
+
+    with pytest.raises(ParameterError, match="base_mesh_method"):
+        ReconstructionParams(base_mesh_method="")
 
 
 def test_opposite_labels_on_one_boundary_are_refused():

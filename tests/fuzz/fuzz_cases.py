@@ -265,7 +265,8 @@ def parameter_cases():
     for value, code in tolerances.items():
         cases.append(intake(f"param--tolerance={value or 'empty'}", "b.stl", box, (code,),
                             ("tolerance",) if code else (), extra=("--tolerance", value)))
-    for option in ("--units", "--components", "--parts", "--fit-mode", "--stop-after"):
+    for option in ("--units", "--components", "--parts", "--fit-mode", "--base-mesh-method",
+                   "--stop-after"):
         cases.append(intake(f"param{option}=bogus", "b.stl", box, (2,), ("invalid choice",),
                             extra=(option, "bogus")))
     for name, factor, unit, words in (
