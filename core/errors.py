@@ -24,7 +24,7 @@ class InvalidMeshError(PolycubeInputError):
         Machine-readable kind: ``empty``, ``unreadable``, ``format``, ``open``,
         ``non_manifold``, ``orientation``, ``degenerate_faces``, ``duplicate_faces``,
         ``non_finite``, ``self_intersecting``, ``multiple_components``,
-        ``coordinate_range``, ``unused_vertices``.
+        ``coordinate_range``, ``unused_vertices``, ``not_quads``.
     count : int
         How many offending items were found.
     examples : list
@@ -42,6 +42,14 @@ class ParameterError(PolycubeInputError):
     """A stage parameter is out of range or inconsistent."""
 
 
+class FaceLimitError(ParameterError):
+    """The base mesh needs more faces than the user's own limit (``max_base_faces``) allows.
+
+    Not a labeling failure: the labeling is usable, the user asked for fewer faces than its
+    layout needs; the message says how many and what to change.
+    """
+
+
 class StageNotAvailableError(PolycubeError, NotImplementedError):
     """A pipeline stage is not implemented yet; the message names the stage."""
 
@@ -52,6 +60,15 @@ class LabelingError(PolycubeError):
 
 class ExportError(PolycubeError):
     """B-spline or B-rep export failed (e.g. the shell does not close)."""
+
+
+class StepPathError(ExportError, PolycubeInputError):
+    """A STEP path is unusable (missing folder, not writable, wrong suffix, is an input)."""
+
+
+class InternalError(PolycubeError, RuntimeError):
+    """An invariant of an algorithm does not hold (a bug, not the user's input); the message
+    names the invariant."""
 
 
 class Cancelled(PolycubeError):

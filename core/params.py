@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Pipeline parameters with the paper's defaults and range checks."""
 from dataclasses import asdict, dataclass, fields
+from numbers import Integral
 
 from core.errors import ParameterError
 
@@ -19,6 +20,17 @@ a patch is exact except in a corner cell of size 2^-depth."""
 MAX_EXPORT_DEPTH = 12
 """Deeper grading adds (2 depth + 3)^2 poles per patch at an extraordinary vertex for no
 visible gain (the error is already ~1e-6 of the diagonal at depth 8)."""
+
+
+def check_export_depth(depth, name="depth"):
+    """Raise ParameterError unless ``depth`` is an integer in ``1..MAX_EXPORT_DEPTH``.
+
+    ``name`` is what the message calls it (``depth`` on the command line, ``Depth`` for the
+    document property).
+    """
+    if isinstance(depth, bool) or not isinstance(depth, Integral):
+        raise ParameterError(f"{name} must be an integer, got {depth!r}")
+    _range(name, depth, 1, MAX_EXPORT_DEPTH)
 
 
 @dataclass(frozen=True)

@@ -98,16 +98,17 @@ def peak_memory_mb():
 
 
 def _check_inputs(state, stages):
-    """Raise ValueError (a caller's mistake) when a stage's input is neither in ``state``
+    """Raise ParameterError (a caller's mistake) when a stage's input is neither in ``state``
     nor made by an earlier stage of ``stages``."""
     available = {name for name in ("source",) + CORE_STAGES if getattr(state, name) is not None}
     for name in stages:
         if name not in STAGE_BY_NAME:
-            raise ValueError(f"unknown stage {name!r}; the stages are {', '.join(CORE_STAGES)}")
+            raise ParameterError(f"unknown stage {name!r}; the stages are {', '.join(CORE_STAGES)}")
         missing = [field for field in STAGE_BY_NAME[name].inputs if field not in available]
         if missing:
-            raise ValueError(f"the '{name}' stage needs the {', '.join(missing)} result, which "
-                             "neither the state nor an earlier stage of this run provides")
+            raise ParameterError(f"the '{name}' stage needs the {', '.join(missing)} result, "
+                                 "which neither the state nor an earlier stage of this run "
+                                 "provides")
         available.add(name)
 
 
@@ -132,7 +133,8 @@ def run_stages(state, stages, params, progress=NO_PROGRESS, report=None):
 
     Raises
     ------
-    PolycubeInputError from a stage (bad input); ValueError when a stage's inputs are missing.
+    PolycubeInputError from a stage (bad input); ParameterError when a stage is unknown or
+    its inputs are missing.
     """
     _check_inputs(state, stages)
     report = report if report is not None else {"stages": {}}

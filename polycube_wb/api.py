@@ -12,7 +12,7 @@ import numpy as np
 
 from core.errors import StageNotAvailableError
 from core.output_files import check_output_path, write_json_atomic
-from core.params import EXPORT_DEPTH, MAX_EXPORT_DEPTH
+from core.params import EXPORT_DEPTH, check_export_depth
 from core.pipeline import (LAST_CORE_STAGE, STOP_AFTER_CHOICES, peak_memory_mb,
                            reconstruct as run_pipeline)
 from core.progress import NO_PROGRESS
@@ -188,11 +188,7 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT
     from polycube_wb.brep import make_solid
     from polycube_wb.step_io import write_solid_step
 
-    if not isinstance(depth, (int, np.integer)) or not 1 <= depth <= MAX_EXPORT_DEPTH:
-        from core.errors import ParameterError
-
-        raise ParameterError(f"depth must be an integer between 1 and {MAX_EXPORT_DEPTH}, "
-                             f"got {depth!r}")
+    check_export_depth(depth)
     inputs = (base_mesh_path,)
     for path, what in ((step_path, "STEP file"), (report_path, "report")):
         if path is not None:

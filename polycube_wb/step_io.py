@@ -10,14 +10,10 @@ import os
 import FreeCAD  # noqa: F401  (importing Part before FreeCAD segfaults in 0.20.2)
 import Part
 
-from core.errors import ExportError, ParameterError, PolycubeInputError
+from core.errors import ExportError, ParameterError, PolycubeInputError, StepPathError
 from core.output_files import atomic_output, check_output_path, write_text_atomic
 
 STEP_SUFFIXES = (".step", ".stp")
-
-
-class StepPathError(ExportError, PolycubeInputError):
-    """A STEP path is unusable (missing folder, not writable, wrong suffix, is an input)."""
 
 
 def write_step(shape, path, input_paths=(), overwrite=True, name=None):

@@ -42,7 +42,7 @@ import scipy.sparse as sp
 
 from core.export.brep_topology import BRepTopology, EdgeCurve
 from core.export.patch_mesh import build_patch_mesh
-from core.params import EXPORT_DEPTH
+from core.params import EXPORT_DEPTH, check_export_depth
 from core.subdivision.catmull_clark import mesh_topology
 from core.subdivision.limit import LimitEvaluator, corner_frame, limit_matrices
 from core.tolerances import CONTACT
@@ -416,8 +416,8 @@ def limit_surface_patches(base, depth=EXPORT_DEPTH, measure=True):
     Parameters
     ----------
     base : PolyMesh, closed 2-manifold polygon mesh (validated by the caller).
-    depth : int >= 1, grading depth ``d``: corner cells at extraordinary vertices
-        are ``2^-d`` of a patch wide (default 8).
+    depth : int in 1..MAX_EXPORT_DEPTH, grading depth ``d``: corner cells at extraordinary
+        vertices are ``2^-d`` of a patch wide (default ``EXPORT_DEPTH``).
     measure : bool, if True fill ``info`` with the approximation and continuity
         figures (costs about as much as the fit).
 
@@ -434,9 +434,12 @@ def limit_surface_patches(base, depth=EXPORT_DEPTH, measure=True):
         ``n_poles``, ``depth``, ``bbox_diagonal`` and, if ``measure``, ``max_error``,
         ``max_error_rel``, ``max_ev_error``, ``max_ev_error_rel``,
         ``normal_jump_max_deg``, ``normal_jump_p95_deg``, ``normal_jump_ev_max_deg``.
+
+    Raises
+    ------
+    ParameterError when ``depth`` is not an integer in 1..MAX_EXPORT_DEPTH.
     """
-    if depth < 1:
-        raise ValueError(f"depth must be >= 1, got {depth}")
+    check_export_depth(depth)
     ctx = _PatchContext(base, depth)
     vertex_pos, edge_poles, sides = _fit_edge_curves(ctx)
     patches = _fit_patches(ctx, edge_poles, sides)

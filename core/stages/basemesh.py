@@ -29,10 +29,12 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     Raises
     ------
     LabelingError when ``base_mesh_method="polycube"`` and the labeling is invalid, the base
-    mesh cannot be built, or the cage's genus differs from the target's.
+    mesh cannot be built, or the cage's genus differs from the target's; FaceLimitError
+    (a user error) when ``base_mesh_method="polycube"`` and the layout needs more faces than
+    ``max_base_faces``.
     """
-    from core.errors import LabelingError
-    from core.quadmesh.base_mesh import build_base_mesh
+    from core.errors import FaceLimitError, LabelingError
+    from core.quadmesh.base_mesh import LayoutTooLargeError, build_base_mesh
 
     validity = labeling.validity.report
     method = params.base_mesh_method
@@ -48,11 +50,15 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     progress.check_cancel()
     field = frames.frame_field
     interface_axis = field.face_interface_axis if len(field.interfaces) else None
-    cage, info = build_base_mesh(intake.target, parts.face_part, labeling.face_label,
-                                 field.face_frame, field.part_frames,
-                                 target_faces=params.target_faces,
-                                 max_base_faces=params.max_base_faces,
-                                 face_interface_axis=interface_axis, method=method)
+    try:
+        cage, info = build_base_mesh(intake.target, parts.face_part, labeling.face_label,
+                                     field.face_frame, field.part_frames,
+                                     target_faces=params.target_faces,
+                                     max_base_faces=params.max_base_faces,
+                                     face_interface_axis=interface_axis, method=method)
+    except LayoutTooLargeError as exc:
+        # only the polycube route lets it through, and only over the user's max_base_faces
+        raise FaceLimitError(str(exc)) from exc
     if invalid is not None and params.base_mesh_method == "auto":
         info["fallback_reason"] = f"the labeling is not a valid polycube labeling ({invalid})"
     if info["genus"] != intake.genus:

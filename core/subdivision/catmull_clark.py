@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from core.errors import InvalidMeshError
+from core.errors import InvalidMeshError, ParameterError
 from core.mesh_topology import next_corners, previous_corners
 from core.types import PolyMesh
 
@@ -229,7 +229,7 @@ class SubdivisionHierarchy:
         ``composite(-1)`` is the identity. Results are cached.
         """
         if i < -1 or i >= self.levels:
-            raise IndexError(f"composite index {i} outside -1..{self.levels - 1}")
+            raise ParameterError(f"composite index {i} outside -1..{self.levels - 1}")
         if i == -1:
             return sp.identity(len(self.meshes[0].vertices), format="csr")
         if i not in self._composites:
@@ -257,9 +257,13 @@ def build_hierarchy(mesh, levels):
     Returns
     -------
     SubdivisionHierarchy
+
+    Raises
+    ------
+    ParameterError when ``levels < 0``; InvalidMeshError as :func:`subdivide`.
     """
     if levels < 0:
-        raise ValueError(f"levels must be >= 0, got {levels}")
+        raise ParameterError(f"subdivision levels must be >= 0, got {levels}")
     meshes = [mesh]
     mats = []
     for _ in range(levels):
@@ -284,9 +288,17 @@ def face_grids(hierarchy, level):
     mesh ``level`` at parameter ``(u, v) = (i, j) / 2**level`` of base face ``f``, where
     corner 0 of ``f`` is ``(0, 0)``, corner 1 ``(1, 0)``, corner 2 ``(1, 1)`` and
     corner 3 ``(0, 1)``.
+
+    Raises
+    ------
+    InvalidMeshError (``not_quads``) when a base face is not a quad.
     """
-    if (hierarchy.meshes[0].face_sizes != 4).any():
-        raise ValueError("face_grids needs an all-quad base mesh")
+    other = np.flatnonzero(hierarchy.meshes[0].face_sizes != 4)
+    if len(other):
+        raise InvalidMeshError(
+            f"face grids need an all-quad base mesh: {len(other)} faces are not quads, e.g. "
+            f"faces {other[:5].tolist()}", reason="not_quads", count=len(other),
+            examples=other[:5].tolist())
     corners = hierarchy.meshes[level].face_vertices.reshape(-1, 4)
     grid = np.stack([np.stack([corners[:, 0], corners[:, 3]], axis=1),
                      np.stack([corners[:, 1], corners[:, 2]], axis=1)], axis=1)

@@ -12,6 +12,7 @@
 import numpy as np
 import scipy.sparse as sp
 
+from core.errors import InternalError, InvalidMeshError, ParameterError
 from core.geometry import polymesh_volume
 from core.subdivision.catmull_clark import build_hierarchy, mesh_topology, subdivision_operator
 
@@ -19,13 +20,28 @@ TEMPLATE_RADIUS = 3
 
 
 def _require_closed_quads(mesh):
+    """The ``Topology`` of ``mesh``, or InvalidMeshError when it is not a closed 2-manifold
+    all-quad mesh (reason ``empty``, ``not_quads``, ``open`` or ``non_manifold``; the
+    message counts the offending faces or edges and names a few)."""
     sizes = mesh.face_sizes
-    if len(sizes) == 0 or (sizes != 4).any():
-        raise ValueError("limit masks need a non-empty all-quad mesh "
-                         "(subdivide once to turn any polygon mesh into quads)")
+    if len(sizes) == 0:
+        raise InvalidMeshError("limit masks need a non-empty all-quad mesh: it has no faces",
+                               reason="empty")
+    other = np.flatnonzero(sizes != 4)
+    if len(other):
+        raise InvalidMeshError(
+            f"limit masks need an all-quad mesh: {len(other)} of {len(sizes)} faces are not "
+            f"quads, e.g. faces {other[:5].tolist()} (subdivide once to turn any polygon mesh "
+            "into quads)", reason="not_quads", count=len(other), examples=other[:5].tolist())
     topo = mesh_topology(mesh.face_vertices, mesh.face_offsets, len(mesh.vertices))
-    if (topo.edge_face_count != 2).any():
-        raise ValueError("limit masks need a closed 2-manifold mesh")
+    bad = np.flatnonzero(topo.edge_face_count != 2)
+    if len(bad):
+        open_ = (topo.edge_face_count[bad] == 1).all()
+        raise InvalidMeshError(
+            f"limit masks need a closed 2-manifold mesh: {len(bad)} edges have "
+            f"{'one face' if open_ else 'one or more than two faces'}, e.g. edges (vertex "
+            f"pairs) {topo.edges[bad[:5]].tolist()}", reason="open" if open_ else "non_manifold",
+            count=len(bad), examples=topo.edges[bad[:5]].tolist())
     return topo
 
 
@@ -79,6 +95,11 @@ def limit_matrices(quad_mesh):
         vertex they are the derivatives of the limit surface with respect to the
         mesh's grid parameter (one edge = one unit) along the vertex's spoke 0 and
         spoke 1; at other valences only their directions and the normal matter.
+
+    Raises
+    ------
+    InvalidMeshError
+        ``empty``, ``not_quads``, ``open`` or ``non_manifold`` (see ``_require_closed_quads``).
     """
     topo = _require_closed_quads(quad_mesh)
     fv = quad_mesh.face_vertices
@@ -227,7 +248,8 @@ class LimitEvaluator:
         corner_valence = self.valence[fv].reshape(-1, 4)
         irregular = corner_valence != 4
         if (irregular.sum(axis=1) > 1).any():
-            raise ValueError("internal: a work quad has more than one extraordinary corner")
+            raise InternalError("a work quad has more than one extraordinary corner after "
+                                f"{self.WORK_LEVELS} subdivisions")
         self.ev_corner = np.where(irregular.any(axis=1), irregular.argmax(axis=1), -1)
         self.stencils = self._regular_stencils()
         self.ev_vertices = np.flatnonzero(self.valence != 4)
@@ -421,9 +443,13 @@ def limit_volume(mesh, level=5):
     Returns
     -------
     volume : float, in model units cubed.
+
+    Raises
+    ------
+    ParameterError when ``level < 2``.
     """
     if level < 2:
-        raise ValueError(f"level must be >= 2, got {level}")
+        raise ParameterError(f"limit_volume needs level >= 2, got {level}")
     h = build_hierarchy(mesh, level)
     vols = []
     for lev in (level - 1, level):

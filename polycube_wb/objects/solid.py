@@ -33,15 +33,12 @@ class SolidProxy(StageProxy):
         return {"depth": int(obj.Depth)}
 
     def run(self, obj, progress):
-        from core.errors import ParameterError
-        from core.progress import SubProgress
         from core.export.bspline import limit_surface_patches
-        from polycube_wb.api import MAX_EXPORT_DEPTH
+        from core.params import check_export_depth
+        from core.progress import SubProgress
         from polycube_wb.brep import build_solid
 
-        if not 1 <= obj.Depth <= MAX_EXPORT_DEPTH:
-            raise ParameterError(f"Depth must be between 1 and {MAX_EXPORT_DEPTH}, got "
-                                 f"{obj.Depth}")
+        check_export_depth(obj.Depth, "Depth")
         base = self.upstream_state(obj).cage
         progress.report("patches", 0.05)
         patches = limit_surface_patches(base, depth=int(obj.Depth), measure=False)

@@ -204,6 +204,17 @@ def test_bad_base_mesh_options_exit_2_and_write_nothing(tmp_path, option, value,
     assert list(tmp_path.iterdir()) == [] and digest(SAMPLE) == before
 
 
+def test_a_layout_over_the_users_max_base_faces_exits_2_and_writes_nothing(tmp_path):
+    """The user's own face limit is bad input (exit 2, what to change), not a labeling
+    failure: fandisk's polycube layout needs 112 quads at least."""
+    mesh = os.path.join(REPO, "..", "shared", "data", "meshes", "fandisk.obj")
+    result = run("reconstruct", mesh, "--stop-after", "basemesh", "--base-mesh-method",
+                 "polycube", "--target-faces", "6", "--max-base-faces", "10",
+                 "--report", tmp_path / "r.json", "--base-mesh", tmp_path / "base.obj")
+    assert_rejected(result, "more than max_base_faces=10", "raise --max-base-faces", "charts")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_labeling_that_cannot_be_quantized_exits_1_naming_the_charts_or_falls_back(tmp_path):
     # the idler riser's labeling with automatic parts is valid, but five of its charts do not
     # close as rectilinear polygons (benchmarks/BASEMESH_RESULTS.md)

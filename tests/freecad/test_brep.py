@@ -10,12 +10,12 @@ import pytest
 import FreeCAD  # noqa: F401  (must precede Part)
 import Part
 
-from core.errors import ExportError, InvalidMeshError, PolycubeInputError
+from core.errors import ExportError, InvalidMeshError, PolycubeInputError, StepPathError
 from core.quality import is_watertight_manifold
 from core.types import PatchSet
 from polycube_wb.brep import make_solid, patches_to_solid, solid_report, tessellate
 from polycube_wb.convert import arrays_to_mesh, mesh_to_arrays
-from polycube_wb.step_io import StepPathError, read_step, step_round_trip, write_step
+from polycube_wb.step_io import read_step, step_round_trip, write_step
 from synthetic_patches import divergence_volume, lattice_patchset, superellipsoid_map
 
 
