@@ -1,6 +1,12 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Pipeline parameters with the paper's defaults and range checks."""
-from dataclasses import asdict, dataclass, fields
+"""Pipeline parameters: the one place for their names, types, defaults, help and valid values.
+
+``ReconstructionParams`` declares every user-settable parameter as a dataclass field whose
+``metadata["option"]`` (an :class:`Option`) holds its help line, its range or choices and its
+command-line flag; the range checks, ``polycube_wb.cli``'s options and their ``--help`` are
+built from these fields (:func:`parameter_options`).
+"""
+from dataclasses import asdict, dataclass, field, fields
 from numbers import Integral
 
 from core.errors import ParameterError
@@ -20,6 +26,37 @@ a patch is exact except in a corner cell of size 2^-depth."""
 MAX_EXPORT_DEPTH = 12
 """Deeper grading adds (2 depth + 3)^2 poles per patch at an extraordinary vertex for no
 visible gain (the error is already ~1e-6 of the diagonal at depth 8)."""
+
+
+@dataclass(frozen=True)
+class Option:
+    """How one parameter is given and checked.
+
+    help : one line for ``--help`` (``%(default)s`` is replaced by the default); a bool's
+        describes its flag.
+    low, high : inclusive range of a number, or None.
+    choices : the allowed values of a text parameter (tuple of str), or None.
+    flag : the command-line option (``--lam``), or None when it has none; a bool's flag sets
+        it to the opposite of its default (``--no-repair``).
+    metavar : the value's name in ``--help``, or None for argparse's (the flag in capitals).
+    """
+
+    help: str
+    low: float = None
+    high: float = None
+    choices: tuple = None
+    flag: str = None
+    metavar: str = None
+
+
+def _param(default, help, flag=None, **option):
+    """A dataclass field with its :class:`Option` (``flag`` defaults to none)."""
+    return field(default=default, metadata={"option": Option(help, flag=flag, **option)})
+
+
+def _flag(name):
+    """``--name-with-dashes`` of a parameter name."""
+    return "--" + name.replace("_", "-")
 
 
 def check_export_depth(depth, name="depth"):
@@ -74,47 +111,67 @@ class ReconstructionParams:
         base mesh and the target (see ``core.fitting.fit_base_mesh``), 0 disables it.
     """
 
-    units: str = "mm"
-    components: str = "largest"
-    check_self_intersections: bool = True
-    parts: str = "single"
-    parts_file: str = ""
-    blend_factor: float = 4.0
-    lam: float = 0.5
-    penalty: float = 1e5
-    max_sweeps: int = 200
-    repair: bool = True
-    target_faces: int = 300
-    max_base_faces: int = 2500
-    base_mesh_method: str = "auto"
-    subdivision_levels: int = 2
-    fit_iterations: int = 100
-    fit_mode: str = "inside"
-    fit_t_min: float = None
-    tolerance: float = 0.0
-    tolerance_mm: float = 0.0
+    units: str = _param("mm", "length unit of the target's coordinates (default: mm); the "
+                        "result is written in millimetres", _flag("units"),
+                        choices=tuple(UNIT_TO_MM))
+    components: str = _param("largest", "several connected components: keep the largest (with a "
+                             "warning), keep all, or reject (default: largest)",
+                             _flag("components"), choices=COMPONENT_POLICIES)
+    check_self_intersections: bool = _param(
+        True, "do not run the triangle-triangle intersection test at intake",
+        "--skip-self-intersection-check")
+    parts: str = _param("single", "part segmentation: whole mesh one part, or curve-skeleton "
+                        "based", _flag("parts"), choices=PART_MODES)
+    parts_file: str = _param("", "user parts: JSON with 'face_part' (per-face part ids), 'groups' "
+                             "(face-index lists) or 'planes' ([point, normal] pairs); implies "
+                             "--parts file", _flag("parts_file"), metavar="JSON")
+    blend_factor: float = _param(4.0, "frame blending distance in mean edge lengths (paper: 4)",
+                                 _flag("blend_factor"), low=1e-3, high=1000.0)
+    lam: float = _param(0.5, "HBECVT neighbour weight lambda (paper: 0.5)", _flag("lam"),
+                        low=0.0, high=1e3)
+    penalty: float = _param(1e5, "HBECVT penalty p (paper: 1e5)", _flag("penalty"),
+                            low=0.0, high=1e12)
+    max_sweeps: int = _param(200, "most HBECVT sweeps (default %(default)s)", _flag("max_sweeps"),
+                             low=1, high=100_000)
+    repair: bool = _param(True, "skip the labeling repair loop", "--no-repair")
+    target_faces: int = _param(300, "approximate number of base-mesh faces (default %(default)s)",
+                               _flag("target_faces"), low=6, high=200_000)
+    max_base_faces: int = _param(2500, "stop when the base mesh has more faces than this "
+                                 "(default %(default)s)", _flag("max_base_faces"),
+                                 low=6, high=1_000_000)
+    base_mesh_method: str = _param(
+        "auto", "auto: the polycube layout, falling back to a paired decimation of the target "
+        "where the layout fails, needs more than twice --target-faces or has inverted faces; "
+        "polycube: never fall back; decimation: the paired decimation only (default auto)",
+        _flag("base_mesh_method"), choices=BASE_MESH_METHODS)
+    subdivision_levels: int = _param(2, "Catmull-Clark levels of the fit (paper: %(default)s)",
+                                     _flag("subdivision_levels"), low=1, high=5)
+    fit_iterations: int = _param(100, "most shape-optimisation iterations (paper: 100; the fit "
+                                 "stops earlier when converged)", _flag("fit_iterations"),
+                                 low=0, high=100_000)
+    fit_mode: str = _param("inside", "inside: fill the target from inside (paper, default); "
+                           "best-fit: two-sided least squares; none: the unfitted limit surface",
+                           _flag("fit_mode"), choices=FIT_MODES)
+    fit_t_min: float = _param(None, "minimal wall thickness of the fit (model units; none: "
+                              "from the base mesh, 0: off)", low=0.0, high=1e9)
+    tolerance: float = _param(0.0, "largest deviation wanted: a fraction of the bounding-box "
+                              "diagonal (0.002) or a length with its unit (0.5mm, 0.05cm, "
+                              "0.02in); quad strips deviating more are split and refitted "
+                              "(default 0: off)", _flag("tolerance"), low=0.0, high=1.0,
+                              metavar="T")
+    tolerance_mm: float = _param(0.0, "largest deviation wanted in millimetres (given as "
+                                 "--tolerance with a unit)", low=0.0, high=1e9)
 
     def __post_init__(self):
-        _choice("units", self.units, tuple(UNIT_TO_MM))
-        _choice("components", self.components, COMPONENT_POLICIES)
-        _choice("parts", self.parts, PART_MODES)
+        for item in fields(self):
+            option, value = item.metadata["option"], getattr(self, item.name)
+            if option.choices is not None:
+                _choice(item.name, value, option.choices)
+            elif option.low is not None and not (value is None and item.default is None):
+                _range(item.name, value, option.low, option.high)
         if (self.parts == "file") != bool(self.parts_file):
             raise ParameterError("parts='file' and parts_file go together: give the JSON file "
                                  "of user parts with parts='file'")
-        _range("blend_factor", self.blend_factor, 1e-3, 1000.0)
-        _range("lam", self.lam, 0.0, 1e3)
-        _range("penalty", self.penalty, 0.0, 1e12)
-        _range("max_sweeps", self.max_sweeps, 1, 100_000)
-        _range("target_faces", self.target_faces, 6, 200_000)
-        _range("max_base_faces", self.max_base_faces, 6, 1_000_000)
-        _choice("base_mesh_method", self.base_mesh_method, BASE_MESH_METHODS)
-        _range("subdivision_levels", self.subdivision_levels, 1, 5)
-        _range("fit_iterations", self.fit_iterations, 0, 100_000)
-        _choice("fit_mode", self.fit_mode, FIT_MODES)
-        if self.fit_t_min is not None:
-            _range("fit_t_min", self.fit_t_min, 0.0, 1e9)
-        _range("tolerance", self.tolerance, 0.0, 1.0)
-        _range("tolerance_mm", self.tolerance_mm, 0.0, 1e9)
         if self.tolerance > 0 and self.tolerance_mm > 0:
             raise ParameterError("give the tolerance once: as a fraction of the bounding-box "
                                  "diagonal (tolerance) or in millimetres (tolerance_mm)")
@@ -133,6 +190,12 @@ class ReconstructionParams:
 
     def to_dict(self):
         return asdict(self)
+
+
+def parameter_options():
+    """``(field, Option)`` of every ``ReconstructionParams`` field, in declaration order
+    (``field.name``, ``field.type``, ``field.default``)."""
+    return [(item, item.metadata["option"]) for item in fields(ReconstructionParams)]
 
 
 def _choice(name, value, allowed):

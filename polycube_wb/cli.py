@@ -12,8 +12,8 @@ import sys
 import traceback
 
 from core.errors import PolycubeInputError
-from core.params import (BASE_MESH_METHODS, COMPONENT_POLICIES, EXPORT_DEPTH, FIT_MODES, MAX_EXPORT_DEPTH,
-                         PART_MODES, UNIT_TO_MM, ReconstructionParams)
+from core.params import (EXPORT_DEPTH, MAX_EXPORT_DEPTH, UNIT_TO_MM, ReconstructionParams,
+                         parameter_options)
 from core.pipeline import STOP_AFTER_CHOICES
 
 EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT = 0, 1, 2
@@ -28,51 +28,28 @@ class _Parser(argparse.ArgumentParser):
 
 
 def add_pipeline_options(parser, defaults):
-    """Add the pipeline parameters shared by ``reconstruct`` and ``batch`` to ``parser``."""
-    parser.add_argument("--units", choices=tuple(UNIT_TO_MM), default=defaults.units,
-                        help="length unit of the target's coordinates (default: mm); the result "
-                        "is written in millimetres")
-    parser.add_argument("--components", choices=COMPONENT_POLICIES, default=defaults.components,
-                        help="several connected components: keep the largest (with a warning), "
-                        "keep all, or reject (default: largest)")
-    parser.add_argument("--parts", choices=PART_MODES, default=defaults.parts,
-                        help="part segmentation: whole mesh one part, or curve-skeleton based")
-    parser.add_argument("--parts-file", metavar="JSON",
-                        help="user parts: JSON with 'face_part' (per-face part ids), 'groups' "
-                        "(face-index lists) or 'planes' ([point, normal] pairs); implies --parts file")
-    parser.add_argument("--blend-factor", type=float, default=defaults.blend_factor,
-                        help="frame blending distance in mean edge lengths (paper: 4)")
-    parser.add_argument("--lam", type=float, default=defaults.lam,
-                        help="HBECVT neighbour weight lambda (paper: 0.5)")
-    parser.add_argument("--penalty", type=float, default=defaults.penalty,
-                        help="HBECVT penalty p (paper: 1e5)")
-    parser.add_argument("--max-sweeps", type=int, default=defaults.max_sweeps,
-                        help=f"most HBECVT sweeps (default {defaults.max_sweeps})")
-    parser.add_argument("--subdivision-levels", type=int, default=defaults.subdivision_levels,
-                        help=f"Catmull-Clark levels of the fit (paper: {defaults.subdivision_levels})")
-    parser.add_argument("--target-faces", type=int, default=defaults.target_faces,
-                        help="approximate number of base-mesh faces (default 300)")
-    parser.add_argument("--max-base-faces", type=int, default=defaults.max_base_faces,
-                        help="stop when the base mesh has more faces than this (default 2500)")
-    parser.add_argument("--base-mesh-method", choices=BASE_MESH_METHODS,
-                        default=defaults.base_mesh_method,
-                        help="auto: the polycube layout, falling back to a paired decimation "
-                        "of the target where the layout fails, needs more than twice "
-                        "--target-faces or has inverted faces; polycube: never fall back; "
-                        "decimation: the paired decimation only (default auto)")
-    parser.add_argument("--fit-iterations", type=int, default=defaults.fit_iterations,
-                        help="most shape-optimisation iterations (paper: 100; the fit stops "
-                        "earlier when converged)")
-    parser.add_argument("--tolerance", default="0", metavar="T",
-                        help="largest deviation wanted: a fraction of the bounding-box diagonal "
-                        "(0.002) or a length with its unit (0.5mm, 0.05cm, 0.02in); quad "
-                        "strips deviating more are split and refitted (default 0: off)")
-    parser.add_argument("--fit-mode", choices=FIT_MODES, default=defaults.fit_mode,
-                        help="inside: fill the target from inside (paper, default); best-fit: "
-                        "two-sided least squares; none: the unfitted limit surface")
-    parser.add_argument("--no-repair", action="store_true", help="skip the labeling repair loop")
-    parser.add_argument("--skip-self-intersection-check", action="store_true",
-                        help="do not run the triangle-triangle intersection test at intake")
+    """Add the pipeline parameters shared by ``reconstruct`` and ``batch`` to ``parser``.
+
+    One option per ``ReconstructionParams`` field with a flag (``core.params``: name, type,
+    default, help and valid values come from there; a number's help ends with its range);
+    the options given as text (``_FROM_TEXT``) are parsed by :func:`pipeline_params`.
+    """
+    for item, option in parameter_options():
+        if option.flag is None:
+            continue
+        default = getattr(defaults, item.name)
+        help_text = option.help if option.low is None or item.name in _FROM_TEXT else \
+            f"{option.help} [{_number(option.low)}..{_number(option.high)}]"
+        if item.type is bool:
+            parser.add_argument(option.flag, dest=item.name, default=default, help=help_text,
+                                action="store_false" if default else "store_true")
+        elif item.name in _FROM_TEXT:
+            parser.add_argument(option.flag, dest=item.name, default=f"{default:g}"
+                                if isinstance(default, float) else default,
+                                metavar=option.metavar, help=help_text)
+        else:
+            parser.add_argument(option.flag, dest=item.name, type=item.type, default=default,
+                                choices=option.choices, metavar=option.metavar, help=help_text)
 
 
 def build_parser():
@@ -183,19 +160,25 @@ def _reconstruct(args):
     return EXIT_OK
 
 
+def _number(value):
+    """``value`` as short text: 0.001, 1000, 1e6, 1e12."""
+    return format(value, "g").replace("e+0", "e").replace("e+", "e")
+
+
 def pipeline_params(args):
     """Keyword arguments of ``reconstruct_to_step`` from the options of :func:`add_pipeline_options`."""
-    parts = "file" if args.parts_file else args.parts
-    return dict(units=args.units, components=args.components, parts=parts,
-                parts_file=args.parts_file or "",
-                blend_factor=args.blend_factor, lam=args.lam, penalty=args.penalty,
-                max_sweeps=args.max_sweeps, subdivision_levels=args.subdivision_levels,
-                repair=not args.no_repair, target_faces=args.target_faces,
-                fit_iterations=args.fit_iterations, fit_mode=args.fit_mode,
-                base_mesh_method=args.base_mesh_method,
-                **_tolerance(args.tolerance),
-                max_base_faces=args.max_base_faces,
-                check_self_intersections=not args.skip_self_intersection_check)
+    values = {}
+    for item, option in parameter_options():
+        if option.flag is not None:
+            value = getattr(args, item.name)
+            values.update(_FROM_TEXT[item.name](value) if item.name in _FROM_TEXT
+                          else {item.name: value})
+    return values
+
+
+def _parts_file(path):
+    """``--parts-file`` implies ``--parts file``."""
+    return {"parts": "file", "parts_file": path} if path else {"parts_file": ""}
 
 
 def _tolerance(text):
@@ -293,4 +276,6 @@ def _batch(args):
     return EXIT_OK
 
 
+_FROM_TEXT = {"parts_file": _parts_file, "tolerance": _tolerance}
+"""Parameters whose option is text turned into parameter values (a dict) by the function."""
 _COMMANDS = {"reconstruct": _reconstruct, "batch": _batch, "subd-to-step": _subd_to_step, "check": _check}

@@ -131,6 +131,47 @@ def test_option_defaults_are_the_parameter_defaults():
     assert parser.parse_args(["subd-to-step", "cage.obj", "-o", "x.step"]).depth == EXPORT_DEPTH
 
 
+def _other_value(item, option):
+    """A valid value of a parameter other than its default, as command-line words and as
+    the value it must become."""
+    if item.type is bool:
+        return [option.flag], not item.default
+    if option.choices is not None:
+        choice = next(c for c in option.choices if c != item.default)
+        return [option.flag, choice], choice
+    value = item.type(option.low + 1 if item.default == option.low else option.low)
+    return [option.flag, str(value)], value
+
+
+def test_every_parameter_option_reaches_the_parameters_and_the_help():
+    """The options are made from ``core.params`` alone: each flagged field, set on the
+    command line to a value other than its default, arrives in ``pipeline_params`` (and
+    ``ReconstructionParams`` accepts the result); ``--help`` of both commands names every
+    flag and prints each number's range."""
+    from core.params import ReconstructionParams, parameter_options
+    from polycube_wb.cli import build_parser, pipeline_params
+
+    parser = build_parser()
+    flagged = [(item, option) for item, option in parameter_options() if option.flag]
+    assert {item.name for item, option in parameter_options() if not option.flag} == \
+        {"fit_t_min", "tolerance_mm"}  # set through the API, or --tolerance with a unit
+    for item, option in flagged:
+        if item.name in ("parts_file", "tolerance"):
+            continue  # text options, below
+        words, expected = _other_value(item, option)
+        values = pipeline_params(parser.parse_args(["reconstruct", "t.stl", *words]))
+        assert values[item.name] == expected, (item.name, values[item.name], expected)
+        assert getattr(ReconstructionParams(**values), item.name) == expected
+    text = pipeline_params(parser.parse_args(["batch", "in", "-o", "out", "--parts-file",
+                                              "p.json", "--tolerance", "0.5mm"]))
+    assert (text["parts"], text["parts_file"], text["tolerance_mm"]) == ("file", "p.json", 0.5)
+    assert "tolerance" not in text and ReconstructionParams(**text).tolerance == 0.0
+    for command in ("reconstruct", "batch"):
+        shown = run(command, "--help").stdout
+        assert all(option.flag in shown for _, option in flagged), command
+        assert "levels of the fit (paper: 2) [1..5]" in " ".join(shown.split())
+
+
 def test_max_sweeps_and_subdivision_levels_reach_the_run(tmp_path):
     result = run("reconstruct", SAMPLE, "--stop-after", "labeling", "--max-sweeps", "3",
                  "--subdivision-levels", "1", "--report", tmp_path / "r.json")
