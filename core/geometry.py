@@ -1,7 +1,63 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Triangle-mesh geometry shared by every stage: face cross products and areas, volumes,
-and the radius classes of k-d tree searches (topology tables are in ``core.mesh_topology``)."""
+"""Triangle-mesh geometry shared by every stage: the checked arrays of a triangle mesh, face
+cross products and areas, volumes, and the radius classes of k-d tree searches (topology
+tables are in ``core.mesh_topology``)."""
 import numpy as np
+
+from core.errors import InvalidMeshError
+
+
+def validate_triangles(V, F, name="mesh"):
+    """Check and coerce a triangle mesh's arrays.
+
+    Parameters
+    ----------
+    V : array_like, (n, 3)
+        Vertex coordinates, finite.
+    F : array_like, (m, 3)
+        Triangle corner indices into ``V``, integers in ``[0, n)``.
+    name : str
+        What to call the mesh in error messages.
+
+    Returns
+    -------
+    V : (n, 3) float64, C-contiguous
+    F : (m, 3) int64, C-contiguous
+
+    Raises
+    ------
+    InvalidMeshError
+        ``reason`` is ``format`` (wrong shape, dtype or index range), ``empty`` or
+        ``non_finite``; the message gives the count and examples.
+    """
+    V = np.asarray(V)
+    F = np.asarray(F)
+    if V.ndim != 2 or V.shape[1] != 3 or not np.issubdtype(V.dtype, np.number):
+        raise InvalidMeshError(f"{name}: vertices must be a numeric (n, 3) array, got shape "
+                               f"{V.shape} dtype {V.dtype}", "format")
+    if F.ndim != 2 or F.shape[1] != 3:
+        raise InvalidMeshError(f"{name}: faces must be an (m, 3) array, got shape {F.shape}",
+                               "format")
+    if len(V) == 0 or len(F) == 0:
+        raise InvalidMeshError(f"{name}: mesh is empty ({len(V)} vertices, {len(F)} faces)",
+                               "empty")
+    integral = np.issubdtype(F.dtype, np.integer) or (
+        np.issubdtype(F.dtype, np.floating) and np.all(F == np.round(F)))
+    if not integral:
+        raise InvalidMeshError(f"{name}: face indices must be integers, got dtype {F.dtype}",
+                               "format")
+    V = np.ascontiguousarray(V, dtype=np.float64)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    bad_v = np.flatnonzero(~np.isfinite(V).all(axis=1))
+    if len(bad_v):
+        raise InvalidMeshError(f"{name}: {len(bad_v)} vertices have non-finite coordinates, "
+                               f"e.g. {bad_v[:5].tolist()}", "non_finite", len(bad_v), bad_v[:5])
+    bad_f = np.flatnonzero(((F < 0) | (F >= len(V))).any(axis=1))
+    if len(bad_f):
+        raise InvalidMeshError(f"{name}: {len(bad_f)} faces index vertices outside [0, {len(V)}), "
+                               f"e.g. faces {bad_f[:5].tolist()}", "format", len(bad_f),
+                               bad_f[:5])
+    return V, F
 
 
 def radius_classes(radius, max_classes=12):

@@ -7,8 +7,27 @@ PyPI ``lazy_loader``. While scikit-image is first imported, the PyPI package is 
 ``sys.modules``; afterwards ``sys.modules`` is restored, so FreeCAD's own module still
 loads for FreeCAD (scikit-image keeps its reference to the PyPI one).
 """
+import importlib
 import importlib.util
 import sys
+
+INSTALL_HINT = (
+    "the {name} package is needed for the mesh quality checks; install it into the Python "
+    "that runs this code with `python -m pip install {name}` (for the FreeCAD GUI: "
+    "`python -m pip install --target <UserAppData>/AdditionalPythonPackages {name}`, where "
+    "<UserAppData> is FreeCAD.getUserAppDataDir())")
+
+
+def optional_module(name, package=None):
+    """Import module ``name`` or raise ImportError with an install hint.
+
+    ``package`` is the PyPI name to install when it differs from the module's top-level
+    name (``igl`` comes from ``libigl``).
+    """
+    try:
+        return importlib.import_module(name)
+    except ImportError as exc:
+        raise ImportError(INSTALL_HINT.format(name=package or name.split(".")[0])) from exc
 
 
 def import_skeletonize():

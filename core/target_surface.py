@@ -33,8 +33,8 @@ from itertools import chain
 import numpy as np
 from scipy.spatial import cKDTree
 
-from core.geometry import radius_classes, unit_face_normals
-from core.quality import optional_module, validate_triangles
+from core.geometry import radius_classes, unit_face_normals, validate_triangles
+from core.optional_imports import optional_module
 
 EDGE_TOL = 1e-9
 """Barycentric tolerance of the exact ray-triangle test (dimensionless)."""
@@ -114,7 +114,7 @@ class TargetSurface:
     Raises
     ------
     InvalidMeshError
-        Malformed arrays (see :func:`core.quality.validate_triangles`).
+        Malformed arrays (see :func:`core.geometry.validate_triangles`).
     ImportError
         libigl is not installed (the message says how to install it).
     """

@@ -14,7 +14,7 @@ import Mesh
 import MeshPart
 
 from core.errors import InvalidMeshError, ParameterError
-from core.quality import validate_triangles
+from core.geometry import validate_triangles
 
 
 def arrays_to_vectors(points):
@@ -47,7 +47,7 @@ def arrays_to_mesh(V, F):
     Raises
     ------
     InvalidMeshError
-        Bad arrays (see ``core.quality.validate_triangles``), or triangles repeating a vertex index
+        Bad arrays (see ``core.geometry.validate_triangles``), or triangles repeating a vertex index
         (``degenerate_faces``), which FreeCAD would drop silently.
     """
     V, F = validate_triangles(V, F)

@@ -30,6 +30,8 @@ from scipy.sparse.csgraph import dijkstra
 from core.errors import ParameterError
 from core.geometry import face_cross
 from core.mesh_topology import edge_faces, unique_edges
+from core.segmentation.parts import (face_interface_axes, interfaces as find_interfaces,
+                                     validate_face_part)
 
 DEFAULT_DEGENERATE_TOL = 0.1
 FRAME_MODES = ("area", "vertices")
@@ -423,60 +425,6 @@ def interface_distances(vertices, faces, face_part, interfaces, limit):
     return out
 
 
-def interface_x_axis(points):
-    """Unit x-axis of an interface for Eq. 3 term 4 and the validity rules (Eq. 1 literally).
-
-    The eigenvector of the smallest eigenvalue of the covariance of the interface's vertices
-    ``points`` ((k, 3) float64); for a planar loop, the normal of its plane. Shared with
-    :func:`core.segmentation.validity.interface_loops` so that the labeling and the validity
-    judgement use the same axis.
-    """
-    p = np.asarray(points, dtype=np.float64)
-    p = p - p.mean(axis=0)
-    return np.linalg.eigh(p.T @ p)[1][:, 0]
-
-
-def face_interface_axes(faces, face_part, interfaces, vertices):
-    """Faces next to an interface and that interface's x-axis (term 4 of Eq. 3).
-
-    A face is next to an interface when one of its vertices lies on it (so the faces along an
-    interface form a connected band and no chart of a label parallel to the axis reaches the
-    interface, not even at a vertex); where a face touches several interfaces the lowest
-    interface index is used. The axis is :func:`interface_x_axis` of the interface's vertices,
-    the axis :func:`core.segmentation.validity.check_validity` judges interface edges with.
-
-    Parameters
-    ----------
-    faces : (m, 3) int64; face_part : (m,) int.
-    interfaces : list of :class:`core.segmentation.parts.Interface`.
-    vertices : (n, 3) float64.
-
-    Returns
-    -------
-    face_interface : (m,) int64 interface index, -1 where the face touches none.
-    axis : (m, 3) float64 unit x-axis of that interface, NaN rows where none.
-    """
-    faces = np.asarray(faces, dtype=np.int64)
-    face_part = np.asarray(face_part, dtype=np.int64)
-    m = len(face_part)
-    none = np.iinfo(np.int64).max
-    face_interface = np.full(m, none)
-    n_v = len(vertices)
-    for k, itf in enumerate(interfaces):
-        on = np.zeros(n_v, dtype=bool)
-        on[itf.vertices] = True
-        touch = on[faces].any(axis=1) & np.isin(face_part, itf.parts)
-        face_interface[touch] = np.minimum(face_interface[touch], k)
-    face_interface[face_interface == none] = -1
-    axis = np.full((m, 3), np.nan)
-    has = face_interface >= 0
-    if has.any():
-        pts = np.asarray(vertices, dtype=np.float64)
-        xs = np.array([interface_x_axis(pts[itf.vertices]) for itf in interfaces])
-        axis[has] = xs[face_interface[has]]
-    return face_interface, axis
-
-
 @dataclass
 class FrameField:
     """Frames of a part segmentation.
@@ -486,7 +434,8 @@ class FrameField:
         :mod:`core.segmentation.frame_choice`; PCA with ``choose="pca"``).
     interfaces : list of Interface records with ``frame`` (3, 3) set.
     face_interface : (m,) int64 interface next to each face (a vertex on it), -1 where none.
-    face_interface_axis : (m, 3) float64 x-axis of that interface (:func:`interface_x_axis`,
+    face_interface_axis : (m, 3) float64 x-axis of that interface
+        (:func:`core.segmentation.parts.interface_x_axis`,
         Eq. 3 term 4), NaN rows where none.
     face_interface_distance : (m,) float64 geodesic distance to the nearest interface of
         the face's part (inf beyond the blend distance or without interface).
@@ -538,9 +487,6 @@ def compute_frames(mesh, face_part, blend_distance=None, mode="area", align_dege
     -------
     FrameField
     """
-    # parts.py builds on this module, so it is imported here rather than at the top
-    from core.segmentation.parts import interfaces as find_interfaces, validate_face_part
-
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int64)
     face_part = validate_face_part(mesh, face_part)

@@ -49,8 +49,10 @@ from core.segmentation.charts import OPPOSITE, build_topology
 from core.segmentation.labeling import (LAMBDA, PENALTY, check_frames, face_colouring,
                                         face_normals, hbecvt_sweeps, interface_penalty,
                                         label_cost, label_vectors, part_neighbours)
-from core.segmentation.validity import (COS_45, check_validity, edge_interface_axes, interface_loops,
-                                         local_counts, local_invalid_count)
+from core.segmentation.parts import face_interface_axes, interfaces
+from core.segmentation.validity import (COS_45, check_validity, edge_interface_axes, local_counts,
+                                        local_invalid_count)
+from core.types import TriMesh
 
 
 def _chart_costs(cost, face_chart, n_charts):
@@ -373,8 +375,8 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     face_label : (m,) int labels 0..5 to repair (not modified).
     face_frame : (m, 3, 3) float64 per-face frames (rows x, y, z).
     face_interface_axis : (m, 3) float64, optional interface x-axis next to interfaces, NaN
-        elsewhere (Eq. 3 term 4 in smoothing and re-segmentation); derived from the interface
-        loops (PCA) when omitted.
+        elsewhere (Eq. 3 term 4 in smoothing and re-segmentation); when omitted, the frames'
+        own (:func:`core.segmentation.parts.face_interface_axes`).
     max_rounds : int, cap on operator rounds.
     smooth : bool, run the restricted boundary smoothing after merges.
     max_angle_increase : float, degrees; no chart operation may raise the area-weighted mean
@@ -439,7 +441,8 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     area = face_areas(V, F)
     cost = label_cost(normals, face_frame)
     if face_interface_axis is None and face_part.max(initial=0) > 0:
-        face_interface_axis = _interface_axis_from_loops(V, F, topology, face_part)
+        itfs = interfaces(TriMesh(V, F), face_part)
+        face_interface_axis = face_interface_axes(F, face_part, itfs, V)[1]
     iface_pen = interface_penalty(face_frame, face_interface_axis)
     unary = cost + penalty * iface_pen
     nb = part_neighbours(topology, face_part)
@@ -604,19 +607,3 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
               "angle_before": angle0, "angle_after": judge.angle(labels),
               "gave_up": list(gave_up.values()), "unfixed": unfixed}
     return labels.astype(np.int32), report
-
-
-def _interface_axis_from_loops(V, F, topology, face_part):
-    """(m, 3) interface x-axis (PCA of the loop) for faces touching an interface, NaN elsewhere."""
-    iface, loop, axes = interface_loops(V, topology, face_part)
-    out = np.full((len(F), 3), np.nan)
-    if len(iface) == 0:
-        return out
-    vert_axis = np.full((topology.n_vertices, 3), np.nan)
-    ev = topology.edges[iface]
-    vert_axis[ev[:, 0]] = axes[loop]
-    vert_axis[ev[:, 1]] = axes[loop]
-    va = vert_axis[F]
-    first = np.argmax(np.isfinite(va[:, :, 0]), axis=1)
-    out = va[np.arange(len(F)), first]
-    return out

@@ -5,7 +5,7 @@ Route: scan-line voxelisation of the solid (parity of surface crossings along z)
 3-D thinning (Lee et al. 1994, ``skimage.morphology.skeletonize``), a 26-connected
 skeleton graph, pruning of spurs, then pieces: one per junction cluster and short
 segments along every branch. Parts are built from these pieces by
-:mod:`core.segmentation.parts`.
+:mod:`core.segmentation.skeleton_parts`.
 """
 from dataclasses import dataclass
 

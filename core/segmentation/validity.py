@@ -21,7 +21,7 @@ Rules (issue 5; charts, boundaries and corners as in :mod:`core.segmentation.cha
 Interface rules (edges between two parts): the interface loops are the connected chains of edges
 between one pair of parts; each loop's x-axis is the smallest-eigenvalue eigenvector of the
 covariance of its vertices (the paper's Eq. 1 on the interface; the same axis the labeling's term 4
-uses, :func:`core.segmentation.frames.interface_x_axis`). On each side an interface edge of a chart
+uses, :func:`core.segmentation.parts.interface_x_axis`). On each side an interface edge of a chart
 with label direction ``d`` gets the axis of that side's frame nearest to ``d x x_interface``; an
 interface boundary is invalid when a side's label direction is within 45 degrees of the interface
 x-axis (the situation Eq. 3's term 4 forbids). A corner on an interface is judged per part with
@@ -41,12 +41,9 @@ has at least two turning points.
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
-from core.segmentation.charts import (MeshTopology, _rank_by_first, boundary_chains, build_topology,
-                                      extract_layout)
-from core.segmentation.frames import interface_x_axis
+from core.segmentation.charts import MeshTopology, boundary_chains, build_topology, extract_layout
+from core.segmentation.parts import interface_pieces, interface_x_axis
 
 COS_45 = float(np.sqrt(0.5))
 
@@ -84,52 +81,6 @@ class Validity:
         r = self.report
         return (r["invalid_charts"]["count"] + r["invalid_boundaries"]["count"]
                 + r["invalid_corners"]["count"])
-
-
-def interface_loops(V, topology, face_part):
-    """Interface loops between parts and their x-axes.
-
-    A loop is a connected set of edges between one pair of parts (edges joined at shared
-    vertices), the same pieces as :func:`core.segmentation.parts.interfaces`; its x-axis is
-    :func:`core.segmentation.frames.interface_x_axis` of its vertices, the axis the labeling's
-    Eq. 3 term 4 uses.
-
-    Parameters
-    ----------
-    V : (n, 3) float64 vertices.
-    topology : MeshTopology.
-    face_part : (m,) int part of each face.
-
-    Returns
-    -------
-    iface_edges : (j,) int64 edges (indices into ``topology.edges``) between two parts.
-    edge_loop : (j,) int64 loop id of each such edge.
-    loop_axis : (nloops, 3) float64 unit x-axis of each loop.
-    """
-    ef = topology.edge_faces
-    ok = (ef[:, 0] >= 0) & (ef[:, 1] >= 0)
-    fa, fb = np.maximum(ef[:, 0], 0), np.maximum(ef[:, 1], 0)
-    iface = np.flatnonzero(ok & (face_part[fa] != face_part[fb]))
-    if len(iface) == 0:
-        return iface, np.zeros(0, dtype=np.int64), np.zeros((0, 3))
-    ev = topology.edges[iface]
-    n = topology.n_vertices
-    j = len(iface)
-    pa, pb = face_part[fa[iface]], face_part[fb[iface]]
-    _, pair = np.unique(np.stack([np.minimum(pa, pb), np.maximum(pa, pb)], axis=1), axis=0,
-                        return_inverse=True)
-    node = pair.reshape(-1)[:, None] * n + ev
-    _, node = np.unique(node.reshape(-1), return_inverse=True)
-    rows = np.repeat(np.arange(j), 2)
-    inc = sp.csr_matrix((np.ones(2 * j, dtype=np.int8), (rows, node.reshape(-1))),
-                        shape=(j, int(node.max()) + 1))
-    _, loop = connected_components(inc @ inc.T, directed=False)
-    loop = _rank_by_first(loop.astype(np.int64), int(loop.max()) + 1)
-    n_loops = int(loop.max()) + 1
-    axes = np.zeros((n_loops, 3))
-    for i in range(n_loops):
-        axes[i] = interface_x_axis(V[np.unique(ev[loop == i])])
-    return iface, loop, axes
 
 
 def _label_direction(face_frame, faces, labels):
@@ -193,7 +144,11 @@ def _example_point(V, F, face):
 
 
 def edge_interface_axes(V, topology, face_part):
-    """(e, 3) float64 x-axis of the interface loop of every edge between two parts (0 elsewhere).
+    """(e, 3) float64 x-axis of the interface of every edge between two parts (0 elsewhere).
+
+    The interfaces are :func:`core.segmentation.parts.interface_pieces` of ``topology``'s edges
+    and their axis :func:`core.segmentation.parts.interface_x_axis` of their vertices: the
+    pieces and the axis the frames and the labeling's Eq. 3 term 4 use.
 
     Parameters
     ----------
@@ -201,9 +156,11 @@ def edge_interface_axes(V, topology, face_part):
     topology : MeshTopology.
     face_part : (m,) int part of each face.
     """
-    iface_edges, edge_loop, loop_axis = interface_loops(V, topology, face_part)
+    V = np.asarray(V, dtype=np.float64)
     edge_ix = np.zeros((len(topology.edges), 3))
-    edge_ix[iface_edges] = loop_axis[edge_loop]
+    for _, index in interface_pieces(topology.edges, topology.edge_faces, face_part,
+                                     topology.n_vertices):
+        edge_ix[index] = interface_x_axis(V[np.unique(topology.edges[index])])
     return edge_ix
 
 

@@ -23,7 +23,8 @@ def run_parts(intake, params, progress):
     ``components="all"``) is its own part.
     """
     from core.mesh_topology import connected_face_components
-    from core.segmentation.parts import single_part, skeleton_segmentation
+    from core.segmentation.parts import single_part
+    from core.segmentation.skeleton_parts import skeleton_segmentation
 
     mesh = intake.target
     if params.parts == "single":

@@ -168,7 +168,7 @@ def test_face_interface_axis_is_the_axis_validity_judges_with():
     # a saddle-shaped (non-planar) interface: the x-axis is not obvious, so both stages must use
     # the same definition (Eq. 1 over the interface vertices)
     from core.segmentation.charts import build_topology
-    from core.segmentation.frames import interface_x_axis
+    from core.segmentation.parts import interface_x_axis
     from core.segmentation.validity import edge_interface_axes
 
     mesh = _mesh(m3.Manifold.cylinder(10.0, 2.0, 2.0, 48).refine(4))

@@ -184,7 +184,7 @@ def test_dev_mesh_ends_valid_with_few_charts(name):
 def test_dev_mesh_with_automatic_parts_ends_valid(name):
     # the interface x-axis of Eq. 3 term 4 and of the validity rules is one and the same
     from core.segmentation.frames import compute_frames, mean_edge_length
-    from core.segmentation.parts import skeleton_segmentation
+    from core.segmentation.skeleton_parts import skeleton_segmentation
     from core.types import TriMesh
 
     path = os.path.join(MESHES, name)

@@ -8,10 +8,10 @@ import pytest
 import trimesh
 
 from core.errors import ParameterError
-from core.segmentation.parts import (
-    MIN_PART_FACES, absorb_patches, automatic_parts, close_interfaces, interfaces,
-    parts_from_user, single_part, skeleton_segmentation, smooth_boundaries, validate_face_part,
-)
+from core.segmentation.parts import interfaces, parts_from_user, single_part, validate_face_part
+from core.segmentation.skeleton_parts import (MIN_PART_FACES, absorb_patches, automatic_parts,
+                                              close_interfaces, skeleton_segmentation,
+                                              smooth_boundaries)
 from core.types import TriMesh
 
 MESHES = Path("/work/shared/data/meshes")
@@ -201,3 +201,52 @@ def test_automatic_parts_on_dev_meshes(name, low, high):
     assert low <= n_parts <= high
     assert np.bincount(part).min() >= MIN_PART_FACES
     assert all(itf.closed == [True] for itf in interfaces(mesh, part))
+
+
+def test_frames_validity_and_repair_share_one_interface_grouping_and_axis(bar):
+    """Three parts meeting at two junction points: the interfaces (frames), the per-edge axes
+    (validity) and the per-face axes (labeling term 4, and the repair when it is not given
+    them) all come from ``interface_pieces`` and ``interface_x_axis``."""
+    from core.mesh_topology import edge_faces
+    from core.segmentation.charts import build_topology
+    from core.segmentation.frames import compute_frames
+    from core.segmentation.labeling import hbecvt_labeling
+    from core.segmentation.parts import face_interface_axes, interface_pieces, interface_x_axis
+    from core.segmentation.repair import repair_labeling
+    from core.segmentation.validity import edge_interface_axes
+
+    c = _centroids(bar)
+    part = validate_face_part(bar, np.where(c[:, 0] < 5.0, 0, np.where(c[:, 1] < 1.0, 1, 2)))
+    itfs = interfaces(bar, part)
+    edges, fe = edge_faces(bar.faces)
+    pieces = interface_pieces(edges, fe, part, len(bar.vertices))
+    assert [pair for pair, _ in pieces] == [itf.parts for itf in itfs] == [(0, 1), (0, 2), (1, 2)]
+    assert all(np.array_equal(edges[index], itf.edges) for (_, index), itf in zip(pieces, itfs))
+    assert [itf.closed for itf in itfs] == [[False]] * 3  # open chains between the junctions
+
+    topo = build_topology(bar.faces, len(bar.vertices))
+    row = {edge: k for k, edge in enumerate(map(tuple, topo.edges.tolist()))}
+    expected = np.zeros((len(topo.edges), 3))
+    for itf in itfs:
+        expected[[row[edge] for edge in map(tuple, itf.edges.tolist())]] = \
+            interface_x_axis(bar.vertices[itf.vertices])
+    assert np.array_equal(edge_interface_axes(bar.vertices, topo, part), expected)
+
+    field = compute_frames(bar, part, blend_distance=0.5)
+    face_itf, axis = face_interface_axes(bar.faces, part, itfs, bar.vertices)
+    assert np.array_equal(face_itf, field.face_interface)
+    assert np.array_equal(axis, field.face_interface_axis, equal_nan=True)
+    near = np.flatnonzero(face_itf >= 0)
+    pairs = np.array([itf.parts for itf in itfs])[face_itf[near]]
+    assert ((pairs == part[near, None]).any(axis=1)).all()  # never another pair's axis
+
+    # a band of +Y across the junctions gives the repair work where the axes matter (the
+    # earlier derivation of the repair gave two junction faces another interface's axis and
+    # repaired 4 faces differently)
+    labels = hbecvt_labeling(bar.vertices, bar.faces, part, field.face_frame, max_sweeps=3)[0]
+    labels[np.abs(c[:, 0] - 5.0) < 1.3] = 2
+    given = repair_labeling(bar.vertices, bar.faces, part, labels, field.face_frame,
+                            field.face_interface_axis)
+    derived = repair_labeling(bar.vertices, bar.faces, part, labels, field.face_frame)
+    assert (given[0] != labels).sum() > 10
+    assert np.array_equal(given[0], derived[0]) and given[1] == derived[1]
