@@ -26,7 +26,7 @@ import Part
 
 from core.errors import ExportError
 from core.export.brep_topology import check_topology, topology_from_sides
-from core.export.bspline import enclosed_volume
+from core.export.bspline_tessellation import enclosed_volume
 from core.export.occ_brep import brep_text
 from core.progress import NO_PROGRESS
 from polycube_wb.convert import shape_to_arrays

@@ -19,6 +19,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from core.errors import ExportError
+from core.export.bspline_basis import basis_matrix, evaluate_patch_points
 from core.mesh_topology import next_corners
 
 SIDE_NAMES = ("v=min", "u=max", "v=max", "u=min")
@@ -169,8 +170,6 @@ def check_topology(topology, patches, tolerance, samples=5):
     ------
     ExportError naming the first edge or face that fails.
     """
-    from core.export.bspline import basis_matrix, evaluate_patch_points
-
     t = topology
     n_edges = len(t.edge_curves)
     forward = np.bincount(t.use_edge[~t.use_reversed], minlength=n_edges)

@@ -7,6 +7,7 @@ import pytest
 
 from core.errors import ExportError
 from core.export import bspline as bs
+from core.export import bspline_basis, bspline_measure, bspline_tessellation
 from core.export.brep_topology import check_topology
 from core.export.patch_mesh import build_patch_mesh
 from core.geometry import triangle_mesh_volume
@@ -46,7 +47,7 @@ def test_regular_mesh_gives_exact_bezier_patches(patchsets):
         i, j = divmod(f, 6)
         net = X[np.ix_((i + np.arange(-1, 3)) % 8, (j + np.arange(-1, 3)) % 6)]
         expected = np.einsum("ai,bj,ijk->abk", Bt, Bt, net)
-        got = bs.evaluate_patch_grid([ps.patches[f]], t, t)[0]
+        got = bspline_basis.evaluate_patch_grid([ps.patches[f]], t, t)[0]
         assert np.abs(got - expected).max() < 1e-12
 
 
@@ -62,7 +63,7 @@ def test_regular_faces_exact_next_to_evs(patchsets):
     t = np.linspace(0, 1, 9)
     U, V = np.meshgrid(t, t, indexing="ij")
     for f in regular:
-        got = bs.evaluate_patch_grid([ps.patches[f]], t, t)[0].reshape(-1, 3)
+        got = bspline_basis.evaluate_patch_grid([ps.patches[f]], t, t)[0].reshape(-1, 3)
         exact = ev.evaluate(np.full(U.size, f), U.ravel(), V.ravel())
         assert np.abs(got - exact).max() < 1e-12
 
@@ -166,14 +167,14 @@ def _cross_derivative(patch, k, t, order):
     u, v = bs._edge_param(np.full(len(t), k), t)
     du, dv = (0, order) if k in (0, 2) else (order, 0)
     sign = 1.0 if k in (0, 3) else -1.0
-    return sign ** order * bs.evaluate_patches([patch], u, v, du, dv)[0]
+    return sign ** order * bspline_basis.evaluate_patches([patch], u, v, du, dv)[0]
 
 
 @pytest.mark.parametrize("name", ["cube", "genus3_block"])
 def test_tessellation_watertight_and_volume(patchsets, name):
     import trimesh
 
-    V, F = bs.tessellate_patches(patchsets[name], resolution=64)
+    V, F = bspline_tessellation.tessellate_patches(patchsets[name], resolution=64)
     mesh = trimesh.Trimesh(V, F, process=False)
     assert mesh.is_watertight and mesh.is_winding_consistent
     exact = limit_volume(getattr(sc, name)(), 5)
@@ -185,9 +186,9 @@ def test_deviation_detects_wrong_patches(patchsets):
     base = sc.cube()
     ps = bs.limit_surface_patches(base, depth=4, measure=False)
     ps.patches[0].poles[3, 3] += 0.01
-    dev = bs.patch_deviation(ps, base)
+    dev = bspline_measure.patch_deviation(ps, base)
     assert dev["max_error"] > 1e-3
-    jumps = bs.normal_jumps(ps, base)
+    jumps = bspline_measure.normal_jumps(ps, base)
     assert jumps["normal_jump_max_deg"] > patchsets["cube"].info["normal_jump_max_deg"]
 
 
