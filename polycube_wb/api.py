@@ -11,7 +11,7 @@ import time
 import numpy as np
 
 from core.errors import StageNotAvailableError
-from core.output_files import check_output_path, write_json_atomic
+from core.output_files import check_output_path, output_transaction, write_json_atomic
 from core.params import EXPORT_DEPTH, MAX_EXPORT_DEPTH
 from core.pipeline import (LAST_CORE_STAGE, STOP_AFTER_CHOICES, peak_memory_mb,
                            reconstruct as run_pipeline)
@@ -53,47 +53,51 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
     report, state = result.report, result.state
     outputs = {}
     missing = []
-    if labels_path is not None:
-        if state.labeling is not None:
-            from core.segmentation.labels_file import write_labels_ply
+    with output_transaction():  # every output or none (an error, Ctrl-C)
+        progress.report("writing", 1.0)
+        if labels_path is not None:
+            if state.labeling is not None:
+                from core.segmentation.labels_file import write_labels_ply
 
-            mesh = state.intake.target
-            write_labels_ply(labels_path, mesh.vertices, mesh.faces, state.parts.face_part,
-                             state.labeling.face_label, state.frames.frame_field.face_frame,
-                             protect=inputs)
-            outputs["labels"] = os.path.abspath(labels_path)
-        else:
-            missing.append(("labels file", "labeling"))
-    if base_mesh_path is not None:
-        if state.cage is not None:
-            from core.polymesh_io import write_polymesh
+                mesh = state.intake.target
+                write_labels_ply(labels_path, mesh.vertices, mesh.faces, state.parts.face_part,
+                                 state.labeling.face_label, state.frames.frame_field.face_frame,
+                                 protect=inputs)
+                outputs["labels"] = os.path.abspath(labels_path)
+            else:
+                missing.append(("labels file", "labeling"))
+        if base_mesh_path is not None:
+            if state.cage is not None:
+                from core.polymesh_io import write_polymesh
 
-            write_polymesh(base_mesh_path, state.cage, inputs)
-            outputs["base_mesh"] = os.path.abspath(base_mesh_path)
-        else:
-            missing.append(("base mesh", "basemesh"))
-    if stop_after == "solid":
-        if state.patches is not None:
-            started = time.perf_counter()
-            solid_section = _solid_and_step(state.patches.patches, step_path, inputs)
-            report["stages"]["solid"] = {"status": "ok", "message": "",
-                                         "seconds": round(time.perf_counter() - started, 4)}
-            report["brep"] = solid_section
-            if step_path is not None:
-                outputs["step"] = solid_section["step_path"]
-        else:
-            report["stages"]["solid"] = {"status": "skipped", "seconds": 0.0,
-                                         "message": "needs B-spline patches of the fitted base mesh"}
-            if step_path is not None:
-                missing.append(("STEP file", _first_unavailable(report)))
-    last_stage = LAST_CORE_STAGE[stop_after]
-    if stop_after != "solid" and report["stages"].get(last_stage, {}).get("status") != "ok":
-        missing.insert(0, (f"result of --stop-after {stop_after}", _first_unavailable(report)))
-    report["outputs"] = outputs
-    report["peak_memory_mb"] = round(peak_memory_mb(), 1)
-    if report_path is not None:
-        write_json_atomic(report_path, report, inputs)
-        outputs["report"] = os.path.abspath(report_path)
+                write_polymesh(base_mesh_path, state.cage, inputs)
+                outputs["base_mesh"] = os.path.abspath(base_mesh_path)
+            else:
+                missing.append(("base mesh", "basemesh"))
+        if stop_after == "solid":
+            if state.patches is not None:
+                progress.report("solid", 1.0)
+                started = time.perf_counter()
+                solid_section = _solid_and_step(state.patches.patches, step_path, inputs)
+                report["stages"]["solid"] = {"status": "ok", "message": "",
+                                             "seconds": round(time.perf_counter() - started, 4)}
+                report["brep"] = solid_section
+                if step_path is not None:
+                    outputs["step"] = solid_section["step_path"]
+            else:
+                report["stages"]["solid"] = {"status": "skipped", "seconds": 0.0, "message":
+                                             "needs B-spline patches of the fitted base mesh"}
+                if step_path is not None:
+                    missing.append(("STEP file", _first_unavailable(report)))
+        progress.report("writing", 1.0)
+        last_stage = LAST_CORE_STAGE[stop_after]
+        if stop_after != "solid" and report["stages"].get(last_stage, {}).get("status") != "ok":
+            missing.insert(0, (f"result of --stop-after {stop_after}", _first_unavailable(report)))
+        report["outputs"] = outputs
+        report["peak_memory_mb"] = round(peak_memory_mb(), 1)
+        if report_path is not None:
+            write_json_atomic(report_path, report, inputs)
+            outputs["report"] = os.path.abspath(report_path)
     if result.failed is not None:
         raise result.failed
     if missing:
@@ -216,31 +220,33 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT
     built = make_solid(patches, progress)
     solid, brep = built.solid, built.figures
     stages["solid"] = _ok(clock)
-    brep["step_path"] = None
-    if step_path is not None:
-        clock = time.perf_counter()
-        brep["step_path"] = write_solid_step(built, patches, step_path, input_paths=inputs,
-                                             name=_input_name(base_mesh_path))
-        stages["step"] = _ok(clock)
-    brep["limit_volume"] = brep["volume_error_rel"] = None
-    if measure:
-        clock = time.perf_counter()
-        reference = limit_volume(base, level=_reference_level(base.n_faces))
-        stages["limit_volume"] = _ok(clock)
-        brep["limit_volume"] = float(reference)
-        brep["volume_error_rel"] = float(abs(brep["volume"] - reference) / abs(reference))
-    brep["max_normal_jump_deg"] = patches.info.get("normal_jump_max_deg")
-    report = {
-        "input": {"file": os.path.abspath(base_mesh_path)},
-        "base_mesh": base_mesh_summary(base),
-        "patches": _plain(patches.info),
-        "brep": brep,
-        "stages": stages,
-        "total_seconds": round(time.perf_counter() - started, 4),
-        "peak_memory_mb": round(peak_memory_mb(), 1),
-    }
-    if report_path is not None:
-        write_json_atomic(report_path, report, inputs)
+    progress.report("writing", 0.8)
+    with output_transaction():  # the STEP file and the report together, or neither
+        brep["step_path"] = None
+        if step_path is not None:
+            clock = time.perf_counter()
+            brep["step_path"] = write_solid_step(built, patches, step_path, input_paths=inputs,
+                                                 name=_input_name(base_mesh_path))
+            stages["step"] = _ok(clock)
+        brep["limit_volume"] = brep["volume_error_rel"] = None
+        if measure:
+            clock = time.perf_counter()
+            reference = limit_volume(base, level=_reference_level(base.n_faces))
+            stages["limit_volume"] = _ok(clock)
+            brep["limit_volume"] = float(reference)
+            brep["volume_error_rel"] = float(abs(brep["volume"] - reference) / abs(reference))
+        brep["max_normal_jump_deg"] = patches.info.get("normal_jump_max_deg")
+        report = {
+            "input": {"file": os.path.abspath(base_mesh_path)},
+            "base_mesh": base_mesh_summary(base),
+            "patches": _plain(patches.info),
+            "brep": brep,
+            "stages": stages,
+            "total_seconds": round(time.perf_counter() - started, 4),
+            "peak_memory_mb": round(peak_memory_mb(), 1),
+        }
+        if report_path is not None:
+            write_json_atomic(report_path, report, inputs)
     progress.report("done", 1.0)
     return solid, report
 

@@ -264,7 +264,7 @@ def run_isolated(job):
     memory readings as its peak memory.
     """
     from polycube_wb.batch_memory import default_memory_limit_mb, memory_message
-    from polycube_wb.batch_worker import STAGE_PREFIX
+    from polycube_wb.stage_lines import STAGE_PREFIX
 
     if job.memory_mb == AUTO_MEMORY:
         job = dataclasses.replace(job, memory_mb=default_memory_limit_mb(os.cpu_count() or 1))

@@ -20,35 +20,8 @@ import time
 import traceback
 
 import polycube_wb  # noqa: F401  (installs the guard that makes ``core`` ours)
-from core.progress import NO_PROGRESS, Progress
-
-STAGE_PREFIX = "STAGE "
-ANNOUNCED = ("intake", "parts", "frames", "labeling", "basemesh", "fit", "patches")
-"""Stage names of the pipeline that are announced."""
-
-
-class StageLines(Progress):
-    """Progress that writes ``STAGE <name>`` on ``stream`` (stderr) when a stage starts.
-
-    The pipeline's final ``done`` after ``patches`` starts the solid (built after the core
-    stages by ``reconstruct_to_step``).
-    """
-
-    def __init__(self, stream=None):
-        self.stream = stream or sys.stderr
-        self.stage = None
-
-    def report(self, stage, fraction, message=""):
-        if stage == "done" and self.stage == "patches":
-            self.announce("solid")
-        elif stage != self.stage and stage in ANNOUNCED:
-            self.announce(stage)
-
-    def announce(self, stage):
-        """Write the line of ``stage``."""
-        self.stage = stage
-        self.stream.write(f"{STAGE_PREFIX}{stage}\n")
-        self.stream.flush()
+from core.progress import NO_PROGRESS
+from polycube_wb.stage_lines import StageLines
 
 
 def run_job(job, stages=None):

@@ -3,7 +3,8 @@
 
 Exit codes: 0 success; 2 bad input (one line on stderr starting ``error:``);
 1 internal failure or a stage that is not available yet (message; the traceback
-only with ``--debug``).
+only with ``--debug``); 130 cancelled with Ctrl-C (one line ``cancelled at stage S``;
+no output is written, an existing output is unchanged).
 """
 import argparse
 import json
@@ -15,8 +16,9 @@ from core.errors import PolycubeInputError
 from core.params import (BASE_MESH_METHODS, COMPONENT_POLICIES, EXPORT_DEPTH, FIT_MODES, MAX_EXPORT_DEPTH,
                          PART_MODES, UNIT_TO_MM, ReconstructionParams)
 from core.pipeline import STOP_AFTER_CHOICES
+from polycube_wb.stage_lines import StageLines
 
-EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT = 0, 1, 2
+EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT, EXIT_CANCELLED = 0, 1, 2, 130
 
 
 class _Parser(argparse.ArgumentParser):
@@ -92,6 +94,8 @@ def build_parser():
     rec.add_argument("--stop-after", choices=STOP_AFTER_CHOICES, default="solid",
                      help="run the pipeline up to this stage (default: solid)")
     add_pipeline_options(rec, defaults)
+    rec.add_argument("--progress", action="store_true",
+                     help="print a line 'STAGE <name>' on stderr as each stage starts")
     rec.add_argument("--debug", action="store_true", help="print tracebacks")
 
     bat = commands.add_parser("batch", help="many target meshes -> STEP solids + summary",
@@ -147,16 +151,19 @@ def build_parser():
 
 def main(argv=None):
     args = build_parser().parse_args(argv)
+    stages = StageLines(echo=getattr(args, "progress", False), stage=args.command)
     try:
-        return _COMMANDS[args.command](args)
+        return _COMMANDS[args.command](args, stages)
     except PolycubeInputError as exc:
         if args.debug:
             traceback.print_exc()
         sys.stderr.write(f"error: {exc}\n")
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        sys.stderr.write("error: interrupted\n")
-        return EXIT_INTERNAL
+    except KeyboardInterrupt:  # Ctrl-C: the outputs are written together or not at all
+        if args.debug:
+            traceback.print_exc()
+        sys.stderr.write(f"cancelled at stage {stages.stage}; {_CANCEL_NOTE[args.command]}\n")
+        return EXIT_CANCELLED
     except Exception as exc:  # internal failure: message, traceback only with --debug
         if args.debug:
             traceback.print_exc()
@@ -164,7 +171,16 @@ def main(argv=None):
         return EXIT_INTERNAL
 
 
-def _reconstruct(args):
+_CANCEL_NOTE = {
+    "reconstruct": "nothing was written",
+    "subd-to-step": "nothing was written",
+    "check": "nothing was written",
+    "batch": "the meshes finished before keep their outputs, the summary was not written",
+}
+"""What a Ctrl-C leaves, per command."""
+
+
+def _reconstruct(args, stages):
     from core.errors import StageNotAvailableError
     from polycube_wb.api import reconstruct_to_step
 
@@ -173,7 +189,7 @@ def _reconstruct(args):
         raise PolycubeInputError("reconstruct needs -o OUT.step (or --stop-after an earlier stage)")
     try:
         report = reconstruct_to_step(args.target, args.output, args.base_mesh, args.report,
-                                     args.labels, args.stop_after, **params)
+                                     args.labels, args.stop_after, progress=stages, **params)
     except StageNotAvailableError as exc:
         if getattr(exc, "report", None):
             _print_summary(exc.report)
@@ -230,11 +246,11 @@ def _print_summary(report):
         print(f"wrote {kind}: {path}")
 
 
-def _subd_to_step(args):
+def _subd_to_step(args, stages):
     from polycube_wb.api import subd_to_solid
 
     _, report = subd_to_solid(args.base_mesh, args.output, args.report, depth=args.depth,
-                              measure=not args.no_measure)
+                              measure=not args.no_measure, progress=stages)
     base, brep, patches = report["base_mesh"], report["brep"], report["patches"]
     print(f"base mesh: {base['faces']} faces ({base['quads']} quads, {base['triangles']} triangles, "
           f"{base['other']} other), {base['extraordinary_vertices']} extraordinary vertices, genus {base['genus']}")
@@ -253,7 +269,7 @@ def _subd_to_step(args):
     return EXIT_OK
 
 
-def _check(args):
+def _check(args, stages):
     from core.output_files import check_output_path, write_json_atomic
     from polycube_wb.api import check
 
@@ -266,7 +282,7 @@ def _check(args):
     return EXIT_OK
 
 
-def _batch(args):
+def _batch(args, stages):
     from polycube_wb.batch import run_batch_command
 
     for value, what in ((args.jobs, "--jobs"), (args.timeout, "--timeout")):
