@@ -141,22 +141,22 @@ def output_transaction():
 def interrupts_held(redeliver=True):
     """Hold Ctrl-C (SIGINT) back during the block, for bookkeeping that must not stop halfway.
 
-    Only in the main thread while Python's own SIGINT handler is installed (elsewhere no
-    ``KeyboardInterrupt`` can arrive). A Ctrl-C during the block raises ``KeyboardInterrupt``
-    when the block ends if ``redeliver``, else it is dropped.
+    Only in the main thread while a Python SIGINT handler is installed (elsewhere none runs).
+    A Ctrl-C during the block is handed to that handler when the block ends if ``redeliver``
+    (Python's own raises ``KeyboardInterrupt`` then), else it is dropped.
     """
-    if threading.current_thread() is not threading.main_thread() or \
-            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or not callable(previous):
         yield
         return
     caught = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    signal.signal(signal.SIGINT, lambda signum, frame: caught.append(frame))
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
     if caught and redeliver:
-        raise KeyboardInterrupt
+        previous(signal.SIGINT, caught[0])
 
 
 _PENDING = contextvars.ContextVar("polycube_pending_outputs", default=None)

@@ -23,6 +23,9 @@ import polycube_wb  # noqa: F401  (installs the guard that makes ``core`` ours)
 from core.progress import NO_PROGRESS
 from polycube_wb.stage_lines import StageLines
 
+CANCELLED_EXIT = 130
+"""Exit code of a worker stopped by Ctrl-C (SIGINT): no row, no output, no report."""
+
 
 def run_job(job, stages=None):
     """Run one mesh and write its outputs; returns the report (dict) with its ``batch`` section.
@@ -97,7 +100,13 @@ def main():
     from polycube_wb.batch import MeshJob, row_from_report
 
     job = MeshJob.from_dict(json.load(sys.stdin))
-    report = run_job(job, StageLines())
+    stages = StageLines()
+    try:
+        with stages.ctrl_c_remembered():
+            report = run_job(job, stages)
+    except KeyboardInterrupt:  # Ctrl-C reaches the whole batch: this mesh leaves no output
+        sys.stderr.write(f"cancelled at stage {stages.stage}\n")
+        return CANCELLED_EXIT
     sys.stdout.write("\nROW " + json.dumps(row_from_report(job, report).to_dict()) + "\n")
     return 0
 

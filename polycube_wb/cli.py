@@ -153,7 +153,8 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     stages = StageLines(echo=getattr(args, "progress", False), stage=args.command)
     try:
-        return _COMMANDS[args.command](args, stages)
+        with stages.ctrl_c_remembered():
+            return _COMMANDS[args.command](args, stages)
     except PolycubeInputError as exc:
         if args.debug:
             traceback.print_exc()
@@ -162,7 +163,7 @@ def main(argv=None):
     except KeyboardInterrupt:  # Ctrl-C: the outputs are written together or not at all
         if args.debug:
             traceback.print_exc()
-        sys.stderr.write(f"cancelled at stage {stages.stage}; {_CANCEL_NOTE[args.command]}\n")
+        sys.stderr.write(_CANCELLED[args.command].format(stage=stages.stage) + "\n")
         return EXIT_CANCELLED
     except Exception as exc:  # internal failure: message, traceback only with --debug
         if args.debug:
@@ -171,13 +172,14 @@ def main(argv=None):
         return EXIT_INTERNAL
 
 
-_CANCEL_NOTE = {
-    "reconstruct": "nothing was written",
-    "subd-to-step": "nothing was written",
-    "check": "nothing was written",
-    "batch": "the meshes finished before keep their outputs, the summary was not written",
+_CANCELLED = {
+    "reconstruct": "cancelled at stage {stage}; nothing was written",
+    "subd-to-step": "cancelled at stage {stage}; nothing was written",
+    "check": "cancelled; nothing was written",
+    "batch": "cancelled; the meshes that had finished keep their outputs, the others have none, "
+             "and the summary was not written",
 }
-"""What a Ctrl-C leaves, per command."""
+"""The line a Ctrl-C prints, per command (``stage``: the stage the run was in)."""
 
 
 def _reconstruct(args, stages):

@@ -8,8 +8,8 @@ import time
 import pytest
 
 from core.errors import ParameterError
-from core.output_files import (atomic_output, interrupts_held, output_transaction, write_json_atomic,
-                               write_text_atomic)
+from core.output_files import (atomic_output, interrupts_held, output_transaction,
+                               write_json_atomic, write_text_atomic)
 
 
 def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):

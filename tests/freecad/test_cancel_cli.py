@@ -24,6 +24,8 @@ MESH = os.path.join(REPO, "..", "shared", "data", "meshes", "to_levelset_cantile
 RUN_SECONDS = 300
 """Hang guard on one run (a whole run takes about 15 s on a loaded machine)."""
 OLD_STEP, OLD_REPORT = b"ISO-10303-21; an older result\n", b'{"older": "report"}\n'
+BATCH_REDRAWS = 5
+"""The batch is stopped at its fifth progress line: its meshes are inside the pipeline."""
 CANCELLED = re.compile(r"cancelled at stage (\w+); nothing was written")
 
 
@@ -123,3 +125,32 @@ def test_the_run_without_ctrl_c_replaces_the_outputs(tmp_path):
     assert sorted(after) == ["base.obj", "labels.ply", "report.json", "result.step"]
     assert after["result.step"] != before["result.step"]
     assert after["report.json"] != before["report.json"]
+
+
+def test_ctrl_c_on_a_batch_stops_every_mesh_and_leaves_the_folder_as_it_was(tmp_path):
+    """Ctrl-C in a terminal reaches the batch and its mesh processes (one process group):
+    exit 130 with one line, no report, output or summary for the meshes that were running,
+    an existing summary unchanged."""
+    inputs, out = tmp_path / "in", tmp_path / "batch"
+    inputs.mkdir()
+    out.mkdir()
+    for name in ("a.stl", "b.stl"):
+        (inputs / name).write_bytes(open(MESH, "rb").read())
+    (out / "summary.csv").write_bytes(b"mesh,status\nolder,ok\n")
+    before = folder_digest(out)
+    process = subprocess.Popen([sys.executable, "-m", "polycube_wb", "batch", str(inputs), "-o",
+                                str(out), "--jobs", "2", "--fit-iterations", "3000",
+                                "--progress-lines"], cwd=REPO, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, start_new_session=True)
+    redraws = 0
+    for line in process.stdout:  # a line a second while both meshes run: stop them mid-run
+        redraws += line.startswith("PROGRESS ") and '"running": 2' in line
+        if redraws == BATCH_REDRAWS:
+            os.killpg(process.pid, signal.SIGINT)  # what Ctrl-C in the terminal does
+            break
+    stdout, stderr = process.communicate(timeout=RUN_SECONDS)
+    assert process.returncode == 130, stderr
+    assert stderr.splitlines() == ["cancelled; the meshes that had finished keep their outputs, "
+                                   "the others have none, and the summary was not written"]
+    assert "MESH " not in stdout, "no mesh finished"
+    assert folder_digest(out) == before
