@@ -645,21 +645,30 @@ def recompute(doc, progress=NO_PROGRESS):
 
     FreeCAD does not propagate errors from ``execute``; the outcome lists them. An object
     whose stage failed is marked invalid (``obj.isValid()`` is False) with the reason in its
-    ``Status`` property; the objects after it are not recomputed.
+    ``Status`` property; the objects after it are not recomputed. When the user cancels
+    (``progress`` raises ``Cancelled``), the object that was running gets ``Status``
+    "cancelled by the user" and keeps its last result; it and the objects that did not run
+    after it stay touched (the next recompute runs them).
     """
     from polycube_wb.objects.base import recompute_session
 
     with recompute_session(doc, progress) as session:
         doc.recompute()
+    if session.cancelled:
+        for name in list(session.failures) + session.skipped:
+            doc.getObject(name).touch()
     return RecomputeOutcome(dict(session.failures), session.cancelled)
 
 
 def run_in_transaction(doc, title, build, progress=NO_PROGRESS):
     """Run ``build()`` (adds or changes objects), then recompute, as one undo step.
 
-    When the user cancels during the recompute, or ``build`` raises, the document is
-    rolled back to what it was before (nothing half-made stays; needs ``doc.UndoMode``,
-    which the GUI turns on).
+    When ``build`` raises, the document is rolled back to what it was before. When the user
+    cancels during the recompute, the stages that finished keep their results, the stage
+    object that was running keeps the result it had (none if it is new) and is marked:
+    ``Status`` "cancelled by the user", touched, so the next recompute runs it again; the
+    objects after it are not run. The step is committed, so Undo restores the document as
+    it was before ``build`` (needs ``doc.UndoMode``, which the GUI turns on).
 
     Returns
     -------
@@ -668,11 +677,11 @@ def run_in_transaction(doc, title, build, progress=NO_PROGRESS):
     Raises
     ------
     core.errors.Cancelled
-        The user cancelled; the document is as before.
+        The user cancelled; the message names the stage object that was running.
     """
     from core.errors import Cancelled
+    from polycube_wb.objects.base import CANCELLED_STATUS
 
-    up_to_date = [obj for obj in doc.Objects if "Touched" not in obj.State]
     doc.openTransaction(title)
     try:
         built = build()
@@ -680,32 +689,23 @@ def run_in_transaction(doc, title, build, progress=NO_PROGRESS):
     except BaseException:
         doc.abortTransaction()
         raise
-    if outcome.cancelled:
-        doc.abortTransaction()
-        _restore_states(doc, up_to_date)
-        raise Cancelled(f"{title}: cancelled by the user; the document is as before")
     doc.commitTransaction()
+    if outcome.cancelled:
+        stopped = [doc.getObject(name) for name, reason in outcome.failures.items()
+                   if reason == CANCELLED_STATUS]
+        where = " at " + ", ".join(obj.Label for obj in stopped) if stopped else ""
+        raise Cancelled(f"{title}: cancelled by the user{where}; the stages before it keep "
+                        f"their results (Undo restores the document as it was)")
     return built, outcome
-
-
-def _restore_states(doc, up_to_date):
-    """After a rollback: the objects that were up to date before are so again.
-
-    The rollback restores their properties but leaves FreeCAD's ``Touched``/``Invalid``
-    flags of the cancelled run; recomputing such an object alone only redisplays its
-    restored result (its inputs and parameters match what it last ran with).
-    """
-    for obj in up_to_date:
-        if doc.getObject(obj.Name) is not obj:
-            continue
-        if not obj.isValid():
-            obj.recompute()
-        obj.purgeTouched()
 
 
 def describe(obj):
     """One line about a stage object's result (for the Report view and messages)."""
+    from polycube_wb.objects.base import CANCELLED_STATUS
+
     kind = stage_kind(obj)
+    if obj.Status == CANCELLED_STATUS:
+        return f"{obj.Label}: {CANCELLED_STATUS}; it runs again at the next recompute"
     if not obj.isValid() or obj.Status not in ("ok", ""):
         return f"{obj.Label}: failed: {obj.Status}"
     if kind == "Target":
