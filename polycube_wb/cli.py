@@ -137,6 +137,8 @@ def build_parser():
                           f"(default {EXPORT_DEPTH})")
     sub.add_argument("--no-measure", action="store_true",
                      help="skip measuring approximation error and continuity (faster)")
+    sub.add_argument("--progress", action="store_true",
+                     help="print a line 'STAGE <name>' on stderr as each stage starts")
     sub.add_argument("--debug", action="store_true", help="print tracebacks")
 
     chk = commands.add_parser("check", help="compare a result STEP with the target mesh",

@@ -154,3 +154,23 @@ def test_ctrl_c_on_a_batch_stops_every_mesh_and_leaves_the_folder_as_it_was(tmp_
                                    "the others have none, and the summary was not written"]
     assert "MESH " not in stdout, "no mesh finished"
     assert folder_digest(out) == before
+
+
+@pytest.mark.parametrize("stage", ["patches", "solid", "writing"])
+def test_ctrl_c_in_subd_to_step_writes_nothing(tmp_path, stage):
+    """``subd-to-step`` on the bundled genus-3 cage: the STEP file and the report are written
+    together at the end (after the limit-surface volume is measured), so a Ctrl-C in any of
+    its stages leaves the older files as they were."""
+    out = outputs_folder(tmp_path)
+    before = folder_digest(out)
+    process = subprocess.Popen([sys.executable, "-m", "polycube_wb", "subd-to-step",
+                                os.path.join(REPO, "examples", "genus3_cage.obj"), "--progress",
+                                "-o", str(out / "result.step"), "--report",
+                                str(out / "report.json")], cwd=REPO, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    code, stdout, lines = interrupt_at(process, stage)
+    assert code == 130, lines
+    match = CANCELLED.fullmatch(lines[-1])
+    assert match and match.group(1) == lines[-2][len(STAGE_PREFIX):], lines
+    assert stdout == ""
+    assert folder_digest(out) == before
