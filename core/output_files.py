@@ -109,6 +109,7 @@ def output_transaction():
     renames (a Ctrl-C then arrives too late to stop the run and is dropped: the outputs are
     complete). When the block ends with an exception (an error, Ctrl-C) every temporary file
     is removed and no target is touched. A transaction inside another joins the outer one.
+    A file written in the block exists at its path only after the block: read it back after.
 
     Raises
     ------
