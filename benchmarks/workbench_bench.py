@@ -11,8 +11,8 @@ changing the fit's iterations (only the fit and what follows rerun); a cage edit
 fitted cage (only the solid and the map rerun); a recompute with nothing changed; the
 document's size on disk with the target embedded; save -> close -> reopen -> recompute
 after a parameter change with the source file deleted; and how long a cancel takes to
-land inside the fit (from the request, 8 s into a long refit, to the rolled-back
-document: at most one fit iteration plus the rollback). Every figure is
+land inside the fit (from the request, 8 s into a long refit, to the document with the Fit
+marked cancelled: at most one fit iteration). Every figure is
 measured here, in this run; seconds are wall-clock on this machine.
 """
 import argparse
@@ -132,10 +132,11 @@ def measure(mesh_path, iterations):
 
         progress.arm()
         _, landed = timed(cancelled_run)
-        rows.append(("cancel requested 8 s into a 400-iteration refit -> document rolled back",
+        rows.append(("cancel requested 8 s into a 400-iteration refit -> Fit marked cancelled",
                      landed - progress.requested_at,
-                     f"seconds from the request; Fit.Iterations {before} -> 400 -> "
-                     f"{chain['Fit'].Iterations} after the rollback"))
+                     f"seconds from the request; Fit.Iterations {before} -> "
+                     f"{chain['Fit'].Iterations}, Status '{chain['Fit'].Status}' (its last "
+                     f"result kept; Undo restores {before})"))
 
         path = os.path.join(folder, "bench.FCStd")
         os.remove(source)

@@ -2,6 +2,9 @@
 """``python -m polycube_wb``: see :mod:`polycube_wb.cli`."""
 import sys
 
-from polycube_wb.cli import main
-
+try:
+    from polycube_wb.cli import EXIT_CANCELLED, main
+except KeyboardInterrupt:  # Ctrl-C while the modules load: nothing ran yet
+    sys.stderr.write("cancelled at start-up; nothing was written\n")
+    sys.exit(130)
 sys.exit(main())

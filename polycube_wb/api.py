@@ -11,7 +11,7 @@ import time
 import numpy as np
 
 from core.errors import StageNotAvailableError
-from core.output_files import check_output_path, write_json_atomic
+from core.output_files import check_output_path, output_transaction, write_json_atomic
 from core.params import EXPORT_DEPTH, check_export_depth
 from core.pipeline import (LAST_CORE_STAGE, STOP_AFTER_CHOICES, peak_memory_mb,
                            reconstruct as run_pipeline)
@@ -53,47 +53,51 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
     report, state = result.report, result.state
     outputs = {}
     missing = []
-    if labels_path is not None:
-        if state.labeling is not None:
-            from core.segmentation.labels_file import write_labels_ply
+    with output_transaction():  # every output or none (an error, Ctrl-C)
+        progress.report("writing", 1.0)
+        if labels_path is not None:
+            if state.labeling is not None:
+                from core.segmentation.labels_file import write_labels_ply
 
-            mesh = state.intake.target
-            write_labels_ply(labels_path, mesh.vertices, mesh.faces, state.parts.face_part,
-                             state.labeling.face_label, state.frames.frame_field.face_frame,
-                             protect=inputs)
-            outputs["labels"] = os.path.abspath(labels_path)
-        else:
-            missing.append(("labels file", "labeling"))
-    if base_mesh_path is not None:
-        if state.cage is not None:
-            from core.polymesh_io import write_polymesh
+                mesh = state.intake.target
+                write_labels_ply(labels_path, mesh.vertices, mesh.faces, state.parts.face_part,
+                                 state.labeling.face_label, state.frames.frame_field.face_frame,
+                                 protect=inputs)
+                outputs["labels"] = os.path.abspath(labels_path)
+            else:
+                missing.append(("labels file", "labeling"))
+        if base_mesh_path is not None:
+            if state.cage is not None:
+                from core.polymesh_io import write_polymesh
 
-            write_polymesh(base_mesh_path, state.cage, inputs)
-            outputs["base_mesh"] = os.path.abspath(base_mesh_path)
-        else:
-            missing.append(("base mesh", "basemesh"))
-    if stop_after == "solid":
-        if state.patches is not None:
-            started = time.perf_counter()
-            solid_section = _solid_and_step(state.patches.patches, step_path, inputs)
-            report["stages"]["solid"] = {"status": "ok", "message": "",
-                                         "seconds": round(time.perf_counter() - started, 4)}
-            report["brep"] = solid_section
-            if step_path is not None:
-                outputs["step"] = solid_section["step_path"]
-        else:
-            report["stages"]["solid"] = {"status": "skipped", "seconds": 0.0,
-                                         "message": "needs B-spline patches of the fitted base mesh"}
-            if step_path is not None:
-                missing.append(("STEP file", _first_unavailable(report)))
-    last_stage = LAST_CORE_STAGE[stop_after]
-    if stop_after != "solid" and report["stages"].get(last_stage, {}).get("status") != "ok":
-        missing.insert(0, (f"result of --stop-after {stop_after}", _first_unavailable(report)))
-    report["outputs"] = outputs
-    report["peak_memory_mb"] = round(peak_memory_mb(), 1)
-    if report_path is not None:
-        write_json_atomic(report_path, report, inputs)
-        outputs["report"] = os.path.abspath(report_path)
+                write_polymesh(base_mesh_path, state.cage, inputs)
+                outputs["base_mesh"] = os.path.abspath(base_mesh_path)
+            else:
+                missing.append(("base mesh", "basemesh"))
+        if stop_after == "solid":
+            if state.patches is not None:
+                progress.report("solid", 1.0)
+                started = time.perf_counter()
+                solid_section = _solid_and_step(state.patches.patches, step_path, inputs)
+                report["stages"]["solid"] = {"status": "ok", "message": "",
+                                             "seconds": round(time.perf_counter() - started, 4)}
+                report["brep"] = solid_section
+                if step_path is not None:
+                    outputs["step"] = solid_section["step_path"]
+            else:
+                report["stages"]["solid"] = {"status": "skipped", "seconds": 0.0, "message":
+                                             "needs B-spline patches of the fitted base mesh"}
+                if step_path is not None:
+                    missing.append(("STEP file", _first_unavailable(report)))
+        progress.report("writing", 1.0)
+        last_stage = LAST_CORE_STAGE[stop_after]
+        if stop_after != "solid" and report["stages"].get(last_stage, {}).get("status") != "ok":
+            missing.insert(0, (f"result of --stop-after {stop_after}", _first_unavailable(report)))
+        report["outputs"] = outputs
+        report["peak_memory_mb"] = round(peak_memory_mb(), 1)
+        if report_path is not None:
+            write_json_atomic(report_path, report, inputs)
+            outputs["report"] = os.path.abspath(report_path)
     if result.failed is not None:
         raise result.failed
     if missing:
@@ -212,31 +216,33 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT
     built = make_solid(patches, progress)
     solid, brep = built.solid, built.figures
     stages["solid"] = _ok(clock)
-    brep["step_path"] = None
-    if step_path is not None:
-        clock = time.perf_counter()
-        brep["step_path"] = write_solid_step(built, patches, step_path, input_paths=inputs,
-                                             name=_input_name(base_mesh_path))
-        stages["step"] = _ok(clock)
-    brep["limit_volume"] = brep["volume_error_rel"] = None
-    if measure:
-        clock = time.perf_counter()
-        reference = limit_volume(base, level=_reference_level(base.n_faces))
-        stages["limit_volume"] = _ok(clock)
-        brep["limit_volume"] = float(reference)
-        brep["volume_error_rel"] = float(abs(brep["volume"] - reference) / abs(reference))
-    brep["max_normal_jump_deg"] = patches.info.get("normal_jump_max_deg")
-    report = {
-        "input": {"file": os.path.abspath(base_mesh_path)},
-        "base_mesh": base_mesh_summary(base),
-        "patches": _plain(patches.info),
-        "brep": brep,
-        "stages": stages,
-        "total_seconds": round(time.perf_counter() - started, 4),
-        "peak_memory_mb": round(peak_memory_mb(), 1),
-    }
-    if report_path is not None:
-        write_json_atomic(report_path, report, inputs)
+    progress.report("writing", 0.8)
+    with output_transaction():  # the STEP file and the report together, or neither
+        brep["step_path"] = None
+        if step_path is not None:
+            clock = time.perf_counter()
+            brep["step_path"] = write_solid_step(built, patches, step_path, input_paths=inputs,
+                                                 name=_input_name(base_mesh_path))
+            stages["step"] = _ok(clock)
+        brep["limit_volume"] = brep["volume_error_rel"] = None
+        if measure:
+            clock = time.perf_counter()
+            reference = limit_volume(base, level=_reference_level(base.n_faces))
+            stages["limit_volume"] = _ok(clock)
+            brep["limit_volume"] = float(reference)
+            brep["volume_error_rel"] = float(abs(brep["volume"] - reference) / abs(reference))
+        brep["max_normal_jump_deg"] = patches.info.get("normal_jump_max_deg")
+        report = {
+            "input": {"file": os.path.abspath(base_mesh_path)},
+            "base_mesh": base_mesh_summary(base),
+            "patches": _plain(patches.info),
+            "brep": brep,
+            "stages": stages,
+            "total_seconds": round(time.perf_counter() - started, 4),
+            "peak_memory_mb": round(peak_memory_mb(), 1),
+        }
+        if report_path is not None:
+            write_json_atomic(report_path, report, inputs)
     progress.report("done", 1.0)
     return solid, report
 
@@ -635,21 +641,30 @@ def recompute(doc, progress=NO_PROGRESS):
 
     FreeCAD does not propagate errors from ``execute``; the outcome lists them. An object
     whose stage failed is marked invalid (``obj.isValid()`` is False) with the reason in its
-    ``Status`` property; the objects after it are not recomputed.
+    ``Status`` property; the objects after it are not recomputed. When the user cancels
+    (``progress`` raises ``Cancelled``), the object that was running gets ``Status``
+    "cancelled by the user" and keeps its last result; it and the objects that did not run
+    after it stay touched (the next recompute runs them).
     """
     from polycube_wb.objects.base import recompute_session
 
     with recompute_session(doc, progress) as session:
         doc.recompute()
+    if session.cancelled:
+        for name in list(session.failures) + session.skipped:
+            doc.getObject(name).touch()
     return RecomputeOutcome(dict(session.failures), session.cancelled)
 
 
 def run_in_transaction(doc, title, build, progress=NO_PROGRESS):
     """Run ``build()`` (adds or changes objects), then recompute, as one undo step.
 
-    When the user cancels during the recompute, or ``build`` raises, the document is
-    rolled back to what it was before (nothing half-made stays; needs ``doc.UndoMode``,
-    which the GUI turns on).
+    When ``build`` raises, the document is rolled back to what it was before. When the user
+    cancels during the recompute, the stages that finished keep their results, the stage
+    object that was running keeps the result it had (none if it is new) and is marked:
+    ``Status`` "cancelled by the user", touched, so the next recompute runs it again; the
+    objects after it are not run. The step is committed, so Undo restores the document as
+    it was before ``build`` (needs ``doc.UndoMode``, which the GUI turns on).
 
     Returns
     -------
@@ -658,11 +673,11 @@ def run_in_transaction(doc, title, build, progress=NO_PROGRESS):
     Raises
     ------
     core.errors.Cancelled
-        The user cancelled; the document is as before.
+        The user cancelled; the message names the stage object that was running.
     """
     from core.errors import Cancelled
+    from polycube_wb.objects.base import CANCELLED_STATUS
 
-    up_to_date = [obj for obj in doc.Objects if "Touched" not in obj.State]
     doc.openTransaction(title)
     try:
         built = build()
@@ -670,32 +685,23 @@ def run_in_transaction(doc, title, build, progress=NO_PROGRESS):
     except BaseException:
         doc.abortTransaction()
         raise
-    if outcome.cancelled:
-        doc.abortTransaction()
-        _restore_states(doc, up_to_date)
-        raise Cancelled(f"{title}: cancelled by the user; the document is as before")
     doc.commitTransaction()
+    if outcome.cancelled:
+        stopped = [doc.getObject(name) for name, reason in outcome.failures.items()
+                   if reason == CANCELLED_STATUS]
+        where = " at " + ", ".join(obj.Label for obj in stopped) if stopped else ""
+        raise Cancelled(f"{title}: cancelled by the user{where}; the stages before it keep "
+                        f"their results (Undo restores the document as it was)")
     return built, outcome
-
-
-def _restore_states(doc, up_to_date):
-    """After a rollback: the objects that were up to date before are so again.
-
-    The rollback restores their properties but leaves FreeCAD's ``Touched``/``Invalid``
-    flags of the cancelled run; recomputing such an object alone only redisplays its
-    restored result (its inputs and parameters match what it last ran with).
-    """
-    for obj in up_to_date:
-        if doc.getObject(obj.Name) is not obj:
-            continue
-        if not obj.isValid():
-            obj.recompute()
-        obj.purgeTouched()
 
 
 def describe(obj):
     """One line about a stage object's result (for the Report view and messages)."""
+    from polycube_wb.objects.base import CANCELLED_STATUS
+
     kind = stage_kind(obj)
+    if obj.Status == CANCELLED_STATUS:
+        return f"{obj.Label}: {CANCELLED_STATUS}; it runs again at the next recompute"
     if not obj.isValid() or obj.Status not in ("ok", ""):
         return f"{obj.Label}: failed: {obj.Status}"
     if kind == "Target":

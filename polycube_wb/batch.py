@@ -13,6 +13,7 @@ import fnmatch
 import glob
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -82,7 +83,8 @@ class MeshRow:
     """One row of the summary (``summary.csv`` / ``summary.html``).
 
     status : ``ok`` (a STEP solid), ``failed`` (a stage stopped; ``failed_stage`` and
-        ``message`` say which and why), ``timeout`` or ``crashed`` (the process).
+        ``message`` say which and why), ``timeout``, ``crashed`` (the process) or
+        ``cancelled`` (its process got Ctrl-C; no report written).
     stage_reached : last stage whose status is ``ok``.
     mean_deviation, max_deviation : fitted surface to target, fractions of the bbox diagonal.
     outside_volume : fraction of the target volume the fitted surface leaves outside it.
@@ -264,7 +266,8 @@ def run_isolated(job):
     memory readings as its peak memory.
     """
     from polycube_wb.batch_memory import default_memory_limit_mb, memory_message
-    from polycube_wb.batch_worker import STAGE_PREFIX
+    from polycube_wb.batch_worker import CANCELLED_EXIT
+    from polycube_wb.stage_lines import STAGE_PREFIX
 
     if job.memory_mb == AUTO_MEMORY:
         job = dataclasses.replace(job, memory_mb=default_memory_limit_mb(os.cpu_count() or 1))
@@ -284,6 +287,8 @@ def run_isolated(job):
     if stop == "memory":
         return _cut_short(job, started, "failed", memory_message(job.memory_mb, stage), stage,
                           {"memory_limit_exceeded": True}, peak)
+    if process.returncode in (CANCELLED_EXIT, -signal.SIGINT):
+        return _cancelled(job, started, stage)
     rows = [line for line in stdout.splitlines() if line.startswith(ROW_PREFIX)]
     if process.returncode != 0 or not rows:
         lines = [line for line in stderr.strip().splitlines() if not line.startswith(STAGE_PREFIX)]
@@ -351,6 +356,16 @@ def _cut_short(job, started, status, message, stage, batch_extra=None, peak_mb=N
     if peak_mb is not None:
         report["peak_memory_mb"] = round(peak_mb, 1)
     write_json_atomic(job.paths()["report"], report, (job.source,))
+    return row_from_report(job, report)
+
+
+def _cancelled(job, started, stage):
+    """The row of a mesh whose process a Ctrl-C (SIGINT) stopped; no report is written, so an
+    earlier report and outputs of the mesh stay as they were."""
+    message = f"cancelled at stage {stage}"
+    report = {"input": {"file": job.source}, "outputs": {},
+              "stages": {stage: {"status": "failed", "seconds": 0.0, "message": message}},
+              "batch": job.batch_section(time.perf_counter() - started, "cancelled", message)}
     return row_from_report(job, report)
 
 

@@ -20,35 +20,11 @@ import time
 import traceback
 
 import polycube_wb  # noqa: F401  (installs the guard that makes ``core`` ours)
-from core.progress import NO_PROGRESS, Progress
+from core.progress import NO_PROGRESS
+from polycube_wb.stage_lines import StageLines
 
-STAGE_PREFIX = "STAGE "
-ANNOUNCED = ("intake", "parts", "frames", "labeling", "basemesh", "fit", "patches")
-"""Stage names of the pipeline that are announced."""
-
-
-class StageLines(Progress):
-    """Progress that writes ``STAGE <name>`` on ``stream`` (stderr) when a stage starts.
-
-    The pipeline's final ``done`` after ``patches`` starts the solid (built after the core
-    stages by ``reconstruct_to_step``).
-    """
-
-    def __init__(self, stream=None):
-        self.stream = stream or sys.stderr
-        self.stage = None
-
-    def report(self, stage, fraction, message=""):
-        if stage == "done" and self.stage == "patches":
-            self.announce("solid")
-        elif stage != self.stage and stage in ANNOUNCED:
-            self.announce(stage)
-
-    def announce(self, stage):
-        """Write the line of ``stage``."""
-        self.stage = stage
-        self.stream.write(f"{STAGE_PREFIX}{stage}\n")
-        self.stream.flush()
+CANCELLED_EXIT = 130
+"""Exit code of a worker stopped by Ctrl-C (SIGINT): no row, no output, no report."""
 
 
 def run_job(job, stages=None):
@@ -124,7 +100,13 @@ def main():
     from polycube_wb.batch import MeshJob, row_from_report
 
     job = MeshJob.from_dict(json.load(sys.stdin))
-    report = run_job(job, StageLines())
+    stages = StageLines()
+    try:
+        with stages.ctrl_c_remembered():
+            report = run_job(job, stages)
+    except KeyboardInterrupt:  # Ctrl-C reaches the whole batch: this mesh leaves no output
+        sys.stderr.write(f"cancelled at stage {stages.stage}\n")
+        return CANCELLED_EXIT
     sys.stdout.write("\nROW " + json.dumps(row_from_report(job, report).to_dict()) + "\n")
     return 0
 

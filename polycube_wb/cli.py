@@ -3,7 +3,8 @@
 
 Exit codes: 0 success; 2 bad input (one line on stderr starting ``error:``);
 1 internal failure or a stage that is not available yet (message; the traceback
-only with ``--debug``).
+only with ``--debug``); 130 cancelled with Ctrl-C (one line ``cancelled at stage S``;
+no output is written, an existing output is unchanged).
 """
 import argparse
 import json
@@ -15,8 +16,9 @@ from core.errors import PolycubeInputError
 from core.params import (EXPORT_DEPTH, MAX_EXPORT_DEPTH, UNIT_TO_MM, ReconstructionParams,
                          parameter_options)
 from core.pipeline import STOP_AFTER_CHOICES
+from polycube_wb.stage_lines import StageLines
 
-EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT = 0, 1, 2
+EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT, EXIT_CANCELLED = 0, 1, 2, 130
 
 
 class _Parser(argparse.ArgumentParser):
@@ -69,6 +71,8 @@ def build_parser():
     rec.add_argument("--stop-after", choices=STOP_AFTER_CHOICES, default="solid",
                      help="run the pipeline up to this stage (default: solid)")
     add_pipeline_options(rec, defaults)
+    rec.add_argument("--progress", action="store_true",
+                     help="print a line 'STAGE <name>' on stderr as each stage starts")
     rec.add_argument("--debug", action="store_true", help="print tracebacks")
 
     bat = commands.add_parser("batch", help="many target meshes -> STEP solids + summary",
@@ -110,6 +114,8 @@ def build_parser():
                           f"(default {EXPORT_DEPTH})")
     sub.add_argument("--no-measure", action="store_true",
                      help="skip measuring approximation error and continuity (faster)")
+    sub.add_argument("--progress", action="store_true",
+                     help="print a line 'STAGE <name>' on stderr as each stage starts")
     sub.add_argument("--debug", action="store_true", help="print tracebacks")
 
     chk = commands.add_parser("check", help="compare a result STEP with the target mesh",
@@ -124,16 +130,20 @@ def build_parser():
 
 def main(argv=None):
     args = build_parser().parse_args(argv)
+    stages = StageLines(echo=getattr(args, "progress", False), stage=args.command)
     try:
-        return _COMMANDS[args.command](args)
+        with stages.ctrl_c_remembered():
+            return _COMMANDS[args.command](args, stages)
     except PolycubeInputError as exc:
         if args.debug:
             traceback.print_exc()
         sys.stderr.write(f"error: {exc}\n")
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        sys.stderr.write("error: interrupted\n")
-        return EXIT_INTERNAL
+    except KeyboardInterrupt:  # Ctrl-C: the outputs are written together or not at all
+        if args.debug:
+            traceback.print_exc()
+        sys.stderr.write(_CANCELLED[args.command].format(stage=stages.stage) + "\n")
+        return EXIT_CANCELLED
     except Exception as exc:  # internal failure: message, traceback only with --debug
         if args.debug:
             traceback.print_exc()
@@ -141,7 +151,17 @@ def main(argv=None):
         return EXIT_INTERNAL
 
 
-def _reconstruct(args):
+_CANCELLED = {
+    "reconstruct": "cancelled at stage {stage}; nothing was written",
+    "subd-to-step": "cancelled at stage {stage}; nothing was written",
+    "check": "cancelled; nothing was written",
+    "batch": "cancelled; the meshes that had finished keep their outputs, the others have none, "
+             "and the summary was not written",
+}
+"""The line a Ctrl-C prints, per command (``stage``: the stage the run was in)."""
+
+
+def _reconstruct(args, stages):
     from core.errors import StageNotAvailableError
     from polycube_wb.api import reconstruct_to_step
 
@@ -150,7 +170,7 @@ def _reconstruct(args):
         raise PolycubeInputError("reconstruct needs -o OUT.step (or --stop-after an earlier stage)")
     try:
         report = reconstruct_to_step(args.target, args.output, args.base_mesh, args.report,
-                                     args.labels, args.stop_after, **params)
+                                     args.labels, args.stop_after, progress=stages, **params)
     except StageNotAvailableError as exc:
         if getattr(exc, "report", None):
             _print_summary(exc.report)
@@ -213,11 +233,11 @@ def _print_summary(report):
         print(f"wrote {kind}: {path}")
 
 
-def _subd_to_step(args):
+def _subd_to_step(args, stages):
     from polycube_wb.api import subd_to_solid
 
     _, report = subd_to_solid(args.base_mesh, args.output, args.report, depth=args.depth,
-                              measure=not args.no_measure)
+                              measure=not args.no_measure, progress=stages)
     base, brep, patches = report["base_mesh"], report["brep"], report["patches"]
     print(f"base mesh: {base['faces']} faces ({base['quads']} quads, {base['triangles']} triangles, "
           f"{base['other']} other), {base['extraordinary_vertices']} extraordinary vertices, genus {base['genus']}")
@@ -236,7 +256,7 @@ def _subd_to_step(args):
     return EXIT_OK
 
 
-def _check(args):
+def _check(args, stages):
     from core.output_files import check_output_path, write_json_atomic
     from polycube_wb.api import check
 
@@ -249,7 +269,7 @@ def _check(args):
     return EXIT_OK
 
 
-def _batch(args):
+def _batch(args, stages):
     from polycube_wb.batch import run_batch_command
 
     for value, what in ((args.jobs, "--jobs"), (args.timeout, "--timeout")):

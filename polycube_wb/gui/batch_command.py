@@ -5,7 +5,9 @@ The batch (``python -m polycube_wb batch FOLDER -o OUT --progress-lines``, every
 its own process) runs as a child process in a session of its own, so FreeCAD stays
 responsive: a Qt timer reads its ``PROGRESS`` / ``MESH`` lines (``polycube_wb.batch_progress``)
 from a reader thread and moves a non-modal dialog's progress bar. Cancel (the button or
-Esc) kills the batch's whole process group, the running meshes with it; meshes already
+Esc) sends the batch's whole process group SIGINT, as Ctrl-C in a terminal does: the
+running meshes stop and remove their temporary files, the batch exits 130 without a summary
+(a group still running after ``CANCEL_GRACE_SECONDS`` is killed); meshes already
 finished keep their outputs and are skipped when the same folder is run again. When the
 batch ends, the Report view gets one line per mesh and the totals, and ``summary.html`` is
 opened in the desktop's browser. The pipeline parameters are the user's preferences.
@@ -26,6 +28,8 @@ from polycube_wb import ADDON_DIR
 from polycube_wb.gui import icon_path
 
 POLL_MS = 100
+CANCEL_GRACE_SECONDS = 10.0
+"""How long a cancelled batch may take to stop after SIGINT before it is killed."""
 """How often the dialog reads the batch's output."""
 OUTPUT_FOLDER = "polycube_batch"
 """Default output folder, inside the chosen mesh folder."""
@@ -145,14 +149,20 @@ class BatchRun:
                 self.other.append(line)
 
     def cancel(self):
-        """Kill the batch and the meshes it runs (its whole process group)."""
+        """Stop the batch and the meshes it runs (its whole process group): SIGINT, then
+        SIGKILL if it still runs after ``CANCEL_GRACE_SECONDS``."""
         self.cancelled = True
-        if self.process.poll() is None:
+        for stop in (signal.SIGINT, signal.SIGKILL):
+            if self.process.poll() is not None:
+                return
             try:
-                os.killpg(self.process.pid, signal.SIGKILL)
+                os.killpg(self.process.pid, stop)
             except ProcessLookupError:
                 pass
-            self.process.wait()
+            try:
+                self.process.wait(timeout=CANCEL_GRACE_SECONDS)
+            except subprocess.TimeoutExpired:
+                continue
 
     @property
     def summary_html(self):

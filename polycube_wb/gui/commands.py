@@ -4,8 +4,9 @@
 A command gathers its input (a file dialog, the selection), then runs the API calls as
 one undo step with the progress bar (``run_stage_command``): the calls that create or
 change objects go through ``FreeCADGui.doCommand``, so the Python console shows a script
-that replays them, and the recompute that follows runs the stages (Esc cancels and
-rolls the document back). Success is reported in the Report view and the status bar;
+that replays them, and the recompute that follows runs the stages (Esc cancels: the
+stages that finished keep their results, the one that was running is marked cancelled and
+runs again at the next recompute; Undo removes the whole step). Success is reported in the Report view and the status bar;
 failures also in a message box: bad input (``PolycubeInputError``) a warning, a stage
 that is not built yet an information box naming it, anything else an error box plus the
 traceback in the Report view.
@@ -145,8 +146,8 @@ def run_stage_command(title, doc, build):
 
     Returns
     -------
-    api.RecomputeOutcome, or None when it failed before recomputing or was cancelled
-    (the document is then as before). Success and stage failures are reported after the
+    api.RecomputeOutcome, or None when it failed before recomputing (the document is then
+    as before) or was cancelled (see ``api.run_in_transaction``: one undo step). Success and stage failures are reported after the
     progress bar has stopped (stopping it clears the status bar).
     """
     from polycube_wb import api
@@ -476,7 +477,8 @@ class RecomputeCommand(_Command):
     ID = "PolyCube_Recompute"
     MENU_TEXT = "Recompute with progress"
     TOOLTIP = ("Recompute the document's changed stages (e.g. after editing properties) as "
-               "one undo step with the progress bar; Esc cancels and restores the document")
+               "one undo step with the progress bar; Esc cancels (finished stages keep their "
+               "results; Undo restores the document)")
 
     def IsActive(self):
         return FreeCAD.ActiveDocument is not None

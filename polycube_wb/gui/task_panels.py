@@ -3,8 +3,8 @@
 
 One panel class serves every stage: its fields come from ``FIELDS`` (property, label,
 kind, range). OK and Apply write the fields to the object and recompute (one undo step,
-with the progress bar; Esc cancels and leaves the document as it was); Cancel changes
-nothing. "Paper defaults" puts the paper's values in the fields. The cage stages
+with the progress bar; Esc cancels: the object is marked cancelled with its last result, Undo
+restores it); Cancel changes nothing. "Paper defaults" puts the paper's values in the fields. The cage stages
 (BaseMesh, Fit) also offer moving selected cage vertices: the stages after them follow
 (a Fit reruns from an edited base mesh; a Solid follows an edited fitted cage directly).
 
@@ -104,7 +104,8 @@ class StagePanel:
 
     def accept(self):
         """Write the fields and recompute; the panel stays open when the user cancelled
-        or the change could not be made (the document is then as before)."""
+        (the object is marked cancelled) or the change could not be made (the document is
+        then as before)."""
         self.apply()
         if self.outcome is None:
             return False

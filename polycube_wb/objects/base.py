@@ -35,6 +35,10 @@ STAGE_WEIGHTS = {"Target": 1.0, "Segmentation": 1.0, "BaseMesh": 2.0, "Fit": 12.
 their run times on the bundled sample: the fit dominates)."""
 
 
+CANCELLED_STATUS = "cancelled by the user"
+"""``Status`` of a stage object whose run the user cancelled (Esc)."""
+
+
 class StageFailed(PolycubeError):
     """A core stage did not produce its result; the message is the stage's own reason."""
 
@@ -49,6 +53,7 @@ class _Session:
         self.done = 0.0
         self.failures = {}
         self.cancelled = False
+        self.skipped = []
 
     def span(self, obj):
         """The ``SubProgress`` of ``obj``'s run: its share of the bar, in run order."""
@@ -76,7 +81,8 @@ def recompute_session(doc, progress=NO_PROGRESS):
     ------
     _Session
         ``failures`` maps object names to the one-line reason their stage failed;
-        ``cancelled`` is True when the user cancelled.
+        ``cancelled`` is True when the user cancelled; ``skipped`` names the objects
+        that did not run after the cancel.
     """
     weights = {}
     for obj in pending_objects(doc):
@@ -226,6 +232,9 @@ class StageProxy:
 
     def execute(self, obj):
         session = _current()
+        if session is not None and session.cancelled:  # after Esc nothing else runs
+            session.skipped.append(obj.Name)
+            return
         progress = session.span(obj) if session is not None else NO_PROGRESS
         try:
             if self.is_stale(obj):
@@ -237,9 +246,9 @@ class StageProxy:
             if result_id != obj.ResultId:  # a new or edited result: forget the cached one
                 self._cache = None
                 obj.ResultId = result_id
-        except Cancelled as exc:
-            self._fail(obj, session, "cancelled by the user", cancelled=True)
-            raise exc
+        except Cancelled:  # not raised on: FreeCAD would print a traceback for it
+            self._fail(obj, session, CANCELLED_STATUS, cancelled=True)
+            return
         except (PolycubeError, ImportError) as exc:
             self._fail(obj, session, _one_line(exc))
             raise
@@ -276,6 +285,45 @@ class StageProxy:
         from core.types import PipelineState
 
         return PipelineState(**self.upstream_results(obj))
+
+
+def settle_states(doc):
+    """Make the stage objects' FreeCAD flags match their restored properties (after Undo/Redo).
+
+    Undo and Redo restore the properties but leave each object's ``Touched``/``Invalid``
+    flags as they were: an object whose run was cancelled and then undone would show an
+    error with ``Status`` "ok". An object whose ``Status`` is "ok" and whose stored result
+    matches its inputs and parameters is marked up to date (an invalid one is recomputed,
+    which only redisplays its result); one whose ``Status`` says it was cancelled is touched.
+    """
+    for obj in doc.Objects:
+        if stage_kind(obj) is None or getattr(obj, "Proxy", None) is None:
+            continue
+        if obj.Status == CANCELLED_STATUS:
+            obj.touch()
+            continue
+        try:
+            current = obj.Status == "ok" and not obj.Proxy.is_stale(obj)
+        except PolycubeError:  # a link the undo emptied: leave the object as it is
+            continue
+        if current:
+            if not obj.isValid():
+                obj.recompute()
+            obj.purgeTouched()
+
+
+class _UndoObserver:
+    """Calls :func:`settle_states` after every Undo and Redo (a FreeCAD document observer)."""
+
+    def slotUndoDocument(self, doc):
+        settle_states(doc)
+
+    def slotRedoDocument(self, doc):
+        settle_states(doc)
+
+
+_UNDO_OBSERVER = _UndoObserver()
+FreeCAD.addDocumentObserver(_UNDO_OBSERVER)
 
 
 def _one_line(exc):

@@ -165,7 +165,7 @@ def test_cage_edits_are_checked(chain_doc):
         api.move_cage_vertices(objects["Solid"], {0: (0, 0, 0)})
 
 
-def test_cancel_during_the_fit_leaves_the_document_as_it_was(chain_doc):
+def test_cancel_during_a_refit_marks_the_fit_and_undo_restores_it(chain_doc):
     from core.errors import Cancelled
     from core.progress import Progress
     from polycube_wb import api
@@ -191,16 +191,24 @@ def test_cancel_during_the_fit_leaves_the_document_as_it_was(chain_doc):
     def build():
         fit.Iterations = 40
 
-    with pytest.raises(Cancelled, match="document is as before"):
+    with pytest.raises(Cancelled, match=f"cancelled by the user at {fit.Label}"):
         api.run_in_transaction(chain_doc, "Refit", build, progress)
     fractions = [fraction for stage, fraction in progress.seen]
     assert fractions == sorted(fractions), "one bar for the whole run, never backwards"
-    assert fit.Iterations == 2
-    assert list(fit.CageVertices) == cage
-    assert solid.Shape.Volume == pytest.approx(volume, rel=1e-12)
-    assert chain_doc.UndoCount == undo
+    assert fit.Iterations == 40, "the edit stays, to be run again"
+    assert list(fit.CageVertices) == cage, "the fit keeps its last result, no half result"
+    assert fit.Status == "cancelled by the user" and "Touched" in fit.State
+    assert solid.Shape.Volume == pytest.approx(volume, rel=1e-12) and solid.isValid(), \
+        "the solid still matches the fit's (kept) result; it reruns when the fit does"
+    assert objects["BaseMesh"].State == ["Up-to-date"]
+    assert chain_doc.UndoCount == undo + 1
+    chain_doc.undo()
+    assert fit.Iterations == 2 and list(fit.CageVertices) == cage
     assert fit.State == ["Up-to-date"] and solid.State == ["Up-to-date"]
     assert fit.isValid() and fit.Status == "ok"
+    chain_doc.redo()
+    assert fit.Iterations == 40 and fit.Status == "cancelled by the user"
+    assert "Touched" in fit.State, "redone: the fit is to be run again"
 
 
 def test_failed_stage_is_invalid_with_a_one_line_status_others_intact(chain_doc):

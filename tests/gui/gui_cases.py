@@ -5,12 +5,13 @@ File dialogs and message boxes are replaced by stubs, so the run needs no user. 
 workflow case runs the commands in the order a user would, on one document, in
 numbered steps (unittest runs them in name order): import, segment parts, label, base
 mesh, fit, solid, each task panel, a real Esc key press during the fit, the deviation
-map, a cage edit, undo, save / reopen without the source file. Screenshots go to
-``$POLYCUBE_GUI_OUTPUT`` (default ``tests/gui/output/``).
+map, a cage edit, undo, save / reopen without the source file; bad files through the
+import commands. Screenshots go to ``$POLYCUBE_GUI_OUTPUT`` (default ``tests/gui/output/``).
 """
 import os
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 import unittest
@@ -101,6 +102,18 @@ class _ScreenshotAssertions:
         self.assertGreaterEqual(colours, min_colours, f"{path}: only {colours} colours")
         self.assertGreater(covered, min_covered,
                            f"{path}: only {covered:.1%} of the pixels show the model")
+
+
+def report_view_text():
+    """The text of FreeCAD's Report view (what a user reads there), once the messages
+    posted to it are shown."""
+    from PySide import QtGui
+
+    QtGui.QApplication.processEvents()
+    views = [widget for widget in FreeCADGui.getMainWindow().findChildren(QtGui.QTextEdit)
+             if widget.objectName() == "Report view"]
+    assert len(views) == 1, f"found {len(views)} Report views"
+    return views[0].toPlainText()
 
 
 def _objects(doc, kind):
@@ -364,7 +377,7 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
                                   msg="the solid follows the refit")
         self.assertIn(f"Edit {fit.Label}", self.doc.UndoNames)
 
-    def test_4_escape_during_the_fit_cancels_and_restores(self):
+    def test_4_escape_during_the_fit_marks_it_cancelled_and_undo_restores(self):
         fit, solid = self.one("Fit"), self.one("Solid")
         before = (fit.Iterations, list(fit.CageVertices), solid.Shape.Volume,
                   self.doc.UndoCount)
@@ -374,6 +387,7 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
         mode.setCurrentIndex(mode.findText("inside"))  # the longer fit (test 3 left best-fit)
         grab = os.path.join(OUTPUT, "polycube_fit_progress.png")
         os.makedirs(OUTPUT, exist_ok=True)
+        report_start = len(report_view_text())
         escape = EscapeKey(after=1.5, grab_path=grab)
         started = time.monotonic()
         try:
@@ -386,12 +400,43 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
         self.assertEqual(escape.answered, 1, "FreeCAD asked to confirm the abort")
         self.assertLess(seconds, 60, "cancelled inside the fit, not after 400 iterations")
         self.assertIsNone(panel.outcome)
+        self.assertTrue(os.path.isfile(grab))
+        # The Fit is marked, keeps its last result, and the step can be undone.
+        self.assertEqual(fit.Iterations, 400)
+        self.assertEqual(fit.Status, "cancelled by the user")
+        self.assertIn("Touched", fit.State)
+        self.assertEqual(list(fit.CageVertices), before[1], "no half result")
+        self.assertAlmostEqual(solid.Shape.Volume, before[2], places=6)
+        self.assertEqual(self.doc.UndoCount, before[3] + 1)
+        report = report_view_text()[report_start:]
+        self.assertIn(f"Polycube: {fit.Label}: cancelled by the user", report)
+        self.assertIn("cancelled by the user at", report)
+        self.assertNotIn("Traceback", report)
+        self.assertEqual(self.stubs.boxes, [], "a cancel opens no message box")
+        _select(fit)
+        FreeCADGui.updateGui()
+        FreeCADGui.getMainWindow().grab().save(os.path.join(OUTPUT, "polycube_cancelled.png"))
+        # It saves and reopens as it is, and reopened it resumes at the Fit.
+        copy = os.path.join(self.tmp, "cancelled.FCStd")
+        self.doc.saveCopy(copy)
+        reopened = FreeCAD.openDocument(copy)
+        try:
+            fits = _objects(reopened, "Fit")
+            self.assertEqual([f.Status for f in fits], ["cancelled by the user"])
+            self.assertTrue(fits[0].Proxy.is_stale(fits[0]), "to be run again")
+        finally:
+            FreeCAD.closeDocument(reopened.Name)
+        FreeCAD.setActiveDocument(self.doc.Name)
+        panel.reject()
+        self.assertFalse(FreeCADGui.Control.activeDialog())
+        self.doc.undo()
         self.assertEqual((fit.Iterations, list(fit.CageVertices), solid.Shape.Volume,
                           self.doc.UndoCount), before)
         self.assertTrue(fit.isValid() and solid.isValid())
-        self.assertTrue(os.path.isfile(grab))
-        panel.reject()
-        self.assertFalse(FreeCADGui.Control.activeDialog())
+        self.assertEqual(fit.Status, "ok")
+        for obj in (fit, solid):
+            self.assertNotIn("Touched", obj.State, obj.Label)
+            self.assertNotIn("Invalid", obj.State, obj.Label)
 
     def test_5_deviation_map(self):
         from polycube_wb.gui import legend
@@ -560,3 +605,89 @@ class EntryPointTest(unittest.TestCase):
         finally:
             FreeCAD.closeDocument(doc.Name)
             shutil.rmtree(tmp, ignore_errors=True)
+
+
+FUZZ_COMMANDS = (("PolyCube_ImportTarget", "Import target mesh"),
+                 ("PolyCube_ReconstructAll", "Reconstruct all"))
+
+
+def _fuzz_meshes():
+    folder = os.path.join(REPO, "tests", "fuzz")
+    if folder not in sys.path:
+        sys.path.insert(0, folder)
+    import fuzz_meshes
+
+    return fuzz_meshes
+
+
+def bad_files(folder):
+    """``[(path, a word the message must contain)]`` of the bad inputs, written into ``folder``."""
+    meshes = _fuzz_meshes()
+    box = meshes.box()
+    files = {
+        "truncated.stl": (meshes.binary_stl(box)[:200], "truncated"),
+        "bad_index.obj": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 9\nf 0 3 4\n",
+                          "index"),
+        "nan.stl": (meshes.binary_stl(meshes.with_vertex(box, 0, float("nan"))), "nan"),
+        "huge.stl": (meshes.binary_stl(meshes.with_vertex(box, 0, 1e30)), "coordinate"),
+        "not_a_mesh.stl": (b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 4, "stl"),
+    }
+    found = []
+    for name, (data, word) in files.items():
+        path = os.path.join(folder, name)
+        with open(path, "wb") as handle:
+            handle.write(data)
+        found.append((path, word))
+    directory = os.path.join(folder, "a_folder.stl")
+    os.mkdir(directory)
+    found.append((directory, "folder"))
+    return found
+
+
+class BadFilesThroughCommandsTest(unittest.TestCase):
+    """A few cases of the fuzz corpus (``tests/fuzz/fuzz_meshes.py``: a truncated binary STL,
+    an OBJ with out-of-range and zero indices, NaN and 1e30 coordinates, a file that is no
+    mesh, a folder) through *Import target mesh* and *Reconstruct all* on an empty document:
+    one warning box and one Report-view line ``Polycube: <command>: <what is wrong>`` naming
+    the file, no traceback, no object in the document (none with a half result), nothing to
+    undo."""
+
+    def setUp(self):
+        FreeCADGui.activateWorkbench(WORKBENCH)
+        self.stubs = _Stubs()
+        self.tmp = tempfile.mkdtemp(prefix="polycube_gui_fuzz_")
+
+    def tearDown(self):
+        self.stubs.restore()
+        shutil.rmtree(self.tmp, ignore_errors=True)
+
+    def test_bad_files_give_a_message_and_leave_no_object(self):
+        cases = bad_files(self.tmp)
+        for command, title in FUZZ_COMMANDS:
+            for path, word in cases:
+                with self.subTest(command=command, file=os.path.basename(path)):
+                    self._check_one(command, title, path, word)
+
+    def _check_one(self, command, title, path, word):
+        doc = FreeCAD.newDocument("PolycubeFuzz")
+        doc.UndoMode = 1
+        try:
+            self.stubs.boxes.clear()
+            self.stubs.answer_open_dialog(path)
+            before = len(report_view_text())
+            FreeCADGui.runCommand(command)
+            FreeCADGui.updateGui()
+            report = report_view_text()[before:]
+            self.assertEqual(doc.Objects, [], "no object, so none with a half result")
+            self.assertEqual(doc.UndoCount, 0, "nothing to undo")
+            self.assertEqual(len(self.stubs.boxes), 1, self.stubs.boxes)
+            kind, text = self.stubs.boxes[0]
+            self.assertEqual(kind, "warning")
+            self.assertIn(word, text.lower())
+            self.assertIn(os.path.basename(path), text, "the message names the file")
+            lines = [line[line.index("Polycube:"):] for line in report.splitlines()
+                     if "Polycube:" in line]  # after the Report view's time stamp
+            self.assertEqual(lines, [f"Polycube: {title}: {text}"], report)
+            self.assertNotIn("Traceback", report)
+        finally:
+            FreeCAD.closeDocument(doc.Name)
