@@ -212,7 +212,9 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         ``max_valence``, ``genus``, ``target_faces``, ``within_budget``, ``minimum_reason``,
         ``inverted_faces`` and ``seconds``; the polycube layout adds ``scale``,
         ``solver_status``, ``scale_rounds``, ``charts``, ``sides``, ``corners``,
-        ``side_directions_flipped``, ``folded_points``, ``rectangles`` and ``collapsed_sides``.
+        ``side_directions_flipped``, ``folded_points``, ``rectangles`` and ``collapsed_sides``;
+        the paired decimation adds ``decimated_triangles`` and ``budget_rounds`` (the budgets
+        tried while its limit surface crossed itself or had inverted faces).
 
     Raises
     ------
@@ -248,14 +250,14 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
             info["inverted_faces"] = int(inverted_faces(mesh, target_v, target_f, surface).sum())
             if info["inverted_faces"]:
                 other_mesh, other_info = _paired_decimation_base_mesh(
-                    target_v, target_f, surface, int(target_faces),
+                    target_v, target_f, surface, int(target_faces), max_base_faces,
                     f"the polycube layout has {info['inverted_faces']} inverted faces")
                 if other_info["inverted_faces"] < info["inverted_faces"]:
                     other_info["fallback_reason"] += f", this one {other_info['inverted_faces']}"
                     mesh, info = other_mesh, other_info
     if reason is not None:
         mesh, info = _paired_decimation_base_mesh(target_v, target_f, surface, int(target_faces),
-                                                  reason)
+                                                  max_base_faces, reason)
     info["seconds"] = round(time.perf_counter() - started, 4)
     return mesh, info
 
@@ -269,9 +271,16 @@ def _mesh_figures(mesh):
             "genus": polymesh_genus(mesh)}
 
 
-def _paired_decimation_base_mesh(target_v, target_f, surface, target_faces, reason):
-    """The fallback base mesh and its report section (see :func:`build_base_mesh`)."""
-    result = paired_decimation_base_mesh(target_v, target_f, target_faces, surface)
+def _paired_decimation_base_mesh(target_v, target_f, surface, target_faces, max_base_faces,
+                                 reason):
+    """The fallback base mesh and its report section (see :func:`build_base_mesh`).
+
+    Budgets up to the top of the budget tolerance (and at most ``max_base_faces``) are tried
+    while the cage's limit surface crosses itself or has inverted faces; the report's
+    ``budget_rounds`` lists them.
+    """
+    largest = int(min(max_base_faces, (1.0 + BUDGET_TOLERANCE) * target_faces))
+    result = paired_decimation_base_mesh(target_v, target_f, target_faces, surface, largest)
     mesh = result.mesh
     info = {
         "method": "paired decimation", "fallback_reason": reason,
@@ -280,6 +289,7 @@ def _paired_decimation_base_mesh(target_v, target_f, surface, target_faces, reas
         "within_budget": bool(abs(mesh.n_faces - target_faces)
                               <= BUDGET_TOLERANCE * target_faces),
         "minimum_reason": None, "decimated_triangles": result.decimated_triangles,
+        "budget_rounds": list(result.rounds),
         "inverted_faces": int(inverted_faces(mesh, target_v, target_f, surface).sum()),
     }
     return mesh, info

@@ -9,6 +9,8 @@ genus and orientation:
 1. QSlim (Garland & Heckbert, "Surface simplification using quadric error metrics", SIGGRAPH
    1997; libigl's ``igl.qslim``) collapses edges of the target, in quadric-error order, down to
    twice the face budget in triangles. Collapses that would change the topology are refused.
+   :mod:`core.quadmesh.even_triangulation` then gives planar fans interior vertices and
+   untangles folded triangles.
 2. Blossom-Quad (Remacle et al., "Blossom-Quad: a non-uniform quadrilateral mesh generator using
    a minimum-cost perfect matching algorithm", IJNME 2012): every pair of triangles sharing an
    edge is a candidate quad, weighted by its corner angles and its flatness; a matching on the
@@ -16,14 +18,17 @@ genus and orientation:
    matching, :func:`_match_pairs`, instead of the paper's exact minimum-cost perfect matching).
    The dual graph of a closed triangle surface is cubic and bridgeless, so a perfect matching
    exists (Petersen) and the result is all quads in practice; unmatched triangles stay
-   triangles (Catmull-Clark and the export take mixed cages). Vertices with only two faces are merged away, and the vertices
-   are moved onto the target.
+   triangles (Catmull-Clark and the export take mixed cages). Vertices with only two faces are
+   merged away, and the vertices are moved onto the target.
+3. Where the cage's limit surface crosses itself or faces away from the target (thin struts
+   with too few faces around them), larger budgets within the allowed range are tried.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from core.errors import InvalidMeshError
+from core.quadmesh.even_triangulation import even_triangulation
 from core.mesh_topology import connected_face_components, edge_faces, genus_of
 from core.polymesh_checks import check_polymesh
 from core.target_surface import TargetSurface
@@ -31,6 +36,9 @@ from core.types import PolyMesh
 
 MIN_WEIGHT = 1e-3
 """Matching weight of the worst candidate quad (folded or degenerate): still pairable."""
+LADDER_STEPS = 3
+"""Larger budgets tried (evenly up to the largest allowed) when a cage's limit surface is
+flawed."""
 
 
 @dataclass(frozen=True)
@@ -41,12 +49,15 @@ class PairedDecimation:
         on the target (where moving them there degenerates no face).
     decimated_triangles : int, triangles of the QSlim result that were paired.
     quads, triangles : int, faces of each kind in ``mesh``.
+    rounds : tuple of dicts, one per budget tried (``faces``, ``limit_crossings``,
+        ``inverted_faces``); empty when only one budget was asked for.
     """
 
     mesh: PolyMesh
     decimated_triangles: int
     quads: int
     triangles: int
+    rounds: tuple = ()
 
 
 def _candidate_quads(vertices, faces):
@@ -149,14 +160,21 @@ def _augment(start, mate, via, neighbours):
     return False
 
 
-def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None):
+def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max_faces=None):
     """Quad-dominant base mesh of about ``target_faces`` faces (module docstring).
+
+    With ``max_faces`` above ``target_faces``, larger budgets up to it are tried in
+    :data:`LADDER_STEPS` steps until a mesh's limit surface neither crosses itself nor has
+    inverted faces (:func:`limit_flaws`); a coarse cage of a thin strut folds its limit surface,
+    and a few more faces along the strut unfold it. The first clean mesh is kept, else the one
+    with the fewest flaws (the smaller on a tie).
 
     Parameters
     ----------
     vertices : (n, 3) float64 target vertices; faces : (m, 3) int64 closed, outward 2-manifold.
     target_faces : int >= 6, faces wanted (the decimation keeps twice as many triangles).
     surface : TargetSurface of the target already built, or None (built here).
+    max_faces : int or None, the largest budget tried (None: ``target_faces`` only).
 
     Returns
     -------
@@ -171,14 +189,63 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None):
 
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
-    wanted = min(2 * int(target_faces), len(faces))
-    decimated_v, decimated_f, _, _ = igl.qslim(vertices, faces, wanted)
+    if surface is None:
+        surface = TargetSurface(vertices, faces)
+    budgets = _ladder(int(target_faces), int(max_faces or target_faces))
+    most = min(2 * budgets[-1], len(faces))
+    decimated_v, decimated_f, _, _ = igl.qslim(vertices, faces, most)
     decimated_f = np.asarray(decimated_f, dtype=np.int64)
     components = int(connected_face_components(faces).max()) + 1
     if genus_of(len(decimated_v), decimated_f, components) != genus_of(len(vertices), faces,
                                                                       components):
         raise InvalidMeshError("the decimated target changed its genus; the input surface is "
                                "not a clean 2-manifold")
+    rounds, best = [], None
+    for budget in budgets:
+        wanted = min(2 * budget, most)
+        if wanted < len(decimated_f):
+            step_v, step_f, _, _ = igl.qslim(decimated_v, decimated_f, wanted)
+            step_v, step_f = np.asarray(step_v, np.float64), np.asarray(step_f, np.int64)
+        else:
+            step_v, step_f = decimated_v, decimated_f
+        result = _paired_mesh(step_v, step_f, surface)
+        if len(budgets) == 1:
+            return result
+        crossings, inverted = limit_flaws(result.mesh, surface)
+        rounds.append({"faces": int(result.mesh.n_faces), "limit_crossings": crossings,
+                       "inverted_faces": inverted})
+        if best is None or crossings + inverted < best[0]:
+            best = (crossings + inverted, result)
+        if crossings + inverted == 0:
+            break
+    return replace(best[1], rounds=tuple(rounds))
+
+
+def _ladder(target_faces, max_faces):
+    """Budgets from ``target_faces`` to ``max(max_faces, target_faces)`` in even steps."""
+    if max_faces <= target_faces:
+        return [target_faces]
+    return sorted({int(round(b)) for b in np.linspace(target_faces, max_faces,
+                                                      LADDER_STEPS + 1)})
+
+
+def limit_flaws(mesh, surface):
+    """Self-crossing triangle pairs of the level-2 limit surface, and inverted faces.
+
+    mesh : PolyMesh base mesh; surface : TargetSurface of its target. Returns two ints
+    (``core.stages.fit.limit_self_intersections`` and
+    :func:`core.quadmesh.orientation.inverted_faces`).
+    """
+    from core.quadmesh.orientation import inverted_faces
+    from core.stages.fit import count_limit_self_intersections
+
+    return (count_limit_self_intersections(mesh, 2),
+            int(inverted_faces(mesh, surface.vertices, surface.faces, surface).sum()))
+
+
+def _paired_mesh(decimated_v, decimated_f, surface):
+    """Even out, pair, merge and project one decimated triangulation (module docstring)."""
+    decimated_v, decimated_f = even_triangulation(decimated_v, decimated_f, surface)
     pairs, quads, weight = _candidate_quads(decimated_v, decimated_f)
     chosen = _match_pairs(len(decimated_f), pairs, weight)
     paired = np.zeros(len(decimated_f), dtype=bool)
@@ -189,8 +256,6 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None):
     renumber = np.full(len(decimated_v), -1, dtype=np.int64)
     renumber[used] = np.arange(len(used))
     mesh = PolyMesh.from_faces(decimated_v[used], [renumber[f] for f in face_list])
-    if surface is None:
-        surface = TargetSurface(vertices, faces)
     mesh = _projected_on_target(mesh, surface)
     sizes = mesh.face_sizes
     return PairedDecimation(mesh, int(len(decimated_f)), int((sizes == 4).sum()),

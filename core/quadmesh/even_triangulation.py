@@ -1,0 +1,223 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Even out a coarse triangulation of the target before its triangles are paired into quads.
+
+QSlim keeps a flat plate with only its rim vertices, so the plate becomes a fan of long
+triangles, and near the end of a strong decimation it leaves triangles folded over their
+neighbours (on ``tray_bottom``, 59 of 600 face away from the target). The paired quads inherit
+both, and the Catmull-Clark limit surface crosses itself and turns inside out there. This module
+repairs the triangulation with the two topology-preserving operators of isotropic remeshing
+(Botsch & Kobbelt, "A remeshing approach to multiresolution modeling", SGP 2004), keeping
+QSlim's feature-aware vertex placement:
+
+Both act on planar regions only (triangles within :data:`PLANAR_ANGLE` of coplanar): machined
+plates are planar, a SIMP iso-surface is not, and there splits and flips were measured to make
+the fit of thin struts worse.
+
+1. planar fans are found: edges more than :data:`LONG_EDGE` times the length of an equilateral
+   triangle of the mean area, between two coplanar triangles. When there are any, the
+   triangulation is decimated further by two triangles per such edge (QSlim again, on the
+   small mesh), and then its longest planar edges are split (their midpoints moved onto the
+   target) until the count is back: the fans get vertices in the plate's interior;
+2. edges are flipped, first to untangle a triangle folded flat over its neighbour (the two
+   coplanar but facing opposite ways, one of them away from the target), then across planar
+   edges to raise the smallest angles (a Delaunay-like criterion).
+"""
+import numpy as np
+
+from core.geometry import face_cross, unit_face_normals
+from core.mesh_topology import unique_edges
+
+LONG_EDGE = 2.0
+"""An edge this many times longer than an equilateral triangle's of the mean area is long."""
+MAX_SPLIT_SHARE = 0.25
+"""At most this share of the triangles is made by splits."""
+PLANAR_ANGLE = np.radians(2.0)
+"""Two triangles are coplanar when their normals are this close (or this close to opposite).
+Machined plates are planar to this; a SIMP result's smoothed iso-surface is not, so it is left
+as QSlim made it (where splits and flips were measured to worsen the fit of thin struts)."""
+MIN_NORMAL_AGREEMENT = 0.5
+"""A triangle faces the target when its normal is within 60 degrees of the target's."""
+
+
+def even_triangulation(vertices, faces, surface):
+    """Split planar fans, then flip edges, of a closed coarse triangulation (module docstring).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64 vertices near the target (model units).
+    faces : (m, 3) int64 closed, outward 2-manifold triangles (QSlim's result).
+    surface : TargetSurface: new vertices are placed on it, and triangles are judged facing
+        it or not by its normals.
+
+    Returns
+    -------
+    vertices : (n', 3) float64; faces : (m', 3) int64, the same topology (genus,
+    orientation), ``m' <= m`` and ``m - m'`` at most twice the planar long edges not split.
+    """
+    import igl
+
+    vertices = np.array(vertices, dtype=np.float64)
+    faces = np.array(faces, dtype=np.int64)
+    wanted = len(faces)
+    splits = min(int(_flat_long_edges(vertices, faces).sum()),
+                 int(MAX_SPLIT_SHARE * wanted) // 2)
+    if splits:
+        vertices, faces, _, _ = igl.qslim(vertices, faces, wanted - 2 * splits)
+        faces = np.asarray(faces, dtype=np.int64)
+        while len(faces) + 1 < wanted:
+            vertices, faces, done = _split_longest(vertices, faces, surface,
+                                                   (wanted - len(faces)) // 2)
+            if not done:
+                break
+    return vertices, _flip_pass(vertices, faces, surface)
+
+
+def _flat_long_edges(vertices, faces):
+    """(e,) bool edges (of :func:`_edge_halfedges`) longer than :data:`LONG_EDGE` times the
+    edge of an equilateral triangle of the mean area, between coplanar triangles."""
+    edges, halfedges = _edge_halfedges(faces)
+    cross = face_cross(vertices, faces)
+    mean_area = 0.5 * np.linalg.norm(cross, axis=1).mean()
+    long = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1) \
+        > LONG_EDGE * np.sqrt(4.0 * mean_area / np.sqrt(3.0))
+    normals = unit_face_normals(vertices, faces)
+    flat = np.einsum("ij,ij->i", normals[halfedges[:, 0] // 3], normals[halfedges[:, 1] // 3]) \
+        > np.cos(PLANAR_ANGLE)
+    return long & flat
+
+
+def _edge_halfedges(faces):
+    """Undirected edges with their two half-edges.
+
+    Returns
+    -------
+    edges : (e, 2) int64 sorted vertex pairs.
+    halfedges : (e, 2) int64 indices ``3 * face + corner`` of the two half-edges of each edge
+        (the half-edge from corner ``k`` to ``k + 1``), closed 2-manifold input.
+    """
+    edges, halfedge_edge = unique_edges(faces)
+    order = np.argsort(halfedge_edge, kind="stable")
+    return edges, order.reshape(-1, 2)
+
+
+def _wings(faces, halfedges):
+    """For half-edges ``h`` (k,): tail ``a``, head ``b`` and apex ``c`` of their triangles."""
+    face, corner = np.divmod(halfedges, 3)
+    return (faces[face, corner], faces[face, (corner + 1) % 3], faces[face, (corner + 2) % 3],
+            face)
+
+
+def _disjoint(candidates, faces_of):
+    """(k,) bool: greedily keep candidates (indices, in the given order) that share no face.
+
+    candidates : (c,) int64 indices into ``faces_of``, most wanted first.
+    faces_of : (k, j) int64 the faces each of the k possible changes touches.
+    """
+    taken = np.zeros(int(faces_of.max()) + 1 if faces_of.size else 0, dtype=bool)
+    keep = np.zeros(len(faces_of), dtype=bool)
+    for i, touched in zip(candidates.tolist(), faces_of[candidates].tolist()):
+        if not taken[touched].any():
+            taken[touched] = True
+            keep[i] = True
+    return keep
+
+
+def _split_longest(vertices, faces, surface, most):
+    """Split up to ``most`` of the longest planar long edges, no two of one triangle, at their
+    midpoints.
+
+    Each split edge ``a``-``b`` between the triangles ``(a, b, c)`` and ``(b, a, d)`` gets a new
+    vertex ``m`` at the target point nearest its midpoint, and the two triangles become four.
+    Returns ``(vertices, faces, split_any)``.
+    """
+    edges, halfedges = _edge_halfedges(faces)
+    length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
+    order = np.argsort(-length, kind="stable")
+    order = order[_flat_long_edges(vertices, faces)[order]]
+    keep = _disjoint(order, halfedges // 3)
+    chosen = order[keep[order]][:most]
+    if not len(chosen):
+        return vertices, faces, False
+    a, b, c, f1 = _wings(faces, halfedges[chosen, 0])
+    _, _, d, f2 = _wings(faces, halfedges[chosen, 1])
+    midpoint = surface.nearest(0.5 * (vertices[a] + vertices[b])).point
+    m = len(vertices) + np.arange(len(chosen))
+    faces = faces.copy()
+    faces[f1] = np.stack([a, m, c], axis=1)
+    faces[f2] = np.stack([b, m, d], axis=1)
+    added = np.concatenate([np.stack([m, b, c], axis=1), np.stack([m, a, d], axis=1)])
+    return np.vstack([vertices, midpoint]), np.vstack([faces, added]), True
+
+
+def _min_angles(vertices, triangles):
+    """(k,) float64 smallest corner angle (radians) of each triangle (k, 3)."""
+    P = vertices[triangles]
+    to_next = np.roll(P, -1, axis=1) - P
+    to_prev = np.roll(P, 1, axis=1) - P
+    cosine = np.einsum("tkj,tkj->tk", to_next, to_prev) / np.maximum(
+        np.linalg.norm(to_next, axis=2) * np.linalg.norm(to_prev, axis=2), 1e-300)
+    return np.arccos(np.clip(cosine, -1.0, 1.0)).min(axis=1)
+
+
+def _flip_pass(vertices, faces, surface, max_passes=20):
+    """Flip edges to untangle folds and to raise the smallest angles.
+
+    Two kinds of flip, at most one per triangle in each pass:
+
+    - an untangling flip, where the two triangles are coplanar, one of them does not face the
+      target (QSlim left it folded flat over its neighbour), and both flipped triangles do;
+    - a shape flip across a planar edge (dihedral angle under :data:`PLANAR_ANGLE`, so the
+      shape is kept) where it raises the smaller of the two triangles' smallest angles and
+      neither flipped triangle turns away from the pair's mean normal.
+
+    Untangling flips go first, then shape flips by their gain. Returns the new faces.
+    """
+    for _ in range(max_passes):
+        edges, halfedges = _edge_halfedges(faces)
+        a, b, c, f1 = _wings(faces, halfedges[:, 0])
+        _, _, d, f2 = _wings(faces, halfedges[:, 1])
+        normals = unit_face_normals(vertices, faces)
+        facing = _facing_target(vertices, faces, normals, surface)
+        new_first = np.stack([a, d, c], axis=1)
+        new_second = np.stack([d, b, c], axis=1)
+        n_first = face_cross(vertices, new_first)
+        n_second = face_cross(vertices, new_second)
+
+        def agree(direction):
+            return (np.einsum("ij,ij->i", n_first, direction) > 0) & (
+                np.einsum("ij,ij->i", n_second, direction) > 0)
+
+        valence = np.bincount(edges.reshape(-1), minlength=len(vertices))
+        n = len(vertices)
+        existing = set((edges[:, 0] * n + edges[:, 1]).tolist())
+        new_code = np.minimum(c, d) * n + np.maximum(c, d)
+        fresh = np.array([code not in existing for code in new_code.tolist()], dtype=bool)
+        allowed = fresh & (c != d) & (valence[a] > 3) & (valence[b] > 3)
+        reference = surface.closest(0.25 * (vertices[a] + vertices[b] + vertices[c]
+                                            + vertices[d])).normal
+        alignment = np.einsum("ij,ij->i", normals[f1], normals[f2])
+        flat = alignment > np.cos(PLANAR_ANGLE)
+        untangle = allowed & ~(facing[f1] & facing[f2]) & (np.abs(alignment)
+                                                          > np.cos(PLANAR_ANGLE)) & agree(reference)
+        before = np.minimum(_min_angles(vertices, faces[f1]), _min_angles(vertices, faces[f2]))
+        after = np.minimum(_min_angles(vertices, new_first), _min_angles(vertices, new_second))
+        gain = after - before
+        reshape = allowed & flat & facing[f1] & facing[f2] & agree(normals[f1] + normals[f2]) \
+            & (gain > 1e-6)
+        order = np.concatenate([np.flatnonzero(untangle), np.flatnonzero(reshape)[
+            np.argsort(-gain[reshape], kind="stable")]])
+        chosen = order[_disjoint(order, np.stack([f1, f2], axis=1))[order]]
+        # two flips in one pass must not create the same new edge
+        chosen = chosen[np.sort(np.unique(new_code[chosen], return_index=True)[1])]
+        if not len(chosen):
+            return faces
+        faces = faces.copy()
+        faces[f1[chosen]] = new_first[chosen]
+        faces[f2[chosen]] = new_second[chosen]
+    return faces
+
+
+def _facing_target(vertices, faces, normals, surface):
+    """(m,) bool triangles within 60 degrees of the target's normal nearest their centroid."""
+    reference = surface.closest(vertices[faces].mean(axis=1)).normal
+    return np.einsum("ij,ij->i", normals, reference) > MIN_NORMAL_AGREEMENT
