@@ -9,8 +9,9 @@ import trimesh
 from core.errors import InvalidMeshError, ParameterError
 from core.segmentation.charts import OPPOSITE, build_topology
 from core.segmentation.labeling import (face_colouring, face_normals, hbecvt_labeling,
-                                        label_directions, mean_label_angle,
-                                        nearest_direction_labels, part_neighbours)
+                                        hbecvt_sweeps, label_cost, label_directions,
+                                        mean_label_angle, nearest_direction_labels,
+                                        part_neighbours)
 from core.segmentation.repair import repair_labeling
 from core.segmentation.validity import check_validity
 
@@ -88,6 +89,33 @@ def test_smoothing_removes_noise_and_is_deterministic():
     assert no_opposite_neighbours(F, a)
     # term 1 keeps labels close to the normals
     assert mean_label_angle(n, a, frame) < mean_label_angle(n, near, frame) + 5.0
+
+
+def test_sweeps_end_at_a_coordinate_wise_minimum_of_eq_3():
+    """Where the sweeps stop, no face can lower the Eq. 3 energy by changing its own label (the
+    sweeps revisit only faces whose neighbours moved; this checks every face), on a noisy sphere
+    in a tilted frame and restricted to an active set."""
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    V, F = np.asarray(sphere.vertices), np.asarray(sphere.faces, dtype=np.int64)
+    V = V * (1.0 + 0.05 * np.random.default_rng(3).standard_normal(len(V)))[:, None]
+    m = len(F)
+    frame = np.broadcast_to(rotation(0.4, 0.2, -0.3), (m, 3, 3)).copy()
+    unary = label_cost(face_normals(V, F), frame)
+    nb = part_neighbours(build_topology(F), np.zeros(m, dtype=np.int64))
+    colour = face_colouring(nb)
+    start = np.argmin(unary, axis=1)
+    active = V[F].mean(axis=1)[:, 2] > -0.2
+    for act in (None, active):
+        labels, sweeps = hbecvt_sweeps(unary, nb, start, colour, lam=0.5, penalty=1e5,
+                                       active=act)
+        assert 1 < sweeps < 200
+        cnt = (labels[nb][:, :, None] == np.arange(6)).sum(axis=1)
+        d2 = unary + 0.5 * (3 - cnt) + 1e5 * cnt[:, OPPOSITE]
+        own = d2[np.arange(m), labels]
+        free = np.ones(m, dtype=bool) if act is None else act
+        assert (own[free] <= d2[free].min(axis=1) + 1e-9).all()
+        assert np.array_equal(labels[~free], start[~free])
+        assert (labels != start).sum() > 50
 
 
 def test_interface_term_forbids_labels_parallel_to_interface_axis():
@@ -257,3 +285,29 @@ def test_saddle_of_alternating_labels_is_repaired():
     out, rep = repair_labeling(V, F, parts, labels, frames)
     assert rep["valid"], rep["unfixed"]
     assert check_validity(V, F, parts, out, frames).is_valid
+
+
+def test_candidate_judge_judges_a_labeling_once():
+    """The judge keeps its last whole-mesh judgements: the same labels give the same judgement,
+    other labels a new one, and asking for turning points adds them to the kept judgement."""
+    from core.geometry import face_areas
+    from core.segmentation.repair import CandidateJudge
+
+    V, F = cube()
+    m = len(F)
+    frame = identity_frames(m)
+    topo = build_topology(F, len(V))
+    parts = np.zeros(m, dtype=np.int64)
+    judge = CandidateJudge.of_mesh(V, F, parts, frame, topo)
+    assert np.allclose(judge.area * face_areas(V, F).sum(), face_areas(V, F))
+    labels = nearest_direction_labels(face_normals(V, F), frame).astype(np.int64)
+    first = judge.validity(labels)
+    assert judge.validity(labels.copy()) is first and first.is_valid
+    island = labels.copy()
+    island[np.flatnonzero(labels == 4)[:2]] = 0
+    other = judge.validity(island)
+    assert other is not first and not other.is_valid
+    assert judge.validity(labels) is first
+    turning = judge.validity(island, tau=0.01)
+    whole = check_validity(V, F, parts, island, frame, topo, turning_tolerance=0.01)
+    assert turning.report == whole.report and turning.report["turning_points"]["count"] >= 1
