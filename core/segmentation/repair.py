@@ -404,6 +404,30 @@ def _chart_candidates(F, face_part, val, labels, c, cost, unary, nb, colour, pen
     return out
 
 
+def _joint_merges(lay, labels, c, small_chart):
+    """Candidates that merge invalid chart ``c`` together with its small neighbouring charts of
+    its part (at most ``small_chart`` faces) into each label around that group: where a small
+    chart of the opposite label sits between ``c`` and a large neighbour, merging either alone
+    leaves an opposite-label boundary (tried when no candidate of :func:`_chart_candidates`
+    helps). Returns a list of (name, labels)."""
+    part = lay.chart_part[c]
+    nbrs = lay.chart_neighbours[c].indices
+    nbrs = nbrs[lay.chart_part[nbrs] == part]
+    small = nbrs[lay.chart_size[nbrs] <= small_chart]
+    if not len(small):
+        return []
+    group = np.concatenate([[c], small])
+    around = np.unique(np.concatenate([lay.chart_neighbours[g].indices for g in group]))
+    around = around[(lay.chart_part[around] == part) & ~np.isin(around, group)]
+    in_group = np.isin(lay.face_chart, group)
+    out = []
+    for lab in np.unique(lay.chart_label[np.concatenate([around, [c]])]).tolist():
+        cand = labels.copy()
+        cand[in_group] = lab
+        out.append((f"merge_with_small_into_{lab}", cand))
+    return out
+
+
 def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis=None,
                     max_rounds=60, smooth=True, max_angle_increase=4.0, small_chart=None,
                     lam=LAMBDA, penalty=PENALTY, topology=None, max_trials=None,
@@ -515,6 +539,33 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
         n_s = val.n_invalid + judge.delta(labels, val, s)[0]
         return (s, n_s) if n_s <= n_cand else (cand, n_cand)
 
+    def score_candidates(cands, best):
+        """Best of ``best`` and the named candidates ``cands`` for an invalid chart of ``labels``
+        (judged as ``val``): (fewest invalid items, smallest mean angle) within the angle cap;
+        candidates that leave opposite-label boundaries get the strip insertion first."""
+        nonlocal trials
+        for name, cand in cands:
+            if np.array_equal(cand, labels) or judge.angle(cand) > angle_cap:
+                continue
+            trials += 1
+            d, opp = judge.delta(labels, val, cand)
+            n_c = val.n_invalid + d
+            if opp:
+                v_c = judge.validity(cand)
+                for _ in range(2):
+                    if not (v_c.boundary_reason == 1).any():
+                        break
+                    cand, _n = _fix_opposite(F, topology, v_c, cand, cost)
+                    v_c = judge.validity(cand)
+                    name += "+split_opposite"
+                if judge.angle(cand) > angle_cap:
+                    continue
+                n_c = v_c.n_invalid
+            score = (n_c, judge.angle(cand))
+            if best is None or score < best[0]:
+                best = (score, name, cand)
+        return best
+
     before = judge.validity(labels)
     val = before
     ops = []
@@ -577,29 +628,12 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
                     key = (int(lay.chart_first_face[c]), int(lay.chart_label[c]))
                     if key in gave_up or trials >= max_trials:
                         continue
-                    best = None
-                    for name, cand in _chart_candidates(F, face_part, val, labels, c, cost,
-                                                        unary, nb, colour, penalty,
-                                                        (1.0, 2.0, 4.0, 8.0)):
-                        if np.array_equal(cand, labels) or judge.angle(cand) > angle_cap:
-                            continue
-                        trials += 1
-                        d, opp = judge.delta(labels, val, cand)
-                        n_c = val.n_invalid + d
-                        if opp:
-                            v_c = judge.validity(cand)
-                            for _ in range(2):
-                                if not (v_c.boundary_reason == 1).any():
-                                    break
-                                cand, _n = _fix_opposite(F, topology, v_c, cand, cost)
-                                v_c = judge.validity(cand)
-                                name += "+split_opposite"
-                            if judge.angle(cand) > angle_cap:
-                                continue
-                            n_c = v_c.n_invalid
-                        score = (n_c, judge.angle(cand))
-                        if best is None or score < best[0]:
-                            best = (score, name, cand)
+                    best = score_candidates(
+                        _chart_candidates(F, face_part, val, labels, c, cost, unary, nb, colour,
+                                          penalty, (1.0, 2.0, 4.0, 8.0)), None)
+                    if best is None or best[0][0] >= val.n_invalid:
+                        best = score_candidates(_joint_merges(val.layout, labels, c, small_chart),
+                                                best)
                     if best is not None:
                         s_cand, n_s = smoothed_local(best[2], best[0][0], lay)
                         best = ((n_s, judge.angle(s_cand)), best[1], s_cand)

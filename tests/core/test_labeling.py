@@ -208,7 +208,8 @@ def test_dev_mesh_ends_valid_with_few_charts(name):
 
 
 @pytest.mark.parametrize("name", ["idler_riser.stl", "to_simp_cantilever.stl",
-                                  "gripper_domain.stl"])
+                                  "gripper_domain.stl", "octagonal_pocket.stl",
+                                  "to_simp_torsion_arm.stl"])
 def test_dev_mesh_with_automatic_parts_ends_valid(name):
     # the interface x-axis of Eq. 3 term 4 and of the validity rules is one and the same
     from core.segmentation.frames import compute_frames, mean_edge_length
@@ -311,3 +312,41 @@ def test_candidate_judge_judges_a_labeling_once():
     turning = judge.validity(island, tau=0.01)
     whole = check_validity(V, F, parts, island, frame, topo, turning_tolerance=0.01)
     assert turning.report == whole.report and turning.report["turning_points"]["count"] >= 1
+
+
+@pytest.mark.parametrize("name", ["fandisk.obj", "octagonal_pocket.stl"])
+def test_automatic_parts_are_labelled_near_their_nearest_directions(name):
+    """With automatic parts every part's area-weighted mean normal-to-label angle is at most
+    3 degrees above the better of its nearest-direction labelings in the world axes and in its
+    PCA frame (the blend keeps the frame of the part whose band covers most of it; layers lying
+    on their cut are not parts)."""
+    from core.params import ReconstructionParams
+    from core.pipeline import run_stages
+    from core.segmentation.frames import face_geometry, part_frames
+    from core.types import MeshSource, PipelineState
+
+    path = os.path.join(MESHES, name)
+    if not os.path.exists(path):
+        pytest.skip(f"dev mesh {name} not available")
+    state = PipelineState(source=MeshSource(path))
+    state = run_stages(state, ["intake", "parts", "frames", "labeling"],
+                       ReconstructionParams(parts="auto"))[0]
+    V, F = state.intake.target.vertices, state.intake.target.faces
+    part = state.parts.face_part
+    assert part.max() >= 1 and state.labeling.validity.is_valid
+    area, normal, _ = face_geometry(V, F)
+    labels, frames = state.labeling.face_label, state.frames.frame_field.face_frame
+
+    def angle(lab, frame):
+        d = label_directions(lab, frame)
+        return np.degrees(np.arccos(np.clip((d * normal).sum(axis=1), -1.0, 1.0)))
+
+    world = identity_frames(len(F))
+    pca = part_frames(V, F, part)[part]
+    got = angle(labels, frames)
+    in_world = angle(nearest_direction_labels(normal, world), world)
+    in_pca = angle(nearest_direction_labels(normal, pca), pca)
+    for p in range(int(part.max()) + 1):
+        sel = part == p
+        mean = [np.average(a[sel], weights=area[sel]) for a in (got, in_world, in_pca)]
+        assert mean[0] <= min(mean[1:]) + 3.0, (p, mean)
