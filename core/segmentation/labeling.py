@@ -69,10 +69,16 @@ def label_directions(face_label, face_frame):
     return np.asarray(face_frame)[np.arange(len(face_label)), face_label // 2] * sign[:, None]
 
 
+def label_dots(normals, face_frame):
+    """(m, 6) float64 dot product of each unit normal with the six label directions of its frame
+    (the rows of :func:`label_vectors`), from the three frame axes."""
+    d = np.einsum("fij,fj->fi", np.asarray(face_frame, dtype=np.float64), normals)
+    return np.stack([d[:, 0], -d[:, 0], d[:, 1], -d[:, 1], d[:, 2], -d[:, 2]], axis=1)
+
+
 def nearest_direction_labels(normals, face_frame):
     """(m,) int32 label whose direction is nearest to each normal (no smoothing)."""
-    dots = np.einsum("fld,fd->fl", label_vectors(face_frame), normals)
-    return np.argmax(dots, axis=1).astype(np.int32)
+    return np.argmax(label_dots(normals, face_frame), axis=1).astype(np.int32)
 
 
 def mean_label_angle(normals, face_label, face_frame, weights=None):
@@ -90,8 +96,11 @@ def check_frames(face_frame, m, name="face_frame"):
     face_frame = np.asarray(face_frame, dtype=np.float64)
     if face_frame.shape != (m, 3, 3):
         raise ParameterError(f"{name} must have shape ({m}, 3, 3), got {face_frame.shape}")
-    gram = np.einsum("fij,fkj->fik", face_frame, face_frame)
-    err = np.abs(gram - np.eye(3)).reshape(m, -1).max(axis=1) if m else np.zeros(0)
+    # the six distinct entries of each frame's Gram matrix minus the identity
+    err = np.zeros(m)
+    for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)):
+        dot = np.einsum("fk,fk->f", face_frame[:, i], face_frame[:, j])
+        err = np.maximum(err, np.abs(dot - (i == j)))
     bad = np.flatnonzero(~(err < 1e-6))
     if len(bad):
         raise ParameterError(f"{name} has {len(bad)} frames that are not orthonormal or not "
@@ -121,17 +130,19 @@ def face_colouring(neighbours):
     colour = np.full(m, -1, dtype=np.int64)
     has = neighbours >= 0
     nb = np.where(has, neighbours, 0)
-    while (colour < 0).any():
-        todo = colour < 0
-        nb_todo = has & todo[nb]
-        nb_prio = np.where(nb_todo, prio[nb], -1)
-        pick = todo & (prio > nb_prio.max(axis=1))
-        nb_col = np.where(has & ~todo[nb], colour[nb], -1)
-        c = np.zeros(m, dtype=np.int64)
+    todo = np.arange(m)
+    while len(todo):
+        # a face is picked when its priority beats every uncoloured neighbour's
+        nb_t, has_t = nb[todo], has[todo]
+        nb_prio = np.where(has_t & (colour[nb_t] < 0), prio[nb_t], -1)
+        pick = prio[todo] > nb_prio.max(axis=1)
+        faces = todo[pick]
+        nb_col = np.where(has_t[pick], colour[nb_t[pick]], -1)  # uncoloured neighbours are -1
+        c = np.zeros(len(faces), dtype=np.int64)
         for _ in range(k + 1):
-            clash = (nb_col == c[:, None]).any(axis=1)
-            c = np.where(clash, c + 1, c)
-        colour[pick] = c[pick]
+            c += (nb_col == c[:, None]).any(axis=1)
+        colour[faces] = c
+        todo = todo[~pick]
     return colour
 
 
@@ -181,6 +192,12 @@ def hbecvt_sweeps(unary, neighbours, labels, colour, lam=LAMBDA, penalty=PENALTY
     -------
     labels : (m,) int32
     sweeps : int, sweeps run (the last one changed nothing unless the cap was hit)
+
+    Notes
+    -----
+    A face is visited again only once a neighbour has moved since its last visit: with the same
+    neighbour labels it would pick the label it holds (its label was the minimum, and the tie
+    rule keeps it), so skipping it gives the same labels and sweep count as visiting every face.
     """
     labels = np.asarray(labels, dtype=np.int64).copy()
     has = neighbours >= 0
@@ -188,30 +205,38 @@ def hbecvt_sweeps(unary, neighbours, labels, colour, lam=LAMBDA, penalty=PENALTY
     deg = has.sum(axis=1)
     classes = [np.flatnonzero((colour == c) & (True if active is None else active))
                for c in range(int(colour.max()) + 1)]
-    eye = np.eye(6, dtype=np.float64)
+    # only faces with a neighbour that moved since their last visit can move (see Notes)
+    stale = np.ones(len(labels), dtype=bool)
     sweeps = 0
     for sweeps in range(1, max_sweeps + 1):
         changed = 0
-        for faces in classes:
+        for members in classes:
+            faces = members[stale[members]]
             if len(faces) == 0:
                 continue
-            nl = labels[nb[faces]]
-            cnt = (eye[nl] * has[faces][:, :, None]).sum(axis=1)
+            stale[faces] = False
+            nl, hf = labels[nb[faces]], has[faces]
+            rows = np.arange(len(faces))
+            cnt = np.zeros((len(faces), 6))
+            for j in range(nb.shape[1]):
+                cnt[rows, nl[:, j]] += hf[:, j]
             d2 = (unary[faces] + lam * (deg[faces][:, None] - cnt)
                   + penalty * cnt[:, OPPOSITE])
             cur = labels[faces]
-            d2[np.arange(len(faces)), cur] -= 1e-9
+            d2[rows, cur] -= 1e-9
             new = np.argmin(d2, axis=1)
             moved = new != cur
             changed += int(moved.sum())
             labels[faces[moved]] = new[moved]
+            stale[nb[faces[moved]][has[faces[moved]]]] = True
         if changed == 0:
             break
     return labels.astype(np.int32), sweeps
 
 
 def hbecvt_labeling(V, F, face_part, face_frame, face_interface_axis=None, lam=LAMBDA,
-                    penalty=PENALTY, max_sweeps=MAX_SWEEPS, topology=None, colour=None):
+                    penalty=PENALTY, max_sweeps=MAX_SWEEPS, topology=None, colour=None,
+                    normals=None):
     """HBECVT labels of every face (Eqs. 2-3; see the module docstring).
 
     Parameters
@@ -228,6 +253,7 @@ def hbecvt_labeling(V, F, face_part, face_frame, face_interface_axis=None, lam=L
     topology : MeshTopology, optional.
     colour : (m,) int64, optional :func:`face_colouring` of :func:`part_neighbours` (computed
         when omitted).
+    normals : (m, 3) float64, optional :func:`face_normals` (computed when omitted).
 
     Returns
     -------
@@ -247,7 +273,8 @@ def hbecvt_labeling(V, F, face_part, face_frame, face_interface_axis=None, lam=L
     if face_part.shape != (m,):
         raise ParameterError(f"face_part must have shape ({m},), got {face_part.shape}")
     face_frame = check_frames(face_frame, m)
-    normals = face_normals(V, F)
+    if normals is None:
+        normals = face_normals(V, F)
     if topology is None:
         topology = build_topology(F, len(V))
     unary = label_cost(normals, face_frame) + penalty * interface_penalty(face_frame,
@@ -264,4 +291,4 @@ def hbecvt_labeling(V, F, face_part, face_frame, face_interface_axis=None, lam=L
 
 def label_cost(normals, face_frame):
     """(m, 6) float64 Eq. 3 term 1, ``||n_i - c_l||^2 = 2 - 2 n_i . c_l``."""
-    return 2.0 - 2.0 * np.einsum("fld,fd->fl", label_vectors(face_frame), normals)
+    return 2.0 - 2.0 * label_dots(normals, face_frame)

@@ -32,11 +32,10 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
-from core.geometry import face_areas
 from core.segmentation.charts import boundary_chains, build_topology
-from core.segmentation.labeling import LAMBDA, face_normals, label_cost
+from core.segmentation.labeling import LAMBDA
 from core.segmentation.repair import CandidateJudge
-from core.segmentation.validity import check_validity, sub_topology
+from core.segmentation.validity import sub_topology
 
 MAX_HOOK = 10
 """Longest hook (edges from the nearer end of the boundary to the turning point) that is moved."""
@@ -199,7 +198,7 @@ def _vertex_faces(F, n_vertices):
 def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None,
                           edge_interface_axis=None, max_rounds=6, max_evaluations=None,
                           max_visits=None,
-                          max_angle_increase=1.0, lam=LAMBDA):
+                          max_angle_increase=1.0, lam=LAMBDA, judge=None):
     """Remove turning points by hook moves and turn charts without losing validity (module docstring).
 
     Parameters
@@ -216,6 +215,8 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
         (default ``max(16, 2400000 // m)``: the work per visit grows with the charts around it).
     max_angle_increase : float, degrees.
     lam : float, Eq. 3 lambda used to rank candidates.
+    judge : CandidateJudge, optional, of this mesh, parts and frames (the repair's, whose last
+        judgements it keeps; built when omitted).
 
     Returns
     -------
@@ -237,19 +238,16 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
         max_evaluations = 8 if m <= 50000 else 1
     if max_visits is None:
         max_visits = max(16, 2400000 // max(m, 1))
-    cost = label_cost(face_normals(V, F), face_frame)
-    area = face_areas(V, F)
-    judge = CandidateJudge(V, F, face_part, face_frame, topology, cost, area)
-    if edge_interface_axis is not None:
-        judge.edge_ix = edge_interface_axis
-    ang = judge.weighted_angle
+    if judge is None:
+        judge = CandidateJudge.of_mesh(V, F, face_part, face_frame, topology,
+                                       edge_ix=edge_interface_axis)
+    cost, ang = judge.cost, judge.weighted_angle
     edge_length = np.linalg.norm(V[topology.edges[:, 0]] - V[topology.edges[:, 1]], axis=1)
     tau = float(edge_length.mean())
     vf_ptr, vf = _vertex_faces(F, topology.n_vertices)
 
     def judge_whole(lab):
-        return check_validity(V, F, face_part, lab, face_frame, topology,
-                              edge_interface_axis=judge.edge_ix, turning_tolerance=tau)
+        return judge.validity(lab, tau)
 
     val = judge_whole(labels)
     tp0 = len(val.turning_points)
@@ -309,7 +307,10 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
             if strict and dirty[zone].any():
                 continue
             sub = sub_topology(topology, zone)
-            inv0, tp_0 = judge.local(labels, zone, vmask, tau, sub)
+            if np.array_equal(labels[zone], start[0][zone]):  # the zone as val judged it
+                inv0, tp_0 = judge.near(val, vmask)
+            else:
+                inv0, tp_0 = judge.local(labels, zone, vmask, tau, sub)
             for _e, _i, op, faces, new, d_angle in scored:
                 cand = labels.copy()
                 cand[faces] = new

@@ -50,8 +50,8 @@ from core.segmentation.labeling import (LAMBDA, PENALTY, check_frames, face_colo
                                         face_normals, hbecvt_sweeps, interface_penalty,
                                         label_cost, label_vectors, part_neighbours)
 from core.segmentation.parts import face_interface_axes, interfaces
-from core.segmentation.validity import (COS_45, check_validity, edge_interface_axes, local_counts,
-                                        local_invalid_count)
+from core.segmentation.validity import (COS_45, check_validity, counts_near, edge_interface_axes,
+                                        local_counts, local_invalid_count, with_turning_points)
 from core.types import TriMesh
 
 
@@ -252,10 +252,25 @@ class CandidateJudge:
     :meth:`validity` judges a whole labeling; :meth:`delta` judges a candidate against the current
     labeling on the submesh around the faces it changes (see
     :func:`core.segmentation.validity.local_invalid_count`), which is exact and much cheaper on
-    large meshes. The interface axes depend on the parts only and are computed once.
+    large meshes. The interface axes depend on the parts only and are computed once. One judge
+    serves the repair and the monotonicity pass of a labeling: the last :data:`MEMO` whole-mesh
+    judgements are kept, so a labeling judged once (a candidate, then the state it becomes) is not
+    judged again.
+
+    Parameters
+    ----------
+    V : (n, 3) float64; F : (m, 3) int64; face_part : (m,) int64; face_frame : (m, 3, 3) float64.
+    topology : MeshTopology.
+    cost : (m, 6) float64 ``||n - c_l||^2`` (:func:`core.segmentation.labeling.label_cost`).
+    area : (m,) float64 face areas.
+    edge_ix : (e, 3) float64, optional interface x-axes per edge
+        (:func:`core.segmentation.validity.edge_interface_axes`, computed when omitted).
     """
 
-    def __init__(self, V, F, face_part, face_frame, topology, cost, area):
+    MEMO = 8
+    """Whole-mesh judgements kept."""
+
+    def __init__(self, V, F, face_part, face_frame, topology, cost, area, edge_ix=None):
         self.V, self.F, self.part = V, F, face_part
         self.face_frame = face_frame
         self.topology = topology
@@ -264,11 +279,31 @@ class CandidateJudge:
         # (m, 6) angle of every label times the face's area share: sums to the mean angle
         self.weighted_angle = (np.degrees(np.arccos(np.clip(1.0 - 0.5 * cost, -1.0, 1.0)))
                                * self.area[:, None])
-        self.edge_ix = edge_interface_axes(V, topology, face_part)
+        self.edge_ix = edge_interface_axes(V, topology, face_part) if edge_ix is None else edge_ix
+        self._memo = []
 
-    def validity(self, labels):
-        return check_validity(self.V, self.F, self.part, labels, self.face_frame, self.topology,
-                              turning=False, edge_interface_axis=self.edge_ix)
+    @classmethod
+    def of_mesh(cls, V, F, face_part, face_frame, topology, normals=None, edge_ix=None):
+        """The judge of a mesh, its parts and frames, with the label cost from its unit face
+        ``normals`` ((m, 3) float64, computed when omitted)."""
+        V = np.asarray(V, dtype=np.float64)
+        F = np.asarray(F, dtype=np.int64)
+        normals = face_normals(V, F) if normals is None else normals
+        return cls(V, F, np.asarray(face_part, dtype=np.int64), face_frame, topology,
+                   label_cost(normals, face_frame), face_areas(V, F), edge_ix)
+
+    def validity(self, labels, tau=None):
+        """Validity of ``labels`` on the whole mesh; with ``tau`` (hysteresis, mesh units) also
+        its turning points (:func:`core.segmentation.validity.check_validity`)."""
+        found = next((v for lab, v in self._memo if np.array_equal(lab, labels)), None)
+        if found is None:
+            found = check_validity(self.V, self.F, self.part, labels, self.face_frame,
+                                   self.topology, turning=False, edge_interface_axis=self.edge_ix)
+        if tau is not None and found.report["turning_points"]["tolerance"] != tau:
+            found = with_turning_points(self.V, self.topology, self.face_frame, found, tau)
+        self._memo = [(np.array(labels), found)] + [
+            (lab, v) for lab, v in self._memo if not np.array_equal(lab, labels)][:self.MEMO - 1]
+        return found
 
     def zone(self, labels, lay, cand):
         """Submesh faces (sorted) and changed-vertex mask for judging ``cand`` against
@@ -290,16 +325,18 @@ class CandidateJudge:
 
     def delta(self, labels, val, cand):
         """(change of the invalid-item count from ``labels`` (judged as ``val``) to ``cand``,
-        opposite-label boundaries of ``cand`` near its changes). Zones of more than half the
-        mesh are judged whole (one check instead of two)."""
+        opposite-label boundaries of ``cand`` near its changes, or on the whole mesh when the
+        zone holds more than half of it: such candidates are judged whole). The items of
+        ``labels`` near the changes are read off ``val``
+        (:func:`core.segmentation.validity.counts_near`)."""
         lay = val.layout
         faces, vmask = self.zone(labels, lay, cand)
         if 2 * len(faces) > len(labels):
             full = self.validity(cand)
             return full.n_invalid - val.n_invalid, int((full.boundary_reason == 1).sum())
-        args = (self.F, self.topology, self.part)
-        old = local_invalid_count(*args, labels, self.face_frame, self.edge_ix, faces, vmask)
-        new = local_invalid_count(*args, cand, self.face_frame, self.edge_ix, faces, vmask)
+        old = counts_near(self.F, self.topology, val, vmask)[:4]
+        new = local_invalid_count(self.F, self.topology, self.part, cand, self.face_frame,
+                                  self.edge_ix, faces, vmask)
         return sum(new[:3]) - sum(old[:3]), new[3]
 
     def local(self, labels, faces, vmask, tau, sub=None, max_invalid=None):
@@ -310,6 +347,13 @@ class CandidateJudge:
         points are None when the invalid items exceed ``max_invalid``)."""
         c = local_counts(self.V, self.F, self.topology, self.part, labels, self.face_frame,
                          self.edge_ix, faces, vmask, tau, sub, max_invalid)
+        return sum(c[:3]), c[4]
+
+    def near(self, val, vmask):
+        """(invalid items, turning points) touching ``vmask`` of the labeling judged as ``val``:
+        what :meth:`local` gives for it on a zone of :meth:`zone_of` (``val.layout``, ``vmask``),
+        read off the whole-mesh judgement (:func:`core.segmentation.validity.counts_near`)."""
+        c = counts_near(self.F, self.topology, val, vmask)
         return sum(c[:3]), c[4]
 
     def angle(self, labels):
@@ -361,10 +405,34 @@ def _chart_candidates(F, face_part, val, labels, c, cost, unary, nb, colour, pen
     return out
 
 
+def _joint_merges(lay, labels, c, small_chart):
+    """Candidates that merge invalid chart ``c`` together with its small neighbouring charts of
+    its part (at most ``small_chart`` faces) into each label around that group: where a small
+    chart of the opposite label sits between ``c`` and a large neighbour, merging either alone
+    leaves an opposite-label boundary (tried when no candidate of :func:`_chart_candidates`
+    helps). Returns a list of (name, labels)."""
+    part = lay.chart_part[c]
+    nbrs = lay.chart_neighbours[c].indices
+    nbrs = nbrs[lay.chart_part[nbrs] == part]
+    small = nbrs[lay.chart_size[nbrs] <= small_chart]
+    if not len(small):
+        return []
+    group = np.concatenate([[c], small])
+    around = np.unique(np.concatenate([lay.chart_neighbours[g].indices for g in group]))
+    around = around[(lay.chart_part[around] == part) & ~np.isin(around, group)]
+    in_group = np.isin(lay.face_chart, group)
+    out = []
+    for lab in np.unique(lay.chart_label[np.concatenate([around, [c]])]).tolist():
+        cand = labels.copy()
+        cand[in_group] = lab
+        out.append((f"merge_with_small_into_{lab}", cand))
+    return out
+
+
 def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis=None,
                     max_rounds=60, smooth=True, max_angle_increase=4.0, small_chart=None,
                     lam=LAMBDA, penalty=PENALTY, topology=None, max_trials=None,
-                    max_sideways=4, colour=None):
+                    max_sideways=4, colour=None, judge=None):
     """Drive the invalid charts, boundaries and corners of a labeling towards zero.
 
     Parameters
@@ -390,6 +458,8 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     max_sideways : int, cap on consecutive moves that keep the invalid count (new states only).
     colour : (m,) int64, optional :func:`face_colouring` of the part neighbours (computed when
         omitted; the labeling computes the same one).
+    judge : CandidateJudge, optional, of this mesh, parts and frames (built when omitted; the
+        labeling stage passes one to the repair and then to the monotonicity pass).
 
     Returns
     -------
@@ -429,7 +499,6 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
         bad = np.flatnonzero((labels < 0) | (labels > 5))
         raise ParameterError(f"face_label has {len(bad)} values outside 0..5 "
                              f"(e.g. face {int(bad[0])}: {int(labels[bad[0]])})")
-    face_frame = check_frames(face_frame, m)
     if topology is None:
         topology = build_topology(F, len(V))
     if small_chart is None:
@@ -437,9 +506,9 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     if max_trials is None:
         max_trials = max(200, 2000000 // max(m, 1))
     V = np.asarray(V, dtype=np.float64)
-    normals = face_normals(V, F)
-    area = face_areas(V, F)
-    cost = label_cost(normals, face_frame)
+    if judge is None:
+        judge = CandidateJudge.of_mesh(V, F, face_part, check_frames(face_frame, m), topology)
+    face_frame, cost = judge.face_frame, judge.cost
     if face_interface_axis is None and face_part.max(initial=0) > 0:
         itfs = interfaces(TriMesh(V, F), face_part)
         face_interface_axis = face_interface_axes(F, face_part, itfs, V)[1]
@@ -448,7 +517,6 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     nb = part_neighbours(topology, face_part)
     if colour is None:
         colour = face_colouring(nb)
-    judge = CandidateJudge(V, F, face_part, face_frame, topology, cost, area)
     angle0 = judge.angle(labels)
     angle_cap = angle0 + max_angle_increase
 
@@ -473,8 +541,34 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
         n_s = val.n_invalid + judge.delta(labels, val, s)[0]
         return (s, n_s) if n_s <= n_cand else (cand, n_cand)
 
-    before = check_validity(V, F, face_part, labels, face_frame, topology, turning=False,
-                            edge_interface_axis=judge.edge_ix)
+    def score_candidates(cands, best):
+        """Best of ``best`` and the named candidates ``cands`` for an invalid chart of ``labels``
+        (judged as ``val``): (fewest invalid items, smallest mean angle) within the angle cap;
+        candidates that leave opposite-label boundaries get the strip insertion first."""
+        nonlocal trials
+        for name, cand in cands:
+            if np.array_equal(cand, labels) or judge.angle(cand) > angle_cap:
+                continue
+            trials += 1
+            d, opp = judge.delta(labels, val, cand)
+            n_c = val.n_invalid + d
+            if opp:
+                v_c = judge.validity(cand)
+                for _ in range(2):
+                    if not (v_c.boundary_reason == 1).any():
+                        break
+                    cand, _n = _fix_opposite(F, topology, v_c, cand, cost)
+                    v_c = judge.validity(cand)
+                    name += "+split_opposite"
+                if judge.angle(cand) > angle_cap:
+                    continue
+                n_c = v_c.n_invalid
+            score = (n_c, judge.angle(cand))
+            if best is None or score < best[0]:
+                best = (score, name, cand)
+        return best
+
+    before = judge.validity(labels)
     val = before
     ops = []
     gave_up = {}
@@ -536,29 +630,12 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
                     key = (int(lay.chart_first_face[c]), int(lay.chart_label[c]))
                     if key in gave_up or trials >= max_trials:
                         continue
-                    best = None
-                    for name, cand in _chart_candidates(F, face_part, val, labels, c, cost,
-                                                        unary, nb, colour, penalty,
-                                                        (1.0, 2.0, 4.0, 8.0)):
-                        if np.array_equal(cand, labels) or judge.angle(cand) > angle_cap:
-                            continue
-                        trials += 1
-                        d, opp = judge.delta(labels, val, cand)
-                        n_c = val.n_invalid + d
-                        if opp:
-                            v_c = judge.validity(cand)
-                            for _ in range(2):
-                                if not (v_c.boundary_reason == 1).any():
-                                    break
-                                cand, _n = _fix_opposite(F, topology, v_c, cand, cost)
-                                v_c = judge.validity(cand)
-                                name += "+split_opposite"
-                            if judge.angle(cand) > angle_cap:
-                                continue
-                            n_c = v_c.n_invalid
-                        score = (n_c, judge.angle(cand))
-                        if best is None or score < best[0]:
-                            best = (score, name, cand)
+                    best = score_candidates(
+                        _chart_candidates(F, face_part, val, labels, c, cost, unary, nb, colour,
+                                          penalty, (1.0, 2.0, 4.0, 8.0)), None)
+                    if best is None or best[0][0] >= val.n_invalid:
+                        best = score_candidates(_joint_merges(val.layout, labels, c, small_chart),
+                                                best)
                     if best is not None:
                         s_cand, n_s = smoothed_local(best[2], best[0][0], lay)
                         best = ((n_s, judge.angle(s_cand)), best[1], s_cand)
@@ -597,8 +674,7 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     else:
         if val.is_valid:
             stopped = "valid"
-    final = check_validity(V, F, face_part, labels, face_frame, topology, turning=False,
-                           edge_interface_axis=judge.edge_ix)
+    final = judge.validity(labels)
     r = final.report
     unfixed = {k: r[k] for k in ("invalid_charts", "invalid_boundaries", "invalid_corners")
                if r[k]["count"]}

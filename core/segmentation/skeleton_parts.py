@@ -358,9 +358,15 @@ def smooth_boundaries(vertices, faces, face_part, width, max_iter=8):
     return label
 
 
-PATCH_NORMAL = 0.6
+PATCH_NORMAL = 0.5
 """A part whose area-weighted mean normal is at least this long (1 for a flat patch,
-about 0 for a slab of the solid cut by closed loops) is a patch on a wall, not a part."""
+about 0 for a slab of the solid cut by closed loops) is a patch on a wall, not a part.
+Over a part cut off by planar loops the sum of ``A n`` is minus that of its cut faces
+(divergence theorem), so the length is the cut area over the part's own surface area: at
+least one half means the cut is as large as half the part's surface, a layer of the solid
+lying on the cut (an ``a x a`` plate of thickness ``a / 4`` or less) rather than a member
+cut across. Its interface runs along its largest face, whose own label Eq. 3's term 4 then
+forbids next to the interface (``octagonal_pocket``: a 0.59 layer of the top face)."""
 
 
 def _shared_lengths(vertices, faces, label):

@@ -38,7 +38,7 @@ A corner-free closed boundary is walked from its lowest point, and that point co
 point when the walk comes back down to it, so a closed loop of extent above ``tau`` along its axis
 has at least two turning points.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -302,17 +302,50 @@ def local_invalid_count(F, topology, face_part, face_label, face_frame, edge_ix,
     return _local_invalid(F, sub, j, faces, vertex_mask)
 
 
+def counts_near(F, topology, validity, vertex_mask):
+    """The counts of :func:`local_counts` read off a whole-mesh judgement.
+
+    Under the condition of :func:`local_invalid_count` the submesh judges the items touching
+    ``vertex_mask`` (and walks the boundaries with an edge there) as the whole mesh does, so for
+    the labeling that ``validity`` judged the counts follow from it without judging again.
+
+    Parameters
+    ----------
+    F : (m, 3) int64 faces; topology : MeshTopology of the whole mesh.
+    validity : Validity of the labeling on the whole mesh (:func:`check_validity`).
+    vertex_mask : (n,) bool.
+
+    Returns
+    -------
+    (charts, boundaries, corners, opposite, turning) : int, as :func:`local_counts`;
+    ``turning`` is None when ``validity`` was judged without turning points.
+    """
+    j = {"layout": validity.layout, "invalid_chart": validity.invalid_chart,
+         "reason": validity.boundary_reason, "invalid_corners": validity.invalid_corners}
+    counts = _local_invalid(F, topology, j, None, vertex_mask)
+    if validity.report["turning_points"]["count"] is None:
+        return counts + (None,)
+    near = _boundaries_at(topology, validity.layout, vertex_mask)
+    return counts + (int(near[validity.turning_points[:, 0]].sum()),)
+
+
+def _boundaries_at(topology, layout, vertex_mask):
+    """(b,) bool boundaries of ``layout`` with an edge at ``vertex_mask``."""
+    ev = topology.edges[layout.sep_edges]
+    near = np.zeros(layout.n_boundaries, dtype=bool)
+    near[layout.sep_boundary[vertex_mask[ev[:, 0]] | vertex_mask[ev[:, 1]]]] = True
+    return near
+
+
 def _local_invalid(F, sub, j, faces, vertex_mask):
     """The counts of :func:`local_invalid_count` from the submesh judgement ``j`` (of
-    :func:`_judge` on ``sub``, the topology of ``faces``)."""
+    :func:`_judge` on ``sub``, the topology of ``faces``; ``faces`` None: the whole mesh)."""
     lay = j["layout"]
-    fv = F[faces]
+    fv = F if faces is None else F[faces]
     touch_face = vertex_mask[fv[:, 0]] | vertex_mask[fv[:, 1]] | vertex_mask[fv[:, 2]]
     charts = np.zeros(lay.n_charts, dtype=bool)
     charts[lay.face_chart[touch_face]] = True
-    ev = sub.edges[lay.sep_edges]
-    bnd = np.zeros(lay.n_boundaries, dtype=bool)
-    bnd[lay.sep_boundary[vertex_mask[ev[:, 0]] | vertex_mask[ev[:, 1]]]] = True
+    bnd = _boundaries_at(sub, lay, vertex_mask)
     reason = j["reason"]
     return (int((charts & j["invalid_chart"]).sum()), int((bnd & (reason > 0)).sum()),
             int(vertex_mask[j["invalid_corners"]].sum()), int((bnd & (reason == 1)).sum()))
@@ -349,9 +382,7 @@ def local_counts(V, F, topology, face_part, face_label, face_frame, edge_ix, fac
         return counts + (None,)
     lay = j["layout"]
     # a boundary without an edge at vertex_mask is the same in both labelings: not walked
-    ev = sub.edges[lay.sep_edges]
-    which = np.zeros(lay.n_boundaries, dtype=bool)
-    which[lay.sep_boundary[vertex_mask[ev[:, 0]] | vertex_mask[ev[:, 1]]]] = True
+    which = _boundaries_at(sub, lay, vertex_mask)
     tp = _turning_points(V, sub, lay, face_frame[faces], j["boundary_axis"], tau, which)
     return counts + (len(tp),)
 
@@ -413,15 +444,6 @@ def check_validity(V, F, face_part, face_label, face_frame, topology=None, turni
     ca, cb = lay.boundary_charts[:, 0], lay.boundary_charts[:, 1]
     la, lb = lay.chart_label[ca], lay.chart_label[cb]
 
-    tau = None if turning_tolerance is None else float(turning_tolerance)
-    if tau is None and turning:
-        tau = float(np.linalg.norm(V[topology.edges[:, 0]] - V[topology.edges[:, 1]],
-                                   axis=1).mean()) if len(topology.edges) else 0.0
-    if turning:
-        tp = _turning_points(V, topology, lay, face_frame, boundary_axis, tau)
-    else:
-        tp = np.zeros((0, 2), dtype=np.int64)
-
     names = ["+X", "-X", "+Y", "-Y", "+Z", "-Z"]
     chart_ex = []
     for c in np.flatnonzero(invalid_chart)[:max_examples]:
@@ -445,15 +467,13 @@ def check_validity(V, F, face_part, face_label, face_frame, topology=None, turni
                           "edges": int(lay.vertex_sep_degree[v]),
                           "axes": ["XYZ?"[a] for a in inc_axis[sel].tolist()],
                           "parts": sorted({int(p) for p in inc_part[sel].tolist()})})
-    tp_ex = [{"boundary": int(b), "vertex": int(v), "point": [float(x) for x in V[v]]}
-             for b, v in tp[:max_examples].tolist()]
     n_ic, n_ib, n_iq = int(invalid_chart.sum()), int(invalid_boundary.sum()), len(invalid_corners)
     ef = topology.edge_faces[lay.sep_edges]
     on_iface = np.zeros(topology.n_vertices, dtype=bool)
     on_iface[topology.edges[lay.sep_edges[face_part[ef[:, 0]] != face_part[ef[:, 1]]]]] = True
     report = {
         "valid": n_ic + n_ib + n_iq == 0,
-        "monotone": len(tp) == 0 if turning else None,
+        "monotone": None,
         "charts": lay.n_charts,
         "boundaries": lay.n_boundaries,
         "corners": len(lay.corners),
@@ -462,8 +482,43 @@ def check_validity(V, F, face_part, face_label, face_frame, topology=None, turni
                                "at_interfaces": int((reason == 2).sum())},
         "invalid_corners": {"count": n_iq, "examples": corner_ex,
                             "at_interfaces": int(on_iface[invalid_corners].sum())},
-        "turning_points": {"count": len(tp) if turning else None, "examples": tp_ex,
-                           "tolerance": tau},
+        "turning_points": {"count": None, "examples": [], "tolerance": None},
     }
-    return Validity(lay, invalid_chart, invalid_boundary, reason, boundary_axis, invalid_corners,
-                    tp, report)
+    validity = Validity(lay, invalid_chart, invalid_boundary, reason, boundary_axis,
+                        invalid_corners, np.zeros((0, 2), dtype=np.int64), report)
+    if not turning:
+        return validity
+    return with_turning_points(V, topology, face_frame, validity, turning_tolerance, max_examples)
+
+
+def with_turning_points(V, topology, face_frame, validity, turning_tolerance=None,
+                        max_examples=5):
+    """``validity`` (of :func:`check_validity`) with its turning points found and reported.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 vertices; topology : MeshTopology; face_frame : (m, 3, 3) float64.
+    validity : Validity judged without turning points (``turning=False``).
+    turning_tolerance : float, hysteresis ``tau`` in mesh units (default mean edge length).
+    max_examples : int, examples in the report.
+
+    Returns
+    -------
+    Validity with ``turning_points`` and the report's ``monotone`` and ``turning_points``.
+    """
+    V = np.asarray(V, dtype=np.float64)
+    tau = turning_tolerance
+    if tau is None:
+        tau = float(np.linalg.norm(V[topology.edges[:, 0]] - V[topology.edges[:, 1]],
+                                   axis=1).mean()) if len(topology.edges) else 0.0
+    tau = float(tau)
+    tp = _turning_points(V, topology, validity.layout, np.asarray(face_frame, dtype=np.float64),
+                         validity.boundary_axis, tau)
+    report = dict(validity.report)
+    report["monotone"] = len(tp) == 0
+    report["turning_points"] = {
+        "count": len(tp),
+        "examples": [{"boundary": int(b), "vertex": int(v), "point": [float(x) for x in V[v]]}
+                     for b, v in tp[:max_examples].tolist()],
+        "tolerance": tau}
+    return replace(validity, turning_points=tp, report=report)

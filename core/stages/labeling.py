@@ -31,33 +31,37 @@ def run_labeling(intake, parts, frames, params, progress):
                                             mean_label_angle, nearest_direction_labels,
                                             part_neighbours)
     from core.segmentation.monotone import straighten_boundaries
-    from core.segmentation.repair import repair_labeling
+    from core.segmentation.repair import CandidateJudge, repair_labeling
     from core.segmentation.validity import check_validity
 
     mesh, face_part, field = intake.target, parts.face_part, frames.frame_field
-    # one edge table and one colouring serve the sweeps, the repair and the monotonicity pass
+    # one edge table, one colouring, one set of normals and one judge serve the sweeps, the
+    # repair and the monotonicity pass
     topology = build_topology(mesh.faces, len(mesh.vertices))
     colour = face_colouring(part_neighbours(topology, face_part))
+    normals = face_normals(mesh.vertices, mesh.faces)
     labels, info = hbecvt_labeling(mesh.vertices, mesh.faces, face_part, field.face_frame,
                                    field.face_interface_axis, lam=params.lam,
                                    penalty=params.penalty, max_sweeps=params.max_sweeps,
-                                   topology=topology, colour=colour)
+                                   topology=topology, colour=colour, normals=normals)
     progress.report("labeling", 0.5)
     progress.check_cancel()
     repair_report = straighten_report = None
     if params.repair:
+        judge = CandidateJudge.of_mesh(mesh.vertices, mesh.faces, face_part, field.face_frame,
+                                       topology, normals)
         labels, repair_report = repair_labeling(mesh.vertices, mesh.faces, face_part, labels,
                                                 field.face_frame, field.face_interface_axis,
                                                 lam=params.lam, penalty=params.penalty,
-                                                topology=topology, colour=colour)
+                                                topology=topology, colour=colour, judge=judge)
         progress.report("labeling", 0.8)
         progress.check_cancel()
         labels, straighten_report, validity = straighten_boundaries(
-            mesh.vertices, mesh.faces, face_part, labels, field.face_frame, topology=topology)
+            mesh.vertices, mesh.faces, face_part, labels, field.face_frame, topology=topology,
+            judge=judge)
     else:
         validity = check_validity(mesh.vertices, mesh.faces, face_part, labels, field.face_frame,
                                   topology)
-    normals = face_normals(mesh.vertices, mesh.faces)
     nearest = nearest_direction_labels(normals, field.face_frame)
     v = validity.report
     report = {

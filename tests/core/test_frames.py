@@ -103,10 +103,11 @@ def test_quaternion_round_trip_and_cube_group():
     assert np.allclose(matched, frame, atol=1e-12)
 
 
-def _bent_bar():
-    """Two 2 x 2 bars, along -x and at 30 degrees above +x, cut at x = 0."""
+def _bent_bar(length_b=10.0):
+    """Two 2 x 2 bars, 10 long along -x and ``length_b`` long at 30 degrees above +x, cut at
+    x = 0."""
     leg_a = m3.Manifold.cube([10.0, 2.0, 2.0]).translate([-10.0, 0.0, 0.0])
-    leg_b = m3.Manifold.cube([10.0, 2.0, 2.0]).rotate([0, -30, 0])
+    leg_b = m3.Manifold.cube([length_b, 2.0, 2.0]).rotate([0, -30, 0])
     mesh = _mesh((leg_a + leg_b).refine(5))
     face_part = parts_from_user(mesh, [((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))])
     return mesh, face_part
@@ -126,7 +127,13 @@ def test_blended_frames_orthonormal_part_far_interface_near():
     far = dist >= field.blend_distance
     assert far.sum() > len(dist) // 2
     assert np.array_equal(frames[far], field.part_frames[face_part[far]])
-    for p in (0, 1):
+    # the interface frame is one leg's own frame: that leg keeps it up to the interface
+    offset = [_angle_deg(field.part_frames[p], match_frame(itf.frame, field.part_frames[p]))
+              for p in (0, 1)]
+    keep = int(np.argmin(offset))
+    assert offset[keep] < 1e-4
+    assert np.allclose(frames[face_part == keep], field.part_frames[keep], atol=1e-9)
+    for p in (1 - keep,):
         target = match_frame(itf.frame, field.part_frames[p])
         total = _angle_deg(field.part_frames[p], target)
         assert total > 5.0  # the two legs really have different frames
@@ -141,6 +148,29 @@ def test_blended_frames_orthonormal_part_far_interface_near():
         order = np.argsort(dist[sel])
         inside = dist[sel][order] < field.blend_distance
         assert np.all(np.diff(ang[order][inside]) > -0.5)
+
+
+@pytest.mark.parametrize("length_b", [3.0, 16.0])
+def test_the_part_mostly_inside_its_blend_band_keeps_its_frame(length_b):
+    """Of two legs, the one whose blend band is the larger share of it (the shorter) keeps its
+    own frame on every face; the other turns towards it near the interface (up to axis order)
+    and keeps its own from the blend distance on."""
+    mesh, face_part = _bent_bar(length_b)
+    field = compute_frames(mesh, face_part)
+    short = 1 if length_b < 10.0 else 0
+    frames = field.face_frame
+    assert np.allclose(frames[face_part == short], field.part_frames[short], atol=1e-9)
+    turn = 1 - short
+    own = field.part_frames[turn]
+    target = match_frame(field.part_frames[short], own)
+    assert _angle_deg(own, target) > 20.0
+    total = _angle_deg(own, target)
+    sel = np.flatnonzero(face_part == turn)
+    dist = field.face_interface_distance[sel]
+    at = sel[dist <= dist.min() + 1e-12]  # the faces nearest the interface: turned most
+    assert max(_angle_deg(frames[f], target) for f in at) < 0.5 * total
+    far = dist >= field.blend_distance
+    assert np.allclose(frames[sel[far]], own, atol=1e-12)
 
 
 def test_face_interface_axis_is_the_loop_normal():

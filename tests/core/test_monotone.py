@@ -99,6 +99,8 @@ def test_local_judgement_of_candidates_matches_whole_mesh():
             zone = judge.zone_of(lay, vmask)
             sub = sub_topology(topo, zone)
             inv0, tp0 = judge.local(labels, zone, vmask, tau, sub)
+            # the current labeling's counts read off its whole-mesh judgement are the same
+            assert judge.near(val, vmask) == (inv0, tp0)
             inv1, tp1 = judge.local(cand, zone, vmask, tau, sub)
             full = check_validity(V, F, parts, cand, frame, topo, turning_tolerance=tau)
             assert val.n_invalid + inv1 - inv0 == full.n_invalid

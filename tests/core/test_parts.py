@@ -164,6 +164,20 @@ def test_absorb_patches_merges_a_patch_on_a_wall(bar):
     assert np.array_equal(out, (c[:, 0] > 5.0).astype(np.int64))
 
 
+def test_absorb_patches_merges_a_layer_lying_on_its_cut(bar):
+    """The top 1.625 of an 8 x 8 x 6.5 block: mean normal 64 / 116 = 0.55 (its cut is more than
+    half its own surface), merged into the block below (64 / 220 = 0.29, kept); the halves of a
+    bar cut across (mean normal 4 / 44) are kept."""
+    block = _mesh(m3.Manifold.cube([8.0, 8.0, 6.5]).refine(4))  # vertex planes every 1.625
+    layer = (_centroids(block)[:, 2] > 4.875).astype(np.int64)
+    assert 0 < layer.sum() < len(layer)
+    assert len(np.unique(absorb_patches(block.vertices, block.faces, layer))) == 1
+    kept = absorb_patches(block.vertices, block.faces, layer, max_normal=0.6)
+    assert np.array_equal(kept, layer)
+    halves = (_centroids(bar)[:, 0] > 5.0).astype(np.int64)
+    assert np.array_equal(absorb_patches(bar.vertices, bar.faces, halves), halves)
+
+
 def test_automatic_parts_split_two_cylinders_at_right_angles():
     tube = m3.Manifold.cylinder(10.0, 1.0, 1.0, 32)
     mesh = _mesh((tube + tube.rotate([0, 90, 0])).refine(2))

@@ -159,7 +159,7 @@ def test_single_chart_and_layout_bookkeeping():
 def test_local_count_matches_whole_mesh_judgement():
     """Judging a change on the submesh around it gives the same invalid-count change as judging
     the whole mesh (random patches relabelled on a two-part cube, interface rules included)."""
-    from core.segmentation.validity import edge_interface_axes, local_invalid_count
+    from core.segmentation.validity import counts_near, edge_interface_axes, local_invalid_count
 
     V, F = cube()
     m = len(F)
@@ -182,6 +182,7 @@ def test_local_count_matches_whole_mesh_judgement():
         faces = np.flatnonzero(vz[F].any(axis=1))
         args = (F, topo, parts)
         old = local_invalid_count(*args, labels, frames(m), edge_ix, faces, vmask)
+        assert counts_near(F, topo, base, vmask)[:4] == old  # read off the whole judgement
         new = local_invalid_count(*args, cand, frames(m), edge_ix, faces, vmask)
         full = judge(V, F, cand, parts)
         assert base.n_invalid + sum(new[:3]) - sum(old[:3]) == full.n_invalid
@@ -247,3 +248,21 @@ def test_pair_and_group_corners_are_valid():
     # the 8 cube corners minus (1, 0, 1) and (0, 1, 1), where only two charts meet now, plus
     # the centre and the two points where a quadrant boundary reaches a side chart
     assert r["corners"] == 9
+
+
+def test_turning_points_added_to_a_judgement_match_a_full_check():
+    """A judgement without turning points, completed by ``with_turning_points``, reports what
+    ``check_validity`` with turning points does (a labeling with turning points: the island)."""
+    from core.segmentation.validity import with_turning_points
+
+    V, F = cube()
+    c = centroids(V, F)
+    labels = nearest_direction_labels(face_normals(V, F), frames(len(F)))
+    labels[(np.abs(c[:, 0] - 0.5) < 0.2) & (np.abs(c[:, 1] - 0.5) < 0.2) & (c[:, 2] > 0.99)] = 2
+    full = judge(V, F, labels, turning_tolerance=0.05)
+    plain = judge(V, F, labels, turning=False)
+    assert plain.report["turning_points"]["count"] is None and plain.report["monotone"] is None
+    added = with_turning_points(V, build_topology(F, len(V)), frames(len(F)), plain, 0.05)
+    assert len(full.turning_points) >= 2
+    assert np.array_equal(added.turning_points, full.turning_points)
+    assert added.report == full.report
