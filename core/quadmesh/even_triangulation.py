@@ -193,8 +193,8 @@ def _flip_pass(vertices, faces, surface, max_passes=20):
         new_code = np.minimum(c, d) * n + np.maximum(c, d)
         fresh = np.array([code not in existing for code in new_code.tolist()], dtype=bool)
         allowed = fresh & (c != d) & (valence[a] > 3) & (valence[b] > 3)
-        reference = surface.closest(0.25 * (vertices[a] + vertices[b] + vertices[c]
-                                            + vertices[d])).normal
+        reference = _target_normal(surface, 0.25 * (vertices[a] + vertices[b] + vertices[c]
+                                                     + vertices[d]))
         alignment = np.einsum("ij,ij->i", normals[f1], normals[f2])
         flat = alignment > np.cos(PLANAR_ANGLE)
         untangle = allowed & ~(facing[f1] & facing[f2]) & (np.abs(alignment)
@@ -219,5 +219,11 @@ def _flip_pass(vertices, faces, surface, max_passes=20):
 
 def _facing_target(vertices, faces, normals, surface):
     """(m,) bool triangles within 60 degrees of the target's normal nearest their centroid."""
-    reference = surface.closest(vertices[faces].mean(axis=1)).normal
+    reference = _target_normal(surface, vertices[faces].mean(axis=1))
     return np.einsum("ij,ij->i", normals, reference) > MIN_NORMAL_AGREEMENT
+
+
+def _target_normal(surface, points):
+    """(k, 3) float64 unit normal of the target triangle nearest each of ``points`` (k, 3)
+    (the triangle's own normal: enough to tell which way a coarse triangle faces)."""
+    return surface.face_normals[surface.nearest(points).face]
