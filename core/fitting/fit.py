@@ -15,13 +15,13 @@ import numpy as np
 
 from core.errors import InvalidMeshError, ParameterError
 from core.fitting.best_fit import BestFitResult, best_fit, pull_inside
+from core.fitting.crossings import count_crossings, hold_back_crossings, stiffen_until_clean
 from core.fitting.responses import thickness, volume
 from core.fitting.rgp import FitProblem, run_rgp
 from core.geometry import face_areas, triangulate
 from core.mesh_topology import next_corners
 from core.progress import NO_PROGRESS
 from core.quality import containment
-from core.self_intersection import find_self_intersections
 from core.subdivision.catmull_clark import build_hierarchy
 from core.subdivision.limit import limit_matrices
 from core.target_surface import TargetSurface
@@ -122,22 +122,25 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     info = {"mode": mode, "levels": levels, "surface": surface, "rounds": 0, "rms": [],
             "iterations": 0, "stopped": "none", "objective": [], "volume": []}
     vertices = V0
-    start_crossings = None
+    crossings = None
     if mode == "best-fit" or (mode == "inside" and start == "best-fit"):
         progress.report("fit", 0.0, "least-squares fit")
         fitted, coarse = _two_level_best_fit(base, hierarchy, limit_map, T, target_surface,
                                              rounds)
-        vertices = fitted.vertices
         info.update(rounds=fitted.rounds + coarse.rounds, rms=fitted.rms,
                     coarse_rms=coarse.rms, stopped=fitted.stopped, start=start)
+        vertices, crossings, stiffness = _untangled(base, limit_map, T, target_surface,
+                                                    fitted.vertices, rounds, info)
         if mode == "inside":
             # the RGP starts just inside the target, and nowhere crossing itself
-            vertices, info["start_margin"] = _pulled_inside(base, limit_map, target_surface,
-                                                            vertices)
-            vertices, held, start_crossings = hold_back_crossings(V0, vertices, limit_map, T)
-            info["held_back"] = held
-            if held:
-                info["start"] = f"{start}, held back at {held} base vertices (it crossed itself)"
+            pulled, info["start_margin"] = _pulled_inside(base, limit_map, target_surface,
+                                                          vertices, stiffness)
+            vertices, crossings, held = _held_back(vertices if crossings == 0 else None,
+                                                   pulled, limit_map, T)
+            info["held_back"] = info.get("held_back", 0) + held
+            if info["held_back"]:
+                info["start"] = (f"{start}, held back at {info['held_back']} base vertices "
+                                 "(it crossed itself)")
     if mode == "inside":
         edge = _mean_edge_length(base)
         step = step_fraction * edge
@@ -148,19 +151,22 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
                              _area(X_start, T))
         result = run_rgp(problem, vertices, step, iterations=iterations, stall_tol=tol,
                          patience=patience, progress=progress)
-        if surface == "limit" and start_crossings is not None \
+        if surface == "limit" and crossings is not None \
                 and np.array_equal(result.vertices, vertices):
-            held, crossings = 0, start_crossings  # the RGP's best is its start, checked above
+            held = 0  # the RGP's best is its start, checked above
+        elif crossings == 0 or crossings is None:
+            vertices, crossings, held = _held_back(vertices, result.vertices, mapping, T)
         else:
-            vertices, held, crossings = hold_back_crossings(vertices, result.vertices, mapping,
-                                                            T)
+            vertices, crossings, held = _held_back(None, result.vertices, mapping, T)
         info["rgp_held_back"] = held
-        if surface == "limit":
-            info["self_intersections"] = crossings
         info.update(iterations=result.iterations, stopped=result.stopped,
                     best_iteration=result.best_iteration,
                     objective=result.history["objective"], volume=result.history["volume"],
                     t_min=float(t_min), step=float(step))
+    if surface == "limit" and crossings is not None:
+        info["self_intersections"] = crossings
+        if crossings:
+            info["cage_self_intersections"] = count_crossings(limit_map, T, V0)
     measuring = time.perf_counter()
     info.update(_figures(limit_map @ vertices, T, target_surface))
     initial = _distances(limit_map @ V0, target_surface)
@@ -175,12 +181,54 @@ INSIDE_MARGIN = 0.25
 of the least-squares fit's limit points (chosen on polycube_bone, where 0.25 gave a lower
 mean distance after the RGP than 0 or 0.5)."""
 INSIDE_ROUNDS = 2
-HALVINGS = 6
-"""Rounds of halving the crossing regions' moves before they are held back completely."""
 
 
-def _pulled_inside(base, limit_map, target, vertices):
-    """The least-squares fit pulled just inside the target (:func:`pull_inside`).
+def _untangled(base, limit_map, T, target, vertices, rounds, info):
+    """The least-squares fit made not to cross itself where a refit or the cage allows.
+
+    Refits with a stiffer smoothness term under the crossings
+    (:func:`core.fitting.crossings.stiffen_until_clean`); if the fit still crosses and
+    the cage's limit surface does not, the fit is held back towards the cage there
+    (:func:`core.fitting.crossings.hold_back_crossings`). Records ``refits``,
+    ``refit_crossings`` (crossing pairs after the first fit and each refit), ``stiffened``
+    (base vertices with a stiffer smoothness term) and ``held_back`` in ``info``.
+
+    Returns
+    -------
+    vertices : (n, 3) float64 base vertices.
+    crossings : int, crossing triangle pairs of their limit surface.
+    stiffness : (n,) float64 smoothness weights of the fit (for the inside pull).
+    """
+    untangled = stiffen_until_clean(
+        vertices, lambda stiffness: best_fit(base, limit_map, T, target, rounds=rounds,
+                                             stiffness=stiffness).vertices, limit_map, T)
+    vertices, crossings, held = untangled.vertices, untangled.crossings, 0
+    if crossings and count_crossings(limit_map, T, base.vertices) == 0:
+        vertices, crossings, held = _held_back(base.vertices, vertices, limit_map, T)
+    info.update(refits=untangled.refits, refit_crossings=untangled.counts,
+                stiffened=int((untangled.stiffness > 1).sum()), held_back=held)
+    return vertices, crossings, untangled.stiffness
+
+
+def _held_back(reference, moved, mapping, T):
+    """``moved`` held back towards a clean ``reference`` where it crosses itself.
+
+    ``reference`` None (no clean one known): ``moved`` as it is.
+
+    Returns
+    -------
+    vertices : (n, 3) float64; crossings : int, crossing pairs of their fine mesh;
+    held : int, base vertices held back.
+    """
+    if reference is None:
+        return moved, count_crossings(mapping, T, moved), 0
+    vertices, held, crossings = hold_back_crossings(reference, moved, mapping, T)
+    return vertices, crossings, held
+
+
+def _pulled_inside(base, limit_map, target, vertices, stiffness):
+    """The least-squares fit pulled just inside the target (:func:`pull_inside`, with the
+    fit's smoothness weights ``stiffness``).
 
     Returns
     -------
@@ -189,52 +237,8 @@ def _pulled_inside(base, limit_map, target, vertices):
     """
     signed = target.closest(limit_map @ vertices).signed
     margin = INSIDE_MARGIN * float(np.sqrt(np.mean(signed ** 2)))
-    return pull_inside(base, limit_map, target, vertices, margin, INSIDE_ROUNDS), margin
-
-
-def hold_back_crossings(reference, moved, mapping, triangles):
-    """Undo a move where it makes the limit surface cross itself, and only there.
-
-    While the fine mesh ``mapping @ W`` of ``W = reference + t (moved - reference)``
-    intersects itself, the move fraction ``t`` of the base vertex with the largest weight
-    in each crossing triangle corner's row of ``mapping`` is halved; after ``HALVINGS``
-    such rounds every base vertex influencing a still crossing triangle keeps its
-    reference position, and a last check confirms. Thin members that the cage cannot
-    resolve are where a fit pulls the two walls through each other; elsewhere the move is
-    kept whole (SIMP cantilever: 66 of 284 base vertices held back, against 107 when every
-    influencing vertex is halved, and mean distance 2.8e-3 instead of 3.4e-3).
-
-    Parameters
-    ----------
-    reference : (n, 3) float64 base vertices whose fine mesh does not cross itself.
-    moved : (n, 3) float64 base vertices after the move.
-    mapping : (n_fine, n) sparse CSR, fine points ``mapping @ V``.
-    triangles : (t, 3) int64 fine triangles.
-
-    Returns
-    -------
-    vertices : (n, 3) float64, ``moved`` where nothing crosses.
-    held : int, base vertices whose move was cut (0 when ``moved`` is clean, or when
-        ``reference`` itself crosses and nothing can be restored).
-    crossings : int, intersecting triangle pairs of the returned fine mesh.
-    """
-    fraction = np.ones(len(moved))
-    for halving in range(HALVINGS + 2):
-        W = reference + fraction[:, None] * (moved - reference)
-        pairs = find_self_intersections(mapping @ W, triangles)
-        if not len(pairs):
-            return W, int((fraction < 1).sum()), 0
-        if halving == HALVINGS + 1:
-            break
-        fine = np.unique(triangles[pairs].reshape(-1))
-        if halving < HALVINGS:
-            rows = mapping[fine]
-            owner = np.asarray(abs(rows).argmax(axis=1)).ravel()
-            columns = np.unique(owner)
-            fraction[columns] *= 0.5
-        else:
-            fraction[np.unique(mapping[fine].indices)] = 0.0
-    return moved, 0, int(len(find_self_intersections(mapping @ moved, triangles)))
+    return pull_inside(base, limit_map, target, vertices, margin, INSIDE_ROUNDS,
+                       stiffness=stiffness), margin
 
 
 def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds):
