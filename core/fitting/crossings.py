@@ -11,8 +11,8 @@ folded onto themselves at thin struts). Two remedies, both local:
   follows its neighbours instead of the far wall. On to_simp_mbb (27 crossing pairs in
   the cage, 75 after the plain fit) and idler_riser (6, 148) the second or first refit
   is clean.
-* :func:`hold_back_crossings` undoes a move towards a clean reference, only where the
-  moved surface crosses.
+* :func:`hold_back_crossings` undoes a move towards its reference, only where the moved
+  surface has a crossing that the reference does not have.
 
 Crossings are the intersecting triangle pairs of the fine limit mesh
 (:func:`core.self_intersection.find_self_intersections`).
@@ -98,44 +98,58 @@ def stiffen_until_clean(vertices, refit, mapping, triangles, tries=STIFFEN_TRIES
     return best
 
 
-def hold_back_crossings(reference, moved, mapping, triangles):
+def hold_back_crossings(reference, moved, mapping, triangles, clean=True):
     """Undo a move where it makes the limit surface cross itself, and only there.
 
-    While the fine mesh ``mapping @ W`` of ``W = reference + t (moved - reference)``
-    intersects itself, the move fraction ``t`` of the base vertex with the largest weight
-    in each crossing triangle corner's row of ``mapping`` is halved; after ``HALVINGS``
-    such rounds every base vertex influencing a still crossing triangle keeps its
-    reference position, and a last check confirms. Thin members that the cage cannot
-    resolve are where a fit pulls the two walls through each other; elsewhere the move is
-    kept whole (SIMP cantilever: 66 of 284 base vertices held back, against 107 when every
-    influencing vertex is halved, and mean distance 2.8e-3 instead of 3.4e-3).
+    While the fine mesh ``mapping @ W`` of ``W = reference + t (moved - reference)`` has
+    an intersecting triangle pair that the reference's fine mesh does not have, the move
+    fraction ``t`` of the base vertex with the largest weight in each such triangle
+    corner's row of ``mapping`` is halved; after ``HALVINGS`` such rounds every base
+    vertex influencing a still new crossing keeps its reference position, and a last
+    check confirms (else the whole move is undone). Thin members that the cage cannot resolve are where a fit pulls the
+    two walls through each other; elsewhere the move is kept whole (SIMP cantilever: 66 of
+    284 base vertices held back, against 107 when every influencing vertex is halved, and
+    mean distance 2.8e-3 instead of 3.4e-3).
 
     Parameters
     ----------
-    reference : (n, 3) float64 base vertices whose fine mesh does not cross itself.
+    reference : (n, 3) float64 base vertices before the move.
     moved : (n, 3) float64 base vertices after the move.
     mapping : (n_fine, n) sparse CSR, fine points ``mapping @ V``.
     triangles : (t, 3) int64 fine triangles.
+    clean : bool, the reference's fine mesh is known not to cross itself (False: its
+        crossing pairs are found and kept allowed, so the result crosses no more than it).
 
     Returns
     -------
-    vertices : (n, 3) float64, ``moved`` where nothing crosses.
-    held : int, base vertices whose move was cut (0 when ``moved`` is clean, or when
-        ``reference`` itself crosses and nothing can be restored).
+    vertices : (n, 3) float64, ``moved`` where it adds no crossing; its crossing pairs are
+        a subset of the reference's.
+    held : int, base vertices whose move was cut (0 when ``moved`` adds no crossing).
     crossings : int, intersecting triangle pairs of the returned fine mesh.
     """
+    allowed = (np.zeros((0, 2), dtype=np.int64) if clean
+               else find_self_intersections(mapping @ reference, triangles))
     fraction = np.ones(len(moved))
     for halving in range(HALVINGS + 2):
         W = reference + fraction[:, None] * (moved - reference)
         pairs = find_self_intersections(mapping @ W, triangles)
-        if not len(pairs):
-            return W, int((fraction < 1).sum()), 0
+        new = pairs[~_rows_in(pairs, allowed)]
+        if not len(new):
+            return W, int((fraction < 1).sum()), int(len(pairs))
         if halving == HALVINGS + 1:
             break
-        fine = np.unique(triangles[pairs].reshape(-1))
         if halving < HALVINGS:
+            fine = np.unique(triangles[new].reshape(-1))
             owner = np.asarray(abs(mapping[fine]).argmax(axis=1)).ravel()
             fraction[np.unique(owner)] *= 0.5
         else:
-            fraction[influencing(pairs, mapping, triangles)] = 0.0
-    return moved, 0, count_crossings(mapping, triangles, moved)
+            fraction[influencing(new, mapping, triangles)] = 0.0
+    return reference.copy(), int(len(moved)), int(len(allowed))
+
+
+def _rows_in(pairs, allowed):
+    """(p,) bool: each row of ``pairs`` ((p, 2) int64) is a row of ``allowed``."""
+    if not len(allowed) or not len(pairs):
+        return np.zeros(len(pairs), dtype=bool)
+    width = int(max(pairs.max(), allowed.max())) + 1
+    return np.isin(pairs[:, 0] * width + pairs[:, 1], allowed[:, 0] * width + allowed[:, 1])

@@ -135,8 +135,7 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
             # the RGP starts just inside the target, and nowhere crossing itself
             pulled, info["start_margin"] = _pulled_inside(base, limit_map, target_surface,
                                                           vertices, stiffness)
-            vertices, crossings, held = _held_back(vertices if crossings == 0 else None,
-                                                   pulled, limit_map, T)
+            vertices, crossings, held = _held_back(vertices, crossings, pulled, limit_map, T)
             info["held_back"] = info.get("held_back", 0) + held
             if info["held_back"]:
                 info["start"] = (f"{start}, held back at {info['held_back']} base vertices "
@@ -154,10 +153,9 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         if surface == "limit" and crossings is not None \
                 and np.array_equal(result.vertices, vertices):
             held = 0  # the RGP's best is its start, checked above
-        elif crossings == 0 or crossings is None:
-            vertices, crossings, held = _held_back(vertices, result.vertices, mapping, T)
         else:
-            vertices, crossings, held = _held_back(None, result.vertices, mapping, T)
+            known = crossings if surface == "limit" else None
+            vertices, crossings, held = _held_back(vertices, known, result.vertices, mapping, T)
         info["rgp_held_back"] = held
         info.update(iterations=result.iterations, stopped=result.stopped,
                     best_iteration=result.best_iteration,
@@ -165,7 +163,7 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
                     t_min=float(t_min), step=float(step))
     if surface == "limit" and crossings is not None:
         info["self_intersections"] = crossings
-        if crossings:
+        if crossings and "cage_self_intersections" not in info:
             info["cage_self_intersections"] = count_crossings(limit_map, T, V0)
     measuring = time.perf_counter()
     info.update(_figures(limit_map @ vertices, T, target_surface))
@@ -189,9 +187,11 @@ def _untangled(base, limit_map, T, target, vertices, rounds, info):
     Refits with a stiffer smoothness term under the crossings
     (:func:`core.fitting.crossings.stiffen_until_clean`); if the fit still crosses and
     the cage's limit surface does not, the fit is held back towards the cage there
-    (:func:`core.fitting.crossings.hold_back_crossings`). Records ``refits``,
-    ``refit_crossings`` (crossing pairs after the first fit and each refit), ``stiffened``
-    (base vertices with a stiffer smoothness term) and ``held_back`` in ``info``.
+    (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses itself is no
+    reference to hold back to (on to_simp_torsion_arm every base vertex would go back).
+    Records ``refits``, ``refit_crossings`` (crossing pairs after the first fit and each
+    refit), ``stiffened`` (base vertices with a stiffer smoothness term), ``held_back`` and,
+    when the fit still crosses, ``cage_self_intersections`` in ``info``.
 
     Returns
     -------
@@ -203,26 +203,28 @@ def _untangled(base, limit_map, T, target, vertices, rounds, info):
         vertices, lambda stiffness: best_fit(base, limit_map, T, target, rounds=rounds,
                                              stiffness=stiffness).vertices, limit_map, T)
     vertices, crossings, held = untangled.vertices, untangled.crossings, 0
-    if crossings and count_crossings(limit_map, T, base.vertices) == 0:
-        vertices, crossings, held = _held_back(base.vertices, vertices, limit_map, T)
+    if crossings:
+        info["cage_self_intersections"] = count_crossings(limit_map, T, base.vertices)
+        if info["cage_self_intersections"] == 0:
+            vertices, crossings, held = _held_back(base.vertices, 0, vertices, limit_map, T)
     info.update(refits=untangled.refits, refit_crossings=untangled.counts,
                 stiffened=int((untangled.stiffness > 1).sum()), held_back=held)
     return vertices, crossings, untangled.stiffness
 
 
-def _held_back(reference, moved, mapping, T):
-    """``moved`` held back towards a clean ``reference`` where it crosses itself.
+def _held_back(reference, crossings, moved, mapping, T):
+    """``moved`` held back towards ``reference`` where it crosses itself and the reference
+    does not (:func:`core.fitting.crossings.hold_back_crossings`).
 
-    ``reference`` None (no clean one known): ``moved`` as it is.
+    crossings : int or None, crossing pairs of the reference's fine mesh (None: unknown).
 
     Returns
     -------
     vertices : (n, 3) float64; crossings : int, crossing pairs of their fine mesh;
     held : int, base vertices held back.
     """
-    if reference is None:
-        return moved, count_crossings(mapping, T, moved), 0
-    vertices, held, crossings = hold_back_crossings(reference, moved, mapping, T)
+    vertices, held, crossings = hold_back_crossings(reference, moved, mapping, T,
+                                                    clean=crossings == 0)
     return vertices, crossings, held
 
 
