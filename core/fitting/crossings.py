@@ -130,12 +130,13 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True):
     allowed = (np.zeros((0, 2), dtype=np.int64) if clean
                else find_self_intersections(mapping @ reference, triangles))
     fraction = np.ones(len(moved))
+    moving = (moved != reference).any(axis=1)
     for halving in range(HALVINGS + 2):
         W = reference + fraction[:, None] * (moved - reference)
         pairs = find_self_intersections(mapping @ W, triangles)
         new = pairs[~_rows_in(pairs, allowed)]
         if not len(new):
-            return W, int((fraction < 1).sum()), int(len(pairs))
+            return W, int(((fraction < 1) & moving).sum()), int(len(pairs))
         if halving == HALVINGS + 1:
             break
         if halving < HALVINGS:
@@ -144,7 +145,7 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True):
             fraction[np.unique(owner)] *= 0.5
         else:
             fraction[influencing(new, mapping, triangles)] = 0.0
-    return reference.copy(), int(len(moved)), int(len(allowed))
+    return reference.copy(), int(moving.sum()), int(len(allowed))
 
 
 def _rows_in(pairs, allowed):
