@@ -14,7 +14,10 @@ when the fit still crosses, the refits and their crossing counts, base vertices 
 fit seconds), whether the STEP was written or refused, and, for a written STEP, the
 independent ``../shared/tools/evaluate.py`` figures (symmetric mean and max distance as
 fractions of the bounding-box diagonal, volume outside the target). ``--before DIR`` runs
-the same on an older checkout (``git archive COMMIT | tar -x -C DIR``) in the same run.
+the pipeline up to the fit on an older checkout (``git archive COMMIT | tar -x -C DIR``) in
+the same run, for its crossing count and fit seconds; the older STEP figures are taken from
+``basemesh_results.json`` (the base-mesh benchmark's single-part rows, its commit recorded),
+which ran the same evaluation.
 
 Writes ``CROSSINGS_RESULTS.md`` and ``crossings_results.json`` into ``--out``.
 """
@@ -69,6 +72,42 @@ def run_one(tree, name):
     return row
 
 
+BEFORE_FIT = """
+import json, sys
+from core.pipeline import reconstruct
+report = reconstruct(sys.argv[1], stop_after="fit").report
+fit = report.get("fit", {})
+print(json.dumps({"fit": {key: fit.get(key) for key in %r},
+                  "stages": {k: v["status"] for k, v in report["stages"].items()}}))
+""" % (FIT_KEYS,)
+
+
+def run_before(tree, name):
+    """The older checkout's pipeline up to the fit on one mesh; a dict."""
+    done = subprocess.run([sys.executable, "-c", BEFORE_FIT, os.path.join(MESHES, name)], cwd=tree,
+                          capture_output=True, text=True, env={**os.environ, "PYTHONPATH": tree})
+    try:
+        return json.loads(done.stdout.strip().splitlines()[-1])
+    except (ValueError, IndexError):
+        return {"error": done.stderr[-300:]}
+
+
+def basemesh_before(path):
+    """name -> {"evaluation", "step_written"} of the base-mesh benchmark's single-part rows."""
+    if not os.path.exists(path):
+        return {}, None
+    with open(path, encoding="utf-8") as handle:
+        data = json.load(handle)
+    rows = {}
+    for row in data["rows"]:
+        solid = row.get("solid") or {}
+        if row.get("mode") != "single" or "evaluation" not in solid:
+            continue
+        rows[row["mesh"]] = {"step_written": solid.get("reached"),
+                             "evaluation": _figures(solid["evaluation"])}
+    return rows, data["meta"].get("commit")
+
+
 def _figures(metrics):
     distance = metrics["distance"]
     there, back = distance["result_to_target"], distance["target_to_result"]
@@ -78,10 +117,12 @@ def _figures(metrics):
             "valid": metrics["brep"]["is_valid"] if "brep" in metrics else None}
 
 
-def markdown(rows, meta):
+def markdown(rows, meta, older):
     lines = ["# Crossings benchmark (`benchmarks/crossings_bench.py`)", "",
              f"Run {meta['date']} on 2 cores (load average at start {meta['load']:.2f}), commit "
-             f"{meta['commit']}; before: {meta['before'] or 'not run'}. Every dev mesh, one part, "
+             f"{meta['commit']}; before: crossings and fit seconds of {meta['before'] or 'not run'} "
+             f"in the same run, STEP figures from `basemesh_results.json` (commit {meta['older']}, "
+             "same evaluation). Every dev mesh, one part, "
              "default parameters, `reconstruct MESH -o X.step --report X.json`. Crossings: "
              "intersecting triangle pairs of the fitted limit surface at the fit's level (the "
              "report's `fit.self_intersections`); cage: those of the unfitted cage (reported when "
@@ -95,9 +136,12 @@ def markdown(rows, meta):
     for name in NAMES:
         if name not in rows:
             continue
+        if "after" not in rows[name]:
+            continue
         after, before = rows[name]["after"], rows[name].get("before") or {}
         fa, fb = after.get("fit", {}), before.get("fit", {})
-        ea, eb = after.get("evaluation", {}), before.get("evaluation", {})
+        ea = after.get("evaluation", {})
+        eb = older.get(name.rsplit(".", 1)[0], {}).get("evaluation", {})
         step = "written" if after.get("step_written") else f"refused (exit {after['exit']})"
         lines.append("| " + " | ".join([
             name.rsplit(".", 1)[0], str(after.get("base_method")), _n(fb.get("self_intersections")),
@@ -105,7 +149,8 @@ def markdown(rows, meta):
             str(fa.get("refit_crossings")), step, _e(eb.get("mean")), _e(ea.get("mean")),
             _e(eb.get("max")), _e(ea.get("max")), _p(eb.get("outside")), _p(ea.get("outside")),
             _s(fb.get("seconds")), _s(fa.get("seconds"))]) + " |")
-    refused = [n for n in NAMES if n in rows and not rows[n]["after"].get("step_written")]
+    refused = [n for n in NAMES if "after" in rows.get(n, {})
+               and not rows[n]["after"].get("step_written")]
     lines += ["", "Refused (the fitted limit surface still crosses itself; exit 1, the report "
               "written):", ""]
     lines += [f"- {n}: `{rows[n]['after']['error']}`" for n in refused] or ["- none"]
@@ -140,18 +185,28 @@ def main(argv=None):
                             text=True).stdout.strip()
     meta = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load": os.getloadavg()[0],
             "commit": commit, "before": args.before}
-    jobs = [(name, "after", REPO) for name in names]
-    if args.before:
-        jobs += [(name, "before", os.path.abspath(args.before)) for name in names]
+    older, meta["older"] = basemesh_before(os.path.join(HERE, "basemesh_results.json"))
+    jobs = []
+    for name in names:
+        jobs.append((name, "after", lambda name=name: run_one(REPO, name)))
+        if args.before:
+            tree = os.path.abspath(args.before)
+            jobs.append((name, "before", lambda name=name: run_before(tree, name)))
     rows = {}
     with ThreadPoolExecutor(max_workers=args.jobs) as pool:
-        for (name, which, _), row in zip(jobs, pool.map(lambda job: run_one(job[2], job[0]), jobs)):
+        for (name, which, _), row in zip(jobs, pool.map(lambda job: job[2](), jobs)):
             rows.setdefault(name, {})[which] = row
-            print(name, which, row.get("fit", {}).get("self_intersections"), row["exit"], flush=True)
-    with open(os.path.join(args.out, "crossings_results.json"), "w", encoding="utf-8") as handle:
+            print(name, which, row.get("fit", {}).get("self_intersections"), row.get("exit"),
+                  flush=True)
+            _write(args.out, rows, meta, older)
+
+
+def _write(folder, rows, meta, older):
+    """Both result files, rewritten after every finished run (a stopped run keeps its rows)."""
+    with open(os.path.join(folder, "crossings_results.json"), "w", encoding="utf-8") as handle:
         json.dump({"meta": meta, "rows": rows}, handle, indent=1)
-    with open(os.path.join(args.out, "CROSSINGS_RESULTS.md"), "w", encoding="utf-8") as handle:
-        handle.write(markdown(rows, meta))
+    with open(os.path.join(folder, "CROSSINGS_RESULTS.md"), "w", encoding="utf-8") as handle:
+        handle.write(markdown(rows, meta, older))
 
 
 if __name__ == "__main__":
