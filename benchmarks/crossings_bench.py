@@ -19,7 +19,8 @@ the same run, for its crossing count and fit seconds; the older STEP figures are
 ``basemesh_results.json`` (the base-mesh benchmark's single-part rows, its commit recorded),
 which ran the same evaluation.
 
-Writes ``CROSSINGS_RESULTS.md`` and ``crossings_results.json`` into ``--out``.
+Writes ``CROSSINGS_RESULTS.md`` and ``crossings_results.json`` into ``--out``. Run from an
+exported tree (``git archive``), ``BENCH_COMMIT`` names the commit it was exported from.
 """
 import argparse
 import json
@@ -181,8 +182,8 @@ def main(argv=None):
     parser.add_argument("--out", default=HERE)
     args = parser.parse_args(argv)
     names = args.only or list(NAMES)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True,
-                            text=True).stdout.strip()
+    commit = os.environ.get("BENCH_COMMIT") or subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True).stdout.strip()
     meta = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load": os.getloadavg()[0],
             "commit": commit, "before": args.before}
     older, meta["older"] = basemesh_before(os.path.join(HERE, "basemesh_results.json"))
