@@ -20,7 +20,8 @@ the same run, for its crossing count and fit seconds; the older STEP figures are
 which ran the same evaluation.
 
 Writes ``CROSSINGS_RESULTS.md`` and ``crossings_results.json`` into ``--out``. Run from an
-exported tree (``git archive``), ``BENCH_COMMIT`` names the commit it was exported from.
+exported tree (``git archive``), ``BENCH_COMMIT`` names the commit it was exported from and
+``BENCH_SHARED`` the shared folder (default ``../shared`` of the checkout).
 """
 import argparse
 import json
@@ -33,8 +34,9 @@ from concurrent.futures import ThreadPoolExecutor
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
-MESHES = os.path.join(REPO, "..", "shared", "data", "meshes")
-EVALUATE = os.path.join(REPO, "..", "shared", "tools", "evaluate.py")
+SHARED = os.environ.get("BENCH_SHARED") or os.path.join(REPO, "..", "shared")
+MESHES = os.path.join(SHARED, "data", "meshes")
+EVALUATE = os.path.join(SHARED, "tools", "evaluate.py")
 NAMES = ("to_simp_cantilever.stl", "to_simp_lbracket.stl", "to_simp_mbb.stl", "to_simp_pylon.stl",
          "to_simp_torsion_arm.stl", "to_simp_torsion_arm_fine3.stl", "fandisk.obj",
          "featuretype.stl", "ge_bracket_domain.stl", "gripper_domain.stl", "idler_riser.stl",
