@@ -60,8 +60,8 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     surface : ``'limit'`` or ``'control'``, which fine positions the responses use.
     start : ``'best-fit'`` (inside mode starts from the least-squares fit, pulled just
         inside the target by :func:`core.fitting.best_fit.pull_inside` and held back where
-        it crosses itself, :func:`hold_back_crossings`) or ``'cage'`` (from the cage as
-        given, the paper's start).
+        it crosses itself, :func:`core.fitting.crossings.hold_back_crossings`) or ``'cage'``
+        (from the cage as given, the paper's start).
     rounds : int >= 0, most Gauss-Newton rounds of the least-squares fit.
     tol, patience : the RGP stops when its best objective improved by less than
         ``tol * max(|best|, step)`` over the last ``patience`` iterations (see
@@ -80,14 +80,16 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         ``uncovered_volume_fraction`` (triangulated fine limit mesh minus target and
         target minus it, over the target volume; of the result only), ``t_min``,
         ``step`` (model units), ``seconds`` (all of it) and ``measure_seconds`` (the
-        part spent on those figures, one manifold3d boolean); ``self_intersections``
-        (intersecting triangle pairs of the fine limit mesh) where the fit checked them
-        anyway (inside mode, ``surface='limit'``); inside mode
-        also ``start_margin`` (depth of the start below the target, model units),
-        ``held_back`` and ``rgp_held_back`` (base vertices whose least-squares start or
-        RGP move was cut back because the limit surface crossed itself there). The
-        returned inside fit's level-``levels`` limit surface does not cross itself when
-        the cage's does not.
+        part spent on those figures, one manifold3d boolean); with a least-squares fit
+        (best-fit mode, inside mode from ``start='best-fit'``) ``self_intersections``
+        (intersecting triangle pairs of the fine limit mesh, ``surface='limit'``),
+        ``cage_self_intersections`` (the cage's, when the result still crosses), ``refits``,
+        ``refit_crossings``, ``stiffened`` (:func:`_untangled`) and ``held_back`` (base
+        vertices held back towards the cage or, inside mode, the least-squares start);
+        inside mode also ``start_margin`` (depth of the start below the target, model
+        units) and ``rgp_held_back`` (base vertices whose RGP move was cut back because the
+        limit surface crossed itself there). The returned level-``levels`` limit surface
+        does not cross itself when the cage's does not, and never where the start did not.
 
     Raises
     ------
