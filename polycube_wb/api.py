@@ -247,25 +247,17 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT
     return solid, report
 
 
-def _refuse_self_intersections(base, path, budget=10_000):
-    """InvalidMeshError if the limit surface of ``base`` intersects itself.
-
-    Tested on the limit mesh at the subdivision level (1..3) with at most ``budget``
-    quads (``core.stages.fit.limit_self_intersections``, the check the fit reports).
-    """
+def _refuse_self_intersections(base, path):
+    """InvalidMeshError if the limit surface of ``base`` intersects itself
+    (``core.stages.fit.export_limit_crossings``, the check the pipeline's solid uses too)."""
     from core.errors import InvalidMeshError
-    from core.stages.fit import limit_self_intersections
+    from core.stages.fit import export_limit_crossings
 
-    levels = int(np.clip(np.floor(np.log(budget / max(base.n_faces, 1)) / np.log(4.0)), 1, 3))
-    pairs, faces, points = limit_self_intersections(base, levels)
-    if len(pairs):
-        x, y, z = points[0]
-        raise InvalidMeshError(
-            f"{os.fspath(path)}: the limit surface intersects itself ({len(pairs)} crossing "
-            f"triangle pairs of its level-{levels} limit mesh), e.g. between base faces "
-            f"{faces[0, 0]} and {faces[0, 1]} near ({x:.6g}, {y:.6g}, {z:.6g}); "
-            "a STEP solid of it would not be a solid", reason="self_intersecting",
-            count=len(pairs), examples=faces[:5].tolist())
+    crossings = export_limit_crossings(base)
+    if crossings.count:
+        raise InvalidMeshError(f"{os.fspath(path)}: {crossings.message()}",
+                               reason="self_intersecting", count=crossings.count,
+                               examples=crossings.base_faces[:5].tolist())
 
 
 def _reference_level(n_faces, budget=40_000):

@@ -60,7 +60,7 @@ class BestFitResult:
 
 
 def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, damping=1e-3,
-             tol=5e-3, samples=None, seed=0, start=None):
+             tol=5e-3, samples=None, seed=0, start=None, stiffness=None):
     """Fit the cage's limit surface to the target in the two-sided least-squares sense.
 
     Parameters
@@ -78,12 +78,14 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
     seed : int, sampling seed (deterministic).
     start : (n, 3) float or None, first iterate (default: the cage's vertices, which stay
         the smoothness term's reference either way).
+    stiffness : (n,) float64 >= 1 or None, per base vertex factor on the smoothness term
+        (the rows of ``D`` at that vertex); None is all ones.
 
     Returns
     -------
     BestFitResult
     """
-    system = NormalEquations(base, mapping, smoothness, damping)
+    system = NormalEquations(base, mapping, smoothness, damping, stiffness)
     n_fine = system.n_fine
     count = max(n_fine, 2000) if samples is None else int(samples)
     rng = np.random.default_rng(seed)
@@ -120,7 +122,7 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
 
 
 def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
-                damping=1e-3):
+                damping=1e-3, stiffness=None):
     """Move the fine limit points that lie outside the target (or within ``margin`` of
     it) to ``margin`` inside it, changing the cage as little as the regularisation allows.
 
@@ -142,7 +144,7 @@ def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
     start : (n_base, 3) float64 base vertices to start from (model units).
     margin : float >= 0, depth below the target surface to pull to (model units).
     rounds : int >= 0
-    smoothness, damping : float, as in :func:`best_fit`.
+    smoothness, damping, stiffness : as in :func:`best_fit`.
 
     Returns
     -------
@@ -150,7 +152,7 @@ def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
     """
     V = np.array(start, dtype=np.float64)
     system = NormalEquations(PolyMesh(V, base.face_vertices, base.face_offsets), mapping,
-                             smoothness, damping)
+                             smoothness, damping, stiffness)
     for _ in range(rounds):
         X = mapping @ V
         near = target.closest(X)
@@ -178,12 +180,16 @@ class NormalEquations:
     base : PolyMesh, the cage (``V_init`` = its vertices).
     mapping : (n_fine, n_base) sparse
     smoothness, damping : float, ``lam`` and ``mu``.
+    stiffness : (n_base,) float64 or None, per-vertex weights ``w`` of the smoothness
+        rows: the term is ``lam s |W^(1/2) D (V - V_init)|^2`` (None: all ones).
     """
 
-    def __init__(self, base, mapping, smoothness, damping):
+    def __init__(self, base, mapping, smoothness, damping, stiffness=None):
         self.n_fine, self.n_base = mapping.shape
         self.V_init = np.asarray(base.vertices, dtype=np.float64)
         laplacian = _umbrella(base, self.n_base)
+        if stiffness is not None:
+            laplacian = sp.diags(np.sqrt(np.asarray(stiffness, dtype=np.float64))) @ laplacian
         self.smooth = sp.block_diag([laplacian.T @ laplacian] * 3, format="csr")
         self.smooth_init = self.smooth @ self.V_init.T.reshape(-1)
         self.smoothness, self.damping = float(smoothness), float(damping)

@@ -15,13 +15,13 @@ import numpy as np
 
 from core.errors import InvalidMeshError, ParameterError
 from core.fitting.best_fit import BestFitResult, best_fit, pull_inside
+from core.fitting.crossings import count_crossings, hold_back_crossings, stiffen_until_clean
 from core.fitting.responses import thickness, volume
 from core.fitting.rgp import FitProblem, run_rgp
 from core.geometry import face_areas, triangulate
 from core.mesh_topology import next_corners
 from core.progress import NO_PROGRESS
 from core.quality import containment
-from core.self_intersection import find_self_intersections
 from core.subdivision.catmull_clark import build_hierarchy
 from core.subdivision.limit import limit_matrices
 from core.target_surface import TargetSurface
@@ -60,8 +60,8 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     surface : ``'limit'`` or ``'control'``, which fine positions the responses use.
     start : ``'best-fit'`` (inside mode starts from the least-squares fit, pulled just
         inside the target by :func:`core.fitting.best_fit.pull_inside` and held back where
-        it crosses itself, :func:`hold_back_crossings`) or ``'cage'`` (from the cage as
-        given, the paper's start).
+        it crosses itself, :func:`core.fitting.crossings.hold_back_crossings`) or ``'cage'``
+        (from the cage as given, the paper's start).
     rounds : int >= 0, most Gauss-Newton rounds of the least-squares fit.
     tol, patience : the RGP stops when its best objective improved by less than
         ``tol * max(|best|, step)`` over the last ``patience`` iterations (see
@@ -80,14 +80,16 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         ``uncovered_volume_fraction`` (triangulated fine limit mesh minus target and
         target minus it, over the target volume; of the result only), ``t_min``,
         ``step`` (model units), ``seconds`` (all of it) and ``measure_seconds`` (the
-        part spent on those figures, one manifold3d boolean); ``self_intersections``
-        (intersecting triangle pairs of the fine limit mesh) where the fit checked them
-        anyway (inside mode, ``surface='limit'``); inside mode
-        also ``start_margin`` (depth of the start below the target, model units),
-        ``held_back`` and ``rgp_held_back`` (base vertices whose least-squares start or
-        RGP move was cut back because the limit surface crossed itself there). The
-        returned inside fit's level-``levels`` limit surface does not cross itself when
-        the cage's does not.
+        part spent on those figures, one manifold3d boolean); with a least-squares fit
+        (best-fit mode, inside mode from ``start='best-fit'``) ``self_intersections``
+        (intersecting triangle pairs of the fine limit mesh, ``surface='limit'``),
+        ``cage_self_intersections`` (the cage's, when the result still crosses), ``refits``,
+        ``refit_crossings``, ``stiffened`` (:func:`_untangled`) and ``held_back`` (base
+        vertices held back towards the cage or, inside mode, the least-squares start);
+        inside mode also ``start_margin`` (depth of the start below the target, model
+        units) and ``rgp_held_back`` (base vertices whose RGP move was cut back because the
+        limit surface crossed itself there). The returned level-``levels`` limit surface
+        does not cross itself when the cage's does not, and never where the start did not.
 
     Raises
     ------
@@ -122,22 +124,25 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     info = {"mode": mode, "levels": levels, "surface": surface, "rounds": 0, "rms": [],
             "iterations": 0, "stopped": "none", "objective": [], "volume": []}
     vertices = V0
-    start_crossings = None
+    crossings = None
     if mode == "best-fit" or (mode == "inside" and start == "best-fit"):
         progress.report("fit", 0.0, "least-squares fit")
         fitted, coarse = _two_level_best_fit(base, hierarchy, limit_map, T, target_surface,
                                              rounds)
-        vertices = fitted.vertices
         info.update(rounds=fitted.rounds + coarse.rounds, rms=fitted.rms,
                     coarse_rms=coarse.rms, stopped=fitted.stopped, start=start)
+        vertices, crossings, stiffness = _untangled(base, hierarchy, limit_map, T,
+                                                    target_surface, fitted.vertices, rounds,
+                                                    info)
         if mode == "inside":
             # the RGP starts just inside the target, and nowhere crossing itself
-            vertices, info["start_margin"] = _pulled_inside(base, limit_map, target_surface,
-                                                            vertices)
-            vertices, held, start_crossings = hold_back_crossings(V0, vertices, limit_map, T)
-            info["held_back"] = held
-            if held:
-                info["start"] = f"{start}, held back at {held} base vertices (it crossed itself)"
+            pulled, info["start_margin"] = _pulled_inside(base, limit_map, target_surface,
+                                                          vertices, stiffness)
+            vertices, crossings, held = _held_back(vertices, crossings, pulled, limit_map, T)
+            info["held_back"] = info.get("held_back", 0) + held
+            if info["held_back"]:
+                info["start"] = (f"{start}, held back at {info['held_back']} base vertices "
+                                 "(it crossed itself)")
     if mode == "inside":
         edge = _mean_edge_length(base)
         step = step_fraction * edge
@@ -148,19 +153,21 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
                              _area(X_start, T))
         result = run_rgp(problem, vertices, step, iterations=iterations, stall_tol=tol,
                          patience=patience, progress=progress)
-        if surface == "limit" and start_crossings is not None \
+        if surface == "limit" and crossings is not None \
                 and np.array_equal(result.vertices, vertices):
-            held, crossings = 0, start_crossings  # the RGP's best is its start, checked above
+            held = 0  # the RGP's best is its start, checked above
         else:
-            vertices, held, crossings = hold_back_crossings(vertices, result.vertices, mapping,
-                                                            T)
+            known = crossings if surface == "limit" else None
+            vertices, crossings, held = _held_back(vertices, known, result.vertices, mapping, T)
         info["rgp_held_back"] = held
-        if surface == "limit":
-            info["self_intersections"] = crossings
         info.update(iterations=result.iterations, stopped=result.stopped,
                     best_iteration=result.best_iteration,
                     objective=result.history["objective"], volume=result.history["volume"],
                     t_min=float(t_min), step=float(step))
+    if surface == "limit" and crossings is not None:
+        info["self_intersections"] = crossings
+        if crossings and "cage_self_intersections" not in info:
+            info["cage_self_intersections"] = count_crossings(limit_map, T, V0)
     measuring = time.perf_counter()
     info.update(_figures(limit_map @ vertices, T, target_surface))
     initial = _distances(limit_map @ V0, target_surface)
@@ -175,12 +182,59 @@ INSIDE_MARGIN = 0.25
 of the least-squares fit's limit points (chosen on polycube_bone, where 0.25 gave a lower
 mean distance after the RGP than 0 or 0.5)."""
 INSIDE_ROUNDS = 2
-HALVINGS = 6
-"""Rounds of halving the crossing regions' moves before they are held back completely."""
 
 
-def _pulled_inside(base, limit_map, target, vertices):
-    """The least-squares fit pulled just inside the target (:func:`pull_inside`).
+def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, info):
+    """The least-squares fit made not to cross itself where a refit or the cage allows.
+
+    Refits with a stiffer smoothness term under the crossings
+    (:func:`core.fitting.crossings.stiffen_until_clean`); if the fit still crosses and
+    the cage's limit surface does not, the fit is held back towards the cage there
+    (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses itself is no
+    reference to hold back to (on to_simp_torsion_arm every base vertex would go back).
+    Records ``refits``, ``refit_crossings`` (crossing pairs after the first fit and each
+    refit), ``stiffened`` (base vertices with a stiffer smoothness term), ``held_back`` and,
+    when the fit still crosses, ``cage_self_intersections`` in ``info``.
+
+    Returns
+    -------
+    vertices : (n, 3) float64 base vertices.
+    crossings : int, crossing triangle pairs of their limit surface.
+    stiffness : (n,) float64 smoothness weights of the fit (for the inside pull).
+    """
+    untangled = stiffen_until_clean(
+        vertices, lambda stiffness: _two_level_best_fit(base, hierarchy, limit_map, T, target,
+                                                        rounds, stiffness)[0].vertices,
+        limit_map, T)
+    vertices, crossings, held = untangled.vertices, untangled.crossings, 0
+    if crossings:
+        info["cage_self_intersections"] = count_crossings(limit_map, T, base.vertices)
+        if info["cage_self_intersections"] == 0:
+            vertices, crossings, held = _held_back(base.vertices, 0, vertices, limit_map, T)
+    info.update(refits=untangled.refits, refit_crossings=untangled.counts,
+                stiffened=int((untangled.stiffness > 1).sum()), held_back=held)
+    return vertices, crossings, untangled.stiffness
+
+
+def _held_back(reference, crossings, moved, mapping, T):
+    """``moved`` held back towards ``reference`` where it crosses itself and the reference
+    does not (:func:`core.fitting.crossings.hold_back_crossings`).
+
+    crossings : int or None, crossing pairs of the reference's fine mesh (None: unknown).
+
+    Returns
+    -------
+    vertices : (n, 3) float64; crossings : int, crossing pairs of their fine mesh;
+    held : int, base vertices held back.
+    """
+    vertices, held, crossings = hold_back_crossings(reference, moved, mapping, T,
+                                                    clean=crossings == 0)
+    return vertices, crossings, held
+
+
+def _pulled_inside(base, limit_map, target, vertices, stiffness):
+    """The least-squares fit pulled just inside the target (:func:`pull_inside`, with the
+    fit's smoothness weights ``stiffness``).
 
     Returns
     -------
@@ -189,55 +243,11 @@ def _pulled_inside(base, limit_map, target, vertices):
     """
     signed = target.closest(limit_map @ vertices).signed
     margin = INSIDE_MARGIN * float(np.sqrt(np.mean(signed ** 2)))
-    return pull_inside(base, limit_map, target, vertices, margin, INSIDE_ROUNDS), margin
+    return pull_inside(base, limit_map, target, vertices, margin, INSIDE_ROUNDS,
+                       stiffness=stiffness), margin
 
 
-def hold_back_crossings(reference, moved, mapping, triangles):
-    """Undo a move where it makes the limit surface cross itself, and only there.
-
-    While the fine mesh ``mapping @ W`` of ``W = reference + t (moved - reference)``
-    intersects itself, the move fraction ``t`` of the base vertex with the largest weight
-    in each crossing triangle corner's row of ``mapping`` is halved; after ``HALVINGS``
-    such rounds every base vertex influencing a still crossing triangle keeps its
-    reference position, and a last check confirms. Thin members that the cage cannot
-    resolve are where a fit pulls the two walls through each other; elsewhere the move is
-    kept whole (SIMP cantilever: 66 of 284 base vertices held back, against 107 when every
-    influencing vertex is halved, and mean distance 2.8e-3 instead of 3.4e-3).
-
-    Parameters
-    ----------
-    reference : (n, 3) float64 base vertices whose fine mesh does not cross itself.
-    moved : (n, 3) float64 base vertices after the move.
-    mapping : (n_fine, n) sparse CSR, fine points ``mapping @ V``.
-    triangles : (t, 3) int64 fine triangles.
-
-    Returns
-    -------
-    vertices : (n, 3) float64, ``moved`` where nothing crosses.
-    held : int, base vertices whose move was cut (0 when ``moved`` is clean, or when
-        ``reference`` itself crosses and nothing can be restored).
-    crossings : int, intersecting triangle pairs of the returned fine mesh.
-    """
-    fraction = np.ones(len(moved))
-    for halving in range(HALVINGS + 2):
-        W = reference + fraction[:, None] * (moved - reference)
-        pairs = find_self_intersections(mapping @ W, triangles)
-        if not len(pairs):
-            return W, int((fraction < 1).sum()), 0
-        if halving == HALVINGS + 1:
-            break
-        fine = np.unique(triangles[pairs].reshape(-1))
-        if halving < HALVINGS:
-            rows = mapping[fine]
-            owner = np.asarray(abs(rows).argmax(axis=1)).ravel()
-            columns = np.unique(owner)
-            fraction[columns] *= 0.5
-        else:
-            fraction[np.unique(mapping[fine].indices)] = 0.0
-    return moved, 0, int(len(find_self_intersections(mapping @ moved, triangles)))
-
-
-def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds):
+def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness=None):
     """Least-squares fit: ``rounds - FINE_ROUNDS`` rounds on the level-1 limit points
     (a quarter of the points; the large moves), then up to ``FINE_ROUNDS`` on the fit's
     level. Measured on the SIMP cantilever: 8 + 2 rounds reach a lower mean distance than
@@ -255,11 +265,11 @@ def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds):
         coarse_map = (limit_matrices(coarse_mesh)[0] @ hierarchy.composite(0)).tocsr()
         coarse = best_fit(base, coarse_map,
                           triangulate(coarse_mesh.face_vertices, coarse_mesh.face_offsets),
-                          target, rounds=coarse_rounds)
+                          target, rounds=coarse_rounds, stiffness=stiffness)
     else:
         coarse = BestFitResult(np.asarray(base.vertices, dtype=np.float64), 0, [], "rounds")
     fine = best_fit(base, limit_map, T, target, rounds=rounds - coarse.rounds,
-                    start=coarse.vertices)
+                    start=coarse.vertices, stiffness=stiffness)
     return fine, coarse
 
 

@@ -1,6 +1,8 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Fit stage: move the cage so its limit surface fits the target (paper Sect. 2.4-2.5,
 Eqs. 4-11), refining quad strips until a tolerance is met when one is asked for."""
+from dataclasses import dataclass
+
 import numpy as np
 
 from core.types import FitResult
@@ -9,9 +11,15 @@ FIT_FACE_BUDGET = 40_000
 """Most faces of the subdivided mesh the fit works on: above it, fewer levels are used
 (the closest-point queries and thickness rays of every iteration scale with it)."""
 
+EXPORT_CHECK_BUDGET = 10_000
+"""Most quads of the limit mesh on which the export checks that a surface does not cross
+itself (:func:`export_limit_crossings`)."""
+
 FIT_REPORT_KEYS = ("start", "rounds", "iterations", "stopped", "mean_distance", "max_distance",
                    "outside_volume_fraction", "uncovered_volume_fraction", "initial_mean_distance",
-                   "initial_max_distance", "t_min", "seconds", "measure_seconds")
+                   "initial_max_distance", "t_min", "seconds", "measure_seconds", "refits",
+                   "refit_crossings", "stiffened", "held_back", "rgp_held_back",
+                   "cage_self_intersections")
 """Figures of ``core.fitting.fit_base_mesh``'s info copied into the report, when present."""
 
 
@@ -107,3 +115,45 @@ def limit_self_intersections(base, levels):
     level_one_face = pairs // 2 // 4 ** (levels - 1)
     base_faces = np.repeat(np.arange(base.n_faces), base.face_sizes)[level_one_face]
     return pairs, base_faces, points[triangles[pairs[:, 0]]].mean(axis=1)
+
+
+@dataclass(frozen=True)
+class LimitCrossings:
+    """Where a cage's limit surface crosses itself (:func:`export_limit_crossings`).
+
+    levels : int, the subdivision level checked.
+    pairs, base_faces, points : as returned by :func:`limit_self_intersections`.
+    """
+
+    levels: int
+    pairs: np.ndarray
+    base_faces: np.ndarray
+    points: np.ndarray
+
+    @property
+    def count(self):
+        """Crossing triangle pairs (0 = the surface does not cross itself)."""
+        return int(len(self.pairs))
+
+    def message(self):
+        """What crosses and where, for an error message (the surface must cross)."""
+        x, y, z = self.points[0]
+        return (f"the limit surface intersects itself ({self.count} crossing triangle pairs "
+                f"of its level-{self.levels} limit mesh), e.g. between base faces "
+                f"{self.base_faces[0, 0]} and {self.base_faces[0, 1]} near "
+                f"({x:.6g}, {y:.6g}, {z:.6g}); a STEP solid of it would not be a solid")
+
+
+def export_limit_crossings(base, budget=EXPORT_CHECK_BUDGET):
+    """The export's check that the limit surface of ``base`` does not cross itself.
+
+    Tested on the limit mesh at the subdivision level (1..3) with at most ``budget``
+    quads; ``subd-to-step`` refuses a cage that fails it, and the pipeline refuses to
+    build a solid of a fitted cage that fails it (``core.stages.patches``).
+
+    Returns
+    -------
+    LimitCrossings
+    """
+    levels = int(np.clip(np.floor(np.log(budget / max(base.n_faces, 1)) / np.log(4.0)), 1, 3))
+    return LimitCrossings(levels, *limit_self_intersections(base, levels))

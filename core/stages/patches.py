@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Patches stage: the fitted cage's limit surface as bicubic B-spline patches (paper Sect. 2.4:
 the limit of the subdivision surface; the B-spline form is ours, docs/DESIGN.md)."""
+from core.errors import ExportError
 from core.types import PatchesResult
 
 
@@ -17,9 +18,22 @@ def run_patches(fit, params, progress):
     Returns
     -------
     core.types.PatchesResult; the report is the patch set's figures (``PatchSet.info``).
+
+    Raises
+    ------
+    ExportError
+        The fitted cage's limit surface crosses itself (the check ``subd-to-step`` makes,
+        ``core.stages.fit.export_limit_crossings``): no solid is built of it.
     """
     from core.export.bspline import limit_surface_patches
+    from core.stages.fit import export_limit_crossings
 
     progress.check_cancel()
+    crossings = export_limit_crossings(fit.cage)
+    if crossings.count:
+        cage = fit.report.get("cage_self_intersections")
+        why = (f"; the unfitted base mesh's limit surface already crosses itself ({cage} "
+               f"pairs at the fit's level {fit.report.get('levels')})" if cage else "")
+        raise ExportError(f"the fitted cage: {crossings.message()}{why}")
     patches = limit_surface_patches(fit.cage)
     return PatchesResult(patches, dict(patches.info))

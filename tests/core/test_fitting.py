@@ -231,7 +231,7 @@ def test_pull_inside_moves_the_outside_points_to_the_margin():
 def test_hold_back_crossings_undoes_only_the_crossing_move():
     import scipy.sparse as sp
 
-    from core.fitting.fit import hold_back_crossings
+    from core.fitting.crossings import hold_back_crossings
     from core.self_intersection import find_self_intersections
 
     sphere = sphere_target(1.0, 2)              # 162 vertices; the mapping is the identity

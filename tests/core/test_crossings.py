@@ -1,0 +1,136 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""A fitted limit surface never crosses itself: refits, hold-back, and the solid's refusal."""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import trimesh
+
+from core.errors import ExportError
+from core.fitting import fit_base_mesh
+from core.fitting.crossings import STIFFEN, hold_back_crossings, influencing, stiffen_until_clean
+from core.params import ReconstructionParams
+from core.pipeline import run_stages
+from core.progress import NO_PROGRESS
+from core.quadmesh.paired_decimation import paired_decimation_base_mesh
+from core.self_intersection import find_self_intersections
+from core.stages.fit import export_limit_crossings
+from core.stages.patches import run_patches
+from core.subdivision.sample_cages import cube, torus
+from core.types import FitResult, PipelineState
+
+from tests.core.dev_meshes import load_dev_mesh
+
+
+def icosphere(subdivisions=2):
+    mesh = trimesh.creation.icosphere(subdivisions)
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces, dtype=np.int64)
+
+
+def pushed_through(V, vertex):
+    """``V`` with one vertex pushed through the far side of the unit sphere."""
+    W = V.copy()
+    W[vertex] = -1.5 * V[vertex]
+    return W
+
+
+def test_hold_back_keeps_the_reference_crossings_and_adds_none():
+    V, T = icosphere()                         # 162 vertices; the mapping is the identity
+    M = sp.identity(len(V), format="csr")
+    reference = pushed_through(V, 0)           # the reference already crosses itself
+    allowed = find_self_intersections(reference, T)
+    assert len(allowed)
+    moved = pushed_through(reference, 80)      # one more crossing, and a harmless move
+    away = (np.abs(V @ V[0]) < 0.5) & (np.abs(V @ V[80]) < 0.5)   # far from both spikes
+    moved[away] *= 1.02
+    assert len(find_self_intersections(moved, T)) > len(allowed)
+    held, count, crossings = hold_back_crossings(reference, moved, M, T, clean=False)
+    result = find_self_intersections(held, T)
+    assert crossings == len(result) <= len(allowed)
+    assert {tuple(p) for p in result} <= {tuple(p) for p in allowed}
+    assert 1 <= count <= 0.1 * len(V)
+    kept = np.linalg.norm(held - moved, axis=1) < 1e-12
+    assert kept.sum() == len(V) - count        # every other vertex keeps its whole move
+
+
+def test_stiffen_until_clean_stiffens_only_under_the_crossings():
+    V, T = icosphere()
+    M = sp.identity(len(V), format="csr")
+    crossing = pushed_through(V, 5)
+    under = influencing(find_self_intersections(crossing, T), M, T)
+    calls = []
+
+    def refit(stiffness):                      # "the fit": clean once vertex 5 is stiff
+        calls.append(stiffness.copy())
+        return V.copy() if stiffness[5] > 1 else crossing
+
+    untangled = stiffen_until_clean(crossing, refit, M, T)
+    assert untangled.crossings == 0 and untangled.refits == 1 == len(calls)
+    assert untangled.counts[0] > 0 and untangled.counts[-1] == 0
+    assert np.array_equal(np.flatnonzero(calls[0] > 1), under)
+    assert np.all(calls[0][under] == STIFFEN)
+    np.testing.assert_array_equal(untangled.vertices, V)
+
+
+def test_stiffen_until_clean_keeps_the_fit_with_fewest_crossings():
+    V, T = icosphere()
+    M = sp.identity(len(V), format="csr")
+    one, two = pushed_through(V, 5), pushed_through(pushed_through(V, 5), 120)
+    untangled = stiffen_until_clean(one, lambda stiffness: two, M, T, tries=3)
+    assert untangled.refits == 3 and len(untangled.counts) == 4
+    assert untangled.crossings == untangled.counts[0] == min(untangled.counts)
+    np.testing.assert_array_equal(untangled.vertices, one)
+    assert np.all(untangled.stiffness == 1.0)  # the weights of the fit that was kept
+
+
+@pytest.fixture(scope="module")
+def idler():
+    """idler_riser and its paired-decimation cage (about 300 faces, as the pipeline's)."""
+    target = load_dev_mesh("idler_riser.stl")
+    cage = paired_decimation_base_mesh(target.vertices, target.faces, 300).mesh
+    return target, cage
+
+
+@pytest.mark.parametrize("mode", ["best-fit", "inside"])
+def test_fit_of_a_decimation_cage_on_a_thin_part_does_not_cross_itself(idler, mode):
+    target, cage = idler
+    fitted, info = fit_base_mesh(cage, target, mode=mode)
+    # the plain least-squares fit pulls thin walls through each other here
+    assert info["refit_crossings"][0] > 0
+    assert info["self_intersections"] == 0
+    assert export_limit_crossings(fitted).count == 0      # the export's own check agrees
+    # closeness is kept: best-fit at most half the unfitted mean distance (inside mode, one
+    # sided, 0.7), the largest distance no worse than the cage's
+    assert info["mean_distance"] <= (0.5 if mode == "best-fit" else 0.7) * \
+        info["initial_mean_distance"]
+    assert info["max_distance"] <= info["initial_max_distance"]
+    if mode == "inside":
+        assert info["outside_volume_fraction"] <= 0.005
+
+
+def spindle_torus():
+    """A torus whose tube is wider than its hole: its limit surface crosses itself."""
+    return torus(major_radius=0.5, minor_radius=1.0)
+
+
+def test_patches_refuse_a_crossing_fitted_cage_and_say_where():
+    report = {"levels": 2, "cage_self_intersections": 7}
+    with pytest.raises(ExportError, match="intersects itself") as raised:
+        run_patches(FitResult(spindle_torus(), report), ReconstructionParams(), NO_PROGRESS)
+    message = str(raised.value)
+    assert "between base faces" in message and " near (" in message
+    assert "already crosses itself (7 pairs" in message
+
+
+def test_the_runner_records_the_refusal_as_a_failed_stage():
+    state = PipelineState(fit=FitResult(spindle_torus(), {"levels": 2}))
+    state, report, failed = run_stages(state, ["patches"], ReconstructionParams())
+    assert isinstance(failed, ExportError)
+    assert report["stages"]["patches"]["status"] == "failed"
+    assert "intersects itself" in report["stages"]["patches"]["message"]
+    assert state.patches is None
+
+
+def test_patches_of_a_clean_cage_are_built():
+    result = run_patches(FitResult(cube(), {"levels": 2}), ReconstructionParams(), NO_PROGRESS)
+    assert result.patches.info  # the export ran
+    assert export_limit_crossings(cube()).count == 0
