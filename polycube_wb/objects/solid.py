@@ -2,7 +2,8 @@
 """Solid: the limit surface of a cage as bicubic B-spline faces, a valid closed solid.
 
 A ``Part::FeaturePython`` (its ``Shape`` is saved in the document). Its input is any cage
-object: a Fit, or a BaseMesh to see the unfitted limit surface.
+object: a Fit, or a BaseMesh to see the unfitted limit surface. A cage whose limit surface
+crosses itself is refused, as on the command line (no solid of it would be one).
 """
 from polycube_wb.objects.base import StageProxy, add_property
 
@@ -33,14 +34,20 @@ class SolidProxy(StageProxy):
         return {"depth": int(obj.Depth)}
 
     def run(self, obj, progress):
+        from core.errors import ExportError
         from core.export.bspline import limit_surface_patches
         from core.params import check_export_depth
         from core.progress import SubProgress
+        from core.stages.fit import export_limit_crossings
         from polycube_wb.brep import build_solid
 
         check_export_depth(obj.Depth, "Depth")
         base = self.upstream_state(obj).cage
         progress.report("patches", 0.05)
+        crossings = export_limit_crossings(base)  # the check of subd-to-step and the pipeline
+        if crossings.count:
+            raise ExportError(f"{obj.Label}: the cage of {obj.Cage.Label}: "
+                              f"{crossings.message()}")
         patches = limit_surface_patches(base, depth=int(obj.Depth), measure=False)
         progress.check_cancel()
         solid, brep = build_solid(patches, SubProgress(progress, 0.5, 1.0))

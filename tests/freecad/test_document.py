@@ -151,6 +151,22 @@ def test_edited_fitted_cage_moves_the_solid_without_refitting(chain_doc):
     assert after.ZMax > before.ZMax + 0.5, "the solid follows the moved vertex"
 
 
+def test_a_cage_edit_that_folds_the_limit_surface_is_refused_by_the_solid(chain_doc):
+    from polycube_wb import api
+
+    objects = _objects(chain_doc)
+    fit, solid = objects["Fit"], objects["Solid"]
+    points = list(fit.CageVertices)
+    top = max(range(len(points)), key=lambda k: points[k].z)
+    lowest = min(p.z for p in points)
+    # the top vertex pushed through the part, below its bottom: the surface folds through itself
+    api.move_cage_vertices(fit, {top: (points[top].x, points[top].y, lowest - 20.0)})
+    outcome = api.recompute(chain_doc)
+    assert list(outcome.failures) == [solid.Name]
+    assert "the limit surface intersects itself" in solid.Status and "\n" not in solid.Status
+    assert fit.isValid() and fit.Status == "ok"
+
+
 def test_cage_edits_are_checked(chain_doc):
     from core.errors import ParameterError
     from polycube_wb import api
