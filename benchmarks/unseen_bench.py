@@ -19,7 +19,8 @@ design runs exactly as a user would, in its own process with a timeout::
 target's bounding-box diagonal, containment), the labels by ``../shared/tools/labelcheck.py``.
 Writes ``benchmarks/UNSEEN_RESULTS.md``, ``benchmarks/unseen_results.json`` (rows kept per
 design and parts mode, so ``--only`` updates a few) and per case a PNG of the base cage over
-its target (``benchmarks/images/unseen_NAME_MODE.png``, the helper of basemesh_bench.py).
+its target (``benchmarks/images/unseen_NAME_MODE.png``, the helper of basemesh_bench.py) and
+of the target alone (``unseen_NAME_target.png``, ``benchmarks/render.py``).
 """
 import argparse
 import hashlib
@@ -85,10 +86,11 @@ def _json_tool(argv, timeout):
                               timeout=timeout)
     except subprocess.TimeoutExpired:
         return None, f"timed out after {timeout} s"
+    text = done.stdout
     try:
-        return json.loads(done.stdout.strip().splitlines()[-1]), ""
-    except (ValueError, IndexError):
-        return None, (done.stderr or done.stdout).strip()[-300:]
+        return json.loads(text[text.index("{"):]), ""
+    except ValueError:
+        return None, (done.stderr or text).strip()[-300:]
 
 
 def run_case(name, mesh, mode, timeout):
@@ -126,7 +128,7 @@ def run_case(name, mesh, mode, timeout):
                                             timeout)
         if err:
             row["evaluation_error"] = err
-    row["image"] = render(name, mode, mesh, paths["obj"])
+    row["images"] = render(name, mode, mesh, paths["obj"])
     return row
 
 
@@ -161,25 +163,26 @@ def _from_report(report):
 
 
 def render(name, mode, mesh, base_obj):
-    """PNG of the base cage over the target (the target alone when no cage was written)."""
+    """PNGs of the target (shaded grey) and, when one was written, the base cage over it.
+
+    Returns the image paths relative to benchmarks/ (list of str).
+    """
     import numpy as np
 
     from basemesh_bench import render_cage
     from core.mesh_io import read_triangle_soup
     from core.polymesh_io import read_polymesh
-    from core.types import PolyMesh
+    from render import render_faces
 
     os.makedirs(IMAGES, exist_ok=True)
-    image = os.path.join(IMAGES, f"unseen_{name}_{mode}.png")
     V, F = read_triangle_soup(mesh)
+    images = [os.path.join(IMAGES, f"unseen_{name}_target.png")]
+    render_faces(images[0], V, F, np.full((len(F), 3), 0.75), f"{name}: target, {len(F)} triangles")
     if os.path.exists(base_obj):
         cage = read_polymesh(base_obj)
-        title = f"{name} ({mode}): {cage.n_faces} base faces"
-    else:
-        cage = PolyMesh(np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros(1, dtype=np.int64))
-        title = f"{name} ({mode}): no base mesh"
-    render_cage(image, V, F, cage, title)
-    return os.path.relpath(image, HERE)
+        images.append(os.path.join(IMAGES, f"unseen_{name}_{mode}.png"))
+        render_cage(images[1], V, F, cage, f"{name} ({mode}): {cage.n_faces} base faces")
+    return [os.path.relpath(path, HERE) for path in images]
 
 
 def _fmt(value, digits=4):
@@ -254,9 +257,9 @@ def markdown(rows, manifest, meta):
                      f"{_fmt(row.get('exit_code'))}: {what.strip()}")
         if row.get("evaluation_error"):
             lines.append(f"  - evaluate.py: {row['evaluation_error']}")
-    lines += ["", "## Pictures (base cage over the target)", ""]
+    lines += ["", "## Pictures (target; base cage over the target where one was built)", ""]
     for row in rows:
-        lines.append(f"![{row['design']} {row['mode']}]({row['image']})")
+        lines += [f"![{row['design']} {row['mode']}]({image})" for image in row["images"]]
     return "\n".join(lines) + "\n"
 
 
