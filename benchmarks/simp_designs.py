@@ -123,8 +123,8 @@ def designs():
     nx, ny, nz = 64, 10, 24
     out.append(Design(
         "simp_bridge_arch",
-        "deck bridge: passive solid deck on top, uniform downward deck load, both bottom ends "
-        "pinned (all dofs); an arch under a deck",
+        "deck bridge: passive solid deck on top, uniform downward deck load, a pad at each "
+        "bottom end clamped (all dofs)",
         (nx, ny, nz), 0.15, ITERATIONS,
         fixed=_union(_box((0, 0, 0), (2, ny, 0)), _box((nx - 2, 0, 0), (nx, ny, 0))),
         load_cases=[[Load(_box((0, 0, nz), (nx, ny, nz)), (0.0, 0.0, -1.0))]],

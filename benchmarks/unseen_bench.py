@@ -151,6 +151,8 @@ def _from_report(report):
         "failed_status": failed[0][1]["status"] if failed else None,
         "failed_message": failed[0][1].get("message", "")[:400] if failed else "",
         "stage_seconds": {s: stages[s].get("seconds") for s in STAGES if s in stages},
+        "stage_messages": {s: stages[s]["message"] for s in STAGES
+                           if s in stages and stages[s].get("message")},
         "parts": report.get("parts", {}).get("parts"),
         "labeling_valid": report.get("labeling", {}).get("valid"),
         "base_mesh": {k: base.get(k) for k in (
@@ -226,15 +228,15 @@ def markdown(rows, manifest, meta):
                      f"{m['volfrac']} | {m['triangles']} | {m['genus']} | "
                      f"{m['dropped_components']} |")
     lines += ["", "## Results", "",
-              "| design | mode | exit | reached | failed at | labeling valid (ours / labelcheck) "
+              "| design | mode | parts | exit | reached | failed at | labeling valid (ours / labelcheck) "
               "| base route | base faces | quads | inverted | fit crossings | STEP valid "
               "| mean dist | max dist | outside | seconds |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for row in rows:
         base = row.get("base_mesh") or {}
         lc = row.get("labelcheck") or {}
         lines.append("| " + " | ".join(str(c) for c in [
-            row["design"], row["mode"], _fmt(row.get("exit_code")), _fmt(row.get("reached")),
+            row["design"], row["mode"], _fmt(row.get("parts")), _fmt(row.get("exit_code")), _fmt(row.get("reached")),
             _fmt(row.get("failed_stage")),
             f"{_fmt(row.get('labeling_valid'))} / {_fmt(lc.get('valid'))}",
             _fmt(base.get("method")), _fmt(base.get("faces")), _fmt(base.get("quads")),
@@ -257,9 +259,17 @@ def markdown(rows, manifest, meta):
                      f"{_fmt(row.get('exit_code'))}: {what.strip()}")
         if row.get("evaluation_error"):
             lines.append(f"  - evaluate.py: {row['evaluation_error']}")
-    lines += ["", "## Pictures (target; base cage over the target where one was built)", ""]
+    lines += ["", "## Stage messages (warnings and fallbacks of the runs)", ""]
     for row in rows:
-        lines += [f"![{row['design']} {row['mode']}]({image})" for image in row["images"]]
+        for stage, message in (row.get("stage_messages") or {}).items():
+            lines.append(f"- {row['design']} ({row['mode']}), {stage}: {message.strip()}")
+    lines += ["", "## Pictures (target; base cage over the target where one was built)", ""]
+    shown = set()
+    for row in rows:
+        for image in row["images"]:
+            if image not in shown:
+                shown.add(image)
+                lines.append(f"![{row['design']} {row['mode']}]({image})")
     return "\n".join(lines) + "\n"
 
 
@@ -268,9 +278,15 @@ def main(argv):
     parser.add_argument("--only", nargs="*", default=[])
     parser.add_argument("--modes", nargs="*", default=list(MODES), choices=MODES)
     parser.add_argument("--timeout", type=float, default=900.0)
+    parser.add_argument("--markdown-only", action="store_true",
+                        help="rewrite UNSEEN_RESULTS.md from unseen_results.json, run nothing")
     args = parser.parse_args(argv)
+    stored = _load(RESULTS_JSON) or {}
+    previous = {(r["design"], r["mode"]): r for r in stored.get("rows", [])}
+    if args.markdown_only:
+        _write(previous, stored["meta"])
+        return 0
     manifest = ensure_designs(args.only)
-    previous = {(r["design"], r["mode"]): r for r in (_load(RESULTS_JSON) or {}).get("rows", [])}
     meta = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
             "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO,
                                      capture_output=True, text=True).stdout.strip(),
@@ -279,6 +295,9 @@ def main(argv):
         mesh = os.path.join(DESIGNS, entry["file"])
         for mode in args.modes:
             row = run_case(name, mesh, mode, args.timeout)
+            # re-read: another run of this script may have added rows meanwhile
+            previous = {(r["design"], r["mode"]): r
+                        for r in (_load(RESULTS_JSON) or {}).get("rows", [])}
             previous[(name, mode)] = row
             print(f"{name} {mode}: exit {row.get('exit_code')}, reached {row.get('reached')}, "
                   f"{row['seconds']} s", flush=True)
