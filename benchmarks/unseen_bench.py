@@ -206,6 +206,26 @@ def _evaluation_cells(row):
             _fmt(cont.get("outside_fraction"))]
 
 
+def _summary(rows):
+    """Bullet lines counting the cases per outcome."""
+    out = []
+    for mode in MODES:
+        mine = [r for r in rows if r["mode"] == mode]
+        if not mine:
+            continue
+        base = [r.get("base_mesh") or {} for r in mine]
+        valid = sum(_evaluation_cells(r)[0] == "yes" for r in mine)
+        out.append(
+            f"- {mode}: {len(mine)} cases; STEP written {sum(r.get('exit_code') == 0 for r in mine)}, "
+            f"valid closed single solid (evaluate.py) {valid}; labeling valid (labelcheck) "
+            f"{sum(bool((r.get('labelcheck') or {}).get('valid')) for r in mine)}; polycube base "
+            f"mesh {sum(b.get('method') == 'polycube' for b in base)}, paired decimation "
+            f"{sum(b.get('method') == 'paired decimation' for b in base)}; with inverted base "
+            f"faces {sum((b.get('inverted_faces') or 0) > 0 for b in base)}; with fitted "
+            f"self-intersections {sum((r.get('fit_self_intersections') or 0) > 0 for r in mine)}.")
+    return out
+
+
 def markdown(rows, manifest, meta):
     lines = ["# The pipeline on unseen SIMP results (issue 8)", "",
              "Written by `benchmarks/unseen_bench.py`; do not edit by hand.", "",
@@ -227,7 +247,7 @@ def markdown(rows, manifest, meta):
         lines.append(f"| {name} | {m['what']} | {'x'.join(map(str, m['grid']))} | "
                      f"{m['volfrac']} | {m['triangles']} | {m['genus']} | "
                      f"{m['dropped_components']} |")
-    lines += ["", "## Results", "",
+    lines += ["", "## Summary", ""] + _summary(rows) + ["", "## Results", "",
               "| design | mode | parts | exit | reached | failed at | labeling valid (ours / labelcheck) "
               "| base route | base faces | quads | inverted | fit crossings | STEP valid "
               "| mean dist | max dist | outside | seconds |",
@@ -249,7 +269,9 @@ def markdown(rows, manifest, meta):
         sec = row.get("stage_seconds") or {}
         lines.append(f"| {row['design']} | {row['mode']} | "
                      + " | ".join(_fmt(sec.get(s), 3) for s in STAGES) + " |")
-    lines += ["", "## Failures (messages as printed)", ""]
+    lines += ["", "## Failed runs (exit code not 0; messages as printed)", ""]
+    if all(row.get("exit_code") == 0 and not row.get("evaluation_error") for row in rows):
+        lines.append("None: every run wrote its STEP file and was evaluated.")
     for row in rows:
         if row.get("exit_code") == 0 and not row.get("evaluation_error"):
             continue
