@@ -113,8 +113,12 @@ TOPIC_RESULTS = (
      "benchmarks/memory_bench.py"),
     ("Robustness: a million triangles, time and peak memory per stage", "ROBUSTNESS_RESULTS.md",
      "benchmarks/robustness_bench.py"),
+    ("Cancel: Ctrl-C in every stage, time to stop and what is left", "CANCEL_RESULTS.md",
+     "benchmarks/cancel_bench.py"),
     ("Structure: typed stage results against the previous runner, same reports",
      "STRUCTURE_RESULTS.md", "benchmarks/structure_bench.py"),
+    ("Unseen SIMP results: new load cases generated here, judged by the independent checks",
+     "UNSEEN_RESULTS.md", "benchmarks/unseen_bench.py"),
 )
 """Topic result files beside RESULTS.md: (title, file name, script)."""
 
