@@ -130,6 +130,7 @@ def output_transaction():
             while pending:
                 temporary, target = pending[0]
                 os.replace(temporary, target)
+                _COMMITTED.append(os.path.abspath(target))
                 pending.pop(0)
     finally:
         _PENDING.reset(token)
@@ -158,6 +159,17 @@ def interrupts_held(redeliver=True):
         signal.signal(signal.SIGINT, previous)
     if caught and redeliver:
         previous(signal.SIGINT, caught[0])
+
+
+_COMMITTED = []
+"""Targets renamed into place by the transactions of this process, in order."""
+
+
+def committed_count():
+    """How many outputs the transactions of this process have put in place so far: a
+    Ctrl-C that stops a command after its transaction must not say that nothing was
+    written (compare the count before and after)."""
+    return len(_COMMITTED)
 
 
 _PENDING = contextvars.ContextVar("polycube_pending_outputs", default=None)

@@ -13,6 +13,7 @@ import sys
 import traceback
 
 from core.errors import PolycubeInputError
+from core.output_files import committed_count
 from core.params import (EXPORT_DEPTH, MAX_EXPORT_DEPTH, UNIT_TO_MM, ReconstructionParams,
                          parameter_options)
 from core.pipeline import STOP_AFTER_CHOICES
@@ -131,6 +132,7 @@ def build_parser():
 def main(argv=None):
     args = build_parser().parse_args(argv)
     stages = StageLines(echo=getattr(args, "progress", False), stage=args.command)
+    committed_before = committed_count()
     try:
         with stages.ctrl_c_remembered():
             return _COMMANDS[args.command](args, stages)
@@ -142,7 +144,10 @@ def main(argv=None):
     except KeyboardInterrupt:  # Ctrl-C: the outputs are written together or not at all
         if args.debug:
             traceback.print_exc()
-        sys.stderr.write(_CANCELLED[args.command].format(stage=stages.stage) + "\n")
+        if args.command != "batch" and committed_count() > committed_before:
+            sys.stderr.write("cancelled after the outputs were written; they are complete\n")
+        else:
+            sys.stderr.write(_CANCELLED[args.command].format(stage=stages.stage) + "\n")
         return EXIT_CANCELLED
     except Exception as exc:  # internal failure: message, traceback only with --debug
         if args.debug:

@@ -1,5 +1,13 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Every test run gets a FreeCAD of its own: a temporary user-data folder.
+"""Every test run gets a FreeCAD of its own (a temporary user-data folder) and Ctrl-C.
+
+Ctrl-C: the cancel tests send SIGINT to this process and to the command-line runs they
+start. A shell without job control starts its background jobs with SIGINT ignored, and a
+process inherits that (a CI runner may start ``make test`` so); the workbench respects an
+ignored SIGINT, as it should. So the test process makes SIGINT Python's usual
+KeyboardInterrupt, whatever started it; its children then start with the default action.
+
+FreeCAD:
 
 FreeCAD 0.20.2 takes its user data and settings folder (``user.cfg``, ``Mod``,
 ``AdditionalPythonPackages``, macros) from ``$FREECAD_USER_HOME`` when it is set, for
@@ -12,6 +20,7 @@ visible through a link of that name in the temporary folder.
 """
 import os
 import shutil
+import signal
 import sys
 import tempfile
 
@@ -39,6 +48,8 @@ def _make_user_home():
     os.environ[USER_HOME_VARIABLE] = home
     return home, previous
 
+
+signal.signal(signal.SIGINT, signal.default_int_handler)
 
 # At import, not in pytest_configure: pytest imports tests/freecad/conftest.py (which
 # imports FreeCAD) before calling any hook, and always after this parent conftest.
