@@ -9,7 +9,6 @@ did not load by a note and records how many did in ``<body data-thumbnails>``. I
 import csv
 import html
 import io
-import os
 
 from core.output_files import write_text_atomic
 
