@@ -239,9 +239,8 @@ def _flip_pass(vertices, faces, surface, max_passes=20):
 
         valence = np.bincount(edges.reshape(-1), minlength=len(vertices))
         n = len(vertices)
-        existing = set((edges[:, 0] * n + edges[:, 1]).tolist())
         new_code = np.minimum(c, d) * n + np.maximum(c, d)
-        fresh = np.array([code not in existing for code in new_code.tolist()], dtype=bool)
+        fresh = ~np.isin(new_code, edges[:, 0] * n + edges[:, 1])
         allowed = fresh & (c != d) & (valence[a] > 3) & (valence[b] > 3)
         reference = _target_normal(surface, 0.25 * (vertices[a] + vertices[b] + vertices[c]
                                                      + vertices[d]))
