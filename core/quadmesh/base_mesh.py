@@ -214,7 +214,8 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         ``solver_status``, ``scale_rounds``, ``charts``, ``sides``, ``corners``,
         ``side_directions_flipped``, ``folded_points``, ``rectangles`` and ``collapsed_sides``;
         the paired decimation adds ``decimated_triangles`` and ``budget_rounds`` (the budgets
-        tried while its limit surface crossed itself or had inverted faces).
+        tried while its limit surface crossed itself or had inverted faces; beyond the budget
+        rule while it crossed itself, and ``minimum_reason`` says so).
 
     Raises
     ------
@@ -276,19 +277,27 @@ def _paired_decimation_base_mesh(target_v, target_f, surface, target_faces, max_
     """The fallback base mesh and its report section (see :func:`build_base_mesh`).
 
     Budgets up to the top of the budget tolerance (and at most ``max_base_faces``) are tried
-    while the cage's limit surface crosses itself or has inverted faces; the report's
-    ``budget_rounds`` lists them.
+    while the cage's limit surface crosses itself or has inverted faces, and beyond it (up to
+    ``max_base_faces``) while it crosses itself; the report's ``budget_rounds`` lists them and
+    ``minimum_reason`` says why a cage over the budget was kept.
     """
     largest = int(min(max_base_faces, (1.0 + BUDGET_TOLERANCE) * target_faces))
-    result = paired_decimation_base_mesh(target_v, target_f, target_faces, surface, largest)
+    result = paired_decimation_base_mesh(target_v, target_f, target_faces, surface, largest,
+                                         max_base_faces)
     mesh = result.mesh
+    within = bool(abs(mesh.n_faces - target_faces) <= BUDGET_TOLERANCE * target_faces)
+    minimum_reason = None
+    if not within and mesh.n_faces > target_faces:
+        fewest = min((r["limit_crossings"] for r in result.rounds if r["faces"] < mesh.n_faces),
+                     default=0)
+        minimum_reason = (f"the limit surfaces of the smaller cages tried cross themselves (the "
+                          f"fewest: {fewest} triangle pairs at subdivision level 2); this is the "
+                          f"smallest one tried whose limit surface does not")
     info = {
         "method": "paired decimation", "fallback_reason": reason,
         **_mesh_figures(mesh), "quads": result.quads, "triangles": result.triangles,
-        "other": 0, "target_faces": int(target_faces),
-        "within_budget": bool(abs(mesh.n_faces - target_faces)
-                              <= BUDGET_TOLERANCE * target_faces),
-        "minimum_reason": None, "decimated_triangles": result.decimated_triangles,
+        "other": 0, "target_faces": int(target_faces), "within_budget": within,
+        "minimum_reason": minimum_reason, "decimated_triangles": result.decimated_triangles,
         "budget_rounds": list(result.rounds),
         "inverted_faces": int(inverted_faces(mesh, target_v, target_f, surface).sum()),
     }
