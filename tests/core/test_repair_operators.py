@@ -48,19 +48,19 @@ def test_strip_insertion_separates_opposite_labels_by_a_third_axis():
     assert not (after.boundary_reason == 1).any()
 
 
-def test_merge_takes_an_island_into_the_label_around_it():
+def test_merge_takes_a_chart_into_the_neighbouring_label_that_fits_it_best():
     V, F, parts, frames, labels = labelled_cube()
     corner = V[F]
-    island = ((corner[:, :, 2] > 0.99).all(axis=1)
-              & (np.abs(corner[:, :, :2] - 0.5) < 0.26).all(axis=(1, 2)))
-    labels[island] = 1  # a -X island in the middle of +Z: a chart with one boundary
+    island = ((corner[:, :, 2] > 0.99).all(axis=1) & (corner[:, :, 0] > 0.74).all(axis=1)
+              & (np.abs(corner[:, :, 1] - 0.5) < 0.26).all(axis=1))
+    labels[island] = 3  # -Y on the top, at its +X edge: a chart with two boundaries, +Z and +X
     topology = build_topology(F, len(V))
     val = check_validity(V, F, parts, labels, frames, topology)
     assert val.invalid_chart.sum() == 1
     given = labels.copy()
     done = merge_charts(val, labels, label_cost(face_normals(V, F), frames), val.invalid_chart)
     assert done.items == 1 and np.array_equal(labels, given)
-    assert (done.labels[island] == 4).all(), "the island takes +Z, the label around it"
+    assert (done.labels[island] == 4).all(), "+Z (the faces' normal), not +X"
     assert np.array_equal(done.labels[~island], labels[~island])
     assert check_validity(V, F, parts, done.labels, frames, topology).is_valid
 
