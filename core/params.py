@@ -198,6 +198,16 @@ def parameter_options():
     return [(item, item.metadata["option"]) for item in fields(ReconstructionParams)]
 
 
+def parameter_option(name):
+    """``(field, Option)`` of the ``ReconstructionParams`` field ``name``; ParameterError
+    naming the parameters when there is no such field."""
+    found = [(item, option) for item, option in parameter_options() if item.name == name]
+    if not found:
+        raise ParameterError(f"unknown parameter {name!r}; known: "
+                             f"{', '.join(item.name for item, _ in parameter_options())}")
+    return found[0]
+
+
 def _choice(name, value, allowed):
     if value not in allowed:
         raise ParameterError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")

@@ -11,11 +11,11 @@ import scipy.sparse as sp
 from core.errors import InvalidMeshError
 from core.geometry import polymesh_volume
 from core.mesh_topology import next_corners, previous_corners
-from core.tolerances import ZERO_AREA
+from core.tolerances import BREP_MM, ZERO_AREA
 
 MAX_EXPORT_COORDINATE = 1e7
 """Largest |coordinate| (mm) of a cage exported to a B-rep: there a float64 still resolves
-steps of 2e-9, well below the B-rep tolerance of 1e-7 (OpenCascade's Precision::Confusion)."""
+steps of 2e-9, well below the B-rep tolerance (``core.tolerances.BREP_MM``, 1e-7)."""
 MIN_EXPORT_DIAGONAL = 1e-3
 """Smallest bounding-box diagonal (mm) of an exported cage: 10,000 times the B-rep tolerance."""
 
@@ -131,7 +131,7 @@ def check_polymesh(mesh):
 
 
 def check_export_range(mesh):
-    """Check that a cage's coordinates suit a B-rep with a 1e-7 mm tolerance.
+    """Check that a cage's coordinates suit a B-rep with the ``BREP_MM`` tolerance.
 
     Parameters
     ----------
@@ -146,7 +146,7 @@ def check_export_range(mesh):
 
 
 def check_coordinate_range(vertices, what, hint, unit_to_mm=1.0):
-    """Check that coordinates suit a B-rep with a 1e-7 mm tolerance.
+    """Check that coordinates suit a B-rep with the ``BREP_MM`` tolerance (1e-7 mm).
 
     Parameters
     ----------
@@ -172,13 +172,14 @@ def check_coordinate_range(vertices, what, hint, unit_to_mm=1.0):
         raise InvalidMeshError(
             f"{what} coordinates reach {raw.max():.3g}{scale} ({len(far)} vertices beyond "
             f"+-{MAX_EXPORT_COORDINATE:.0e} mm, e.g. vertex {int(np.argmax(size))}): a B-rep with "
-            f"tolerance 1e-07 mm cannot resolve them; {hint}",
+            f"tolerance {BREP_MM:g} mm cannot resolve them; {hint}",
             reason="coordinate_range", count=len(far), examples=far[:5].tolist())
     diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))) * unit_to_mm
     if diagonal < MIN_EXPORT_DIAGONAL:
         raise InvalidMeshError(
             f"{what} is {diagonal:.3g} mm across (bounding-box diagonal), less than "
-            f"{MIN_EXPORT_DIAGONAL:g} mm: too small for a B-rep with tolerance 1e-07 mm; {hint}",
+            f"{MIN_EXPORT_DIAGONAL:g} mm: too small for a B-rep with tolerance {BREP_MM:g} mm; "
+            f"{hint}",
             reason="coordinate_range", count=1, examples=[0])
 
 

@@ -4,7 +4,8 @@
 Every test that decides whether two points coincide or a face has no area uses one of
 these, scaled by the diagonal of the mesh it looks at (so the decisions do not depend on
 the model's units). Tolerances that belong to one algorithm (a solver's stall test, the
-quantization's face budget) stay with it.
+quantization's face budget) stay with it. The one absolute tolerance is the B-rep's
+(:data:`BREP_MM`), which OpenCascade fixes in model units.
 """
 
 MERGE = 1e-8
@@ -19,4 +20,9 @@ take its normal, the cage check rejects it."""
 
 CONTACT = 1e-9
 """Points closer than ``CONTACT * diagonal`` touch: triangles meeting only that closely are
-not self-intersecting, a patch corner that near an extraordinary vertex is at it."""
+not self-intersecting, a patch corner that near an extraordinary vertex is at it, samples of
+neighbouring patches that close are welded into one vertex of the tessellation."""
+
+BREP_MM = 1e-7
+"""Tolerance of the B-rep's vertices, edges and faces, in millimetres (absolute: OpenCascade's
+``Precision::Confusion``); the exported cages' coordinate range is checked against it."""

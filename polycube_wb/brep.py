@@ -28,14 +28,13 @@ from core.errors import ExportError
 from core.export.brep_topology import check_topology, topology_from_sides
 from core.export.bspline_tessellation import enclosed_volume
 from core.export.occ_brep import brep_text
+from core.tolerances import BREP_MM
 from core.progress import NO_PROGRESS
 from polycube_wb.convert import shape_to_arrays
 
 _MAX_DEGREE = 25  # OpenCascade's Geom_BSplineSurface::MaxDegree()
 _SIDE_NAMES = ("u=min", "u=max", "v=min", "v=max")
 _MAX_EXAMPLES = 5
-TOLERANCE = 1e-7
-"""Tolerance of the B-rep vertices, edges and faces (OpenCascade's Precision::Confusion)."""
 
 
 def patches_to_solid(patchset, progress=NO_PROGRESS):
@@ -146,10 +145,10 @@ def make_solid(patchset, progress=NO_PROGRESS):
 
 def _shared_edge_solid(patches, topology, reverse):
     """The solid read from BREP text of the shared-edge topology; ExportError if invalid."""
-    check_topology(topology, patches, TOLERANCE)
+    check_topology(topology, patches, BREP_MM)
     shape = Part.Shape()
     try:
-        shape.importBrepFromString(brep_text(patches, topology, TOLERANCE, reverse), False)
+        shape.importBrepFromString(brep_text(patches, topology, BREP_MM, reverse), False)
     except (Part.OCCError, RuntimeError) as exc:
         raise ExportError(f"OpenCascade could not read the shared-edge B-rep ({exc})") from exc
     if shape.isNull() or shape.ShapeType != "Solid":

@@ -2,35 +2,37 @@
 """Default parameters of new stage objects: the user's preferences, else the paper's values.
 
 The preferences page (``polycube_wb.gui.preferences``) writes the same keys, under
-``User parameter:BaseApp/Preferences/Mod/Polycube``; nothing here needs the GUI.
+``User parameter:BaseApp/Preferences/Mod/Polycube``; nothing here needs the GUI. The keys are
+the page's fields (``polycube_wb.panel_fields.PAGE_FIELDS``), the paper's values those of
+``core.params``.
 """
 from dataclasses import fields
 
 import FreeCAD
 
+from polycube_wb.panel_fields import EXPORT_DEPTH_KEY, PAGE_FIELDS
+
 PREFERENCES = "User parameter:BaseApp/Preferences/Mod/Polycube"
 
-PREFERENCE_FIELDS = ("parts", "blend_factor", "lam", "penalty", "max_sweeps", "repair",
-                     "target_faces", "max_base_faces", "base_mesh_method", "subdivision_levels",
-                     "fit_iterations", "fit_mode")
+PREFERENCE_FIELDS = tuple(field.key for field in PAGE_FIELDS if field.key != EXPORT_DEPTH_KEY)
 """``ReconstructionParams`` fields the preferences page offers."""
-EXPORT_DEPTH_KEY = "export_depth"
 
 
 def paper_defaults():
-    """Dict of every ``ReconstructionParams`` field's default (the paper's values)."""
-    from core.params import ReconstructionParams
+    """Dict of every ``ReconstructionParams`` field's default (the paper's values) and of the
+    grading depth (``export_depth``: ``core.params.EXPORT_DEPTH``)."""
+    from core.params import EXPORT_DEPTH, ReconstructionParams
 
     defaults = ReconstructionParams()
-    return {f.name: getattr(defaults, f.name) for f in fields(defaults)}
+    values = {f.name: getattr(defaults, f.name) for f in fields(defaults)}
+    values[EXPORT_DEPTH_KEY] = EXPORT_DEPTH
+    return values
 
 
 def default(name):
     """The default for a new object's parameter ``name`` (a ``ReconstructionParams`` field,
     or ``export_depth``): the user's preference if set, else the paper's value."""
-    from core.params import EXPORT_DEPTH
-
-    fallback = EXPORT_DEPTH if name == EXPORT_DEPTH_KEY else paper_defaults()[name]
+    fallback = paper_defaults()[name]
     group = FreeCAD.ParamGet(PREFERENCES)
     if isinstance(fallback, bool):
         return bool(group.GetBool(name, fallback))
@@ -47,11 +49,8 @@ def set_default(name, value):
     The paper's value is stored as no preference at all, so the user follows the code's
     default until choosing another value.
     """
-    from core.params import EXPORT_DEPTH
-
     group = FreeCAD.ParamGet(PREFERENCES)
-    paper = EXPORT_DEPTH if name == EXPORT_DEPTH_KEY else paper_defaults()[name]
-    if value == paper:
+    if value == paper_defaults()[name]:
         _forget(group, name)
     elif isinstance(value, bool):
         group.SetBool(name, value)

@@ -85,10 +85,10 @@ def write_solid_step(built, patchset, path, input_paths=(), overwrite=True, name
     if built.topology is None:
         return write_step(built.solid, path, input_paths, overwrite, name)
     from core.export.step_file import step_text
-    from polycube_wb.brep import TOLERANCE
+    from core.tolerances import BREP_MM
 
     target, inputs = _checked_target(path, input_paths, overwrite)
-    text = step_text(patchset.patches, built.topology, _product_name(target, name), TOLERANCE,
+    text = step_text(patchset.patches, built.topology, _product_name(target, name), BREP_MM,
                      built.reverse)
     try:
         write_text_atomic(target, text, inputs, "STEP file")

@@ -10,6 +10,7 @@ from scipy.sparse.csgraph import connected_components
 import scipy.sparse as sp
 
 from core.export.bspline_basis import evaluate_patch_grid, layout_groups
+from core.tolerances import CONTACT
 
 
 def _tessellation_params(patch_knots, resolution):
@@ -21,7 +22,7 @@ def _tessellation_params(patch_knots, resolution):
     return np.concatenate(pieces + [[1.0]])
 
 
-def tessellate_patches(patchset, resolution=16, weld_tolerance=1e-9):
+def tessellate_patches(patchset, resolution=16, weld_tolerance=CONTACT):
     """Watertight triangle mesh of a PatchSet.
 
     Each patch is sampled on a grid (every knot span split into
@@ -35,7 +36,8 @@ def tessellate_patches(patchset, resolution=16, weld_tolerance=1e-9):
     patchset : PatchSet
     resolution : int, samples per unit of patch parameter (about ``2 resolution**2``
         triangles per patch).
-    weld_tolerance : float, relative to the bounding-box diagonal of the samples.
+    weld_tolerance : float, relative to the bounding-box diagonal of the samples (default
+        ``core.tolerances.CONTACT``).
 
     Returns
     -------

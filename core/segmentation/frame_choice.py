@@ -5,11 +5,11 @@ PCA (Eq. 1) is the paper's frame, but topology-optimisation results are built on
 aligned with the design domain, and the PCA of an L-shaped or bracket-shaped part turns away from
 that grid. Each part therefore gets the best of three candidates:
 
-- ``"pca"``: :func:`core.segmentation.frames.part_frames` (PCA with degenerate axes aligned to the
-  normals, the frame the stage used before);
+- ``"pca"``: :func:`core.segmentation.part_frame.part_frames` (PCA with degenerate axes aligned
+  to the normals, the frame the stage used before);
 - ``"world"``: the world axes (identity);
 - ``"aligned"``: the rotation that minimises the area-weighted cubic misalignment of the normals,
-  ``sum A (1 - sum_k (n.a_k)^4) / 2`` (:func:`core.segmentation.frames.cubic_energy`), found by
+  ``sum A (1 - sum_k (n.a_k)^4) / 2`` (:func:`core.segmentation.part_frame.cubic_energy`), found by
   cyclic closed-form rotations about each axis from the PCA and from the world start (the better
   of the two results).
 
@@ -26,8 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.mesh_topology import edge_faces
-from core.segmentation.frames import (align_about, cubic_energy, face_geometry, group_moments,
-                                      orient_frame)
+from core.segmentation.part_frame import (align_about, cubic_energy, face_geometry,
+                                          group_moments, orient_frame)
 from core.segmentation.labeling import LAMBDA
 
 CANDIDATES = ("pca", "world", "aligned")
@@ -54,7 +54,8 @@ def best_aligned_frame(normal4, start, sweeps=20, tol=1e-12):
 
     Parameters
     ----------
-    normal4 : (3, 3, 3, 3) float64 normal moment (:class:`core.segmentation.frames.SurfaceMoments`).
+    normal4 : (3, 3, 3, 3) float64 normal moment
+        (:class:`core.segmentation.part_frame.SurfaceMoments`).
     start : (3, 3) float64 start frame (rows x, y, z).
     sweeps : int, cap on cycles of rotations about x, y and z.
     tol : float, stop when a cycle lowers the energy by less than ``tol`` times the area.
@@ -80,7 +81,7 @@ def best_aligned_frame(normal4, start, sweeps=20, tol=1e-12):
 def candidate_frames(pca, normal4):
     """(3, 3, 3) float64 candidate frames of one part, in :data:`CANDIDATES` order.
 
-    ``pca`` : (3, 3) PCA frame of the part (:func:`core.segmentation.frames.part_frames`);
+    ``pca`` : (3, 3) PCA frame of the part (:func:`core.segmentation.part_frame.part_frames`);
     ``normal4`` : (3, 3, 3, 3) normal moment of the part's faces.
     """
     world = np.eye(3)
@@ -126,9 +127,9 @@ def choose_part_frames(vertices, faces, face_part, pca_frames, lam=LAMBDA, momen
     vertices : (n, 3) float64; faces : (m, 3) int64.
     face_part : (m,) int64 parts 0 .. P-1, each non-empty.
     pca_frames : (P, 3, 3) float64 PCA frame of each part
-        (:func:`core.segmentation.frames.part_frames`).
+        (:func:`core.segmentation.part_frame.part_frames`).
     lam : float, lambda of Eq. 3.
-    moments : optional list of P :class:`core.segmentation.frames.SurfaceMoments` of the parts,
+    moments : optional list of P :class:`core.segmentation.part_frame.SurfaceMoments` of the parts,
         computed when omitted.
 
     Returns

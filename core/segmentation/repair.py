@@ -36,214 +36,33 @@ that touch a separating edge, with the extra rule that a face may only take a la
 among its neighbours (boundaries move, charts are neither created nor split off by it); this undoes
 the jagged edges merges leave. Everything is vectorised per round; the loop is deterministic.
 
-Candidates are scored on the submesh around the faces they change (exact; see
-:func:`core.segmentation.validity.local_invalid_count`); only accepted states are judged whole.
+The operators and the candidate trials are :mod:`core.segmentation.repair_operators` (each returns
+a typed ``Relabel`` or ``Trial``); :class:`RepairRun` holds one repair's state and tries them in
+this order, a round's accepted change being a :class:`Step`. Candidates are scored on the submesh
+around the faces they change (exact; see :func:`core.segmentation.validity.local_invalid_count`);
+only accepted states are judged whole.
 Per-chart trials are capped (``max_trials``) and so are consecutive sideways moves
 (``max_sideways``), so the work stays bounded on meshes with many invalid charts.
 """
+from dataclasses import dataclass
+
 import numpy as np
 
 from core.errors import ParameterError
 from core.geometry import face_areas
-from core.segmentation.charts import OPPOSITE, build_topology
+from core.segmentation.charts import build_topology
 from core.segmentation.labeling import (LAMBDA, PENALTY, check_frames, face_colouring,
-                                        face_normals, hbecvt_sweeps, interface_penalty,
-                                        label_cost, label_vectors, part_neighbours)
+                                        face_normals, interface_penalty, label_cost,
+                                        part_neighbours)
 from core.segmentation.parts import face_interface_axes, interfaces
-from core.segmentation.validity import (COS_45, check_validity, counts_near, edge_interface_axes,
+from core.segmentation.repair_operators import (Trial, boundary_faces, chart_candidates,
+                                                faces_at_vertices, insert_one_axis_charts,
+                                                joint_merges, merge_charts, one_axis_corners,
+                                                relabel_corner_faces, relabel_interface_parallel,
+                                                smooth_boundaries, split_opposite_boundaries)
+from core.segmentation.validity import (check_validity, counts_near, edge_interface_axes,
                                         local_counts, local_invalid_count, with_turning_points)
 from core.types import TriMesh
-
-
-def _chart_costs(cost, face_chart, n_charts):
-    """(c, 6) summed label cost of every chart."""
-    return np.stack([np.bincount(face_chart, weights=cost[:, l], minlength=n_charts)
-                     for l in range(6)], axis=1)
-
-
-def _faces_at_vertices(F, vertex_mask):
-    return vertex_mask[F[:, 0]] | vertex_mask[F[:, 1]] | vertex_mask[F[:, 2]]
-
-
-def _fix_opposite(F, topology, val, labels, cost):
-    lay = val.layout
-    bad = np.flatnonzero(val.boundary_reason == 1)
-    edge_bad = np.isin(lay.sep_boundary, bad)
-    vmask = np.zeros(topology.n_vertices, dtype=bool)
-    vmask[topology.edges[lay.sep_edges[edge_bad]].reshape(-1)] = True
-    charts = lay.boundary_charts[bad]
-    chart_of_b = np.full(lay.n_charts, -1, dtype=np.int64)
-    # each chart joins the strip of the first (lowest id) opposite boundary it lies on
-    for col in (1, 0):
-        chart_of_b[charts[::-1, col]] = bad[::-1]
-    strip_b = chart_of_b[lay.face_chart]
-    in_strip = _faces_at_vertices(F, vmask) & (strip_b >= 0)
-    faces = np.flatnonzero(in_strip)
-    group = strip_b[faces]
-    new = labels.copy()
-    groups, inv = np.unique(group, return_inverse=True)
-    gcost = _chart_costs(cost[faces], inv.reshape(-1), len(groups))
-    axis_ab = lay.chart_label[lay.boundary_charts[groups, 0]] // 2
-    allowed = np.ones((len(groups), 6), dtype=bool)
-    allowed[np.arange(len(groups)), 2 * axis_ab] = False
-    allowed[np.arange(len(groups)), 2 * axis_ab + 1] = False
-    # labels touching the strip from outside: avoid their opposites
-    nb = topology.neighbours[faces]
-    outside = (nb >= 0) & ~in_strip[np.maximum(nb, 0)]
-    touch = np.zeros((len(groups), 6), dtype=bool)
-    touch[np.repeat(inv, 3)[outside.reshape(-1)], labels[nb[outside]]] = True
-    soft = allowed & ~touch[:, OPPOSITE]
-    use = np.where(soft.any(axis=1)[:, None], soft, allowed)
-    choice = np.argmin(np.where(use, gcost, np.inf), axis=1)
-    new[faces] = choice[inv]
-    return new, len(groups)
-
-
-def _fix_interface(F, topology, val, labels, cost, face_part, face_frame, iface_pen, edge_ix):
-    """Relabel faces whose label is parallel to a part interface's x-axis.
-
-    Two sets of faces change: faces next to the invalid interface boundaries whose label carries
-    Eq. 3's interface penalty, and the faces on interface edges whose label direction lies within
-    45 degrees of that edge's loop axis (the rule of :func:`check_validity`). Each takes its
-    least-cost label that is neither penalised nor within 45 degrees of the axis.
-    """
-    lay = val.layout
-    m = len(F)
-    bad = np.flatnonzero(val.boundary_reason == 2)
-    edge_bad = np.isin(lay.sep_boundary, bad)
-    vmask = np.zeros(topology.n_vertices, dtype=bool)
-    vmask[topology.edges[lay.sep_edges[edge_bad]].reshape(-1)] = True
-    forbid = iface_pen > 0
-    sep = lay.sep_edges[edge_bad]
-    sides = topology.edge_faces[sep]
-    iface = face_part[sides[:, 0]] != face_part[sides[:, 1]]
-    faces_e = sides[iface].reshape(-1)
-    ix = np.repeat(edge_ix[sep[iface]], 2, axis=0)
-    dirs = label_vectors(face_frame[faces_e])
-    par = np.abs(np.einsum("fld,fd->fl", dirs, ix)) > COS_45
-    np.logical_or.at(forbid, faces_e, par)
-    wrong = forbid[np.arange(m), labels] & _faces_at_vertices(F, vmask)
-    faces = np.flatnonzero(wrong)
-    new = labels.copy()
-    new[faces] = np.argmin(cost[faces] + 1e3 * forbid[faces], axis=1)
-    return new, len(bad)
-
-
-def _merge_charts(val, labels, cost, which):
-    lay = val.layout
-    bad = np.flatnonzero(which)
-    order = bad[np.lexsort((bad, lay.chart_size[bad]))]
-    nbm = lay.chart_neighbours
-    ccost = _chart_costs(cost, lay.face_chart, lay.n_charts)
-    blocked = np.zeros(lay.n_charts, dtype=bool)
-    target = np.full(lay.n_charts, -1, dtype=np.int64)
-    indptr, indices = nbm.indptr, nbm.indices
-    for c in order.tolist():
-        if blocked[c]:
-            continue
-        nbrs = indices[indptr[c]:indptr[c + 1]]
-        nbrs = nbrs[lay.chart_part[nbrs] == lay.chart_part[c]]
-        if len(nbrs) == 0:
-            continue
-        nl = np.unique(lay.chart_label[nbrs])
-        ok = nl[~np.isin(OPPOSITE[nl], nl)]
-        cand = ok if len(ok) else nl
-        target[c] = cand[np.argmin(ccost[c, cand])]
-        blocked[c] = True
-        blocked[indices[indptr[c]:indptr[c + 1]]] = True
-    chosen = np.flatnonzero(target >= 0)
-    new = labels.copy()
-    sel = target[lay.face_chart]
-    move = sel >= 0
-    new[move] = sel[move]
-    return new, len(chosen)
-
-
-def _one_axis_corners(topology, val):
-    """Invalid corners whose separating edges all have one and the same axis (e.g. a fan
-    +X, +Y, -X, -Y around the vertex: four edges along Z), and that axis: (k,) int64 each."""
-    lay = val.layout
-    ev = topology.edges[lay.sep_edges]
-    axis = val.boundary_axis[lay.sep_boundary]
-    v = np.concatenate([ev[:, 0], ev[:, 1]])
-    a = np.concatenate([axis, axis])
-    at = np.isin(v, val.invalid_corners)
-    v, a = v[at], a[at]
-    lo = np.full(topology.n_vertices, 9, dtype=np.int64)
-    hi = np.full(topology.n_vertices, -9, dtype=np.int64)
-    np.minimum.at(lo, v, a)
-    np.maximum.at(hi, v, a)
-    corners = val.invalid_corners
-    one = (lo[corners] == hi[corners]) & (lo[corners] >= 0)
-    return corners[one], lo[corners[one]]
-
-
-def _fix_one_axis_corners(F, topology, labels, face_part, cost, corners, axes, rings=2):
-    """Insert a chart of the corners' common axis: the faces of the corner's part within
-    ``rings`` vertex rings of each corner take that axis' label of least normal cost, so the
-    charts that met at a point (pairwise opposite across it) now each share a boundary with the
-    new chart, whose corners are X, Y, Z groups."""
-    new = labels.copy()
-    for v, k in zip(corners.tolist(), axes.tolist()):
-        vmask = np.zeros(topology.n_vertices, dtype=bool)
-        vmask[v] = True
-        for _ in range(rings):
-            vmask[F[_faces_at_vertices(F, vmask)]] = True
-        part_of_corner = face_part[np.flatnonzero(F == v)[0] // 3]
-        faces = np.flatnonzero(_faces_at_vertices(F, vmask) & (face_part == part_of_corner))
-        plus, minus = cost[faces, 2 * k].sum(), cost[faces, 2 * k + 1].sum()
-        new[faces] = 2 * k if plus <= minus else 2 * k + 1
-    return new, len(corners)
-
-
-def _fix_corners(F, topology, val, labels, face_part):
-    lay = val.layout
-    vmask = np.zeros(topology.n_vertices, dtype=bool)
-    vmask[val.invalid_corners] = True
-    faces = np.flatnonzero(_faces_at_vertices(F, vmask))
-    new = labels.copy()
-    size = lay.chart_size
-    nb = topology.neighbours[faces]
-    okn = (nb >= 0) & (face_part[np.maximum(nb, 0)] == face_part[faces][:, None])
-    nb_chart = np.where(okn, lay.face_chart[np.maximum(nb, 0)], -1)
-    nb_size = np.where(okn, size[np.maximum(nb_chart, 0)], -1)
-    own = size[lay.face_chart[faces]]
-    best = np.argmax(nb_size, axis=1)
-    big = nb_size[np.arange(len(faces)), best] > own
-    f = faces[big]
-    new[f] = lay.chart_label[nb_chart[big, best[big]]]
-    return new, int(big.sum())
-
-
-def _boundary_faces(topology, face_part, labels):
-    """(m,) bool faces with an edge neighbour in another chart (other label or other part)."""
-    tn = topology.neighbours
-    ok = tn >= 0
-    other = np.maximum(tn, 0)
-    diff = ok & ((labels[other] != labels[:, None]) | (face_part[other] != face_part[:, None]))
-    return diff[:, 0] | diff[:, 1] | diff[:, 2]
-
-
-def _smooth_boundaries(labels, active, unary, nb, colour, lam, penalty):
-    """HBECVT sweeps on the ``active`` faces (those next to separating edges), labels limited to
-    the labels of each face's neighbours."""
-    has = nb >= 0
-    present = np.zeros((len(labels), 6), dtype=bool)
-    rows = np.repeat(np.arange(len(labels)), nb.shape[1])[has.reshape(-1)]
-    present[rows, labels[nb[has]]] = True
-    present[np.arange(len(labels)), labels] = True
-    restricted = np.where(present, unary, unary + 4.0 * penalty)
-    out, _ = hbecvt_sweeps(restricted, nb, labels, colour, lam, penalty, max_sweeps=3,
-                           active=active)
-    return out.astype(np.int64)
-
-
-def _local_resegment(labels, unary, nb, colour, region, lam, penalty):
-    """Re-run the HBECVT sweeps inside ``region`` from nearest-direction labels with ``lam``."""
-    start = labels.copy()
-    start[region] = np.argmin(unary[region], axis=1)
-    out, _ = hbecvt_sweeps(unary, nb, start, colour, lam, penalty, max_sweeps=50, active=region)
-    return out.astype(np.int64)
 
 
 class CandidateJudge:
@@ -318,10 +137,10 @@ class CandidateJudge:
         ``vmask`` against a labeling of layout ``lay`` (see :meth:`zone`)."""
         F = self.F
         charts = np.zeros(lay.n_charts, dtype=bool)
-        charts[lay.face_chart[_faces_at_vertices(F, vmask)]] = True
+        charts[lay.face_chart[faces_at_vertices(F, vmask)]] = True
         vz = np.zeros_like(vmask)
         vz[F[charts[lay.face_chart]]] = True
-        return np.flatnonzero(_faces_at_vertices(F, vz))
+        return np.flatnonzero(faces_at_vertices(F, vz))
 
     def delta(self, labels, val, cand):
         """(change of the invalid-item count from ``labels`` (judged as ``val``) to ``cand``,
@@ -361,72 +180,267 @@ class CandidateJudge:
         return float(self.weighted_angle[np.arange(len(labels)), labels].sum())
 
 
-def _chart_candidates(F, face_part, val, labels, c, cost, unary, nb, colour, penalty, lams):
-    """Candidate labelings that change invalid chart ``c``: merges into each neighbouring label;
-    for each label of another axis missing around the chart, the faces of the chart and its
-    neighbouring charts that fit that label better than their own take it; growing the chart
-    over the faces of its part around its corners (so it gains a boundary with every chart that
-    only touched it at a corner) and over its one-ring; local re-segmentations of the chart and
-    its neighbours at coarser ``lam``."""
-    lay = val.layout
-    nbrs = lay.chart_neighbours[c].indices
-    nbrs = nbrs[lay.chart_part[nbrs] == lay.chart_part[c]]
-    in_c = lay.face_chart == c
-    out = []
-    for lab in np.unique(lay.chart_label[nbrs]).tolist():
-        cand = labels.copy()
-        cand[in_c] = lab
-        out.append((f"merge_into_{lab}", cand))
-    region = in_c | np.isin(lay.face_chart, nbrs)
-    a = int(lay.chart_label[c])
-    present = set(lay.chart_label[nbrs].tolist())
-    cur_cost = cost[np.arange(len(labels)), labels]
-    for lab in range(6):
-        if lab // 2 == a // 2 or lab in present:
-            continue
-        grow = region & (cost[:, lab] < cur_cost)
-        if grow.any():
-            cand = labels.copy()
-            cand[grow] = lab
-            out.append((f"grow_missing_{lab}", cand))
-    own_part = face_part == lay.chart_part[c]
-    ring = np.zeros(len(lay.vertex_sep_degree), dtype=bool)
-    ring[F[in_c]] = True
-    at_corner = ring & (lay.vertex_sep_degree >= 3)
-    for name, vmask in (("grow_at_corners", at_corner), ("grow_ring", ring)):
-        grow = _faces_at_vertices(F, vmask) & own_part & ~in_c
-        if grow.any():
-            cand = labels.copy()
-            cand[grow] = a
-            out.append((name, cand))
-    for lam in lams:
-        out.append((f"resegment_lambda_{lam:g}", _local_resegment(labels, unary, nb, colour,
-                                                                   region, lam, penalty)))
-    return out
+@dataclass(frozen=True)
+class Candidate:
+    """A judged candidate labeling.
+
+    name : str, the operator or trial that made it (the report's ``operator`` names it).
+    labels : (m,) int64 labels 0..5.
+    invalid : int, its invalid items (exact, from the judgement near its changes).
+    angle : float, its area-weighted mean angle in degrees (:meth:`CandidateJudge.angle`).
+    """
+
+    name: str
+    labels: np.ndarray
+    invalid: int
+    angle: float
+
+    @property
+    def score(self):
+        """(invalid items, mean angle): the smaller the better."""
+        return (self.invalid, self.angle)
 
 
-def _joint_merges(lay, labels, c, small_chart):
-    """Candidates that merge invalid chart ``c`` together with its small neighbouring charts of
-    its part (at most ``small_chart`` faces) into each label around that group: where a small
-    chart of the opposite label sits between ``c`` and a large neighbour, merging either alone
-    leaves an opposite-label boundary (tried when no candidate of :func:`_chart_candidates`
-    helps). Returns a list of (name, labels)."""
-    part = lay.chart_part[c]
-    nbrs = lay.chart_neighbours[c].indices
-    nbrs = nbrs[lay.chart_part[nbrs] == part]
-    small = nbrs[lay.chart_size[nbrs] <= small_chart]
-    if not len(small):
-        return []
-    group = np.concatenate([[c], small])
-    around = np.unique(np.concatenate([lay.chart_neighbours[g].indices for g in group]))
-    around = around[(lay.chart_part[around] == part) & ~np.isin(around, group)]
-    in_group = np.isin(lay.face_chart, group)
-    out = []
-    for lab in np.unique(lay.chart_label[np.concatenate([around, [c]])]).tolist():
-        cand = labels.copy()
-        cand[in_group] = lab
-        out.append((f"merge_with_small_into_{lab}", cand))
-    return out
+@dataclass(frozen=True)
+class Step:
+    """The change a repair round accepts.
+
+    operator : str, the report's name of what it did; items : int, the items it worked on.
+    labels : (m,) int64 the new labels; validity : Validity of ``labels`` (whole mesh).
+    """
+
+    operator: str
+    items: int
+    labels: np.ndarray
+    validity: object
+
+
+class RepairRun:
+    """One repair of a labeling: the current labels, their judgement and the bookkeeping.
+
+    :meth:`step` tries the operators of the module docstring in order (one kind per round) and
+    returns the first change it accepts; :meth:`accept` makes it the current labeling.
+
+    Parameters
+    ----------
+    F : (m, 3) int64; face_part : (m,) int64; topology : MeshTopology.
+    judge : CandidateJudge of the mesh, parts and frames.
+    labels : (m,) int64 labels 0..5 to repair.
+    iface_pen : (m, 6) float64 Eq. 3 interface penalty of each label.
+    nb : (m, 3) int64 face neighbours within the part (-1: none); colour : (m,) int64.
+    lam, penalty : float, Eq. 3 parameters of the smoothing and re-segmentation.
+    smooth : bool, smooth the boundaries after merges.
+    angle_cap : float, degrees: no chart operation may raise the mean angle above it.
+    small_chart, max_trials, max_sideways : int, see :func:`repair_labeling`.
+    """
+
+    def __init__(self, F, face_part, topology, judge, labels, iface_pen, nb, colour, lam,
+                 penalty, smooth, angle_cap, small_chart, max_trials, max_sideways):
+        self.F, self.face_part, self.topology, self.judge = F, face_part, topology, judge
+        self.iface_pen, self.unary = iface_pen, judge.cost + penalty * iface_pen
+        self.nb, self.colour, self.lam, self.penalty = nb, colour, lam, penalty
+        self.smooth, self.angle_cap = smooth, angle_cap
+        self.small_chart, self.max_trials, self.max_sideways = small_chart, max_trials, max_sideways
+        self.labels = labels
+        self.val = judge.validity(labels)
+        self.seen = {hash(labels.tobytes())}
+        self.gave_up = {}  # (first face, label) of a chart no trial improved -> report entry
+        self.trials = 0
+        self.n_sideways = 0
+
+    def step(self):
+        """The first change an operator offers and the rules accept, or None (stuck)."""
+        for operator in (self.opposite_step, self.interface_step, self.chart_step,
+                         self.one_axis_corner_step, self.corner_step):
+            found = operator()
+            if found is not None:
+                return found
+        return None
+
+    def accept(self, step):
+        """Make ``step`` (a Step) the current labeling."""
+        self.n_sideways = self.n_sideways + 1 if step.operator.endswith("_sideways") else 0
+        self.labels, self.val = step.labels, step.validity
+        self.seen.add(hash(step.labels.tobytes()))
+
+    def is_new(self, labels):
+        """Whether ``labels`` is a state this repair has not been in."""
+        return hash(labels.tobytes()) not in self.seen
+
+    def _smooth(self, labels, active):
+        return smooth_boundaries(labels, active, self.unary, self.nb, self.colour, self.lam,
+                                 self.penalty)
+
+    def smoothed(self, operator, relabel):
+        """Step of the Relabel ``relabel``, boundary-smoothed where that leaves no more invalid
+        items."""
+        v_c = self.judge.validity(relabel.labels)
+        if not self.smooth:
+            return Step(operator, relabel.items, relabel.labels, v_c)
+        s = self._smooth(relabel.labels, boundary_faces(self.topology, self.face_part,
+                                                         relabel.labels))
+        v_s = self.judge.validity(s)
+        if v_s.n_invalid <= v_c.n_invalid:
+            return Step(operator, relabel.items, s, v_s)
+        return Step(operator, relabel.items, relabel.labels, v_c)
+
+    def smoothed_local(self, cand, lay):
+        """Candidate ``cand``, smoothed near its changes where that leaves no more invalid
+        items (``lay``: the current labeling's layout)."""
+        if not self.smooth:
+            return cand
+        faces, _ = self.judge.zone(self.labels, lay, cand.labels)
+        active = np.zeros(len(self.F), dtype=bool)
+        active[faces] = True
+        s = self._smooth(cand.labels, active & boundary_faces(self.topology, self.face_part,
+                                                              cand.labels))
+        n_s = self.val.n_invalid + self.judge.delta(self.labels, self.val, s)[0]
+        if n_s <= cand.invalid:
+            return Candidate(cand.name, s, n_s, self.judge.angle(s))
+        return cand
+
+    def best_of(self, trials, best):
+        """Best of ``best`` (a Candidate or None) and the Trials ``trials`` for an invalid chart
+        of the current labeling: (fewest invalid items, smallest mean angle) within the angle
+        cap; trials that leave opposite-label boundaries get the strip insertion first."""
+        judge, labels, val = self.judge, self.labels, self.val
+        for trial in trials:
+            name, cand = trial.name, trial.labels
+            if np.array_equal(cand, labels) or judge.angle(cand) > self.angle_cap:
+                continue
+            self.trials += 1
+            d, opp = judge.delta(labels, val, cand)
+            n_c = val.n_invalid + d
+            if opp:
+                v_c = judge.validity(cand)
+                for _ in range(2):
+                    if not (v_c.boundary_reason == 1).any():
+                        break
+                    cand = split_opposite_boundaries(self.F, self.topology, v_c, cand,
+                                                     judge.cost).labels
+                    v_c = judge.validity(cand)
+                    name += "+split_opposite"
+                if judge.angle(cand) > self.angle_cap:
+                    continue
+                n_c = v_c.n_invalid
+            scored = Candidate(name, cand, n_c, judge.angle(cand))
+            if best is None or scored.score < best.score:
+                best = scored
+        return best
+
+    def opposite_step(self):
+        """Operator 1: the strip insertion or a merge of a chart of the first opposite-label
+        boundary, whichever leaves the fewest invalid items (the strip when none helps)."""
+        judge, labels, val = self.judge, self.labels, self.val
+        if not (val.boundary_reason == 1).any():
+            return None
+        lay = val.layout
+        b = int(np.flatnonzero(val.boundary_reason == 1)[0])
+        strip = split_opposite_boundaries(self.F, self.topology, val, labels, judge.cost)
+        trials = [Trial("split_opposite_boundaries", strip.labels)]
+        for c in lay.boundary_charts[b].tolist():
+            nbrs = lay.chart_neighbours[c].indices
+            nbrs = nbrs[lay.chart_part[nbrs] == lay.chart_part[c]]
+            for lab in np.unique(lay.chart_label[nbrs]).tolist():
+                cand = labels.copy()
+                cand[lay.face_chart == c] = lab
+                trials.append(Trial(f"merge_opposite_chart_into_{lab}", cand))
+        best = None
+        for k, trial in enumerate(trials):
+            if judge.angle(trial.labels) > self.angle_cap and k > 0:
+                continue
+            cand = Candidate(trial.name, trial.labels,
+                             val.n_invalid + judge.delta(labels, val, trial.labels)[0],
+                             judge.angle(trial.labels))
+            if best is None or cand.score < best.score:
+                best = cand
+        best = self.smoothed_local(best, lay)
+        if best.invalid >= val.n_invalid:
+            best = Candidate(trials[0].name, strip.labels, best.invalid, best.angle)
+        if not self.is_new(best.labels):
+            return None
+        items = strip.items if best.name == trials[0].name else 1
+        return Step(best.name, items, best.labels, judge.validity(best.labels))
+
+    def interface_step(self):
+        """Operator 2, kept when it lowers the invalid count."""
+        val, judge = self.val, self.judge
+        if not (val.boundary_reason == 2).any():
+            return None
+        new = relabel_interface_parallel(self.F, self.topology, val, self.labels, judge.cost,
+                                         self.face_part, judge.face_frame, self.iface_pen,
+                                         judge.edge_ix)
+        v_new = judge.validity(new.labels)
+        if v_new.n_invalid < val.n_invalid and self.is_new(new.labels):
+            return Step("relabel_interface_parallel", new.items, new.labels, v_new)
+        return None
+
+    def chart_step(self):
+        """Operator 3: the small invalid charts merged in a batch, else per chart (smallest
+        first) the best trial that lowers the invalid count, else a sideways move."""
+        judge, labels, val = self.judge, self.labels, self.val
+        if not val.invalid_chart.any():
+            return None
+        lay = val.layout
+        small = val.invalid_chart & (lay.chart_size <= self.small_chart)
+        if small.any():
+            step = self.smoothed("merge_small_charts", merge_charts(val, labels, judge.cost,
+                                                                    small))
+            if step.validity.n_invalid < val.n_invalid:
+                return step
+        sideways = None
+        bad = np.flatnonzero(val.invalid_chart)
+        for c in bad[np.lexsort((bad, lay.chart_size[bad]))].tolist():
+            key = (int(lay.chart_first_face[c]), int(lay.chart_label[c]))
+            if key in self.gave_up or self.trials >= self.max_trials:
+                continue
+            best = self.best_of(chart_candidates(self.F, self.face_part, val, labels, c,
+                                                 judge.cost, self.unary, self.nb, self.colour,
+                                                 self.penalty, (1.0, 2.0, 4.0, 8.0)), None)
+            if best is None or best.invalid >= val.n_invalid:
+                best = self.best_of(joint_merges(lay, labels, c, self.small_chart), best)
+            if best is not None:
+                best = self.smoothed_local(best, lay)
+                if best.invalid < val.n_invalid:
+                    return Step(f"chart_{best.name}", 1, best.labels,
+                                judge.validity(best.labels))
+                if best.invalid == val.n_invalid and sideways is None and self.is_new(
+                        best.labels):
+                    sideways = Candidate(f"chart_{best.name}_sideways", best.labels,
+                                         best.invalid, best.angle)
+            self.gave_up[key] = {"face": key[0], "label": key[1],
+                                 "faces": int(lay.chart_size[c])}
+        if sideways is not None and self.n_sideways < self.max_sideways:
+            step = Step(sideways.name, 1, sideways.labels, judge.validity(sideways.labels))
+            self.gave_up.clear()
+            return step
+        return None
+
+    def one_axis_corner_step(self):
+        """Operator 4, kept when it lowers the invalid count within the angle cap."""
+        val, judge = self.val, self.judge
+        if not len(val.invalid_corners):
+            return None
+        corners = one_axis_corners(self.topology, val)
+        if not len(corners.vertices):
+            return None
+        new = insert_one_axis_charts(self.F, self.topology, self.labels, self.face_part,
+                                     judge.cost, corners)
+        v_new = judge.validity(new.labels)
+        if (v_new.n_invalid < val.n_invalid and judge.angle(new.labels) <= self.angle_cap
+                and self.is_new(new.labels)):
+            return Step("insert_chart_at_one_axis_corners", new.items, new.labels, v_new)
+        return None
+
+    def corner_step(self):
+        """Operator 5 (the last resort: kept whenever it makes a new state)."""
+        if not len(self.val.invalid_corners):
+            return None
+        new = relabel_corner_faces(self.F, self.topology, self.val, self.labels, self.face_part)
+        if not self.is_new(new.labels):
+            return None
+        return Step("relabel_corner_faces", new.items, new.labels,
+                    self.judge.validity(new.labels))
 
 
 def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis=None,
@@ -466,10 +480,10 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     labels : (m,) int32 repaired labels.
     report : dict with ``rounds``, ``valid``, ``stopped`` (``valid``, ``stuck`` or
         ``round_cap``), ``operations`` (per-round operator and item count), ``before`` and
-        ``after`` (the validity reports, without turning points: the monotonicity pass counts them), ``angle_before`` /
-        ``angle_after`` (area-weighted mean degrees), ``gave_up`` (charts no candidate
-        improved: example face, label, faces) and ``unfixed`` (the remaining invalid items with
-        examples, empty when valid).
+        ``after`` (the validity reports, without turning points: the monotonicity pass counts
+        them), ``angle_before`` / ``angle_after`` (area-weighted mean degrees), ``gave_up``
+        (charts no candidate improved: example face, label, faces) and ``unfixed`` (the
+        remaining invalid items with examples, empty when valid).
 
     Notes
     -----
@@ -508,172 +522,36 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     V = np.asarray(V, dtype=np.float64)
     if judge is None:
         judge = CandidateJudge.of_mesh(V, F, face_part, check_frames(face_frame, m), topology)
-    face_frame, cost = judge.face_frame, judge.cost
     if face_interface_axis is None and face_part.max(initial=0) > 0:
         itfs = interfaces(TriMesh(V, F), face_part)
         face_interface_axis = face_interface_axes(F, face_part, itfs, V)[1]
-    iface_pen = interface_penalty(face_frame, face_interface_axis)
-    unary = cost + penalty * iface_pen
+    iface_pen = interface_penalty(judge.face_frame, face_interface_axis)
     nb = part_neighbours(topology, face_part)
     if colour is None:
         colour = face_colouring(nb)
     angle0 = judge.angle(labels)
-    angle_cap = angle0 + max_angle_increase
-
-    def smoothed(cand):
-        if not smooth:
-            return cand, judge.validity(cand)
-        v_c = judge.validity(cand)
-        s = _smooth_boundaries(cand, _boundary_faces(topology, face_part, cand), unary, nb,
-                               colour, lam, penalty)
-        v_s = judge.validity(s)
-        return (s, v_s) if v_s.n_invalid <= v_c.n_invalid else (cand, v_c)
-
-    def smoothed_local(cand, n_cand, lay):
-        """Smooth ``cand`` near its changes; returns (labels, invalid count) of the better."""
-        if not smooth:
-            return cand, n_cand
-        faces, _ = judge.zone(labels, lay, cand)
-        active = np.zeros(m, dtype=bool)
-        active[faces] = True
-        s = _smooth_boundaries(cand, active & _boundary_faces(topology, face_part, cand), unary,
-                               nb, colour, lam, penalty)
-        n_s = val.n_invalid + judge.delta(labels, val, s)[0]
-        return (s, n_s) if n_s <= n_cand else (cand, n_cand)
-
-    def score_candidates(cands, best):
-        """Best of ``best`` and the named candidates ``cands`` for an invalid chart of ``labels``
-        (judged as ``val``): (fewest invalid items, smallest mean angle) within the angle cap;
-        candidates that leave opposite-label boundaries get the strip insertion first."""
-        nonlocal trials
-        for name, cand in cands:
-            if np.array_equal(cand, labels) or judge.angle(cand) > angle_cap:
-                continue
-            trials += 1
-            d, opp = judge.delta(labels, val, cand)
-            n_c = val.n_invalid + d
-            if opp:
-                v_c = judge.validity(cand)
-                for _ in range(2):
-                    if not (v_c.boundary_reason == 1).any():
-                        break
-                    cand, _n = _fix_opposite(F, topology, v_c, cand, cost)
-                    v_c = judge.validity(cand)
-                    name += "+split_opposite"
-                if judge.angle(cand) > angle_cap:
-                    continue
-                n_c = v_c.n_invalid
-            score = (n_c, judge.angle(cand))
-            if best is None or score < best[0]:
-                best = (score, name, cand)
-        return best
-
-    before = judge.validity(labels)
-    val = before
+    run = RepairRun(F, face_part, topology, judge, labels, iface_pen, nb, colour, lam, penalty,
+                    smooth, angle0 + max_angle_increase, small_chart, max_trials, max_sideways)
+    before = run.val
     ops = []
-    gave_up = {}
-    seen = {hash(labels.tobytes())}
     stopped = "round_cap"
     rounds = 0
-    n_sideways = 0
-    trials = 0
     for rounds in range(1, max_rounds + 1):
-        if val.is_valid:
+        if run.val.is_valid:
             stopped = "valid"
             rounds -= 1
             break
-        accepted = None
-        sideways = None
-        if (val.boundary_reason == 1).any():
-            lay = val.layout
-            b = int(np.flatnonzero(val.boundary_reason == 1)[0])
-            strip, count = _fix_opposite(F, topology, val, labels, cost)
-            cands = [("split_opposite_boundaries", strip)]
-            for c in lay.boundary_charts[b].tolist():
-                nbrs = lay.chart_neighbours[c].indices
-                nbrs = nbrs[lay.chart_part[nbrs] == lay.chart_part[c]]
-                for lab in np.unique(lay.chart_label[nbrs]).tolist():
-                    cand = labels.copy()
-                    cand[lay.face_chart == c] = lab
-                    cands.append((f"merge_opposite_chart_into_{lab}", cand))
-            best = None
-            for name, cand in cands:
-                if judge.angle(cand) > angle_cap and name != cands[0][0]:
-                    continue
-                score = (val.n_invalid + judge.delta(labels, val, cand)[0], judge.angle(cand))
-                if best is None or score < best[0]:
-                    best = (score, name, cand)
-            s_cand, n_s = smoothed_local(best[2], best[0][0], lay)
-            best = ((n_s, judge.angle(s_cand)), best[1], s_cand)
-            if best[0][0] >= val.n_invalid:
-                best = (None, cands[0][0], strip)
-            if hash(best[2].tobytes()) not in seen:
-                accepted = (best[1], count if best[1] == cands[0][0] else 1, best[2],
-                            judge.validity(best[2]))
-        if accepted is None and (val.boundary_reason == 2).any():
-            new, count = _fix_interface(F, topology, val, labels, cost, face_part, face_frame,
-                                        iface_pen, judge.edge_ix)
-            v_new = judge.validity(new)
-            if v_new.n_invalid < val.n_invalid and hash(new.tobytes()) not in seen:
-                accepted = ("relabel_interface_parallel", count, new, v_new)
-        if accepted is None and val.invalid_chart.any():
-            lay = val.layout
-            small = val.invalid_chart & (lay.chart_size <= small_chart)
-            if small.any():
-                new, count = _merge_charts(val, labels, cost, small)
-                new, v_new = smoothed(new)
-                if v_new.n_invalid < val.n_invalid:
-                    accepted = ("merge_small_charts", count, new, v_new)
-            if accepted is None:
-                bad = np.flatnonzero(val.invalid_chart)
-                for c in bad[np.lexsort((bad, lay.chart_size[bad]))].tolist():
-                    key = (int(lay.chart_first_face[c]), int(lay.chart_label[c]))
-                    if key in gave_up or trials >= max_trials:
-                        continue
-                    best = score_candidates(
-                        _chart_candidates(F, face_part, val, labels, c, cost, unary, nb, colour,
-                                          penalty, (1.0, 2.0, 4.0, 8.0)), None)
-                    if best is None or best[0][0] >= val.n_invalid:
-                        best = score_candidates(_joint_merges(val.layout, labels, c, small_chart),
-                                                best)
-                    if best is not None:
-                        s_cand, n_s = smoothed_local(best[2], best[0][0], lay)
-                        best = ((n_s, judge.angle(s_cand)), best[1], s_cand)
-                    if best is not None and best[0][0] < val.n_invalid:
-                        accepted = (f"chart_{best[1]}", 1, best[2], judge.validity(best[2]))
-                        break
-                    if (best is not None and best[0][0] == val.n_invalid
-                            and hash(best[2].tobytes()) not in seen):
-                        sideways = sideways or (f"chart_{best[1]}_sideways", 1, best[2])
-                    gave_up[key] = {"face": key[0], "label": key[1],
-                                    "faces": int(lay.chart_size[c])}
-                if accepted is None and sideways is not None and n_sideways < max_sideways:
-                    accepted = sideways + (judge.validity(sideways[2]),)
-                    gave_up.clear()
-        if accepted is None and len(val.invalid_corners):
-            corners, axes = _one_axis_corners(topology, val)
-            if len(corners):
-                new, count = _fix_one_axis_corners(F, topology, labels, face_part, cost, corners,
-                                                   axes)
-                v_new = judge.validity(new)
-                if (v_new.n_invalid < val.n_invalid and judge.angle(new) <= angle_cap
-                        and hash(new.tobytes()) not in seen):
-                    accepted = ("insert_chart_at_one_axis_corners", count, new, v_new)
-        if accepted is None and len(val.invalid_corners):
-            new, count = _fix_corners(F, topology, val, labels, face_part)
-            if hash(new.tobytes()) not in seen:
-                accepted = ("relabel_corner_faces", count, new, judge.validity(new))
-        if accepted is None or np.array_equal(accepted[2], labels):
+        step = run.step()
+        if step is None or np.array_equal(step.labels, run.labels):
             stopped = "stuck"
             break
-        op, count, labels, val = accepted
-        n_sideways = n_sideways + 1 if op.endswith("_sideways") else 0
-        seen.add(hash(labels.tobytes()))
-        ops.append({"round": rounds, "operator": op, "items": int(count),
-                    "invalid_after": int(val.n_invalid)})
+        run.accept(step)
+        ops.append({"round": rounds, "operator": step.operator, "items": int(step.items),
+                    "invalid_after": int(step.validity.n_invalid)})
     else:
-        if val.is_valid:
+        if run.val.is_valid:
             stopped = "valid"
+    labels = run.labels
     final = judge.validity(labels)
     r = final.report
     unfixed = {k: r[k] for k in ("invalid_charts", "invalid_boundaries", "invalid_corners")
@@ -681,5 +559,5 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     report = {"rounds": int(rounds), "valid": bool(r["valid"]), "stopped": stopped,
               "operations": ops, "before": before.report, "after": r,
               "angle_before": angle0, "angle_after": judge.angle(labels),
-              "gave_up": list(gave_up.values()), "unfixed": unfixed}
+              "gave_up": list(run.gave_up.values()), "unfixed": unfixed}
     return labels.astype(np.int32), report

@@ -18,8 +18,8 @@ from scipy.spatial import cKDTree
 from core.errors import ParameterError
 from core.geometry import face_areas, face_cross
 from core.mesh_topology import edge_faces, face_adjacency, face_neighbours
-from core.segmentation.frames import (cubic_energy, frame_from_moments, group_moments,
-                                      mean_edge_length)
+from core.segmentation.frames import mean_edge_length
+from core.segmentation.part_frame import cubic_energy, frame_from_moments, group_moments
 from core.segmentation.parts import canonical_order, interfaces, part_components
 from core.segmentation.skeleton import choose_pitch, skeleton_pieces
 from core.types import TriMesh

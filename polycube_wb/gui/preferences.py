@@ -7,14 +7,8 @@ in the code reaches the user.
 """
 from PySide import QtGui
 
-from polycube_wb.gui.task_panels import FIELDS, make_widget, set_widget_value, widget_value
-
-PAGE_FIELDS = tuple(
-    (prop, label, kind, limits, field)
-    for kind_fields in (FIELDS["Segmentation"], FIELDS["BaseMesh"], FIELDS["Fit"])
-    for prop, label, kind, limits, field in kind_fields if field is not None
-) + (("Depth", "Grading depth at extraordinary vertices", "int", (1, 12), "export_depth"),)
-"""(property, label, kind, limits, preference key) of the page's fields."""
+from polycube_wb.gui.task_panels import make_widget, set_widget_value, widget_value
+from polycube_wb.panel_fields import PAGE_FIELDS
 
 
 class PreferencesPage:
@@ -25,10 +19,10 @@ class PreferencesPage:
         self.form.setWindowTitle("Polycube")
         layout = QtGui.QFormLayout(self.form)
         self.widgets = {}
-        for _, label, kind, limits, key in PAGE_FIELDS:
-            widget = make_widget(kind, limits)
-            layout.addRow(label, widget)
-            self.widgets[key] = (widget, kind)
+        for field in PAGE_FIELDS:
+            widget = make_widget(field.kind, field.limits)
+            layout.addRow(field.label, widget)
+            self.widgets[field.key] = (widget, field.kind)
         reset = QtGui.QPushButton("Paper defaults")
         reset.clicked.connect(self.paper_defaults)
         layout.addRow(reset)
@@ -46,9 +40,8 @@ class PreferencesPage:
             set_default(key, widget_value(widget, kind))
 
     def paper_defaults(self):
-        from core.params import EXPORT_DEPTH
         from polycube_wb.preferences import paper_defaults
 
-        defaults = dict(paper_defaults(), export_depth=EXPORT_DEPTH)
+        defaults = paper_defaults()
         for key, (widget, kind) in self.widgets.items():
             set_widget_value(widget, kind, defaults[key])

@@ -1,11 +1,12 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Task panels of the stage objects: their parameters, OK / Apply / Cancel.
 
-One panel class serves every stage: its fields come from ``FIELDS`` (property, label,
-kind, range). OK and Apply write the fields to the object and recompute (one undo step,
-with the progress bar; Esc cancels: the object is marked cancelled with its last result, Undo
-restores it); Cancel changes nothing. "Paper defaults" puts the paper's values in the fields. The cage stages
-(BaseMesh, Fit) also offer moving selected cage vertices: the stages after them follow
+One panel class serves every stage: its fields are ``polycube_wb.panel_fields.FIELDS``
+(property, label, kind, range or choices from ``core.params``). OK and Apply write the fields
+to the object and recompute (one undo step, with the progress bar; Esc cancels: the object is
+marked cancelled with its last result, Undo restores it); Cancel changes nothing. "Paper
+defaults" puts the paper's values in the fields. The cage stages (BaseMesh, Fit) also offer
+moving selected cage vertices: the stages after them follow
 (a Fit reruns from an edited base mesh; a Solid follows an edited fitted cage directly).
 
 Panels hold no geometry code, so tests build them, set their widgets and call
@@ -15,38 +16,9 @@ import FreeCAD
 import FreeCADGui
 from PySide import QtGui
 
-from core.params import BASE_MESH_METHODS, FIT_MODES
 from polycube_wb.gui import icon_path
+from polycube_wb.panel_fields import FIELDS
 
-FIELDS = {
-    # property, label, kind ("int", "float", "choice", "bool"), (minimum, maximum) or choices,
-    # ReconstructionParams field (for the paper's default) or None
-    "Target": (("CheckSelfIntersections", "Check self-intersections", "bool", None, None),),
-    "Segmentation": (
-        ("PartMode", "Parts", "choice", ("single", "auto"), "parts"),
-        ("BlendFactor", "Frame blending (mean edge lengths)", "float", (1e-3, 1000.0),
-         "blend_factor"),
-        ("Lambda", "λ (Eq. 3)", "float", (0.0, 1000.0), "lam"),
-        ("Penalty", "p (Eq. 3)", "float", (0.0, 1e12), "penalty"),
-        ("MaxSweeps", "Most HBECVT sweeps", "int", (1, 100000), "max_sweeps"),
-        ("Repair", "Repair the labeling", "bool", None, "repair"),
-        ("ColourBy", "Colour by", "choice", ("Labels", "Parts"), None)),
-    "BaseMesh": (
-        ("TargetFaces", "Target faces", "int", (6, 200000), "target_faces"),
-        ("MaxBaseFaces", "Most faces", "int", (6, 1000000), "max_base_faces"),
-        ("Method", "Route", "choice", BASE_MESH_METHODS,
-         "base_mesh_method")),
-    "Fit": (
-        ("Iterations", "Iterations", "int", (0, 100000), "fit_iterations"),
-        ("SubdivisionLevels", "Subdivision levels", "int", (1, 5), "subdivision_levels"),
-        ("Mode", "Mode", "choice", FIT_MODES, "fit_mode"),
-        ("AutoMinThickness", "Automatic minimal thickness", "bool", None, None),
-        ("MinThickness", "Minimal thickness, mm (0: none)", "float", (0.0, 1e6), None)),
-    "Solid": (("Depth", "Grading depth at extraordinary vertices", "int", (1, 12), None),),
-    "Deviation": (
-        ("Tolerance", "Tessellation tolerance (of the diagonal)", "float", (1e-6, 0.1), None),
-        ("Scale", "Colour scale, mm (0: largest deviation)", "float", (0.0, 1e9), None)),
-}
 CAGE_KINDS = ("BaseMesh", "Fit")
 ACTIVE = {}
 """Object name -> its open task panel (for scripts and tests)."""
@@ -74,12 +46,12 @@ class StagePanel:
         layout = QtGui.QVBoxLayout(self.form)
         box = QtGui.QGroupBox("Parameters")
         form = QtGui.QFormLayout(box)
-        for prop, label, kind, limits, _ in FIELDS.get(self.kind, ()):
-            widget = make_widget(kind, limits)
-            set_widget_value(widget, kind, getattr(obj, prop))
-            widget.setToolTip(obj.getDocumentationOfProperty(prop))
-            form.addRow(label, widget)
-            self.widgets[prop] = (widget, kind)
+        for field in FIELDS.get(self.kind, ()):
+            widget = make_widget(field.kind, field.limits)
+            set_widget_value(widget, field.kind, getattr(obj, field.prop))
+            widget.setToolTip(obj.getDocumentationOfProperty(field.prop))
+            form.addRow(field.label, widget)
+            self.widgets[field.prop] = (widget, field.kind)
         defaults = QtGui.QPushButton("Paper defaults")
         defaults.clicked.connect(self.paper_defaults)
         form.addRow(defaults)
@@ -126,9 +98,9 @@ class StagePanel:
         from polycube_wb.preferences import paper_defaults
 
         defaults = paper_defaults()
-        for prop, _, kind, _, field in FIELDS.get(self.kind, ()):
-            if field is not None:
-                set_widget_value(self.widgets[prop][0], kind, defaults[field])
+        for field in FIELDS.get(self.kind, ()):
+            if field.key is not None:
+                set_widget_value(self.widgets[field.prop][0], field.kind, defaults[field.key])
 
     def apply(self, vertex_moves=None):
         """Write the fields (and ``vertex_moves``: index -> new position) and recompute."""

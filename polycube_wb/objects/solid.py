@@ -19,14 +19,17 @@ class SolidProxy(StageProxy):
     INPUTS = ("Cage",)
 
     def init_properties(self, obj):
-        from polycube_wb.preferences import EXPORT_DEPTH_KEY, default
+        from core.params import MAX_EXPORT_DEPTH
+        from polycube_wb.panel_fields import EXPORT_DEPTH_KEY
+        from polycube_wb.preferences import default
 
         super().init_properties(obj)
         add_property(obj, "App::PropertyLink", "Cage", "Solid",
                      "The cage whose limit surface becomes the solid (a Fit or a BaseMesh)")
         add_property(obj, "App::PropertyInteger", "Depth", "Solid",
-                     "Grading depth of the patches at extraordinary vertices (1..12; exact "
-                     "except in a cell of size 2^-depth)", default(EXPORT_DEPTH_KEY))
+                     "Grading depth of the patches at extraordinary vertices "
+                     f"(1..{MAX_EXPORT_DEPTH}; exact except in a cell of size 2^-depth)",
+                     default(EXPORT_DEPTH_KEY))
         for name, _, kind, tooltip in FIGURES:
             add_property(obj, kind, name, "Result", tooltip, read_only=True, output=True)
 

@@ -9,8 +9,8 @@ from scipy.spatial.transform import Rotation
 
 from core.segmentation.frame_choice import (CANDIDATES, best_aligned_frame, choose_part_frames,
                                             labeling_energy)
-from core.segmentation.frames import (CUBE_GROUP, compute_frames, cubic_energy, group_moments,
-                                      part_frames)
+from core.segmentation.frames import CUBE_GROUP, compute_frames
+from core.segmentation.part_frame import cubic_energy, group_moments, part_frames
 from core.segmentation.labeling import face_normals, mean_label_angle, nearest_direction_labels
 from core.types import TriMesh
 

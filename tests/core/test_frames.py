@@ -7,9 +7,9 @@ from scipy.spatial.transform import Rotation
 
 from core.errors import ParameterError
 from core.segmentation.frames import (
-    CUBE_GROUP, compute_frames, match_frame, part_frames, pca_frame, quaternion_to_rotation,
-    rotation_to_quaternion,
+    CUBE_GROUP, compute_frames, match_frame, quaternion_to_rotation, rotation_to_quaternion,
 )
+from core.segmentation.part_frame import part_frames, pca_frame
 from core.segmentation.parts import parts_from_user
 from core.types import TriMesh
 

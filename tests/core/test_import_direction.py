@@ -120,15 +120,8 @@ def import_cycles(files):
                   for c in np.flatnonzero(sizes > 1))
 
 
-KNOWN_CYCLES = [["core.segmentation.frame_choice", "core.segmentation.frames"]]
-"""Cycles through a function-level import left for now: the frame choice (``compute_frames``
-calls it, and it builds on the frames' helpers; issue 14's modules this session). A new
-cycle fails the test."""
-
-
-def test_core_has_no_new_import_cycle():
-    cycles = import_cycles(_python_files("core"))
-    assert [cycle for cycle in cycles if cycle not in KNOWN_CYCLES] == []
+def test_core_has_no_import_cycle():
+    assert import_cycles(_python_files("core")) == []
 
 
 def test_the_cycle_check_sees_a_cycle_through_a_function_level_import(tmp_path, monkeypatch):

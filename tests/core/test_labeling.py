@@ -322,7 +322,7 @@ def test_automatic_parts_are_labelled_near_their_nearest_directions(name):
     on their cut are not parts)."""
     from core.params import ReconstructionParams
     from core.pipeline import run_stages
-    from core.segmentation.frames import face_geometry, part_frames
+    from core.segmentation.part_frame import face_geometry, part_frames
     from core.types import MeshSource, PipelineState
 
     path = os.path.join(MESHES, name)

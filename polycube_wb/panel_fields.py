@@ -1,0 +1,112 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""The parameter fields of the task panels and of the preferences page (no GUI needed).
+
+A field that sets a pipeline parameter takes its kind, range or choices from that parameter's
+declaration in ``core.params`` (:func:`parameter_field`), and its default from the same place
+(``polycube_wb.preferences``), so the GUI, the command line and the range checks agree; the
+grading depth of the solid takes its range and default from ``core.params`` too. The Qt widgets
+are made from these fields by ``polycube_wb.gui.task_panels``.
+"""
+from dataclasses import dataclass
+
+from core.params import BASE_MESH_METHODS, MAX_EXPORT_DEPTH, parameter_option
+
+EXPORT_DEPTH_KEY = "export_depth"
+"""Preference key of the solid's grading depth (default ``core.params.EXPORT_DEPTH``), which is
+not a ``ReconstructionParams`` field."""
+KIND_OF_TYPE = {bool: "bool", int: "int", float: "float"}
+"""Field kind of a ``ReconstructionParams`` number or flag, by the field's type."""
+
+
+@dataclass(frozen=True)
+class PanelField:
+    """One field of a task panel or of the preferences page.
+
+    prop : the stage object's property it edits.
+    label : its label in the form.
+    kind : ``"int"``, ``"float"``, ``"choice"`` or ``"bool"``.
+    limits : (minimum, maximum) of a number, the tuple of choices of a ``"choice"``, None for a
+        ``"bool"``.
+    key : the ``ReconstructionParams`` field (or :data:`EXPORT_DEPTH_KEY`) whose default and
+        preference the field shows, or None (a property of the object only).
+    """
+
+    prop: str
+    label: str
+    kind: str
+    limits: tuple = None
+    key: str = None
+
+
+def parameter_field(prop, label, name, choices=None):
+    """The field of the ``ReconstructionParams`` parameter ``name``: kind, range or choices
+    from ``core.params``.
+
+    Parameters
+    ----------
+    prop, label : see :class:`PanelField`.
+    name : str, the parameter (a ``ReconstructionParams`` field).
+    choices : tuple of str, optional: the subset of the parameter's choices the panel offers
+        (the segmentation object has no ``file`` part mode: its parts come from its target).
+
+    Returns
+    -------
+    PanelField with ``key == name``.
+
+    Raises
+    ------
+    core.errors.ParameterError
+        ``name`` is not a parameter, or ``choices`` are not among the parameter's.
+    """
+    from core.errors import ParameterError
+
+    item, option = parameter_option(name)
+    if option.choices is not None:
+        offered = option.choices if choices is None else tuple(choices)
+        if not set(offered) <= set(option.choices):
+            raise ParameterError(f"{name}: the panel offers {offered}, the parameter allows only "
+                                 f"{option.choices}")
+        return PanelField(prop, label, "choice", offered, name)
+    kind = KIND_OF_TYPE[item.type]
+    return PanelField(prop, label, kind, None if kind == "bool" else parameter_range(name), name)
+
+
+def parameter_range(name):
+    """(minimum, maximum) of the ``ReconstructionParams`` number ``name`` (``core.params``)."""
+    option = parameter_option(name)[1]
+    return (option.low, option.high)
+
+
+FIELDS = {
+    "Target": (PanelField("CheckSelfIntersections", "Check self-intersections", "bool"),),
+    "Segmentation": (
+        parameter_field("PartMode", "Parts", "parts", choices=("single", "auto")),
+        parameter_field("BlendFactor", "Frame blending (mean edge lengths)", "blend_factor"),
+        parameter_field("Lambda", "λ (Eq. 3)", "lam"),
+        parameter_field("Penalty", "p (Eq. 3)", "penalty"),
+        parameter_field("MaxSweeps", "Most HBECVT sweeps", "max_sweeps"),
+        parameter_field("Repair", "Repair the labeling", "repair"),
+        PanelField("ColourBy", "Colour by", "choice", ("Labels", "Parts"))),
+    "BaseMesh": (
+        parameter_field("TargetFaces", "Target faces", "target_faces"),
+        parameter_field("MaxBaseFaces", "Most faces", "max_base_faces"),
+        parameter_field("Method", "Route", "base_mesh_method", choices=BASE_MESH_METHODS)),
+    "Fit": (
+        parameter_field("Iterations", "Iterations", "fit_iterations"),
+        parameter_field("SubdivisionLevels", "Subdivision levels", "subdivision_levels"),
+        parameter_field("Mode", "Mode", "fit_mode"),
+        PanelField("AutoMinThickness", "Automatic minimal thickness", "bool"),
+        PanelField("MinThickness", "Minimal thickness, mm (0: none)", "float",
+                   parameter_range("fit_t_min"))),
+    "Solid": (PanelField("Depth", "Grading depth at extraordinary vertices", "int",
+                         (1, MAX_EXPORT_DEPTH), EXPORT_DEPTH_KEY),),
+    "Deviation": (
+        PanelField("Tolerance", "Tessellation tolerance (of the diagonal)", "float", (1e-6, 0.1)),
+        PanelField("Scale", "Colour scale, mm (0: largest deviation)", "float", (0.0, 1e9))),
+}
+"""Stage kind -> its task panel's fields, in form order."""
+PREFERENCE_KINDS = ("Segmentation", "BaseMesh", "Fit", "Solid")
+"""Stage kinds whose parameter fields the preferences page offers."""
+PAGE_FIELDS = tuple(field for kind in PREFERENCE_KINDS for field in FIELDS[kind]
+                    if field.key is not None)
+"""The preferences page's fields: every panel field with a default (``key``)."""
