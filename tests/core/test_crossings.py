@@ -134,3 +134,20 @@ def test_patches_of_a_clean_cage_are_built():
     result = run_patches(FitResult(cube(), {"levels": 2}), ReconstructionParams(), NO_PROGRESS)
     assert result.patches.info  # the export ran
     assert export_limit_crossings(cube()).count == 0
+
+
+def test_the_export_checks_at_the_fits_level_up_to_large_cages():
+    from core.stages.fit import EXPORT_CHECK_LEVELS, FIT_FACE_BUDGET, fit_levels
+    from core.subdivision.sample_cages import grid_sphere
+
+    # 864 faces: the fit works at level 2, and so does the check (it was level 1 above 625
+    # faces, and refused cages the fit had found clean)
+    medium = grid_sphere(12)
+    assert medium.n_faces == 864
+    assert fit_levels(medium.n_faces, EXPORT_CHECK_LEVELS) == EXPORT_CHECK_LEVELS == 2
+    crossings = export_limit_crossings(medium)
+    assert crossings.levels == 2 and crossings.count == 0
+    # beyond the fit's budget at level 2, both take one level
+    large = grid_sphere(21)
+    assert large.n_faces * 16 > FIT_FACE_BUDGET
+    assert export_limit_crossings(large).levels == fit_levels(large.n_faces, 2) == 1
