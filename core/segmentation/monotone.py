@@ -37,6 +37,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
+from core.mesh_topology import vertex_face_matrix
 from core.segmentation.charts import boundary_chains, build_topology
 from core.segmentation.labeling import LAMBDA
 from core.segmentation.repair import CandidateJudge
@@ -198,22 +199,20 @@ def _energy_increase(topology, labels, faces, new, cost, lam):
 
 
 def _vertex_faces(F, n_vertices):
-    """CSR-style (indptr (n+1,), faces) of the faces around each vertex."""
-    flat = np.asarray(F, dtype=np.int64).reshape(-1)
-    order = np.argsort(flat, kind="stable")
-    indptr = np.searchsorted(flat[order], np.arange(n_vertices + 1))
-    return indptr, order // 3
+    """(n, m) CSR vertex-face incidence (:func:`core.mesh_topology.vertex_face_matrix`): row ``v``
+    lists the faces around vertex ``v``."""
+    return vertex_face_matrix(F, n_vertices)
 
 
 def faces_at(vertex_faces, verts):
     """(k,) int64 sorted faces with a vertex in ``verts``, from the CSR ``vertex_faces``
     (:func:`_vertex_faces`): the work grows with the faces found, not with the mesh."""
-    ptr, vf = vertex_faces
+    ptr, vf = vertex_faces.indptr, vertex_faces.indices
     verts = np.asarray(verts, dtype=np.int64).reshape(-1)
     start, count = ptr[verts], ptr[verts + 1] - ptr[verts]
     first = np.cumsum(count) - count
     idx = np.repeat(start - first, count) + np.arange(int(count.sum()))
-    return np.unique(vf[idx])
+    return np.unique(vf[idx]).astype(np.int64)
 
 
 def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None,
@@ -368,7 +367,7 @@ def _propose(V, F, topology, val, labels, cost, ang, edge_length, tau, lookup, t
     touched = np.zeros(lay.n_boundaries, dtype=bool)
     out = []
     for b, v in val.turning_points.tolist():
-        around = vfm[1][vfm[0][v]:vfm[0][v + 1]]
+        around = vfm.indices[vfm.indptr[v]:vfm.indptr[v + 1]]
         if touched[b] or dirty[around].any():
             continue
         pair = lay.boundary_charts[b]
