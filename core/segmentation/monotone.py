@@ -243,7 +243,7 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
     max_evaluations : int, cap on the candidates proposed per turning point (keyed by its vertex
         and the labels of its boundary) over the pass.
     max_visits : int, cap on the whole-mesh judgements over the pass: no round starts once it is
-        reached (default ``max(12, 1800000 // m)``, each costs a pass over the charts).
+        reached (default ``max(8, 1200000 // m)``, each costs a pass over the charts).
     max_angle_increase : float, degrees.
     lam : float, Eq. 3 lambda used to rank candidates.
     judge : CandidateJudge, optional, of this mesh, parts and frames (the repair's, whose last
@@ -266,7 +266,7 @@ def straighten_boundaries(V, F, face_part, face_label, face_frame, topology=None
     if topology is None:
         topology = build_topology(F, len(V))
     if max_visits is None:
-        max_visits = max(12, 1800000 // max(m, 1))
+        max_visits = max(8, 1200000 // max(m, 1))
     if judge is None:
         judge = CandidateJudge.of_mesh(V, F, face_part, face_frame, topology,
                                        edge_ix=edge_interface_axis)
