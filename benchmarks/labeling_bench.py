@@ -19,7 +19,8 @@ The labeling stage of the largest mesh (:data:`SPEED_MESH`, one part) is timed a
 in a fresh process the stages up to the frames run once, then the labeling stage
 :data:`SPEED_RUNS` times, and the least CPU time counts (the other jobs on the shared machine only
 ever add to it); with ``--before CHECKOUT`` the same is measured on another checkout of the
-project (e.g. the commit before the speed work), run by the same interpreter.
+project (e.g. the commit before the speed work, a checkout or a ``git archive`` export in a
+directory named after the commit), run by the same interpreter.
 Writes ``benchmarks/LABELING_RESULTS.md`` (or ``--out``).
 """
 import argparse
@@ -93,8 +94,10 @@ def speed_case(checkout, path, runs=SPEED_RUNS):
     if proc.returncode != 0:
         return {"error": (proc.stderr.strip().splitlines() or ["failed"])[-1]}
     out = json.loads(proc.stdout.strip().splitlines()[-1])
+    # an exported tree (``git archive``) is named after its commit
     out["commit"] = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=checkout,
-                                   capture_output=True, text=True).stdout.strip()
+                                   capture_output=True, text=True).stdout.strip() or (
+        os.path.basename(os.path.normpath(checkout)))
     return out
 
 

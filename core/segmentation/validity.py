@@ -325,11 +325,11 @@ def counts_near(F, topology, validity, vertex_mask):
     counts = _local_invalid(F, topology, j, None, vertex_mask)
     if validity.report["turning_points"]["count"] is None:
         return counts + (None,)
-    near = _boundaries_at(topology, validity.layout, vertex_mask)
+    near = boundaries_at(topology, validity.layout, vertex_mask)
     return counts + (int(near[validity.turning_points[:, 0]].sum()),)
 
 
-def _boundaries_at(topology, layout, vertex_mask):
+def boundaries_at(topology, layout, vertex_mask):
     """(b,) bool boundaries of ``layout`` with an edge at ``vertex_mask``."""
     ev = topology.edges[layout.sep_edges]
     near = np.zeros(layout.n_boundaries, dtype=bool)
@@ -345,7 +345,7 @@ def _local_invalid(F, sub, j, faces, vertex_mask):
     touch_face = vertex_mask[fv[:, 0]] | vertex_mask[fv[:, 1]] | vertex_mask[fv[:, 2]]
     charts = np.zeros(lay.n_charts, dtype=bool)
     charts[lay.face_chart[touch_face]] = True
-    bnd = _boundaries_at(sub, lay, vertex_mask)
+    bnd = boundaries_at(sub, lay, vertex_mask)
     reason = j["reason"]
     return (int((charts & j["invalid_chart"]).sum()), int((bnd & (reason > 0)).sum()),
             int(vertex_mask[j["invalid_corners"]].sum()), int((bnd & (reason == 1)).sum()))
@@ -382,7 +382,7 @@ def local_counts(V, F, topology, face_part, face_label, face_frame, edge_ix, fac
         return counts + (None,)
     lay = j["layout"]
     # a boundary without an edge at vertex_mask is the same in both labelings: not walked
-    which = _boundaries_at(sub, lay, vertex_mask)
+    which = boundaries_at(sub, lay, vertex_mask)
     tp = _turning_points(V, sub, lay, face_frame[faces], j["boundary_axis"], tau, which)
     return counts + (len(tp),)
 

@@ -207,7 +207,7 @@ def test_dev_mesh_ends_valid_with_few_charts(name):
     assert mean_label_angle(n, out, frame) <= mean_label_angle(n, near, frame) + 5.0
 
 
-@pytest.mark.parametrize("name", ["idler_riser.stl", "to_simp_cantilever.stl",
+@pytest.mark.parametrize("name", ["to_simp_lbracket.stl", "to_simp_cantilever.stl",
                                   "gripper_domain.stl", "octagonal_pocket.stl",
                                   "to_simp_torsion_arm.stl"])
 def test_dev_mesh_with_automatic_parts_ends_valid(name):

@@ -9,9 +9,11 @@ import trimesh
 
 from core.errors import ParameterError
 from core.segmentation.parts import interfaces, parts_from_user, single_part, validate_face_part
-from core.segmentation.skeleton_parts import (MIN_PART_FACES, absorb_patches, automatic_parts,
-                                              close_interfaces, skeleton_segmentation,
-                                              smooth_boundaries)
+from core.segmentation.skeleton_parts import (MIN_PART_FACES, TANGENT_AREA, TANGENT_SHARE,
+                                              absorb_patches, absorb_tangent_cuts,
+                                              automatic_parts, close_interfaces,
+                                              skeleton_segmentation, smooth_boundaries,
+                                              tangent_cut_shares)
 from core.types import TriMesh
 
 MESHES = Path("/work/shared/data/meshes")
@@ -194,6 +196,39 @@ def test_automatic_parts_on_genus_two_frame():
     validate_face_part(mesh, result.face_part)
     assert result.info["parts"] == 1  # one frame fits the whole plate
     assert result.info["junctions"] >= 2
+
+
+def test_absorb_tangent_cuts_merges_a_cap_cut_along_its_wall():
+    """A unit sphere cut by the plane z = cos 30 deg: the cap's faces next to the cut have normals
+    within about 30 degrees of the cut's axis (z), so they make up more than TANGENT_SHARE of the
+    cap and the cap joins the rest; cut at the equator, the faces next to the cut are
+    perpendicular to it (share 0) and the halves are kept."""
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    V, F = np.asarray(sphere.vertices), np.asarray(sphere.faces, dtype=np.int64)
+    z = V[F].mean(axis=1)[:, 2]
+    cap = (z > np.cos(np.radians(30.0))).astype(np.int64)
+    share, pairs, part_share = tangent_cut_shares(V, F, cap)
+    assert pairs.tolist() == [[0, 1]] and share[1, 0] >= TANGENT_SHARE > share[0, 0]
+    assert part_share[1] <= TANGENT_AREA and abs(part_share.sum() - 1.0) < 1e-12
+    assert len(np.unique(absorb_tangent_cuts(V, F, cap))) == 1
+    # the same cap counts as a member when it may be a larger share of the surface than it is
+    assert np.array_equal(absorb_tangent_cuts(V, F, cap, max_area=0.5 * part_share[1]), cap)
+    halves = (z > 0).astype(np.int64)
+    share, _, _ = tangent_cut_shares(V, F, halves)
+    assert share.max() < 0.01
+    assert np.array_equal(absorb_tangent_cuts(V, F, halves), halves)
+
+
+def test_automatic_parts_of_idler_riser_are_cut_across():
+    """The curve skeleton of idler_riser ends in a 78-face sliver of a curved wall whose cut runs
+    along it (a 0.25 share, labelled 16 degrees above its nearest directions by Eq. 3's term 4);
+    no automatic part may keep such a cut."""
+    mesh = _load("idler_riser.stl")
+    part = skeleton_segmentation(mesh).face_part
+    validate_face_part(mesh, part)
+    share, _, part_share = tangent_cut_shares(mesh.vertices, mesh.faces, part)
+    small = share[part_share <= TANGENT_AREA]
+    assert small.size == 0 or small.max() < TANGENT_SHARE
 
 
 def test_automatic_parameter_errors(bar):
