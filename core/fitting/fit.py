@@ -188,7 +188,9 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, info):
     """The least-squares fit made not to cross itself where a refit or the cage allows.
 
     Refits with a stiffer smoothness term under the crossings
-    (:func:`core.fitting.crossings.stiffen_until_clean`); if the fit still crosses and
+    (:func:`core.fitting.crossings.stiffen_until_clean`), each from the fit before it and on
+    the fit's level only (``FINE_ROUNDS`` rounds: the stiffer term changes the fit only
+    near the crossings, so the coarse rounds' large moves need not be made again); if the fit still crosses and
     the cage's limit surface does not, the fit is held back towards the cage there
     (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses itself is no
     reference to hold back to (on to_simp_torsion_arm every base vertex would go back).
@@ -202,10 +204,11 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, info):
     crossings : int, crossing triangle pairs of their limit surface.
     stiffness : (n,) float64 smoothness weights of the fit (for the inside pull).
     """
-    untangled = stiffen_until_clean(
-        vertices, lambda stiffness: _two_level_best_fit(base, hierarchy, limit_map, T, target,
-                                                        rounds, stiffness)[0].vertices,
-        limit_map, T)
+    def refit(stiffness, previous):
+        return best_fit(base, limit_map, T, target, rounds=min(rounds, FINE_ROUNDS),
+                        start=previous, stiffness=stiffness, refit=True).vertices
+
+    untangled = stiffen_until_clean(vertices, refit, limit_map, T)
     vertices, crossings, held = untangled.vertices, untangled.crossings, 0
     if crossings:
         info["cage_self_intersections"] = count_crossings(limit_map, T, base.vertices)
