@@ -312,8 +312,8 @@ class TargetSurface:
         e1 = _unit(np.roll(tri, -1, axis=1) - tri)
         e2 = _unit(np.roll(tri, -2, axis=1) - tri)
         angles = np.arccos(np.clip(np.einsum("ijk,ijk->ij", e1, e2), -1.0, 1.0))
-        vertex_sum = scatter_add(F.reshape(-1), (angles[:, :, None] * fn[:, None, :]).reshape(-1, 3),
-                                 len(V))
+        weighted = (angles[:, :, None] * fn[:, None, :]).reshape(-1, 3)
+        vertex_sum = scatter_add(F.reshape(-1), weighted, len(V))
         return edge_normals, _unit(vertex_sum)
 
     def _normal_at(self, face, region):

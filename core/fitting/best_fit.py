@@ -216,9 +216,8 @@ class NormalEquations:
                 rows.append(block * n_f + np.broadcast_to(corners[:, :, None], pair.shape))
                 cols.append(np.broadcast_to(corners[:, None, :], pair.shape))
                 vals.append((normal[:, a] * normal[:, c])[:, None, None] * pair)
-            fine_rhs += scatter_add(corners.reshape(-1), ((normal * (b / count)[:, None])[:, None, :]
-                                                          * weights[:, :, None]).reshape(-1, 3),
-                                    n_f)
+            per_corner = (normal * (b / count)[:, None])[:, None, :] * weights[:, :, None]
+            fine_rhs += scatter_add(corners.reshape(-1), per_corner.reshape(-1, 3), n_f)
         Z = sp.csr_matrix((np.concatenate([v.reshape(-1) for v in vals]),
                            (np.concatenate([r.reshape(-1) for r in rows]),
                             np.concatenate([c.reshape(-1) for c in cols]))),
