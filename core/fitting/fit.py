@@ -85,10 +85,11 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         (best-fit mode, inside mode from ``start='best-fit'``) ``self_intersections``
         (intersecting triangle pairs of the fine limit mesh, ``surface='limit'``),
         ``cage_self_intersections`` (the cage's, when the result still crosses), ``refits``,
-        ``refit_crossings``, ``stiffened`` (:func:`_untangled`) and ``held_back`` (base
-        vertices held back towards the cage or, inside mode, the least-squares start);
-        inside mode also ``start_margin`` (depth of the start below the target, model
-        units) and ``rgp_held_back`` (base vertices whose RGP move was cut back because the
+        ``refit_crossings``, ``cold_refit_crossings`` (when the short refits did not
+        untangle), ``stiffened`` (:func:`_untangled`) and ``held_back`` (base vertices held
+        back towards the cage or, inside mode, the least-squares start); inside mode also
+        ``start_margin`` (depth of the start below the target, model units) and
+        ``rgp_held_back`` (base vertices whose RGP move was cut back because the
         limit surface crossed itself there). The returned level-``levels`` limit surface
         does not cross itself when the cage's does not, and never where the start did not.
 
@@ -132,8 +133,9 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
                                              rounds, seed=seed)
         info.update(rounds=fitted.rounds + coarse.rounds, rms=fitted.rms,
                     coarse_rms=coarse.rms, stopped=fitted.stopped, start=start)
-        vertices, crossings, stiffness = _untangled(base, limit_map, T, target_surface,
-                                                    fitted.vertices, rounds, seed, info)
+        vertices, crossings, stiffness = _untangled(base, hierarchy, limit_map, T,
+                                                    target_surface, fitted.vertices, rounds,
+                                                    seed, info)
         if mode == "inside":
             # the RGP starts just inside the target, and nowhere crossing itself
             pulled, info["start_margin"] = _pulled_inside(base, limit_map, target_surface,
@@ -184,15 +186,19 @@ mean distance after the RGP than 0 or 0.5)."""
 INSIDE_ROUNDS = 2
 
 
-def _untangled(base, limit_map, T, target, vertices, rounds, seed, info):
+def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, info):
     """The least-squares fit made not to cross itself where a refit or the cage allows.
 
     Refits with a stiffer smoothness term under the crossings
     (:func:`core.fitting.crossings.stiffen_until_clean`), each from the fit before it and on
     the fit's level only (``FINE_ROUNDS`` rounds: the stiffer term changes the fit only
-    near the crossings, so the coarse rounds' large moves need not be made again); if the
-    fit still crosses and the cage's limit surface does not, the fit is held back towards
-    the cage there
+    near the crossings, so the coarse rounds' large moves need not be made again). If they
+    do not reach a clean fit, the refits are made again the long way, each a whole
+    two-level fit from the cage (``cold_refit_crossings``), and the fit with fewer
+    crossings is kept: where the cage itself crosses, stiffening towards it from a crossing
+    fit can bring its crossings back (tray_bottom: 171, 72, 22, 156, 167 pairs the short way,
+    7 at best the long way). If the fit still crosses and the cage's limit surface does
+    not, the fit is held back towards the cage there
     (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses itself is no
     reference to hold back to (on to_simp_torsion_arm every base vertex would go back).
     Records ``refits``, ``refit_crossings`` (crossing pairs after the first fit and each
@@ -209,7 +215,16 @@ def _untangled(base, limit_map, T, target, vertices, rounds, seed, info):
         return best_fit(base, limit_map, T, target, rounds=min(rounds, FINE_ROUNDS),
                         seed=seed, start=previous, stiffness=stiffness, refit=True).vertices
 
+    def cold_refit(stiffness, previous):
+        return _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness,
+                                   seed)[0].vertices
+
     untangled = stiffen_until_clean(vertices, refit, limit_map, T)
+    if untangled.crossings:
+        cold = stiffen_until_clean(vertices, cold_refit, limit_map, T)
+        info["cold_refit_crossings"] = cold.counts
+        if cold.crossings < untangled.crossings:
+            untangled = cold
     vertices, crossings, held = untangled.vertices, untangled.crossings, 0
     if crossings:
         info["cage_self_intersections"] = count_crossings(limit_map, T, base.vertices)
