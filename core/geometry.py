@@ -130,6 +130,33 @@ def triangle_mesh_volume(vertices, faces):
     return float(triangle_signed_volumes(V - V.mean(axis=0), faces).sum())
 
 
+def sample_surface(V, F, count, rng):
+    """Uniform area-weighted random points on a triangle mesh.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+    F : (m, 3) int64
+    count : int
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    (count, 3) float64
+    """
+    tri = V[F]
+    area = face_areas(V, F)
+    total = area.sum()
+    if not total > 0:
+        raise InvalidMeshError("mesh has zero surface area", "degenerate_faces", len(F))
+    face = rng.choice(len(F), size=count, p=area / total)
+    a, b = rng.random((2, count))
+    flip = a + b > 1
+    a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
+    t = tri[face]
+    return t[:, 0] + a[:, None] * (t[:, 1] - t[:, 0]) + b[:, None] * (t[:, 2] - t[:, 0])
+
+
 def triangulate(face_vertices, face_offsets):
     """Fan triangulation of a CSR polygon mesh (``core.types.PolyMesh`` layout).
 

@@ -33,9 +33,9 @@ from itertools import chain
 import numpy as np
 from scipy.spatial import cKDTree
 
-from core.geometry import radius_classes, scatter_add, unit_face_normals, validate_triangles
+from core.geometry import (radius_classes, sample_surface, scatter_add, unit_face_normals,
+                           validate_triangles)
 from core.optional_imports import optional_module
-from core.quality import sample_surface
 
 EDGE_TOL = 1e-9
 """Barycentric tolerance of the exact ray-triangle test (dimensionless)."""
@@ -222,7 +222,7 @@ class TargetSurface:
     def samples(self, count, seed=0):
         """Area-weighted random points on the surface and the pseudo-normals there.
 
-        Drawn once per ``(count, seed)`` (:func:`core.quality.sample_surface` with
+        Drawn once per ``(count, seed)`` (:func:`core.geometry.sample_surface` with
         ``numpy.random.default_rng(seed)``) and kept: every least-squares fit on this
         target uses the same samples.
 
