@@ -84,6 +84,16 @@ def radius_classes(radius, max_classes=12):
     return [np.flatnonzero(level == value) for value in np.unique(level)]
 
 
+def scatter_add(index, values, n):
+    """(n, 3) float64 sums of the rows of ``values`` ((p, 3)) by ``index`` ((p,) int64).
+
+    The unbuffered ``np.add.at`` of numpy 1.24 is several times slower than one
+    ``np.bincount`` per coordinate.
+    """
+    return np.stack([np.bincount(index, weights=values[:, k], minlength=n)
+                     for k in range(values.shape[1])], axis=1)
+
+
 def face_cross(vertices, faces):
     """(m, 3) float64 ``(b - a) x (c - a)`` of each triangle: its normal times twice its area.
 
@@ -118,6 +128,33 @@ def triangle_mesh_volume(vertices, faces):
     """
     V = np.asarray(vertices, dtype=np.float64)
     return float(triangle_signed_volumes(V - V.mean(axis=0), faces).sum())
+
+
+def sample_surface(V, F, count, rng):
+    """Uniform area-weighted random points on a triangle mesh.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+    F : (m, 3) int64
+    count : int
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    (count, 3) float64
+    """
+    tri = V[F]
+    area = face_areas(V, F)
+    total = area.sum()
+    if not total > 0:
+        raise InvalidMeshError("mesh has zero surface area", "degenerate_faces", len(F))
+    face = rng.choice(len(F), size=count, p=area / total)
+    a, b = rng.random((2, count))
+    flip = a + b > 1
+    a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
+    t = tri[face]
+    return t[:, 0] + a[:, None] * (t[:, 1] - t[:, 0]) + b[:, None] * (t[:, 2] - t[:, 0])
 
 
 def triangulate(face_vertices, face_offsets):

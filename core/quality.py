@@ -15,7 +15,7 @@ hint.
 import numpy as np
 
 from core.errors import InvalidMeshError, ParameterError
-from core.geometry import face_areas, validate_triangles
+from core.geometry import sample_surface, validate_triangles
 from core.optional_imports import optional_module
 
 def manifold_report(V, F):
@@ -167,33 +167,6 @@ def surface_distances(result_V, result_F, target_V, target_F, samples=20000, see
     }
     report["hausdorff"] = max(report["result_to_target_max"], report["target_to_result_max"])
     return report
-
-
-def sample_surface(V, F, count, rng):
-    """Uniform area-weighted random points on a triangle mesh.
-
-    Parameters
-    ----------
-    V : (n, 3) float64
-    F : (m, 3) int64
-    count : int
-    rng : numpy.random.Generator
-
-    Returns
-    -------
-    (count, 3) float64
-    """
-    tri = V[F]
-    area = face_areas(V, F)
-    total = area.sum()
-    if not total > 0:
-        raise InvalidMeshError("mesh has zero surface area", "degenerate_faces", len(F))
-    face = rng.choice(len(F), size=count, p=area / total)
-    a, b = rng.random((2, count))
-    flip = a + b > 1
-    a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
-    t = tri[face]
-    return t[:, 0] + a[:, None] * (t[:, 1] - t[:, 0]) + b[:, None] * (t[:, 2] - t[:, 0])
 
 
 def point_surface_distance(points, V, F):

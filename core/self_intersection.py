@@ -17,20 +17,23 @@ from core.tolerances import CONTACT
 _CHUNK = 400_000
 
 
-def find_self_intersections(vertices, faces):
+def find_self_intersections(vertices, faces, among=None):
     """Pairs of faces that intersect each other.
 
     Parameters
     ----------
     vertices : (n, 3) float64
     faces : (m, 3) int64
+    among : (m,) bool or None, test only the pairs with at least one face marked (for a
+        mesh of which only the marked faces moved since the pairs were last found);
+        None tests all.
 
     Returns
     -------
     pairs : (k, 2) int64, ``pairs[:, 0] < pairs[:, 1]``, sorted.
     """
     tri = vertices[faces]
-    pairs = _candidate_pairs(tri)
+    pairs = _candidate_pairs(tri, among)
     eps = CONTACT * float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
     normal = unit_face_normals(vertices, faces)
     offset = np.einsum("ij,ij->i", normal, tri[:, 0])
@@ -54,13 +57,15 @@ def _straddle(tri, normal, offset, a, b, eps):
     return (side.max(axis=1) > eps) & (side.min(axis=1) < -eps)
 
 
-def _candidate_pairs(tri):
+def _candidate_pairs(tri, among=None):
     """(p, 2) int64 face pairs whose bounding boxes overlap (i < j).
 
     A bounding-volume hierarchy over the faces in Morton (Z-curve) order, a complete
     binary tree stored level by level, is traversed against itself breadth-first:
     every level keeps only the node pairs whose boxes overlap, so the work follows
     the number of truly overlapping pairs, whatever the spread of triangle sizes.
+    With ``among`` ((t,) bool), node pairs without a marked face below either node are
+    dropped too.
     """
     lo, hi = tri.min(axis=1), tri.max(axis=1)
     order = np.argsort(_morton_codes(tri.mean(axis=1)), kind="stable")
@@ -69,21 +74,25 @@ def _candidate_pairs(tri):
     leaf_lo = np.full((size, 3), np.inf)
     leaf_hi = np.full((size, 3), -np.inf)
     leaf_lo[:len(tri)], leaf_hi[:len(tri)] = lo[order], hi[order]
-    levels = [(leaf_lo, leaf_hi)]
+    leaf_marked = np.zeros(size, dtype=bool)
+    leaf_marked[:len(tri)] = True if among is None else among[order]
+    levels = [(leaf_lo, leaf_hi, leaf_marked)]
     while len(levels[0][0]) > 1:
-        child_lo, child_hi = levels[0]
+        child_lo, child_hi, child_marked = levels[0]
         levels.insert(0, (np.minimum(child_lo[0::2], child_lo[1::2]),
-                          np.maximum(child_hi[0::2], child_hi[1::2])))
+                          np.maximum(child_hi[0::2], child_hi[1::2]),
+                          child_marked[0::2] | child_marked[1::2]))
     self_children = np.array([[0, 0], [1, 1], [0, 1]], dtype=np.int64)
     cross_children = np.array([[0, 0], [0, 1], [1, 0], [1, 1]], dtype=np.int64)
     pairs = np.zeros((1, 2), dtype=np.int64)
-    for level_lo, level_hi in levels[1:]:
+    for level_lo, level_hi, level_marked in levels[1:]:
         same = pairs[:, 0] == pairs[:, 1]
         pairs = np.concatenate([
             (2 * pairs[same][:, None, :] + self_children).reshape(-1, 2),
             (2 * pairs[~same][:, None, :] + cross_children).reshape(-1, 2)])
         a, b = pairs[:, 0], pairs[:, 1]
-        keep = ((level_lo[a] <= level_hi[b]) & (level_lo[b] <= level_hi[a])).all(axis=1)
+        keep = (((level_lo[a] <= level_hi[b]) & (level_lo[b] <= level_hi[a])).all(axis=1)
+                & (level_marked[a] | level_marked[b]))
         pairs = pairs[keep]
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     return np.sort(order[pairs], axis=1)

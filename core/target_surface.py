@@ -33,7 +33,8 @@ from itertools import chain
 import numpy as np
 from scipy.spatial import cKDTree
 
-from core.geometry import radius_classes, unit_face_normals, validate_triangles
+from core.geometry import (radius_classes, sample_surface, scatter_add, unit_face_normals,
+                           validate_triangles)
 from core.optional_imports import optional_module
 
 EDGE_TOL = 1e-9
@@ -127,6 +128,7 @@ class TargetSurface:
         self.diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
         self._tree = optional_module("igl", "libigl").AABB()
         self._tree.init(V, F)
+        self._samples = {}
 
     def nearest(self, points):
         """Closest points and unsigned distances (no pseudo-normals).
@@ -217,6 +219,25 @@ class TargetSurface:
         normal[found] = self.face_normals[face[found]]
         return RayHits(t, face, bary, normal, int(len(recast)))
 
+    def samples(self, count, seed=0):
+        """Area-weighted random points on the surface and the pseudo-normals there.
+
+        Drawn once per ``(count, seed)`` (:func:`core.geometry.sample_surface` with
+        ``numpy.random.default_rng(seed)``) and kept: every least-squares fit on this
+        target uses the same samples.
+
+        Returns
+        -------
+        points : (count, 3) float64, model units.
+        normals : (count, 3) float64 unit pseudo-normals at them.
+        """
+        key = (int(count), int(seed))
+        if key not in self._samples:
+            points = sample_surface(self.vertices, self.faces, key[0],
+                                    np.random.default_rng(key[1]))
+            self._samples[key] = (points, self.closest(points).normal)
+        return self._samples[key]
+
     @cached_property
     def _edges(self):
         """(m, 3) edge vectors ``v1 - v0`` and ``v2 - v0`` of every triangle."""
@@ -282,18 +303,17 @@ class TargetSurface:
     def _pseudo_normals(self):
         """(m, 3, 3) per face-edge and (n, 3) per vertex unit pseudo-normals."""
         F, V, fn = self.faces, self.vertices, self.face_normals
-        pairs = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
-        _, edge_id = np.unique(np.sort(pairs, axis=1), axis=0, return_inverse=True)
+        pairs = np.sort(np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+        _, edge_id = np.unique(pairs[:, 0] * len(V) + pairs[:, 1], return_inverse=True)
         edge_id = edge_id.reshape(-1)
-        summed = np.zeros((edge_id.max() + 1, 3))
-        np.add.at(summed, edge_id, np.repeat(fn, 3, axis=0))
+        summed = scatter_add(edge_id, np.repeat(fn, 3, axis=0), edge_id.max() + 1)
         edge_normals = _unit(summed)[edge_id].reshape(-1, 3, 3)
         tri = self._tri
         e1 = _unit(np.roll(tri, -1, axis=1) - tri)
         e2 = _unit(np.roll(tri, -2, axis=1) - tri)
         angles = np.arccos(np.clip(np.einsum("ijk,ijk->ij", e1, e2), -1.0, 1.0))
-        vertex_sum = np.zeros_like(V)
-        np.add.at(vertex_sum, F.reshape(-1), (angles[:, :, None] * fn[:, None, :]).reshape(-1, 3))
+        weighted = (angles[:, :, None] * fn[:, None, :]).reshape(-1, 3)
+        vertex_sum = scatter_add(F.reshape(-1), weighted, len(V))
         return edge_normals, _unit(vertex_sum)
 
     def _normal_at(self, face, region):

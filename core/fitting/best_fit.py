@@ -31,12 +31,14 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
 from core.fitting.responses import vertex_normals
-from core.quality import sample_surface
+from core.geometry import scatter_add
 from core.subdivision.catmull_clark import mesh_topology
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
 _DENSE_UNKNOWNS = 3000
+"""Most unknowns solved by dense Cholesky (the Catmull-Clark limit stencils make the normal
+matrix about 15 % full); above, sparse LU with a symmetric minimum-degree ordering."""
 COMPATIBLE = 0.5
 """Pairs count only if their two unit normals have a dot product above this (60 degrees)."""
 
@@ -46,7 +48,7 @@ class BestFitResult:
     """Outcome of :func:`best_fit`.
 
     vertices : (n, 3) float64 fitted base vertices (model units), the round with the
-        lowest RMS distance.
+        lowest RMS distance (of the solved rounds, for a refit).
     rounds : int, Gauss-Newton rounds run.
     rms : list of float, two-sided RMS distance (forward and backward mean squares
         averaged) before each round and after the last (model units).
@@ -60,7 +62,7 @@ class BestFitResult:
 
 
 def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, damping=1e-3,
-             tol=5e-3, samples=None, seed=0, start=None, stiffness=None):
+             tol=5e-3, samples=None, seed=0, start=None, stiffness=None, refit=False):
     """Fit the cage's limit surface to the target in the two-sided least-squares sense.
 
     Parameters
@@ -80,6 +82,9 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
         the smoothness term's reference either way).
     stiffness : (n,) float64 >= 1 or None, per base vertex factor on the smoothness term
         (the rows of ``D`` at that vertex); None is all ones.
+    refit : bool, ``start`` is a fit with other smoothness weights: it is not a candidate
+        for the result (its RMS distance is lower than any fit with stiffer weights can
+        reach), the first solved round is.
 
     Returns
     -------
@@ -88,10 +93,9 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
     system = NormalEquations(base, mapping, smoothness, damping, stiffness)
     n_fine = system.n_fine
     count = max(n_fine, 2000) if samples is None else int(samples)
-    rng = np.random.default_rng(seed)
-    points = sample_surface(target.vertices, target.faces, count, rng)
-    sample_normal = target.closest(points).normal
+    points, sample_normal = target.samples(count, seed)
     V = system.V_init.copy() if start is None else np.array(start, dtype=np.float64)
+    own, ones = np.arange(n_fine)[:, None], np.ones((n_fine, 1))
     rms = []
     best = (np.inf, V)
     stopped = "rounds"
@@ -102,21 +106,19 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
         back = fitted.nearest(points)
         rms.append(float(np.sqrt(0.5 * (np.mean(forward.distance ** 2)
                                         + np.mean(back.distance ** 2)))))
-        if rms[-1] < best[0]:
+        if rms[-1] < best[0] and not (refit and done == 0 and rounds > 0):
             best = (rms[-1], V)
-        if len(rms) >= 2 and rms[-2] - rms[-1] <= tol * rms[-2]:
+        if len(rms) >= 2 + refit and rms[-2] - rms[-1] <= tol * rms[-2]:
             stopped = "converged"
             break
         if done == rounds:
             break
-        rows = sp.csr_matrix((back.bary.reshape(-1), triangles[back.face].reshape(-1),
-                              np.arange(0, 3 * count + 1, 3)), shape=(count, n_fine))
         # pairs whose normals disagree (the far wall of a thin member) are left out
         keep_f = _dot(vertex_normals(X, triangles), forward.normal) > COMPATIBLE
         keep_b = _dot(fitted.face_normals[back.face], sample_normal) > COMPATIBLE
-        V = system.solve(V, [(forward.normal * keep_f[:, None], mapping,
+        V = system.solve(V, [(forward.normal * keep_f[:, None], own, ones,
                               _dot(forward.normal, forward.point) * keep_f, n_fine),
-                             (sample_normal * keep_b[:, None], rows @ mapping,
+                             (sample_normal * keep_b[:, None], triangles[back.face], back.bary,
                               _dot(sample_normal, points) * keep_b, count)])
     return BestFitResult(best[1], len(rms) - 1, rms, stopped)
 
@@ -160,7 +162,7 @@ def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
         if not active.any():
             break
         normal = near.normal * active[:, None]
-        V = system.solve(V, [(normal, mapping,
+        V = system.solve(V, [(normal, np.arange(len(X))[:, None], np.ones((len(X), 1)),
                               (_dot(near.normal, near.point) - margin) * active,
                               system.n_fine)])
     return V
@@ -169,11 +171,18 @@ def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
 class NormalEquations:
     """Regularised point-to-plane normal equations on the cage's vertices.
 
-    For data terms ``(normal, A, b, count)`` -- rows ``normal_j . (A V)_j = b_j``
-    weighted by ``1 / count`` -- :meth:`solve` minimises their sum plus
-    ``lam s |D (V - V_init)|^2 + mu s |V - V_prev|^2`` (``s`` the mean diagonal of the
-    data part, so ``lam`` and ``mu`` are unit free; ``D`` the cage's umbrella
+    For data terms ``(normal, corners, weights, b, count)`` -- rows
+    ``normal_j . sum_c weights_jc X_(corners_jc) = b_j`` on the fine points
+    ``X = mapping @ V``, weighted by ``1 / count`` -- :meth:`solve` minimises their sum
+    plus ``lam s |D (V - V_init)|^2 + mu s |V - V_prev|^2`` (``s`` the mean diagonal of
+    the data part, so ``lam`` and ``mu`` are unit free; ``D`` the cage's umbrella
     Laplacian). The smoothness matrix is built once per cage.
+
+    Assembly: the data part's 3x3 blocks (coordinates ``a, b``) are
+    ``M^T Z_ab M`` with ``Z_ab = sum_j (n_ja n_jb / count) w_j w_j^T`` on the fine
+    points (``w_j`` the row's corner weights), six symmetric blocks built at once on
+    the fine level and mapped by one sparse product; a row through ``k`` corners costs
+    ``k^2`` fine entries instead of the square of its base-vertex support.
 
     Parameters
     ----------
@@ -185,6 +194,7 @@ class NormalEquations:
     """
 
     def __init__(self, base, mapping, smoothness, damping, stiffness=None):
+        self.mapping = sp.csr_matrix(mapping)
         self.n_fine, self.n_base = mapping.shape
         self.V_init = np.asarray(base.vertices, dtype=np.float64)
         laplacian = _umbrella(base, self.n_base)
@@ -193,53 +203,53 @@ class NormalEquations:
         self.smooth = sp.block_diag([laplacian.T @ laplacian] * 3, format="csr")
         self.smooth_init = self.smooth @ self.V_init.T.reshape(-1)
         self.smoothness, self.damping = float(smoothness), float(damping)
+        self._mapping_t6 = sp.block_diag([self.mapping.T] * len(_PAIRS), format="csr")
 
     def solve(self, V, terms):
         """(n_base, 3) float64 minimiser for the data ``terms`` and the previous ``V``."""
-        system = None
-        rhs = 0.0
-        for normal, A, b, count in terms:
-            J = _plane_rows(normal, sp.csr_matrix(A))
-            part = (J.T @ J) / count
-            system = part if system is None else system + part
-            rhs = rhs + (J.T @ b) / count
-        scale = float(system.diagonal().mean())
-        system = (system + (self.smoothness * scale) * self.smooth
-                  + sp.identity(3 * self.n_base, format="csr") * (self.damping * scale))
+        n_f, n = self.n_fine, self.n_base
+        rows, cols, vals = [], [], []
+        fine_rhs = np.zeros((n_f, 3))
+        for normal, corners, weights, b, count in terms:
+            pair = weights[:, :, None] * weights[:, None, :] / count
+            for block, (a, c) in enumerate(_PAIRS):
+                rows.append(block * n_f + np.broadcast_to(corners[:, :, None], pair.shape))
+                cols.append(np.broadcast_to(corners[:, None, :], pair.shape))
+                vals.append((normal[:, a] * normal[:, c])[:, None, None] * pair)
+            per_corner = (normal * (b / count)[:, None])[:, None, :] * weights[:, :, None]
+            fine_rhs += scatter_add(corners.reshape(-1), per_corner.reshape(-1, 3), n_f)
+        Z = sp.csr_matrix((np.concatenate([v.reshape(-1) for v in vals]),
+                           (np.concatenate([r.reshape(-1) for r in rows]),
+                            np.concatenate([c.reshape(-1) for c in cols]))),
+                          shape=(len(_PAIRS) * n_f, n_f))
+        blocks = self._mapping_t6 @ (Z @ self.mapping)
+        rhs = np.asarray(self.mapping.T @ fine_rhs).T.reshape(-1)
+        dense = 3 * n <= _DENSE_UNKNOWNS
+        part = {}
+        for block, (a, c) in enumerate(_PAIRS):
+            piece = blocks[block * n:(block + 1) * n]
+            part[a, c] = part[c, a] = piece.toarray() if dense else piece
+        scale = float(np.mean([part[a, a].diagonal().mean() for a in range(3)]))
+        regular = ((self.smoothness * scale) * self.smooth
+                   + sp.identity(3 * n, format="csr") * (self.damping * scale))
         rhs = (rhs + (self.smoothness * scale) * self.smooth_init
                + (self.damping * scale) * V.T.reshape(-1))
-        return _solve_spd(system, rhs).reshape(3, -1).T
+        if dense:
+            system = np.block([[part[a, c] for c in range(3)] for a in range(3)])
+            system += regular.toarray()
+            solution = scipy.linalg.cho_solve(scipy.linalg.cho_factor(system), rhs)
+        else:
+            system = sp.bmat([[part[a, c] for c in range(3)] for a in range(3)], format="csc")
+            solution = spsolve((system + regular).tocsc(), rhs, permc_spec="MMD_AT_PLUS_A")
+        return solution.reshape(3, -1).T
+
+
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+"""The coordinate pairs ``(a, b)`` of the six distinct 3x3 blocks of the normal matrix."""
 
 
 def _dot(a, b):
     return np.einsum("ij,ij->i", a, b)
-
-
-def _solve_spd(system, rhs):
-    """Solve a symmetric positive definite sparse system: dense Cholesky up to
-    ``_DENSE_UNKNOWNS`` unknowns (the Catmull-Clark limit stencils make it about 15 %
-    full), sparse LU with a symmetric minimum-degree ordering above."""
-    if system.shape[0] <= _DENSE_UNKNOWNS:
-        return scipy.linalg.cho_solve(scipy.linalg.cho_factor(system.toarray()), rhs)
-    return spsolve(system.tocsc(), rhs, permc_spec="MMD_AT_PLUS_A")
-
-
-def _plane_rows(normal, A):
-    """(k, 3 n) CSR rows ``v -> normal_j . (A V)_j`` for ``v = [Vx, Vy, Vz]``.
-
-    Built directly from ``A``'s CSR arrays: row ``j`` holds ``A``'s row ``j`` three
-    times, scaled by ``normal_j``'s coordinates, with the columns shifted by 0, n, 2n.
-    """
-    k, n = A.shape
-    counts = np.diff(A.indptr)
-    row = np.repeat(np.arange(k), counts)
-    within = np.arange(len(A.data)) - A.indptr[row]
-    position = (3 * A.indptr[row] + within)[:, None] + counts[row, None] * np.arange(3)
-    data = np.empty(3 * len(A.data))
-    indices = np.empty(3 * len(A.data), dtype=A.indices.dtype)
-    data[position] = A.data[:, None] * normal[row]
-    indices[position] = A.indices[:, None] + n * np.arange(3)
-    return sp.csr_matrix((data, indices, 3 * A.indptr), shape=(k, 3 * n))
 
 
 def _umbrella(base, n):

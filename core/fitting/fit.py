@@ -35,7 +35,7 @@ SURFACES = ("limit", "control")
 
 def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="inside",
                   progress=None, penalty=1e5, step_fraction=0.05, surface="limit",
-                  start="best-fit", rounds=10, tol=2e-3, patience=5):
+                  start="best-fit", rounds=10, tol=2e-3, patience=5, seed=0):
     """Move the base-mesh vertices so the subdivision surface fills or fits the target.
 
     Parameters
@@ -63,6 +63,7 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         it crosses itself, :func:`core.fitting.crossings.hold_back_crossings`) or ``'cage'``
         (from the cage as given, the paper's start).
     rounds : int >= 0, most Gauss-Newton rounds of the least-squares fit.
+    seed : int, seed of its target samples (:meth:`core.target_surface.TargetSurface.samples`).
     tol, patience : the RGP stops when its best objective improved by less than
         ``tol * max(|best|, step)`` over the last ``patience`` iterations (see
         :func:`core.fitting.rgp.run_rgp`); ``iterations`` is the cap.
@@ -84,10 +85,11 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         (best-fit mode, inside mode from ``start='best-fit'``) ``self_intersections``
         (intersecting triangle pairs of the fine limit mesh, ``surface='limit'``),
         ``cage_self_intersections`` (the cage's, when the result still crosses), ``refits``,
-        ``refit_crossings``, ``stiffened`` (:func:`_untangled`) and ``held_back`` (base
-        vertices held back towards the cage or, inside mode, the least-squares start);
-        inside mode also ``start_margin`` (depth of the start below the target, model
-        units) and ``rgp_held_back`` (base vertices whose RGP move was cut back because the
+        ``refit_crossings``, ``cold_refit_crossings`` (when the short refits did not
+        untangle), ``stiffened`` (:func:`_untangled`) and ``held_back`` (base vertices held
+        back towards the cage or, inside mode, the least-squares start); inside mode also
+        ``start_margin`` (depth of the start below the target, model units) and
+        ``rgp_held_back`` (base vertices whose RGP move was cut back because the
         limit surface crossed itself there). The returned level-``levels`` limit surface
         does not cross itself when the cage's does not, and never where the start did not.
 
@@ -128,12 +130,12 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     if mode == "best-fit" or (mode == "inside" and start == "best-fit"):
         progress.report("fit", 0.0, "least-squares fit")
         fitted, coarse = _two_level_best_fit(base, hierarchy, limit_map, T, target_surface,
-                                             rounds)
+                                             rounds, seed=seed)
         info.update(rounds=fitted.rounds + coarse.rounds, rms=fitted.rms,
                     coarse_rms=coarse.rms, stopped=fitted.stopped, start=start)
         vertices, crossings, stiffness = _untangled(base, hierarchy, limit_map, T,
                                                     target_surface, fitted.vertices, rounds,
-                                                    info)
+                                                    seed, info)
         if mode == "inside":
             # the RGP starts just inside the target, and nowhere crossing itself
             pulled, info["start_margin"] = _pulled_inside(base, limit_map, target_surface,
@@ -184,12 +186,19 @@ mean distance after the RGP than 0 or 0.5)."""
 INSIDE_ROUNDS = 2
 
 
-def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, info):
+def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, info):
     """The least-squares fit made not to cross itself where a refit or the cage allows.
 
     Refits with a stiffer smoothness term under the crossings
-    (:func:`core.fitting.crossings.stiffen_until_clean`); if the fit still crosses and
-    the cage's limit surface does not, the fit is held back towards the cage there
+    (:func:`core.fitting.crossings.stiffen_until_clean`), each from the fit before it and on
+    the fit's level only (``FINE_ROUNDS`` rounds: the stiffer term changes the fit only
+    near the crossings, so the coarse rounds' large moves need not be made again). If they
+    do not reach a clean fit, the refits are made again the long way, each a whole
+    two-level fit from the cage (``cold_refit_crossings``), and the fit with fewer
+    crossings is kept: where the cage itself crosses, stiffening towards it from a crossing
+    fit can bring its crossings back (tray_bottom: 171, 72, 22, 156, 167 pairs the short way,
+    7 at best the long way). If the fit still crosses and the cage's limit surface does
+    not, the fit is held back towards the cage there
     (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses itself is no
     reference to hold back to (on to_simp_torsion_arm every base vertex would go back).
     Records ``refits``, ``refit_crossings`` (crossing pairs after the first fit and each
@@ -202,10 +211,20 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, info):
     crossings : int, crossing triangle pairs of their limit surface.
     stiffness : (n,) float64 smoothness weights of the fit (for the inside pull).
     """
-    untangled = stiffen_until_clean(
-        vertices, lambda stiffness: _two_level_best_fit(base, hierarchy, limit_map, T, target,
-                                                        rounds, stiffness)[0].vertices,
-        limit_map, T)
+    def refit(stiffness, previous):
+        return best_fit(base, limit_map, T, target, rounds=min(rounds, FINE_ROUNDS),
+                        seed=seed, start=previous, stiffness=stiffness, refit=True).vertices
+
+    def cold_refit(stiffness, previous):
+        return _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness,
+                                   seed)[0].vertices
+
+    untangled = stiffen_until_clean(vertices, refit, limit_map, T)
+    if untangled.crossings:
+        cold = stiffen_until_clean(vertices, cold_refit, limit_map, T)
+        info["cold_refit_crossings"] = cold.counts
+        if cold.crossings < untangled.crossings:
+            untangled = cold
     vertices, crossings, held = untangled.vertices, untangled.crossings, 0
     if crossings:
         info["cage_self_intersections"] = count_crossings(limit_map, T, base.vertices)
@@ -247,7 +266,7 @@ def _pulled_inside(base, limit_map, target, vertices, stiffness):
                        stiffness=stiffness), margin
 
 
-def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness=None):
+def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness=None, seed=0):
     """Least-squares fit: ``rounds - FINE_ROUNDS`` rounds on the level-1 limit points
     (a quarter of the points; the large moves), then up to ``FINE_ROUNDS`` on the fit's
     level. Measured on the SIMP cantilever: 8 + 2 rounds reach a lower mean distance than
@@ -265,11 +284,11 @@ def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness
         coarse_map = (limit_matrices(coarse_mesh)[0] @ hierarchy.composite(0)).tocsr()
         coarse = best_fit(base, coarse_map,
                           triangulate(coarse_mesh.face_vertices, coarse_mesh.face_offsets),
-                          target, rounds=coarse_rounds, stiffness=stiffness)
+                          target, rounds=coarse_rounds, stiffness=stiffness, seed=seed)
     else:
         coarse = BestFitResult(np.asarray(base.vertices, dtype=np.float64), 0, [], "rounds")
     fine = best_fit(base, limit_map, T, target, rounds=rounds - coarse.rounds,
-                    start=coarse.vertices, stiffness=stiffness)
+                    start=coarse.vertices, stiffness=stiffness, seed=seed)
     return fine, coarse
 
 

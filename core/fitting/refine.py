@@ -17,8 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from core.errors import ParameterError
-from core.geometry import triangulate
-from core.quality import sample_surface
+from core.geometry import sample_surface, triangulate
 from core.subdivision.catmull_clark import build_hierarchy, face_grids
 from core.subdivision.limit import limit_matrices
 from core.target_surface import TargetSurface

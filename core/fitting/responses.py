@@ -18,18 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.geometry import face_cross
+from core.geometry import face_cross, scatter_add
 from core.target_surface import TargetSurface
-
-
-def scatter_add(index, values, n):
-    """(n, 3) float64 sums of the rows of ``values`` ((p, 3)) by ``index`` ((p,) int64).
-
-    The unbuffered ``np.add.at`` of numpy 1.24 is several times slower than one
-    ``np.bincount`` per coordinate.
-    """
-    return np.stack([np.bincount(index, weights=values[:, k], minlength=n)
-                     for k in range(values.shape[1])], axis=1)
 
 
 def volume(X, T):

@@ -6,7 +6,7 @@ import scipy.sparse as sp
 import trimesh
 
 from core.errors import ExportError
-from core.fitting import fit_base_mesh
+from core.fitting import crossings, fit_base_mesh
 from core.fitting.crossings import STIFFEN, hold_back_crossings, influencing, stiffen_until_clean
 from core.params import ReconstructionParams
 from core.pipeline import run_stages
@@ -52,6 +52,32 @@ def test_hold_back_keeps_the_reference_crossings_and_adds_none():
     assert kept.sum() == len(V) - count        # every other vertex keeps its whole move
 
 
+def test_crossings_among_marked_faces_are_the_full_search_restricted_to_them():
+    V, T = icosphere()
+    W = pushed_through(pushed_through(V, 0), 80)    # two spikes, far apart
+    every = find_self_intersections(W, T)
+    marked = np.zeros(len(T), dtype=bool)
+    marked[np.flatnonzero((T == 80).any(axis=1))] = True
+    expected = every[marked[every].any(axis=1)]
+    assert 0 < len(expected) < len(every)
+    np.testing.assert_array_equal(find_self_intersections(W, T, among=marked), expected)
+    assert len(find_self_intersections(W, T, among=np.zeros(len(T), dtype=bool))) == 0
+
+
+def test_hold_back_rechecking_only_what_moved_agrees_with_full_searches(monkeypatch):
+    V, T = icosphere()
+    M = sp.identity(len(V), format="csr")
+    moved = pushed_through(pushed_through(V, 5), 120)
+    moved[(np.abs(V @ V[5]) < 0.5) & (np.abs(V @ V[120]) < 0.5)] *= 1.02
+    quick = hold_back_crossings(V, moved, M, T)
+    monkeypatch.setattr(crossings, "_crossings_after",
+                        lambda X, triangles, pairs, mapping, changed:
+                        find_self_intersections(X, triangles))
+    full = hold_back_crossings(V, moved, M, T)
+    np.testing.assert_array_equal(quick[0], full[0])
+    assert quick[1:] == full[1:] and quick[2] == 0 and quick[1] >= 2
+
+
 def test_stiffen_until_clean_stiffens_only_under_the_crossings():
     V, T = icosphere()
     M = sp.identity(len(V), format="csr")
@@ -59,15 +85,16 @@ def test_stiffen_until_clean_stiffens_only_under_the_crossings():
     under = influencing(find_self_intersections(crossing, T), M, T)
     calls = []
 
-    def refit(stiffness):                      # "the fit": clean once vertex 5 is stiff
-        calls.append(stiffness.copy())
+    def refit(stiffness, previous):            # "the fit": clean once vertex 5 is stiff
+        calls.append((stiffness.copy(), previous.copy()))
         return V.copy() if stiffness[5] > 1 else crossing
 
     untangled = stiffen_until_clean(crossing, refit, M, T)
     assert untangled.crossings == 0 and untangled.refits == 1 == len(calls)
     assert untangled.counts[0] > 0 and untangled.counts[-1] == 0
-    assert np.array_equal(np.flatnonzero(calls[0] > 1), under)
-    assert np.all(calls[0][under] == STIFFEN)
+    assert np.array_equal(np.flatnonzero(calls[0][0] > 1), under)
+    assert np.all(calls[0][0][under] == STIFFEN)
+    np.testing.assert_array_equal(calls[0][1], crossing)   # started from the crossing fit
     np.testing.assert_array_equal(untangled.vertices, V)
 
 
@@ -75,7 +102,7 @@ def test_stiffen_until_clean_keeps_the_fit_with_fewest_crossings():
     V, T = icosphere()
     M = sp.identity(len(V), format="csr")
     one, two = pushed_through(V, 5), pushed_through(pushed_through(V, 5), 120)
-    untangled = stiffen_until_clean(one, lambda stiffness: two, M, T, tries=3)
+    untangled = stiffen_until_clean(one, lambda stiffness, previous: two, M, T, tries=3)
     assert untangled.refits == 3 and len(untangled.counts) == 4
     assert untangled.crossings == untangled.counts[0] == min(untangled.counts)
     np.testing.assert_array_equal(untangled.vertices, one)

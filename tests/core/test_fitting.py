@@ -6,6 +6,7 @@ import trimesh
 
 from core.errors import InvalidMeshError, ParameterError
 from core.fitting import TargetSurface, fit_base_mesh
+from core.fitting.best_fit import NormalEquations, _umbrella, best_fit
 from core.fitting.responses import packaging, thickness, thickness_constraint, volume
 from core.geometry import triangulate
 from core.subdivision.catmull_clark import build_hierarchy
@@ -246,3 +247,60 @@ def test_hold_back_crossings_undoes_only_the_crossing_move():
     assert 1 <= count <= 0.1 * len(V)
     kept = np.linalg.norm(held - moved, axis=1) < 1e-12
     assert kept.sum() == len(V) - count         # every other vertex keeps its whole move
+
+
+def test_normal_equations_solve_the_dense_least_squares_problem():
+    # two data terms (one row per fine point; one through three corners with barycentric
+    # weights) solved by the fine-level assembly against the same problem written out as
+    # a dense least-squares system with an explicit Jacobian
+    base = grid_sphere(2)
+    h, fine, T = fine_mesh(base, 2)
+    M = (limit_matrices(fine)[0] @ h.composite(1)).tocsr()
+    n_f, n = M.shape
+    rng = np.random.default_rng(3)
+    normal_f = rng.normal(size=(n_f, 3))
+    normal_f /= np.linalg.norm(normal_f, axis=1, keepdims=True)
+    b_f = rng.normal(size=n_f)
+    k = 500
+    corners = T[rng.integers(0, len(T), k)]
+    weights = rng.dirichlet(np.ones(3), k)
+    normal_b = rng.normal(size=(k, 3))
+    b_b = rng.normal(size=k)
+    stiffness = np.where(np.arange(n) % 3 == 0, 10.0, 1.0)
+    V_prev = base.vertices + 0.01 * rng.normal(size=base.vertices.shape)
+    system = NormalEquations(base, M, 1e-2, 1e-3, stiffness)
+    solved = system.solve(V_prev, [(normal_f, np.arange(n_f)[:, None], np.ones((n_f, 1)),
+                                    b_f, n_f), (normal_b, corners, weights, b_b, k)])
+    Md = M.toarray()
+    rows_b = np.zeros((k, n_f))
+    np.add.at(rows_b, (np.repeat(np.arange(k), 3), corners.reshape(-1)), weights.reshape(-1))
+    J_f = np.hstack([normal_f[:, [a]] * Md for a in range(3)]) / np.sqrt(n_f)
+    J_b = np.hstack([normal_b[:, [a]] * (rows_b @ Md) for a in range(3)]) / np.sqrt(k)
+    data = J_f.T @ J_f + J_b.T @ J_b
+    scale = np.diag(data).mean()
+    D = _umbrella(base, n).toarray() * np.sqrt(stiffness)[:, None]
+    smooth = np.kron(np.eye(3), D.T @ D)
+    lhs = data + 1e-2 * scale * smooth + 1e-3 * scale * np.eye(3 * n)
+    rhs = (J_f.T @ (b_f / np.sqrt(n_f)) + J_b.T @ (b_b / np.sqrt(k))
+           + 1e-2 * scale * smooth @ base.vertices.T.reshape(-1)
+           + 1e-3 * scale * V_prev.T.reshape(-1))
+    expected = np.linalg.solve(lhs, rhs).reshape(3, -1).T
+    np.testing.assert_allclose(solved, expected, atol=1e-9 * np.abs(expected).max())
+
+
+def test_a_refit_does_not_return_its_start():
+    # started from the unstiffened fit, a stiffer refit has a higher RMS distance than its
+    # start; it still returns the stiffer fit, not the start
+    base = grid_sphere(3)
+    target = sphere_target(1.3)
+    h, fine, T = fine_mesh(base, 2)
+    M = (limit_matrices(fine)[0] @ h.composite(1)).tocsr()
+    surface = TargetSurface(target.vertices, target.faces)
+    first = best_fit(base, M, T, surface, rounds=6)
+    stiff = np.full(len(base.vertices), 1e4)
+    refit = best_fit(base, M, T, surface, rounds=2, start=first.vertices, stiffness=stiff,
+                     refit=True)
+    assert refit.rms[1] > refit.rms[0]                # stiffer: the start was closer
+    assert refit.rounds >= 2 and not np.array_equal(refit.vertices, first.vertices)
+    kept = best_fit(base, M, T, surface, rounds=2, start=first.vertices, stiffness=stiff)
+    np.testing.assert_array_equal(kept.vertices, first.vertices)   # without the flag

@@ -151,3 +151,18 @@ def test_malformed_arrays_and_missing_libigl(monkeypatch):
     monkeypatch.setitem(sys.modules, "igl", None)
     with pytest.raises(ImportError, match="pip install libigl"):
         TargetSurface(sphere.vertices, sphere.faces)
+
+
+def test_samples_lie_on_the_surface_and_are_drawn_once():
+    mesh = trimesh.creation.icosphere(3, radius=2.0)
+    surface = TargetSurface(mesh.vertices, mesh.faces)
+    points, normals = surface.samples(3000, seed=4)
+    assert points.shape == normals.shape == (3000, 3)
+    assert surface.nearest(points).distance.max() < 1e-12 * surface.diagonal
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-12)
+    outward = np.einsum("ij,ij->i", normals, points) / np.linalg.norm(points, axis=1)
+    assert outward.min() > 0.99                       # outward, near radial on a sphere
+    again = surface.samples(3000, seed=4)
+    assert again[0] is points and again[1] is normals
+    other, _ = surface.samples(3000, seed=5)
+    assert not np.array_equal(other, points)
