@@ -10,12 +10,13 @@ Usage::
 ``--repo`` is the checkout whose ``core`` is measured (default: this one; for the "before"
 column, an export of the commit to compare with). Every mesh runs in its own process: the
 labeling once, then the base-mesh stage (``core.stages.basemesh.run_basemesh``, default
-parameters but ``--target-faces``, one part) twice. Per mesh: CPU seconds of the stage (the first run), of its
-polycube attempt (``_polycube_base_mesh``), the mixed-integer programs (count, the slowest one's
-CPU seconds, the most branch-and-bound nodes), the method, faces and a hash of the base mesh,
-and whether the second run gave the same base mesh. Rows are kept per label in
-``benchmarks/basemesh_speed_results.json``; ``benchmarks/BASEMESH_SPEED_RESULTS.md`` shows
-every label side by side.
+parameters but ``--target-faces``, one part) twice. Per mesh: CPU seconds of the stage (the
+first run), of its polycube attempt (``_polycube_base_mesh``), the mixed-integer programs
+(count, the slowest one's CPU seconds, the most branch-and-bound nodes), the method, faces and
+a hash of the base mesh, and whether the second run gave the same base mesh; ``--profile``
+meshes get a third, profiled run. Rows are kept per label in
+``benchmarks/basemesh_speed_results.json``; ``benchmarks/BASEMESH_SPEED_RESULTS.md`` shows the
+labels of one face budget side by side.
 """
 import argparse
 import json
