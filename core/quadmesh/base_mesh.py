@@ -23,10 +23,11 @@ from core.quadmesh.chart_complex import build_chart_complex
 from core.quadmesh.embed import (interior_point_positions, side_point_positions,
                                  tutte_coordinates)
 from core.quadmesh.lattice import OverlappingChartsError, build_lattice, chart_orientation
+from core.quadmesh.milp_solve import MilpTimeLimitError
 from core.quadmesh.orientation import inverted_faces
 from core.quadmesh.paired_decimation import paired_decimation_base_mesh
 from core.quadmesh.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapsible_sides,
-                                    loop_tables, quantize, quantize_for_budget,
+                                    loop_tables, minimum_faces, quantize, quantize_for_budget,
                                     rectangular_refinement)
 from core.quadmesh.relax import relax_on_target
 from core.quadmesh.side_signs import make_loops_rectilinear
@@ -78,6 +79,12 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     time (only those, so the other charts keep their freedom; a chart whose rectangles make
     the program infeasible stays whole), and the quantization is repeated.
 
+    Before a program is solved, a linear lower bound on the quads of every layout it could
+    lead to (:func:`core.quadmesh.quantize.minimum_faces`) ends an attempt that cannot stay
+    within ``give_up_faces``: without refinements always (every later refinement only adds
+    constraints, and the retry without collapsible sides has a larger bound), with them only
+    when no side is collapsible (then no retry follows, so the outcome is the same failure).
+
     Raises
     ------
     LabelingError (no layout, or more than ``give_up_faces`` quads, at most
@@ -88,6 +95,9 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     scale, rounds = None, []
     for _ in range(refinement_rounds):
         refinement = rectangular_refinement(complex_, tables, refine)
+        if not refine or not np.any(collapsible):
+            _check_minimum(complex_, tables, refinement, collapsible, give_up_faces,
+                           max_base_faces)
         try:
             if scale is None:
                 # the face budget is searched once without refinements and once at the end;
@@ -96,6 +106,8 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
                                                        target_faces, collapsible, give_up_faces)
             else:
                 polycube = quantize(complex_, tables, refinement, scale, collapsible)
+        except MilpTimeLimitError:
+            raise  # not infeasible: another refinement would only make it load-dependent
         except LabelingError:
             if last is None:
                 raise
@@ -110,13 +122,10 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
                 last = None
             continue
         if polycube.faces > give_up_faces:
-            limit = (f"max_base_faces={max_base_faces}; raise --max-base-faces or simplify "
-                     "the labeling (--parts auto)" if give_up_faces >= max_base_faces else
-                     f"{give_up_faces}, {FALLBACK_OVER_BUDGET:g} times the budget")
             raise LayoutTooLargeError(
                 f"the smallest quantized layout found has {polycube.faces} quads, more than "
-                f"{limit} ({complex_.n_charts} charts, {complex_.n_sides} sides, each at least "
-                "one unit long)")
+                f"{_give_up_limit(give_up_faces, max_base_faces)} ({complex_.n_charts} charts, "
+                f"{complex_.n_sides} sides, each at least one unit long)")
         try:
             lattice = build_lattice(complex_, tables, polycube)
         except OverlappingChartsError as exc:
@@ -161,6 +170,25 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     except InvalidMeshError:
         pass  # smoothing degenerated a face somewhere: keep the Tutte placement
     return mesh, polycube, rounds, refinement, folded
+
+
+def _give_up_limit(give_up_faces, max_base_faces):
+    """The limit a layout exceeded, for :class:`LayoutTooLargeError` messages (a str)."""
+    if give_up_faces >= max_base_faces:
+        return (f"max_base_faces={max_base_faces}; raise --max-base-faces or simplify the "
+                "labeling (--parts auto)")
+    return f"{give_up_faces}, {FALLBACK_OVER_BUDGET:g} times the budget"
+
+
+def _check_minimum(complex_, tables, refinement, collapsible, give_up_faces, max_base_faces):
+    """Raise LayoutTooLargeError when every layout of ``refinement`` has too many quads."""
+    least = minimum_faces(complex_, tables, refinement, collapsible)
+    if least > give_up_faces:
+        raise LayoutTooLargeError(
+            f"every quantized layout of this labeling has at least {least} quads (a linear "
+            f"bound), more than {_give_up_limit(give_up_faces, max_base_faces)} "
+            f"({complex_.n_charts} charts, {complex_.n_sides} sides, "
+            f"{refinement.rectangles} rectangles)")
 
 
 def _merge_points(n, pairs):
@@ -337,8 +365,8 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
             give_up_faces, refinement_rounds)
         if polymesh_genus(mesh) != target_genus:
             raise LabelingError("collapsing sliver charts changed the genus")
-    except LayoutTooLargeError:
-        raise  # keeping the slivers would only make it larger
+    except (LayoutTooLargeError, MilpTimeLimitError):
+        raise  # keeping the slivers would only make it larger (or slower)
     except (LabelingError, InvalidMeshError):
         # slivers that cannot vanish cleanly keep at least one unit
         collapsible = np.zeros(complex_.n_sides, dtype=bool)

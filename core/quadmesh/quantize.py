@@ -29,12 +29,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import Bounds, LinearConstraint, milp
+from scipy.optimize import Bounds, LinearConstraint
 
 from core.errors import LabelingError
+from core.quadmesh.milp_solve import solve_milp
 
-MILP_TIME_LIMIT = 20.0
-"""Seconds HiGHS may spend on one quantization."""
 MILP_GAP = 0.01
 """Relative optimality gap accepted from HiGHS (the objective is a soft closeness measure)."""
 BUDGET_TOLERANCE = 0.25
@@ -82,6 +81,8 @@ class Refinement:
     piece : (n_vars,) bool, unknowns that are pieces of a split edge (they may be zero: the
         inserted edge then meets a corner of the edge it splits).
     rectangles : int, rectangles of all charts.
+    rectangle_chart : (rectangles,) int64 chart of each rectangle (its rows in ``extents`` are
+        ``2 r`` for the width and ``2 r + 1`` for the height).
     """
 
     n_vars: int
@@ -89,6 +90,7 @@ class Refinement:
     extents: sp.csr_matrix
     piece: np.ndarray
     rectangles: int
+    rectangle_chart: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -230,7 +232,7 @@ def rectangular_refinement(complex_, tables, refine=()):
     n_vars = complex_.n_sides
     rows, cols, vals = [], [], []
     ext_rows, ext_cols = [], []
-    pieces = []
+    pieces, rectangle_chart = [], []
     n_rows = 0
     rectangles = 0
     order = np.argsort(tables.ref_chart, kind="stable")
@@ -278,6 +280,7 @@ def rectangular_refinement(complex_, tables, refine=()):
                         ext_rows += [2 * rectangles + axis] * len(forward)
                         ext_cols += forward
                     rectangles += 1
+                    rectangle_chart.append(chart)
                 continue
             i = reflex[0]
             k, hit = _front(face, turns, i, measured=mode != "first")
@@ -311,7 +314,8 @@ def rectangular_refinement(complex_, tables, refine=()):
                             shape=(2 * rectangles, n_vars))
     piece = np.zeros(n_vars, dtype=bool)
     piece[pieces] = True
-    return Refinement(n_vars, equalities, extents, piece, rectangles)
+    return Refinement(n_vars, equalities, extents, piece, rectangles,
+                      np.asarray(rectangle_chart, dtype=np.int64))
 
 
 def corner_coordinates(complex_, tables, side_length):
@@ -385,9 +389,8 @@ def quantize(complex_, tables, refinement, scale, collapsible=None):
     side_lower = np.ones(n_sides) if collapsible is None else np.where(collapsible, 0.0, 1.0)
     lower = np.concatenate([side_lower, np.where(refinement.piece[n_sides:], 0.0, 1.0),
                             np.zeros(n_sides)])
-    result = milp(cost, integrality=integrality, bounds=Bounds(lower, np.inf),
-                  constraints=constraints,
-                  options={"time_limit": MILP_TIME_LIMIT, "mip_rel_gap": MILP_GAP})
+    result = solve_milp("the side-length quantization", cost, integrality, Bounds(lower, np.inf),
+                        constraints, MILP_GAP)
     if result.x is None:
         raise LabelingError(
             f"no integer side lengths close every rectangle of this labeling's charts "
@@ -398,6 +401,66 @@ def quantize(complex_, tables, refinement, scale, collapsible=None):
     chart_faces = chart_unit_squares(complex_, tables, corner_uv)
     return IntegerPolycube(side_length, corner_uv, float(scale), int(chart_faces.sum()),
                            chart_faces, str(result.message))
+
+
+def minimum_faces(complex_, tables, refinement, collapsible=None):
+    """A lower bound on the unit squares of every layout that :func:`quantize` can return.
+
+    Any lengths that close every rectangle of ``refinement`` and draw every chart as a polygon
+    that :func:`core.quadmesh.lattice.build_lattice` accepts (a disk with integer corners)
+    obey two linear bounds on each chart's area ``A``, so a linear program over real lengths
+    (with the quantization's own constraints) gives a bound on their sum:
+
+    - Pick's theorem, ``A = I + B / 2 - 1 >= P / 2 - 1`` with ``P`` the perimeter (the sum of
+      the chart's side lengths, slit banks counted twice), for charts with no collapsible side
+      (a collapsed chart or neck is not a disk);
+    - for a chart split into rectangles, ``A = sum w h >= sum (w + h - 1)`` since every
+      rectangle has ``w, h >= 1``.
+
+    Parameters
+    ----------
+    complex_ : ChartComplex; tables : LoopTables; refinement : Refinement.
+    collapsible : (s,) bool sides that may have length zero, or None.
+
+    Returns
+    -------
+    int, the bound rounded up (0 when the linear program is infeasible: :func:`quantize` then
+    says so).
+    """
+    from scipy.optimize import linprog
+
+    n, n_sides, n_charts = refinement.n_vars, complex_.n_sides, complex_.n_charts
+    zero_ok = (np.zeros(n_sides, dtype=bool) if collapsible is None
+               else np.asarray(collapsible, dtype=bool))
+    perimeter = sp.csr_matrix((np.ones(len(tables.ref_side)), (tables.ref_chart, tables.ref_side)),
+                              shape=(n_charts, n))
+    disk = np.bincount(tables.ref_chart, weights=zero_ok[tables.ref_side].astype(np.float64),
+                       minlength=n_charts) == 0
+    rectangles = sp.csr_matrix(
+        (np.ones(2 * refinement.rectangles), (np.repeat(refinement.rectangle_chart, 2),
+                                              np.arange(2 * refinement.rectangles))),
+        shape=(n_charts, 2 * refinement.rectangles)) @ refinement.extents
+    refined = np.bincount(refinement.rectangle_chart, minlength=n_charts)
+    # variables [lengths (n), areas (c)]; rows A x - area <= rhs
+    area = -sp.identity(n_charts, format="csr")
+    upper = sp.vstack([sp.hstack([0.5 * perimeter[disk], area[disk]]),
+                       sp.hstack([rectangles[refined > 0], area[refined > 0]]),
+                       sp.hstack([-refinement.extents,
+                                  sp.csr_matrix((refinement.extents.shape[0], n_charts))])])
+    rhs = np.concatenate([np.ones(int(disk.sum())), refined[refined > 0].astype(np.float64),
+                          -np.ones(refinement.extents.shape[0])])
+    lower = np.concatenate([np.where(zero_ok, 0.0, 1.0),
+                            np.where(refinement.piece[n_sides:], 0.0, 1.0), np.zeros(n_charts)])
+    result = linprog(np.concatenate([np.zeros(n), np.ones(n_charts)]), A_ub=upper.tocsr(),
+                     b_ub=rhs,
+                     A_eq=sp.hstack([refinement.equalities,
+                                     sp.csr_matrix((refinement.equalities.shape[0], n_charts))]),
+                     b_eq=np.zeros(refinement.equalities.shape[0]),
+                     bounds=np.stack([lower, np.full(len(lower), np.inf)], axis=1),
+                     method="highs")
+    if result.status != 0:
+        return 0
+    return int(np.ceil(result.fun - 1e-6))
 
 
 def first_scale(complex_, target_faces):

@@ -15,13 +15,12 @@ from dataclasses import replace
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import Bounds, LinearConstraint, milp
+from scipy.optimize import Bounds, LinearConstraint
 
 from core.errors import LabelingError
+from core.quadmesh.milp_solve import solve_milp
 
 AXES = np.eye(3)
-MILP_TIME_LIMIT = 20.0
-"""Seconds HiGHS may spend on the sign repair."""
 DISAGREEMENT_WEIGHT = 2.0
 """Cost of giving a side different directions in its two charts, relative to its measured
 extent (flipping it in both charts costs the extent once): the charts still close and glue,
@@ -188,9 +187,8 @@ def make_loops_rectilinear(complex_, collapsible=None):
                             np.zeros(nf + nd)])
     upper = np.concatenate([np.ones(nf + npairs + n_loops), np.full(n_sides + nf, big),
                             np.ones(nd)])
-    result = milp(cost, integrality=integrality, bounds=Bounds(lower, upper),
-                  constraints=[LinearConstraint(matrix, lo, hi)],
-                  options={"time_limit": MILP_TIME_LIMIT})
+    result = solve_milp("the side-direction repair", cost, integrality, Bounds(lower, upper),
+                        [LinearConstraint(matrix, lo, hi)])
     if result.x is None:
         bad = np.flatnonzero(np.isin(loop_turning(complex_), [-4, 4], invert=True))
         charts = np.unique(complex_.loop_chart[bad])

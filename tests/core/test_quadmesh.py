@@ -16,7 +16,11 @@ from core.quality import point_surface_distance
 from core.quadmesh import build_base_mesh
 from core.quadmesh.chart_complex import build_chart_complex
 from core.quadmesh.orientation import inverted_faces
-from core.quadmesh.quantize import LoopTables, rectangular_refinement
+from core.quadmesh.base_mesh import LayoutTooLargeError
+from core.quadmesh.lattice import OverlappingChartsError, build_lattice
+from core.quadmesh.milp_solve import MilpTimeLimitError, solve_milp
+from core.quadmesh.quantize import (LoopTables, loop_tables, minimum_faces, quantize,
+                                    rectangular_refinement)
 from core.quadmesh.side_signs import charts_close, loops_are_rectilinear, make_loops_rectilinear
 from core.types import TriMesh
 
@@ -224,3 +228,78 @@ def test_real_simp_cantilever_base_mesh():
     assert inverted_faces(base, target.vertices, target.faces).mean() <= 0.01
     diag = float(np.linalg.norm(np.ptp(target.vertices, axis=0)))
     assert on_surface_distance(base.vertices, target.vertices, target.faces).max() < 1e-9 * diag
+
+
+def layout_problem(boxes):
+    """Chart complex and loop tables of a union of boxes with nearest-axis labels."""
+    V, F = union_of_boxes(boxes)
+    frames, part_frames = identity_frames(len(F))
+    complex_ = build_chart_complex(V, F, np.zeros(len(F)), nearest_labels(V, F), frames)
+    complex_, _ = make_loops_rectilinear(complex_)
+    return complex_, loop_tables(complex_, V, part_frames)
+
+
+@pytest.mark.parametrize("boxes", [L_SHAPE, FRAME], ids=["l-shape", "frame"])
+def test_minimum_faces_is_a_lower_bound_of_every_layout(boxes):
+    complex_, tables = layout_problem(boxes)
+    plain = rectangular_refinement(complex_, tables)
+    every_chart = rectangular_refinement(complex_, tables, range(complex_.n_charts))
+    least, least_refined = (minimum_faces(complex_, tables, r) for r in (plain, every_chart))
+    # rectangles only add constraints and a second bound, so the bound can only grow
+    assert 6 <= least <= least_refined
+    for refinement, bound in ((plain, least), (every_chart, least_refined)):
+        for scale in (0.05, 1.0, 4.0, 10.0):
+            polycube = quantize(complex_, tables, refinement, scale)
+            try:
+                build_lattice(complex_, tables, polycube)
+            except OverlappingChartsError:
+                continue  # not a layout the stage keeps
+            assert polycube.faces >= bound, (scale, polycube.faces, bound)
+    # the smallest layout of the refined L (every side one unit where it can be) meets it
+    polycube = quantize(complex_, tables, every_chart, 1e-3)
+    assert polycube.faces <= least_refined + 4 * complex_.n_charts
+
+
+def test_a_box_needs_six_quads_by_the_bound_and_by_the_quantization():
+    complex_, tables = layout_problem([[[0, 0, 0], [2, 1, 1]]])
+    refinement = rectangular_refinement(complex_, tables)
+    assert minimum_faces(complex_, tables, refinement) == 6
+    assert quantize(complex_, tables, refinement, 1e-3).faces == 6
+
+
+def test_an_attempt_over_the_bound_ends_before_any_program(monkeypatch):
+    complex_, tables = layout_problem(L_SHAPE)
+    least = minimum_faces(complex_, tables, rectangular_refinement(complex_, tables))
+
+    def no_program(*args, **kwargs):
+        raise AssertionError("a mixed-integer program was solved")
+
+    monkeypatch.setattr("core.quadmesh.quantize.solve_milp", no_program)
+    with pytest.raises(LayoutTooLargeError, match=f"at least {least} quads"):
+        base_of(L_SHAPE, target_faces=300, max_base_faces=least - 1)
+
+
+def test_the_hang_guard_is_an_error_not_another_answer(monkeypatch):
+    monkeypatch.setattr("core.quadmesh.milp_solve.HANG_GUARD_SECONDS", 0.0)
+    with pytest.raises(MilpTimeLimitError, match="depend on the machine's load"):
+        solve_milp("a test program", np.ones(3), np.ones(3), Bounds(1, 10),
+                   [LinearConstraint(np.ones((1, 3)), 4.5, np.inf)])
+
+
+def test_the_same_labelled_dev_mesh_gives_the_same_base_mesh_twice():
+    from core.pipeline import reconstruct
+
+    from tests.core.dev_meshes import MESHES
+
+    path = Path(MESHES) / "polycube_bone.obj"
+    if not path.exists():
+        pytest.skip("dev mesh polycube_bone.obj not available")
+    state = reconstruct(path, stop_after="labeling").state
+    field = state.frames.frame_field
+    builds = [build_base_mesh(state.intake.target, state.parts.face_part,
+                              state.labeling.face_label, field.face_frame, field.part_frames,
+                              300, method="polycube") for _ in range(2)]
+    (first, info), (second, again) = builds
+    assert info["method"] == "polycube" and info["scale_rounds"] == again["scale_rounds"]
+    assert np.array_equal(first.vertices, second.vertices)
+    assert np.array_equal(first.face_vertices, second.face_vertices)

@@ -1,0 +1,57 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""The mixed-integer programs of the base-mesh stage, solved so that one input gives one result.
+
+HiGHS (``scipy.optimize.milp``) is deterministic for fixed options, but a wall-clock limit is
+not: on a loaded machine it stops the search earlier and hands back another incumbent. The
+programs here are therefore bounded by a node limit (``NODE_LIMIT``, the same answer whatever
+the load). HiGHS 1.2 (Debian's scipy 1.10) has no deterministic bound on the work of its root
+node, so a wall-clock limit stays only as a guard against a hang (``HANG_GUARD_SECONDS``); a
+program that reaches it raises :class:`MilpTimeLimitError` instead of using a load-dependent
+incumbent. Measured on every dev mesh (``benchmarks/BASEMESH_SPEED_RESULTS.md``): every
+program closes at its root node (1 node) within 4.1 CPU seconds, far from both limits.
+"""
+from scipy.optimize import milp
+
+from core.errors import LabelingError
+
+NODE_LIMIT = 5000
+"""Branch-and-bound nodes HiGHS may explore (the dev meshes' programs all close at node 1)."""
+HANG_GUARD_SECONDS = 600.0
+"""Wall-clock seconds after which a program is abandoned (an error, never another answer)."""
+TIME_LIMIT_MESSAGE = "Time limit reached"
+"""Start of scipy's message when HiGHS stopped on ``HANG_GUARD_SECONDS``."""
+
+
+class MilpTimeLimitError(LabelingError):
+    """A base-mesh program reached the wall-clock hang guard (its answer would depend on load)."""
+
+
+def solve_milp(what, cost, integrality, bounds, constraints, mip_rel_gap=None):
+    """``scipy.optimize.milp`` with the deterministic limits of this module.
+
+    Parameters
+    ----------
+    what : str, names the program in the error message (e.g. "the side-length quantization").
+    cost, integrality, bounds, constraints : as ``scipy.optimize.milp``.
+    mip_rel_gap : float or None, relative optimality gap accepted (HiGHS's default when None).
+
+    Returns
+    -------
+    scipy.optimize.OptimizeResult; ``x`` is None when no solution was found (infeasible, or
+    none within ``NODE_LIMIT`` nodes; ``message`` says which).
+
+    Raises
+    ------
+    MilpTimeLimitError when HiGHS stopped on the hang guard.
+    """
+    options = {"node_limit": NODE_LIMIT, "time_limit": HANG_GUARD_SECONDS}
+    if mip_rel_gap is not None:
+        options["mip_rel_gap"] = mip_rel_gap
+    result = milp(cost, integrality=integrality, bounds=bounds, constraints=constraints,
+                  options=options)
+    if str(result.message).startswith(TIME_LIMIT_MESSAGE):
+        raise MilpTimeLimitError(
+            f"{what} did not finish within {HANG_GUARD_SECONDS:g} s ({len(cost)} variables); "
+            "its answer would depend on the machine's load, so none is used: try --parts auto "
+            "or --base-mesh-method decimation")
+    return result
