@@ -99,6 +99,8 @@ TOPIC_RESULTS = (
     ("Base mesh: quantized layouts and the paired-decimation fallback on every dev mesh, cages "
      "over targets, whole pipeline to STEP",
      "BASEMESH_RESULTS.md", "benchmarks/basemesh_bench.py"),
+    ("Base-mesh stage speed and determinism: CPU seconds, MILP counts, the same cage twice",
+     "BASEMESH_SPEED_RESULTS.md", "benchmarks/basemesh_speed_bench.py"),
     ("Labeling: validity by the independent check, frames chosen, angles, turning points",
      "LABELING_RESULTS.md", "benchmarks/labeling_bench.py"),
     ("Fit: compiled queries, modes, the QuadriFlow peer", "FIT_RESULTS.md",
