@@ -22,9 +22,10 @@ from core.mesh_topology import connected_face_components, genus_of
 
 SOURCE_TRIANGLES = 20000
 """Targets with more triangles are decimated to this many once, when a decimation larger than
-the coarse one is first asked for; those then start from it. On ``to_simp_torsion_arm_fine3`` (151k triangles) this took 3.2 s, and
-each further decimation to 450-600 triangles 0.4 s instead of 3.4 s; the results had 4-7
-intersecting triangle pairs where QSlim of the target itself gave 12."""
+the coarse one is first asked for; those then start from it. On ``to_simp_torsion_arm_fine3``
+(151k triangles) this took 3.2 s, and each further decimation to 450-600 triangles 0.4 s
+instead of 3.4 s; the results had 4-7 intersecting triangle pairs where QSlim of the target
+itself gave 12."""
 
 
 class Decimation:
