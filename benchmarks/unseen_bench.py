@@ -21,6 +21,11 @@ Writes ``benchmarks/UNSEEN_RESULTS.md``, ``benchmarks/unseen_results.json`` (row
 design and parts mode, so ``--only`` updates a few) and per case a PNG of the base cage over
 its target (``benchmarks/images/unseen_NAME_MODE.png``, the helper of basemesh_bench.py) and
 of the target alone (``unseen_NAME_target.png``, ``benchmarks/render.py``).
+
+Large targets: ``--large`` adds, for each design of :data:`LARGE_DESIGNS`, the same design
+Loop-subdivided twice (``NAME_loop2``, 16 times the triangles, 100k-170k; a finer and smoother
+surface of the same result, as a TO exporter's fine output is), written once into
+``benchmarks/tmp/unseen_large/`` (deterministic; its SHA-256 is listed with the results).
 """
 import argparse
 import hashlib
@@ -42,6 +47,9 @@ WORK = os.path.join(HERE, "tmp", "unseen")
 IMAGES = os.path.join(HERE, "images")
 RESULTS_JSON = os.path.join(HERE, "unseen_results.json")
 RESULTS_MD = os.path.join(HERE, "UNSEEN_RESULTS.md")
+LARGE = os.path.join(HERE, "tmp", "unseen_large")
+LARGE_DESIGNS = ("simp_crank_arm", "simp_gripper_jaw", "simp_two_load_bracket")
+LARGE_SUFFIX = "_loop2"
 MODES = ("single", "auto")
 STAGES = ("intake", "parts", "frames", "labeling", "basemesh", "fit", "patches", "solid")
 
@@ -70,6 +78,35 @@ def ensure_designs(names):
                        + stale, check=True)
         manifest = _load(MANIFEST)
     return {n: manifest[n] for n in (names or sorted(manifest))}
+
+
+def ensure_large(names):
+    """Manifest-like entries (dict name -> dict) of the Loop-subdivided large designs.
+
+    names : the wanted ``NAME_loop2`` names (empty: all of :data:`LARGE_DESIGNS`). Each is made
+    from its design's STL (regenerated as :func:`ensure_designs` does) on first use.
+    """
+    import trimesh
+
+    bases = [n[:-len(LARGE_SUFFIX)] for n in names if n.endswith(LARGE_SUFFIX)] \
+        if names else list(LARGE_DESIGNS)
+    os.makedirs(LARGE, exist_ok=True)
+    entries = {}
+    for base, entry in ensure_designs(bases).items():
+        name = base + LARGE_SUFFIX
+        path = os.path.join(LARGE, name + ".stl")
+        if not os.path.exists(path):
+            mesh = trimesh.load(os.path.join(DESIGNS, entry["file"]), process=True)
+            vertices, faces = trimesh.remesh.subdivide_loop(mesh.vertices, mesh.faces,
+                                                            iterations=2)
+            tmp = path + ".tmp.stl"
+            trimesh.Trimesh(vertices, faces, process=False).export(tmp)
+            os.replace(tmp, path)
+        mesh = trimesh.load(path, process=True)
+        entries[name] = {**entry, "file": path, "sha256": sha256(path),
+                         "what": f"{base}, Loop-subdivided twice", "triangles": len(mesh.faces),
+                         "genus": int(round((2 - mesh.euler_number) / 2))}
+    return entries
 
 
 def _load(path):
@@ -300,6 +337,9 @@ def main(argv):
     parser.add_argument("--only", nargs="*", default=[])
     parser.add_argument("--modes", nargs="*", default=list(MODES), choices=MODES)
     parser.add_argument("--timeout", type=float, default=900.0)
+    parser.add_argument("--large", action="store_true",
+                        help="run the Loop-subdivided large designs (LARGE_DESIGNS) too, or "
+                             "with --only NAME_loop2 only them")
     parser.add_argument("--markdown-only", action="store_true",
                         help="rewrite UNSEEN_RESULTS.md from unseen_results.json, run nothing")
     args = parser.parse_args(argv)
@@ -308,13 +348,17 @@ def main(argv):
     if args.markdown_only:
         _write(previous, stored["meta"])
         return 0
-    manifest = ensure_designs(args.only)
+    small = [n for n in args.only if not n.endswith(LARGE_SUFFIX)]
+    large = [n for n in args.only if n.endswith(LARGE_SUFFIX)]
+    manifest = ensure_designs(small) if small or not large else {}
+    if args.large or large:
+        manifest.update(ensure_large(large))
     meta = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
             "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO,
                                      capture_output=True, text=True).stdout.strip(),
             "load": round(os.getloadavg()[0], 1), "timeout": args.timeout}
     for name, entry in manifest.items():
-        mesh = os.path.join(DESIGNS, entry["file"])
+        mesh = os.path.join(DESIGNS, entry["file"])  # an absolute file stays as it is
         for mode in args.modes:
             row = run_case(name, mesh, mode, args.timeout)
             # re-read: another run of this script may have added rows meanwhile
@@ -329,6 +373,8 @@ def main(argv):
 
 def _write(rows_by_key, meta):
     manifest = _load(MANIFEST) or {}
+    if any(design.endswith(LARGE_SUFFIX) for design, _ in rows_by_key):
+        manifest.update(ensure_large([]))
     rows = [rows_by_key[k] for k in sorted(rows_by_key, key=lambda k: (k[0], MODES.index(k[1])))]
     for path, text in ((RESULTS_JSON, json.dumps({"meta": meta, "rows": rows}, indent=1)),
                        (RESULTS_MD, markdown(rows, {n: manifest[n] for n in sorted(manifest)},
