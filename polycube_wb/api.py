@@ -16,6 +16,7 @@ from core.params import EXPORT_DEPTH, check_export_depth
 from core.pipeline import (LAST_CORE_STAGE, STOP_AFTER_CHOICES, peak_memory_mb,
                            reconstruct as run_pipeline)
 from core.progress import NO_PROGRESS
+from polycube_wb.view_hook import attach_view_provider
 
 
 def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_path=None,
@@ -398,17 +399,8 @@ def _make(doc, kind, name, links, properties):
             doc.removeObject(obj.Name)
             raise ParameterError(f"{kind} has no property {prop!r}; its properties: {known}")
         setattr(obj, prop, value)
-    _attach_view_provider(obj, kind)
+    attach_view_provider(obj, kind)
     return obj
-
-
-def _attach_view_provider(obj, kind):
-    import FreeCAD
-
-    if FreeCAD.GuiUp and obj.ViewObject is not None:
-        from polycube_wb.gui.view_providers import attach_view_provider
-
-        attach_view_provider(obj, kind)
 
 
 def stage_kind(obj):

@@ -34,6 +34,9 @@ RERUN_STATUSES = ("timeout", "crashed")
 """Batch statuses of a mesh that say nothing about the mesh itself: always run again (so
 does a mesh stopped by its memory cap, ``batch.memory_limit_exceeded`` in its report)."""
 ROW_PREFIX = "ROW "
+"""A worker's last stdout line: this, then its row as JSON (``polycube_wb.batch_worker``)."""
+CANCELLED_EXIT = 130
+"""Exit code of a worker stopped by Ctrl-C (SIGINT): no row, no output, no report."""
 AUTO_MEMORY = "auto"
 REDRAW_SECONDS = 1.0
 """The progress line is redrawn at least this often while meshes run locally."""
@@ -266,7 +269,6 @@ def run_isolated(job):
     memory readings as its peak memory.
     """
     from polycube_wb.batch_memory import default_memory_limit_mb, memory_message
-    from polycube_wb.batch_worker import CANCELLED_EXIT
     from polycube_wb.stage_lines import STAGE_PREFIX
 
     if job.memory_mb == AUTO_MEMORY:

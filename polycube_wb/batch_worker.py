@@ -23,9 +23,6 @@ import polycube_wb  # noqa: F401  (installs the guard that makes ``core`` ours)
 from core.progress import NO_PROGRESS
 from polycube_wb.stage_lines import StageLines
 
-CANCELLED_EXIT = 130
-"""Exit code of a worker stopped by Ctrl-C (SIGINT): no row, no output, no report."""
-
 
 def run_job(job, stages=None):
     """Run one mesh and write its outputs; returns the report (dict) with its ``batch`` section.
@@ -97,7 +94,7 @@ def _first_failed(report):
 
 def main():
     """Entry point of the worker process (see the module docstring)."""
-    from polycube_wb.batch import MeshJob, row_from_report
+    from polycube_wb.batch import CANCELLED_EXIT, ROW_PREFIX, MeshJob, row_from_report
 
     job = MeshJob.from_dict(json.load(sys.stdin))
     stages = StageLines()
@@ -107,7 +104,8 @@ def main():
     except KeyboardInterrupt:  # Ctrl-C reaches the whole batch: this mesh leaves no output
         sys.stderr.write(f"cancelled at stage {stages.stage}\n")
         return CANCELLED_EXIT
-    sys.stdout.write("\nROW " + json.dumps(row_from_report(job, report).to_dict()) + "\n")
+    row = row_from_report(job, report).to_dict()
+    sys.stdout.write("\n" + ROW_PREFIX + json.dumps(row) + "\n")
     return 0
 
 

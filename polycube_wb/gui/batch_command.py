@@ -246,7 +246,7 @@ def _report_end(run):
         tail = "\n".join(run.other[-5:]) or "no output"
         FreeCAD.Console.PrintError(f"Polycube: Reconstruct folder: the batch exited with code "
                                    f"{run.process.returncode}:\n{tail}\n")
-        from polycube_wb.gui.commands import message_box
+        from polycube_wb.gui.dialogs import message_box
 
         message_box("warning", "Reconstruct folder", tail)
         return
@@ -285,9 +285,9 @@ class ReconstructFolderCommand:
         return self.dialog is None or self.dialog.finished_run
 
     def Activated(self):
-        from polycube_wb.gui.commands import _last_directory, message_box
+        from polycube_wb.gui.dialogs import last_directory, message_box
 
-        folder = ask_folder("Reconstruct folder: the meshes", _last_directory())
+        folder = ask_folder("Reconstruct folder: the meshes", last_directory())
         if folder is None:
             return
         out_dir = ask_folder("Reconstruct folder: the output folder",

@@ -21,7 +21,7 @@ import traceback
 import FreeCAD
 import FreeCADGui
 
-from polycube_wb.gui import icon_path
+from polycube_wb.gui import dialogs, icon_path
 from polycube_wb.gui.batch_command import ReconstructFolderCommand
 
 MESH_FILTER = "Triangle meshes (*.stl *.obj *.ply *.off);;All files (*)"
@@ -34,53 +34,8 @@ SUPERSEDES = {"Segmentation": ("Target",), "BaseMesh": ("Segmentation",),
 
 
 # ----------------------------------------------------------------------------------------
-# Dialogs and feedback (tests replace ask_* and message_box)
+# Feedback (the dialogs are in polycube_wb.gui.dialogs, which tests replace)
 # ----------------------------------------------------------------------------------------
-
-def _last_directory():
-    from polycube_wb.preferences import PREFERENCES
-
-    return FreeCAD.ParamGet(PREFERENCES).GetString("LastDirectory", os.path.expanduser("~"))
-
-
-def _remember_directory(path):
-    from polycube_wb.preferences import PREFERENCES
-
-    FreeCAD.ParamGet(PREFERENCES).SetString("LastDirectory", os.path.dirname(path))
-
-
-def ask_open_file(title, file_filter, start=None):
-    """File-open dialog; returns the chosen path or None."""
-    from PySide import QtGui
-
-    path, _ = QtGui.QFileDialog.getOpenFileName(FreeCADGui.getMainWindow(), title,
-                                                start or _last_directory(), file_filter)
-    if not path:
-        return None
-    _remember_directory(path)
-    return path
-
-
-def ask_save_file(title, file_filter, start):
-    """File-save dialog; returns the chosen path (``.step`` added if no suffix) or None."""
-    from PySide import QtGui
-
-    path, _ = QtGui.QFileDialog.getSaveFileName(FreeCADGui.getMainWindow(), title, start,
-                                                file_filter)
-    if not path:
-        return None
-    if not os.path.splitext(path)[1]:
-        path += ".step"
-    _remember_directory(path)
-    return path
-
-
-def message_box(kind, title, text):
-    """Modal message box; ``kind`` is ``information``, ``warning`` or ``critical``."""
-    from PySide import QtGui
-
-    getattr(QtGui.QMessageBox, kind)(FreeCADGui.getMainWindow(), title, text)
-
 
 def report_success(text):
     """A success line in the Report view and the status bar."""
@@ -130,7 +85,7 @@ def run_guarded(title, work, with_progress=False):
             progress.stop()
         QtGui.QApplication.restoreOverrideCursor()
     if box is not None:
-        message_box(box[0], title, box[1])
+        dialogs.message_box(box[0], title, box[1])
     return None
 
 
@@ -162,7 +117,7 @@ def run_stage_command(title, doc, build):
         lines = [f"{doc.getObject(name).Label}: {reason}"
                  for name, reason in outcome.failures.items()]
         FreeCAD.Console.PrintWarning(f"Polycube: {title}: " + "; ".join(lines) + "\n")
-        message_box("warning", title, "A stage did not finish:\n\n" + "\n".join(lines))
+        dialogs.message_box("warning", title, "A stage did not finish:\n\n" + "\n".join(lines))
     if shown is not None:
         _supersede(shown)
         if not outcome.failures:
@@ -261,7 +216,7 @@ class ImportTargetCommand(_Command):
         return True
 
     def Activated(self):
-        path = ask_open_file(self.MENU_TEXT.rstrip("."), MESH_FILTER)
+        path = dialogs.ask_open_file(self.MENU_TEXT.rstrip("."), MESH_FILTER)
         if path is None:
             return
         doc = FreeCAD.ActiveDocument or FreeCAD.newDocument()
@@ -394,7 +349,7 @@ class ReconstructAllCommand(_Command):
         doc = FreeCAD.ActiveDocument
         target = target_for_selection() if doc is not None else None
         if target is None:
-            path = ask_open_file("Reconstruct all: target mesh", MESH_FILTER)
+            path = dialogs.ask_open_file("Reconstruct all: target mesh", MESH_FILTER)
             if path is None:
                 return
             doc = doc or FreeCAD.newDocument()
@@ -498,7 +453,7 @@ class ImportSubDCommand(_Command):
         return True
 
     def Activated(self):
-        path = ask_open_file("Import SubD cage as solid", CAGE_FILTER)
+        path = dialogs.ask_open_file("Import SubD cage as solid", CAGE_FILTER)
         if path is None:
             return
         doc = FreeCAD.ActiveDocument or FreeCAD.newDocument()
@@ -534,8 +489,8 @@ class ExportStepCommand(_Command):
 
     def Activated(self):
         obj = _selection()[0]
-        start = os.path.join(_last_directory(), obj.Label + ".step")
-        path = ask_save_file("Export STEP", STEP_FILTER, start)
+        start = os.path.join(dialogs.last_directory(), obj.Label + ".step")
+        path = dialogs.ask_save_file("Export STEP", STEP_FILTER, start)
         if path is not None:
             run_guarded("Export STEP", lambda _: report_success(
                 f"wrote {obj.Label} to {_do(f'api.export_step({_ref(obj)}, {path!r})')}"))
@@ -544,7 +499,7 @@ class ExportStepCommand(_Command):
 def _no_target(title):
     text = "No target mesh: import one with 'Import target mesh' first (or select it)."
     FreeCAD.Console.PrintWarning(f"Polycube: {title}: {text}\n")
-    message_box("warning", title, text)
+    dialogs.message_box("warning", title, text)
 
 
 COMMANDS = (ImportTargetCommand, SegmentPartsCommand, LabelPolycubeCommand,

@@ -78,19 +78,21 @@ def _reddish_and_bluish(colours):
 
 
 class _Stubs:
-    """Replaces the dialogs and boxes of the commands module; restores them."""
+    """Replaces the commands' dialogs and boxes (``polycube_wb.gui.dialogs``); restores them."""
 
     def __init__(self):
-        self.commands = _commands()
+        from polycube_wb.gui import dialogs
+
+        self.dialogs = dialogs
         self.boxes = []
-        self.saved = (self.commands.ask_open_file, self.commands.message_box)
-        self.commands.message_box = lambda kind, title, text: self.boxes.append((kind, text))
+        self.saved = (dialogs.ask_open_file, dialogs.message_box)
+        dialogs.message_box = lambda kind, title, text: self.boxes.append((kind, text))
 
     def answer_open_dialog(self, path):
-        self.commands.ask_open_file = lambda *args, **kwargs: path
+        self.dialogs.ask_open_file = lambda *args, **kwargs: path
 
     def restore(self):
-        self.commands.ask_open_file, self.commands.message_box = self.saved
+        self.dialogs.ask_open_file, self.dialogs.message_box = self.saved
 
 
 class _ScreenshotAssertions:
@@ -332,6 +334,9 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
         self.assertEqual(base.Segmentation.PartMode, "single",
                          "segment parts does not break the base mesh")
         self.assertGreater(base.Faces, 6)
+        # the view provider InitGui.py registered with polycube_wb.view_hook
+        self.assertEqual(type(base.ViewObject.Proxy).__name__, "StageViewProvider")
+        self.assertEqual(base.ViewObject.LineWidth, 2.0)
         self.assert_screenshot_shows_model(save_screenshot(self.doc, "polycube_base_mesh.png"),
                                            min_colours=2, min_covered=0.01)
         FreeCADGui.runCommand("PolyCube_FitTarget")
