@@ -25,17 +25,18 @@ base-mesh quads; :func:`quantize_for_budget` searches it for a face budget.
 Each side's cost ``t >= |l - g|`` is written with the convex hull of its integer points
 (:func:`closeness_rows`): besides ``t >= l - g`` and ``t >= g - l``, the chord through
 ``(floor g, g - floor g)`` and ``(ceil g, ceil g - g)``. The chord holds at every integer
-``l``, so the integer program and its optimum are unchanged; but the closure rows of every
-chart are node-arc rows of a network (each side adds its length to one chart and takes it from
-the other), so without the chord the linear relaxation lets every side sit at its real goal
-(the bound HiGHS 1.2 then closed with seconds of cuts and heuristics at the root), and with it
-the relaxation is a convex-cost flow whose vertex optimum is integral: on every dev mesh's
-programs HiGHS's root LP is already integral and the program closes at the root in about
-0.01 s instead of up to 3.8 s (``benchmarks/BASEMESH_SPEED_RESULTS.md``). The optimum found is
-then exact rather than within ``MILP_GAP``. Several lengths often reach the same closeness (it
-is flat when one side grows and another shrinks on the same side of their goals), and another
-solver path would pick another of them; a small cost per unit of side length
-(``LENGTH_COST``) picks the shortest.
+``l``, so the integer program and its optimum are unchanged, but its linear relaxation is much
+tighter. Without slits and rectangles the closure rows are the node-arc rows of a network
+(along each axis a side adds its length to one chart and takes it from the other), so with the
+chord the relaxation is a convex-cost flow with integral vertex optima; slit and rectangle rows
+break that structure in general, yet on every program of the dev meshes HiGHS's root LP is
+integral and the program closes in about 0.01 s. Without the chord the relaxation lets the
+sides sit at their real goals, and HiGHS 1.2 spent up to 3.8 s on cuts and heuristics at the
+root (``benchmarks/BASEMESH_SPEED_RESULTS.md``). The optimum is then exact rather than within
+``MILP_GAP``. Several lengths often reach the same closeness (it is flat when one side grows
+and another shrinks on the same side of their goals), and another solver path would pick
+another of them; a small cost per unit of side length (``LENGTH_COST``) prefers the shorter
+ones, which on the dev meshes gives the same base meshes as before the chord.
 
 After Protais, Bourcier, Ledoux, Lévy, "Robust quantization for polycube maps" (CAD 2022);
 Lyon, Campen, Kobbelt, "Quad layouts via constrained T-mesh quantization" (EG 2021); Tamassia,
