@@ -139,13 +139,18 @@ def write_markdown(results):
              "nodes of one), `same` whether a second run in the same process gave the same base "
              "mesh (vertices and faces bit for bit), `hash` a digest of the base mesh. The "
              "machine has 2 cores shared with other jobs, so CPU seconds vary by about 10%.",
-             "", "Every program closes at its root node, so a node limit changes none of them; "
-             "their CPU time is HiGHS 1.2's root processing (cuts and heuristics: the LP "
-             "relaxation alone takes about 0.01 s on the 151k-triangle mesh). Where the "
-             "polycube attempt fails at the default budget, it fails after a chart is split "
-             "into rectangles at a fixed scale: the linear bound on the quads "
-             "(`quantize.minimum_faces`) lies well below the layout the program then finds, so "
-             "it ends those attempts early only where it exceeds the give-up size."]
+             "", "Every program closes at its root node, so a node limit changes none of them. "
+             "Before the chord rows of `quantize.closeness_rows`, a quantization program's CPU "
+             "time was HiGHS 1.2's root processing (cuts and heuristics, up to 3.8 s) because "
+             "its linear relaxation let every side sit at its real goal; with them each side's "
+             "cost is the convex hull of its integer points, the relaxation is integral on "
+             "every program here and HiGHS stops after it. The program and its optimum are the "
+             "same, but several lengths often share the optimum and the tie-break is now "
+             "explicit (shorter sides, `quantize.LENGTH_COST`), so `hash` compares the base "
+             "meshes. Where the stage falls back, most of what is left is the paired "
+             "decimation (`paired_decimation.py`): one QSlim of the whole target (about 3.5 s "
+             "on 151k triangles; the cages depend on it) and its budget ladder (limit-surface "
+             "crossings and inverted faces of every budget tried)."]
     budgets = {}
     for label, rows in results.items():
         budget = next((row["target_faces"] for row in rows.values() if "target_faces" in row),

@@ -51,7 +51,7 @@ REFINEMENT_ROUNDS = 24
 """Rounds of quantization, each splitting one more overlapping chart into rectangles."""
 FALLBACK_REFINEMENT_ROUNDS = 8
 """The same where the paired decimation can take over: on the dev meshes, layouts within the
-budget needed at most five refinements, and each round is a mixed-integer program (1-2 s)."""
+budget needed at most five refinements."""
 
 
 def refined_target(target):

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
 """Integer chart polygons: every side of the chart complex gets an integer length (issue 8, item 1).
 
 Each chart is a rectilinear polygon in its label plane, walked with the chart on the left
@@ -21,6 +22,22 @@ HiGHS, ``scipy.optimize.milp``). Short sides land on one unit wherever the const
 which makes the layout coarse. The scale sets the number of unit squares, which is the number of
 base-mesh quads; :func:`quantize_for_budget` searches it for a face budget.
 
+Each side's cost ``t >= |l - g|`` is written with the convex hull of its integer points
+(:func:`closeness_rows`): besides ``t >= l - g`` and ``t >= g - l``, the chord through
+``(floor g, g - floor g)`` and ``(ceil g, ceil g - g)``. The chord holds at every integer
+``l``, so the integer program and its optimum are unchanged, but its linear relaxation is much
+tighter. Without slits and rectangles the closure rows are the node-arc rows of a network
+(along each axis a side adds its length to one chart and takes it from the other), so with the
+chord the relaxation is a convex-cost flow with integral vertex optima; slit and rectangle rows
+break that structure in general, yet on every program of the dev meshes HiGHS's root LP is
+integral and the program closes in about 0.01 s. Without the chord the relaxation lets the
+sides sit at their real goals, and HiGHS 1.2 spent up to 3.8 s on cuts and heuristics at the
+root (``benchmarks/BASEMESH_SPEED_RESULTS.md``). The optimum is then exact rather than within
+``MILP_GAP``. Several lengths often reach the same closeness (it is flat when one side grows
+and another shrinks on the same side of their goals), and another solver path would pick
+another of them; a small cost per unit of side length (``LENGTH_COST``) prefers the shorter
+ones, which on the dev meshes gives the same base meshes as before the chord.
+
 After Protais, Bourcier, Ledoux, Lévy, "Robust quantization for polycube maps" (CAD 2022);
 Lyon, Campen, Kobbelt, "Quad layouts via constrained T-mesh quantization" (EG 2021); Tamassia,
 "On embedding a graph in the grid with the minimum number of bends" (SIAM J. Comput. 1987).
@@ -43,6 +60,9 @@ COLLAPSE_BELOW = 0.5
 zero: slivers of the labeling collapse (:func:`collapsible_sides`)."""
 EXTRA_COST = 1e-3
 """Objective weight of the lengths of inserted edges and split pieces (per unit)."""
+LENGTH_COST = 1e-5
+"""Objective weight of the side lengths (per unit): among lengths equally close to their goals
+(module docstring), the shorter ones, whatever path the solver takes."""
 SCALE_ROUNDS = 10
 """Most scales tried by :func:`quantize_for_budget`."""
 
@@ -351,6 +371,34 @@ def measured_lengths(complex_):
     return complex_.side_extent.mean(axis=1)
 
 
+def closeness_rows(goal, n_vars):
+    """Rows ``t_s >= |l_s - goal_s|`` over the variables ``[l (n_vars), t (s)]``, exact on integers.
+
+    Three rows per side: ``t >= l - g``, ``t >= g - l`` and the chord of ``|l - g|`` between
+    the integers around ``g``, ``t >= (g - f) + (1 - 2 (g - f)) (l - f)`` with ``f = floor g``.
+    Together they describe the convex hull of ``{(l, t): l integer, t >= |l - g|}`` (module
+    docstring): every integer ``l`` keeps its cost ``|l - g|``.
+
+    Parameters
+    ----------
+    goal : (s,) float64 goal length of every side (units); the sides are ``l[:s]``.
+    n_vars : int, length unknowns ``l`` (sides first, then the refinement's unknowns).
+
+    Returns
+    -------
+    scipy.optimize.LinearConstraint with 3 s rows and ``n_vars + s`` columns, each row ``>=``.
+    """
+    n_sides = len(goal)
+    lengths = sp.identity(n_vars, format="csr")[:n_sides]
+    slack = sp.identity(n_sides, format="csr")
+    floor = np.floor(goal)
+    slope = 1.0 - 2.0 * (goal - floor)
+    rows = sp.vstack([sp.hstack([-lengths, slack]), sp.hstack([lengths, slack]),
+                      sp.hstack([sp.diags(-slope) @ lengths, slack])])
+    return LinearConstraint(rows.tocsr(), np.concatenate([-goal, goal,
+                                                          goal - floor - slope * floor]), np.inf)
+
+
 def quantize(complex_, tables, refinement, scale, collapsible=None):
     """Integer side lengths closest to ``scale`` times the measured ones, every rectangle closed.
 
@@ -369,13 +417,9 @@ def quantize(complex_, tables, refinement, scale, collapsible=None):
     LabelingError when no integer lengths close every rectangle.
     """
     n_sides, n = complex_.n_sides, refinement.n_vars
-    goal = scale * measured_lengths(complex_)
-    eye = sp.identity(n, format="csr")[:n_sides]
-    slack = sp.identity(n_sides, format="csr")
     # variables [lengths (n), t (n_sides)]: t >= |l - goal| for the side lengths
     constraints = [
-        LinearConstraint(sp.vstack([sp.hstack([-eye, slack]), sp.hstack([eye, slack])]),
-                         np.concatenate([-goal, goal]), np.inf),
+        closeness_rows(scale * measured_lengths(complex_), n),
         LinearConstraint(sp.hstack([refinement.equalities,
                                     sp.csr_matrix((refinement.equalities.shape[0], n_sides))]),
                          0.0, 0.0),
@@ -384,7 +428,8 @@ def quantize(complex_, tables, refinement, scale, collapsible=None):
                          1.0, np.inf),
     ]
     # inserted edges and split pieces carry a small cost: no larger than the sides need
-    cost = np.concatenate([np.zeros(n_sides), np.full(n - n_sides, EXTRA_COST), np.ones(n_sides)])
+    cost = np.concatenate([np.full(n_sides, LENGTH_COST), np.full(n - n_sides, EXTRA_COST),
+                           np.ones(n_sides)])
     integrality = np.concatenate([np.ones(n), np.zeros(n_sides)])
     side_lower = np.ones(n_sides) if collapsible is None else np.where(collapsible, 0.0, 1.0)
     lower = np.concatenate([side_lower, np.where(refinement.piece[n_sides:], 0.0, 1.0),

@@ -19,8 +19,8 @@ from core.quadmesh.orientation import inverted_faces
 from core.quadmesh.base_mesh import LayoutTooLargeError
 from core.quadmesh.lattice import OverlappingChartsError, build_lattice
 from core.quadmesh.milp_solve import MilpTimeLimitError, solve_milp
-from core.quadmesh.quantize import (LoopTables, loop_tables, minimum_faces, quantize,
-                                    rectangular_refinement)
+from core.quadmesh.quantize import (LoopTables, closeness_rows, loop_tables, minimum_faces,
+                                    quantize, rectangular_refinement)
 from core.quadmesh.side_signs import charts_close, loops_are_rectilinear, make_loops_rectilinear
 from core.types import TriMesh
 
@@ -258,6 +258,54 @@ def test_minimum_faces_is_a_lower_bound_of_every_layout(boxes):
     # the smallest layout of the refined L (every side one unit where it can be) meets it
     polycube = quantize(complex_, tables, every_chart, 1e-3)
     assert polycube.faces <= least_refined + 4 * complex_.n_charts
+
+
+def test_closeness_rows_cost_every_integer_length_its_distance_and_cut_between_them():
+    goal = np.array([0.3, 1.0, 2.5, 3.75, 7.01])
+    rows = closeness_rows(goal, len(goal))
+    A, lb = rows.A.toarray(), np.asarray(rows.lb)
+    s = len(goal)
+
+    def least_t(lengths):
+        """Smallest t each side's three rows allow at these lengths (t has coefficient 1)."""
+        return ((lb - A[:, :s] @ lengths)).reshape(3, s).max(axis=0)
+
+    for shift in range(-3, 4):
+        lengths = np.floor(goal) + shift
+        assert np.allclose(least_t(lengths), np.abs(lengths - goal), atol=1e-12)
+    # between the integers around a goal the rows cost the chord, above |l - g| inside
+    between = np.floor(goal) + 0.5
+    chord = 0.5 * (np.abs(np.floor(goal) - goal) + np.abs(np.floor(goal) + 1 - goal))
+    assert np.allclose(least_t(between), chord, atol=1e-12)
+    fractional = goal != np.floor(goal)
+    assert (least_t(between)[fractional] > np.abs(between - goal)[fractional] + 1e-3).all()
+
+
+@pytest.mark.parametrize("scale", [1.37, 3.1])
+def test_the_quantization_program_is_solved_by_its_linear_relaxation(monkeypatch, scale):
+    """The chord rows make the relaxation integral (module docstring of quantize): its optimum
+    is the program's, so HiGHS closes at the root; without them the relaxation is weaker."""
+    complex_, tables = layout_problem(FRAME)
+    refinement = rectangular_refinement(complex_, tables, range(complex_.n_charts))
+    programs = []
+
+    def recorded(what, cost, integrality, bounds, constraints, gap=None):
+        result = solve_milp(what, cost, integrality, bounds, constraints, gap)
+        programs.append((cost, bounds, constraints, result))
+        return result
+
+    monkeypatch.setattr("core.quadmesh.quantize.solve_milp", recorded)
+    quantize(complex_, tables, refinement, scale)
+    (cost, bounds, constraints, result), = programs
+    relaxed = milp(cost, bounds=bounds, constraints=constraints)
+    n = refinement.n_vars
+    assert np.abs(relaxed.x[:n] - np.rint(relaxed.x[:n])).max() < 1e-6
+    assert relaxed.fun == pytest.approx(result.fun, abs=1e-6)
+    # the first closeness block without its chord rows: the relaxation alone falls short
+    s = complex_.n_sides
+    plain = [LinearConstraint(constraints[0].A[:2 * s], constraints[0].lb[:2 * s], np.inf)]
+    weaker = milp(cost, bounds=bounds, constraints=plain + list(constraints[1:]))
+    assert weaker.fun < result.fun - 0.1
 
 
 def test_a_box_needs_six_quads_by_the_bound_and_by_the_quantization():
