@@ -8,6 +8,7 @@ import trimesh
 from core.errors import ExportError
 from core.fitting import crossings, fit_base_mesh
 from core.fitting.crossings import STIFFEN, hold_back_crossings, influencing, stiffen_until_clean
+from core.geometry import triangulate
 from core.params import ReconstructionParams
 from core.pipeline import run_stages
 from core.progress import NO_PROGRESS
@@ -15,6 +16,8 @@ from core.quadmesh.paired_decimation import paired_decimation_base_mesh
 from core.self_intersection import find_self_intersections
 from core.stages.fit import export_limit_crossings
 from core.stages.patches import run_patches
+from core.subdivision.catmull_clark import build_hierarchy
+from core.subdivision.limit import limit_matrices
 from core.subdivision.sample_cages import cube, torus
 from core.types import FitResult, PipelineState
 
@@ -140,16 +143,16 @@ def spindle_torus():
 
 
 def test_patches_refuse_a_crossing_fitted_cage_and_say_where():
-    report = {"levels": 2, "cage_self_intersections": 7}
+    fit = FitResult(spindle_torus(), levels=2, cage_self_intersections=7)
     with pytest.raises(ExportError, match="intersects itself") as raised:
-        run_patches(FitResult(spindle_torus(), report), ReconstructionParams(), NO_PROGRESS)
+        run_patches(fit, ReconstructionParams(), NO_PROGRESS)
     message = str(raised.value)
     assert "between base faces" in message and " near (" in message
-    assert "already crosses itself (7 pairs" in message
+    assert "already crosses itself (7 pairs at the fit's level 2)" in message
 
 
 def test_the_runner_records_the_refusal_as_a_failed_stage():
-    state = PipelineState(fit=FitResult(spindle_torus(), {"levels": 2}))
+    state = PipelineState(fit=FitResult(spindle_torus(), levels=2))
     state, report, failed = run_stages(state, ["patches"], ReconstructionParams())
     assert isinstance(failed, ExportError)
     assert report["stages"]["patches"]["status"] == "failed"
@@ -158,7 +161,7 @@ def test_the_runner_records_the_refusal_as_a_failed_stage():
 
 
 def test_patches_of_a_clean_cage_are_built():
-    result = run_patches(FitResult(cube(), {"levels": 2}), ReconstructionParams(), NO_PROGRESS)
+    result = run_patches(FitResult(cube(), levels=2), ReconstructionParams(), NO_PROGRESS)
     assert result.patches.info  # the export ran
     assert export_limit_crossings(cube()).count == 0
 
@@ -178,3 +181,24 @@ def test_the_export_checks_at_the_fits_level_up_to_large_cages():
     large = grid_sphere(21)
     assert large.n_faces * 16 > FIT_FACE_BUDGET
     assert export_limit_crossings(large).levels == fit_levels(large.n_faces, 2) == 1
+
+
+def test_the_fit_stage_types_the_levels_and_the_cages_crossings():
+    """The patches stage reads ``levels`` and ``cage_self_intersections`` from the typed
+    result; the report keeps both. Fitted to its own limit surface, the spindle torus's
+    cage stays where it is and still crosses itself, so the cage's crossings are counted."""
+    from core.stages.fit import limit_self_intersections, run_fit
+    from core.types import BaseMeshResult, IntakeResult, TriMesh
+
+    cage = spindle_torus()
+    fine = build_hierarchy(cage, 3).meshes[3]
+    target = TriMesh(limit_matrices(fine)[0] @ fine.vertices,
+                     triangulate(fine.face_vertices, fine.face_offsets))
+    params = ReconstructionParams(fit_mode="best-fit", subdivision_levels=2)
+    fit = run_fit(IntakeResult(target, genus=1), BaseMeshResult(cage), params, NO_PROGRESS)
+    assert fit.levels == fit.report["levels"] == 2
+    assert fit.report["self_intersections"] > 0
+    assert fit.cage_self_intersections == fit.report["cage_self_intersections"]
+    assert fit.cage_self_intersections == len(limit_self_intersections(cage, 2)[0]) > 0
+    clean = run_fit(IntakeResult(target, genus=1), BaseMeshResult(cube()), params, NO_PROGRESS)
+    assert clean.levels == 2 and clean.cage_self_intersections is None
