@@ -22,7 +22,7 @@ FIT_REPORT_KEYS = ("start", "rounds", "iterations", "stopped", "mean_distance", 
                    "outside_volume_fraction", "uncovered_volume_fraction", "initial_mean_distance",
                    "initial_max_distance", "t_min", "seconds", "measure_seconds", "refits",
                    "refit_crossings", "cold_refit_crossings", "stiffened", "held_back",
-                   "rgp_held_back", "cage_self_intersections")
+                   "rgp_held_back", "rgp_passes", "pull_crossings", "cage_self_intersections")
 """Figures of ``core.fitting.fit_base_mesh``'s info copied into the report, when present."""
 
 
