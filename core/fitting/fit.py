@@ -92,8 +92,9 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         ``rgp_held_back`` (base vertices whose RGP move was cut back because the
         limit surface crossed itself there), then ``rgp_passes`` (iterations and base
         vertices held back of each further pass, :func:`_passes_around_crossings`;
-        ``iterations`` counts them too) and ``pull_crossings`` (:func:`_pulled_inside`). The returned level-``levels`` limit surface
-        does not cross itself when the cage's does not, and never where the start did not.
+        ``iterations`` counts them too) and ``pull_crossings`` (:func:`_pulled_inside`).
+        The returned level-``levels`` limit surface does not cross itself when the cage's
+        does not, and never where the start did not.
 
     Raises
     ------
