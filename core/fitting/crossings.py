@@ -111,9 +111,9 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True):
     gripper_domain's pull inside, 159 pairs, one such round undid the whole move before).
     Thin members that the cage cannot resolve are where a fit pulls the two walls through
     each other; elsewhere the move is kept whole (SIMP cantilever: 66 of 284 base vertices
-    held back, against 107 when every influencing vertex is halved, and mean distance 2.8e-3 instead of 3.4e-3). After the
-    first round only the triangles that the halved base vertices influence are tested again
-    (:func:`_crossings_after`).
+    held back, against 107 when every influencing vertex is halved, and mean distance
+    2.8e-3 instead of 3.4e-3). After the first round only the triangles that the halved
+    base vertices influence are tested again (:func:`_crossings_after`).
 
     Parameters
     ----------
