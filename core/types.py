@@ -184,11 +184,18 @@ class FitResult:
 
     cage : PolyMesh whose Catmull-Clark limit surface approximates the target (possibly
         refined: more faces than the base mesh when ``tolerance`` split quad strips).
+    levels : int or None, the subdivision level the fit worked on (None: not known, a
+        cage read back from a document).
+    cage_self_intersections : int or None, crossing triangle pairs of the unfitted cage's
+        limit surface at ``levels``, counted only when the fitted one still crosses itself
+        (None: not counted).
     """
 
     cage: PolyMesh
     report: dict = field(default_factory=dict)
     message: str = ""
+    levels: int | None = None
+    cage_self_intersections: int | None = None
 
 
 @dataclass(frozen=True)

@@ -90,8 +90,11 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         back towards the cage or, inside mode, the least-squares start); inside mode also
         ``start_margin`` (depth of the start below the target, model units) and
         ``rgp_held_back`` (base vertices whose RGP move was cut back because the
-        limit surface crossed itself there). The returned level-``levels`` limit surface
-        does not cross itself when the cage's does not, and never where the start did not.
+        limit surface crossed itself there), then ``rgp_passes`` (iterations and base
+        vertices held back of each further pass, :func:`_passes_around_crossings`;
+        ``iterations`` counts them too) and ``pull_crossings`` (:func:`_pulled_inside`).
+        The returned level-``levels`` limit surface does not cross itself when the cage's
+        does not, and never where the start did not.
 
     Raises
     ------
@@ -138,8 +141,8 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
                                                     seed, info)
         if mode == "inside":
             # the RGP starts just inside the target, and nowhere crossing itself
-            pulled, info["start_margin"] = _pulled_inside(base, limit_map, target_surface,
-                                                          vertices, stiffness)
+            pulled, info["start_margin"], info["pull_crossings"] = _pulled_inside(
+                base, limit_map, T, target_surface, vertices, stiffness)
             vertices, crossings, held = _held_back(vertices, crossings, pulled, limit_map, T)
             info["held_back"] = info.get("held_back", 0) + held
             if info["held_back"]:
@@ -162,7 +165,13 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
             known = crossings if surface == "limit" else None
             vertices, crossings, held = _held_back(vertices, known, result.vertices, mapping, T)
         info["rgp_held_back"] = held
-        info.update(iterations=result.iterations, stopped=result.stopped,
+        used = result.iterations
+        if held and surface == "limit" and crossings == 0:
+            vertices, info["rgp_passes"], used = _passes_around_crossings(
+                problem, vertices, result.vertices, T, step, iterations - used,
+                dict(stall_tol=tol, patience=patience, progress=progress))
+            used += result.iterations
+        info.update(iterations=used, stopped=result.stopped,
                     best_iteration=result.best_iteration,
                     objective=result.history["objective"], volume=result.history["volume"],
                     t_min=float(t_min), step=float(step))
@@ -177,6 +186,50 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     info["seconds"] = time.perf_counter() - started
     info["measure_seconds"] = time.perf_counter() - measuring
     return PolyMesh(vertices, base.face_vertices, base.face_offsets), info
+
+
+RGP_PASSES = 3
+"""Most further RGP passes of :func:`_passes_around_crossings`."""
+
+
+def _passes_around_crossings(problem, held, moved, T, step, budget, options):
+    """Further RGP passes from a result held back where it crossed itself, the held-back
+    base vertices fixed.
+
+    The RGP does not see crossings: on a thin plate of a coarse cage it pulls the two walls
+    through each other within a few iterations, and the hold-back
+    (:func:`core.fitting.crossings.hold_back_crossings`) puts the vertices there back
+    towards the start, which lies partly outside. From the held-back result the RGP runs
+    again with those vertices fixed, so the others can still move in; its result is held
+    back the same way, and the vertices cut then are fixed too, until a pass holds nothing
+    back, ``RGP_PASSES`` passes ran or the iteration budget is spent (gripper_domain: 0.55 %
+    of the target's volume outside after one pass, 0.47 % after two more).
+
+    Parameters
+    ----------
+    problem : FitProblem; held : (n, 3) float64 the held-back result, its fine mesh clean;
+    moved : (n, 3) float64 the RGP's result it was held back from; T : fine triangles;
+    step : float, RGP step (model units); budget : int, RGP iterations left;
+    options : dict of further :func:`core.fitting.rgp.run_rgp` arguments.
+
+    Returns
+    -------
+    vertices : (n, 3) float64, its fine mesh clean.
+    passes : list of [iterations, held back base vertices], one per pass.
+    iterations : int, RGP iterations of the passes.
+    """
+    fixed = (held != moved).any(axis=1)
+    passes, used = [], 0
+    while len(passes) < RGP_PASSES and used < budget:
+        again = run_rgp(problem, held, step, iterations=budget - used, fixed=fixed, **options)
+        used += again.iterations
+        vertices, _, count = _held_back(held, 0, again.vertices, problem.mapping, T)
+        passes.append([again.iterations, count])
+        fixed |= (vertices != again.vertices).any(axis=1)
+        held = vertices
+        if not count:
+            break
+    return held, passes, used
 
 
 INSIDE_MARGIN = 0.25
@@ -251,19 +304,32 @@ def _held_back(reference, crossings, moved, mapping, T):
     return vertices, crossings, held
 
 
-def _pulled_inside(base, limit_map, target, vertices, stiffness):
+def _pulled_inside(base, limit_map, T, target, vertices, stiffness):
     """The least-squares fit pulled just inside the target (:func:`pull_inside`, with the
-    fit's smoothness weights ``stiffness``).
+    fit's smoothness weights ``stiffness``), made stiffer where the pull crosses itself.
+
+    Where the pull's limit surface crosses itself (the two walls of a thin plate pulled
+    through each other by a coarse cage's wide stencils), it is made again with the
+    smoothness term stiffer there (:func:`core.fitting.crossings.stiffen_until_clean`,
+    each pull from ``vertices``), so that less of it has to be held back: on
+    gripper_domain 159, 75, 48, 27, 21 crossing pairs, the start 1.0 % of the target's
+    volume outside after the hold-back instead of 1.4 %.
 
     Returns
     -------
     vertices : (n, 3) float64 base vertices.
     margin : float, the depth pulled to (model units).
+    crossings : list of int, crossing pairs of the pull and of each stiffer pull.
     """
     signed = target.closest(limit_map @ vertices).signed
     margin = INSIDE_MARGIN * float(np.sqrt(np.mean(signed ** 2)))
-    return pull_inside(base, limit_map, target, vertices, margin, INSIDE_ROUNDS,
-                       stiffness=stiffness), margin
+
+    def pull(extra, previous=None):
+        return pull_inside(base, limit_map, target, vertices, margin, INSIDE_ROUNDS,
+                           stiffness=stiffness * extra)
+
+    pulled = stiffen_until_clean(pull(np.ones(len(vertices))), pull, limit_map, T)
+    return pulled.vertices, margin, pulled.counts
 
 
 def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness=None, seed=0):
@@ -354,8 +420,24 @@ def _area(X, T):
     return float(face_areas(X, T).sum())
 
 
+NEAR_TOUCH = 0.01
+"""Thinnest wall of the inside start, times the mean base edge, below which the default
+``t_min`` is 0 (the thickness constraint left off)."""
+
+
 def _default_t_min(X, T, edge):
-    """``min(0.1 * edge, 0.5 * thinnest wall)``, walls measured up to ``0.2 * edge``."""
+    """``min(0.1 * edge, 0.5 * thinnest wall)``, walls measured up to ``0.2 * edge``; 0 where
+    the thinnest wall is below ``NEAR_TOUCH * edge``.
+
+    A start whose walls nearly touch (where a crossing was held back just far enough,
+    :func:`core.fitting.crossings.hold_back_crossings`) cannot keep a constraint that thin:
+    the first RGP step closes it, no later iterate is feasible and the RGP's result is its
+    start (gripper_domain: thinnest wall 0.12 of a 32 mm edge, 1.0 % of the volume left
+    outside; without the constraint 0.55 %). The crossing hold-back after the RGP keeps the
+    walls apart instead.
+    """
     cap = 0.1 * edge
     found = thickness(X, T, 2.0 * cap).thickness.min()
+    if found < NEAR_TOUCH * edge:
+        return 0.0
     return float(min(cap, 0.5 * found))

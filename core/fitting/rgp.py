@@ -190,7 +190,7 @@ class RGPResult:
 
 
 def run_rgp(problem, V0, step, iterations=100, stall_tol=1e-4, patience=10,
-            max_inner=10, initial_buffer=0.2, progress=NO_PROGRESS):
+            max_inner=10, initial_buffer=0.2, progress=NO_PROGRESS, fixed=None):
     """Minimise ``problem`` from base positions ``V0`` with relaxed gradient projection.
 
     Parameters
@@ -206,6 +206,8 @@ def run_rgp(problem, V0, step, iterations=100, stall_tol=1e-4, patience=10,
     initial_buffer : float > 0, buffer-zone half width before any change was seen
         (in the constraint's own, dimensionless units).
     progress : core.progress.Progress
+    fixed : (n,) bool or None, base vertices that keep their position (their rows of the
+        search direction are zero).
 
     Returns
     -------
@@ -237,6 +239,8 @@ def run_rgp(problem, V0, step, iterations=100, stall_tol=1e-4, patience=10,
                 weights[c.name] = w
         active = [c for c in ev.constraints if c.name in weights]
         direction = _search_direction(ev, active, weights, damping, step, max_inner)
+        if fixed is not None:
+            direction[fixed] = 0.0
         moving = (np.linalg.norm(direction, axis=1) > _MOVING) & (
             np.linalg.norm(previous, axis=1) > _MOVING)
         reversed_ = moving & (np.einsum("ij,ij->i", direction, previous) < 0)

@@ -22,7 +22,7 @@ FIT_REPORT_KEYS = ("start", "rounds", "iterations", "stopped", "mean_distance", 
                    "outside_volume_fraction", "uncovered_volume_fraction", "initial_mean_distance",
                    "initial_max_distance", "t_min", "seconds", "measure_seconds", "refits",
                    "refit_crossings", "cold_refit_crossings", "stiffened", "held_back",
-                   "rgp_held_back", "cage_self_intersections")
+                   "rgp_held_back", "rgp_passes", "pull_crossings", "cage_self_intersections")
 """Figures of ``core.fitting.fit_base_mesh``'s info copied into the report, when present."""
 
 
@@ -46,7 +46,8 @@ def run_fit(intake, basemesh, params, progress):
 
     Returns
     -------
-    core.types.FitResult; the report has the fit's figures, ``self_intersections`` of the
+    core.types.FitResult (its ``levels`` and ``cage_self_intersections`` also in the report);
+    the report has the fit's figures, ``self_intersections`` of the
     fitted limit surface (triangle pairs at the fit's level, the fit's own count when it
     made one) and, with a tolerance, a
     ``tolerance`` section per refinement round. The message warns about crossings and a
@@ -85,7 +86,8 @@ def run_fit(intake, basemesh, params, progress):
                                "faces": int(fitted.n_faces), "rounds": refinement.rounds}
         if not refinement.met:
             warnings.append(f"warning: {refinement.reason}")
-    return FitResult(fitted, report, "; ".join(warnings))
+    return FitResult(fitted, report, "; ".join(warnings), levels=levels,
+                     cage_self_intersections=info.get("cage_self_intersections"))
 
 
 def count_limit_self_intersections(base, levels):

@@ -31,9 +31,9 @@ def run_patches(fit, params, progress):
     progress.check_cancel()
     crossings = export_limit_crossings(fit.cage)
     if crossings.count:
-        cage = fit.report.get("cage_self_intersections")
+        cage = fit.cage_self_intersections
         why = (f"; the unfitted base mesh's limit surface already crosses itself ({cage} "
-               f"pairs at the fit's level {fit.report.get('levels')})" if cage else "")
+               f"pairs at the fit's level {fit.levels})" if cage else "")
         raise ExportError(f"the fitted cage: {crossings.message()}{why}")
     patches = limit_surface_patches(fit.cage)
     return PatchesResult(patches, dict(patches.info))

@@ -1,5 +1,7 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """A fitted limit surface never crosses itself: refits, hold-back, and the solid's refusal."""
+import os
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -8,17 +10,20 @@ import trimesh
 from core.errors import ExportError
 from core.fitting import crossings, fit_base_mesh
 from core.fitting.crossings import STIFFEN, hold_back_crossings, influencing, stiffen_until_clean
+from core.geometry import triangulate
 from core.params import ReconstructionParams
-from core.pipeline import run_stages
+from core.pipeline import reconstruct, run_stages
 from core.progress import NO_PROGRESS
 from core.quadmesh.paired_decimation import paired_decimation_base_mesh
 from core.self_intersection import find_self_intersections
 from core.stages.fit import export_limit_crossings
 from core.stages.patches import run_patches
+from core.subdivision.catmull_clark import build_hierarchy
+from core.subdivision.limit import limit_matrices
 from core.subdivision.sample_cages import cube, torus
 from core.types import FitResult, PipelineState
 
-from tests.core.dev_meshes import load_dev_mesh
+from tests.core.dev_meshes import MESHES, load_dev_mesh
 
 
 def icosphere(subdivisions=2):
@@ -140,16 +145,16 @@ def spindle_torus():
 
 
 def test_patches_refuse_a_crossing_fitted_cage_and_say_where():
-    report = {"levels": 2, "cage_self_intersections": 7}
+    fit = FitResult(spindle_torus(), levels=2, cage_self_intersections=7)
     with pytest.raises(ExportError, match="intersects itself") as raised:
-        run_patches(FitResult(spindle_torus(), report), ReconstructionParams(), NO_PROGRESS)
+        run_patches(fit, ReconstructionParams(), NO_PROGRESS)
     message = str(raised.value)
     assert "between base faces" in message and " near (" in message
-    assert "already crosses itself (7 pairs" in message
+    assert "already crosses itself (7 pairs at the fit's level 2)" in message
 
 
 def test_the_runner_records_the_refusal_as_a_failed_stage():
-    state = PipelineState(fit=FitResult(spindle_torus(), {"levels": 2}))
+    state = PipelineState(fit=FitResult(spindle_torus(), levels=2))
     state, report, failed = run_stages(state, ["patches"], ReconstructionParams())
     assert isinstance(failed, ExportError)
     assert report["stages"]["patches"]["status"] == "failed"
@@ -158,7 +163,7 @@ def test_the_runner_records_the_refusal_as_a_failed_stage():
 
 
 def test_patches_of_a_clean_cage_are_built():
-    result = run_patches(FitResult(cube(), {"levels": 2}), ReconstructionParams(), NO_PROGRESS)
+    result = run_patches(FitResult(cube(), levels=2), ReconstructionParams(), NO_PROGRESS)
     assert result.patches.info  # the export ran
     assert export_limit_crossings(cube()).count == 0
 
@@ -178,3 +183,66 @@ def test_the_export_checks_at_the_fits_level_up_to_large_cages():
     large = grid_sphere(21)
     assert large.n_faces * 16 > FIT_FACE_BUDGET
     assert export_limit_crossings(large).levels == fit_levels(large.n_faces, 2) == 1
+
+
+def test_the_fit_stage_types_the_levels_and_the_cages_crossings():
+    """The patches stage reads ``levels`` and ``cage_self_intersections`` from the typed
+    result; the report keeps both. Fitted to its own limit surface, the spindle torus's
+    cage stays where it is and still crosses itself, so the cage's crossings are counted."""
+    from core.stages.fit import limit_self_intersections, run_fit
+    from core.types import BaseMeshResult, IntakeResult, TriMesh
+
+    cage = spindle_torus()
+    fine = build_hierarchy(cage, 3).meshes[3]
+    target = TriMesh(limit_matrices(fine)[0] @ fine.vertices,
+                     triangulate(fine.face_vertices, fine.face_offsets))
+    params = ReconstructionParams(fit_mode="best-fit", subdivision_levels=2)
+    fit = run_fit(IntakeResult(target, genus=1), BaseMeshResult(cage), params, NO_PROGRESS)
+    assert fit.levels == fit.report["levels"] == 2
+    assert fit.report["self_intersections"] > 0
+    assert fit.cage_self_intersections == fit.report["cage_self_intersections"]
+    assert fit.cage_self_intersections == len(limit_self_intersections(cage, 2)[0]) > 0
+    clean = run_fit(IntakeResult(target, genus=1), BaseMeshResult(cube()), params, NO_PROGRESS)
+    assert clean.levels == 2 and clean.cage_self_intersections is None
+
+
+def test_rgp_keeps_fixed_vertices_in_place():
+    from core.fitting.rgp import Evaluation, run_rgp
+
+    class Push:
+        """Objective -sum(x): every vertex is pushed along +x."""
+
+        def evaluate(self, V):
+            gradient = np.zeros_like(V)
+            gradient[:, 0] = -1.0
+            return Evaluation(-float(V[:, 0].sum()), gradient, [], {"volume": 0.0}, 1.0)
+
+    V0 = np.zeros((5, 3))
+    fixed = np.array([True, False, True, False, False])
+    result = run_rgp(Push(), V0, 0.1, iterations=4, fixed=fixed)
+    assert np.all(result.vertices[fixed] == 0.0)
+    assert np.allclose(result.vertices[~fixed, 0], 0.4)
+
+
+@pytest.fixture(scope="module")
+def gripper():
+    """gripper_domain (a 3.4 mm plate, 289 mm across) and the pipeline's cage of it."""
+    path = os.path.join(MESHES, "gripper_domain.stl")
+    if not os.path.exists(path):
+        pytest.skip("dev mesh gripper_domain.stl not available")
+    state = reconstruct(path, stop_after="basemesh").state
+    return state.intake.target, state.basemesh.cage
+
+
+def test_inside_fit_of_a_thin_plate_stays_inside_and_clean(gripper):
+    """The RGP pulls the plate's two walls through each other; held back there, it runs
+    again with those vertices fixed, and at most 0.5 % of the volume is left outside."""
+    target, cage = gripper
+    fitted, info = fit_base_mesh(cage, target, mode="inside")
+    assert info["outside_volume_fraction"] <= 0.005
+    assert info["self_intersections"] == 0 and export_limit_crossings(fitted).count == 0
+    assert info["rgp_held_back"] > 0 and info["rgp_passes"]
+    assert info["t_min"] == 0.0  # the start's walls nearly touch where it was held back
+    # the stiffer pulls leave less to hold back than undoing the whole pull would
+    assert info["pull_crossings"][-1] < info["pull_crossings"][0]
+    assert info["held_back"] < 0.5 * len(cage.vertices)
