@@ -25,7 +25,8 @@ of the target alone (``unseen_NAME_target.png``, ``benchmarks/render.py``).
 Large targets: ``--large`` adds, for each design of :data:`LARGE_DESIGNS`, the same design
 Loop-subdivided twice (``NAME_loop2``, 16 times the triangles, 100k-170k; a finer and smoother
 surface of the same result, as a TO exporter's fine output is), written once into
-``benchmarks/tmp/unseen_large/`` (deterministic; its SHA-256 is listed with the results).
+``benchmarks/tmp/unseen_large/`` (deterministic; the start of its SHA-256 is in the designs
+table).
 """
 import argparse
 import hashlib
@@ -84,28 +85,42 @@ def ensure_large(names):
     """Manifest-like entries (dict name -> dict) of the Loop-subdivided large designs.
 
     names : the wanted ``NAME_loop2`` names (empty: all of :data:`LARGE_DESIGNS`). Each is made
-    from its design's STL (regenerated as :func:`ensure_designs` does) on first use.
+    from its design's STL (regenerated as :func:`ensure_designs` does) when it is missing, or
+    when it or its source changed since it was made (``LARGE/MANIFEST.json`` records both
+    hashes and the figures of the table).
     """
     import trimesh
 
     bases = [n[:-len(LARGE_SUFFIX)] for n in names if n.endswith(LARGE_SUFFIX)] \
         if names else list(LARGE_DESIGNS)
     os.makedirs(LARGE, exist_ok=True)
+    manifest_path = os.path.join(LARGE, "MANIFEST.json")
+    made = _load(manifest_path) or {}
     entries = {}
     for base, entry in ensure_designs(bases).items():
         name = base + LARGE_SUFFIX
         path = os.path.join(LARGE, name + ".stl")
-        if not os.path.exists(path):
-            mesh = trimesh.load(os.path.join(DESIGNS, entry["file"]), process=True)
-            vertices, faces = trimesh.remesh.subdivide_loop(mesh.vertices, mesh.faces,
+        known = made.get(name, {})
+        if not (os.path.exists(path) and known.get("source_sha256") == entry["sha256"]
+                and known.get("sha256") == sha256(path)):
+            source = trimesh.load(os.path.join(DESIGNS, entry["file"]), process=True)
+            vertices, faces = trimesh.remesh.subdivide_loop(source.vertices, source.faces,
                                                             iterations=2)
+            mesh = trimesh.Trimesh(vertices, faces, process=False)
             tmp = path + ".tmp.stl"
-            trimesh.Trimesh(vertices, faces, process=False).export(tmp)
+            mesh.export(tmp)
             os.replace(tmp, path)
-        mesh = trimesh.load(path, process=True)
-        entries[name] = {**entry, "file": path, "sha256": sha256(path),
-                         "what": f"{base}, Loop-subdivided twice", "triangles": len(mesh.faces),
-                         "genus": int(round((2 - mesh.euler_number) / 2))}
+            made[name] = {"source_sha256": entry["sha256"], "sha256": sha256(path),
+                          "triangles": len(mesh.faces),
+                          "genus": int(round((2 - mesh.euler_number) / 2))}
+            tmp = manifest_path + ".tmp"
+            with open(tmp, "w", encoding="utf-8") as handle:
+                json.dump(made, handle, indent=1, sort_keys=True)
+            os.replace(tmp, manifest_path)
+        entries[name] = {**entry, "file": path,
+                         "what": f"{base}, Loop-subdivided twice (SHA-256 "
+                                 f"{made[name]['sha256'][:12]})",
+                         **{k: made[name][k] for k in ("sha256", "triangles", "genus")}}
     return entries
 
 
