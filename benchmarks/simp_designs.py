@@ -190,6 +190,37 @@ def designs():
         solid=_union(_cylinder(1, (6, 6), 2.5, 4.5), _cylinder(1, (6, 21), 2.5, 4.5)),
         void=_union(_box((14, 0, 0), (nx, ny, 11)), _cylinder(1, (6, 6), 0.0, 2.5),
                     _cylinder(1, (6, 21), 0.0, 2.5))))
+    nx, ny, nz = 16, 16, 44
+    out.append(Design(
+        "simp_twisted_tower",
+        "column clamped at its base, twisted at the top (tangential loads on the four top "
+        "edges, case 1) and pushed sideways (case 2): thin curved walls ending in sharp horns "
+        "at the loaded top edges",
+        (nx, ny, nz), 0.12, ITERATIONS,
+        fixed=_box((0, 0, 0), (nx, ny, 0)),
+        load_cases=[[Load(_box((0, 0, nz), (nx, 0, nz)), (1.0, 0.0, 0.0)),
+                     Load(_box((nx, 0, nz), (nx, ny, nz)), (0.0, 1.0, 0.0)),
+                     Load(_box((0, ny, nz), (nx, ny, nz)), (-1.0, 0.0, 0.0)),
+                     Load(_box((0, 0, nz), (0, ny, nz)), (0.0, -1.0, 0.0))],
+                    [Load(_box((0, 0, nz), (nx, ny, nz)), (1.0, 0.0, 0.0))]]))
+    nx, ny, nz = 60, 8, 20
+    out.append(Design(
+        "simp_clevis_link",
+        "link between two pin eyes: passive-solid rings (two elements) around passive-void "
+        "bores, the left bore clamped, the right one pulled along the link and down",
+        (nx, ny, nz), 0.2, ITERATIONS,
+        fixed=_cylinder(1, (7, 10), 2.9, 3.1),
+        load_cases=[[Load(_cylinder(1, (53, 10), 2.9, 3.1), (1.0, 0.0, -0.5))]],
+        solid=_union(_cylinder(1, (7, 10), 3.0, 5.0), _cylinder(1, (53, 10), 3.0, 5.0)),
+        void=_union(_cylinder(1, (7, 10), 0.0, 3.0), _cylinder(1, (53, 10), 0.0, 3.0))))
+    nx, ny, nz = 48, 32, 4
+    out.append(Design(
+        "simp_cover_plate",
+        "thin cover plate (four elements thick) clamped along its two short edges, a "
+        "downward load on an off-centre pad of the top face",
+        (nx, ny, nz), 0.4, ITERATIONS,
+        fixed=_union(_box((0, 0, 0), (0, ny, nz)), _box((nx, 0, 0), (nx, ny, nz))),
+        load_cases=[[Load(_box((28, 8, nz), (34, 14, nz)), (0.0, 0.0, -1.0))]]))
     return out
 
 
