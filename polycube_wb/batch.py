@@ -89,7 +89,9 @@ class MeshRow:
         ``message`` say which and why), ``timeout``, ``crashed`` (the process) or
         ``cancelled`` (its process got Ctrl-C; no report written).
     stage_reached : last stage whose status is ``ok``.
-    mean_deviation, max_deviation : fitted surface to target, fractions of the bbox diagonal.
+    mean_deviation : fitted surface to target; max_deviation : the larger of the fitted
+        surface to the target and the target to it (a missed tip counts); fractions of the
+        bbox diagonal.
     outside_volume : fraction of the target volume the fitted surface leaves outside it.
     seconds : wall time of the mesh; peak_memory_mb : peak resident memory of its process in
         MiB (its own ``VmHWM`` at its end; for a process the batch stopped or that died, the
@@ -251,11 +253,17 @@ def row_from_report(job, report, skipped=False):
                    triangles=source.get("triangles"), genus=source.get("genus"),
                    stage_reached=ok[-1] if ok else "", failed_stage=failed[0] if failed else "",
                    faces=brep.get("faces"), mean_deviation=fit.get("mean_distance"),
-                   max_deviation=fit.get("max_distance"),
+                   max_deviation=_larger(fit.get("max_distance"), fit.get("target_max_distance")),
                    outside_volume=fit.get("outside_volume_fraction"),
                    seconds=batch.get("seconds"), peak_memory_mb=report.get("peak_memory_mb"),
                    message=message, thumbnail=os.path.basename(thumbnail) if thumbnail else "",
                    skipped=skipped)
+
+
+def _larger(a, b):
+    """The larger of two optional figures (None where neither is known)."""
+    known = [x for x in (a, b) if x is not None]
+    return max(known) if known else None
 
 
 def run_isolated(job):

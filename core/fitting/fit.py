@@ -76,12 +76,13 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         ('iterations', 'stalled', 'converged' or 'none'),
         ``best_iteration``, ``objective`` (list per iteration), ``volume`` (list),
         ``mean_distance`` / ``max_distance`` (distance of the fine limit points to the
-        target over the target's bounding-box diagonal) and their ``initial_``
-        counterparts (the cage's), ``outside_volume_fraction`` and
+        target over the target's bounding-box diagonal), ``target_mean_distance`` /
+        ``target_max_distance`` (the target to the limit surface, :func:`_distances`) and
+        their ``initial_`` counterparts (the cage's), ``outside_volume_fraction`` and
         ``uncovered_volume_fraction`` (triangulated fine limit mesh minus target and
         target minus it, over the target volume; of the result only), ``t_min``,
         ``step`` (model units), ``seconds`` (all of it) and ``measure_seconds`` (the
-        part spent on those figures, one manifold3d boolean); with a least-squares fit
+        part spent on those figures: one manifold3d boolean and the distance queries); with a least-squares fit
         (best-fit mode, inside mode from ``start='best-fit'``) ``self_intersections``
         (intersecting triangle pairs of the fine limit mesh, ``surface='limit'``),
         ``cage_self_intersections`` (the cage's, when the result still crosses), ``refits``,
@@ -180,8 +181,8 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         if crossings and "cage_self_intersections" not in info:
             info["cage_self_intersections"] = count_crossings(limit_map, T, V0)
     measuring = time.perf_counter()
-    info.update(_figures(limit_map @ vertices, T, target_surface))
-    initial = _distances(limit_map @ V0, target_surface)
+    info.update(_figures(limit_map @ vertices, T, target_surface, seed))
+    initial = _distances(limit_map @ V0, T, target_surface, seed)
     info.update({"initial_" + k: v for k, v in initial.items()})
     info["seconds"] = time.perf_counter() - started
     info["measure_seconds"] = time.perf_counter() - measuring
@@ -358,18 +359,41 @@ def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness
     return fine, coarse
 
 
-def _figures(X, T, target):
-    """Distance and containment figures of fine limit points against the target."""
+def _figures(X, T, target, seed):
+    """Distance and containment figures of the fine limit surface against the target."""
     report = containment(X, T, target.vertices, target.faces)
-    return {**_distances(X, target),
+    return {**_distances(X, T, target, seed),
             "outside_volume_fraction": report["outside_volume_fraction"],
             "uncovered_volume_fraction": report["uncovered_volume_fraction"]}
 
 
-def _distances(X, target):
-    """Mean and largest distance of fine limit points to the target, over its diagonal."""
-    distance = target.nearest(X).distance / target.diagonal
-    return {"mean_distance": float(distance.mean()), "max_distance": float(distance.max())}
+DISTANCE_SAMPLES = 20000
+"""Target samples of the target-to-surface figures (:func:`_distances`)."""
+
+
+def _distances(X, T, target, seed):
+    """Both one-sided distances between the fine limit surface and the target.
+
+    Parameters
+    ----------
+    X : (n, 3) float64 fine limit points; T : (t, 3) int64 their triangles.
+    target : TargetSurface; seed : int, seed of its samples.
+
+    Returns
+    -------
+    dict of fractions of the target's bounding-box diagonal: ``mean_distance`` /
+    ``max_distance``, the fine limit points to the target; ``target_mean_distance`` /
+    ``target_max_distance``, :data:`DISTANCE_SAMPLES` area-weighted target samples (the
+    maximum also over the target's vertices) to the triangulated limit surface: what the
+    surface misses, such as a thin horn's tip the limit surface stops short of.
+    """
+    forward = target.nearest(X).distance / target.diagonal
+    points, _ = target.samples(DISTANCE_SAMPLES, seed)
+    backward = TargetSurface(X, T, "fitted surface").nearest(
+        np.vstack([points, target.vertices])).distance / target.diagonal
+    return {"mean_distance": float(forward.mean()), "max_distance": float(forward.max()),
+            "target_mean_distance": float(backward[:len(points)].mean()),
+            "target_max_distance": float(backward.max())}
 
 
 def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface, start,

@@ -19,8 +19,10 @@ check refused fitted cages the fit had found clean: on ``simp_crank_arm`` (848 f
 crossing triangle pairs at level 1 and none at level 2."""
 
 FIT_REPORT_KEYS = ("start", "rounds", "iterations", "stopped", "mean_distance", "max_distance",
+                   "target_mean_distance", "target_max_distance",
                    "outside_volume_fraction", "uncovered_volume_fraction", "initial_mean_distance",
-                   "initial_max_distance", "t_min", "seconds", "measure_seconds", "refits",
+                   "initial_max_distance", "initial_target_mean_distance",
+                   "initial_target_max_distance", "t_min", "seconds", "measure_seconds", "refits",
                    "refit_crossings", "cold_refit_crossings", "stiffened", "held_back",
                    "rgp_held_back", "rgp_passes", "pull_crossings", "cage_self_intersections")
 """Figures of ``core.fitting.fit_base_mesh``'s info copied into the report, when present."""

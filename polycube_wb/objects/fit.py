@@ -14,6 +14,9 @@ FIGURES = (("MeanDistance", "mean_distance", "Mean distance of the limit surface
             "(fraction of the bounding-box diagonal)"),
            ("MaxDistance", "max_distance", "Largest distance to the target (fraction of the "
             "diagonal)"),
+           ("TargetMaxDistance", "target_max_distance", "Largest distance of the target to the "
+            "limit surface: what the surface misses, such as a thin tip (fraction of the "
+            "diagonal)"),
            ("OutsideVolume", "outside_volume_fraction", "Volume outside the target (fraction "
             "of the target volume)"),
            ("UncoveredVolume", "uncovered_volume_fraction", "Target volume not covered "

@@ -163,6 +163,20 @@ def test_mode_none_keeps_the_cage_and_reports_its_figures():
     assert "initial_outside_volume_fraction" not in info   # the result's volumes only
 
 
+def test_the_target_to_surface_figure_sees_the_corners_the_limit_surface_misses():
+    # the cube cage's limit surface lies inside the cube it is the cage of; its corner vertex
+    # has the limit (9 v + 4 sum(edge neighbours) + sum(diagonals)) / 24 = v / 2, so the
+    # target's corners are |v| / 2 = sqrt(3) / 2 from it: a quarter of the diagonal 2 sqrt(3),
+    # while no limit point is farther than 1 - 1/2 from the cube (a seventh of the diagonal)
+    box = trimesh.creation.box(extents=(2.0, 2.0, 2.0))
+    target = TriMesh(np.asarray(box.vertices), np.asarray(box.faces, dtype=np.int64))
+    _, info = fit_base_mesh(centred_cube(2.0), target, mode="none")
+    assert info["target_max_distance"] == pytest.approx(0.25, abs=1e-3)
+    assert info["max_distance"] == pytest.approx(0.5 / (2 * np.sqrt(3)), abs=1e-3)
+    assert info["initial_target_max_distance"] == info["target_max_distance"]
+    assert 0 < info["target_mean_distance"] < info["target_max_distance"]
+
+
 def test_grid_sphere_converges_into_a_slightly_larger_sphere():
     base = grid_sphere(3)
     X, _ = limit_points(base, 2)

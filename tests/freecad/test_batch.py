@@ -85,6 +85,8 @@ def test_every_output_and_a_row_per_mesh(batch_run):
         report = json.loads((out / f"{name}.json").read_text())
         assert report["batch"]["params"]["fit_iterations"] == 3
         assert float(row["mean_deviation"]) == pytest.approx(report["fit"]["mean_distance"])
+        assert float(row["max_deviation"]) == pytest.approx(
+            max(report["fit"]["max_distance"], report["fit"]["target_max_distance"]))
         assert 0.0 < float(row["mean_deviation"]) <= float(row["max_deviation"]) < 0.05
         assert int(row["triangles"]) == report["input"]["triangles"]
     assert rows["box"]["triangles"] == "768" and rows["box"]["genus"] == "0"

@@ -103,6 +103,9 @@ def test_reopened_chain_has_its_proxies_and_results(chain_doc):
     base, fitted = read_cage(objects["BaseMesh"]), read_cage(objects["Fit"])
     assert np.array_equal(base.face_vertices, fitted.face_vertices)
     assert np.abs(base.vertices - fitted.vertices).max() > 0, "the fit moved the cage"
+    # both one-sided figures, each below 2% of the diagonal on the cantilever
+    assert 0 < objects["Fit"].MeanDistance < objects["Fit"].MaxDistance < 0.02
+    assert 0 < objects["Fit"].TargetMaxDistance < 0.02
     solid = objects["Solid"].Shape
     assert solid.isValid() and len(solid.Solids) == 1 and solid.Shells[0].isClosed()
     assert objects["Solid"].BrepFaces == len(solid.Faces) == base.n_faces
