@@ -40,10 +40,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.fitting.responses import packaging, thickness_constraint, volume
+from core.fitting.responses import InsideBounds, packaging, thickness_constraint, volume
 from core.progress import NO_PROGRESS
 
 P_REF = 1e3
+INSIDE_SLACK = 1e-9
+"""Depth below the target, times its bounding-box diagonal, within which a fine point whose
+inside bound (:class:`core.fitting.responses.InsideBounds`) does not prove it inside is
+queried again."""
 
 _MOVING = 0.05
 _MIN_DAMPING = 1e-3
@@ -74,6 +78,8 @@ class FitProblem:
         self.mode = mode
         self.t_min = float(t_min)
         self.area = float(area)
+        # queries of the points proven still inside are skipped (exact, see InsideBounds)
+        self.known = InsideBounds(INSIDE_SLACK * target.diagonal) if mode == "inside" else None
 
     def fine(self, V0):
         """(n_fine, 3) float64 fine positions ``M V0`` (Eq. 10)."""
@@ -89,7 +95,7 @@ class FitProblem:
         X = self.fine(V0)
         n_fine = len(X)
         vol, d_vol = volume(X, self.triangles)
-        pack, d_pack, signed = packaging(X, self.target, self.mode)
+        pack, d_pack, signed = packaging(X, self.target, self.mode, self.known)
         objective = -vol / self.area + self.weight * pack / n_fine
         grad_volume = self.mapping_t @ (-d_vol / self.area)
         grad = grad_volume + self.mapping_t @ (self.weight * d_pack / n_fine)
