@@ -24,6 +24,7 @@ points change between rounds; the rounds stop when the two-sided RMS distance im
 by less than ``tol`` (relative) or after ``rounds``.
 """
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.linalg
@@ -207,41 +208,59 @@ class NormalEquations:
 
     def solve(self, V, terms):
         """(n_base, 3) float64 minimiser for the data ``terms`` and the previous ``V``."""
-        n_f, n = self.n_fine, self.n_base
-        rows, cols, vals = [], [], []
-        fine_rhs = np.zeros((n_f, 3))
-        for normal, corners, weights, b, count in terms:
-            pair = weights[:, :, None] * weights[:, None, :] / count
-            for block, (a, c) in enumerate(_PAIRS):
-                rows.append(block * n_f + np.broadcast_to(corners[:, :, None], pair.shape))
-                cols.append(np.broadcast_to(corners[:, None, :], pair.shape))
-                vals.append((normal[:, a] * normal[:, c])[:, None, None] * pair)
-            per_corner = (normal * (b / count)[:, None])[:, None, :] * weights[:, :, None]
-            fine_rhs += scatter_add(corners.reshape(-1), per_corner.reshape(-1, 3), n_f)
-        Z = sp.csr_matrix((np.concatenate([v.reshape(-1) for v in vals]),
-                           (np.concatenate([r.reshape(-1) for r in rows]),
-                            np.concatenate([c.reshape(-1) for c in cols]))),
-                          shape=(len(_PAIRS) * n_f, n_f))
-        blocks = self._mapping_t6 @ (Z @ self.mapping)
+        n = self.n_base
+        blocks = self._mapping_t6 @ (self._fine_blocks(terms) @ self.mapping)
+        fine_rhs = sum(scatter_add(corners.reshape(-1),
+                                   ((normal * (b / count)[:, None])[:, None, :]
+                                    * weights[:, :, None]).reshape(-1, 3), self.n_fine)
+                       for normal, corners, weights, b, count in terms)
         rhs = np.asarray(self.mapping.T @ fine_rhs).T.reshape(-1)
-        dense = 3 * n <= _DENSE_UNKNOWNS
-        part = {}
-        for block, (a, c) in enumerate(_PAIRS):
-            piece = blocks[block * n:(block + 1) * n]
-            part[a, c] = part[c, a] = piece.toarray() if dense else piece
-        scale = float(np.mean([part[a, a].diagonal().mean() for a in range(3)]))
-        regular = ((self.smoothness * scale) * self.smooth
-                   + sp.identity(3 * n, format="csr") * (self.damping * scale))
+        piece = {pair: blocks[k * n:(k + 1) * n] for k, pair in enumerate(_PAIRS)}
+        scale = float(np.mean([piece[a, a].diagonal().mean() for a in range(3)]))
         rhs = (rhs + (self.smoothness * scale) * self.smooth_init
                + (self.damping * scale) * V.T.reshape(-1))
-        if dense:
-            system = np.block([[part[a, c] for c in range(3)] for a in range(3)])
-            system += regular.toarray()
+        if 3 * n <= _DENSE_UNKNOWNS:
+            system = (self.smoothness * scale) * self._smooth_dense
+            system.flat[::3 * n + 1] += self.damping * scale
+            for (a, c), block in piece.items():
+                dense = block.toarray()
+                system[a * n:(a + 1) * n, c * n:(c + 1) * n] += dense
+                if a != c:  # the blocks are symmetric
+                    system[c * n:(c + 1) * n, a * n:(a + 1) * n] += dense
             solution = scipy.linalg.cho_solve(scipy.linalg.cho_factor(system), rhs)
         else:
-            system = sp.bmat([[part[a, c] for c in range(3)] for a in range(3)], format="csc")
+            system = sp.bmat([[piece[min(a, c), max(a, c)] for c in range(3)] for a in range(3)],
+                             format="csc")
+            regular = ((self.smoothness * scale) * self.smooth
+                       + sp.identity(3 * n, format="csr") * (self.damping * scale))
             solution = spsolve((system + regular).tocsc(), rhs, permc_spec="MMD_AT_PLUS_A")
         return solution.reshape(3, -1).T
+
+    def _fine_blocks(self, terms):
+        """(6 n_fine, n_fine) CSR: the six blocks ``Z_ab`` of :meth:`solve` stacked, ``_PAIRS``
+        order. Every block has the same pattern (the corner pairs of all rows), so the
+        duplicate entries are summed once per pattern (one sort), not once per block."""
+        n_f = self.n_fine
+        keys, values = [], []
+        for normal, corners, weights, _, count in terms:
+            pair = (weights[:, :, None] * weights[:, None, :]).reshape(len(corners), -1) / count
+            keys.append((corners[:, :, None] * n_f + corners[:, None, :]).reshape(-1))
+            products = np.stack([normal[:, a] * normal[:, c] for a, c in _PAIRS])
+            values.append((products[:, :, None] * pair[None]).reshape(len(_PAIRS), -1))
+        key, inverse = np.unique(np.concatenate(keys), return_inverse=True)
+        values = np.concatenate(values, axis=1)
+        data = np.concatenate([np.bincount(inverse, weights=v, minlength=len(key))
+                               for v in values])
+        row, col = np.divmod(key, n_f)
+        indptr = np.concatenate([[0], np.cumsum(np.tile(np.bincount(row, minlength=n_f),
+                                                        len(_PAIRS)))])
+        return sp.csr_matrix((data, np.tile(col, len(_PAIRS)), indptr),
+                             shape=(len(_PAIRS) * n_f, n_f))
+
+    @cached_property
+    def _smooth_dense(self):
+        """(3 n, 3 n) float64 the smoothness matrix, dense (read only)."""
+        return self.smooth.toarray()
 
 
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
