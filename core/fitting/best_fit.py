@@ -182,7 +182,7 @@ class NormalEquations:
     Assembly: the data part's 3x3 blocks (coordinates ``a, b``) are
     ``M^T Z_ab M`` with ``Z_ab = sum_j (n_ja n_jb / count) w_j w_j^T`` on the fine
     points (``w_j`` the row's corner weights), six symmetric blocks built at once on
-    the fine level and mapped by one sparse product; a row through ``k`` corners costs
+    the fine level (one pattern) and mapped by two sparse products each; a row through ``k`` corners costs
     ``k^2`` fine entries instead of the square of its base-vertex support.
 
     Parameters
@@ -204,18 +204,19 @@ class NormalEquations:
         self.smooth = sp.block_diag([laplacian.T @ laplacian] * 3, format="csr")
         self.smooth_init = self.smooth @ self.V_init.T.reshape(-1)
         self.smoothness, self.damping = float(smoothness), float(damping)
-        self._mapping_t6 = sp.block_diag([self.mapping.T] * len(_PAIRS), format="csr")
+        self._mapping_t = self.mapping.T.tocsr()
 
     def solve(self, V, terms):
         """(n_base, 3) float64 minimiser for the data ``terms`` and the previous ``V``."""
-        n = self.n_base
-        blocks = self._mapping_t6 @ (self._fine_blocks(terms) @ self.mapping)
+        n, n_f = self.n_base, self.n_fine
+        fine_blocks = self._fine_blocks(terms) @ self.mapping
         fine_rhs = sum(scatter_add(corners.reshape(-1),
                                    ((normal * (b / count)[:, None])[:, None, :]
                                     * weights[:, :, None]).reshape(-1, 3), self.n_fine)
                        for normal, corners, weights, b, count in terms)
-        rhs = np.asarray(self.mapping.T @ fine_rhs).T.reshape(-1)
-        piece = {pair: blocks[k * n:(k + 1) * n] for k, pair in enumerate(_PAIRS)}
+        rhs = np.asarray(self._mapping_t @ fine_rhs).T.reshape(-1)
+        piece = {pair: self._mapping_t @ fine_blocks[k * n_f:(k + 1) * n_f]
+                 for k, pair in enumerate(_PAIRS)}
         scale = float(np.mean([piece[a, a].diagonal().mean() for a in range(3)]))
         rhs = (rhs + (self.smoothness * scale) * self.smooth_init
                + (self.damping * scale) * V.T.reshape(-1))
