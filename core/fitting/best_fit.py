@@ -182,8 +182,9 @@ class NormalEquations:
     Assembly: the data part's 3x3 blocks (coordinates ``a, b``) are
     ``M^T Z_ab M`` with ``Z_ab = sum_j (n_ja n_jb / count) w_j w_j^T`` on the fine
     points (``w_j`` the row's corner weights), six symmetric blocks built at once on
-    the fine level (one pattern) and mapped by two sparse products each; a row through ``k`` corners costs
-    ``k^2`` fine entries instead of the square of its base-vertex support.
+    the fine level and mapped by two sparse products each; a row through
+    ``k`` corners costs ``k^2`` fine entries instead of the square of its base-vertex
+    support.
 
     Parameters
     ----------
@@ -239,23 +240,18 @@ class NormalEquations:
 
     def _fine_blocks(self, terms):
         """(6 n_fine, n_fine) CSR: the six blocks ``Z_ab`` of :meth:`solve` stacked, ``_PAIRS``
-        order. Every block has the same pattern (the corner pairs of all rows), so the
-        duplicate entries are summed once per pattern (one sort), not once per block."""
+        order."""
         n_f = self.n_fine
-        keys, values = [], []
+        rows, cols, vals = [], [], []
         for normal, corners, weights, _, count in terms:
-            pair = (weights[:, :, None] * weights[:, None, :]).reshape(len(corners), -1) / count
-            keys.append((corners[:, :, None] * n_f + corners[:, None, :]).reshape(-1))
-            products = np.stack([normal[:, a] * normal[:, c] for a, c in _PAIRS])
-            values.append((products[:, :, None] * pair[None]).reshape(len(_PAIRS), -1))
-        key, inverse = np.unique(np.concatenate(keys), return_inverse=True)
-        values = np.concatenate(values, axis=1)
-        data = np.concatenate([np.bincount(inverse, weights=v, minlength=len(key))
-                               for v in values])
-        row, col = np.divmod(key, n_f)
-        indptr = np.concatenate([[0], np.cumsum(np.tile(np.bincount(row, minlength=n_f),
-                                                        len(_PAIRS)))])
-        return sp.csr_matrix((data, np.tile(col, len(_PAIRS)), indptr),
+            pair = weights[:, :, None] * weights[:, None, :] / count
+            for block, (a, c) in enumerate(_PAIRS):
+                rows.append(block * n_f + np.broadcast_to(corners[:, :, None], pair.shape))
+                cols.append(np.broadcast_to(corners[:, None, :], pair.shape))
+                vals.append((normal[:, a] * normal[:, c])[:, None, None] * pair)
+        return sp.csr_matrix((np.concatenate([v.reshape(-1) for v in vals]),
+                              (np.concatenate([r.reshape(-1) for r in rows]),
+                               np.concatenate([c.reshape(-1) for c in cols]))),
                              shape=(len(_PAIRS) * n_f, n_f))
 
     @cached_property
