@@ -31,7 +31,7 @@ import scipy.linalg
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-from core.fitting.responses import vertex_normals
+from core.fitting.responses import INSIDE_SLACK, InsideBounds, vertex_normals
 from core.geometry import scatter_add
 from core.subdivision.catmull_clark import mesh_topology
 from core.target_surface import TargetSurface
@@ -125,7 +125,7 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
 
 
 def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
-                damping=1e-3, stiffness=None):
+                damping=1e-3, stiffness=None, start_closest=None):
     """Move the fine limit points that lie outside the target (or within ``margin`` of
     it) to ``margin`` inside it, changing the cage as little as the regularisation allows.
 
@@ -148,6 +148,11 @@ def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
     margin : float >= 0, depth below the target surface to pull to (model units).
     rounds : int >= 0
     smoothness, damping, stiffness : as in :func:`best_fit`.
+    start_closest : core.target_surface.ClosestPoints or None, the closest points of the
+        start's fine points ``mapping @ start`` if known (the stiffer pulls of
+        :func:`core.fitting.fit._pulled_inside` all start there). After the first round
+        only the points not proven deeper than ``margin`` are queried
+        (:class:`core.fitting.responses.InsideBounds`; the same rows either way).
 
     Returns
     -------
@@ -156,15 +161,20 @@ def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
     V = np.array(start, dtype=np.float64)
     system = NormalEquations(PolyMesh(V, base.face_vertices, base.face_offsets), mapping,
                              smoothness, damping, stiffness)
-    for _ in range(rounds):
+    known = InsideBounds(INSIDE_SLACK * target.diagonal, margin)
+    for done in range(rounds):
         X = mapping @ V
-        near = target.closest(X)
+        query = known.undecided(X)
+        near = (start_closest if done == 0 and start_closest is not None
+                else target.closest(X[query]))
+        known.record(X, query, near.signed)
         active = near.signed > -margin
         if not active.any():
             break
-        normal = near.normal * active[:, None]
-        V = system.solve(V, [(normal, np.arange(len(X))[:, None], np.ones((len(X), 1)),
-                              (_dot(near.normal, near.point) - margin) * active,
+        normal, b = np.zeros_like(X), np.zeros(len(X))
+        normal[query] = near.normal * active[:, None]
+        b[query] = (_dot(near.normal, near.point) - margin) * active
+        V = system.solve(V, [(normal, np.arange(len(X))[:, None], np.ones((len(X), 1)), b,
                               system.n_fine)])
     return V
 

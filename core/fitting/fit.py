@@ -324,12 +324,12 @@ def _pulled_inside(base, limit_map, T, target, vertices, stiffness):
     margin : float, the depth pulled to (model units).
     crossings : list of int, crossing pairs of the pull and of each stiffer pull.
     """
-    signed = target.closest(limit_map @ vertices).signed
-    margin = INSIDE_MARGIN * float(np.sqrt(np.mean(signed ** 2)))
+    start = target.closest(limit_map @ vertices)
+    margin = INSIDE_MARGIN * float(np.sqrt(np.mean(start.signed ** 2)))
 
     def pull(extra, previous=None):
         return pull_inside(base, limit_map, target, vertices, margin, INSIDE_ROUNDS,
-                           stiffness=stiffness * extra)
+                           stiffness=stiffness * extra, start_closest=start)
 
     pulled = stiffen_until_clean(pull(np.ones(len(vertices))), pull, limit_map, T)
     return pulled, margin, pulled.counts

@@ -90,6 +90,12 @@ def packaging(X, target, mode="inside", known=None):
     return value, gradient, signed
 
 
+INSIDE_SLACK = 1e-9
+"""Depth below the target, times its bounding-box diagonal, within which a fine point whose
+inside bound (:class:`InsideBounds`) does not prove it inside is
+queried again."""
+
+
 class InsideBounds:
     """Points proven inside a target since their last closest-point query.
 
@@ -99,14 +105,19 @@ class InsideBounds:
     there) does not need its closest point. Points that are outside or near the surface
     are queried every time; the result is the same as querying all of them.
 
+    With ``depth > 0`` the points proven deeper than ``depth`` are skipped (the pull inside,
+    :func:`core.fitting.best_fit.pull_inside`, leaves them free).
+
     Parameters
     ----------
-    slack : float >= 0, model units; a bound above ``-slack`` counts as undecided (keeps
-        rounding of the moves from deciding a point on the surface).
+    slack : float >= 0, model units; a bound above ``-(depth + slack)`` counts as undecided
+        (keeps rounding of the moves from deciding a point on the threshold).
+    depth : float >= 0, model units.
     """
 
-    def __init__(self, slack):
+    def __init__(self, slack, depth=0.0):
         self.slack = float(slack)
+        self.depth = float(depth)
         self.points = None
         self.signed = None
 
@@ -119,7 +130,7 @@ class InsideBounds:
         if self.points is None or len(self.points) != len(X):
             self.points, self.signed = None, None
             return np.arange(len(X))
-        return np.flatnonzero(self.bound(X) >= -self.slack)
+        return np.flatnonzero(self.bound(X) >= -(self.depth + self.slack))
 
     def record(self, X, query, signed):
         """Keep the signed distances ``signed`` ((k,)) of the points ``X[query]``."""

@@ -40,14 +40,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.fitting.responses import InsideBounds, packaging, thickness_constraint, volume
+from core.fitting.responses import (INSIDE_SLACK, InsideBounds, packaging, thickness_constraint,
+                                    volume)
 from core.progress import NO_PROGRESS
 
 P_REF = 1e3
-INSIDE_SLACK = 1e-9
-"""Depth below the target, times its bounding-box diagonal, within which a fine point whose
-inside bound (:class:`core.fitting.responses.InsideBounds`) does not prove it inside is
-queried again."""
 
 _MOVING = 0.05
 _MIN_DAMPING = 1e-3
