@@ -255,6 +255,30 @@ def test_pull_inside_moves_the_outside_points_to_the_margin():
     assert np.abs(after + 0.01).max() < 0.01
 
 
+def test_pull_inside_queries_only_points_not_proven_deep_and_pulls_the_same():
+    """A cage poking out of one side of a sphere: handed the start's closest points, the
+    pull queries in its later rounds only the points not proven deeper than the margin,
+    and its result is the same as querying every point every round."""
+    from core.fitting.best_fit import pull_inside
+
+    base = grid_sphere(3)
+    V = 0.7 * base.vertices / np.linalg.norm(base.vertices, axis=1).max() + [0.6, 0.0, 0.0]
+    base = PolyMesh(V, base.face_vertices, base.face_offsets)
+    h, fine, _ = fine_mesh(base, 2)
+    M = (limit_matrices(fine)[0] @ h.composite(1)).tocsr()
+    sphere = sphere_target(1.0)
+    target = TargetSurface(sphere.vertices, sphere.faces)
+    pulled = pull_inside(base, M, target, base.vertices, margin=0.01, rounds=3)
+    queried = []
+    closest = target.closest
+    target.closest = lambda points: queried.append(len(points)) or closest(points)
+    again = pull_inside(base, M, target, base.vertices, margin=0.01, rounds=3,
+                        start_closest=closest(M @ base.vertices))
+    np.testing.assert_array_equal(again, pulled)
+    assert len(queried) == 2 and max(queried) < 0.5 * M.shape[0]
+    assert target.closest(M @ pulled).signed.max() < 0
+
+
 def test_hold_back_crossings_undoes_only_the_crossing_move():
     import scipy.sparse as sp
 
