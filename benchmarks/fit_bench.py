@@ -21,7 +21,9 @@ rounds. ``--baseline DIR`` also runs the best-fit and inside fits of an older ch
 ``core`` (for example ``git archive 9ea2d9c core | tar -x -C DIR``) on the same base mesh, in a
 subprocess, with each sampling seed of ``SEEDS`` (ours too), and compares the medians over the
 seeds. The other dev meshes that reach the fit (``RULE_ONLY``) get only the inside fit, ours and
-the baseline's, for the 0.5 % volume-outside rule.
+the baseline's, for the 0.5 % volume-outside rule. The medians of the CPU seconds over the seeds
+are set against the issue's speed rule, and the inside fits of ``PROFILED`` are profiled once
+(where the time goes).
 
 Writes ``FIT_RESULTS.md`` and ``fit_results.json`` into ``--out``. Timings are wall-clock
 seconds on a shared 2-core machine; the load average at the start is recorded.
@@ -73,6 +75,15 @@ SEEDS = (0, 1, 2)
 mean by 20-40 %, so before and after are compared by the median over these seeds."""
 LARGE = "to_simp_torsion_arm_fine3"
 """The issue's large case (151k triangles): its fit within 6 s, the others' within 2 s."""
+PROFILED = (LARGE, "to_simp_mbb", "polycube_mambo_b0")
+"""Meshes whose inside fit is also run under cProfile (:func:`profile_fit`)."""
+PARTS = (("closest points (TargetSurface.nearest)", "target_surface.py", "nearest"),
+         ("crossing checks (find_self_intersections)", "self_intersection.py",
+          "find_self_intersections"),
+         ("normal equations (NormalEquations.solve)", "best_fit.py", "solve"),
+         ("thickness rays (responses.thickness)", "responses.py", "thickness"),
+         ("report figures (containment boolean)", "quality.py", "containment"))
+"""The parts of the fit whose cumulative CPU time :func:`profile_fit` reports."""
 MODES = ("none", "best-fit", "inside")
 EVAL_LEVEL = 3
 FLOOR_QUERIES = 100_000
@@ -130,6 +141,31 @@ def our_fit(base, target, mode, seed=0):
         row["seed"] = seed
     row.update(surface_figures(V, F, target))
     return row
+
+
+def profile_fit(base, target):
+    """CPU seconds of the default inside fit and of its parts (``PARTS``), under cProfile.
+
+    The parts can nest (a crossing check inside a hold-back inside a pull), so they do not
+    add up to the total; the profiler itself adds some time to every call.
+    """
+    import cProfile
+    import pstats
+
+    profiler = cProfile.Profile(time.process_time)
+    profiler.enable()
+    fit_base_mesh(base, target, levels=fit_levels(base.n_faces, 2), iterations=100,
+                  mode="inside")
+    profiler.disable()
+    stats = pstats.Stats(profiler).stats
+    parts = {}
+    for label, filename, function in PARTS:
+        found = [(calls, cumulative) for (path, _, name), (_, calls, _, cumulative, _)
+                 in stats.items() if path.endswith(filename) and name == function]
+        parts[label] = [sum(c for c, _ in found), sum(t for _, t in found)]
+    total = max(cumulative for (path, _, name), (_, _, _, cumulative, _) in stats.items()
+                if name == "fit_base_mesh")
+    return {"total": total, "parts": parts}
 
 
 def peer_fit(target, faces):
@@ -240,6 +276,8 @@ def run_case(name, path, baseline, work):
         row["peer"] = {"error": f"{type(exc).__name__}: {exc}"}
     if baseline:
         row["baseline"] = baseline_fits(baseline, base, target, work, name)
+    if name in PROFILED:
+        row["profile"] = profile_fit(base, target)
     return row
 
 
@@ -284,6 +322,8 @@ def markdown(rows, info):
             lines.append(f"| {row['name']} | | | peer failed: {row['peer']['error']} |"
                          + " |" * 10)
     lines += _speed(rows)
+    lines += _speed_rule(rows)
+    lines += _profiles(rows)
     lines += _before_after(rows, info)
     lines += _outside_rule(rows)
     lines += ["", "## Against the peer (best-fit, same face count)", "",
@@ -338,6 +378,50 @@ def _speed(rows):
         per = (inside["seconds"] - inside["measure_seconds"]) / max(steps, 1)
         lines.append(f"| {row['name']} | {row['floor_seconds']:.3f} | {inside['seconds']:.2f} | "
                      f"{steps} | {per / row['floor_seconds']:.2f} |")
+    return lines
+
+
+def _speed_rule(rows):
+    """Markdown lines: median CPU seconds over the seeds, before and after, against the
+    issue's limits (2 s for a target of up to 30k triangles, 6 s for ``LARGE``)."""
+    lines = ["", "## CPU seconds against the speed rule", "",
+             "Median over the sampling seeds of `SEEDS` of the fit process's CPU seconds "
+             "(report figures included); before: the `--baseline` tree in the same run.", "",
+             "| mesh | triangles | cage faces | mode | CPU s before | CPU s after | after / before "
+             "| limit | met after |", "|---|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        if "error" in row or row.get("rule_only"):
+            continue
+        limit = _time_limit(row)
+        for mode in BASELINE_MODES:
+            after = [m["cpu_seconds"] for m in row["modes"] if m["mode"] == mode]
+            before = [b["cpu_seconds"] for b in row.get("baseline", []) if b["mode"] == mode]
+            a = float(np.median(after))
+            b = float(np.median(before)) if before else None
+            lines.append(
+                f"| {row['name']} | {row['triangles']} | {row['base_faces']} | {mode} | "
+                f"{'' if b is None else format(b, '.2f')} | {a:.2f} | "
+                f"{'' if b is None else format(a / b, '.2f')} | "
+                f"{'none' if limit is None else format(limit, '.0f') + ' s'} | "
+                f"{'' if limit is None else ('yes' if a <= limit else 'no')} |")
+    return lines
+
+
+def _profiles(rows):
+    """Markdown lines: where the inside fit's CPU time goes (:func:`profile_fit`)."""
+    profiled = [row for row in rows if "profile" in row]
+    if not profiled:
+        return []
+    lines = ["", "## Where the inside fit's CPU time goes", "",
+             "cProfile of one default inside fit (seed 0) after the comparison runs; "
+             "cumulative CPU seconds and calls of each part (parts can nest, the profiler "
+             "adds overhead).", "",
+             "| mesh | total CPU s | " + " | ".join(label for label, _, _ in PARTS) + " |",
+             "|---|---|" + "---|" * len(PARTS)]
+    for row in profiled:
+        parts = row["profile"]["parts"]
+        lines.append(f"| {row['name']} | {row['profile']['total']:.2f} | " + " | ".join(
+            f"{parts[label][1]:.2f} ({parts[label][0]})" for label, _, _ in PARTS) + " |")
     return lines
 
 

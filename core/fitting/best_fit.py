@@ -24,13 +24,14 @@ points change between rounds; the rounds stop when the two-sided RMS distance im
 by less than ``tol`` (relative) or after ``rounds``.
 """
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-from core.fitting.responses import vertex_normals
+from core.fitting.responses import INSIDE_SLACK, InsideBounds, vertex_normals
 from core.geometry import scatter_add
 from core.subdivision.catmull_clark import mesh_topology
 from core.target_surface import TargetSurface
@@ -124,7 +125,7 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
 
 
 def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
-                damping=1e-3, stiffness=None):
+                damping=1e-3, stiffness=None, start_closest=None):
     """Move the fine limit points that lie outside the target (or within ``margin`` of
     it) to ``margin`` inside it, changing the cage as little as the regularisation allows.
 
@@ -147,6 +148,11 @@ def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
     margin : float >= 0, depth below the target surface to pull to (model units).
     rounds : int >= 0
     smoothness, damping, stiffness : as in :func:`best_fit`.
+    start_closest : core.target_surface.ClosestPoints or None, the closest points of the
+        start's fine points ``mapping @ start`` if known (the stiffer pulls of
+        :func:`core.fitting.fit._pulled_inside` all start there). After the first round
+        only the points not proven deeper than ``margin`` are queried
+        (:class:`core.fitting.responses.InsideBounds`; the same rows either way).
 
     Returns
     -------
@@ -155,15 +161,20 @@ def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
     V = np.array(start, dtype=np.float64)
     system = NormalEquations(PolyMesh(V, base.face_vertices, base.face_offsets), mapping,
                              smoothness, damping, stiffness)
-    for _ in range(rounds):
+    known = InsideBounds(INSIDE_SLACK * target.diagonal, margin)
+    for done in range(rounds):
         X = mapping @ V
-        near = target.closest(X)
+        query = known.undecided(X)
+        near = (start_closest if done == 0 and start_closest is not None
+                else target.closest(X[query]))
+        known.record(X, query, near.signed)
         active = near.signed > -margin
         if not active.any():
             break
-        normal = near.normal * active[:, None]
-        V = system.solve(V, [(normal, np.arange(len(X))[:, None], np.ones((len(X), 1)),
-                              (_dot(near.normal, near.point) - margin) * active,
+        normal, b = np.zeros_like(X), np.zeros(len(X))
+        normal[query] = near.normal * active[:, None]
+        b[query] = (_dot(near.normal, near.point) - margin) * active
+        V = system.solve(V, [(normal, np.arange(len(X))[:, None], np.ones((len(X), 1)), b,
                               system.n_fine)])
     return V
 
@@ -181,8 +192,9 @@ class NormalEquations:
     Assembly: the data part's 3x3 blocks (coordinates ``a, b``) are
     ``M^T Z_ab M`` with ``Z_ab = sum_j (n_ja n_jb / count) w_j w_j^T`` on the fine
     points (``w_j`` the row's corner weights), six symmetric blocks built at once on
-    the fine level and mapped by one sparse product; a row through ``k`` corners costs
-    ``k^2`` fine entries instead of the square of its base-vertex support.
+    the fine level and mapped by two sparse products each; a row through
+    ``k`` corners costs ``k^2`` fine entries instead of the square of its base-vertex
+    support.
 
     Parameters
     ----------
@@ -203,45 +215,59 @@ class NormalEquations:
         self.smooth = sp.block_diag([laplacian.T @ laplacian] * 3, format="csr")
         self.smooth_init = self.smooth @ self.V_init.T.reshape(-1)
         self.smoothness, self.damping = float(smoothness), float(damping)
-        self._mapping_t6 = sp.block_diag([self.mapping.T] * len(_PAIRS), format="csr")
+        self._mapping_t = self.mapping.T.tocsr()
 
     def solve(self, V, terms):
         """(n_base, 3) float64 minimiser for the data ``terms`` and the previous ``V``."""
-        n_f, n = self.n_fine, self.n_base
+        n, n_f = self.n_base, self.n_fine
+        fine_blocks = self._fine_blocks(terms) @ self.mapping
+        fine_rhs = sum(scatter_add(corners.reshape(-1),
+                                   ((normal * (b / count)[:, None])[:, None, :]
+                                    * weights[:, :, None]).reshape(-1, 3), self.n_fine)
+                       for normal, corners, weights, b, count in terms)
+        rhs = np.asarray(self._mapping_t @ fine_rhs).T.reshape(-1)
+        piece = {pair: self._mapping_t @ fine_blocks[k * n_f:(k + 1) * n_f]
+                 for k, pair in enumerate(_PAIRS)}
+        scale = float(np.mean([piece[a, a].diagonal().mean() for a in range(3)]))
+        rhs = (rhs + (self.smoothness * scale) * self.smooth_init
+               + (self.damping * scale) * V.T.reshape(-1))
+        if 3 * n <= _DENSE_UNKNOWNS:
+            system = (self.smoothness * scale) * self._smooth_dense
+            system.flat[::3 * n + 1] += self.damping * scale
+            for (a, c), block in piece.items():
+                dense = block.toarray()
+                system[a * n:(a + 1) * n, c * n:(c + 1) * n] += dense
+                if a != c:  # the blocks are symmetric
+                    system[c * n:(c + 1) * n, a * n:(a + 1) * n] += dense
+            solution = scipy.linalg.cho_solve(scipy.linalg.cho_factor(system), rhs)
+        else:
+            system = sp.bmat([[piece[min(a, c), max(a, c)] for c in range(3)] for a in range(3)],
+                             format="csc")
+            regular = ((self.smoothness * scale) * self.smooth
+                       + sp.identity(3 * n, format="csr") * (self.damping * scale))
+            solution = spsolve((system + regular).tocsc(), rhs, permc_spec="MMD_AT_PLUS_A")
+        return solution.reshape(3, -1).T
+
+    def _fine_blocks(self, terms):
+        """(6 n_fine, n_fine) CSR: the six blocks ``Z_ab`` of :meth:`solve` stacked, ``_PAIRS``
+        order."""
+        n_f = self.n_fine
         rows, cols, vals = [], [], []
-        fine_rhs = np.zeros((n_f, 3))
-        for normal, corners, weights, b, count in terms:
+        for normal, corners, weights, _, count in terms:
             pair = weights[:, :, None] * weights[:, None, :] / count
             for block, (a, c) in enumerate(_PAIRS):
                 rows.append(block * n_f + np.broadcast_to(corners[:, :, None], pair.shape))
                 cols.append(np.broadcast_to(corners[:, None, :], pair.shape))
                 vals.append((normal[:, a] * normal[:, c])[:, None, None] * pair)
-            per_corner = (normal * (b / count)[:, None])[:, None, :] * weights[:, :, None]
-            fine_rhs += scatter_add(corners.reshape(-1), per_corner.reshape(-1, 3), n_f)
-        Z = sp.csr_matrix((np.concatenate([v.reshape(-1) for v in vals]),
-                           (np.concatenate([r.reshape(-1) for r in rows]),
-                            np.concatenate([c.reshape(-1) for c in cols]))),
-                          shape=(len(_PAIRS) * n_f, n_f))
-        blocks = self._mapping_t6 @ (Z @ self.mapping)
-        rhs = np.asarray(self.mapping.T @ fine_rhs).T.reshape(-1)
-        dense = 3 * n <= _DENSE_UNKNOWNS
-        part = {}
-        for block, (a, c) in enumerate(_PAIRS):
-            piece = blocks[block * n:(block + 1) * n]
-            part[a, c] = part[c, a] = piece.toarray() if dense else piece
-        scale = float(np.mean([part[a, a].diagonal().mean() for a in range(3)]))
-        regular = ((self.smoothness * scale) * self.smooth
-                   + sp.identity(3 * n, format="csr") * (self.damping * scale))
-        rhs = (rhs + (self.smoothness * scale) * self.smooth_init
-               + (self.damping * scale) * V.T.reshape(-1))
-        if dense:
-            system = np.block([[part[a, c] for c in range(3)] for a in range(3)])
-            system += regular.toarray()
-            solution = scipy.linalg.cho_solve(scipy.linalg.cho_factor(system), rhs)
-        else:
-            system = sp.bmat([[part[a, c] for c in range(3)] for a in range(3)], format="csc")
-            solution = spsolve((system + regular).tocsc(), rhs, permc_spec="MMD_AT_PLUS_A")
-        return solution.reshape(3, -1).T
+        return sp.csr_matrix((np.concatenate([v.reshape(-1) for v in vals]),
+                              (np.concatenate([r.reshape(-1) for r in rows]),
+                               np.concatenate([c.reshape(-1) for c in cols]))),
+                             shape=(len(_PAIRS) * n_f, n_f))
+
+    @cached_property
+    def _smooth_dense(self):
+        """(3 n, 3 n) float64 the smoothness matrix, dense (read only)."""
+        return self.smooth.toarray()
 
 
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))

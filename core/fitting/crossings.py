@@ -41,6 +41,7 @@ class Untangled:
     stiffness : (n,) float64 the smoothness weights it was fitted with (ones: no refit).
     refits : int, refits run.
     counts : list of int, crossing pairs after the first fit and each refit.
+    pairs : (crossings, 2) int64 the intersecting triangle pairs of its fine mesh.
     """
 
     vertices: np.ndarray
@@ -48,6 +49,7 @@ class Untangled:
     stiffness: np.ndarray
     refits: int
     counts: list
+    pairs: np.ndarray
 
 
 def count_crossings(mapping, triangles, vertices):
@@ -85,7 +87,7 @@ def stiffen_until_clean(vertices, refit, mapping, triangles, tries=STIFFEN_TRIES
     stiffness = np.ones(mapping.shape[1])
     pairs = find_self_intersections(mapping @ vertices, triangles)
     counts = [int(len(pairs))]
-    best = Untangled(vertices, counts[0], stiffness.copy(), 0, counts)
+    best = Untangled(vertices, counts[0], stiffness.copy(), 0, counts, pairs)
     for refit_number in range(1, tries + 1):
         if not len(pairs):
             break
@@ -94,12 +96,12 @@ def stiffen_until_clean(vertices, refit, mapping, triangles, tries=STIFFEN_TRIES
         pairs = find_self_intersections(mapping @ vertices, triangles)
         counts.append(int(len(pairs)))
         if len(pairs) < best.crossings:
-            best = Untangled(vertices, int(len(pairs)), stiffness.copy(), 0, counts)
+            best = Untangled(vertices, int(len(pairs)), stiffness.copy(), 0, counts, pairs)
     best.refits = len(counts) - 1
     return best
 
 
-def hold_back_crossings(reference, moved, mapping, triangles, clean=True):
+def hold_back_crossings(reference, moved, mapping, triangles, clean=True, moved_pairs=None):
     """Undo a move where it makes the limit surface cross itself, and only there.
 
     While the fine mesh ``mapping @ W`` of ``W = reference + t (moved - reference)`` has
@@ -123,6 +125,9 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True):
     triangles : (t, 3) int64 fine triangles.
     clean : bool, the reference's fine mesh is known not to cross itself (False: its
         crossing pairs are found and kept allowed, so the result crosses no more than it).
+    moved_pairs : (k, 2) int64 or None, the crossing pairs of the moved fine mesh when they
+        are known (:attr:`Untangled.pairs`): they stand for those of the first round's
+        ``reference + (moved - reference)``, which is ``moved`` to rounding.
 
     Returns
     -------
@@ -138,7 +143,8 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True):
     pairs, changed, halving = None, None, 0
     while True:
         W = reference + fraction[:, None] * (moved - reference)
-        pairs = _crossings_after(mapping @ W, triangles, pairs, mapping, changed)
+        pairs = (moved_pairs if pairs is None and moved_pairs is not None else
+                 _crossings_after(mapping @ W, triangles, pairs, mapping, changed))
         new = pairs[~_rows_in(pairs, allowed)]
         if not len(new):
             return W, int(((fraction < 1) & moving).sum()), int(len(pairs))

@@ -144,7 +144,8 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
             # the RGP starts just inside the target, and nowhere crossing itself
             pulled, info["start_margin"], info["pull_crossings"] = _pulled_inside(
                 base, limit_map, T, target_surface, vertices, stiffness)
-            vertices, crossings, held = _held_back(vertices, crossings, pulled, limit_map, T)
+            vertices, crossings, held = _held_back(vertices, crossings, pulled.vertices,
+                                                   limit_map, T, pulled.pairs)
             info["held_back"] = info.get("held_back", 0) + held
             if info["held_back"]:
                 info["start"] = (f"{start}, held back at {info['held_back']} base vertices "
@@ -283,17 +284,19 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, in
     if crossings:
         info["cage_self_intersections"] = count_crossings(limit_map, T, base.vertices)
         if info["cage_self_intersections"] == 0:
-            vertices, crossings, held = _held_back(base.vertices, 0, vertices, limit_map, T)
+            vertices, crossings, held = _held_back(base.vertices, 0, vertices, limit_map, T,
+                                                   untangled.pairs)
     info.update(refits=untangled.refits, refit_crossings=untangled.counts,
                 stiffened=int((untangled.stiffness > 1).sum()), held_back=held)
     return vertices, crossings, untangled.stiffness
 
 
-def _held_back(reference, crossings, moved, mapping, T):
+def _held_back(reference, crossings, moved, mapping, T, moved_pairs=None):
     """``moved`` held back towards ``reference`` where it crosses itself and the reference
     does not (:func:`core.fitting.crossings.hold_back_crossings`).
 
     crossings : int or None, crossing pairs of the reference's fine mesh (None: unknown).
+    moved_pairs : (k, 2) int64 or None, the crossing pairs of ``moved``'s fine mesh if known.
 
     Returns
     -------
@@ -301,7 +304,7 @@ def _held_back(reference, crossings, moved, mapping, T):
     held : int, base vertices held back.
     """
     vertices, held, crossings = hold_back_crossings(reference, moved, mapping, T,
-                                                    clean=crossings == 0)
+                                                    clean=crossings == 0, moved_pairs=moved_pairs)
     return vertices, crossings, held
 
 
@@ -318,19 +321,19 @@ def _pulled_inside(base, limit_map, T, target, vertices, stiffness):
 
     Returns
     -------
-    vertices : (n, 3) float64 base vertices.
+    pulled : core.fitting.crossings.Untangled, the pull with the fewest crossings.
     margin : float, the depth pulled to (model units).
     crossings : list of int, crossing pairs of the pull and of each stiffer pull.
     """
-    signed = target.closest(limit_map @ vertices).signed
-    margin = INSIDE_MARGIN * float(np.sqrt(np.mean(signed ** 2)))
+    start = target.closest(limit_map @ vertices)
+    margin = INSIDE_MARGIN * float(np.sqrt(np.mean(start.signed ** 2)))
 
     def pull(extra, previous=None):
         return pull_inside(base, limit_map, target, vertices, margin, INSIDE_ROUNDS,
-                           stiffness=stiffness * extra)
+                           stiffness=stiffness * extra, start_closest=start)
 
     pulled = stiffen_until_clean(pull(np.ones(len(vertices))), pull, limit_map, T)
-    return pulled.vertices, margin, pulled.counts
+    return pulled, margin, pulled.counts
 
 
 def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness=None, seed=0):

@@ -39,7 +39,7 @@ def volume(X, T):
     return value, scatter_add(T.T.reshape(-1), per_corner, len(X))
 
 
-def packaging(X, target, mode="inside"):
+def packaging(X, target, mode="inside", known=None):
     """Packaging response (Eq. 8) against a :class:`TargetSurface`.
 
     Parameters
@@ -48,6 +48,8 @@ def packaging(X, target, mode="inside"):
     target : core.target_surface.TargetSurface
     mode : ``'inside'`` sums ``max(d_j, 0)`` (penetration out of the target, the
         paper's form); ``'nearest'`` sums ``|d_j|``.
+    known : InsideBounds or None, the queries of earlier calls on the same ``n`` points
+        (``mode='inside'`` only): points proven still inside are not queried again.
 
     Returns
     -------
@@ -56,25 +58,86 @@ def packaging(X, target, mode="inside"):
         face normal (Eq. 8); on an edge or a vertex of the target it is the exact
         gradient of the distance, ``(X_j - CPP_j) / |X_j - CPP_j|``, signed. Zero for
         vertices that do not contribute.
-    signed : (n,) float64 signed distance ``d_j`` to the target, positive outside.
+    signed : (n,) float64 signed distance ``d_j`` to the target, positive outside; for
+        a point that ``known`` proves inside, a negative upper bound of it.
     """
-    near = target.closest(X)
-    signed, region = near.signed, near.region
-    offset = X - near.point
-    length = np.abs(signed)
+    if mode not in ("inside", "nearest"):
+        raise ValueError(f"unknown packaging mode {mode!r}")
+    X = np.asarray(X, dtype=np.float64)
+    signed = np.empty(len(X))
+    gradient = np.zeros_like(X)
+    query = (np.arange(len(X)) if known is None or mode != "inside"
+             else known.undecided(X))
+    near = target.closest(X[query])
+    if known is not None and mode == "inside":
+        known.record(X, query, near.signed)
+        signed[:] = known.bound(X)
+    signed[query] = near.signed
+    region = near.region
+    offset = X[query] - near.point
+    length = np.abs(near.signed)
     direction = np.divide(offset, length[:, None], out=near.normal.copy(),
                           where=(region[:, None] != 0) & (length[:, None] > 0))
-    direction[region != 0] *= np.sign(signed[region != 0])[:, None]
+    direction[region != 0] *= np.sign(near.signed[region != 0])[:, None]
     if mode == "inside":
         active = signed > 0
         value = float(signed[active].sum())
-        weight = active.astype(np.float64)
-    elif mode == "nearest":
-        value = float(length.sum())
-        weight = np.sign(signed)
+        weight = (near.signed > 0).astype(np.float64)
     else:
-        raise ValueError(f"unknown packaging mode {mode!r}")
-    return value, direction * weight[:, None], signed
+        value = float(length.sum())
+        weight = np.sign(near.signed)
+    gradient[query] = direction * weight[:, None]
+    return value, gradient, signed
+
+
+INSIDE_SLACK = 1e-9
+"""Depth below the target, times its bounding-box diagonal, within which a fine point whose
+inside bound (:class:`InsideBounds`) does not prove it inside is
+queried again."""
+
+
+class InsideBounds:
+    """Points proven inside a target since their last closest-point query.
+
+    The signed distance is 1-Lipschitz: a point at signed distance ``d < 0`` when it was
+    last queried, moved by ``m`` since, has ``d' <= d + m``, so while ``d + m < -slack``
+    it is still inside, and the inside packaging response (value and gradient zero
+    there) does not need its closest point. Points that are outside or near the surface
+    are queried every time; the result is the same as querying all of them.
+
+    With ``depth > 0`` the points proven deeper than ``depth`` are skipped (the pull inside,
+    :func:`core.fitting.best_fit.pull_inside`, leaves them free).
+
+    Parameters
+    ----------
+    slack : float >= 0, model units; a bound above ``-(depth + slack)`` counts as undecided
+        (keeps rounding of the moves from deciding a point on the threshold).
+    depth : float >= 0, model units.
+    """
+
+    def __init__(self, slack, depth=0.0):
+        self.slack = float(slack)
+        self.depth = float(depth)
+        self.points = None
+        self.signed = None
+
+    def bound(self, X):
+        """(n,) float64 upper bounds of the signed distances of ``X`` ((n, 3))."""
+        return self.signed + np.linalg.norm(X - self.points, axis=1)
+
+    def undecided(self, X):
+        """(k,) int64 indices of the points of ``X`` ((n, 3)) to query."""
+        if self.points is None or len(self.points) != len(X):
+            self.points, self.signed = None, None
+            return np.arange(len(X))
+        return np.flatnonzero(self.bound(X) >= -(self.depth + self.slack))
+
+    def record(self, X, query, signed):
+        """Keep the signed distances ``signed`` ((k,)) of the points ``X[query]``."""
+        if self.points is None:
+            self.points, self.signed = np.array(X, dtype=np.float64), np.zeros(len(X))
+        self.points[query] = X[query]
+        self.signed[query] = signed
 
 
 def vertex_normals(X, T):

@@ -40,7 +40,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.fitting.responses import packaging, thickness_constraint, volume
+from core.fitting.responses import (INSIDE_SLACK, InsideBounds, packaging, thickness_constraint,
+                                    volume)
 from core.progress import NO_PROGRESS
 
 P_REF = 1e3
@@ -74,6 +75,8 @@ class FitProblem:
         self.mode = mode
         self.t_min = float(t_min)
         self.area = float(area)
+        # queries of the points proven still inside are skipped (exact, see InsideBounds)
+        self.known = InsideBounds(INSIDE_SLACK * target.diagonal) if mode == "inside" else None
 
     def fine(self, V0):
         """(n_fine, 3) float64 fine positions ``M V0`` (Eq. 10)."""
@@ -89,7 +92,7 @@ class FitProblem:
         X = self.fine(V0)
         n_fine = len(X)
         vol, d_vol = volume(X, self.triangles)
-        pack, d_pack, signed = packaging(X, self.target, self.mode)
+        pack, d_pack, signed = packaging(X, self.target, self.mode, self.known)
         objective = -vol / self.area + self.weight * pack / n_fine
         grad_volume = self.mapping_t @ (-d_vol / self.area)
         grad = grad_volume + self.mapping_t @ (self.weight * d_pack / n_fine)

@@ -55,6 +55,11 @@ def test_hold_back_keeps_the_reference_crossings_and_adds_none():
     assert 1 <= count <= 0.1 * len(V)
     kept = np.linalg.norm(held - moved, axis=1) < 1e-12
     assert kept.sum() == len(V) - count        # every other vertex keeps its whole move
+    # the moved mesh's crossing pairs handed in: the same hold-back
+    again = hold_back_crossings(reference, moved, M, T, clean=False,
+                                moved_pairs=find_self_intersections(moved, T))
+    np.testing.assert_array_equal(again[0], held)
+    assert again[1:] == (count, crossings)
 
 
 def test_crossings_among_marked_faces_are_the_full_search_restricted_to_them():

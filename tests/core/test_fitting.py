@@ -7,7 +7,8 @@ import trimesh
 from core.errors import InvalidMeshError, ParameterError
 from core.fitting import TargetSurface, fit_base_mesh
 from core.fitting.best_fit import NormalEquations, _umbrella, best_fit
-from core.fitting.responses import packaging, thickness, thickness_constraint, volume
+from core.fitting.responses import (InsideBounds, packaging, thickness, thickness_constraint,
+                                    volume)
 from core.geometry import triangulate
 from core.subdivision.catmull_clark import build_hierarchy
 from core.subdivision.limit import limit_matrices
@@ -73,6 +74,31 @@ def test_packaging_gradient_matches_finite_differences_where_active():
         Xm[active, k] -= h
         fd = (target.closest(Xp).signed - target.closest(Xm).signed) / (2 * h)
         assert np.allclose(fd[active], grad[active, k], rtol=1e-6, atol=1e-6)
+
+
+def test_inside_bounds_skip_only_points_proven_inside_and_change_nothing():
+    """Moves of a point cloud in and out of a unit sphere: with the bounds the response,
+    gradient and outside signs are those of querying every point, with fewer queries."""
+    sphere = sphere_target(1.0, 3)
+    target = TargetSurface(sphere.vertices, sphere.faces)
+    queried = []
+    closest = target.closest
+    target.closest = lambda points: queried.append(len(points)) or closest(points)
+    rng = np.random.default_rng(4)
+    X = rng.normal(size=(600, 3))
+    X *= (rng.uniform(0.2, 1.3, 600) / np.linalg.norm(X, axis=1))[:, None]
+    known = InsideBounds(1e-9)
+    for _ in range(6):
+        value, grad, signed = packaging(X, target, known=known)
+        full_value, full_grad, full_signed = packaging(X, target)
+        assert value == full_value
+        np.testing.assert_array_equal(grad, full_grad)
+        exact = signed == full_signed
+        assert np.all(full_signed[~exact] < signed[~exact]) and np.all(signed[~exact] < 0)
+        X = X * rng.uniform(0.97, 1.05, (600, 1))
+    with_bounds = queried[0::2]
+    assert with_bounds[0] == 600 and max(with_bounds[1:]) < 450
+    assert packaging(X[:10], target, known=known)[0] == packaging(X[:10], target)[0]
 
 
 @pytest.mark.parametrize("with_limit", [False, True])
@@ -241,6 +267,30 @@ def test_pull_inside_moves_the_outside_points_to_the_margin():
     # every point ends within 2 mm-equivalents (0.2 % of the radius) of 1 % inside
     assert after.max() < -0.01 + 2e-3
     assert np.abs(after + 0.01).max() < 0.01
+
+
+def test_pull_inside_queries_only_points_not_proven_deep_and_pulls_the_same():
+    """A cage poking out of one side of a sphere: handed the start's closest points, the
+    pull queries in its later rounds only the points not proven deeper than the margin,
+    and its result is the same as querying every point every round."""
+    from core.fitting.best_fit import pull_inside
+
+    base = grid_sphere(3)
+    V = 0.7 * base.vertices / np.linalg.norm(base.vertices, axis=1).max() + [0.6, 0.0, 0.0]
+    base = PolyMesh(V, base.face_vertices, base.face_offsets)
+    h, fine, _ = fine_mesh(base, 2)
+    M = (limit_matrices(fine)[0] @ h.composite(1)).tocsr()
+    sphere = sphere_target(1.0)
+    target = TargetSurface(sphere.vertices, sphere.faces)
+    pulled = pull_inside(base, M, target, base.vertices, margin=0.01, rounds=3)
+    queried = []
+    closest = target.closest
+    target.closest = lambda points: queried.append(len(points)) or closest(points)
+    again = pull_inside(base, M, target, base.vertices, margin=0.01, rounds=3,
+                        start_closest=closest(M @ base.vertices))
+    np.testing.assert_array_equal(again, pulled)
+    assert len(queried) == 2 and max(queried) < 0.5 * M.shape[0]
+    assert target.closest(M @ pulled).signed.max() < 0
 
 
 def test_hold_back_crossings_undoes_only_the_crossing_move():
