@@ -10,6 +10,14 @@ side zig-zags (noisy TO surfaces, turning points). :func:`make_loops_rectilinear
 fewest measured side directions, weighted by their measured extent, so that every loop obeys
 the rule: a small mixed-integer program (one binary per side direction, one per pair of
 consecutive sides for the product of their flips, one per loop for outer/hole).
+
+Proving that program infeasible can take HiGHS many branch-and-bound nodes where deciding a
+feasible one takes none beyond the root. The program is therefore solved at its root first;
+when that does not decide it, the programs of single charts with their neighbours, each a
+relaxation of the whole, are tried for a contradiction before the full search
+(:func:`_local_contradiction`). Both steps are deterministic and change no answer: a feasible
+program closed at its root has the optimum of the full search, and an infeasible relaxation
+proves what the full search would.
 """
 from dataclasses import dataclass, replace
 

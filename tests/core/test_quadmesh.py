@@ -179,6 +179,32 @@ def test_a_chart_that_cannot_turn_by_four_is_found_in_its_neighbourhood():
         make_loops_rectilinear(broken)
 
 
+def test_an_undecided_root_goes_through_the_neighbourhoods_to_the_same_answer(monkeypatch):
+    """With no root node allowed (HiGHS stops before deciding), a repairable box is checked
+    neighbourhood by neighbourhood (each has a solution) and then gets the flips of the full
+    search."""
+    import core.quadmesh.side_signs as side_signs
+
+    V, F = union_of_boxes([[[0, 0, 0], [2, 1, 1]]])
+    frames, _ = identity_frames(len(F))
+    box = build_chart_complex(V, F, np.zeros(len(F)), nearest_labels(V, F), frames)
+    sign = box.side_sign.copy()
+    sign[3] *= -1
+    checked = []
+    local = side_signs._local_contradiction
+
+    def counted(*args):
+        checked.append(local(*args))
+        return checked[-1]
+
+    monkeypatch.setattr(side_signs, "ROOT_NODES", 0)
+    monkeypatch.setattr(side_signs, "_local_contradiction", counted)
+    repaired, flipped = make_loops_rectilinear(dataclasses.replace(box, side_sign=sign))
+    assert checked == [None]
+    assert flipped.tolist() == [[3, 0], [3, 1]]
+    assert np.array_equal(repaired.side_sign, box.side_sign)
+
+
 def _solve(refinement):
     n = refinement.n_vars
     lower = np.where(refinement.piece, 0.0, 1.0)
