@@ -173,9 +173,11 @@ def _local_contradiction(complex_, collapsible):
         sides = np.flatnonzero((complex_.side_chart == chart).any(axis=1))
         neighbours = np.unique(complex_.side_chart[sides])
         rings.append(np.concatenate([[chart], neighbours[neighbours != chart]]))
+    slits = complex_.slit_walks()
     for chart in np.lexsort((np.arange(len(rings)), [len(ring) for ring in rings])):
         ring = rings[chart]
-        result = _solve(_direction_program(complex_, np.sort(ring), collapsible), NODE_LIMIT)
+        result = _solve(_direction_program(complex_, np.sort(ring), collapsible, slits),
+                        NODE_LIMIT)
         if result.status == INFEASIBLE:
             return ring.astype(np.int64), str(result.message)
     return None
@@ -196,7 +198,7 @@ class _DirectionProgram:
     constraints: list
 
 
-def _direction_program(complex_, charts, collapsible):
+def _direction_program(complex_, charts, collapsible, slits=None):
     """The side-direction program of the loops and slit walks of ``charts`` only.
 
     Over every chart it is the program of :func:`make_loops_rectilinear`. Over a subset its
@@ -206,7 +208,8 @@ def _direction_program(complex_, charts, collapsible):
     Parameters
     ----------
     complex_ : ChartComplex; charts : (c',) int64 sorted chart indices;
-    collapsible : (s,) bool sides allowed length zero.
+    collapsible : (s,) bool sides allowed length zero; slits : ``complex_.slit_walks()`` when
+    already made, or None.
 
     Returns
     -------
@@ -277,7 +280,7 @@ def _direction_program(complex_, charts, collapsible):
         add([(y, 1.0), (f, -big)], -np.inf, 0.0)
         add([(y, 1.0), (l, -1.0)], -np.inf, 0.0)
         add([(y, 1.0), (l, -1.0), (f, -big)], -big, np.inf)
-    for keys_, coefficients in _closure_rows(complex_, loops):
+    for keys_, coefficients in _closure_rows(complex_, loops, slits):
         key = np.searchsorted(used, keys_)
         add([(length0 + key_side[k], c) for k, c in zip(key, coefficients)]
             + [(flipped0 + k, -2.0 * c) for k, c in zip(key, coefficients)], 0.0, 0.0)
@@ -327,11 +330,11 @@ def loops_are_rectilinear(complex_):
     return bool((outer[has_loop] == 1).all())
 
 
-def _closure_rows(complex_, loops=None):
+def _closure_rows(complex_, loops=None, slits=None):
     """Closure equations of loops and slit walks, one per axis they run along.
 
     ``loops`` : (k,) int64 loops whose equations (and those of their slit walks) are given, or
-    None for every loop.
+    None for every loop; ``slits``: ``complex_.slit_walks()`` when already made, or None.
 
     Yields ``(keys, coefficients)``: (k,) int64 sign keys (``side * 2 + column``) and (k,)
     float64 signed unit directions; the lengths of those sides times the coefficients add up
@@ -339,7 +342,7 @@ def _closure_rows(complex_, loops=None):
     """
     if loops is None:
         loops = np.arange(len(complex_.loop_chart))
-    slits = [walk for walk in complex_.slit_walks() if len(walk)]
+    slits = [walk for walk in (complex_.slit_walks() if slits is None else slits) if len(walk)]
     slit_loop = np.searchsorted(complex_.loop_offsets, [walk[0] for walk in slits],
                                 side="right") - 1
     walks = ([np.arange(complex_.loop_offsets[loop], complex_.loop_offsets[loop + 1])
