@@ -203,7 +203,17 @@ def write_markdown(results):
              "`infeasible` twice means the retry repeated a proof (its bounds are tighter, so "
              "it cannot succeed); on `to_simp_mbb` and `tray_bottom` the retry's directions "
              "were found but its layout failed again, and on no dev mesh did the retry give "
-             "the polycube base mesh."]
+             "the polycube base mesh.",
+             "", "The one-part stage on `to_simp_torsion_arm_fine3` (about 6-7 CPU s, aim 5 s) is "
+             "unchanged: 3.4 s of it is one QSlim of the 151k-triangle target "
+             "(`decimation.py`), whose cost is mostly its set-up on the whole target (to 600, "
+             "20,000 or 75,000 triangles: 3.4-3.7 CPU s alike), so a two-step QSlim does not "
+             "help. A shortest-edge reduction first (`igl.decimate`, 151k to 40,000 triangles "
+             "in 1.0 s, then QSlim to 600 in 0.6 s) changed the cages: the budget ladder "
+             "(`paired_decimation.py`) then ended at 431 faces instead of 291 (331 from a "
+             "reduction to 75,000) because the smaller budgets' cages had flaws, and the stage "
+             "took 6.0 s (7.5 s); not used, like `fast-simplification` before it (cages that "
+             "cross themselves)."]
     budgets = {}
     for label, rows in results.items():
         budget = next((row["target_faces"] for row in rows.values() if "target_faces" in row),
