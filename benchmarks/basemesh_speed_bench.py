@@ -5,18 +5,20 @@ Usage::
 
     .venv/bin/python benchmarks/basemesh_speed_bench.py --label after [--repo PATH]
                                                         [--meshes DIR] [--only NAME ...]
-                                                        [--target-faces N] [--profile NAME ...]
+                                                        [--target-faces N] [--parts auto]
+                                                        [--profile NAME ...]
 
 ``--repo`` is the checkout whose ``core`` is measured (default: this one; for the "before"
 column, an export of the commit to compare with). Every mesh runs in its own process: the
 labeling once, then the base-mesh stage (``core.stages.basemesh.run_basemesh``, default
-parameters but ``--target-faces``, one part) twice. Per mesh: CPU seconds of the stage (the
+parameters but ``--target-faces`` and ``--parts``) twice. Per mesh: CPU seconds of the parts
+stage and a hash of its ``face_part`` (with ``--parts auto``), of the base-mesh stage (the
 first run), of its polycube attempt (``_polycube_base_mesh``), the mixed-integer programs
 (count, the slowest one's CPU seconds, the most branch-and-bound nodes), the method, faces and
 a hash of the base mesh, and whether the second run gave the same base mesh; ``--profile``
 meshes get a third, profiled run. Rows are kept per label in
 ``benchmarks/basemesh_speed_results.json``; ``benchmarks/BASEMESH_SPEED_RESULTS.md`` shows the
-labels of one face budget side by side.
+labels of one face budget and parts mode side by side.
 """
 import argparse
 import json
@@ -34,7 +36,7 @@ PROFILE_ROWS = 14
 """Functions listed per profiled mesh."""
 
 
-def run_case(path, target_faces, profile=False):
+def run_case(path, target_faces, parts="single", profile=False):
     """One mesh with the ``core`` on ``sys.path``; returns a JSON-serialisable dict (with a
     third, profiled run of the stage when ``profile``)."""
     import hashlib
@@ -71,14 +73,44 @@ def run_case(path, target_faces, profile=False):
             attempt["cpu"] += time.process_time() - started
 
     base_mesh._polycube_base_mesh = timed_polycube
-    state = reconstruct(path, stop_after="labeling").state
+    directions = []
+    repair = base_mesh.make_loops_rectilinear
+
+    def timed_repair(*args, **kwargs):
+        started = time.process_time()
+        outcome = "solved"
+        try:
+            return repair(*args, **kwargs)
+        except Exception:
+            outcome = "infeasible"
+            raise
+        finally:
+            directions.append([outcome, round(time.process_time() - started, 2)])
+
+    base_mesh.make_loops_rectilinear = timed_repair
+    import core.segmentation.skeleton_parts as skeleton_parts
+
+    parts_cpu = {"cpu": 0.0}
+    segmentation = skeleton_parts.skeleton_segmentation
+
+    def timed_segmentation(*args, **kwargs):
+        started = time.process_time()
+        try:
+            return segmentation(*args, **kwargs)
+        finally:
+            parts_cpu["cpu"] += time.process_time() - started
+
+    skeleton_parts.skeleton_segmentation = timed_segmentation  # imported by run_parts per call
+    params = ReconstructionParams(target_faces=target_faces, parts=parts)
+    state = reconstruct(path, params, stop_after="labeling").state
     hashes, row = [], {}
     for run in range(2):
         programs.clear()
+        directions.clear()
         attempt["cpu"] = 0.0
         started = time.process_time()
         result = run_basemesh(state.intake, state.parts, state.frames, state.labeling,
-                              ReconstructionParams(target_faces=target_faces), NO_PROGRESS)
+                              params, NO_PROGRESS)
         seconds = time.process_time() - started
         cage = result.cage
         digest = hashlib.sha1(np.ascontiguousarray(cage.vertices).tobytes()
@@ -92,29 +124,31 @@ def run_case(path, target_faces, profile=False):
                    "slowest_program_cpu": round(max((p["cpu"] for p in programs), default=0), 2),
                    "most_nodes": int(max((p["nodes"] for p in programs), default=0)),
                    "method": info["method"], "faces": int(info["faces"]),
-                   "target_faces": int(target_faces),
-                   "fallback_reason": info.get("fallback_reason")}
+                   "target_faces": int(target_faces), "parts": parts,
+                   "parts_cpu": round(parts_cpu["cpu"], 2),
+                   "face_part_hash": hashlib.sha1(np.ascontiguousarray(
+                       state.parts.face_part, dtype=np.int64).tobytes()).hexdigest()[:12],
+                   "fallback_reason": info.get("fallback_reason"),
+                   "side_directions": [list(d) for d in directions]}
     row["hash"] = hashes[0]
     row["same_twice"] = hashes[0] == hashes[1]
     if profile:
-        row["profile"] = profile_stage(state, target_faces)
+        row["profile"] = profile_stage(state, params)
     return row
 
 
-def profile_stage(state, target_faces):
+def profile_stage(state, params):
     """Cumulative CPU seconds of the stage's main functions (cProfile, CPU clock), top first."""
     import cProfile
     import pstats
     import time
 
-    from core.params import ReconstructionParams
     from core.progress import NO_PROGRESS
     from core.stages.basemesh import run_basemesh
 
     profiler = cProfile.Profile(time.process_time)
     profiler.enable()
-    run_basemesh(state.intake, state.parts, state.frames, state.labeling,
-                 ReconstructionParams(target_faces=target_faces), NO_PROGRESS)
+    run_basemesh(state.intake, state.parts, state.frames, state.labeling, params, NO_PROGRESS)
     profiler.disable()
     totals = {}
     for (filename, _, function), (_, calls, _, cumulative, _) in \
@@ -132,38 +166,75 @@ def write_markdown(results):
     table per face budget, its labels side by side."""
     lines = ["# Base-mesh stage: CPU seconds and determinism (issue 8)", "",
              "Written by `benchmarks/basemesh_speed_bench.py` (one process per mesh; default "
-             "parameters, one part, the face budget of the table; the labeling is not timed). "
+             "parameters, the face budget and parts mode of the table; the labeling is not in "
+             "`stage`). "
              "`stage` is the CPU seconds of `run_basemesh` (polycube attempt + paired "
              "decimation where it falls back), `poly` of its polycube attempt, `MILPs` the "
              "mixed-integer programs solved (`slowest` CPU s, `nodes` the most branch-and-bound "
              "nodes of one), `same` whether a second run in the same process gave the same base "
              "mesh (vertices and faces bit for bit), `hash` a digest of the base mesh. The "
              "machine has 2 cores shared with other jobs, so CPU seconds vary by about 10%.",
-             "", "Every program closes at its root node, so a node limit changes none of them. "
-             "Before the chord rows of `quantize.closeness_rows`, a quantization program's CPU "
-             "time was HiGHS 1.2's root processing (cuts and heuristics, up to 3.8 s) because "
-             "its linear relaxation let every side sit at its real goal; with them each side's "
-             "cost is the convex hull of its integer points, the relaxation is integral on "
-             "every program here and HiGHS stops after it. The program and its optimum are the "
-             "same, but several lengths often share the optimum and the tie-break is now "
-             "explicit (shorter sides, `quantize.LENGTH_COST`), so `hash` compares the base "
-             "meshes. Where the stage falls back, most of what is left is the paired "
-             "decimation (`paired_decimation.py`): one QSlim of the whole target (about 3.5 s "
-             "on 151k triangles; the cages depend on it) and its budget ladder (limit-surface "
-             "crossings and inverted faces of every budget tried)."]
+             "", "Every program that has a solution closes at its root node, so a node limit "
+             "changes none of them. Before the chord rows of `quantize.closeness_rows`, a "
+             "quantization program's CPU time was HiGHS 1.2's root processing (cuts and "
+             "heuristics, up to 3.8 s) because its linear relaxation let every side sit at its "
+             "real goal; with them each side's cost is the convex hull of its integer points, "
+             "the relaxation is integral on every program here and HiGHS stops after it "
+             "(summed over the 16 meshes with one part: 118.8 CPU s at 09dd8fd, 73.8 s after). "
+             "Where the stage falls back, most of what is left is the paired decimation "
+             "(`paired_decimation.py`): one QSlim of the whole target (about 3.5 s on 151k "
+             "triangles; the cages depend on it) and its budget ladder (limit-surface "
+             "crossings and inverted faces of every budget tried).",
+             "", "With `--parts auto`, `to_simp_torsion_arm_fine3` spent 29 CPU s in one "
+             "side-direction program (`side_signs.make_loops_rectilinear`): the retry without "
+             "collapsible sides after the first layout failed, which HiGHS proves infeasible "
+             "only after branch and bound (1,000 nodes; 3.8 s for its root alone). The program "
+             "is now solved at its root first (`side_signs.ROOT_NODES`; every program with a "
+             "solution closes there, with the same answer); where the root does not decide "
+             "it, the programs of one chart with its neighbours, each a relaxation of the "
+             "whole, are solved smallest first, and an infeasible one proves the whole "
+             "program infeasible (there: chart 7 and its 27 neighbours, 3 s; the smallest "
+             "infeasible set found by deleting charts has 6, all neighbours of chart 7). The "
+             "parts stage's threshold dynamics (`skeleton_parts.smooth_boundaries`, 153 "
+             "pieces on fine3) solves after its first heat step only the columns of the parts "
+             "that gained or lost faces (about 15 per step). `parts s` is the CPU seconds of "
+             "`skeleton_segmentation`, `face_part` a digest of the parts. The list of fallback "
+             "reasons gives, where measured, each side-direction program of the stage: "
+             "`infeasible` twice means the retry repeated a proof (its bounds are tighter, so "
+             "it cannot succeed); on `to_simp_mbb` and `tray_bottom` the retry's directions "
+             "were found but its layout failed again, and on no dev mesh did the retry give "
+             "the polycube base mesh. End to end (`basemesh_bench.py --only "
+             "to_simp_torsion_arm_fine3 --modes auto --solid to_simp_torsion_arm_fine3` on an "
+             "export of this branch at 81ae9c7): 291 faces, 6 inverted, 0 crossing pairs, a valid "
+             "STEP solid, mean 0.23% and max 2.63% of the diagonal, the row of "
+             "`BASEMESH_RESULTS.md` at c914732; its base-mesh stage took 16.4 s wall instead of "
+             "35.3 s.",
+             "", "The one-part stage on `to_simp_torsion_arm_fine3` (about 6-7 CPU s, aim 5 s) is "
+             "unchanged: 3.4 s of it is one QSlim of the 151k-triangle target "
+             "(`decimation.py`), whose cost is mostly its set-up on the whole target (to 600, "
+             "20,000 or 75,000 triangles: 3.4-3.7 CPU s alike), so a two-step QSlim does not "
+             "help. A shortest-edge reduction first (`igl.decimate`, 151k to 40,000 triangles "
+             "in 1.0 s, then QSlim to 600 in 0.6 s) changed the cages: the budget ladder "
+             "(`paired_decimation.py`) then ended at 431 faces instead of 291 (331 from a "
+             "reduction to 75,000) because the smaller budgets' cages had flaws, and the stage "
+             "took 6.0 s (7.5 s); not used, like `fast-simplification` before it (cages that "
+             "cross themselves)."]
     budgets = {}
     for label, rows in results.items():
         budget = next((row["target_faces"] for row in rows.values() if "target_faces" in row),
                       300)
-        budgets.setdefault(budget, []).append(label)
-    for budget, labels in budgets.items():
+        parts = next((row["parts"] for row in rows.values() if "parts" in row), "single")
+        budgets.setdefault((budget, parts), []).append(label)
+    for (budget, parts), labels in budgets.items():
         meshes = sorted({m for label in labels for m in results[label]})
+        auto = parts != "single"
         header, rule = "| mesh | triangles |", "|---|---:|"
         for label in labels:
-            header += (f" {label}: stage | poly | MILPs | slowest | nodes | method | faces | "
-                       "hash | same |")
-            rule += "---:|---:|---:|---:|---:|---|---:|---|---|"
-        lines += ["", f"## Face budget {budget}", "", header, rule]
+            header += ((f" {label}: parts s | face_part |" if auto else f" {label}:")
+                       + " stage | poly | MILPs | slowest | nodes | method | faces | hash | same |")
+            rule += ("---:|---|" if auto else "") + "---:|---:|---:|---:|---:|---|---:|---|---|"
+        lines += ["", f"## Face budget {budget}" + (f", --parts {parts}" if auto else ""), "",
+                  header, rule]
         for mesh in meshes:
             triangles = next((results[label][mesh].get("triangles", "") for label in labels
                               if mesh in results[label]), "")
@@ -171,9 +242,11 @@ def write_markdown(results):
             for label in labels:
                 row = results[label].get(mesh)
                 if row is None or "error" in row:
-                    line += " " + ("failed" if row else "-") + " |" * 8
+                    line += " " + ("failed" if row else "-") + " |" * (10 if auto else 8)
                     continue
                 method = "polycube" if row["method"] == "polycube" else "decimation"
+                if auto:
+                    line += f" {row['parts_cpu']:.2f} | `{row['face_part_hash']}` |"
                 line += (f" {row['stage_cpu']:.2f} | {row['polycube_cpu']:.2f} | "
                          f"{row['programs']} | {row['slowest_program_cpu']:.2f} | "
                          f"{row['most_nodes']} | {method} | {row['faces']} | `{row['hash']}` | "
@@ -188,11 +261,20 @@ def write_markdown(results):
             lines += ["", f"Same method and bit-identical base mesh in `{labels[0]}` and "
                           f"`{labels[-1]}`: {len(same)} of {len(both)} meshes; stage CPU "
                           f"seconds summed over them {total[0]:.1f} and {total[1]:.1f}."]
+            if auto:
+                same_parts = [m for m in both
+                              if first[m]["face_part_hash"] == last[m]["face_part_hash"]]
+                seconds = [sum(rows[m]["parts_cpu"] for m in both) for rows in (first, last)]
+                lines[-1] += (f" Same face_part: {len(same_parts)} of {len(both)}; parts-stage "
+                              f"CPU seconds summed {seconds[0]:.1f} and {seconds[1]:.1f}.")
         lines += ["", f"Why the polycube attempt fails where it does (`{labels[-1]}`):", ""]
         for mesh in meshes:
-            reason = results[labels[-1]].get(mesh, {}).get("fallback_reason")
-            if reason:
-                lines.append(f"- {mesh}: {reason}")
+            row = results[labels[-1]].get(mesh, {})
+            if row.get("fallback_reason"):
+                calls = row.get("side_directions")
+                lines.append(f"- {mesh}: {row['fallback_reason']}" + (
+                    "" if not calls else " [side-direction programs: "
+                    + ", ".join(f"{outcome} in {cpu:.2f} s" for outcome, cpu in calls) + "]"))
         for label in labels:
             for mesh in meshes:
                 profile = results[label].get(mesh, {}).get("profile")
@@ -216,6 +298,8 @@ def main():
     parser.add_argument("--only", nargs="*", default=None)
     parser.add_argument("--target-faces", type=int, default=300,
                         help="face budget (a label measures one budget)")
+    parser.add_argument("--parts", default="single", choices=("single", "auto"),
+                        help="parts mode (a label measures one mode)")
     parser.add_argument("--profile", nargs="*", default=[],
                         help="meshes whose stage is also profiled")
     parser.add_argument("--case", help=argparse.SUPPRESS)
@@ -223,7 +307,8 @@ def main():
     args = parser.parse_args()
     if args.case:
         sys.path.insert(0, os.path.abspath(args.repo))
-        print(json.dumps(run_case(args.case, args.target_faces, profile=args.profile_case)))
+        print(json.dumps(run_case(args.case, args.target_faces, args.parts,
+                                  profile=args.profile_case)))
         return
     names = sorted(n for n in os.listdir(args.meshes) if n.lower().endswith(MESH_SUFFIXES))
     if args.only:
@@ -236,6 +321,7 @@ def main():
         profiled = name in args.profile or os.path.splitext(name)[0] in args.profile
         done = subprocess.run([sys.executable, os.path.abspath(__file__), "--label", args.label,
                                "--repo", args.repo, "--target-faces", str(args.target_faces),
+                               "--parts", args.parts,
                                "--case", os.path.join(args.meshes, name)]
                               + (["--profile-case"] if profiled else []),
                               capture_output=True, text=True, cwd=args.repo)

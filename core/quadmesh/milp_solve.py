@@ -27,7 +27,8 @@ class MilpTimeLimitError(LabelingError):
     """A base-mesh program reached the wall-clock hang guard (its answer would depend on load)."""
 
 
-def solve_milp(what, cost, integrality, bounds, constraints, mip_rel_gap=None):
+def solve_milp(what, cost, integrality, bounds, constraints, mip_rel_gap=None,
+               node_limit=NODE_LIMIT):
     """``scipy.optimize.milp`` with the deterministic limits of this module.
 
     Parameters
@@ -35,17 +36,19 @@ def solve_milp(what, cost, integrality, bounds, constraints, mip_rel_gap=None):
     what : str, names the program in the error message (e.g. "the side-length quantization").
     cost, integrality, bounds, constraints : as ``scipy.optimize.milp``.
     mip_rel_gap : float or None, relative optimality gap accepted (HiGHS's default when None).
+    node_limit : int, branch-and-bound nodes HiGHS may explore (a deterministic bound).
 
     Returns
     -------
     scipy.optimize.OptimizeResult; ``x`` is None when no solution was found (infeasible, or
-    none within ``NODE_LIMIT`` nodes; ``message`` says which).
+    none within ``node_limit`` nodes; ``status`` and ``message`` say which: 0 optimal, 1 a
+    limit reached, 2 infeasible).
 
     Raises
     ------
     MilpTimeLimitError when HiGHS stopped on the hang guard.
     """
-    options = {"node_limit": NODE_LIMIT, "time_limit": HANG_GUARD_SECONDS}
+    options = {"node_limit": int(node_limit), "time_limit": HANG_GUARD_SECONDS}
     if mip_rel_gap is not None:
         options["mip_rel_gap"] = mip_rel_gap
     result = milp(cost, integrality=integrality, bounds=bounds, constraints=constraints,

@@ -10,15 +10,23 @@ side zig-zags (noisy TO surfaces, turning points). :func:`make_loops_rectilinear
 fewest measured side directions, weighted by their measured extent, so that every loop obeys
 the rule: a small mixed-integer program (one binary per side direction, one per pair of
 consecutive sides for the product of their flips, one per loop for outer/hole).
+
+Proving that program infeasible can take HiGHS many branch-and-bound nodes where deciding a
+feasible one takes none beyond the root. The program is therefore solved at its root first;
+when that does not decide it, the programs of single charts with their neighbours, each a
+relaxation of the whole, are tried for a contradiction before the full search
+(:func:`_local_contradiction`). Both steps are deterministic and change no answer: a feasible
+program closed at its root has the optimum of the full search, and an infeasible relaxation
+proves what the full search would.
 """
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint
 
 from core.errors import LabelingError
-from core.quadmesh.milp_solve import solve_milp
+from core.quadmesh.milp_solve import NODE_LIMIT, solve_milp
 
 AXES = np.eye(3)
 DISAGREEMENT_WEIGHT = 2.0
@@ -27,6 +35,14 @@ extent (flipping it in both charts costs the extent once): the charts still clos
 but the layout stops being a polycube there."""
 CLOSURE_BOUND = 1000.0
 """Largest side length (relative to the shortest, 1) in the closure check."""
+ROOT_NODES = 1
+"""Nodes of the first solve of the whole program. Every program of the dev meshes that has a
+solution closes at its root node; one that does not is first checked for a neighbourhood that
+cannot close (:func:`_local_contradiction`), which proves it infeasible in a fraction of the
+full search (``to_simp_torsion_arm_fine3`` with ``--parts auto``, its retry with no
+collapsible side: 29 CPU s of branch and bound to prove it infeasible)."""
+LIMIT_REACHED, INFEASIBLE = 1, 2
+"""``scipy.optimize.milp`` statuses: a node (or other) limit reached; infeasible."""
 
 
 def _loop_directions(complex_, loop):
@@ -95,9 +111,113 @@ def make_loops_rectilinear(complex_, collapsible=None):
     ------
     LabelingError naming the charts when no choice of directions makes them rectilinear.
     """
-    n_loops = len(complex_.loop_chart)
+    collapsible = (np.zeros(complex_.n_sides, dtype=bool) if collapsible is None
+                   else np.asarray(collapsible, dtype=bool))
+    if loops_are_rectilinear(complex_) and charts_close(complex_, collapsible):
+        return complex_, np.zeros((0, 2), dtype=np.int64)
+    program = _direction_program(complex_, np.arange(complex_.n_charts), collapsible)
+    result = _solve(program, ROOT_NODES)
+    if result.status == LIMIT_REACHED:
+        # not decided at the root: a neighbourhood that cannot close is a quick proof that the
+        # whole program is infeasible; without one, the full search
+        contradiction = _local_contradiction(complex_, collapsible)
+        if contradiction is not None:
+            charts, message = contradiction
+            raise LabelingError(
+                "no side directions make every chart a closed rectilinear polygon: chart "
+                f"{charts[0]} and its {len(charts) - 1} neighbours {charts[1:6].tolist()}... "
+                f"cannot close with sides of positive length (HiGHS says '{message}'). The "
+                "labeling is not a polycube there: try --parts auto or another labeling")
+        result = _solve(program, NODE_LIMIT)
+    if result.x is None:
+        bad = np.flatnonzero(np.isin(loop_turning(complex_), [-4, 4], invert=True))
+        charts = np.unique(complex_.loop_chart[bad])
+        raise LabelingError(
+            f"no side directions make every chart a closed rectilinear polygon ({len(charts)} "
+            f"charts do not turn by four, e.g. charts {charts[:5].tolist()}); HiGHS says "
+            f"'{result.message}'. The labeling is not a polycube there: try --parts auto or "
+            "another labeling")
+    used = program.used
+    flip = np.rint(result.x[:len(used)]).astype(bool)
+    flat = complex_.side_sign.reshape(-1).copy()
+    flat[used[flip]] *= -1
+    sign = flat.reshape(-1, 2)
+    slit = complex_.side_chart[:, 0] == complex_.side_chart[:, 1]
+    sign[slit, 1] = sign[slit, 0]
+    flipped = np.stack(np.divmod(used[flip], 2), axis=1)
+    return replace(complex_, side_sign=sign), flipped
+
+
+def _solve(program, node_limit):
+    """``solve_milp`` of a :class:`_DirectionProgram` within ``node_limit`` nodes."""
+    return solve_milp("the side-direction repair", program.cost, program.integrality,
+                      program.bounds, program.constraints, node_limit=node_limit)
+
+
+def _local_contradiction(complex_, collapsible):
+    """The first chart whose neighbourhood alone admits no side directions, or None.
+
+    A neighbourhood is a chart and the charts it shares a side with; its program
+    (:func:`_direction_program`) is a relaxation of the whole one, so an infeasible
+    neighbourhood proves the whole program infeasible. Neighbourhoods are tried smallest
+    first (ties by chart), each within ``NODE_LIMIT`` nodes; one that reaches the limit proves
+    nothing and the next is tried.
+
+    Returns
+    -------
+    ``(charts, message)``: (k,) int64 the chart then its neighbours, and HiGHS's message; or
+    None when every neighbourhood has a solution.
+    """
+    rings = []
+    for chart in range(complex_.n_charts):
+        sides = np.flatnonzero((complex_.side_chart == chart).any(axis=1))
+        neighbours = np.unique(complex_.side_chart[sides])
+        rings.append(np.concatenate([[chart], neighbours[neighbours != chart]]))
+    slits = complex_.slit_walks()
+    for chart in np.lexsort((np.arange(len(rings)), [len(ring) for ring in rings])):
+        ring = rings[chart]
+        result = _solve(_direction_program(complex_, np.sort(ring), collapsible, slits),
+                        NODE_LIMIT)
+        if result.status == INFEASIBLE:
+            return ring.astype(np.int64), str(result.message)
+    return None
+
+
+@dataclass
+class _DirectionProgram:
+    """The mixed-integer program of :func:`make_loops_rectilinear` over some charts.
+
+    used : (f,) int64 sign keys (``side * 2 + column``) of its flip variables, the first f.
+    cost, integrality, bounds, constraints : as ``scipy.optimize.milp``.
+    """
+
+    used: np.ndarray
+    cost: np.ndarray
+    integrality: np.ndarray
+    bounds: Bounds
+    constraints: list
+
+
+def _direction_program(complex_, charts, collapsible, slits=None):
+    """The side-direction program of the loops and slit walks of ``charts`` only.
+
+    Over every chart it is the program of :func:`make_loops_rectilinear`. Over a subset its
+    rows are a subset of those rows on a subset of the variables, so it is a relaxation: when
+    it is infeasible, so is the whole program.
+
+    Parameters
+    ----------
+    complex_ : ChartComplex; charts : (c',) int64 sorted chart indices;
+    collapsible : (s,) bool sides allowed length zero; slits : ``complex_.slit_walks()`` when
+    already made, or None.
+
+    Returns
+    -------
+    _DirectionProgram
+    """
+    loops = np.flatnonzero(np.isin(complex_.loop_chart, charts))
     keys, pair_a, pair_b, pair_turn, pair_parallel, pair_loop = [], [], [], [], [], []
-    for loop in range(n_loops):
+    for local, loop in enumerate(loops):
         k, d, normal = _loop_directions(complex_, loop)
         nxt = np.roll(d, -1, axis=0)
         keys.append(k)
@@ -105,12 +225,8 @@ def make_loops_rectilinear(complex_, collapsible=None):
         pair_b.append(np.roll(k, -1))
         pair_turn.append(np.rint(np.cross(d, nxt) @ normal))
         pair_parallel.append(np.einsum("kj,kj->k", d, nxt))
-        pair_loop.append(np.full(len(k), loop))
-    collapsible = (np.zeros(complex_.n_sides, dtype=bool) if collapsible is None
-                   else np.asarray(collapsible, dtype=bool))
-    if loops_are_rectilinear(complex_) and charts_close(complex_, collapsible):
-        return complex_, np.zeros((0, 2), dtype=np.int64)
-    used, key_var = np.unique(np.concatenate(keys), return_inverse=True)
+        pair_loop.append(np.full(len(k), local))
+    used = np.unique(np.concatenate(keys))
     nf = len(used)
     a = np.searchsorted(used, np.concatenate(pair_a))
     b = np.searchsorted(used, np.concatenate(pair_b))
@@ -118,7 +234,9 @@ def make_loops_rectilinear(complex_, collapsible=None):
     parallel = np.concatenate(pair_parallel)
     loop_of_pair = np.concatenate(pair_loop)
     npairs = len(a)
-    n_sides = complex_.n_sides
+    n_loops = len(loops)
+    sides, key_side = np.unique(used // 2, return_inverse=True)
+    n_sides = len(sides)
     # variables: flips f (nf), pair products x (npairs), hole flags h (n_loops), side lengths
     # l (n_sides), flipped lengths y = f * l (nf)
     nvar = nf + npairs + n_loops + n_sides + nf
@@ -146,25 +264,24 @@ def make_loops_rectilinear(complex_, collapsible=None):
             # collinear neighbours must keep going the same way: flip both or neither
             value = 1 if parallel[p] < 0 else 0
             add([(x, 1)], value, value)
-    for loop in range(n_loops):
-        pairs = np.flatnonzero(loop_of_pair == loop)
+    for local in range(n_loops):
+        pairs = np.flatnonzero(loop_of_pair == local)
         entries = [(nf + p, -2.0 * turn[p]) for p in pairs if abs(parallel[p]) <= 0.5]
-        entries.append((nf + npairs + loop, 8.0))
+        entries.append((nf + npairs + local, 8.0))
         rhs = 4.0 - float(turn[pairs].sum())
         add(entries, rhs, rhs)
-    for chart in range(complex_.n_charts):
-        loops = np.flatnonzero(complex_.loop_chart == chart)
-        if len(loops):
-            add([(nf + npairs + loop, 1.0) for loop in loops], len(loops) - 1, len(loops) - 1)
-    key_side = used // 2
+    for chart in charts:
+        mine = np.flatnonzero(complex_.loop_chart[loops] == chart)
+        if len(mine):
+            add([(nf + npairs + local, 1.0) for local in mine], len(mine) - 1, len(mine) - 1)
     big = CLOSURE_BOUND
     for key in range(nf):
         f, l, y = key, length0 + key_side[key], flipped0 + key
         add([(y, 1.0), (f, -big)], -np.inf, 0.0)
         add([(y, 1.0), (l, -1.0)], -np.inf, 0.0)
         add([(y, 1.0), (l, -1.0), (f, -big)], -big, np.inf)
-    for keys, coefficients in _closure_rows(complex_):
-        key = np.searchsorted(used, keys)
+    for keys_, coefficients in _closure_rows(complex_, loops, slits):
+        key = np.searchsorted(used, keys_)
         add([(length0 + key_side[k], c) for k, c in zip(key, coefficients)]
             + [(flipped0 + k, -2.0 * c) for k, c in zip(key, coefficients)], 0.0, 0.0)
     # disagreements z >= |f(side, 0) - f(side, 1)| of the two charts of a side within one part
@@ -183,28 +300,12 @@ def make_loops_rectilinear(complex_, collapsible=None):
                            np.zeros(npairs + n_loops + n_sides + nf), disagree_cost])
     integrality = np.concatenate([np.ones(nf + npairs + n_loops), np.zeros(n_sides + nf),
                                   np.zeros(nd)])
-    lower = np.concatenate([np.zeros(nf + npairs + n_loops), np.where(collapsible, 0.0, 1.0),
-                            np.zeros(nf + nd)])
+    lower = np.concatenate([np.zeros(nf + npairs + n_loops),
+                            np.where(collapsible[sides], 0.0, 1.0), np.zeros(nf + nd)])
     upper = np.concatenate([np.ones(nf + npairs + n_loops), np.full(n_sides + nf, big),
                             np.ones(nd)])
-    result = solve_milp("the side-direction repair", cost, integrality, Bounds(lower, upper),
-                        [LinearConstraint(matrix, lo, hi)])
-    if result.x is None:
-        bad = np.flatnonzero(np.isin(loop_turning(complex_), [-4, 4], invert=True))
-        charts = np.unique(complex_.loop_chart[bad])
-        raise LabelingError(
-            f"no side directions make every chart a closed rectilinear polygon ({len(charts)} "
-            f"charts do not turn by four, e.g. charts {charts[:5].tolist()}); HiGHS says "
-            f"'{result.message}'. The labeling is not a polycube there: try --parts auto or "
-            "another labeling")
-    flip = np.rint(result.x[:nf]).astype(bool)
-    flat = complex_.side_sign.reshape(-1).copy()
-    flat[used[flip]] *= -1
-    sign = flat.reshape(-1, 2)
-    slit = complex_.side_chart[:, 0] == complex_.side_chart[:, 1]
-    sign[slit, 1] = sign[slit, 0]
-    flipped = np.stack(np.divmod(used[flip], 2), axis=1)
-    return replace(complex_, side_sign=sign), flipped
+    return _DirectionProgram(used, cost, integrality, Bounds(lower, upper),
+                             [LinearConstraint(matrix, lo, hi)])
 
 
 def _coupled_sides(complex_, used):
@@ -229,15 +330,24 @@ def loops_are_rectilinear(complex_):
     return bool((outer[has_loop] == 1).all())
 
 
-def _closure_rows(complex_):
-    """Closure equations of every loop and every slit walk, one per axis they run along.
+def _closure_rows(complex_, loops=None, slits=None):
+    """Closure equations of loops and slit walks, one per axis they run along.
+
+    ``loops`` : (k,) int64 loops whose equations (and those of their slit walks) are given, or
+    None for every loop; ``slits``: ``complex_.slit_walks()`` when already made, or None.
 
     Yields ``(keys, coefficients)``: (k,) int64 sign keys (``side * 2 + column``) and (k,)
     float64 signed unit directions; the lengths of those sides times the coefficients add up
     to zero when the walk closes along that axis.
     """
-    walks = [np.arange(complex_.loop_offsets[loop], complex_.loop_offsets[loop + 1])
-             for loop in range(len(complex_.loop_chart))] + complex_.slit_walks()
+    if loops is None:
+        loops = np.arange(len(complex_.loop_chart))
+    slits = [walk for walk in (complex_.slit_walks() if slits is None else slits) if len(walk)]
+    slit_loop = np.searchsorted(complex_.loop_offsets, [walk[0] for walk in slits],
+                                side="right") - 1
+    walks = ([np.arange(complex_.loop_offsets[loop], complex_.loop_offsets[loop + 1])
+              for loop in loops]
+             + [walk for walk, loop in zip(slits, slit_loop) if np.isin(loop, loops)])
     for walk in walks:
         keys, d = _reference_directions(complex_, walk)
         axis = np.argmax(np.abs(d), axis=1)

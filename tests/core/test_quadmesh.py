@@ -152,6 +152,59 @@ def test_a_wrongly_measured_short_side_is_flipped_back():
     assert np.array_equal(repaired.side_sign, box.side_sign)
 
 
+def test_a_chart_that_cannot_turn_by_four_is_found_in_its_neighbourhood():
+    """A box chart whose loop runs x, x, x, y after one side is measured along the wrong axis
+    admits no directions: the whole program is infeasible, and so is the neighbourhood program
+    of the smallest ring holding that chart, which names it; the intact box has none."""
+    from core.quadmesh.side_signs import _direction_program, _local_contradiction
+
+    V, F = union_of_boxes([[[0, 0, 0], [2, 1, 1]]])
+    frames, _ = identity_frames(len(F))
+    box = build_chart_complex(V, F, np.zeros(len(F)), nearest_labels(V, F), frames)
+    none = np.zeros(box.n_sides, dtype=bool)
+    assert _local_contradiction(box, none) is None
+    loop = box.loop(0)
+    sides = np.where(loop >= 0, loop, ~loop)
+    column = np.where(box.side_chart[sides, 0] == box.loop_chart[0], 0, 1)
+    axis = box.side_axis.copy()
+    axis[sides[1], column[1]] = axis[sides[0], column[0]]
+    broken = dataclasses.replace(box, side_axis=axis)
+    charts, message = _local_contradiction(broken, none)
+    assert box.loop_chart[0] in charts and "infeasible" in message
+    assert len(charts) == 5  # a box chart and its four neighbours
+    whole = _direction_program(broken, np.arange(broken.n_charts), none)
+    assert milp(whole.cost, integrality=whole.integrality, bounds=whole.bounds,
+                constraints=whole.constraints).status == 2
+    with pytest.raises(LabelingError, match="rectilinear polygon"):
+        make_loops_rectilinear(broken)
+
+
+def test_an_undecided_root_goes_through_the_neighbourhoods_to_the_same_answer(monkeypatch):
+    """With no root node allowed (HiGHS stops before deciding), a repairable box is checked
+    neighbourhood by neighbourhood (each has a solution) and then gets the flips of the full
+    search."""
+    import core.quadmesh.side_signs as side_signs
+
+    V, F = union_of_boxes([[[0, 0, 0], [2, 1, 1]]])
+    frames, _ = identity_frames(len(F))
+    box = build_chart_complex(V, F, np.zeros(len(F)), nearest_labels(V, F), frames)
+    sign = box.side_sign.copy()
+    sign[3] *= -1
+    checked = []
+    local = side_signs._local_contradiction
+
+    def counted(*args):
+        checked.append(local(*args))
+        return checked[-1]
+
+    monkeypatch.setattr(side_signs, "ROOT_NODES", 0)
+    monkeypatch.setattr(side_signs, "_local_contradiction", counted)
+    repaired, flipped = make_loops_rectilinear(dataclasses.replace(box, side_sign=sign))
+    assert checked == [None]
+    assert flipped.tolist() == [[3, 0], [3, 1]]
+    assert np.array_equal(repaired.side_sign, box.side_sign)
+
+
 def _solve(refinement):
     n = refinement.n_vars
     lower = np.where(refinement.piece, 0.0, 1.0)
