@@ -357,8 +357,10 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
                                    interface_axis)
     target_genus = genus_of(len(V), F, int(connected_face_components(F).max()) + 1)
     collapsible = collapsible_sides(complex_, int(target_faces))
+    # raised here, it ends the attempt: the retry below keeps every side at least one unit
+    # long, a stricter program that no side directions can satisfy either
+    layout_complex, flipped = make_loops_rectilinear(complex_, collapsible)
     try:
-        layout_complex, flipped = make_loops_rectilinear(complex_, collapsible)
         tables = loop_tables(layout_complex, V, part_frames)
         mesh, polycube, rounds, refinement, folded = _layout_on_target(
             V, F, layout_complex, tables, int(target_faces), max_base_faces, collapsible,

@@ -404,3 +404,29 @@ def test_the_same_labelled_dev_mesh_gives_the_same_base_mesh_twice():
     assert info["method"] == "polycube" and info["scale_rounds"] == again["scale_rounds"]
     assert np.array_equal(first.vertices, second.vertices)
     assert np.array_equal(first.face_vertices, second.face_vertices)
+
+
+def test_side_directions_that_cannot_be_found_end_the_attempt_after_one_program(monkeypatch):
+    """With slivers allowed length zero no directions exist for ge_bracket_domain's labeling
+    (one part); the retry that keeps every side one unit long is stricter, so it is not run."""
+    import core.quadmesh.base_mesh as base_mesh
+    from core.pipeline import reconstruct
+
+    from tests.core.dev_meshes import MESHES
+
+    path = Path(MESHES) / "ge_bracket_domain.stl"
+    if not path.exists():
+        pytest.skip("dev mesh ge_bracket_domain.stl not available")
+    state = reconstruct(path, stop_after="labeling").state
+    field = state.frames.frame_field
+    programs = []
+
+    def counted(complex_, collapsible=None):
+        programs.append(collapsible.copy())
+        return make_loops_rectilinear(complex_, collapsible)
+
+    monkeypatch.setattr(base_mesh, "make_loops_rectilinear", counted)
+    with pytest.raises(LabelingError, match="rectilinear polygon"):
+        build_base_mesh(state.intake.target, state.parts.face_part, state.labeling.face_label,
+                        field.face_frame, field.part_frames, 300, method="polycube")
+    assert len(programs) == 1 and programs[0].any()
