@@ -278,11 +278,23 @@ def _summary(rows):
     return out
 
 
+def _earlier_rows(rows, meta):
+    """A line naming the cases kept from runs at other commits, if any (``--only`` runs)."""
+    earlier = {}
+    for row in rows:
+        commit = row.get("commit", "unknown")
+        if commit != meta["commit"]:
+            earlier.setdefault(commit, []).append(f"{row['design']} ({row['mode']})")
+    return [f"- Kept from the run at commit {commit}: {', '.join(cases)}."
+            for commit, cases in sorted(earlier.items())]
+
+
 def markdown(rows, manifest, meta):
     lines = ["# The pipeline on unseen SIMP results (issue 8)", "",
              "Written by `benchmarks/unseen_bench.py`; do not edit by hand.", "",
              f"- Date: {meta['date']}; commit {meta['commit']}; load (1 min) at start "
              f"{meta['load']}; timeout per case {meta['timeout']} s.",
+             *_earlier_rows(rows, meta),
              "- Designs: `benchmarks/simp_designs.py` (pymoto 2.0.1, density filter, OC, marching "
              "cubes at 0.5, 8 Taubin iterations, mm), none of them a dev-mesh load case; "
              "hashes in `benchmarks/simp_unseen/MANIFEST.json`.",
@@ -375,7 +387,7 @@ def main(argv):
     for name, entry in manifest.items():
         mesh = os.path.join(DESIGNS, entry["file"])  # an absolute file stays as it is
         for mode in args.modes:
-            row = run_case(name, mesh, mode, args.timeout)
+            row = dict(run_case(name, mesh, mode, args.timeout), commit=meta["commit"])
             # re-read: another run of this script may have added rows meanwhile
             previous = {(r["design"], r["mode"]): r
                         for r in (_load(RESULTS_JSON) or {}).get("rows", [])}
