@@ -18,7 +18,7 @@ from core.fitting.best_fit import BestFitResult, best_fit, pull_inside
 from core.fitting.crossings import count_crossings, hold_back_crossings, stiffen_until_clean
 from core.fitting.responses import thickness, volume
 from core.fitting.rgp import FitProblem, run_rgp
-from core.geometry import face_areas, triangulate
+from core.geometry import face_areas, sample_surface, triangulate
 from core.mesh_topology import next_corners
 from core.progress import NO_PROGRESS
 from core.quality import containment
@@ -391,7 +391,9 @@ def _distances(X, T, target, seed):
     surface misses, such as a thin horn's tip the limit surface stops short of.
     """
     forward = target.nearest(X).distance / target.diagonal
-    points, _ = target.samples(DISTANCE_SAMPLES, seed)
+    # the points of target.samples without the pseudo-normals it also finds (not needed here)
+    points = sample_surface(target.vertices, target.faces, DISTANCE_SAMPLES,
+                            np.random.default_rng(seed))
     backward = TargetSurface(X, T, "fitted surface").nearest(
         np.vstack([points, target.vertices])).distance / target.diagonal
     return {"mean_distance": float(forward.mean()), "max_distance": float(forward.max()),
