@@ -101,6 +101,9 @@ class ReconstructionParams:
     subdivision_levels : Catmull-Clark levels used by the fit (paper: 2).
     fit_iterations : most shape-optimisation iterations (paper: 100); the fit stops earlier
         when it has converged.
+    fit_convergence : the inside fit has converged when its best objective improved by less
+        than this fraction over its last five iterations (default 0.002); 0 runs every one of
+        ``fit_iterations``.
     fit_mode : ``inside`` (the paper's: the surface fills the target from inside),
         ``best-fit`` (two-sided least squares) or ``none`` (the unfitted limit surface).
     tolerance : largest deviation wanted, as a fraction of the target's bounding-box
@@ -149,6 +152,10 @@ class ReconstructionParams:
     fit_iterations: int = _param(100, "most shape-optimisation iterations (paper: 100; the fit "
                                  "stops earlier when converged)", _flag("fit_iterations"),
                                  low=0, high=100_000)
+    fit_convergence: float = _param(2e-3, "the inside fit stops when its best objective "
+                                    "improved by less than this fraction over five iterations "
+                                    "(default %(default)s; 0: run every iteration)",
+                                    _flag("fit_convergence"), low=0.0, high=1.0)
     fit_mode: str = _param("inside", "inside: fill the target from inside (paper, default); "
                            "best-fit: two-sided least squares; none: the unfitted limit surface",
                            _flag("fit_mode"), choices=FIT_MODES)

@@ -42,7 +42,7 @@ def run_fit(intake, basemesh, params, progress):
     intake : core.types.IntakeResult; basemesh : core.types.BaseMeshResult (its ``cage``
         may be one the user edited).
     params : core.params.ReconstructionParams (``fit_mode``, ``fit_iterations``,
-        ``subdivision_levels``, ``fit_t_min``, ``tolerance`` or ``tolerance_mm``,
+        ``fit_convergence``, ``subdivision_levels``, ``fit_t_min``, ``tolerance`` or ``tolerance_mm``,
         ``max_base_faces``).
     progress : core.progress.Progress; the fit reports its iterations and cancels inside.
 
@@ -62,7 +62,8 @@ def run_fit(intake, basemesh, params, progress):
     def fit(cage):
         return fit_base_mesh(cage, target, levels=fit_levels(cage.n_faces, params.subdivision_levels),
                              iterations=params.fit_iterations, mode=params.fit_mode,
-                             t_min=params.fit_t_min, progress=progress)
+                             t_min=params.fit_t_min, tol=params.fit_convergence,
+                             progress=progress)
 
     diagonal_mm = float(np.linalg.norm(np.ptp(target.vertices, axis=0)))
     tolerance = params.tolerance or params.tolerance_mm / diagonal_mm

@@ -36,6 +36,10 @@ class FitProxy(CageProxy):
                      "The cage to fit (a base mesh, possibly edited)")
         add_property(obj, "App::PropertyInteger", "Iterations", "Fit",
                      "Shape-optimisation iterations (paper: 100)", default("fit_iterations"))
+        add_property(obj, "App::PropertyFloat", "Convergence", "Fit",
+                     "The inside fit stops when its best objective improved by less than this "
+                     "fraction over five iterations (0: run every iteration)",
+                     default("fit_convergence"))
         add_property(obj, "App::PropertyInteger", "SubdivisionLevels", "Fit",
                      "Catmull-Clark levels the fit works on (paper: 2; fewer on large cages)",
                      default("subdivision_levels"))
@@ -58,6 +62,7 @@ class FitProxy(CageProxy):
 
     def parameters(self, obj):
         return {"fit_iterations": int(obj.Iterations),
+                "fit_convergence": float(obj.Convergence),
                 "subdivision_levels": int(obj.SubdivisionLevels), "fit_mode": obj.Mode,
                 "fit_t_min": None if obj.AutoMinThickness else float(obj.MinThickness)}
 

@@ -82,3 +82,15 @@ def test_tolerance_without_a_fit_is_refused():
         ReconstructionParams(fit_mode="none", tolerance=0.01)
     with pytest.raises(ParameterError, match="once"):
         ReconstructionParams(tolerance=0.01, tolerance_mm=1.0)
+
+
+def test_fit_convergence_zero_runs_every_iteration_the_default_stops_when_converged():
+    """The inside fit on the level-set cantilever converges within a few iterations at the
+    default ``fit_convergence``; with 0 it runs all ``fit_iterations`` (the cap)."""
+    cap = 25
+    reports = {tol: reconstruct(TINY, {"fit_iterations": cap, "fit_convergence": tol},
+                                stop_after="fit").report["fit"] for tol in (2e-3, 0.0)}
+    assert reports[2e-3]["stopped"] == "stalled" and reports[2e-3]["iterations"] < cap
+    assert reports[0.0]["stopped"] == "iterations" and reports[0.0]["iterations"] == cap
+    with pytest.raises(ParameterError, match="fit_convergence"):
+        ReconstructionParams(fit_convergence=-1e-3)

@@ -6,7 +6,7 @@ waits for a stage's line, sends SIGINT and holds the process to: exit 130, stder
 lines and then exactly one line ``cancelled at stage S; nothing was written`` naming the last
 stage announced (no traceback), nothing on stdout, and the output folder exactly as before
 (the existing STEP file and report keep their bytes, no new output, no temporary file).
-The level-set cantilever (344 triangles), with a long fit cap where the fit is interrupted.
+The level-set cantilever (344 triangles), with a long fit where the fit is interrupted.
 """
 import hashlib
 import json
@@ -25,6 +25,9 @@ MESH = os.path.join(REPO, "..", "shared", "data", "meshes", "to_levelset_cantile
 RUN_SECONDS = 300
 """Hang guard on one run (a whole run takes about 15 s on a loaded machine)."""
 OLD_STEP, OLD_REPORT = b"ISO-10303-21; an older result\n", b'{"older": "report"}\n'
+LONG_FIT = ("--fit-iterations", "3000", "--fit-convergence", "0")
+"""A fit that runs every one of its 3,000 iterations (about 100 s here): a run is surely in it
+when it is interrupted, however fast the stages before it have become."""
 BATCH_REDRAWS = 5
 """The batch is stopped at its fifth progress line: its meshes are inside the pipeline."""
 CANCELLED = re.compile(r"cancelled at stage (\w+); nothing was written")
@@ -81,9 +84,8 @@ def _needs_the_mesh():
 def test_ctrl_c_at_a_stage_writes_nothing_and_says_where(tmp_path, stage):
     out = outputs_folder(tmp_path)
     before = folder_digest(out)
-    iterations = "3000" if stage == "fit" else "3"  # a long fit only where it is interrupted
-    code, stdout, lines = interrupt_at(start_reconstruct(out, "--fit-iterations", iterations),
-                                       stage)
+    fit = LONG_FIT if stage == "fit" else ("--fit-iterations", "3")  # long where interrupted
+    code, stdout, lines = interrupt_at(start_reconstruct(out, *fit), stage)
     assert code == 130, lines
     announced = [line[len(STAGE_PREFIX):] for line in lines[:-1]]
     assert lines[:-1] == [STAGE_PREFIX + name for name in announced], \
@@ -143,8 +145,7 @@ def test_ctrl_c_on_a_batch_stops_every_mesh_and_leaves_the_folder_as_it_was(tmp_
     (out / "summary.csv").write_bytes(b"mesh,status\nolder,ok\n")
     before = folder_digest(out)
     process = subprocess.Popen([sys.executable, "-m", "polycube_wb", "batch", str(inputs), "-o",
-                                str(out), "--jobs", "2", "--fit-iterations", "3000",
-                                "--progress-lines"], cwd=REPO, stdout=subprocess.PIPE,
+                                str(out), "--jobs", "2", *LONG_FIT, "--progress-lines"], cwd=REPO, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True, start_new_session=True)
     redraws = 0
     for line in process.stdout:  # a line a second while both meshes run: stop them mid-run

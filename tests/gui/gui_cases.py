@@ -388,6 +388,7 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
                   self.doc.UndoCount)
         panel = self.open_panel(fit)
         panel.widgets["Iterations"][0].setValue(400)
+        panel.widgets["Convergence"][0].setValue(0.0)  # all 400: far longer than the Esc delay
         mode = panel.widgets["Mode"][0]
         mode.setCurrentIndex(mode.findText("inside"))  # the longer fit (test 3 left best-fit)
         grab = os.path.join(OUTPUT, "polycube_fit_progress.png")
