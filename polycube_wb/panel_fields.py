@@ -93,8 +93,7 @@ FIELDS = {
         parameter_field("Method", "Route", "base_mesh_method", choices=BASE_MESH_METHODS)),
     "Fit": (
         parameter_field("Iterations", "Iterations", "fit_iterations"),
-        parameter_field("Convergence", "Convergence (0: off)",
-                        "fit_convergence"),
+        parameter_field("Convergence", "Convergence (0: off)", "fit_convergence"),
         parameter_field("SubdivisionLevels", "Subdivision levels", "subdivision_levels"),
         parameter_field("Mode", "Mode", "fit_mode"),
         PanelField("AutoMinThickness", "Automatic minimal thickness", "bool"),

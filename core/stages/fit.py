@@ -42,8 +42,8 @@ def run_fit(intake, basemesh, params, progress):
     intake : core.types.IntakeResult; basemesh : core.types.BaseMeshResult (its ``cage``
         may be one the user edited).
     params : core.params.ReconstructionParams (``fit_mode``, ``fit_iterations``,
-        ``fit_convergence``, ``subdivision_levels``, ``fit_t_min``, ``tolerance`` or ``tolerance_mm``,
-        ``max_base_faces``).
+        ``fit_convergence``, ``subdivision_levels``, ``fit_t_min``, ``tolerance`` or
+        ``tolerance_mm``, ``max_base_faces``).
     progress : core.progress.Progress; the fit reports its iterations and cancels inside.
 
     Returns

@@ -145,8 +145,9 @@ def test_ctrl_c_on_a_batch_stops_every_mesh_and_leaves_the_folder_as_it_was(tmp_
     (out / "summary.csv").write_bytes(b"mesh,status\nolder,ok\n")
     before = folder_digest(out)
     process = subprocess.Popen([sys.executable, "-m", "polycube_wb", "batch", str(inputs), "-o",
-                                str(out), "--jobs", "2", *LONG_FIT, "--progress-lines"], cwd=REPO, stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True, start_new_session=True)
+                                str(out), "--jobs", "2", *LONG_FIT, "--progress-lines"],
+                               cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True, start_new_session=True)
     redraws = 0
     for line in process.stdout:  # a line a second while both meshes run: stop them mid-run
         redraws += line.startswith("PROGRESS ") and '"running": 2' in line
