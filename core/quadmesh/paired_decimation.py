@@ -33,6 +33,7 @@ from core.errors import InvalidMeshError
 from core.mesh_topology import edge_faces
 from core.quadmesh.decimation import Decimation
 from core.quadmesh.even_triangulation import even_triangulation
+from core.quadmesh.limit_interpolation import unshrink_inverted
 from core.polymesh_checks import check_polymesh
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
@@ -230,11 +231,16 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
 
 
 def _flawed_mesh(decimation, budget, surface, rounds):
-    """The paired mesh of one budget and its :func:`limit_flaws`; appends its round."""
+    """The paired mesh of one budget, its inverted faces unshrunk
+    (:func:`core.quadmesh.limit_interpolation.unshrink_inverted`), and its :func:`limit_flaws`;
+    appends its round."""
     result = _paired_mesh(decimation, 2 * budget, surface)
     crossings, inverted = limit_flaws(result.mesh, surface)
+    mesh, crossings, inverted, moved = unshrink_inverted(result.mesh, surface, crossings,
+                                                         inverted, _limit_crossings)
+    result = replace(result, mesh=mesh)
     rounds.append({"faces": int(result.mesh.n_faces), "limit_crossings": crossings,
-                   "inverted_faces": inverted})
+                   "inverted_faces": inverted, "moved_vertices": moved})
     return result, crossings, inverted
 
 
@@ -265,10 +271,16 @@ def limit_flaws(mesh, surface):
     :func:`core.quadmesh.orientation.inverted_faces`).
     """
     from core.quadmesh.orientation import inverted_faces
+
+    return (_limit_crossings(mesh),
+            int(inverted_faces(mesh, surface.vertices, surface.faces, surface).sum()))
+
+
+def _limit_crossings(mesh):
+    """Self-crossing triangle pairs of the level-2 limit surface of ``mesh`` (an int)."""
     from core.stages.fit import count_limit_self_intersections
 
-    return (count_limit_self_intersections(mesh, 2),
-            int(inverted_faces(mesh, surface.vertices, surface.faces, surface).sum()))
+    return count_limit_self_intersections(mesh, 2)
 
 
 def _paired_mesh(decimation, count, surface):
