@@ -233,7 +233,8 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     Returns
     -------
     mesh : core.types.PolyMesh, quads (a few triangles possible in the fallback), closed,
-        2-manifold, outward, vertices on the target.
+        2-manifold, outward, vertices on the target (in the fallback, those of inverted faces
+        may be moved off it: :mod:`core.quadmesh.limit_interpolation`).
     info : dict (JSON-serialisable) with ``method`` ("polycube" or "paired decimation"),
         ``fallback_reason`` (None for the polycube layout), ``faces``, ``quads``,
         ``triangles``, ``other``, ``vertices``, ``extraordinary_vertices``, ``min_valence``,

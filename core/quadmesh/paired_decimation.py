@@ -21,9 +21,12 @@ genus and orientation:
    exists (Petersen) and the result is all quads in practice; unmatched triangles stay
    triangles (Catmull-Clark and the export take mixed cages). Vertices with only two faces are
    merged away, and the vertices are moved onto the target.
-3. Where the cage's limit surface crosses itself or faces away from the target (thin struts
-   with too few faces around them), larger budgets within the allowed range are tried; where
-   they all cross themselves, budgets beyond it (a solid needs a surface that does not).
+3. Where the cage's limit surface faces away from the target, the vertices of those faces are
+   moved off the target, towards a limit surface through their on-target positions
+   (:mod:`core.quadmesh.limit_interpolation`; in the budget ladder only). Where it still
+   crosses itself or faces away (thin struts with too few faces around them), larger budgets
+   within the allowed range are tried; where they all cross themselves, budgets beyond it (a
+   solid needs a surface that does not).
 """
 from dataclasses import dataclass, replace
 
@@ -59,11 +62,13 @@ class PairedDecimation:
     """Result of :func:`paired_decimation_base_mesh`.
 
     mesh : PolyMesh, quads and leftover triangles, closed, 2-manifold, outward, its vertices
-        on the target (where moving them there degenerates no face).
+        on the target (where moving them there degenerates no face), except those of inverted
+        faces moved off it (:mod:`core.quadmesh.limit_interpolation`) in a budget ladder.
     decimated_triangles : int, triangles of the QSlim result that were paired.
     quads, triangles : int, faces of each kind in ``mesh``.
     rounds : tuple of dicts, one per budget tried (``faces``, ``limit_crossings``,
-        ``inverted_faces``); empty when only one budget was asked for.
+        ``inverted_faces``, ``moved_vertices``: after the moves); empty when only one budget
+        was asked for.
     """
 
     mesh: PolyMesh
