@@ -40,8 +40,9 @@ def find_self_intersections(vertices, faces, among=None):
     hits = []
     for start in range(0, len(pairs), _CHUNK):
         chunk = pairs[start:start + _CHUNK]
-        chunk = chunk[_straddle(tri, normal, offset, chunk[:, 0], chunk[:, 1], eps)
-                      & _straddle(tri, normal, offset, chunk[:, 1], chunk[:, 0], eps)]
+        # the second order is tested only on the pairs that passed the first
+        chunk = chunk[_straddle(tri, normal, offset, chunk[:, 0], chunk[:, 1], eps)]
+        chunk = chunk[_straddle(tri, normal, offset, chunk[:, 1], chunk[:, 0], eps)]
         hits.append(chunk[_pairs_intersect(tri, faces, chunk, eps)])
     hits = np.concatenate(hits) if hits else np.zeros((0, 2), dtype=np.int64)
     return hits[np.lexsort((hits[:, 1], hits[:, 0]))]
@@ -65,37 +66,49 @@ def _candidate_pairs(tri, among=None):
     every level keeps only the node pairs whose boxes overlap, so the work follows
     the number of truly overlapping pairs, whatever the spread of triangle sizes.
     With ``among`` ((t,) bool), node pairs without a marked face below either node are
-    dropped too.
+    dropped too. The boxes are kept per axis ((3, nodes) arrays) and the node pairs are
+    filtered one axis at a time, so each later test gathers only the survivors.
     """
     lo, hi = tri.min(axis=1), tri.max(axis=1)
     order = np.argsort(_morton_codes(tri.mean(axis=1)), kind="stable")
     depth = max(int(np.ceil(np.log2(max(len(tri), 2)))), 1)
     size = 1 << depth
-    leaf_lo = np.full((size, 3), np.inf)
-    leaf_hi = np.full((size, 3), -np.inf)
-    leaf_lo[:len(tri)], leaf_hi[:len(tri)] = lo[order], hi[order]
+    leaf_lo = np.full((3, size), np.inf)
+    leaf_hi = np.full((3, size), -np.inf)
+    leaf_lo[:, :len(tri)], leaf_hi[:, :len(tri)] = lo[order].T, hi[order].T
     leaf_marked = np.zeros(size, dtype=bool)
     leaf_marked[:len(tri)] = True if among is None else among[order]
     levels = [(leaf_lo, leaf_hi, leaf_marked)]
-    while len(levels[0][0]) > 1:
+    while levels[0][0].shape[1] > 1:
         child_lo, child_hi, child_marked = levels[0]
-        levels.insert(0, (np.minimum(child_lo[0::2], child_lo[1::2]),
-                          np.maximum(child_hi[0::2], child_hi[1::2]),
+        levels.insert(0, (np.minimum(child_lo[:, 0::2], child_lo[:, 1::2]),
+                          np.maximum(child_hi[:, 0::2], child_hi[:, 1::2]),
                           child_marked[0::2] | child_marked[1::2]))
-    self_children = np.array([[0, 0], [1, 1], [0, 1]], dtype=np.int64)
-    cross_children = np.array([[0, 0], [0, 1], [1, 0], [1, 1]], dtype=np.int64)
-    pairs = np.zeros((1, 2), dtype=np.int64)
+    a, b = np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64)
     for level_lo, level_hi, level_marked in levels[1:]:
-        same = pairs[:, 0] == pairs[:, 1]
-        pairs = np.concatenate([
-            (2 * pairs[same][:, None, :] + self_children).reshape(-1, 2),
-            (2 * pairs[~same][:, None, :] + cross_children).reshape(-1, 2)])
-        a, b = pairs[:, 0], pairs[:, 1]
-        keep = (((level_lo[a] <= level_hi[b]) & (level_lo[b] <= level_hi[a])).all(axis=1)
-                & (level_marked[a] | level_marked[b]))
-        pairs = pairs[keep]
-    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-    return np.sort(order[pairs], axis=1)
+        a, b = _child_pairs(a, b)
+        if among is not None:
+            keep = level_marked[a] | level_marked[b]
+            a, b = a[keep], b[keep]
+        for axis_lo, axis_hi in zip(level_lo, level_hi):
+            keep = (axis_lo[a] <= axis_hi[b]) & (axis_lo[b] <= axis_hi[a])
+            a, b = a[keep], b[keep]
+    keep = a != b
+    return np.sort(np.stack([order[a[keep]], order[b[keep]]], axis=1), axis=1)
+
+
+_SELF_CHILDREN = np.array([[0, 0], [1, 1], [0, 1]], dtype=np.int64)
+_CROSS_CHILDREN = np.array([[0, 0], [0, 1], [1, 0], [1, 1]], dtype=np.int64)
+
+
+def _child_pairs(a, b):
+    """Child node pairs of the node pairs ``(a[i], b[i])`` ((p,) int64 each) one level down:
+    three for a node with itself (each child with itself, the two children with each other),
+    four for two nodes; node ``k``'s children are ``2 k`` and ``2 k + 1``."""
+    same = a == b
+    return tuple(np.concatenate([(2 * a[same][:, None] + _SELF_CHILDREN[:, k]).reshape(-1),
+                                 (2 * node[~same][:, None] + _CROSS_CHILDREN[:, k]).reshape(-1)])
+                 for k, node in enumerate((a, b)))
 
 
 def _morton_codes(points):

@@ -12,6 +12,7 @@ control points ``S_i V0`` as in the paper's Eq. 10.
 import time
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from core.errors import InvalidMeshError, ParameterError
 from core.fitting.best_fit import BestFitResult, best_fit, pull_inside
@@ -394,11 +395,31 @@ def _distances(X, T, target, seed):
     # the points of target.samples without the pseudo-normals it also finds (not needed here)
     points = sample_surface(target.vertices, target.faces, DISTANCE_SAMPLES,
                             np.random.default_rng(seed))
-    backward = TargetSurface(X, T, "fitted surface").nearest(
-        np.vstack([points, target.vertices])).distance / target.diagonal
+    fitted = TargetSurface(X, T, "fitted surface")
+    back = fitted.nearest(points)
+    backward = back.distance / target.diagonal
+    largest = float(backward.max())
+    vertices = target.vertices[_may_be_farther(target.vertices, np.vstack([X, back.point]),
+                                               largest * target.diagonal, target.diagonal)]
+    if len(vertices):
+        largest = max(largest, float((fitted.nearest(vertices).distance
+                                      / target.diagonal).max()))
     return {"mean_distance": float(forward.mean()), "max_distance": float(forward.max()),
-            "target_mean_distance": float(backward[:len(points)].mean()),
-            "target_max_distance": float(backward.max())}
+            "target_mean_distance": float(backward.mean()), "target_max_distance": largest}
+
+
+def _may_be_farther(points, on_surface, distance, diagonal):
+    """(k,) bool: the ``points`` ((k, 3)) whose distance to a surface may exceed
+    ``distance`` (model units).
+
+    A point of the surface (``on_surface``, (s, 3), such as the fine limit points and the
+    closest points of the samples) bounds the distance from above, so a target vertex
+    nearer than ``distance`` to one of them cannot raise the maximum and is not queried
+    (``1e-9 * diagonal`` of slack for the rounding of those points): on fine3's 75k target
+    vertices the query of the rest costs a fraction of the query of all.
+    """
+    bound, _ = cKDTree(on_surface).query(points)
+    return bound > distance - 1e-9 * diagonal
 
 
 def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface, start,
