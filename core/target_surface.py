@@ -400,5 +400,6 @@ def _dot(x, y):
 
 
 def _unit(x):
-    length = np.linalg.norm(x, axis=1, keepdims=True)
+    """``x`` scaled to unit length along its last axis (the coordinates); zero rows stay zero."""
+    length = np.linalg.norm(x, axis=-1, keepdims=True)
     return np.divide(x, length, out=np.zeros_like(x), where=length > 0)

@@ -166,3 +166,20 @@ def test_samples_lie_on_the_surface_and_are_drawn_once():
     assert again[0] is points and again[1] is normals
     other, _ = surface.samples(3000, seed=5)
     assert not np.array_equal(other, points)
+
+
+def test_vertex_pseudo_normals_are_angle_weighted():
+    """At a corner of the tetrahedron (0, e_x, e_y, e_z) the pseudo-normal is the sum of the
+    incident face normals weighted by the face angles there (Baerentzen and Aanaes): at
+    e_x the faces z = 0 and y = 0 meet at 45 degrees each, the slanted face at 60."""
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    surface = TargetSurface(V, F)
+    slanted = np.ones(3) / np.sqrt(3.0)
+    expected = np.pi / 4 * np.array([0, -1.0, -1.0]) + np.pi / 3 * slanted
+    expected /= np.linalg.norm(expected)
+    found = surface.closest(np.array([[1.0, 0, 0] + 0.1 * expected]))
+    assert found.region[0] >= 4  # the closest point is the corner e_x itself
+    assert np.allclose(found.normal[0], expected, atol=1e-12)
+    origin = surface.closest(np.array([[-0.1, -0.1, -0.1]]))
+    assert np.allclose(origin.normal[0], -slanted, atol=1e-12)
