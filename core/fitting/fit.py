@@ -16,6 +16,7 @@ from scipy.spatial import cKDTree
 
 from core.errors import InvalidMeshError, ParameterError
 from core.fitting.best_fit import BestFitResult, best_fit, pull_inside
+from core.fitting.contain import nudge_inside
 from core.fitting.crossings import count_crossings, hold_back_crossings, stiffen_until_clean
 from core.fitting.responses import thickness, volume
 from core.fitting.rgp import FitProblem, run_rgp
@@ -94,7 +95,10 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         ``rgp_held_back`` (base vertices whose RGP move was cut back because the
         limit surface crossed itself there), then ``rgp_passes`` (iterations and base
         vertices held back of each further pass, :func:`_passes_around_crossings`;
-        ``iterations`` counts them too) and ``pull_crossings`` (:func:`_pulled_inside`).
+        ``iterations`` counts them too), ``pull_crossings`` (:func:`_pulled_inside`) and,
+        when the RGP's result was held back, ``nudged`` (base vertices moved in each round
+        of :func:`core.fitting.contain.nudge_inside`, which moves the held-back ones under
+        the points left outside inwards).
         The returned level-``levels`` limit surface does not cross itself when the cage's
         does not, and never where the start did not.
 
@@ -168,12 +172,17 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
             known = crossings if surface == "limit" else None
             vertices, crossings, held = _held_back(vertices, known, result.vertices, mapping, T)
         info["rgp_held_back"] = held
+        fixed = (vertices != result.vertices).any(axis=1)
         used = result.iterations
         if held and surface == "limit" and crossings == 0:
-            vertices, info["rgp_passes"], used = _passes_around_crossings(
+            vertices, info["rgp_passes"], used, fixed = _passes_around_crossings(
                 problem, vertices, result.vertices, T, step, iterations - used,
                 dict(stall_tol=tol, patience=patience, progress=progress))
             used += result.iterations
+        if surface == "limit" and crossings == 0 and held:
+            # the held-back vertices sit where the start was, partly outside
+            vertices, info["nudged"] = nudge_inside(vertices, limit_map, T, target_surface,
+                                                    movable=fixed)
         info.update(iterations=used, stopped=result.stopped,
                     best_iteration=result.best_iteration,
                     objective=result.history["objective"], volume=result.history["volume"],
@@ -220,6 +229,7 @@ def _passes_around_crossings(problem, held, moved, T, step, budget, options):
     vertices : (n, 3) float64, its fine mesh clean.
     passes : list of [iterations, held back base vertices], one per pass.
     iterations : int, RGP iterations of the passes.
+    fixed : (n,) bool, the base vertices held back in the first hold-back or a pass.
     """
     fixed = (held != moved).any(axis=1)
     passes, used = [], 0
@@ -232,7 +242,7 @@ def _passes_around_crossings(problem, held, moved, T, step, budget, options):
         held = vertices
         if not count:
             break
-    return held, passes, used
+    return held, passes, used, fixed
 
 
 INSIDE_MARGIN = 0.25

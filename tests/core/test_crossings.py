@@ -245,12 +245,13 @@ def gripper():
 
 def test_inside_fit_of_a_thin_plate_stays_inside_and_clean(gripper):
     """The RGP pulls the plate's two walls through each other; held back there, it runs
-    again with those vertices fixed, and at most 0.65 % of the volume is left outside."""
+    again with those vertices fixed, the held-back vertices are nudged inwards, and at
+    most 0.5 % of the volume is left outside (issue 10)."""
     target, cage = gripper
     fitted, info = fit_base_mesh(cage, target, mode="inside")
-    # measured: 0.47 % from the cage on the target, 0.61 % since the pin eye's vertices are
-    # moved off it to unshrink its limit surface (core.quadmesh.limit_interpolation)
-    assert info["outside_volume_fraction"] <= 0.0065
+    # measured: 0.61 % without the nudges (core.fitting.contain), 0.48 % with them
+    assert info["outside_volume_fraction"] <= 0.005
+    assert info["nudged"]
     assert info["self_intersections"] == 0 and export_limit_crossings(fitted).count == 0
     assert info["rgp_held_back"] > 0 and info["rgp_passes"]
     assert info["t_min"] == 0.0  # the start's walls nearly touch where it was held back

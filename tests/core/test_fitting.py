@@ -368,3 +368,32 @@ def test_a_refit_does_not_return_its_start():
     assert refit.rounds >= 2 and not np.array_equal(refit.vertices, first.vertices)
     kept = best_fit(base, M, T, surface, rounds=2, start=first.vertices, stiffness=stiff)
     np.testing.assert_array_equal(kept.vertices, first.vertices)   # without the flag
+
+
+def test_nudge_inside_moves_only_the_vertices_under_outside_points_and_stays_clean():
+    """A cage poking out of one side of a sphere: the nudge brings the outside points in,
+    moves no vertex it was not allowed to, and its limit surface does not cross itself."""
+    from core.fitting.contain import nudge_inside
+    from core.self_intersection import find_self_intersections
+
+    base = grid_sphere(3)
+    V = 0.7 * base.vertices / np.linalg.norm(base.vertices, axis=1).max() + [0.6, 0.0, 0.0]
+    base = PolyMesh(V, base.face_vertices, base.face_offsets)
+    h, fine, T = fine_mesh(base, 2)
+    M = (limit_matrices(fine)[0] @ h.composite(1)).tocsr()
+    sphere = sphere_target(1.0)
+    target = TargetSurface(sphere.vertices, sphere.faces)
+    before = target.closest(M @ V).signed
+    assert before.max() > 0.1
+    movable = V[:, 2] > 0                       # one half may move
+    nudged, moved = nudge_inside(V, M, T, target, movable=movable)
+    np.testing.assert_array_equal(nudged[~movable], V[~movable])
+    assert moved and moved[0] > 0
+    after = target.closest(M @ nudged).signed
+    half = (M @ V)[:, 2] > 0.1                  # fine points carried by the movable half
+    assert after[half].max() < 0.5 * before[half].max()
+    assert len(find_self_intersections(M @ nudged, T)) == 0
+    # the fine points with no weight on a movable vertex stay where they were
+    untouched = abs(M) @ movable.astype(np.float64) == 0
+    assert untouched.sum() > 0.1 * len(untouched)
+    np.testing.assert_allclose((M @ nudged)[untouched], (M @ V)[untouched], atol=1e-12)
