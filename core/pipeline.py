@@ -27,6 +27,7 @@ from core.stages.intake import run_intake
 from core.stages.labeling import run_labeling
 from core.stages.parts import run_parts
 from core.stages.patches import run_patches
+from core.threads import single_threaded
 from core.types import MeshSource, PipelineState
 
 
@@ -112,8 +113,12 @@ def _check_inputs(state, stages):
         available.add(name)
 
 
+@single_threaded()
 def run_stages(state, stages, params, progress=NO_PROGRESS, report=None):
     """Run ``stages`` (names, in order) on ``state``; returns ``(state, report, failed)``.
+
+    The stages run with one BLAS / OpenMP thread (:func:`core.threads.single_threaded`), so
+    a run's results do not depend on the machine's core count.
 
     Parameters
     ----------

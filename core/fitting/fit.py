@@ -27,6 +27,7 @@ from core.quality import containment
 from core.subdivision.catmull_clark import build_hierarchy
 from core.subdivision.limit import limit_matrices
 from core.target_surface import TargetSurface
+from core.threads import single_threaded
 from core.types import PolyMesh
 
 MODES = ("inside", "best-fit", "none")
@@ -35,6 +36,7 @@ STARTS = ("best-fit", "cage")
 SURFACES = ("limit", "control")
 
 
+@single_threaded()
 def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="inside",
                   progress=None, penalty=1e5, step_fraction=0.05, surface="limit",
                   start="best-fit", rounds=10, tol=2e-3, patience=5, seed=0):
@@ -100,7 +102,9 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         of :func:`core.fitting.contain.nudge_inside`, which moves the held-back ones under
         the points left outside inwards).
         The returned level-``levels`` limit surface does not cross itself when the cage's
-        does not, and never where the start did not.
+        does not, and never where the start did not. The fit runs with one BLAS thread
+        (:func:`core.threads.single_threaded`): the result does not depend on the
+        machine's core count.
 
     Raises
     ------

@@ -397,3 +397,34 @@ def test_nudge_inside_moves_only_the_vertices_under_outside_points_and_stays_cle
     untouched = abs(M) @ movable.astype(np.float64) == 0
     assert untouched.sum() > 0.1 * len(untouched)
     np.testing.assert_allclose((M @ nudged)[untouched], (M @ V)[untouched], atol=1e-12)
+
+
+@pytest.mark.parametrize("mode", ["inside", "best-fit"])
+def test_the_fit_does_not_depend_on_the_blas_thread_count(mode):
+    """Called under a two-thread BLAS limit, the fit gives bit-identical vertices to one
+    under a one-thread limit (without :func:`core.threads.single_threaded` on the fit, the
+    grid sphere's vertices differed by about 2e-12 between the two)."""
+    from threadpoolctl import threadpool_limits
+
+    base = grid_sphere(3)
+    X, _ = limit_points(base, 2)
+    target = sphere_target(1.1 * np.linalg.norm(X, axis=1).max())
+    fitted = {}
+    for threads in (1, 2):
+        with threadpool_limits(limits=threads):
+            fitted[threads], _ = fit_base_mesh(base, target, levels=2, iterations=60, mode=mode)
+    np.testing.assert_array_equal(fitted[1].vertices, fitted[2].vertices)
+
+
+def test_single_threaded_limits_blas_and_restores_the_limit():
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from core.threads import single_threaded
+
+    with threadpool_limits(limits=2):
+        before = [pool["num_threads"] for pool in threadpool_info()]
+        with single_threaded():
+            inside = [pool["num_threads"] for pool in threadpool_info()]
+        after = [pool["num_threads"] for pool in threadpool_info()]
+    assert inside and all(n == 1 for n in inside)
+    assert after == before

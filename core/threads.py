@@ -1,0 +1,26 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""One BLAS / OpenMP thread for the reconstruction, so its results do not depend on the
+machine's core count.
+
+A multi-threaded BLAS splits a dot product or a matrix product into per-thread partial
+sums whose number, and so whose rounding, follows the thread count. The fit feeds such
+products into branching decisions (a point inside or outside, a crossing held back or
+not), so last-bit differences grow into different results: fine3's inside fit left
+1.17 % of the volume outside with one OpenBLAS thread and 0.62 % with two. The fit's
+products are small (a few thousand rows), so one thread costs no time (see
+``benchmarks/FIT_RESULTS.md``).
+"""
+from contextlib import contextmanager
+
+from threadpoolctl import threadpool_limits
+
+
+@contextmanager
+def single_threaded():
+    """Limit every BLAS and OpenMP pool loaded in this process to one thread meanwhile.
+
+    Usable as ``with single_threaded():`` or as the decorator ``@single_threaded()``; nested
+    uses are harmless, and the previous limits are restored on exit (also on an exception).
+    """
+    with threadpool_limits(limits=1):
+        yield
