@@ -100,7 +100,8 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         ``iterations`` counts them too), ``pull_crossings`` (:func:`_pulled_inside`) and,
         when the RGP's result was held back, ``nudged`` (base vertices moved in each round
         of :func:`core.fitting.contain.nudge_inside`, which moves the held-back ones under
-        the points left outside inwards).
+        the points left outside inwards); ``rgp_retried`` when the RGP ran again with a
+        shorter step (:func:`_rgp`).
         The returned level-``levels`` limit surface does not cross itself when the cage's
         does not, and never where the start did not. The fit runs with one BLAS thread
         (:func:`core.threads.single_threaded`): the result does not depend on the
@@ -167,8 +168,8 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
             t_min = _default_t_min(X_start, T, edge)
         problem = FitProblem(mapping, T, target_surface, penalty, "inside", t_min,
                              _area(X_start, T))
-        result = run_rgp(problem, vertices, step, iterations=iterations, stall_tol=tol,
-                         patience=patience, progress=progress)
+        result, rgp_step = _rgp(problem, vertices, step, iterations,
+                                dict(stall_tol=tol, patience=patience, progress=progress))
         if surface == "limit" and crossings is not None \
                 and np.array_equal(result.vertices, vertices):
             held = 0  # the RGP's best is its start, checked above
@@ -176,11 +177,13 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
             known = crossings if surface == "limit" else None
             vertices, crossings, held = _held_back(vertices, known, result.vertices, mapping, T)
         info["rgp_held_back"] = held
+        if rgp_step != step:
+            info["rgp_retried"] = True
         fixed = (vertices != result.vertices).any(axis=1)
         used = result.iterations
         if held and surface == "limit" and crossings == 0:
             vertices, info["rgp_passes"], used, fixed = _passes_around_crossings(
-                problem, vertices, result.vertices, T, step, iterations - used,
+                problem, vertices, result.vertices, T, rgp_step, iterations - used,
                 dict(stall_tol=tol, patience=patience, progress=progress))
             used += result.iterations
         if surface == "limit" and crossings == 0 and held:
@@ -202,6 +205,37 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     info["seconds"] = time.perf_counter() - started
     info["measure_seconds"] = time.perf_counter() - measuring
     return PolyMesh(vertices, base.face_vertices, base.face_offsets), info
+
+
+RETRY_STEP = 0.4
+"""Step of the RGP's second run, times the first's, when the first kept its start
+(:func:`_rgp`)."""
+
+
+def _rgp(problem, vertices, step, iterations, options):
+    """The RGP from ``vertices``; run again with ``RETRY_STEP`` times the step when no
+    iterate after the start was feasible.
+
+    The thickness constraint is linearised and its rays reach ``2 t_min``, while a step
+    moves a vertex up to ``step`` (0.05 of the mean base edge, about ten times a default
+    ``t_min`` taken from a thin start): the first step can close a wall the constraint did
+    not yet see, and no later iterate is feasible again, so the RGP's best is its start
+    and the start's outside points stay (fine3, seed 3: 0.59 % of the target's volume
+    outside; with the shorter step 0.10 %, mean distance 0.0021 -> 0.0029).
+
+    Returns
+    -------
+    result : core.fitting.rgp.RGPResult, ``iterations`` counting both runs.
+    step : float, the step of the run returned (model units).
+    """
+    result = run_rgp(problem, vertices, step, iterations=iterations, **options)
+    if result.iterations and result.best_iteration == 0 and problem.t_min > 0 \
+            and result.iterations < iterations:
+        first = result.iterations
+        step = RETRY_STEP * step
+        result = run_rgp(problem, vertices, step, iterations=iterations - first, **options)
+        result.iterations += first
+    return result, step
 
 
 RGP_PASSES = 3
