@@ -123,8 +123,10 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True, moved_
     Thin members that the cage cannot resolve are where a fit pulls the two walls through
     each other; elsewhere the move is kept whole (SIMP cantilever: 66 of 284 base vertices
     held back, against 107 when every influencing vertex is halved, and mean distance
-    2.8e-3 instead of 3.4e-3). After the first round only the triangles that the halved
-    base vertices influence are tested again (:func:`_crossings_after`).
+    2.8e-3 instead of 3.4e-3). Only the triangles that the moving base vertices influence
+    are tested in the first round, and those that the halved ones influence in the later
+    rounds (:func:`_crossings_after`): a pair of triangles that do not move keeps the
+    reference's answer.
 
     Parameters
     ----------
@@ -151,10 +153,11 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True, moved_
                else find_self_intersections(mapping @ reference, triangles))
     fraction = np.ones(len(moved))
     moving = (moved != reference).any(axis=1)
-    pairs, changed, halving = None, None, 0
+    # the reference's pairs, of which only those near a moving vertex can change
+    pairs, changed, halving = allowed, moving, 0
     while True:
         W = reference + fraction[:, None] * (moved - reference)
-        pairs = (moved_pairs if pairs is None and moved_pairs is not None else
+        pairs = (moved_pairs if halving == 0 and moved_pairs is not None else
                  _crossings_after(mapping @ W, triangles, pairs, mapping, changed))
         new = pairs[~_rows_in(pairs, allowed)]
         if not len(new):
@@ -177,12 +180,10 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True, moved_
 def _crossings_after(X, triangles, pairs, mapping, changed):
     """(k, 2) int64 crossing triangle pairs of the fine mesh ``X`` ((n_fine, 3)).
 
-    ``pairs`` are those found before the base vertices marked in ``changed`` ((n,) bool)
-    moved (None: not known, every pair is tested); only the triangles these base
-    vertices influence through ``mapping`` are tested again, the other pairs are kept.
+    ``pairs`` ((p, 2) int64) are those found before the base vertices marked in
+    ``changed`` ((n,) bool) moved; only the triangles these base vertices influence
+    through ``mapping`` are tested again, the other pairs are kept.
     """
-    if pairs is None:
-        return find_self_intersections(X, triangles)
     fine = np.asarray(abs(mapping) @ changed.astype(np.float64)).ravel() > 0
     moved = fine[triangles].any(axis=1)
     kept = pairs[~moved[pairs].any(axis=1)]

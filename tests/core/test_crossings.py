@@ -88,6 +88,33 @@ def test_hold_back_rechecking_only_what_moved_agrees_with_full_searches(monkeypa
     assert quick[1:] == full[1:] and quick[2] == 0 and quick[1] >= 2
 
 
+def test_hold_back_tests_only_the_moving_triangles_from_the_first_round(monkeypatch):
+    """A reference that crosses itself and a move of a few vertices: the first round
+    searches only the triangles around the moving vertices, and the result is the one of
+    full searches in every round."""
+    V, T = icosphere()
+    M = sp.identity(len(V), format="csr")
+    reference = pushed_through(V, 5)              # crosses itself (allowed: clean=False)
+    moved = pushed_through(reference, 120)
+    assert (moved != reference).any(axis=1).sum() == 1
+    searched = []
+    real = crossings.find_self_intersections
+
+    def recording(X, triangles, among=None):
+        searched.append(len(triangles) if among is None else int(among.sum()))
+        return real(X, triangles, among)
+
+    monkeypatch.setattr(crossings, "find_self_intersections", recording)
+    quick = hold_back_crossings(reference, moved, M, T, clean=False)
+    assert searched[0] == len(T)                  # the reference's own pairs, once
+    assert 0 < searched[1] <= 6                   # the one-ring of vertex 120
+    monkeypatch.setattr(crossings, "_crossings_after",
+                        lambda X, triangles, pairs, mapping, changed: real(X, triangles))
+    full = hold_back_crossings(reference, moved, M, T, clean=False)
+    np.testing.assert_array_equal(quick[0], full[0])
+    assert quick[1:] == full[1:] and quick[1] == 1
+
+
 def test_stiffen_until_clean_stiffens_only_under_the_crossings():
     V, T = icosphere()
     M = sp.identity(len(V), format="csr")
