@@ -30,6 +30,11 @@ NUDGE_HALVINGS = 2
 hold_back_crossings`): a round moves by a point's depth, and what a quarter of that does
 not bring in, the next round tries again (fine3, seed 0: 0.92 % of the target's volume
 outside with 2, 0.90 % with 6, at half the nudge's CPU time)."""
+NUDGE_PROGRESS = 0.01
+"""Least fraction of the summed outside depth a round must take off for another round of
+its kind (fine3 and gripper_domain, seed 0: the third and later rounds of a kind took
+0.1-1.9 % off, 0.00-0.01 % of the target's volume; this stops after 4 of 8 rounds on
+fine3 at 0.93 % instead of 0.92 %, gripper at 0.379 % as with 8)."""
 CARRY_REACH = 8.0
 """A far wall moves along when it is hit within this many depths of the outside point
 along its inward normal (fine3, seed 0: 0.52 % of the target's volume left outside with
@@ -52,7 +57,9 @@ def nudge_inside(vertices, mapping, triangles, target, movable=None, rounds=NUDG
     target : core.target_surface.TargetSurface
     movable : (n,) bool or None, the base vertices that may move (None: all); an outside
         point whose largest weight is on another vertex is left where it is.
-    rounds : int >= 0, rounds of each kind (near walls, then near and far walls).
+    rounds : int >= 0, most rounds of each kind (near walls, then near and far walls); a
+        kind stops early when its last round took less than ``NUDGE_PROGRESS`` off the
+        summed depth of the outside points.
 
     Returns
     -------
@@ -62,10 +69,14 @@ def nudge_inside(vertices, mapping, triangles, target, movable=None, rounds=NUDG
     V = np.array(vertices, dtype=np.float64)
     moved = []
     for carry in (False, True):
+        before = np.inf
         for _ in range(rounds):
-            shift = _shift(V, mapping, triangles, target, movable, carry)
+            shift, depth = _shift(V, mapping, triangles, target, movable, carry)
             if shift is None:
                 return V, moved
+            if depth > (1.0 - NUDGE_PROGRESS) * before:
+                break
+            before = depth
             nudged, _, _ = hold_back_crossings(V, V + shift, mapping, triangles,
                                                halvings=NUDGE_HALVINGS)
             changed = (nudged != V).any(axis=1)
@@ -77,9 +88,14 @@ def nudge_inside(vertices, mapping, triangles, target, movable=None, rounds=NUDG
 
 
 def _shift(V, mapping, triangles, target, movable, carry):
-    """(n, 3) float64 per base vertex the mean inward move of the outside points it
-    carries (and, with ``carry``, of those whose far wall it carries), or None when no
-    outside point is left to a movable vertex."""
+    """Per base vertex the mean inward move of the outside points it carries.
+
+    Returns
+    -------
+    shift : (n, 3) float64 the move (with ``carry`` also of the outside points whose far
+        wall the vertex carries), or None when no outside point is left to a movable vertex.
+    depth : float, summed depth of all fine points outside the target (model units).
+    """
     X = mapping @ V
     near = target.closest(X)
     outside = np.flatnonzero(near.signed > 0)
@@ -100,13 +116,13 @@ def _shift(V, mapping, triangles, target, movable, carry):
         keep = movable[owner]
         owner, wanted = owner[keep], wanted[keep]
     if not len(owner):
-        return None
+        return None, float(depth.sum())
     shift = np.zeros_like(V)
     np.add.at(shift, owner, wanted)
     count = np.bincount(owner, minlength=len(V)).astype(np.float64)
     carries = count > 0
     shift[carries] /= count[carries, None]
-    return shift
+    return shift, float(depth.sum())
 
 
 def _owner(mapping, points):
