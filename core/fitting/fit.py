@@ -169,7 +169,8 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         problem = FitProblem(mapping, T, target_surface, penalty, "inside", t_min,
                              _area(X_start, T))
         result, rgp_step = _rgp(problem, vertices, step, iterations,
-                                dict(stall_tol=tol, patience=patience, progress=progress))
+                                dict(stall_tol=tol, patience=patience, progress=progress),
+                                target_volume)
         if surface == "limit" and crossings is not None \
                 and np.array_equal(result.vertices, vertices):
             held = 0  # the RGP's best is its start, checked above
@@ -210,11 +211,18 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
 RETRY_STEP = 0.4
 """Step of the RGP's second run, times the first's, when the first kept its start
 (:func:`_rgp`)."""
+RETRY_OUTSIDE = 1e-3
+"""... and the start's outside points stand for more than this fraction of the target's
+volume (a fifth of the issue's 0.5 % rule): idler_riser seeds 2-4 and ge_bracket_domain
+seed 3 (estimates 0-0.05 %, measured 0.06-0.10 %) keep their start, whose mean distance a
+second run raised by 14-17 %; fine3 seed 3 (0.59 % measured) runs again."""
 
 
-def _rgp(problem, vertices, step, iterations, options):
+def _rgp(problem, vertices, step, iterations, options, target_volume):
     """The RGP from ``vertices``; run again with ``RETRY_STEP`` times the step when no
-    iterate after the start was feasible.
+    iterate after the start was feasible and the start leaves more than ``RETRY_OUTSIDE``
+    of ``target_volume`` (model units cubed) outside, estimated as the summed depth of its
+    outside fine points times the mean area per fine point.
 
     The thickness constraint is linearised and its rays reach ``2 t_min``, while a step
     moves a vertex up to ``step`` (0.05 of the mean base edge, about ten times a default
@@ -229,8 +237,9 @@ def _rgp(problem, vertices, step, iterations, options):
     step : float, the step of the run returned (model units).
     """
     result = run_rgp(problem, vertices, step, iterations=iterations, **options)
+    outside = result.history["packaging"][0] * problem.area / problem.mapping.shape[0]
     if result.iterations and result.best_iteration == 0 and problem.t_min > 0 \
-            and result.iterations < iterations:
+            and result.iterations < iterations and outside > RETRY_OUTSIDE * target_volume:
         first = result.iterations
         step = RETRY_STEP * step
         result = run_rgp(problem, vertices, step, iterations=iterations - first, **options)

@@ -169,9 +169,25 @@ def test_fit_of_a_decimation_cage_on_a_thin_part_does_not_cross_itself(idler, mo
     assert info["max_distance"] <= info["initial_max_distance"]
     if mode == "inside":
         assert info["outside_volume_fraction"] <= 0.005
-        # the RGP's first run keeps its start here (its first step thins a wall below
-        # t_min and no later iterate is feasible); the run with the shorter step moves
-        assert info["t_min"] > 0 and info.get("rgp_retried") and info["best_iteration"] > 0
+
+
+def test_the_rgp_runs_again_with_a_shorter_step_only_when_its_start_leaves_much_outside(
+        idler, monkeypatch):
+    """On idler_riser's decimation cage the RGP's first run keeps its start (its first step
+    thins a wall below t_min and no later iterate is feasible). The start's outside points
+    stand for less than ``RETRY_OUTSIDE`` of the target's volume, so the start is kept; with
+    that threshold at 0 the RGP runs again with the shorter step and leaves its start, the
+    result still clean and inside."""
+    import core.fitting.fit as fit_module
+
+    target, cage = idler
+    _, kept = fit_base_mesh(cage, target)
+    assert kept["t_min"] > 0 and kept["best_iteration"] == 0 and "rgp_retried" not in kept
+    monkeypatch.setattr(fit_module, "RETRY_OUTSIDE", 0.0)
+    _, again = fit_base_mesh(cage, target)
+    assert again["rgp_retried"] and again["best_iteration"] > 0
+    assert again["iterations"] > kept["iterations"]
+    assert again["self_intersections"] == 0 and again["outside_volume_fraction"] <= 0.005
 
 
 def spindle_torus():
