@@ -115,7 +115,8 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True, moved_
     and after those every such vertex keeps its reference position, round after round
     until nothing new crosses (a held-back region can cross a moved neighbour; on
     gripper_domain's pull inside, 159 pairs, one such round undid the whole move before).
-    Crossings that survive the owners' halvings are where the reference's walls nearly
+    When no owner of a new crossing moves, the influencing vertices' halvings start at
+    once. Crossings that survive the owners' halvings are where the reference's walls nearly
     touch and a neighbour's move alone still pushes one through the other; halving the
     whole influencing region together keeps part of its move (fine3's inside fit, seed 0:
     36-42 such pairs; the RGP's result held back to 1.01 % of the target's volume outside
@@ -163,11 +164,16 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True, moved_
         if not len(new):
             return W, int(((fraction < 1) & moving).sum()), int(len(pairs))
         before = fraction.copy()
+        owner = None
         if halving < halvings:
             fine = np.unique(triangles[new].reshape(-1))
-            owner = np.asarray(abs(mapping[fine]).argmax(axis=1)).ravel()
-            fraction[np.unique(owner)] *= 0.5
+            owner = np.unique(np.asarray(abs(mapping[fine]).argmax(axis=1)).ravel())
+        if owner is not None and moving[owner].any():
+            fraction[owner] *= 0.5
         elif halving < 2 * halvings:
+            # no owner moves (a neighbour's move carries the corners through): on to the
+            # influencing vertices at once
+            halving = max(halving, halvings)
             fraction[influencing(new, mapping, triangles)] *= 0.5
         else:
             fraction[influencing(new, mapping, triangles)] = 0.0

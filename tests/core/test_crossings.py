@@ -115,6 +115,29 @@ def test_hold_back_tests_only_the_moving_triangles_from_the_first_round(monkeypa
     assert quick[1:] == full[1:] and quick[1] == 1
 
 
+def test_hold_back_halves_a_mover_that_owns_none_of_the_crossing_corners():
+    """Two tetrahedra of fine points: A's are base vertices 0-3, B's are 0.6 of base
+    vertices 4-7 plus 0.4 of a driver, base vertex 8, which owns no fine point. Moving only
+    the driver carries B into A; halving the crossing corners' owners changes nothing (they
+    do not move), so the driver's move is halved instead, once, and half of it is kept."""
+    tet = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    faces = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    T = np.vstack([faces, faces + 4])
+    rows = np.r_[np.arange(8), np.arange(4, 8)]
+    cols = np.r_[np.arange(8), np.full(4, 8)]
+    weights = np.r_[np.ones(4), np.full(4, 0.6), np.full(4, 0.4)]
+    M = sp.csr_matrix((weights, (rows, cols)), shape=(8, 9))
+    V = np.vstack([tet, (tet + [3.0, 0.2, 0.2]) / 0.6, np.zeros((1, 3))])
+    moved = V.copy()
+    moved[8] = [-7.0, 0.0, 0.0]                    # B shifted by -2.8 in x, through A
+    assert len(find_self_intersections(M @ V, T)) == 0
+    assert len(find_self_intersections(M @ moved, T)) > 0
+    held, count, crossings = hold_back_crossings(V, moved, M, T)
+    assert crossings == 0 and count == 1
+    np.testing.assert_array_equal(held[:8], V[:8])
+    np.testing.assert_allclose(held[8], [-3.5, 0.0, 0.0], atol=1e-12)
+
+
 def test_stiffen_until_clean_stiffens_only_under_the_crossings():
     V, T = icosphere()
     M = sp.identity(len(V), format="csr")
