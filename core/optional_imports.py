@@ -12,7 +12,7 @@ import importlib.util
 import sys
 
 INSTALL_HINT = (
-    "the {name} package is needed for the mesh quality checks; install it into the Python "
+    "the {name} package is needed by the reconstruction; install it into the Python "
     "that runs this code with `python -m pip install {name}` (for the FreeCAD GUI: "
     "`python -m pip install --target <UserAppData>/AdditionalPythonPackages {name}`, where "
     "<UserAppData> is FreeCAD.getUserAppDataDir())")

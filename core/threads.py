@@ -12,7 +12,7 @@ products are small (a few thousand rows), so one thread costs no time (see
 """
 from contextlib import contextmanager
 
-from threadpoolctl import threadpool_limits
+from core.optional_imports import optional_module
 
 
 @contextmanager
@@ -22,5 +22,6 @@ def single_threaded():
     Usable as ``with single_threaded():`` or as the decorator ``@single_threaded()``; nested
     uses are harmless, and the previous limits are restored on exit (also on an exception).
     """
-    with threadpool_limits(limits=1):
+    threadpoolctl = optional_module("threadpoolctl")
+    with threadpoolctl.threadpool_limits(limits=1):
         yield
