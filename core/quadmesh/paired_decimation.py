@@ -34,9 +34,11 @@ import numpy as np
 
 from core.errors import InvalidMeshError
 from core.mesh_topology import edge_faces
+from core.quadmesh.crossing_count import LimitCrossingCount
 from core.quadmesh.decimation import Decimation
 from core.quadmesh.even_triangulation import even_triangulation
 from core.quadmesh.limit_interpolation import unshrink_inverted
+from core.quadmesh.orientation import inverted_faces
 from core.polymesh_checks import check_polymesh
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
@@ -240,9 +242,11 @@ def _flawed_mesh(decimation, budget, surface, rounds):
     (:func:`core.quadmesh.limit_interpolation.unshrink_inverted`), and its :func:`limit_flaws`;
     appends its round."""
     result = _paired_mesh(decimation, 2 * budget, surface)
-    crossings, inverted = limit_flaws(result.mesh, surface)
+    count_crossings = LimitCrossingCount(result.mesh)
+    crossings = count_crossings.crossings
+    inverted = int(inverted_faces(result.mesh, surface.vertices, surface.faces, surface).sum())
     mesh, crossings, inverted, moved = unshrink_inverted(result.mesh, surface, crossings,
-                                                         inverted, _limit_crossings)
+                                                         inverted, count_crossings)
     result = replace(result, mesh=mesh)
     rounds.append({"faces": int(result.mesh.n_faces), "limit_crossings": crossings,
                    "inverted_faces": inverted, "moved_vertices": moved})
@@ -275,17 +279,10 @@ def limit_flaws(mesh, surface):
     (``core.stages.fit.limit_self_intersections`` and
     :func:`core.quadmesh.orientation.inverted_faces`).
     """
-    from core.quadmesh.orientation import inverted_faces
-
-    return (_limit_crossings(mesh),
-            int(inverted_faces(mesh, surface.vertices, surface.faces, surface).sum()))
-
-
-def _limit_crossings(mesh):
-    """Self-crossing triangle pairs of the level-2 limit surface of ``mesh`` (an int)."""
     from core.stages.fit import count_limit_self_intersections
 
-    return count_limit_self_intersections(mesh, 2)
+    return (count_limit_self_intersections(mesh, 2),
+            int(inverted_faces(mesh, surface.vertices, surface.faces, surface).sum()))
 
 
 def _paired_mesh(decimation, count, surface):
