@@ -23,10 +23,11 @@ genus and orientation:
    merged away, and the vertices are moved onto the target.
 3. Where the cage's limit surface faces away from the target, the vertices of those faces are
    moved off the target, towards a limit surface through their on-target positions
-   (:mod:`core.quadmesh.limit_interpolation`; in the budget ladder only). Where it still
-   crosses itself or faces away (thin struts with too few faces around them), larger budgets
-   within the allowed range are tried; where they all cross themselves, budgets beyond it (a
-   solid needs a surface that does not).
+   (:mod:`core.quadmesh.limit_interpolation`), and faces still inverted are edited: a corner
+   relaxed or a quad split (:mod:`core.quadmesh.local_repair`; both in the budget ladder
+   only). Where it still crosses itself or faces away (thin struts with too few faces around
+   them), larger budgets within the allowed range are tried; where they all cross themselves,
+   budgets beyond it (a solid needs a surface that does not).
 """
 from dataclasses import dataclass, replace
 
@@ -38,6 +39,7 @@ from core.quadmesh.crossing_count import LimitCrossingCount
 from core.quadmesh.decimation import Decimation
 from core.quadmesh.even_triangulation import even_triangulation
 from core.quadmesh.limit_interpolation import unshrink_inverted
+from core.quadmesh.local_repair import repair_inverted
 from core.quadmesh.orientation import inverted_faces
 from core.polymesh_checks import check_polymesh
 from core.target_surface import TargetSurface
@@ -69,8 +71,8 @@ class PairedDecimation:
     decimated_triangles : int, triangles of the QSlim result that were paired.
     quads, triangles : int, faces of each kind in ``mesh``.
     rounds : tuple of dicts, one per budget tried (``faces``, ``limit_crossings``,
-        ``inverted_faces``, ``moved_vertices``: after the moves); empty when only one budget
-        was asked for.
+        ``inverted_faces``, ``moved_vertices``: after the moves, ``edits``: local edits kept,
+        :mod:`core.quadmesh.local_repair`); empty when only one budget was asked for.
     """
 
     mesh: PolyMesh
@@ -239,17 +241,27 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
 
 def _flawed_mesh(decimation, budget, surface, rounds):
     """The paired mesh of one budget, its inverted faces unshrunk
-    (:func:`core.quadmesh.limit_interpolation.unshrink_inverted`), and its :func:`limit_flaws`;
-    appends its round."""
+    (:func:`core.quadmesh.limit_interpolation.unshrink_inverted`), those left edited where its
+    limit surface does not cross itself (:func:`core.quadmesh.local_repair.repair_inverted`),
+    and its :func:`limit_flaws`; appends its round."""
     result = _paired_mesh(decimation, 2 * budget, surface)
     count_crossings = LimitCrossingCount(result.mesh)
     crossings = count_crossings.crossings
     inverted = int(inverted_faces(result.mesh, surface.vertices, surface.faces, surface).sum())
     mesh, crossings, inverted, moved = unshrink_inverted(result.mesh, surface, crossings,
                                                          inverted, count_crossings)
-    result = replace(result, mesh=mesh)
+    edits = 0
+    if not crossings:
+        # a cage whose limit surface crosses itself is refused or outranked by one that does
+        # not, whatever its inverted faces: the edits would only cost time (on featuretype
+        # 5-12 edits per budget, 125 s in all)
+        mesh, crossings, inverted, edits = repair_inverted(mesh, surface, crossings, inverted,
+                                                           count_crossings)
+    sizes = mesh.face_sizes
+    result = replace(result, mesh=mesh, quads=int((sizes == 4).sum()),
+                     triangles=int((sizes == 3).sum()))
     rounds.append({"faces": int(result.mesh.n_faces), "limit_crossings": crossings,
-                   "inverted_faces": inverted, "moved_vertices": moved})
+                   "inverted_faces": inverted, "moved_vertices": moved, "edits": edits})
     return result, crossings, inverted
 
 
