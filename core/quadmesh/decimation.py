@@ -15,9 +15,9 @@ change the topology. Its quadrics are those of the mesh it is given, which matte
   none from the target). Larger budgets therefore start from the target, or for large targets
   from one fine decimation of it (:data:`SOURCE_TRIANGLES`), which keeps each one quick.
 
-Very large targets (:data:`REDUCE_ABOVE`) are first reduced by shortest-edge collapses, and
-both the coarse and the fine decimations start from that reduction: QSlim of the whole target
-costs twice as much.
+The coarse decimation of a very large target (:data:`REDUCE_ABOVE`) starts from a reduction by
+shortest-edge collapses: QSlim of the whole target costs twice as much. Larger budgets keep
+QSlim's fine decimation, whose quadrics keep thin members.
 """
 import numpy as np
 
@@ -31,15 +31,17 @@ the coarse one is first asked for; those then start from it. On ``to_simp_torsio
 instead of 3.4 s; the results had 4-7 intersecting triangle pairs where QSlim of the target
 itself gave 12."""
 REDUCE_ABOVE = 100000
-"""Targets with more triangles are reduced to :data:`SOURCE_TRIANGLES` by shortest-edge
-collapses (``igl.decimate``: a collapsed edge becomes its midpoint; collapses that would change
-the topology are refused), and that reduction is their fine source. On
-``to_simp_torsion_arm_fine3`` (151k triangles) it took 1.1 s, and QSlim of it to 750 triangles
-0.2 s, where QSlim of the target to 750 took 2.6 s; its paired cage needed 345 faces instead
-of 291 for a limit surface without flaws, which follows the target closer (level-2 limit
-surface: mean distance 0.41% of the diagonal against 0.45%, largest 2.5% against 4.0%).
-Smaller targets keep QSlim's own quadrics (on ``ge_bracket_domain``, 76k triangles, the
-reduction cost 3 budgets more)."""
+"""The coarse decimation of targets with more triangles starts from their reduction to
+:data:`SOURCE_TRIANGLES` by shortest-edge collapses (``igl.decimate``: a collapsed edge becomes
+its midpoint; collapses that would change the topology are refused). On
+``to_simp_torsion_arm_fine3`` (151k triangles) the reduction took 1.1 s, and QSlim of it to
+750 triangles 0.2 s, where QSlim of the target to 750 took 2.6 s; its paired cage needed 345
+faces instead of 291 for a limit surface without flaws, which follows the target closer
+(level-2 limit surface: mean distance 0.41% of the diagonal against 0.45%, largest 2.5%
+against 4.0%). Smaller targets keep QSlim's own quadrics (on ``ge_bracket_domain``, 76k
+triangles, the reduction cost 3 budgets more), and so do the larger budgets: from the
+reduction, every cage of ``simp_crank_arm_loop2`` up to 6 times the budget crossed itself
+(227 pairs at 311 faces), from QSlim's fine decimation the one at 1,726 faces did not."""
 
 
 class Decimation:
@@ -64,20 +66,19 @@ class Decimation:
         self._genus = genus_of(len(self._target[0]), self._target[1], self._components)
         self._results = {}
         self._fine = None
-        if len(self._target[1]) > REDUCE_ABOVE:
-            import igl
-
-            self._fine = self._checked(*igl.decimate(*self._target, SOURCE_TRIANGLES)[:2])
-        start = self._target if self._fine is None else self._fine
         self._coarse = None
-        if coarse_triangles is not None and coarse_triangles < len(start[1]):
+        if coarse_triangles is not None and coarse_triangles < len(self._target[1]):
+            start = self._target
+            if len(self._target[1]) > REDUCE_ABOVE:
+                import igl
+
+                start = self._checked(*igl.decimate(*self._target, SOURCE_TRIANGLES)[:2])
             self._coarse = self._qslim(*start, coarse_triangles)
 
     @property
     def fine_source(self):
         """``(vertices, faces)`` the decimations larger than the coarse one start from: the
-        target, or its decimation to :data:`SOURCE_TRIANGLES` (made on first use, or its
-        reduction: :data:`REDUCE_ABOVE`)."""
+        target, or its decimation to :data:`SOURCE_TRIANGLES` (made on first use)."""
         if self._fine is None:
             self._fine = (self._qslim(*self._target, SOURCE_TRIANGLES)
                           if len(self._target[1]) > SOURCE_TRIANGLES else self._target)
