@@ -14,7 +14,8 @@ each cage over its target (``benchmarks/images/basemesh_*.png``). Every case run
 process with a timeout. Per case: the stage reached, base faces against the budget, quads,
 extraordinary vertices, valence range, genus against the target's, inverted faces (limit
 normal more than 90 degrees from the target's, :mod:`core.quadmesh.orientation`), crossing
-triangle pairs of the level-2 limit surface, and the labeling and base-mesh seconds. For the
+triangle pairs of the level-2 limit surface, and the labeling and base-mesh seconds (the base
+mesh also in CPU seconds, which the load of other processes does not add). For the
 meshes named after ``--solid`` the whole pipeline then writes a STEP file, judged by the
 independent ``../shared/tools/evaluate.py``. Rows are kept per mesh, parts mode and requested
 ``--base-mesh-method`` route, so the routes can be compared side by side (``--update``).
@@ -55,6 +56,7 @@ def run_case(path, mode, method, out_json, image, solid):
            "labeling_valid": report.get("labeling", {}).get("valid"),
            "labeling_seconds": report["stages"].get("labeling", {}).get("seconds"),
            "basemesh_seconds": report["stages"].get("basemesh", {}).get("seconds"),
+           "basemesh_cpu_seconds": report["stages"].get("basemesh", {}).get("cpu_seconds"),
            "input_genus": report["input"]["genus"], "triangles": report["input"]["triangles"]}
     base = result.state.cage
     if base is not None:
@@ -64,7 +66,7 @@ def run_case(path, mode, method, out_json, image, solid):
             "method", "fallback_reason", "faces", "quads", "triangles",
             "extraordinary_vertices", "min_valence", "max_valence", "genus", "target_faces",
             "within_budget", "minimum_reason", "scale", "solver_status", "collapsed_sides",
-            "side_directions_flipped", "rectangles")}
+            "side_directions_flipped", "rectangles", "crossing_reason")}
         row["inverted_faces"] = int(inverted_faces(base, target.vertices, target.faces).sum())
         row["limit_self_intersections"] = count_limit_self_intersections(base, 2)
         render_cage(image, target.vertices, target.faces, base,
@@ -145,7 +147,8 @@ def markdown(rows, meta):
     lines.append(f"Base mesh reached on **{len(reached)} of {len(rows)}** cases.")
     lines.append("")
     header = ["mesh", "parts", "asked", "labeling", "base mesh", "route", "faces", "budget met", "quads %", "EVs",
-              "valence", "genus (target)", "inverted", "crossings", "labeling s", "base mesh s"]
+              "valence", "genus (target)", "inverted", "crossings", "labeling s", "base mesh s",
+              "base mesh CPU s"]
     with_solid = any("solid" in r for r in rows)
     if with_solid:
         header += ["STEP valid", "mean dist %", "max dist %"]
@@ -163,7 +166,8 @@ def markdown(rows, meta):
                       str(r["limit_self_intersections"])]
         else:
             cells += ["–"] * 9
-        cells += [str(r.get("labeling_seconds", "–")), str(r.get("basemesh_seconds", "–"))]
+        cells += [str(r.get("labeling_seconds", "–")), str(r.get("basemesh_seconds", "–")),
+                  str(r.get("basemesh_cpu_seconds", "–"))]
         if with_solid:
             metrics = (r.get("solid") or {}).get("evaluation", {})
             symmetric = metrics.get("distance", {}).get("symmetric", {})
@@ -172,7 +176,8 @@ def markdown(rows, meta):
                       _percent(symmetric.get("mean_frac")), _percent(symmetric.get("max_frac"))]
         lines.append("| " + " | ".join(cells) + " |")
     lines += ["", "Where the base mesh was not reached, the stage's message; where the route "
-              "fell back from the polycube layout, why:", ""]
+              "fell back from the polycube layout, why; where no cage tried had a limit surface "
+              "that does not cross itself, the stage's reason:", ""]
     for r in rows:
         reason = (r.get("base_mesh") or {}).get("fallback_reason")
         if not r.get("base_mesh"):
@@ -181,6 +186,10 @@ def markdown(rows, meta):
                          f"not reached: {message[:300]}")
         elif reason and r.get("method", "auto") == "auto":
             lines.append(f"- `{r['mesh']}` ({r['mode']}): {reason[:300]}")
+        crossing = (r.get("base_mesh") or {}).get("crossing_reason")
+        if crossing:
+            lines.append(f"- `{r['mesh']}` ({r['mode']}, {r.get('method', 'auto')}): "
+                         f"{crossing}")
     lines += ["", "## Cages over their targets", ""]
     for r in reached:
         lines.append(f"![{r['mesh']} {r['mode']} {r.get('method', 'auto')}]"

@@ -242,9 +242,11 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         ``inverted_faces`` and ``seconds``; the polycube layout adds ``scale``,
         ``solver_status``, ``scale_rounds``, ``charts``, ``sides``, ``corners``,
         ``side_directions_flipped``, ``folded_points``, ``rectangles`` and ``collapsed_sides``;
-        the paired decimation adds ``decimated_triangles`` and ``budget_rounds`` (the budgets
+        the paired decimation adds ``decimated_triangles``, ``budget_rounds`` (the budgets
         tried while its limit surface crossed itself or had inverted faces; beyond the budget
-        rule while it crossed itself, and ``minimum_reason`` says so).
+        rule while it crossed itself, and ``minimum_reason`` says so), ``limit_crossings``
+        (of the cage kept, level 2) and ``crossing_reason`` (None, or why no cage tried had
+        a limit surface that does not cross itself).
 
     Raises
     ------
@@ -322,12 +324,22 @@ def _paired_decimation_base_mesh(target_v, target_f, surface, target_faces, max_
         minimum_reason = (f"the limit surfaces of the smaller cages tried cross themselves (the "
                           f"fewest: {fewest} triangle pairs at subdivision level 2); this is the "
                           f"smallest one tried whose limit surface does not")
+    crossing_reason = None
+    if result.limit_crossings:
+        largest_tried = max(r["faces"] for r in result.rounds)
+        crossing_reason = (
+            f"its limit surface crosses itself ({result.limit_crossings} triangle pairs at "
+            f"subdivision level 2), as did those of all {len(result.rounds)} cages tried up to "
+            f"{largest_tried} faces (more faces did not remove the crossings): no solid can be "
+            f"built of it (sharp creases, which Catmull-Clark subdivision rounds off, are the "
+            f"usual cause)")
     info = {
         "method": "paired decimation", "fallback_reason": reason,
         **_mesh_figures(mesh), "quads": result.quads, "triangles": result.triangles,
         "other": 0, "target_faces": int(target_faces), "within_budget": within,
         "minimum_reason": minimum_reason, "decimated_triangles": result.decimated_triangles,
-        "budget_rounds": list(result.rounds),
+        "budget_rounds": list(result.rounds), "limit_crossings": result.limit_crossings,
+        "crossing_reason": crossing_reason,
         "inverted_faces": int(inverted_faces(mesh, target_v, target_f, surface).sum()),
     }
     return mesh, info

@@ -23,10 +23,11 @@ genus and orientation:
    merged away, and the vertices are moved onto the target.
 3. Where the cage's limit surface faces away from the target, the vertices of those faces are
    moved off the target, towards a limit surface through their on-target positions
-   (:mod:`core.quadmesh.limit_interpolation`; in the budget ladder only). Where it still
-   crosses itself or faces away (thin struts with too few faces around them), larger budgets
-   within the allowed range are tried; where they all cross themselves, budgets beyond it (a
-   solid needs a surface that does not).
+   (:mod:`core.quadmesh.limit_interpolation`), and faces still inverted are edited: a corner
+   relaxed or a quad split (:mod:`core.quadmesh.local_repair`; both in the budget ladder
+   only). Where it still crosses itself or faces away (thin struts with too few faces around
+   them), larger budgets within the allowed range are tried; where they all cross themselves,
+   budgets beyond it (a solid needs a surface that does not), until more faces stop helping.
 """
 from dataclasses import dataclass, replace
 
@@ -34,9 +35,12 @@ import numpy as np
 
 from core.errors import InvalidMeshError
 from core.mesh_topology import edge_faces
+from core.quadmesh.crossing_count import LimitCrossingCount
 from core.quadmesh.decimation import Decimation
 from core.quadmesh.even_triangulation import even_triangulation
 from core.quadmesh.limit_interpolation import unshrink_inverted
+from core.quadmesh.local_repair import repair_inverted
+from core.quadmesh.orientation import inverted_faces
 from core.polymesh_checks import check_polymesh
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
@@ -52,9 +56,17 @@ of every cage crosses itself. On SIMP results with thin perforated walls (``simp
 genus 20; ``simp_two_load_bracket``, genus 34; ``simp_gripper_jaw``, genus 9) the crossings
 ended at 2 or 3 times 300 faces, on the 167k-triangle surface of the crank arm
 (``benchmarks/unseen_bench.py --large``) at 6 times (58 pairs at 870 faces, 43 at 1,154, none
-at 1,726); on machined parts with small steps and counterbores (``featuretype``) they grew
-with the budget (126 pairs at 283 faces, 3,355 at 1,467), which makes their refusal slower:
-about 50 s instead of 30 s there."""
+at 1,726); on machined parts with small steps and counterbores (``featuretype``) they grow
+with the budget (171 pairs at 282 faces, 3,757 at 1,468): :data:`OVER_BUDGET_MISSES`."""
+OVER_BUDGET_MISSES = 2
+"""The budgets beyond the budget rule end after this many in a row whose cages are not less
+flawed (crossing pairs plus inverted faces) than every smaller one: more faces do not unfold
+that limit surface. The flaws fall unevenly on SIMP results (``simp_two_load_bracket``: 42 in
+the rule, then 36, 44 and none at 870 faces; ``simp_gripper_jaw``: 4, then 92 and none at
+561), so one miss is not enough; on ``featuretype`` (184, then 593 and 693) and
+``octagonal_pocket`` (153, then 241 and 261) two end the ladder after 2 of its 5 steps, where
+the limit surfaces of a machined part's sharp steps cross themselves (Catmull-Clark without
+crease rules rounds them)."""
 
 
 @dataclass(frozen=True)
@@ -67,8 +79,10 @@ class PairedDecimation:
     decimated_triangles : int, triangles of the QSlim result that were paired.
     quads, triangles : int, faces of each kind in ``mesh``.
     rounds : tuple of dicts, one per budget tried (``faces``, ``limit_crossings``,
-        ``inverted_faces``, ``moved_vertices``: after the moves); empty when only one budget
-        was asked for.
+        ``inverted_faces``, ``moved_vertices``: after the moves, ``edits``: local edits kept,
+        :mod:`core.quadmesh.local_repair`); empty when only one budget was asked for.
+    limit_crossings : int or None, self-crossing triangle pairs of the level-2 limit surface
+        of ``mesh`` (None when only one budget was asked for: not counted).
     """
 
     mesh: PolyMesh
@@ -76,6 +90,7 @@ class PairedDecimation:
     quads: int
     triangles: int
     rounds: tuple = ()
+    limit_crossings: int = None
 
 
 def _candidate_quads(vertices, faces):
@@ -189,7 +204,8 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     with the fewest flaws (the smaller on a tie). When every one of them crosses itself and
     ``over_budget_faces`` is larger, the budgets :data:`OVER_BUDGET_FACTORS` times
     ``target_faces`` (at most ``over_budget_faces``) are tried too, and the first whose limit
-    surface does not cross itself is kept: a solid needs it, the face budget does not.
+    surface does not cross itself is kept: a solid needs it, the face budget does not. They
+    stop after :data:`OVER_BUDGET_MISSES` in a row that are not less flawed than all before.
 
     Parameters
     ----------
@@ -227,25 +243,42 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
         if crossings + inverted == 0:
             break
     if best[2] and over_budget_faces:
+        fewest, misses = best[0], 0
         for budget in _over_budgets(target_faces, max_faces, int(over_budget_faces)):
-            result, crossings, _ = _flawed_mesh(decimation, budget, surface, rounds)
+            result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
             if not crossings:
                 best = (None, result, 0)
                 break
-    return replace(best[1], rounds=tuple(rounds))
+            misses = 0 if crossings + inverted < fewest else misses + 1
+            fewest = min(fewest, crossings + inverted)
+            if misses == OVER_BUDGET_MISSES:
+                break
+    return replace(best[1], rounds=tuple(rounds), limit_crossings=int(best[2]))
 
 
 def _flawed_mesh(decimation, budget, surface, rounds):
     """The paired mesh of one budget, its inverted faces unshrunk
-    (:func:`core.quadmesh.limit_interpolation.unshrink_inverted`), and its :func:`limit_flaws`;
-    appends its round."""
+    (:func:`core.quadmesh.limit_interpolation.unshrink_inverted`), those left edited where its
+    limit surface does not cross itself (:func:`core.quadmesh.local_repair.repair_inverted`),
+    and its :func:`limit_flaws`; appends its round."""
     result = _paired_mesh(decimation, 2 * budget, surface)
-    crossings, inverted = limit_flaws(result.mesh, surface)
+    count_crossings = LimitCrossingCount(result.mesh)
+    crossings = count_crossings.crossings
+    inverted = int(inverted_faces(result.mesh, surface.vertices, surface.faces, surface).sum())
     mesh, crossings, inverted, moved = unshrink_inverted(result.mesh, surface, crossings,
-                                                         inverted, _limit_crossings)
-    result = replace(result, mesh=mesh)
+                                                         inverted, count_crossings)
+    edits = 0
+    if not crossings:
+        # a cage whose limit surface crosses itself is refused or outranked by one that does
+        # not, whatever its inverted faces: the edits would only cost time (on featuretype
+        # 5-12 edits per budget, 125 s in all)
+        mesh, crossings, inverted, edits = repair_inverted(mesh, surface, crossings, inverted,
+                                                           count_crossings)
+    sizes = mesh.face_sizes
+    result = replace(result, mesh=mesh, quads=int((sizes == 4).sum()),
+                     triangles=int((sizes == 3).sum()))
     rounds.append({"faces": int(result.mesh.n_faces), "limit_crossings": crossings,
-                   "inverted_faces": inverted, "moved_vertices": moved})
+                   "inverted_faces": inverted, "moved_vertices": moved, "edits": edits})
     return result, crossings, inverted
 
 
@@ -275,17 +308,10 @@ def limit_flaws(mesh, surface):
     (``core.stages.fit.limit_self_intersections`` and
     :func:`core.quadmesh.orientation.inverted_faces`).
     """
-    from core.quadmesh.orientation import inverted_faces
-
-    return (_limit_crossings(mesh),
-            int(inverted_faces(mesh, surface.vertices, surface.faces, surface).sum()))
-
-
-def _limit_crossings(mesh):
-    """Self-crossing triangle pairs of the level-2 limit surface of ``mesh`` (an int)."""
     from core.stages.fit import count_limit_self_intersections
 
-    return count_limit_self_intersections(mesh, 2)
+    return (count_limit_self_intersections(mesh, 2),
+            int(inverted_faces(mesh, surface.vertices, surface.faces, surface).sum()))
 
 
 def _paired_mesh(decimation, count, surface):

@@ -24,7 +24,8 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     -------
     core.types.BaseMeshResult; its report is ``build_base_mesh``'s info (with
     ``fallback_reason`` when the labeling was invalid), its message names a fallback and
-    says when the face budget could not be met.
+    says when the face budget could not be met or the limit surface of every cage tried
+    crosses itself.
 
     Raises
     ------
@@ -69,5 +70,5 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
                f"{info['minimum_reason'] or 'the closest layout found'}")
     if info["method"] != "polycube":
         message = "; ".join(filter(None, [f"{info['method']} ({info['fallback_reason']})",
-                                          message]))
+                                          message, info["crossing_reason"]]))
     return BaseMeshResult(cage, info, message)

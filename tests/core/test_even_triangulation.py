@@ -76,3 +76,18 @@ def test_a_simp_iso_surface_is_left_almost_as_qslim_made_it():
     # no planar region: at most a few splits, so almost every QSlim vertex is still there
     kept = TargetSurface(vertices, faces).nearest(qslim_v).distance < 1e-9
     assert kept.mean() >= 0.9
+
+
+def test_flips_on_a_machined_part_end_in_a_triangulation_no_flip_changes():
+    from core.quadmesh.even_triangulation import _flip_pass
+
+    target = load_dev_mesh("featuretype.stl")  # counterbores and notches, genus 9
+    surface = TargetSurface(target.vertices, target.faces)
+    qslim_v, qslim_f, _, _ = igl.qslim(target.vertices, target.faces, 600)
+    vertices, faces = even_triangulation(qslim_v, np.asarray(qslim_f, dtype=np.int64), surface)
+    assert closed_manifold(faces)
+    assert genus_of(len(vertices), faces, 1) == 9
+    # every flip makes both its triangles face the target, so none is undone: the result is a
+    # fixed point (measured: flips went back and forth, 4 in every pass up to the last, when an
+    # untangling flip could leave a triangle facing away)
+    assert np.array_equal(_flip_pass(vertices, faces, surface, max_passes=1), faces)

@@ -1,6 +1,8 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Paired-decimation base mesh (core.quadmesh.paired_decimation): closed, the target's genus,
 quads, on budget, near the target; on a torus built here and on a real SIMP result."""
+import os
+
 import numpy as np
 import pytest
 
@@ -9,7 +11,7 @@ from core.polymesh_checks import check_polymesh
 from core.mesh_topology import polymesh_genus
 from core.quadmesh.paired_decimation import MIN_WEIGHT, _candidate_quads, paired_decimation_base_mesh
 from core.quality import point_surface_distance
-from dev_meshes import load_dev_mesh
+from dev_meshes import MESHES, load_dev_mesh
 
 
 def torus(major=3.0, minor=1.0, sections=64, rings=32):
@@ -137,3 +139,29 @@ def test_budgets_beyond_the_rule_are_tried_while_every_cage_crosses_itself():
     assert info["within_budget"] is False
     assert "cross themselves" in info["minimum_reason"]
     assert info["budget_rounds"] == list(result.rounds)
+
+
+def test_budgets_beyond_the_rule_stop_where_more_faces_do_not_unfold_the_limit_surface():
+    from core.pipeline import reconstruct
+    from core.quadmesh.paired_decimation import OVER_BUDGET_MISSES
+    from core.stages.fit import count_limit_self_intersections
+    from core.target_surface import TargetSurface
+
+    target = load_dev_mesh("featuretype.stl")  # machined: counterbores, steps, genus 9
+    surface = TargetSurface(target.vertices, target.faces)
+    result = paired_decimation_base_mesh(target.vertices, target.faces, 300, surface, 375, 2500)
+    flaws = [r["limit_crossings"] + r["inverted_faces"] for r in result.rounds]
+    within = sum(r["faces"] <= 1.02 * 375 for r in result.rounds)
+    # measured: 184, 207, 443 and 507 flaws within the rule, then 593 and 693 at 429 and 566
+    # faces (of the five budgets up to 6 times 300)
+    assert within == 4 and len(result.rounds) == within + OVER_BUDGET_MISSES
+    assert all(r["limit_crossings"] > 0 for r in result.rounds)
+    assert min(flaws[within:]) >= min(flaws[:within])
+    assert result.limit_crossings == count_limit_self_intersections(result.mesh, 2) > 0
+    assert result.mesh.n_faces == result.rounds[int(np.argmin(flaws))]["faces"] <= 375
+    # the stage says what is wrong
+    path = os.path.join(MESHES, "featuretype.stl")
+    report = reconstruct(path, {"base_mesh_method": "decimation"}, stop_after="basemesh").report
+    assert report["base_mesh"]["limit_crossings"] > 0
+    message = report["stages"]["basemesh"]["message"]
+    assert "crosses itself" in message and "no solid can be built" in message

@@ -1,0 +1,120 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Local edits of a cage at the faces still inverted after unshrinking (issue 8, "no inverted
+face").
+
+:mod:`core.quadmesh.limit_interpolation` repairs faces whose limit surface is pulled past a
+thin feature. Two other causes of inverted faces were found on paired-decimation cages:
+
+- a quad paired across a sharp fold: its two triangles lie on two sheets of a thin wall or on
+  both sides of a strut's ridge (the matching takes such a pair where an augmenting path
+  needs it). On ``gripper_domain`` (320 faces) the two triangles of the one face left, over
+  the edge of a 2 mm wall, are 174 degrees apart; its limit surface runs across the wall,
+  not round it;
+- a quad folded over its neighbours: QSlim left sliver triangles 80 mm long facing away from
+  the nearly flat top of ``to_simp_torsion_arm_fine3`` (:mod:`core.quadmesh.even_triangulation`
+  untangles only planar regions), so a quad there was clockwise seen from outside.
+
+Two edits act on such a face: moving one of its corners to the target point nearest the mean
+of the corner's neighbours (which unfolds a folded quad and evens out a pair over a fold), and
+splitting the quad into two triangles along either diagonal (each sheet of a fold then has its
+own face). Measured: the one face of ``gripper_domain`` and the three of
+``to_simp_torsion_arm_fine3`` (its cage of QSlim of the whole target, 291 faces) each went
+with one corner moved; ``simp_shelf_bracket`` (``benchmarks/simp_unseen``, 335 faces) needed
+four edits, two of them splits.
+
+For each inverted face the edits are tried in this order: each corner moved (the faces stay
+quads), then the split along each diagonal (while the triangles stay within
+:data:`MAX_TRIANGLE_SHARE` of the faces). An edit is kept when it lowers the cage's inverted
+faces without raising the self-crossings of its limit surface; the search then starts again
+on the edited cage, until no face is inverted or no edit helps.
+"""
+import numpy as np
+
+from core.errors import InvalidMeshError
+from core.mesh_topology import next_corners
+from core.polymesh_checks import check_polymesh
+from core.quadmesh.orientation import inverted_faces
+from core.types import PolyMesh
+
+MAX_TRIANGLE_SHARE = 0.1
+"""Splits keep at least 90% of the faces quads (the issue's quad-dominance rule)."""
+MAX_EDITS = 12
+"""Edits kept at most (each one lowers the inverted faces, so a cage has at most as many
+as it has inverted faces; this bounds the time on cages with many)."""
+
+
+def repair_inverted(mesh, surface, crossings, inverted, count_crossings):
+    """The cage with its inverted faces relaxed or split where that helps (module docstring).
+
+    Parameters
+    ----------
+    mesh : PolyMesh closed 2-manifold cage (vertices on the target or moved off it).
+    surface : TargetSurface of the target.
+    crossings, inverted : int, the limit flaws of ``mesh`` (self-crossing triangle pairs of
+        its level-2 limit surface, inverted faces).
+    count_crossings : callable PolyMesh -> int, the self-crossing pairs of a cage's limit
+        surface (as ``crossings`` was counted).
+
+    Returns
+    -------
+    mesh : PolyMesh, ``mesh`` itself when no edit helped.
+    crossings, inverted : int, its limit flaws.
+    edits : int, edits kept.
+    """
+    edits = 0
+    while inverted and edits < MAX_EDITS:
+        flipped = inverted_faces(mesh, surface.vertices, surface.faces, surface)
+        for candidate in _candidates(mesh, np.flatnonzero(flipped), surface):
+            count = int(inverted_faces(candidate, surface.vertices, surface.faces,
+                                       surface).sum())
+            if count >= inverted:
+                continue
+            candidate_crossings = count_crossings(candidate)
+            if candidate_crossings <= crossings:
+                mesh, crossings, inverted = candidate, candidate_crossings, count
+                edits += 1
+                break
+        else:
+            break
+    return mesh, crossings, inverted, edits
+
+
+def _candidates(mesh, faces, surface):
+    """Edited cages, lazily, in the order of the module docstring, for each of ``faces``
+    ((k,) int64 face indices); edits that give an invalid cage are skipped."""
+    face_list = [list(f) for f in mesh.faces()]
+    neighbours = _vertex_neighbours(mesh)
+    # a split makes one quad two triangles
+    can_split = (mesh.face_sizes == 3).sum() + 2 <= MAX_TRIANGLE_SHARE * (mesh.n_faces + 1)
+    for face in faces.tolist():
+        corners = face_list[face]
+        for vertex in corners:
+            vertices = mesh.vertices.copy()
+            vertices[vertex] = surface.nearest(
+                mesh.vertices[neighbours[vertex]].mean(axis=0)[None]).point[0]
+            yield from _valid(PolyMesh(vertices, mesh.face_vertices, mesh.face_offsets))
+        if len(corners) == 4 and can_split:
+            for start in (0, 1):
+                a, b, c, d = np.roll(corners, -start).tolist()
+                split = face_list[:face] + [[a, b, c], [c, d, a]] + face_list[face + 1:]
+                yield from _valid(PolyMesh.from_faces(mesh.vertices, split))
+
+
+def _valid(mesh):
+    """``[mesh]`` if it is a closed 2-manifold without degenerate faces, else ``[]``."""
+    try:
+        check_polymesh(mesh)
+    except InvalidMeshError:
+        return []
+    return [mesh]
+
+
+def _vertex_neighbours(mesh):
+    """List of (k_v,) int64 arrays: the vertices joined to each vertex by a cage edge."""
+    corners = mesh.face_vertices
+    following = corners[next_corners(mesh.face_offsets)]
+    edges = np.unique(np.sort(np.stack([corners, following], axis=1), axis=1), axis=0)
+    ends = np.concatenate([edges, edges[:, ::-1]])
+    ends = ends[np.argsort(ends[:, 0], kind="stable")]
+    split_at = np.searchsorted(ends[:, 0], np.arange(1, len(mesh.vertices)))
+    return np.split(ends[:, 1], split_at)

@@ -1,0 +1,36 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Limit-surface self-crossings counted again only where vertices moved
+(core.quadmesh.crossing_count): the same counts as the full check, on a real cage."""
+import numpy as np
+
+from core.quadmesh.crossing_count import LimitCrossingCount
+from core.quadmesh.paired_decimation import paired_decimation_base_mesh
+from core.stages.fit import count_limit_self_intersections
+from core.target_surface import TargetSurface
+from core.types import PolyMesh
+from dev_meshes import load_dev_mesh
+
+
+def test_the_crossing_count_of_moved_vertices_is_the_full_count():
+    target = load_dev_mesh("gripper_domain.stl")
+    surface = TargetSurface(target.vertices, target.faces)
+    cage = paired_decimation_base_mesh(target.vertices, target.faces, 300, surface).mesh
+    count = LimitCrossingCount(cage)
+    assert count.crossings == count_limit_self_intersections(cage, 2)
+    rng = np.random.default_rng(7)
+    totals = []
+    for moved in (3, 10, 30):
+        vertices = cage.vertices.copy()
+        chosen = rng.choice(len(vertices), moved, replace=False)
+        vertices[chosen] += rng.normal(scale=0.02 * surface.diagonal, size=(moved, 3))
+        trial = PolyMesh(vertices, cage.face_vertices, cage.face_offsets)
+        totals.append(count(trial))
+        assert totals[-1] == count_limit_self_intersections(trial, 2)
+    assert max(totals) > count.crossings  # the moves made crossings: the test can tell
+    # other faces: counted in full
+    faces = cage.faces()
+    quad = next(i for i, face in enumerate(faces) if len(face) == 4)
+    split = PolyMesh.from_faces(cage.vertices, faces[:quad] + [faces[quad][[0, 1, 2]],
+                                                               faces[quad][[0, 2, 3]]]
+                                + faces[quad + 1:])
+    assert count(split) == count_limit_self_intersections(split, 2)
