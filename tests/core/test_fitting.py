@@ -399,6 +399,31 @@ def test_nudge_inside_moves_only_the_vertices_under_outside_points_and_stays_cle
     np.testing.assert_allclose((M @ nudged)[untouched], (M @ V)[untouched], atol=1e-12)
 
 
+def test_nudge_inside_stops_a_kind_of_rounds_that_no_longer_takes_depth_off(monkeypatch):
+    """When a round leaves the summed outside depth where it was (less than
+    ``NUDGE_PROGRESS`` off), no further round of that kind runs: with a depth that never
+    falls, one round of each kind, not ``rounds`` of each (the moves themselves are real and
+    clean: a small outward shift of every base vertex of a grid sphere)."""
+    from core.fitting import contain
+
+    base = grid_sphere(3)
+    h, fine, T = fine_mesh(base, 2)
+    M = (limit_matrices(fine)[0] @ h.composite(1)).tocsr()
+    sphere = sphere_target(1.0)
+    target = TargetSurface(sphere.vertices, sphere.faces)
+    calls = []
+
+    def stalled_shift(V, mapping, triangles, target, movable, carry):
+        calls.append(carry)
+        return 1e-3 * V, 1.0                   # the same summed depth every round
+
+    monkeypatch.setattr(contain, "_shift", stalled_shift)
+    nudged, moved = contain.nudge_inside(base.vertices, M, T, target, rounds=8)
+    assert len(moved) == 2 and min(moved) == len(base.vertices)   # one round of each kind
+    assert calls == [False, False, True, True]  # the second of each kind saw no progress
+    np.testing.assert_allclose(nudged, base.vertices * 1.001 ** 2, rtol=1e-12)
+
+
 @pytest.mark.parametrize("mode", ["inside", "best-fit"])
 def test_the_fit_does_not_depend_on_the_blas_thread_count(mode):
     """Called under a two-thread BLAS limit, the fit gives bit-identical vertices to one
