@@ -147,6 +147,26 @@ def previous_corners(face_offsets):
     return preceding
 
 
+def neighbour_mean(vertices, face_vertices, face_offsets):
+    """(n, 3) float64 mean of each vertex's edge neighbours in a polygon mesh.
+
+    Each corner adds the next corner of its face, so in a closed, consistently oriented
+    2-manifold every neighbour of a vertex counts once (one outgoing half-edge each).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64; face_vertices : (k,) int64 corners; face_offsets : (m + 1,)
+        int64 CSR offsets of the faces into them.
+    """
+    corners = np.asarray(face_vertices, dtype=np.int64)
+    following = corners[next_corners(face_offsets)]
+    total = np.zeros((len(vertices), 3))
+    count = np.zeros(len(vertices))
+    np.add.at(total, corners, np.asarray(vertices)[following])
+    np.add.at(count, corners, 1.0)
+    return total / np.maximum(count, 1.0)[:, None]
+
+
 def euler_characteristic(n_vertices, faces):
     """``V - E + F`` of a triangle mesh with ``n_vertices`` vertices (int)."""
     edges, _ = unique_edges(faces)

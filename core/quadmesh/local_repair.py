@@ -31,7 +31,7 @@ on the edited cage, until no face is inverted or no edit helps.
 import numpy as np
 
 from core.errors import InvalidMeshError
-from core.mesh_topology import next_corners
+from core.mesh_topology import neighbour_mean
 from core.polymesh_checks import check_polymesh
 from core.quadmesh.orientation import inverted_faces
 from core.types import PolyMesh
@@ -83,15 +83,14 @@ def _candidates(mesh, faces, surface):
     """Edited cages, lazily, in the order of the module docstring, for each of ``faces``
     ((k,) int64 face indices); edits that give an invalid cage are skipped."""
     face_list = [list(f) for f in mesh.faces()]
-    neighbours = _vertex_neighbours(mesh)
+    centres = neighbour_mean(mesh.vertices, mesh.face_vertices, mesh.face_offsets)
     # a split makes one quad two triangles
     can_split = (mesh.face_sizes == 3).sum() + 2 <= MAX_TRIANGLE_SHARE * (mesh.n_faces + 1)
     for face in faces.tolist():
         corners = face_list[face]
         for vertex in corners:
             vertices = mesh.vertices.copy()
-            vertices[vertex] = surface.nearest(
-                mesh.vertices[neighbours[vertex]].mean(axis=0)[None]).point[0]
+            vertices[vertex] = surface.nearest(centres[vertex][None]).point[0]
             yield from _valid(PolyMesh(vertices, mesh.face_vertices, mesh.face_offsets))
         if len(corners) == 4 and can_split:
             for start in (0, 1):
@@ -108,13 +107,3 @@ def _valid(mesh):
         return []
     return [mesh]
 
-
-def _vertex_neighbours(mesh):
-    """List of (k_v,) int64 arrays: the vertices joined to each vertex by a cage edge."""
-    corners = mesh.face_vertices
-    following = corners[next_corners(mesh.face_offsets)]
-    edges = np.unique(np.sort(np.stack([corners, following], axis=1), axis=1), axis=0)
-    ends = np.concatenate([edges, edges[:, ::-1]])
-    ends = ends[np.argsort(ends[:, 0], kind="stable")]
-    split_at = np.searchsorted(ends[:, 0], np.arange(1, len(mesh.vertices)))
-    return np.split(ends[:, 1], split_at)

@@ -11,6 +11,7 @@ chart or side, never onto the nearest surface, keeps points on their sheet acros
 """
 import numpy as np
 
+from core.mesh_topology import neighbour_mean
 from core.target_surface import TargetSurface
 from core.quadmesh.embed import arc_fractions, point_on_chain
 
@@ -18,20 +19,6 @@ RELAX_ROUNDS = 8
 """Rounds of constrained smoothing."""
 MIN_GAP = 0.1
 """Side points stay at least this many units apart along their side."""
-
-
-def _neighbour_mean(mesh):
-    """(n, 3) float64 mean of each vertex's edge neighbours in a quad mesh."""
-    q = mesh.face_vertices.reshape(-1, 4)
-    a = q.reshape(-1)
-    b = np.roll(q, -1, axis=1).reshape(-1)
-    n = len(mesh.vertices)
-    total = np.zeros((n, 3))
-    count = np.zeros(n)
-    # every edge is seen once in each direction by its two faces
-    np.add.at(total, a, mesh.vertices[b])
-    np.add.at(count, a, 1.0)
-    return total / np.maximum(count, 1.0)[:, None]
 
 
 def _slide_along(points, chain, order, length):
@@ -81,8 +68,6 @@ def relax_on_target(mesh, V, F, face_chart, vertex_side, vertex_step, side_lengt
     -------
     (p, 3) float64 new positions, on the target.
     """
-    from core.types import PolyMesh
-
     positions = np.array(mesh.vertices, dtype=np.float64)
     charts = np.unique(vertex_chart[vertex_chart >= 0])
     surfaces = {}
@@ -93,7 +78,7 @@ def relax_on_target(mesh, V, F, face_chart, vertex_side, vertex_step, side_lengt
     sides = np.unique(vertex_side[vertex_side >= 0])
     chains = {side: side_chains(side) for side in sides.tolist()}
     for _ in range(rounds):
-        moved = _neighbour_mean(PolyMesh(positions, mesh.face_vertices, mesh.face_offsets))
+        moved = neighbour_mean(positions, mesh.face_vertices, mesh.face_offsets)
         for chart, surface in surfaces.items():
             rows = np.flatnonzero(vertex_chart == chart)
             positions[rows] = surface.nearest(moved[rows]).point

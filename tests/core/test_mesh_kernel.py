@@ -7,7 +7,7 @@ import trimesh
 from core.geometry import (face_areas, face_cross, polymesh_volume, triangle_mesh_volume,
                            triangle_signed_volumes, triangulate, unit_face_normals)
 from core.mesh_topology import (edge_faces, euler_characteristic, face_neighbours, genus_of,
-                                next_corners, previous_corners)
+                                neighbour_mean, next_corners, previous_corners)
 from core.subdivision.sample_cages import cube, genus3_block
 
 
@@ -38,6 +38,15 @@ def test_next_corners_cycle_within_each_face():
     assert following.tolist() == [1, 2, 3, 0, 5, 6, 4, 8, 9, 10, 11, 7]
     assert previous_corners(offsets)[following].tolist() == list(range(12))
     assert next_corners(np.array([0])).tolist() == []
+
+
+def test_neighbour_mean_of_a_closed_cage_counts_each_neighbour_once():
+    """On the unit cube cage every corner has three neighbours, one step along each axis:
+    their mean lies a third of the way towards the opposite corner."""
+    c = cube()
+    mean = neighbour_mean(c.vertices, c.face_vertices, c.face_offsets)
+    expected = c.vertices + (1.0 - 2.0 * c.vertices) / 3.0
+    np.testing.assert_allclose(mean, expected, atol=1e-15)
 
 
 def test_unit_normals_are_outward_and_zero_on_a_degenerate_triangle():
