@@ -7,6 +7,10 @@ internal failure (exit code 1).
 """
 
 
+OTHER_PARTS = "other parts (--parts auto, or your own with --parts file)"
+"""What a user can change when a labeling cannot be laid out; worded so that it also holds
+when the run already used ``--parts auto``."""
+
 class PolycubeError(Exception):
     """Base class of every error raised on purpose by this project."""
 

@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from core.errors import InvalidMeshError, LabelingError, ParameterError
+from core.errors import InvalidMeshError, LabelingError, OTHER_PARTS, ParameterError
 from core.mesh_topology import connected_face_components, genus_of, polymesh_genus
 from core.params import BASE_MESH_METHODS
 from core.polymesh_checks import check_polymesh
@@ -176,7 +176,7 @@ def _give_up_limit(give_up_faces, max_base_faces):
     """The limit a layout exceeded, for :class:`LayoutTooLargeError` messages (a str)."""
     if give_up_faces >= max_base_faces:
         return (f"max_base_faces={max_base_faces}; raise --max-base-faces or simplify the "
-                "labeling (--parts auto)")
+                f"labeling ({OTHER_PARTS})")
     return f"{give_up_faces}, {FALLBACK_OVER_BUDGET:g} times the budget"
 
 
@@ -384,8 +384,9 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
         raise  # keeping the slivers would only make it larger (or slower)
     except (LabelingError, InvalidMeshError):
         # slivers that cannot vanish cleanly keep at least one unit
+        layout_complex, flipped = make_loops_rectilinear(
+            complex_, np.zeros(complex_.n_sides, dtype=bool), feasible_collapsible=collapsible)
         collapsible = np.zeros(complex_.n_sides, dtype=bool)
-        layout_complex, flipped = make_loops_rectilinear(complex_, collapsible)
         tables = loop_tables(layout_complex, V, part_frames)
         try:
             mesh, polycube, rounds, refinement, folded = _layout_on_target(

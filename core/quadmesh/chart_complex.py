@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.errors import LabelingError
+from core.errors import LabelingError, OTHER_PARTS
 from core.geometry import face_areas
 from core.segmentation.charts import build_topology, extract_layout
 
@@ -279,7 +279,7 @@ def build_chart_complex(V, F, face_part, face_label, face_frame, face_interface_
             f"chart {chart} (label {_LABEL_NAMES[layout.chart_label[chart]]}, part "
             f"{int(layout.chart_part[chart])}) has a boundary loop without corners near "
             f"{np.round(V[he_from[bad]], 4).tolist()}: a polycube face needs corners on each "
-            "boundary loop (try --parts auto or a different labeling)")
+            f"boundary loop (try {OTHER_PARTS} or a different labeling)")
     cut_edge, middles = _slit_edges(V, F, face_chart, he_from, he_to, topology.edges, loops,
                                     half, layout.vertex_sep_degree)
     is_cut = cut_edge[he_edge]

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.errors import LabelingError
+from core.errors import LabelingError, OTHER_PARTS
 from core.quadmesh.locate import winding_numbers
 
 
@@ -24,7 +24,7 @@ class OverlappingChartsError(LabelingError):
         super().__init__(
             f"{len(self.charts)} integer chart polygons overlap or touch themselves (e.g. charts "
             f"{self.charts[:5]}): the quantized layout is not valid there; try a larger "
-            "--target-faces or --parts auto")
+            f"--target-faces or {OTHER_PARTS}")
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ seconds (its linear relaxation is integral, :mod:`core.quadmesh.quantize`), far 
 """
 from scipy.optimize import milp
 
-from core.errors import LabelingError
+from core.errors import LabelingError, OTHER_PARTS
 
 NODE_LIMIT = 5000
 """Branch-and-bound nodes HiGHS may explore (the dev meshes' programs all close at node 1)."""
@@ -56,6 +56,6 @@ def solve_milp(what, cost, integrality, bounds, constraints, mip_rel_gap=None,
     if str(result.message).startswith(TIME_LIMIT_MESSAGE):
         raise MilpTimeLimitError(
             f"{what} did not finish within {HANG_GUARD_SECONDS:g} s ({len(cost)} variables); "
-            "its answer would depend on the machine's load, so none is used: try --parts auto "
+            f"its answer would depend on the machine's load, so none is used: try {OTHER_PARTS} "
             "or --base-mesh-method decimation")
     return result

@@ -48,7 +48,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint
 
-from core.errors import LabelingError
+from core.errors import LabelingError, OTHER_PARTS
 from core.quadmesh.milp_solve import solve_milp
 
 MILP_GAP = 0.01
@@ -440,7 +440,7 @@ def quantize(complex_, tables, refinement, scale, collapsible=None):
         raise LabelingError(
             f"no integer side lengths close every rectangle of this labeling's charts "
             f"({n_sides} sides, {refinement.rectangles} rectangles): HiGHS says "
-            f"'{result.message}'; try --parts auto or another labeling")
+            f"'{result.message}'; try {OTHER_PARTS} or another labeling")
     side_length = np.rint(result.x[:n_sides]).astype(np.int64)
     corner_uv = corner_coordinates(complex_, tables, side_length)
     chart_faces = chart_unit_squares(complex_, tables, corner_uv)

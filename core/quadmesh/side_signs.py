@@ -17,7 +17,9 @@ when that does not decide it, the programs of single charts with their neighbour
 relaxation of the whole, are tried for a contradiction before the full search
 (:func:`_local_contradiction`). Both steps are deterministic and change no answer: a feasible
 program closed at its root has the optimum of the full search, and an infeasible relaxation
-proves what the full search would.
+proves what the full search would. When the program is a stricter copy of one known to have a
+solution (fewer collapsible sides), only the neighbourhoods holding a side that lost its
+freedom can contradict, and they are tried first, before the root solve.
 """
 from dataclasses import dataclass, replace
 
@@ -25,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint
 
-from core.errors import LabelingError
+from core.errors import LabelingError, OTHER_PARTS
 from core.quadmesh.milp_solve import NODE_LIMIT, solve_milp
 
 AXES = np.eye(3)
@@ -86,7 +88,7 @@ def loop_turning(complex_):
     return np.asarray(totals, dtype=np.int64)
 
 
-def make_loops_rectilinear(complex_, collapsible=None):
+def make_loops_rectilinear(complex_, collapsible=None, feasible_collapsible=None):
     """Flip the cheapest set of measured side directions so every chart can be a polygon.
 
     Every loop must turn by +4 (outer) or -4 (hole), and the charts must close together: some
@@ -101,6 +103,12 @@ def make_loops_rectilinear(complex_, collapsible=None):
     ----------
     complex_ : ChartComplex
     collapsible : (s,) bool sides allowed length zero in the closure check, or None.
+    feasible_collapsible : (s,) bool, a superset of ``collapsible`` with which this program is
+        known to have a solution, or None. Every neighbourhood holding no side of the
+        difference then has a solution, so the search for a contradiction
+        (:func:`_local_contradiction`) tries only the others, and before the root solve
+        (``to_simp_torsion_arm_fine3`` with ``--parts auto``: its retry without collapsible
+        sides: about 4.5 -> 1.5 CPU s).
 
     Returns
     -------
@@ -113,21 +121,23 @@ def make_loops_rectilinear(complex_, collapsible=None):
     """
     collapsible = (np.zeros(complex_.n_sides, dtype=bool) if collapsible is None
                    else np.asarray(collapsible, dtype=bool))
+    if feasible_collapsible is not None:
+        feasible_collapsible = np.asarray(feasible_collapsible, dtype=bool)
+        if (collapsible & ~feasible_collapsible).any():
+            raise ValueError("feasible_collapsible must hold every collapsible side")
     if loops_are_rectilinear(complex_) and charts_close(complex_, collapsible):
         return complex_, np.zeros((0, 2), dtype=np.int64)
     program = _direction_program(complex_, np.arange(complex_.n_charts), collapsible)
+    searched = feasible_collapsible is not None
+    if searched:
+        _raise_on_contradiction(complex_, collapsible,
+                                np.flatnonzero(feasible_collapsible & ~collapsible))
     result = _solve(program, ROOT_NODES)
     if result.status == LIMIT_REACHED:
         # not decided at the root: a neighbourhood that cannot close is a quick proof that the
         # whole program is infeasible; without one, the full search
-        contradiction = _local_contradiction(complex_, collapsible)
-        if contradiction is not None:
-            charts, message = contradiction
-            raise LabelingError(
-                "no side directions make every chart a closed rectilinear polygon: chart "
-                f"{charts[0]} and its {len(charts) - 1} neighbours {charts[1:6].tolist()}... "
-                f"cannot close with sides of positive length (HiGHS says '{message}'). The "
-                "labeling is not a polycube there: try --parts auto or another labeling")
+        if not searched:
+            _raise_on_contradiction(complex_, collapsible)
         result = _solve(program, NODE_LIMIT)
     if result.x is None:
         bad = np.flatnonzero(np.isin(loop_turning(complex_), [-4, 4], invert=True))
@@ -135,8 +145,8 @@ def make_loops_rectilinear(complex_, collapsible=None):
         raise LabelingError(
             f"no side directions make every chart a closed rectilinear polygon ({len(charts)} "
             f"charts do not turn by four, e.g. charts {charts[:5].tolist()}); HiGHS says "
-            f"'{result.message}'. The labeling is not a polycube there: try --parts auto or "
-            "another labeling")
+            f"'{result.message}'. The labeling is not a polycube there: try {OTHER_PARTS} "
+            "or another labeling")
     used = program.used
     flip = np.rint(result.x[:len(used)]).astype(bool)
     flat = complex_.side_sign.reshape(-1).copy()
@@ -154,14 +164,29 @@ def _solve(program, node_limit):
                       program.bounds, program.constraints, node_limit=node_limit)
 
 
-def _local_contradiction(complex_, collapsible):
+def _raise_on_contradiction(complex_, collapsible, stricter=None):
+    """Raise LabelingError naming a neighbourhood that cannot close (see _local_contradiction)."""
+    contradiction = _local_contradiction(complex_, collapsible, stricter)
+    if contradiction is not None:
+        charts, message = contradiction
+        raise LabelingError(
+            "no side directions make every chart a closed rectilinear polygon: chart "
+            f"{charts[0]} and its {len(charts) - 1} neighbours {charts[1:6].tolist()}... "
+            f"cannot close with sides of positive length (HiGHS says '{message}'). The "
+            f"labeling is not a polycube there: try {OTHER_PARTS} or another labeling")
+
+
+def _local_contradiction(complex_, collapsible, stricter=None):
     """The first chart whose neighbourhood alone admits no side directions, or None.
 
     A neighbourhood is a chart and the charts it shares a side with; its program
     (:func:`_direction_program`) is a relaxation of the whole one, so an infeasible
     neighbourhood proves the whole program infeasible. Neighbourhoods are tried smallest
     first (ties by chart), each within ``NODE_LIMIT`` nodes; one that reaches the limit proves
-    nothing and the next is tried.
+    nothing and the next is tried. ``stricter``: (k,) int64 sides that lost the freedom to
+    collapse in a program otherwise known to have a solution, or None; then only the
+    neighbourhoods holding one of them are tried, those holding most first (they are the likely
+    contradictions: ``to_simp_torsion_arm_fine3``'s chart 7 comes sixth instead of 163rd).
 
     Returns
     -------
@@ -173,8 +198,16 @@ def _local_contradiction(complex_, collapsible):
         sides = np.flatnonzero((complex_.side_chart == chart).any(axis=1))
         neighbours = np.unique(complex_.side_chart[sides])
         rings.append(np.concatenate([[chart], neighbours[neighbours != chart]]))
+    sizes = [len(ring) for ring in rings]
+    if stricter is None:
+        order = np.lexsort((np.arange(len(rings)), sizes))
+    else:
+        held = np.array([np.isin(complex_.side_chart[stricter], ring).any(axis=1).sum()
+                         for ring in rings], dtype=np.int64)
+        order = np.lexsort((np.arange(len(rings)), sizes, -held))
+        order = order[held[order] > 0]
     slits = complex_.slit_walks()
-    for chart in np.lexsort((np.arange(len(rings)), [len(ring) for ring in rings])):
+    for chart in order:
         ring = rings[chart]
         result = _solve(_direction_program(complex_, np.sort(ring), collapsible, slits),
                         NODE_LIMIT)

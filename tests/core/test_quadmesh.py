@@ -205,6 +205,48 @@ def test_an_undecided_root_goes_through_the_neighbourhoods_to_the_same_answer(mo
     assert np.array_equal(repaired.side_sign, box.side_sign)
 
 
+def test_a_stricter_copy_of_a_feasible_program_is_searched_where_it_is_stricter(monkeypatch):
+    """A program known feasible with more collapsible sides can contradict only in the
+    neighbourhoods holding a side that lost its freedom: those are solved (most such sides
+    first), the others never; with no such side nothing is solved before the root, and the
+    answer is that of the plain call. A collapsible side missing from the feasible set is an
+    error."""
+    import core.quadmesh.side_signs as side_signs
+
+    V, F = union_of_boxes([[[0, 0, 0], [5, 1, 1]], [[0, 0, 0], [1, 2, 1]], [[4, 0, 0], [5, 2, 1]]],
+                          max_edge=0.5)
+    frames, _ = identity_frames(len(F))
+    ell = build_chart_complex(V, F, np.zeros(len(F)), nearest_labels(V, F), frames)
+    none = np.zeros(ell.n_sides, dtype=bool)
+    solved = []
+    solve = side_signs._solve
+
+    def spy(program, node_limit):
+        solved.append(np.unique(program.used // 2))
+        return solve(program, node_limit)
+
+    monkeypatch.setattr(side_signs, "_solve", spy)
+    assert side_signs._local_contradiction(ell, none, np.zeros(0, dtype=np.int64)) is None
+    assert solved == []
+    rings = [np.unique(ell.side_chart[(ell.side_chart == c).any(axis=1)])
+             for c in range(ell.n_charts)]
+    holding = np.array([[np.isin(ell.side_chart[s], ring).any() for ring in rings]
+                        for s in range(ell.n_sides)])
+    side = int(np.argmin(holding.sum(axis=1)))  # a tooth's side: far charts do not hold it
+    assert holding[side].sum() < ell.n_charts
+    assert side_signs._local_contradiction(ell, none, np.array([side])) is None
+    assert len(solved) == holding[side].sum()
+    assert all(side in sides for sides in solved)
+    solved.clear()
+    plain = make_loops_rectilinear(ell, none)
+    assert solved == []  # its loops are rectilinear and close: no program at all
+    assert np.array_equal(make_loops_rectilinear(ell, none, feasible_collapsible=none)[0].side_sign,
+                          plain[0].side_sign)
+    with pytest.raises(ValueError, match="every collapsible side"):
+        make_loops_rectilinear(ell, ~none,
+                               feasible_collapsible=none)
+
+
 def _solve(refinement):
     n = refinement.n_vars
     lower = np.where(refinement.piece, 0.0, 1.0)
@@ -421,9 +463,9 @@ def test_side_directions_that_cannot_be_found_end_the_attempt_after_one_program(
     field = state.frames.frame_field
     programs = []
 
-    def counted(complex_, collapsible=None):
+    def counted(complex_, collapsible=None, **kwargs):
         programs.append(collapsible.copy())
-        return make_loops_rectilinear(complex_, collapsible)
+        return make_loops_rectilinear(complex_, collapsible, **kwargs)
 
     monkeypatch.setattr(base_mesh, "make_loops_rectilinear", counted)
     with pytest.raises(LabelingError, match="rectilinear polygon"):
