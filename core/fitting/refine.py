@@ -1,16 +1,17 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Tolerance-driven refinement of an all-quad cage (``--tolerance``).
+"""Tolerance-driven refinement of a quad-dominant cage (``--tolerance``).
 
-After a fit, every base quad gets the largest deviation between its part of the limit
+After a fit, every base face gets the largest deviation between its part of the limit
 surface and the target, both ways: the distance of its fine limit points to the target,
 and the distance of the target samples whose closest point on the limit surface lies in
-it. Each quad deviating more than the tolerance has the quad strip through its two
-longer opposite edges split: every quad of the strip (the ring of quads joined through
-opposite edges, closed on a closed quad mesh) is cut in two through the midpoints of its
-two crossed edges, so the mesh stays all-quad and conforming (a quad lying on two split
-strips is cut in four). The refined cage (midpoints of the fitted cage) is fitted again,
-until the largest deviation is at most the tolerance or the next refinement would exceed
-the face budget.
+it. Each face deviating more than the tolerance has the quad strip through it split (for a
+quad, the strip through its two longer opposite edges; for another face, the strip across
+its longest edge): every quad of the strip (the ring of quads joined through opposite edges;
+on a quad-dominant mesh it may end in faces that are not quads) is cut in two through the
+midpoints of its two crossed edges, so the mesh stays conforming (a quad lying on two split
+strips is cut in four, a face where a strip ends is cut from the midpoint to a corner). The
+refined cage (midpoints of the fitted cage) is fitted again, until the largest deviation is
+at most the tolerance or the next refinement would exceed the face budget.
 """
 from dataclasses import dataclass, field
 
@@ -18,7 +19,7 @@ import numpy as np
 
 from core.errors import ParameterError
 from core.geometry import sample_surface, triangulate
-from core.subdivision.catmull_clark import build_hierarchy, face_grids
+from core.subdivision.catmull_clark import build_hierarchy, mesh_topology
 from core.subdivision.limit import limit_matrices
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
@@ -50,7 +51,7 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, max_rounds=8):
 
     Parameters
     ----------
-    base : PolyMesh, closed, all quads.
+    base : PolyMesh, closed 2-manifold, quad-dominant.
     target : TriMesh
     tolerance : float > 0, fraction of the target's bounding-box diagonal.
     max_faces : int, no refinement beyond this many faces.
@@ -70,11 +71,6 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, max_rounds=8):
     if not (np.isfinite(tolerance) and tolerance > 0):
         raise ParameterError(f"tolerance must be a positive fraction of the bounding-box "
                              f"diagonal, got {tolerance!r}")
-    sizes = base.face_sizes
-    if (sizes != 4).any():
-        bad = np.flatnonzero(sizes != 4)
-        raise ParameterError(f"tolerance refinement needs an all-quad base mesh; "
-                             f"{len(bad)} faces are not quads, e.g. faces {bad[:5].tolist()}")
     surface = TargetSurface(target.vertices, target.faces)
     rng = np.random.default_rng(0)
     samples = np.vstack([sample_surface(surface.vertices, surface.faces, DEVIATION_SAMPLES, rng),
@@ -106,11 +102,11 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, max_rounds=8):
 
 
 def face_deviation(cage, levels, surface, samples):
-    """(m,) float64 largest two-sided deviation of each base quad's limit-surface part.
+    """(m,) float64 largest two-sided deviation of each base face's limit-surface part.
 
     Parameters
     ----------
-    cage : PolyMesh, all quads.
+    cage : PolyMesh, closed; faces of any size.
     levels : int >= 1, level of the fine limit points.
     surface : TargetSurface of the target.
     samples : (s, 3) float64 points on the target.
@@ -122,92 +118,135 @@ def face_deviation(cage, levels, surface, samples):
     hierarchy = build_hierarchy(cage, levels)
     fine = hierarchy.meshes[levels]
     X = limit_matrices(fine)[0] @ hierarchy.composite(levels - 1) @ cage.vertices
-    grid = face_grids(hierarchy, levels).reshape(cage.n_faces, -1)
-    forward = surface.nearest(X).distance[grid].max(axis=1)
-    T = triangulate(fine.face_vertices, fine.face_offsets)
+    # an n-gon has n level-1 quads, each 4 ** (levels - 1) level-``levels`` quads, contiguous
+    owner = np.repeat(np.arange(cage.n_faces), cage.face_sizes * 4 ** (levels - 1))
+    corner_distance = surface.nearest(X).distance[fine.face_vertices.reshape(-1, 4)]
+    forward = np.zeros(cage.n_faces)
+    np.maximum.at(forward, owner, corner_distance.max(axis=1))
+    T = triangulate(fine.face_vertices, fine.face_offsets)  # two triangles per fine quad
     back = TargetSurface(X, T, "fitted surface").nearest(samples)
-    # fan triangulation: 2 triangles per fine quad, 4**levels fine quads per base quad
-    owner = back.face // (2 * 4 ** levels)
     backward = np.zeros(cage.n_faces)
-    np.maximum.at(backward, owner, back.distance)
+    np.maximum.at(backward, owner[back.face // 2], back.distance)
     return np.maximum(forward, backward) / surface.diagonal
 
 
 def split_quad_strips(cage, seeds):
     """Split the quad strips through ``seeds`` conformingly.
 
+    A strip runs through quads across opposite edges, both ways from its seed, until it
+    closes or enters a face that is not a quad, where it ends: an n-gon entered on one edge
+    is cut from that edge's midpoint to the corner ``(n + 1) // 2`` further on (a triangle
+    into two triangles, a pentagon into two quads); entered on several edges, it is cut into
+    one face per entry around its centre.
+
     Parameters
     ----------
-    cage : PolyMesh, closed, all quads.
-    seeds : (s, 2) int64 rows ``(face, direction)``; direction 0 crosses the face's edges
-        0 (corners 0-1) and 2 (corners 2-3), direction 1 its edges 1 and 3.
+    cage : PolyMesh, closed 2-manifold; faces of any size.
+    seeds : (s, 2) int64 rows ``(face, edge)``. A quad is crossed through its local edges
+        ``edge`` and ``edge + 2`` (edge ``k`` joins corners ``k`` and ``k + 1``; 0 and 1 are
+        its two directions); a strip seeded in another face starts across its edge ``edge``.
 
     Returns
     -------
-    PolyMesh, all quads, the new vertices at the midpoints of the split edges.
+    PolyMesh, the new vertices (after the cage's) at the midpoints of the split edges, then
+    the centres of the faces cut in four or around their centre.
     """
-    quads = cage.face_vertices.reshape(-1, 4)
-    m = len(quads)
-    a, b = quads, np.roll(quads, -1, axis=1)
-    keys = np.minimum(a, b) * len(cage.vertices) + np.maximum(a, b)
-    _, edge_id = np.unique(keys.reshape(-1), return_inverse=True)
-    edge_id = edge_id.reshape(m, 4)
-    twin = _twins(edge_id)
-    split = np.zeros((m, 2), dtype=bool)
-    for face, direction in np.asarray(seeds, dtype=np.int64).reshape(-1, 2):
-        f, k = int(face), int(direction)
-        leave = k + 2
-        while not split[f, k]:
-            split[f, k] = True
-            f, entry = divmod(int(twin[f * 4 + leave]), 4)
-            k, leave = entry % 2, (entry + 2) % 4
-    cut_edges = np.unique(np.concatenate([edge_id[split[:, 0]][:, [0, 2]].reshape(-1),
-                                          edge_id[split[:, 1]][:, [1, 3]].reshape(-1)]))
+    sizes = cage.face_sizes
+    offsets = cage.face_offsets
+    topology = mesh_topology(cage.face_vertices, offsets, len(cage.vertices))
+    quad = sizes == 4
+    split = np.zeros((cage.n_faces, 2), dtype=bool)  # quads: crossed through edges (k, k + 2)
+    entered = np.zeros(len(cage.face_vertices), dtype=bool)  # other faces: cut edges (corners)
+
+    def walk(corner):
+        """Follow a strip out of its face across the edge starting at ``corner``."""
+        while True:
+            across = int(topology.twin[corner])
+            face = int(topology.face_of_corner[across])
+            if not quad[face]:
+                entered[across] = True
+                return
+            edge = across - int(offsets[face])
+            if split[face, edge % 2]:
+                return
+            split[face, edge % 2] = True
+            corner = int(offsets[face]) + (edge + 2) % 4
+
+    for face, edge in np.asarray(seeds, dtype=np.int64).reshape(-1, 2):
+        first = int(offsets[face])
+        if quad[face]:
+            if split[face, edge % 2]:
+                continue
+            split[face, edge % 2] = True
+            walk(first + edge % 2)
+            walk(first + edge % 2 + 2)
+        elif not entered[first + edge]:
+            entered[first + edge] = True
+            walk(first + edge)
+    corner_cut = entered.copy()
+    quad_corners = offsets[:-1][quad][:, None] + np.arange(4)
+    corner_cut[quad_corners] = np.concatenate([split[quad], split[quad]], axis=1)
+    return _cut_faces(cage, topology, corner_cut)
+
+
+def _cut_faces(cage, topology, corner_cut):
+    """The faces of ``cage`` cut at the midpoints of the edges of ``corner_cut`` (k,) bool.
+
+    Quads cut on opposite edges are cut in two, on all four in four; other faces as
+    :func:`split_quad_strips` says. Returns the PolyMesh.
+    """
+    edge_cut = np.zeros(len(topology.edges), dtype=bool)
+    edge_cut[topology.corner_edge[corner_cut]] = True
     V = np.asarray(cage.vertices, dtype=np.float64)
     n = len(V)
-    mid_index = np.full(edge_id.max() + 1, -1, dtype=np.int64)
-    mid_index[cut_edges] = n + np.arange(len(cut_edges))
-    first = np.zeros(edge_id.max() + 1, dtype=np.int64)
-    first[edge_id.reshape(-1)] = np.arange(4 * m)
-    ends = np.stack([a.reshape(-1)[first[cut_edges]], b.reshape(-1)[first[cut_edges]]], axis=1)
-    both = split.all(axis=1)
-    centres = np.flatnonzero(both)
-    centre_index = np.full(m, -1, dtype=np.int64)
-    centre_index[centres] = n + len(cut_edges) + np.arange(len(centres))
-    vertices = np.vstack([V, V[ends].mean(axis=1), V[quads[centres]].mean(axis=1)])
-    mid = mid_index[edge_id]
-    v0, v1, v2, v3 = quads.T
-    m0, m1, m2, m3 = mid.T
-    e = centre_index
-    pieces = [quads[~split.any(axis=1)]]
-    only0 = split[:, 0] & ~split[:, 1]
-    only1 = split[:, 1] & ~split[:, 0]
-    pieces.append(np.stack([v0, m0, m2, v3], axis=1)[only0])
-    pieces.append(np.stack([m0, v1, v2, m2], axis=1)[only0])
-    pieces.append(np.stack([v0, v1, m1, m3], axis=1)[only1])
-    pieces.append(np.stack([m3, m1, v2, v3], axis=1)[only1])
-    pieces.append(np.stack([v0, m0, e, m3], axis=1)[both])
-    pieces.append(np.stack([m0, v1, m1, e], axis=1)[both])
-    pieces.append(np.stack([e, m1, v2, m2], axis=1)[both])
-    pieces.append(np.stack([m3, e, m2, v3], axis=1)[both])
-    faces = np.concatenate(pieces).astype(np.int64)
-    return PolyMesh(vertices, faces.reshape(-1), np.arange(0, faces.size + 1, 4, dtype=np.int64))
-
-
-def _twins(edge_id):
-    """(4 m,) int64: for corner-edge ``4 f + i`` the corner-edge on the other side."""
-    flat = edge_id.reshape(-1)
-    order = np.argsort(flat, kind="stable")
-    pairs = order.reshape(-1, 2)
-    twin = np.empty_like(flat)
-    twin[pairs[:, 0]], twin[pairs[:, 1]] = pairs[:, 1], pairs[:, 0]
-    return twin
+    cut_edges = np.flatnonzero(edge_cut)
+    midpoint = np.full(len(topology.edges), -1, dtype=np.int64)
+    midpoint[cut_edges] = n + np.arange(len(cut_edges))
+    new_points = [V[topology.edges[cut_edges]].mean(axis=1)]
+    next_index = n + len(cut_edges)
+    faces = []
+    for face in range(cage.n_faces):
+        corners = np.arange(cage.face_offsets[face], cage.face_offsets[face + 1])
+        ring = cage.face_vertices[corners]
+        mids = midpoint[topology.corner_edge[corners]]
+        cuts = np.flatnonzero(mids >= 0)
+        size = len(ring)
+        if len(cuts) == 0:
+            faces.append(ring)
+        elif len(cuts) == 1 or (size == 4 and len(cuts) == 2 and cuts[1] - cuts[0] == 2):
+            i = cuts[0]
+            j = (i + (size + 1) // 2) % size if len(cuts) == 1 else cuts[1]
+            # corners i+1 .. j on one side of the cut, j(+1) .. i on the other
+            one = [mids[i]] + [ring[(i + 1 + t) % size] for t in range((j - i) % size)]
+            other = [ring[(j + 1 + t) % size] for t in range((i - j) % size)] + [mids[i]]
+            if len(cuts) == 2:
+                one, other = one + [mids[j]], [mids[j]] + other
+            else:
+                other = [ring[j]] + other
+            faces += [np.array(one), np.array(other)]
+        else:
+            centre = next_index
+            next_index += 1
+            new_points.append(V[ring].mean(axis=0)[None])
+            for a, b in zip(cuts, np.roll(cuts, -1)):
+                between = [ring[(a + 1 + t) % size] for t in range((b - a) % size)]
+                faces.append(np.array([centre, mids[a]] + between + [mids[b]]))
+    vertices = np.vstack([V] + new_points)
+    face_vertices = np.concatenate(faces).astype(np.int64)
+    face_offsets = np.concatenate([[0], np.cumsum([len(f) for f in faces])]).astype(np.int64)
+    return PolyMesh(vertices, face_vertices, face_offsets)
 
 
 def _seed_directions(cage, faces):
-    """(s, 2) rows ``(face, direction)``: cut each face across its two longer edges."""
-    quads = cage.face_vertices.reshape(-1, 4)[faces]
+    """(s, 2) rows ``(face, edge)``: cut each face across its longest edge (a quad across its
+    two longer opposite edges)."""
+    rows = []
     V = cage.vertices
-    length = np.linalg.norm(V[np.roll(quads, -1, axis=1)] - V[quads], axis=2)
-    direction = np.where(length[:, 0] + length[:, 2] >= length[:, 1] + length[:, 3], 0, 1)
-    return np.stack([faces, direction], axis=1)
+    for face in faces:
+        ring = cage.face_vertices[cage.face_offsets[face]:cage.face_offsets[face + 1]]
+        length = np.linalg.norm(V[np.roll(ring, -1)] - V[ring], axis=1)
+        if len(ring) == 4:
+            rows.append((face, 0 if length[0] + length[2] >= length[1] + length[3] else 1))
+        else:
+            rows.append((face, int(np.argmax(length))))
+    return np.asarray(rows, dtype=np.int64).reshape(-1, 2)

@@ -12,7 +12,7 @@ from core.polymesh_checks import check_polymesh
 from core.quality import surface_distances
 from core.subdivision.catmull_clark import build_hierarchy
 from core.subdivision.limit import limit_matrices
-from core.subdivision.sample_cages import cube, grid_sphere, mixed_prism
+from core.subdivision.sample_cages import cube, grid_sphere, mixed_prism, pentagonal_prism
 from core.types import PolyMesh, TriMesh
 from polycube_wb.cli import _tolerance
 
@@ -74,10 +74,57 @@ def test_refinement_says_why_it_stops_at_the_face_budget():
     assert result.rounds[-1]["max_deviation"] > 0.002
 
 
-def test_refinement_needs_quads_and_a_positive_tolerance():
+@pytest.mark.parametrize("make", [mixed_prism, pentagonal_prism])
+def test_strips_end_conformingly_in_faces_that_are_not_quads(make):
+    """On prisms with triangles or pentagons, strips seeded in quads and in the other faces
+    end in the other faces: the result is closed, 2-manifold and consistently oriented, every
+    new vertex an edge midpoint or a face centre, and the split quads stay quads."""
+    cage = make()
+    sizes = cage.face_sizes
+    quad, other = int(np.flatnonzero(sizes == 4)[0]), int(np.flatnonzero(sizes != 4)[0])
+    refined = split_quad_strips(cage, np.array([[quad, 0], [quad, 1], [other, 0]]))
+    check_polymesh(refined)
+    assert refined.n_faces > cage.n_faces and (refined.face_sizes >= 3).all()
+    assert (refined.face_sizes == 4).sum() > (sizes == 4).sum()
+    n = len(cage.vertices)
+    assert np.array_equal(refined.vertices[:n], cage.vertices)
+    V = cage.vertices
+    rings = np.split(cage.face_vertices, cage.face_offsets[1:-1])
+    mids = np.vstack([0.5 * (V[r] + V[np.roll(r, -1)]) for r in rings])
+    candidates = np.vstack([mids, [V[r].mean(axis=0) for r in rings]])
+    gap = np.linalg.norm(refined.vertices[n:, None] - candidates[None], axis=2).min(axis=1)
+    assert gap.max() <= 1e-12
+
+
+def test_a_pentagon_entered_once_becomes_two_quads():
+    """The side quads of a pentagonal prism form one ring of five through their side edges,
+    which does not enter the caps; the strip across a side quad's other direction runs
+    cap to cap: each pentagon cap is entered once and cut into two quads."""
+    cage = pentagonal_prism()
+    around = split_quad_strips(cage, np.array([[0, 1]]))
+    assert around.n_faces == cage.n_faces + 5 and sorted(around.face_sizes) == [4] * 10 + [5, 5]
+    across = split_quad_strips(cage, np.array([[0, 0]]))
+    check_polymesh(across)
+    assert (across.face_sizes == 4).all() and across.n_faces == cage.n_faces + 3
+
+
+def test_refinement_meets_the_tolerance_on_a_quad_dominant_cage():
+    """A hexagonal prism cage of quads and triangle fans is refined to fit a cylinder within
+    the tolerance (no all-quad requirement), the result still a closed 2-manifold."""
+    mesh = trimesh.creation.cylinder(radius=1.0, height=1.5, sections=32)
+    target = TriMesh(np.asarray(mesh.vertices) + [0, 0, 0.75],
+                     np.asarray(mesh.faces, dtype=np.int64))
+    base = mixed_prism(radius=1.0, height=1.5)
+    result = fit_to_tolerance(base, target, 0.015, 2000,
+                              lambda cage: fit_base_mesh(cage, target, 2, 20, mode="best-fit"))
+    assert result.met and len(result.rounds) >= 2
+    assert result.rounds[0]["max_deviation"] > 0.015 >= result.rounds[-1]["max_deviation"]
+    check_polymesh(result.mesh)
+    assert (result.mesh.face_sizes != 4).any()
+
+
+def test_refinement_needs_a_positive_tolerance():
     target, base = capsule_and_box_cage()
-    with pytest.raises(ParameterError, match="all-quad"):
-        fit_to_tolerance(mixed_prism(), target, 0.01, 100, None)
     with pytest.raises(ParameterError, match="positive"):
         fit_to_tolerance(base, target, 0.0, 100, None)
 
