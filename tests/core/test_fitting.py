@@ -352,6 +352,37 @@ def test_normal_equations_solve_the_dense_least_squares_problem():
     np.testing.assert_allclose(solved, expected, atol=1e-9 * np.abs(expected).max())
 
 
+def test_normal_equations_pair_the_blocks_bit_for_bit_and_leave_the_mapping_alone():
+    # the paired (complex) products give each block of M^T Z_ab M exactly as the real
+    # products do; the caller's mapping, whose rows are not sorted, keeps its entries' order
+    # (the fit's limit points M @ V are summed in that order)
+    import scipy.sparse as sp
+
+    base = grid_sphere(2)
+    h, fine, T = fine_mesh(base, 2)
+    M = (limit_matrices(fine)[0] @ h.composite(1)).tocsr()
+    rows = np.repeat(np.arange(M.shape[0]), np.diff(M.indptr))
+    reverse = M.indptr[rows] + M.indptr[rows + 1] - 1 - np.arange(M.nnz)  # each row reversed
+    shuffled = sp.csr_matrix((M.data[reverse], M.indices[reverse], M.indptr), shape=M.shape)
+    assert not shuffled.has_sorted_indices
+    data, indices = shuffled.data.copy(), shuffled.indices.copy()
+    rng = np.random.default_rng(4)
+    n_f = M.shape[0]
+    normal = rng.normal(size=(n_f, 3))
+    corners = T[rng.integers(0, len(T), 300)]
+    terms = [(normal, np.arange(n_f)[:, None], np.ones((n_f, 1)), rng.normal(size=n_f), n_f),
+             (rng.normal(size=(300, 3)), corners, rng.dirichlet(np.ones(3), 300),
+              rng.normal(size=300), 300)]
+    system = NormalEquations(base, shuffled, 1e-2, 1e-3)
+    np.testing.assert_array_equal(shuffled.data, data)
+    np.testing.assert_array_equal(shuffled.indices, indices)
+    blocks = system._data_blocks(terms)
+    stacked = system._fine_blocks(terms) @ system.mapping
+    for k, pair in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+        real = system.mapping.T @ stacked[k * n_f:(k + 1) * n_f]
+        np.testing.assert_array_equal(blocks[pair].toarray(), real.toarray())
+
+
 def test_a_refit_does_not_return_its_start():
     # started from the unstiffened fit, a stiffer refit has a higher RMS distance than its
     # start; it still returns the stiffer fit, not the start
