@@ -192,9 +192,9 @@ class NormalEquations:
     Assembly: the data part's 3x3 blocks (coordinates ``a, b``) are
     ``M^T Z_ab M`` with ``Z_ab = sum_j (n_ja n_jb / count) w_j w_j^T`` on the fine
     points (``w_j`` the row's corner weights), six symmetric blocks built at once on
-    the fine level and mapped by two sparse products each; a row through
-    ``k`` corners costs ``k^2`` fine entries instead of the square of its base-vertex
-    support.
+    the fine level and mapped by two sparse products per pair of blocks
+    (:meth:`_data_blocks`); a row through ``k`` corners costs ``k^2`` fine entries instead
+    of the square of its base-vertex support.
 
     Parameters
     ----------
