@@ -239,7 +239,9 @@ class NormalEquations:
                 system[a * n:(a + 1) * n, c * n:(c + 1) * n] += dense
                 if a != c:  # the blocks are symmetric
                     system[c * n:(c + 1) * n, a * n:(a + 1) * n] += dense
-            solution = scipy.linalg.cho_solve(scipy.linalg.cho_factor(system), rhs)
+            # the system is this call's own array and finite by construction
+            factor = scipy.linalg.cho_factor(system, overwrite_a=True, check_finite=False)
+            solution = scipy.linalg.cho_solve(factor, rhs, check_finite=False)
         else:
             system = sp.bmat([[piece[min(a, c), max(a, c)] for c in range(3)] for a in range(3)],
                              format="csc")
