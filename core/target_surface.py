@@ -47,10 +47,12 @@ REGION_FACE = 0
 
 _RAY_BLOCK = 200000
 _START_OFFSET = 1e-6
-CLOSEST_KEPT = 16
+CLOSEST_KEPT = 4
 """Most answers of :meth:`TargetSurface.closest` kept (the latest), each for its query
 points bit for bit: the fit queries some point sets again (a refit starts where the fit
-before it ended, the inside pull where the untangled fit is; fine3: 0.1 s a query)."""
+before it ended, the inside pull where the untangled fit is; fine3: 0.1 s a query). Two
+already find those; 16 found only a few more small ones (the cold refits' first coarse
+rounds), at four times the memory (an answer and its points: about 120 bytes a point)."""
 
 
 @dataclass
