@@ -192,9 +192,9 @@ class NormalEquations:
     Assembly: the data part's 3x3 blocks (coordinates ``a, b``) are
     ``M^T Z_ab M`` with ``Z_ab = sum_j (n_ja n_jb / count) w_j w_j^T`` on the fine
     points (``w_j`` the row's corner weights), six symmetric blocks built at once on
-    the fine level and mapped by two sparse products each; a row through
-    ``k`` corners costs ``k^2`` fine entries instead of the square of its base-vertex
-    support.
+    the fine level and mapped by two sparse products per pair of blocks
+    (:meth:`_data_blocks`); a row through ``k`` corners costs ``k^2`` fine entries instead
+    of the square of its base-vertex support.
 
     Parameters
     ----------
@@ -216,18 +216,18 @@ class NormalEquations:
         self.smooth_init = self.smooth @ self.V_init.T.reshape(-1)
         self.smoothness, self.damping = float(smoothness), float(damping)
         self._mapping_t = self.mapping.T.tocsr()
+        # complex copies for the paired products of _data_blocks (their imaginary parts are 0)
+        self._mapping_c, self._mapping_t_c = (_complex(self.mapping), _complex(self._mapping_t))
 
     def solve(self, V, terms):
         """(n_base, 3) float64 minimiser for the data ``terms`` and the previous ``V``."""
-        n, n_f = self.n_base, self.n_fine
-        fine_blocks = self._fine_blocks(terms) @ self.mapping
+        n = self.n_base
         fine_rhs = sum(scatter_add(corners.reshape(-1),
                                    ((normal * (b / count)[:, None])[:, None, :]
                                     * weights[:, :, None]).reshape(-1, 3), self.n_fine)
                        for normal, corners, weights, b, count in terms)
         rhs = np.asarray(self._mapping_t @ fine_rhs).T.reshape(-1)
-        piece = {pair: self._mapping_t @ fine_blocks[k * n_f:(k + 1) * n_f]
-                 for k, pair in enumerate(_PAIRS)}
+        piece = self._data_blocks(terms)
         scale = float(np.mean([piece[a, a].diagonal().mean() for a in range(3)]))
         rhs = (rhs + (self.smoothness * scale) * self.smooth_init
                + (self.damping * scale) * V.T.reshape(-1))
@@ -239,7 +239,9 @@ class NormalEquations:
                 system[a * n:(a + 1) * n, c * n:(c + 1) * n] += dense
                 if a != c:  # the blocks are symmetric
                     system[c * n:(c + 1) * n, a * n:(a + 1) * n] += dense
-            solution = scipy.linalg.cho_solve(scipy.linalg.cho_factor(system), rhs)
+            # the system is this call's own array and finite by construction
+            factor = scipy.linalg.cho_factor(system, overwrite_a=True, check_finite=False)
+            solution = scipy.linalg.cho_solve(factor, rhs, check_finite=False)
         else:
             system = sp.bmat([[piece[min(a, c), max(a, c)] for c in range(3)] for a in range(3)],
                              format="csc")
@@ -247,6 +249,24 @@ class NormalEquations:
                        + sp.identity(3 * n, format="csr") * (self.damping * scale))
             solution = spsolve((system + regular).tocsc(), rhs, permc_spec="MMD_AT_PLUS_A")
         return solution.reshape(3, -1).T
+
+    def _data_blocks(self, terms):
+        """dict ``(a, b) -> (n_base, n_base)`` sparse: the data part's blocks ``M^T Z_ab M``.
+
+        Two blocks go through the two sparse products together, as the real and imaginary
+        parts of ``M^T (Z_ab + i Z_cd) M`` with a real ``M``: a real factor times a complex
+        number rounds each part exactly as the real product does, so the parts are the two
+        real products bit for bit, in about 0.6 of their time (the products' cost is their
+        index work, which the two parts share).
+        """
+        n_f = self.n_fine
+        stacked = self._fine_blocks(terms)
+        fine = [stacked[k * n_f:(k + 1) * n_f] for k in range(len(_PAIRS))]
+        blocks = {}
+        for first, second in ((0, 1), (2, 3), (4, 5)):
+            both = self._mapping_t_c @ ((fine[first] + 1j * fine[second]) @ self._mapping_c)
+            blocks[_PAIRS[first]], blocks[_PAIRS[second]] = both.real, both.imag
+        return blocks
 
     def _fine_blocks(self, terms):
         """(6 n_fine, n_fine) CSR: the six blocks ``Z_ab`` of :meth:`solve` stacked, ``_PAIRS``
@@ -272,6 +292,13 @@ class NormalEquations:
 
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 """The coordinate pairs ``(a, b)`` of the six distinct 3x3 blocks of the normal matrix."""
+
+
+def _complex(matrix):
+    """A complex128 copy of a CSR matrix with its own index arrays and its entries in the same
+    order (scipy's ``astype`` sorts them, in the arrays it may share with ``matrix``)."""
+    return sp.csr_matrix((matrix.data.astype(np.complex128), matrix.indices.copy(),
+                          matrix.indptr.copy()), shape=matrix.shape)
 
 
 def _dot(a, b):

@@ -19,7 +19,7 @@ too, where it has room inside the target, so the thin section moves inwards as a
 import numpy as np
 
 from core.fitting.crossings import hold_back_crossings
-from core.fitting.responses import vertex_normals
+from core.fitting.responses import INSIDE_SLACK, InsideBounds, vertex_normals
 from core.target_surface import TargetSurface
 
 NUDGE_ROUNDS = 4
@@ -67,11 +67,13 @@ def nudge_inside(vertices, mapping, triangles, target, movable=None, rounds=NUDG
     moved : list of int, base vertices moved in each round run (after the hold-back).
     """
     V = np.array(vertices, dtype=np.float64)
+    # the points a round's move left provably inside are not queried again
+    known = InsideBounds(INSIDE_SLACK * target.diagonal)
     moved = []
     for carry in (False, True):
         before = np.inf
         for _ in range(rounds):
-            shift, depth = _shift(V, mapping, triangles, target, movable, carry)
+            shift, depth = _shift(V, mapping, triangles, target, movable, carry, known)
             if shift is None:
                 return V, moved
             if depth > (1.0 - NUDGE_PROGRESS) * before:
@@ -87,8 +89,13 @@ def nudge_inside(vertices, mapping, triangles, target, movable=None, rounds=NUDG
     return V, moved
 
 
-def _shift(V, mapping, triangles, target, movable, carry):
+def _shift(V, mapping, triangles, target, movable, carry, known):
     """Per base vertex the mean inward move of the outside points it carries.
+
+    ``known`` (:class:`core.fitting.responses.InsideBounds`, kept over the rounds) skips the
+    closest-point queries of the fine points proven inside since their last one; a far
+    wall's corner is queried when its bound does not already prove the room the carry
+    needs. The moves are those of querying every point.
 
     Returns
     -------
@@ -97,10 +104,13 @@ def _shift(V, mapping, triangles, target, movable, carry):
     depth : float, summed depth of all fine points outside the target (model units).
     """
     X = mapping @ V
-    near = target.closest(X)
-    outside = np.flatnonzero(near.signed > 0)
-    depth = near.signed[outside]
-    wanted = -depth[:, None] * near.normal[outside]
+    query = known.undecided(X)
+    near = target.closest(X[query])
+    known.record(X, query, near.signed)
+    out = near.signed > 0
+    outside = query[out]
+    depth = near.signed[out]
+    wanted = -depth[:, None] * near.normal[out]
     owner = _owner(mapping, outside)
     if carry and len(outside):
         direction = -vertex_normals(X, triangles)[outside]
@@ -108,7 +118,13 @@ def _shift(V, mapping, triangles, target, movable, carry):
             X[outside], direction, CARRY_REACH * float(depth.max()))
         found = hits.face >= 0
         corners = triangles[hits.face[found]]
-        roomy = near.signed[corners].max(axis=1) < -CARRY_ROOM * depth[found]
+        room = -CARRY_ROOM * depth[found]
+        # the corners' bounds decide the room where they are below it; the corners of the
+        # other walls that were not queried this round are queried now
+        undecided = (known.bound(X)[corners] >= room[:, None]).any(axis=1)
+        unsure = np.setdiff1d(corners[undecided], query)
+        known.record(X, unsure, target.closest(X[unsure]).signed)
+        roomy = known.bound(X)[corners].max(axis=1) < room
         far = np.flatnonzero(found)[roomy & (hits.t[found] < CARRY_REACH * depth[found])]
         owner = np.concatenate([owner, _owner(mapping, triangles[hits.face[far]].reshape(-1))])
         wanted = np.concatenate([wanted, np.repeat(wanted[far], 3, axis=0)])

@@ -95,10 +95,12 @@ def stiffen_until_clean(vertices, refit, mapping, triangles, tries=STIFFEN_TRIES
             break
         stiffness[influencing(pairs, mapping, triangles)] *= STIFFEN
         vertices = refit(stiffness, vertices)
-        pairs = find_self_intersections(mapping @ vertices, triangles)
+        previous, pairs = pairs, find_self_intersections(mapping @ vertices, triangles)
         counts.append(int(len(pairs)))
         if len(pairs) < best.crossings:
             best = Untangled(vertices, int(len(pairs)), stiffness.copy(), 0, counts, pairs)
+        if np.array_equal(pairs, previous):
+            break  # stiffer there, the same triangles cross: no untangling left to find
     best.refits = len(counts) - 1
     return best
 

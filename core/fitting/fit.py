@@ -200,8 +200,11 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         if crossings and "cage_self_intersections" not in info:
             info["cage_self_intersections"] = count_crossings(limit_map, T, V0)
     measuring = time.perf_counter()
-    info.update(_figures(limit_map @ vertices, T, target_surface, seed))
-    initial = _distances(limit_map @ V0, T, target_surface, seed)
+    # the points of target.samples without the pseudo-normals it also finds (not needed here)
+    points = sample_surface(target_surface.vertices, target_surface.faces, DISTANCE_SAMPLES,
+                            np.random.default_rng(seed))
+    info.update(_figures(limit_map @ vertices, T, target_surface, points))
+    initial = _distances(limit_map @ V0, T, target_surface, points)
     info.update({"initial_" + k: v for k, v in initial.items()})
     info["seconds"] = time.perf_counter() - started
     info["measure_seconds"] = time.perf_counter() - measuring
@@ -420,10 +423,10 @@ def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness
     return fine, coarse
 
 
-def _figures(X, T, target, seed):
+def _figures(X, T, target, points):
     """Distance and containment figures of the fine limit surface against the target."""
     report = containment(X, T, target.vertices, target.faces)
-    return {**_distances(X, T, target, seed),
+    return {**_distances(X, T, target, points),
             "outside_volume_fraction": report["outside_volume_fraction"],
             "uncovered_volume_fraction": report["uncovered_volume_fraction"]}
 
@@ -432,13 +435,14 @@ DISTANCE_SAMPLES = 20000
 """Target samples of the target-to-surface figures (:func:`_distances`)."""
 
 
-def _distances(X, T, target, seed):
+def _distances(X, T, target, points):
     """Both one-sided distances between the fine limit surface and the target.
 
     Parameters
     ----------
     X : (n, 3) float64 fine limit points; T : (t, 3) int64 their triangles.
-    target : TargetSurface; seed : int, seed of its samples.
+    target : TargetSurface; points : (DISTANCE_SAMPLES, 3) float64 area-weighted samples of
+        it (drawn once per fit, for the result's figures and the cage's).
 
     Returns
     -------
@@ -449,9 +453,6 @@ def _distances(X, T, target, seed):
     surface misses, such as a thin horn's tip the limit surface stops short of.
     """
     forward = target.nearest(X).distance / target.diagonal
-    # the points of target.samples without the pseudo-normals it also finds (not needed here)
-    points = sample_surface(target.vertices, target.faces, DISTANCE_SAMPLES,
-                            np.random.default_rng(seed))
     fitted = TargetSurface(X, T, "fitted surface")
     back = fitted.nearest(points)
     backward = back.distance / target.diagonal

@@ -162,11 +162,29 @@ def test_stiffen_until_clean_keeps_the_fit_with_fewest_crossings():
     V, T = icosphere()
     M = sp.identity(len(V), format="csr")
     one, two = pushed_through(V, 5), pushed_through(pushed_through(V, 5), 120)
-    untangled = stiffen_until_clean(one, lambda stiffness, previous: two, M, T, tries=3)
+    three = pushed_through(pushed_through(V, 7), 120)
+    fits = iter([two, three, two])              # each refit crosses somewhere else
+    untangled = stiffen_until_clean(one, lambda stiffness, previous: next(fits), M, T, tries=3)
     assert untangled.refits == 3 and len(untangled.counts) == 4
     assert untangled.crossings == untangled.counts[0] == min(untangled.counts)
     np.testing.assert_array_equal(untangled.vertices, one)
     assert np.all(untangled.stiffness == 1.0)  # the weights of the fit that was kept
+
+
+def test_stiffen_until_clean_stops_when_a_stiffer_refit_crosses_at_the_same_triangles():
+    V, T = icosphere()
+    M = sp.identity(len(V), format="csr")
+    one, two = pushed_through(V, 5), pushed_through(pushed_through(V, 5), 120)
+    calls = []
+
+    def refit(stiffness, previous):             # stiffening never untangles vertex 120
+        calls.append(stiffness.copy())
+        return two
+
+    untangled = stiffen_until_clean(one, refit, M, T, tries=4)
+    assert len(calls) == 2 and untangled.refits == 2
+    assert untangled.counts[1] == untangled.counts[2] > untangled.counts[0]
+    np.testing.assert_array_equal(untangled.vertices, one)
 
 
 @pytest.fixture(scope="module")

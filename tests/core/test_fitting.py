@@ -352,6 +352,37 @@ def test_normal_equations_solve_the_dense_least_squares_problem():
     np.testing.assert_allclose(solved, expected, atol=1e-9 * np.abs(expected).max())
 
 
+def test_normal_equations_pair_the_blocks_bit_for_bit_and_leave_the_mapping_alone():
+    # the paired (complex) products give each block of M^T Z_ab M exactly as the real
+    # products do; the caller's mapping, whose rows are not sorted, keeps its entries' order
+    # (the fit's limit points M @ V are summed in that order)
+    import scipy.sparse as sp
+
+    base = grid_sphere(2)
+    h, fine, T = fine_mesh(base, 2)
+    M = (limit_matrices(fine)[0] @ h.composite(1)).tocsr()
+    rows = np.repeat(np.arange(M.shape[0]), np.diff(M.indptr))
+    reverse = M.indptr[rows] + M.indptr[rows + 1] - 1 - np.arange(M.nnz)  # each row reversed
+    shuffled = sp.csr_matrix((M.data[reverse], M.indices[reverse], M.indptr), shape=M.shape)
+    assert not shuffled.has_sorted_indices
+    data, indices = shuffled.data.copy(), shuffled.indices.copy()
+    rng = np.random.default_rng(4)
+    n_f = M.shape[0]
+    normal = rng.normal(size=(n_f, 3))
+    corners = T[rng.integers(0, len(T), 300)]
+    terms = [(normal, np.arange(n_f)[:, None], np.ones((n_f, 1)), rng.normal(size=n_f), n_f),
+             (rng.normal(size=(300, 3)), corners, rng.dirichlet(np.ones(3), 300),
+              rng.normal(size=300), 300)]
+    system = NormalEquations(base, shuffled, 1e-2, 1e-3)
+    np.testing.assert_array_equal(shuffled.data, data)
+    np.testing.assert_array_equal(shuffled.indices, indices)
+    blocks = system._data_blocks(terms)
+    stacked = system._fine_blocks(terms) @ system.mapping
+    for k, pair in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+        real = system.mapping.T @ stacked[k * n_f:(k + 1) * n_f]
+        np.testing.assert_array_equal(blocks[pair].toarray(), real.toarray())
+
+
 def test_a_refit_does_not_return_its_start():
     # started from the unstiffened fit, a stiffer refit has a higher RMS distance than its
     # start; it still returns the stiffer fit, not the start
@@ -399,6 +430,67 @@ def test_nudge_inside_moves_only_the_vertices_under_outside_points_and_stays_cle
     np.testing.assert_allclose((M @ nudged)[untouched], (M @ V)[untouched], atol=1e-12)
 
 
+def test_nudge_inside_queries_fewer_points_and_moves_as_if_it_queried_all(monkeypatch):
+    """The nudge skips the closest-point queries of the fine points its bounds prove inside
+    (and of the far walls' corners whose bounds already prove the room): the same moves,
+    bit for bit, as querying every point every round, with fewer queries (both kinds of
+    rounds run: the near walls alone, then with the far walls carried)."""
+    from core.fitting import contain
+    from core.fitting.responses import InsideBounds
+
+    base = grid_sphere(3)
+    V = 0.7 * base.vertices / np.linalg.norm(base.vertices, axis=1).max() + [0.6, 0.0, 0.0]
+    h, fine, T = fine_mesh(PolyMesh(V, base.face_vertices, base.face_offsets), 2)
+    M = (limit_matrices(fine)[0] @ h.composite(1)).tocsr()
+    sphere = sphere_target(1.0)
+    target = TargetSurface(sphere.vertices, sphere.faces)
+    queried = []
+    closest = TargetSurface.closest
+
+    def counting(self, points):
+        queried.append(len(points))
+        return closest(self, points)
+
+    monkeypatch.setattr(TargetSurface, "closest", counting)
+    # each run on its own copy of the map (scipy's abs() sorts a map's rows in place)
+    bounded, moved = contain.nudge_inside(V, M.copy(), T, target, movable=V[:, 2] > 0)
+    fewer = sum(queried)
+    queried.clear()
+    monkeypatch.setattr(InsideBounds, "undecided", lambda self, X: np.arange(len(X)))
+    every, moved_every = contain.nudge_inside(V, M.copy(), T, target, movable=V[:, 2] > 0)
+    assert len(moved) > 2 and moved == moved_every
+    np.testing.assert_array_equal(bounded, every)
+    assert fewer < 0.8 * sum(queried)
+
+
+def test_a_nudge_round_with_loose_bounds_carries_the_far_walls_as_with_exact_ones():
+    """Bounds from queries made elsewhere (every point's last query about 0.3 away) prove
+    little: the round queries the points and far-wall corners they leave undecided, and its
+    move and depth are those of a round that queried everything."""
+    from core.fitting.contain import _shift
+    from core.fitting.responses import InsideBounds
+
+    base = grid_sphere(3)                       # a small cage, its far wall within reach
+    V = 0.3 * base.vertices / np.linalg.norm(base.vertices, axis=1).max() + [0.9, 0.0, 0.0]
+    h, fine, T = fine_mesh(PolyMesh(V, base.face_vertices, base.face_offsets), 2)
+    M = (limit_matrices(fine)[0] @ h.composite(1)).tocsr()
+    M.sort_indices()
+    sphere = sphere_target(1.0)
+    target = TargetSurface(sphere.vertices, sphere.faces)
+    X = M @ V
+    elsewhere = X + 0.3 * np.random.default_rng(2).normal(size=X.shape) / np.sqrt(3)
+    loose = InsideBounds(0.0)
+    loose.record(elsewhere, np.arange(len(X)), target.closest(elsewhere).signed)
+    assert (loose.bound(X) > target.closest(X).signed + 0.1).mean() > 0.5
+    movable = np.ones(len(V), dtype=bool)
+    shift, depth = _shift(V, M, T, target, movable, True, loose)
+    exact_shift, exact_depth = _shift(V, M, T, target, movable, True, InsideBounds(0.0))
+    carried = _shift(V, M, T, target, movable, False, InsideBounds(0.0))[0]
+    assert np.abs(exact_shift - carried).max() > 0   # far walls were carried
+    np.testing.assert_array_equal(shift, exact_shift)
+    assert depth == exact_depth
+
+
 def test_nudge_inside_stops_a_kind_of_rounds_that_no_longer_takes_depth_off(monkeypatch):
     """When a round leaves the summed outside depth where it was (less than
     ``NUDGE_PROGRESS`` off), no further round of that kind runs: with a depth that never
@@ -413,7 +505,7 @@ def test_nudge_inside_stops_a_kind_of_rounds_that_no_longer_takes_depth_off(monk
     target = TargetSurface(sphere.vertices, sphere.faces)
     calls = []
 
-    def stalled_shift(V, mapping, triangles, target, movable, carry):
+    def stalled_shift(V, mapping, triangles, target, movable, carry, known):
         calls.append(carry)
         return 1e-3 * V, 1.0                   # the same summed depth every round
 

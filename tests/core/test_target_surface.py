@@ -183,3 +183,32 @@ def test_vertex_pseudo_normals_are_angle_weighted():
     assert np.allclose(found.normal[0], expected, atol=1e-12)
     origin = surface.closest(np.array([[-0.1, -0.1, -0.1]]))
     assert np.allclose(origin.normal[0], -slanted, atol=1e-12)
+
+
+def test_closest_answers_the_same_points_again_from_the_kept_answers():
+    """The same points (bit for bit) get the kept answer, read only; a point moved by one
+    unit in the last place gets a fresh one; an answer older than ``CLOSEST_KEPT`` other
+    queries is recomputed, with the same values."""
+    from core.target_surface import CLOSEST_KEPT
+
+    mesh = trimesh.creation.icosphere(3)
+    surface = TargetSurface(mesh.vertices, mesh.faces)
+    rng = np.random.default_rng(6)
+    points = rng.normal(size=(200, 3))
+    first = surface.closest(points)
+    again = surface.closest(points.copy())
+    assert again is first
+    with pytest.raises(ValueError):
+        first.signed[0] = 0.0
+    moved = points.copy()
+    moved[7, 0] = np.nextafter(moved[7, 0], np.inf)
+    fresh = surface.closest(moved)
+    assert fresh is not first
+    np.testing.assert_array_equal(fresh.signed, TargetSurface(mesh.vertices, mesh.faces)
+                                  .closest(moved).signed)
+    for k in range(CLOSEST_KEPT):
+        surface.closest(points + (k + 1.0))
+    recomputed = surface.closest(points)
+    assert recomputed is not first
+    for name, value in vars(first).items():
+        np.testing.assert_array_equal(getattr(recomputed, name), value)

@@ -1,0 +1,119 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""CPU seconds of the default inside fit on every dev mesh that reaches the fit, before and after.
+
+Usage::
+
+    .venv/bin/python benchmarks/fit_speed_bench.py --baseline OLD_TREE [--only NAME ...]
+                                                   [--seeds 0 1 2] [--cache DIR]
+
+Each dev mesh's cage is built once by ``reconstruct(path, stop_after="basemesh")`` with this
+tree and pickled (cage and target) into ``--cache``, so both trees fit the same cage. For every
+mesh, a subprocess of the baseline tree (``--baseline``, for example ``git archive f8909fc core |
+tar -x -C OLD_TREE``) and one of this tree run ``fit_base_mesh(cage, target, levels=2,
+mode="inside", seed=k)`` for each seed, one after the other (interleaved per mesh, so both see
+the same load). Each fit is timed by ``time.process_time`` around the call (CPU seconds of
+the process, report figures included) and hashed (its vertices' bytes), so identical results
+show as identical hashes. Prints a markdown table: CPU seconds per seed, the fit figures
+(volume outside, mean and max distance of the fine limit points over the diagonal), whether the
+vertices are bit-identical, and the load average when each run started.
+"""
+import argparse
+import hashlib
+import json
+import os
+import pickle
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+MESHES = os.path.join(REPO, "..", "shared", "data", "meshes")
+CASES = {"to_simp_cantilever": os.path.join(REPO, "examples", "to_simp_cantilever.stl"),
+         **{name: os.path.join(MESHES, name + ext) for name, ext in (
+             ("polycube_bone", ".obj"), ("polycube_mambo_b0", ".obj"),
+             ("to_levelset_cantilever_tiny", ".stl"), ("idler_riser", ".stl"),
+             ("to_simp_mbb", ".stl"), ("to_simp_lbracket", ".stl"), ("to_simp_pylon", ".stl"),
+             ("to_simp_torsion_arm", ".stl"), ("tray_bottom", ".stl"), ("fandisk", ".obj"),
+             ("gripper_domain", ".stl"), ("ge_bracket_domain", ".stl"),
+             ("to_simp_torsion_arm_fine3", ".stl"))}}
+"""The dev meshes that reach the fit (featuretype and octagonal_pocket are refused before it)."""
+
+
+def cache_cages(names, folder):
+    """Pickle ``(cage, target)`` of each mesh into ``folder`` unless already there."""
+    sys.path.insert(0, REPO)
+    from core.pipeline import reconstruct
+
+    os.makedirs(folder, exist_ok=True)
+    for name in names:
+        path = os.path.join(folder, name + ".pkl")
+        if not os.path.exists(path):
+            state = reconstruct(CASES[name], stop_after="basemesh").state
+            with open(path, "wb") as handle:
+                pickle.dump((state.basemesh.cage, state.intake.target), handle)
+
+
+def worker(tree, path, seeds):
+    """Fit one cached cage with ``tree``'s core for each seed; one JSON line per fit."""
+    sys.path.insert(0, tree)
+    from core.fitting import fit_base_mesh
+
+    with open(path, "rb") as handle:
+        cage, target = pickle.load(handle)
+    for seed in seeds:
+        load = os.getloadavg()[0]
+        started = time.process_time()
+        fitted, info = fit_base_mesh(cage, target, levels=2, mode="inside", seed=seed)
+        cpu = time.process_time() - started
+        print(json.dumps({
+            "seed": seed, "cpu": cpu, "load": load, "triangles": len(target.faces),
+            "faces": int(cage.n_faces), "outside": info["outside_volume_fraction"],
+            "mean": info["mean_distance"], "max": info["max_distance"],
+            "hash": hashlib.sha1(fitted.vertices.tobytes()).hexdigest()}), flush=True)
+
+
+def run(tree, path, seeds):
+    """The JSON lines of :func:`worker` in a subprocess of this script."""
+    out = subprocess.run([sys.executable, __file__, "--worker", tree, path,
+                          *map(str, seeds)], capture_output=True, text=True, check=True)
+    return [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
+
+
+def markdown(results):
+    """Table rows: mesh, seed, CPU s before / after, figures, identical, load."""
+    lines = ["| mesh | triangles | cage faces | seed | CPU s before | CPU s after | outside % "
+             "before / after | mean before / after | max before / after | identical | load |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name, (before, after) in results.items():
+        for b, a in zip(before, after):
+            lines.append(
+                f"| {name} | {a['triangles']} | {a['faces']} | {a['seed']} | {b['cpu']:.2f} | "
+                f"{a['cpu']:.2f} | {100 * b['outside']:.3f} / {100 * a['outside']:.3f} | "
+                f"{b['mean']:.5f} / {a['mean']:.5f} | {b['max']:.4f} / {a['max']:.4f} | "
+                f"{'yes' if a['hash'] == b['hash'] else 'no'} | {b['load']:.1f}-{a['load']:.1f} |")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--baseline", required=True, help="folder holding an older core/")
+    parser.add_argument("--only", nargs="*", default=list(CASES))
+    parser.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2])
+    parser.add_argument("--cache", default=os.path.join("/tmp", "fit_speed_cages"))
+    args = parser.parse_args(argv)
+    cache_cages(args.only, args.cache)
+    results = {}
+    for name in args.only:
+        path = os.path.join(args.cache, name + ".pkl")
+        results[name] = (run(os.path.abspath(args.baseline), path, args.seeds),
+                         run(REPO, path, args.seeds))
+        print(f"{name} done", file=sys.stderr, flush=True)
+    print(markdown(results))
+
+
+if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "--worker":
+        worker(sys.argv[2], sys.argv[3], [int(s) for s in sys.argv[4:]])
+    else:
+        main()
