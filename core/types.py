@@ -181,7 +181,9 @@ class LabelingResult:
 class BaseMeshResult:
     """The coarse quad base mesh (cage) on the target (report key ``base_mesh``).
 
-    cage : PolyMesh, closed, 2-manifold, outward, the target's genus.
+    cage : PolyMesh, closed, 2-manifold, outward, the target's genus; its ``creases`` are
+        the edges on the target's sharp feature lines (``core.quadmesh.creases``; the paired
+        decimation only), None when there are none.
     """
 
     cage: PolyMesh

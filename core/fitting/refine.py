@@ -144,7 +144,8 @@ def split_quad_strips(cage, seeds):
 
     Returns
     -------
-    PolyMesh, all quads, the new vertices at the midpoints of the split edges.
+    PolyMesh, all quads, the new vertices at the midpoints of the split edges; both halves of
+    a split crease edge are crease edges.
     """
     quads = cage.face_vertices.reshape(-1, 4)
     m = len(quads)
@@ -191,7 +192,16 @@ def split_quad_strips(cage, seeds):
     pieces.append(np.stack([e, m1, v2, m2], axis=1)[both])
     pieces.append(np.stack([m3, e, m2, v3], axis=1)[both])
     faces = np.concatenate(pieces).astype(np.int64)
-    return PolyMesh(vertices, faces.reshape(-1), np.arange(0, faces.size + 1, 4, dtype=np.int64))
+    creases = None
+    if cage.n_creases:
+        pairs = np.asarray(cage.creases, dtype=np.int64)
+        crease_keys = pairs.min(axis=1) * n + pairs.max(axis=1)
+        crease_mid = mid_index[np.searchsorted(np.unique(keys), crease_keys)]
+        cut = crease_mid >= 0
+        creases = np.concatenate([pairs[~cut], np.stack([pairs[cut, 0], crease_mid[cut]], axis=1),
+                                  np.stack([crease_mid[cut], pairs[cut, 1]], axis=1)])
+    return PolyMesh(vertices, faces.reshape(-1), np.arange(0, faces.size + 1, 4, dtype=np.int64),
+                    creases)
 
 
 def _twins(edge_id):

@@ -12,7 +12,7 @@
 import numpy as np
 import scipy.sparse as sp
 
-from core.errors import InternalError, InvalidMeshError, ParameterError, StageNotAvailableError
+from core.errors import InternalError, InvalidMeshError, ParameterError
 from core.geometry import polymesh_volume
 from core.subdivision.catmull_clark import (build_hierarchy, crease_edge_mask, mesh_topology,
                                             subdivision_operator, vertex_crease_counts)
@@ -296,15 +296,17 @@ def _template_grid(n, r=TEMPLATE_RADIUS):
 _TEMPLATE_CACHE = {}
 
 
-def template_matrix(n, r=TEMPLATE_RADIUS):
+def template_matrix(n, r=TEMPLATE_RADIUS, crease_spokes=0):
     """(K, K) dense subdivision matrix of the radius-``r`` neighbourhood of a valence-``n`` EV.
 
     The neighbourhood is ``n`` sectors of ``r x r`` quads around the EV (what every
     EV looks like after two subdivision steps); row order is :func:`_template_id`.
     Row ``i`` gives template point ``i`` one level finer, in the same sector
     coordinates, as exact Catmull-Clark combinations (valid for ``r >= 3``).
+    ``crease_spokes`` : int, bit ``s`` set when spoke ``s`` (the edges from the centre
+    along sector ``s``'s first axis) is a crease; the crease rules apply along it.
     """
-    key = (n, r)
+    key = (n, r, int(crease_spokes))
     if key in _TEMPLATE_CACHE:
         return _TEMPLATE_CACHE[key]
     K = 1 + n * r * (r + 1)
@@ -314,8 +316,13 @@ def template_matrix(n, r=TEMPLATE_RADIUS):
                       _template_id(n, s, i + 1, j + 1, r), _template_id(n, s, i, j + 1, r)],
                      axis=1)
     n_faces = len(quads)
+    creased = np.flatnonzero((int(crease_spokes) >> np.arange(n)) & 1)
+    cs, ca = np.repeat(creased, r), np.tile(np.arange(r), len(creased))
+    creases = np.stack([_template_id(n, cs, ca, np.zeros_like(ca), r),
+                        _template_id(n, cs, ca + 1, np.zeros_like(ca), r)], axis=1)
     _, _, S, topo = subdivision_operator(quads.reshape(-1),
-                                         np.arange(0, 4 * n_faces + 1, 4), K, allow_open=True)
+                                         np.arange(0, 4 * n_faces + 1, 4), K, allow_open=True,
+                                         creases=creases if len(creases) else None)
     fs, fa, fb = _template_grid(n, r)
     fs = np.concatenate([[0], fs])
     fa = np.concatenate([[0], fa])
@@ -345,16 +352,24 @@ class LimitEvaluator:
     -----
     The mesh is subdivided twice internally so that every EV is at least four edges
     from any other and every sub-quad has at most one EV corner.
+
+    Crease edges (``quad_mesh.creases``) are evaluated exactly too. A work quad is
+    *regular* when each corner is, for it: a valence-4 vertex without crease edges, a
+    valence-4 vertex on a straight crease (two opposite crease edges, one of them a side of
+    the quad), or a corner (three or more crease edges) whose two edges along the quad are
+    creases. Its limit is then the bicubic B-spline of its 4 x 4 stencil with the points
+    beyond each creased side replaced by the phantom points ``2 * crease - interior`` (as
+    OpenSubdiv's boundary patches: the crease rules on one side of the crease equal the
+    smooth rules on that reflected net). Any other corner (valence not 4, darts, crease
+    vertices and corners with more faces on the quad's side) is treated as an EV: local
+    subdivision templates with the crease rules along the creased spokes, and phantom points
+    in the sub-quads next to a creased spoke.
     """
 
     WORK_LEVELS = 2
 
     def __init__(self, quad_mesh):
         _require_closed_quads(quad_mesh)
-        if quad_mesh.n_creases:
-            raise StageNotAvailableError(
-                f"exact limit evaluation of a cage with crease edges ({quad_mesh.n_creases}) "
-                "is not implemented: the B-spline export cannot evaluate its limit surface")
         self.hierarchy = build_hierarchy(quad_mesh, self.WORK_LEVELS)
         work = self.hierarchy.meshes[-1]
         self.work = work
@@ -364,22 +379,44 @@ class LimitEvaluator:
         L, _, _ = limit_matrices(work)
         self.work_limit = L @ work.vertices
         fv = work.face_vertices
-        corner_valence = self.valence[fv].reshape(-1, 4)
-        irregular = corner_valence != 4
+        crease = crease_edge_mask(topo, work.creases)
+        self.crease_sides = crease[topo.corner_edge].reshape(-1, 4)
+        self.crease_spokes = np.zeros(len(work.vertices), dtype=np.int64)
+        on = np.flatnonzero(crease[topo.corner_edge])
+        np.add.at(self.crease_spokes, fv[on], np.left_shift(1, self.spoke[on]))
+        irregular = ~self._regular_corners(crease).reshape(-1, 4)
         if (irregular.sum(axis=1) > 1).any():
             raise InternalError("a work quad has more than one extraordinary corner after "
                                 f"{self.WORK_LEVELS} subdivisions")
         self.ev_corner = np.where(irregular.any(axis=1), irregular.argmax(axis=1), -1)
         self.stencils = self._regular_stencils()
-        self.ev_vertices = np.flatnonzero(self.valence != 4)
+        self.ev_vertices = np.unique(fv[irregular.reshape(-1)])
         self._ev_slot = np.full(len(work.vertices), -1, dtype=np.int64)
         self._ev_levels = {}
-        self._ev_groups = {}
-        for n in np.unique(self.valence[self.ev_vertices]):
-            evs = self.ev_vertices[self.valence[self.ev_vertices] == n]
+        keys, kind = self._ev_kinds(self.ev_vertices)
+        for index, key in enumerate(keys):
+            evs = self.ev_vertices[kind == index]
             self._ev_slot[evs] = np.arange(len(evs))
-            self._ev_groups[int(n)] = evs
-            self._ev_levels[int(n)] = [self._gather_templates(evs, int(n))]
+            self._ev_levels[key] = [self._gather_templates(evs, key[0])]
+
+    def _ev_kinds(self, vertices):
+        """Template kinds of ``vertices`` ((p,) int64): the sorted distinct ``(valence, crease
+        spoke bits)`` tuples, and the index of each vertex's among them ((p,) int64)."""
+        pairs = np.stack([self.valence[vertices], self.crease_spokes[vertices]], axis=1)
+        distinct, kind = np.unique(pairs.reshape(-1, 2), axis=0, return_inverse=True)
+        return [tuple(int(x) for x in row) for row in distinct], kind.reshape(-1)
+
+    def _regular_corners(self, crease):
+        """(k,) bool: the vertex of every work corner is regular for the corner's quad (class
+        notes)."""
+        fv, topo = self.work.face_vertices, self.topo
+        n_crease = vertex_crease_counts(topo, crease, len(self.work.vertices))[fv]
+        valence = self.valence[fv]
+        bits = self.crease_spokes[fv]
+        smooth = (n_crease == 0) & (valence == 4)
+        straight = (n_crease == 2) & (valence == 4) & ((bits == 0b0101) | (bits == 0b1010))
+        both_sides = crease[topo.corner_edge] & crease[topo.corner_edge[topo.prev_corner]]
+        return smooth | straight | ((n_crease >= 3) & both_sides)
 
     # -- topology walks on the work mesh (corner = half-edge leaving it) --
     def _move(self, g, direction):
@@ -458,10 +495,10 @@ class LimitEvaluator:
                            np.broadcast_to(j + dj, shape).reshape(-1))
         return ids.reshape(n, 2, 2, 16)
 
-    def _ev_level(self, n, m):
-        levels = self._ev_levels[n]
+    def _ev_level(self, key, m):
+        levels = self._ev_levels[key]
         if m >= len(levels):
-            A = template_matrix(n)
+            A = template_matrix(key[0], crease_spokes=key[1])
             while len(levels) <= m:
                 levels.append(np.einsum("ij,ejk->eik", A, levels[-1]))
         return levels[m]
@@ -490,9 +527,13 @@ class LimitEvaluator:
         out = np.empty((len(face), 3))
         evc = self.ev_corner[face]
         reg = evc < 0
-        if reg.any():
-            out[reg] = self._eval_regular(self.stencils[face[reg]], u[reg], v[reg],
-                                          self.work.vertices)
+        plain = reg & ~self.crease_sides[face].any(axis=1)
+        if plain.any():
+            out[plain] = self._eval_regular(self.stencils[face[plain]], u[plain], v[plain],
+                                            self.work.vertices)
+        sharp = reg & ~plain
+        if sharp.any():
+            out[sharp] = self._eval_crease_regular(face[sharp], u[sharp], v[sharp])
         if (~reg).any():
             idx = np.flatnonzero(~reg)
             c = evc[idx]
@@ -507,6 +548,14 @@ class LimitEvaluator:
         w = (bspline_weights(u)[:, :, None] * bspline_weights(v)[:, None, :]).reshape(-1, 16)
         st = stencil.reshape(-1, 16)
         return np.stack([np.einsum("pi,pi->p", w, X[st, k]) for k in range(3)], axis=1)
+
+    def _eval_crease_regular(self, face, u, v):
+        """(p, 3) limit points of regular quads with creased sides (phantom nets)."""
+        P = self.work.vertices[self.stencils[face]]
+        side = self.crease_sides[face]
+        _reflect(P, side[:, 0], side[:, 2], side[:, 3], side[:, 1])
+        w = bspline_weights(u)[:, :, None] * bspline_weights(v)[:, None, :]
+        return np.einsum("pij,pijk->pk", w, P)
 
     def _eval_near_ev(self, ev, sector, a, b):
         out = np.empty((len(ev), 3))
@@ -524,19 +573,46 @@ class LimitEvaluator:
         j = np.minimum(np.floor(B), 1).astype(np.int64)
         wa = bspline_weights(A - i)
         wb = bspline_weights(B - j)
-        nval = self.valence[ev]
+        keys, kind = self._ev_kinds(ev)
         res = np.empty((len(rest), 3))
         w = (wa[:, :, None] * wb[:, None, :]).reshape(-1, 16)
-        for n in np.unique(nval):
-            table = self._stencil_table(int(n))
-            for lev in np.unique(m[nval == n]):
-                sel = np.flatnonzero((nval == n) & (m == lev))
-                C = self._ev_level(int(n), int(lev))
+        for index, key in enumerate(keys):
+            n, bits = key
+            of_key = kind == index
+            table = self._stencil_table(n)
+            for lev in np.unique(m[of_key]):
+                sel = np.flatnonzero(of_key & (m == lev))
+                C = self._ev_level(key, int(lev))
                 tid = table[sector[sel], i[sel], j[sel]]
                 pts = C[self._ev_slot[ev[sel]][:, None], tid]
+                if bits:
+                    # sub-quads next to a creased spoke: phantom points beyond it
+                    pts = pts.reshape(-1, 4, 4, 3).copy()
+                    below = (j[sel] == 0) & ((bits >> sector[sel]) & 1).astype(bool)
+                    left = (i[sel] == 0) & ((bits >> ((sector[sel] + 1) % n)) & 1).astype(bool)
+                    none = np.zeros(len(sel), dtype=bool)
+                    _reflect(pts, below, none, left, none)
+                    pts = pts.reshape(-1, 16, 3)
                 res[sel] = np.einsum("pi,pik->pk", w[sel], pts)
         out[rest] = res
         return out
+
+
+def _reflect(P, v_low, v_high, u_low, u_high):
+    """Replace the points of 4 x 4 nets beyond creased sides by phantom points, in place.
+
+    Parameters
+    ----------
+    P : (p, 4, 4, 3) nets ``P[:, a, b]`` of quads spanning ``a, b`` in 1..2.
+    v_low, v_high, u_low, u_high : (p,) bool, the side ``v = 0`` (row ``b = 1``),
+        ``v = 1``, ``u = 0`` (column ``a = 1``) or ``u = 1`` is a crease; the row or column
+        beyond it becomes ``2 * crease - interior``. Rows first, then columns, so a corner
+        between two creased sides gets the tensor-product reflection.
+    """
+    P[v_low, :, 0] = 2.0 * P[v_low, :, 1] - P[v_low, :, 2]
+    P[v_high, :, 3] = 2.0 * P[v_high, :, 2] - P[v_high, :, 1]
+    P[u_low, 0] = 2.0 * P[u_low, 1] - P[u_low, 2]
+    P[u_high, 3] = 2.0 * P[u_high, 2] - P[u_high, 1]
 
 
 def quad_mesh_of(mesh):
