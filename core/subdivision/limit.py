@@ -200,16 +200,17 @@ def _dart_rows(quad_mesh, topo, spoke, crease, dart):
     along = corners[crease[topo.corner_edge[corners]]]
     crease_spoke[fv[along]] = spoke[along]
     k = np.mod(spoke[corners] - crease_spoke[v], valence[v])
-    rows, cols, vals = [np.flatnonzero(dart)], [np.flatnonzero(dart)], []
-    vals.append(np.array([dart_limit_mask(int(valence[d]))[0] for d in rows[0]]))
-    masks = {int(m): dart_limit_mask(int(m)) for m in np.unique(valence[dart])}
-    w_end = np.array([masks[int(valence[x])][1 + s] for x, s in zip(v, k)])
-    w_diag = np.array([masks[int(valence[x])][1 + valence[x] + s] for x, s in zip(v, k)])
-    rows += [v, v]
-    cols += [fv[topo.next_corner[corners]], fv[topo.next_corner[topo.next_corner[corners]]]]
-    vals += [w_end, w_diag]
-    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                         shape=(n, n))
+    darts = np.flatnonzero(dart)
+    top = int(valence.max())
+    table = np.zeros((top + 1, 2 * top + 1))
+    for m in np.unique(valence[darts]).tolist():
+        table[m, :2 * m + 1] = dart_limit_mask(m)
+    rows = np.concatenate([darts, v, v])
+    cols = np.concatenate([darts, fv[topo.next_corner[corners]],
+                           fv[topo.next_corner[topo.next_corner[corners]]]])
+    vals = np.concatenate([table[valence[darts], 0], table[valence[v], 1 + k],
+                           table[valence[v], 1 + valence[v] + k]])
+    return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
 
 
 _DART_MASKS = {}
