@@ -79,3 +79,28 @@ def test_machined_part_cage_has_crease_network_and_simp_cage_none():
     # without tags (the default) none
     assert paired_decimation_base_mesh(featuretype.vertices, featuretype.faces,
                                        300).mesh.creases is None
+
+
+def test_the_fit_and_the_strip_split_keep_the_creases():
+    """A refined cube cage creased along the cube's edges, fitted to the box itself: the
+    fitted cage keeps its tags and its limit surface stays on the box (it is the box); the
+    quad-strip split of the tolerance refinement makes both halves of a cut crease edge
+    creases."""
+    from core.fitting import fit_base_mesh
+    from core.fitting.refine import split_quad_strips
+    from core.subdivision.catmull_clark import subdivide
+    from core.types import TriMesh
+
+    cube = sc.cube()
+    topo = mesh_topology(cube.face_vertices, cube.face_offsets, 8)
+    cage, _ = subdivide(PolyMesh(cube.vertices, cube.face_vertices, cube.face_offsets,
+                                 topo.edges))
+    V, F = _fine_box()
+    fitted, info = fit_base_mesh(cage, TriMesh(V, F), levels=2, iterations=3)
+    assert np.array_equal(fitted.creases, cage.creases)
+    assert info["initial_mean_distance"] < 1e-9
+    split = split_quad_strips(cage, np.array([[0, 0]]))
+    assert split.n_creases == cage.n_creases + 4  # a closed strip round the cube: 4 edges cut
+    fine_topo = mesh_topology(split.face_vertices, split.face_offsets, len(split.vertices))
+    assert (fine_topo.edge_index(split.creases[:, 0], split.creases[:, 1]) >= 0).all()
+    assert (np.bincount(split.creases.reshape(-1)) != 1).all()
