@@ -28,7 +28,7 @@ class InvalidMeshError(PolycubeInputError):
         Machine-readable kind: ``empty``, ``unreadable``, ``format``, ``open``,
         ``non_manifold``, ``orientation``, ``degenerate_faces``, ``duplicate_faces``,
         ``non_finite``, ``self_intersecting``, ``multiple_components``,
-        ``coordinate_range``, ``unused_vertices``, ``not_quads``.
+        ``coordinate_range``, ``unused_vertices``, ``not_quads``, ``crease_not_edge``.
     count : int
         How many offending items were found.
     examples : list

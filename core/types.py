@@ -26,11 +26,17 @@ class PolyMesh:
         each face counter-clockwise seen from outside.
     face_offsets : (m + 1,) int64, face ``f`` is
         ``face_vertices[face_offsets[f]:face_offsets[f + 1]]``.
+    creases : None, or (c, 2) int64 vertex pairs of the edges tagged as infinitely sharp
+        creases (any order within a pair; ``core.subdivision.catmull_clark`` applies the crease
+        rules to them and carries them to the refined meshes). None or an empty array: no
+        creases. Build meshes with new vertex positions by ``dataclasses.replace(mesh,
+        vertices=...)`` so the tags stay.
     """
 
     vertices: np.ndarray
     face_vertices: np.ndarray
     face_offsets: np.ndarray
+    creases: np.ndarray = None
 
     @classmethod
     def from_faces(cls, vertices, faces):
@@ -50,6 +56,11 @@ class PolyMesh:
     @property
     def n_faces(self):
         return len(self.face_offsets) - 1
+
+    @property
+    def n_creases(self):
+        """Number of crease edges (0 without creases)."""
+        return 0 if self.creases is None else len(self.creases)
 
     def faces(self):
         """List of (size_f,) int64 arrays, one per face (a Python list: use for small meshes)."""
@@ -170,7 +181,9 @@ class LabelingResult:
 class BaseMeshResult:
     """The coarse quad base mesh (cage) on the target (report key ``base_mesh``).
 
-    cage : PolyMesh, closed, 2-manifold, outward, the target's genus.
+    cage : PolyMesh, closed, 2-manifold, outward, the target's genus; its ``creases`` are
+        the edges on the target's sharp feature lines (``core.quadmesh.creases``; the paired
+        decimation only), None when there are none.
     """
 
     cage: PolyMesh

@@ -98,7 +98,9 @@ def normal_jumps(patchset, base, samples=None, context=None):
     Returns
     -------
     dict with ``normal_jump_max_deg``, ``normal_jump_p95_deg`` (over all samples on
-    all edges) and ``normal_jump_ev_max_deg`` (edges with an extraordinary end).
+    all edges but the crease edges, where the normal may jump) and
+    ``normal_jump_ev_max_deg`` (edges with an extraordinary end), and
+    ``normal_jump_crease_edges``: the B-rep edges left out.
     """
     from core.export.brep_topology import topology_from_sides
 
@@ -114,13 +116,15 @@ def normal_jumps(patchset, base, samples=None, context=None):
 
         near = cKDTree(ev_points).query(ends.reshape(-1, 3))[0].reshape(n_edges, 2)
         ev_edge = (near <= CONTACT * ctx.bbox_diagonal).any(axis=1)
+    crease = ctx.crease_edge if patchset.topology is not None else np.zeros(n_edges, bool)
     if samples is None:
         dense_t = _measure_params(graded_knots(max(ctx.depth, EXPORT_DEPTH)))
         plain_t = np.linspace(0.0, 1.0, 9)
     else:
         dense_t = plain_t = np.asarray(samples, dtype=np.float64)
     angles, ev_angles = [], []
-    for mask, t in ((ev_edge, dense_t), (~ev_edge, plain_t)):
+    for mask, t, at_ev in ((ev_edge & ~crease, dense_t, True),
+                           (~ev_edge & ~crease, plain_t, False)):
         if not mask.any():
             continue
         pair = uses[mask]
@@ -137,12 +141,13 @@ def normal_jumps(patchset, base, samples=None, context=None):
             normals.append(n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300))
         ang = np.degrees(np.arccos(np.clip(np.sum(normals[0] * normals[1], axis=1), -1.0, 1.0)))
         angles.append(ang)
-        if mask is ev_edge:
+        if at_ev:
             ev_angles.append(ang)
-    ang = np.concatenate(angles)
+    ang = np.concatenate(angles) if angles else np.zeros(1)
     ev_ang = np.concatenate(ev_angles) if ev_angles else np.zeros(1)
     return {
         "normal_jump_max_deg": float(ang.max()),
         "normal_jump_p95_deg": float(np.percentile(ang, 95)),
         "normal_jump_ev_max_deg": float(ev_ang.max()),
+        "normal_jump_crease_edges": int(crease.sum()),
     }

@@ -8,7 +8,7 @@ import scipy.sparse as sp
 
 from core.export.bspline_basis import BEZIER, GRADED
 from core.export.patch_mesh import build_patch_mesh
-from core.subdivision.catmull_clark import mesh_topology
+from core.subdivision.catmull_clark import crease_edge_mask, mesh_topology
 from core.subdivision.limit import LimitEvaluator, corner_frame, limit_matrices
 
 
@@ -23,9 +23,10 @@ class PatchContext:
 
     Attributes hold the patch mesh (``pm``, ``level``, ``face_of_patch``), the exact
     evaluator and the limit positions and normals of the work mesh (``limit``, ``normal``,
-    ``is_ev``), the patch mesh's edge tables (``topo``, ``edge_corner``), the knot kinds
-    (``base_edge_kind``, ``kind_u``, ``kind_v``, ``face_has_ev``, ``quad_corner``) and
-    ``bbox_diagonal``.
+    ``is_ev``, ``on_crease``: a crease edge ends there, so its normal is one side's only),
+    the patch mesh's edge tables (``topo``, ``edge_corner``, ``crease_edge``: the B-rep
+    edge lies on a crease of ``base``), the knot kinds (``base_edge_kind``, ``kind_u``,
+    ``kind_v``, ``face_has_ev``, ``quad_corner``) and ``bbox_diagonal``.
     """
 
     def __init__(self, base, depth):
@@ -42,6 +43,9 @@ class PatchContext:
         nrm = np.cross(Tu @ work.vertices, Tv @ work.vertices)
         self.normal = nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
         self.is_ev = np.bincount(work.face_vertices, minlength=len(work.vertices)) != 4
+        work_topo = mesh_topology(work.face_vertices, work.face_offsets, len(work.vertices))
+        self.on_crease = np.zeros(len(work.vertices), dtype=bool)
+        self.on_crease[work_topo.edges[crease_edge_mask(work_topo, work.creases)]] = True
         mesh = pm.mesh
         self.topo = mesh_topology(mesh.face_vertices, mesh.face_offsets, len(mesh.vertices))
         n_edges = len(self.topo.edges)
@@ -50,6 +54,9 @@ class PatchContext:
         first[self.topo.corner_edge[::-1]] = c[::-1]
         self.edge_corner = first
         self._knot_kinds(base)
+        base_crease = crease_edge_mask(self.base_topo, base.creases)
+        base_edge = pm.base_edge[first]
+        self.crease_edge = (base_edge >= 0) & base_crease[np.maximum(base_edge, 0)]
         lo, hi = work.vertices.min(axis=0), work.vertices.max(axis=0)
         limit_lo, limit_hi = self.limit.min(axis=0), self.limit.max(axis=0)
         self.bbox_diagonal = float(np.linalg.norm(np.maximum(hi, limit_hi)
@@ -58,8 +65,8 @@ class PatchContext:
     def _knot_kinds(self, base):
         """Knot kind of every base edge (per ring of base quads) and of every patch.
 
-        A base quad is regular when its four corners have valence 4 and touch only
-        quads (its limit surface is then one bicubic polynomial); a ring of quads
+        A base quad is regular when its four corners have valence 4, touch only quads and
+        no crease edge (its limit surface is then one bicubic polynomial); a ring of quads
         (joined through opposite sides) gets the graded knots if any of its quads is
         not regular. Patches of non-quad faces are graded in both directions.
         """
@@ -72,6 +79,7 @@ class PatchContext:
         valence = np.bincount(fv, minlength=len(base.vertices))
         irregular_vertex = valence != 4
         irregular_vertex[fv[~corner_quad]] = True
+        irregular_vertex[topo.edges[crease_edge_mask(topo, base.creases)]] = True
         qf = np.flatnonzero(quad)
         qc = fo[qf][:, None] + np.arange(4)
         quad_edges = topo.corner_edge[qc]

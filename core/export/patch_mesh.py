@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.subdivision.catmull_clark import mesh_topology, subdivision_operator
+from core.subdivision.catmull_clark import mesh_topology, subdivide
 from core.types import PolyMesh
 
 CORNER_UV = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
@@ -30,7 +30,7 @@ class PatchMesh:
     """Patches of a base mesh and the conforming polygon mesh of their boundaries.
 
     work : PolyMesh, all quads, the mesh the limit surface is evaluated on (``base``
-        or its level-1 refinement).
+        or its level-1 refinement, with the halves of ``base``'s crease edges).
     level : int, 0 if ``work`` is the base mesh, else 1.
     mesh : PolyMesh, the patch mesh: face ``i`` is patch ``i``, vertices are ``work``'s
         (unused ones included).
@@ -71,8 +71,7 @@ def build_patch_mesh(base):
         return PatchMesh(base, 0, base, np.arange(m, dtype=np.int64), np.ones(m, dtype=bool),
                          np.arange(m, dtype=np.int64), corners.reshape(m, 4),
                          CORNER_UV[corners % 4], topo.corner_edge.astype(np.int64))
-    child_fv, child_fo, S, _ = subdivision_operator(fv, fo, n)
-    work = PolyMesh(S @ base.vertices, child_fv, child_fo)
+    work, _ = subdivide(base)
     quad = sizes == 4
     face = topo.face_of_corner
     local = np.arange(len(fv)) - fo[face]

@@ -10,6 +10,7 @@ that is fitted is the one exported later; ``surface='control'`` uses the level-i
 control points ``S_i V0`` as in the paper's Eq. 10.
 """
 import time
+from dataclasses import replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -208,7 +209,7 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     info.update({"initial_" + k: v for k, v in initial.items()})
     info["seconds"] = time.perf_counter() - started
     info["measure_seconds"] = time.perf_counter() - measuring
-    return PolyMesh(vertices, base.face_vertices, base.face_offsets), info
+    return replace(base, vertices=vertices), info
 
 
 RETRY_STEP = 0.4

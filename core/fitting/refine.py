@@ -149,7 +149,8 @@ def split_quad_strips(cage, seeds):
     Returns
     -------
     PolyMesh, the new vertices (after the cage's) at the midpoints of the split edges, then
-    the centres of the faces cut in four or around their centre.
+    the centres of the faces cut in four or around their centre; both halves of
+    a split crease edge are crease edges.
     """
     sizes = cage.face_sizes
     offsets = cage.face_offsets
@@ -234,7 +235,14 @@ def _cut_faces(cage, topology, corner_cut):
     vertices = np.vstack([V] + new_points)
     face_vertices = np.concatenate(faces).astype(np.int64)
     face_offsets = np.concatenate([[0], np.cumsum([len(f) for f in faces])]).astype(np.int64)
-    return PolyMesh(vertices, face_vertices, face_offsets)
+    creases = None
+    if cage.n_creases:
+        pairs = np.asarray(cage.creases, dtype=np.int64)
+        crease_mid = midpoint[topology.edge_index(pairs[:, 0], pairs[:, 1])]
+        cut = crease_mid >= 0
+        creases = np.concatenate([pairs[~cut], np.stack([pairs[cut, 0], crease_mid[cut]], axis=1),
+                                  np.stack([crease_mid[cut], pairs[cut, 1]], axis=1)])
+    return PolyMesh(vertices, face_vertices, face_offsets, creases)
 
 
 def _seed_directions(cage, faces):

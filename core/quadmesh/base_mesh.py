@@ -237,7 +237,10 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         may be moved off it: :mod:`core.quadmesh.limit_interpolation`).
     info : dict (JSON-serialisable) with ``method`` ("polycube" or "paired decimation"),
         ``fallback_reason`` (None for the polycube layout), ``faces``, ``quads``,
-        ``triangles``, ``other``, ``vertices``, ``extraordinary_vertices``, ``min_valence``,
+        ``triangles``, ``other``, ``vertices``, ``crease_edges`` (edges tagged as sharp
+        creases, :mod:`core.quadmesh.creases`: the paired decimation's cage where every
+        smooth one crossed itself, else 0),
+        ``extraordinary_vertices``, ``min_valence``,
         ``max_valence``, ``genus``, ``target_faces``, ``within_budget``, ``minimum_reason``,
         ``inverted_faces`` and ``seconds``; the polycube layout adds ``scale``,
         ``solver_status``, ``scale_rounds``, ``charts``, ``sides``, ``corners``,
@@ -295,9 +298,11 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
 
 
 def _mesh_figures(mesh):
-    """Report figures every base mesh has: faces, vertices, valences and genus (a dict)."""
+    """Report figures every base mesh has: faces, vertices, valences, genus and crease edges
+    (a dict)."""
     valence = np.bincount(mesh.face_vertices, minlength=len(mesh.vertices))
     return {"faces": int(mesh.n_faces), "vertices": int(len(mesh.vertices)),
+            "crease_edges": int(mesh.n_creases),
             "extraordinary_vertices": int((valence != 4).sum()),
             "min_valence": int(valence.min()), "max_valence": int(valence.max()),
             "genus": polymesh_genus(mesh)}
@@ -331,8 +336,11 @@ def _paired_decimation_base_mesh(target_v, target_f, surface, target_faces, max_
             f"its limit surface crosses itself ({result.limit_crossings} triangle pairs at "
             f"subdivision level 2), as did those of all {len(result.rounds)} cages tried up to "
             f"{largest_tried} faces (more faces did not remove the crossings): no solid can be "
-            f"built of it (sharp creases, which Catmull-Clark subdivision rounds off, are the "
-            f"usual cause)")
+            f"built of it (" + (f"with {mesh.n_creases} of its edges tagged as sharp creases; "
+                                f"its faces are too coarse or ill-shaped for the part's small "
+                                f"steps and holes" if mesh.n_creases else
+                                "sharp creases, which Catmull-Clark subdivision rounds off, are "
+                                "the usual cause") + ")")
     info = {
         "method": "paired decimation", "fallback_reason": reason,
         **_mesh_figures(mesh), "quads": result.quads, "triangles": result.triangles,

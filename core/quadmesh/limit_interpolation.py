@@ -20,13 +20,14 @@ feature asks for large moves, so each step is cut to :data:`STEP_SHARE` and the 
 the cage kept is the one with the fewest inverted faces among those whose limit surface has
 no more self-crossings than the original (the original itself if none has fewer).
 """
+from dataclasses import replace
+
 import numpy as np
 
 from core.mesh_topology import next_corners
 from core.quadmesh.orientation import inverted_faces
 from core.subdivision.catmull_clark import subdivide
 from core.subdivision.limit import limit_matrices
-from core.types import PolyMesh
 
 STEPS = 8
 """Jacobi steps tried. On ``tray_bottom`` the inverted faces went 6, 4, 2, 3, 2, 0 (and the
@@ -93,7 +94,7 @@ def unshrink_inverted(mesh, surface, crossings, inverted, count_crossings):
         vertices[moving] += step[moving]
         move = vertices - anchors
         vertices = anchors + move * _cut(move, MOVE_SHARE * reach)
-        current = PolyMesh(vertices, mesh.face_vertices, mesh.face_offsets)
+        current = replace(mesh, vertices=vertices)
         flipped = inverted_faces(current, surface.vertices, surface.faces, surface)
         count = int(flipped.sum())
         if count < best[2]:

@@ -28,6 +28,8 @@ quads), then the split along each diagonal (while the triangles stay within
 faces without raising the self-crossings of its limit surface; the search then starts again
 on the edited cage, until no face is inverted or no edit helps.
 """
+from dataclasses import replace
+
 import numpy as np
 
 from core.errors import InvalidMeshError
@@ -91,12 +93,14 @@ def _candidates(mesh, faces, surface):
         for vertex in corners:
             vertices = mesh.vertices.copy()
             vertices[vertex] = surface.nearest(centres[vertex][None]).point[0]
-            yield from _valid(PolyMesh(vertices, mesh.face_vertices, mesh.face_offsets))
+            yield from _valid(replace(mesh, vertices=vertices))
         if len(corners) == 4 and can_split:
             for start in (0, 1):
                 a, b, c, d = np.roll(corners, -start).tolist()
                 split = face_list[:face] + [[a, b, c], [c, d, a]] + face_list[face + 1:]
-                yield from _valid(PolyMesh.from_faces(mesh.vertices, split))
+                # the diagonal is a new edge: every crease edge stays an edge
+                yield from _valid(replace(PolyMesh.from_faces(mesh.vertices, split),
+                                          creases=mesh.creases))
 
 
 def _valid(mesh):

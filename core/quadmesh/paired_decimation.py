@@ -28,6 +28,15 @@ genus and orientation:
    only). Where it still crosses itself or faces away (thin struts with too few faces around
    them), larger budgets within the allowed range are tried; where they all cross themselves,
    budgets beyond it (a solid needs a surface that does not), until more faces stop helping.
+4. Where every budget's limit surface crosses itself (machined parts whose sharp steps the
+   smooth limit rounds over a face's length), the ladder runs again with sharp creases: the
+   edges of the decimation on the target's sharp feature lines (:mod:`core.quadmesh.creases`)
+   are never paired across, stay cage edges and are tagged as creases (``PolyMesh.creases``),
+   and the cage with fewer crossings of the two ladders is kept. Only there: on
+   ``tray_bottom`` (a thin plate with holes, clean without tags at 292 faces) every creased
+   cage within the budget rule crosses itself (49 pairs at best) and the first clean one has
+   879 faces, so tagging is not the default; the cages of every mesh whose smooth ladder ends
+   clean stay bit-identical.
 """
 from dataclasses import dataclass, replace
 
@@ -35,6 +44,7 @@ import numpy as np
 
 from core.errors import InvalidMeshError
 from core.mesh_topology import edge_faces
+from core.quadmesh.creases import closed_network, crease_edges
 from core.quadmesh.crossing_count import LimitCrossingCount
 from core.quadmesh.decimation import Decimation
 from core.quadmesh.even_triangulation import even_triangulation
@@ -42,6 +52,7 @@ from core.quadmesh.limit_interpolation import unshrink_inverted
 from core.quadmesh.local_repair import repair_inverted
 from core.quadmesh.orientation import inverted_faces
 from core.polymesh_checks import check_polymesh
+from core.subdivision.catmull_clark import mesh_topology
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
@@ -80,7 +91,8 @@ class PairedDecimation:
     quads, triangles : int, faces of each kind in ``mesh``.
     rounds : tuple of dicts, one per budget tried (``faces``, ``limit_crossings``,
         ``inverted_faces``, ``moved_vertices``: after the moves, ``edits``: local edits kept,
-        :mod:`core.quadmesh.local_repair`); empty when only one budget was asked for.
+        :mod:`core.quadmesh.local_repair`; ``crease_edges`` in the rounds of the creased
+        ladder); empty when only one budget was asked for.
     limit_crossings : int or None, self-crossing triangle pairs of the level-2 limit surface
         of ``mesh`` (None when only one budget was asked for: not counted).
     """
@@ -206,6 +218,8 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     ``target_faces`` (at most ``over_budget_faces``) are tried too, and the first whose limit
     surface does not cross itself is kept: a solid needs it, the face budget does not. They
     stop after :data:`OVER_BUDGET_MISSES` in a row that are not less flawed than all before.
+    When the cage kept still crosses itself, the whole ladder runs again with crease tags
+    (module docstring, step 4), and its cage is kept if it crosses itself less.
 
     Parameters
     ----------
@@ -232,12 +246,27 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     target_faces = int(target_faces)
     max_faces = int(max_faces or target_faces)
     decimation = Decimation(vertices, faces, coarse_triangles=2 * max(max_faces, target_faces))
-    budgets = _ladder(target_faces, max_faces)
-    if len(budgets) == 1 and not over_budget_faces:
+    if len(_ladder(target_faces, max_faces)) == 1 and not over_budget_faces:
         return _paired_mesh(decimation, 2 * target_faces, surface)
-    rounds, best = [], None
-    for budget in budgets:
-        result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
+    rounds = []
+    best = _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces,
+                          rounds)
+    if best[2] and over_budget_faces:
+        creased = _budget_ladder(decimation, surface, target_faces, max_faces,
+                                 over_budget_faces, rounds, creases=True)
+        if creased[2] < best[2]:
+            best = creased
+    return replace(best[1], rounds=tuple(rounds), limit_crossings=int(best[2]))
+
+
+def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces, rounds,
+                   creases=False):
+    """The budget ladder of :func:`paired_decimation_base_mesh` with or without crease tags;
+    appends its rounds and returns ``(flaws, PairedDecimation, crossings)`` of the cage
+    kept."""
+    best = None
+    for budget in _ladder(target_faces, max_faces):
+        result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds, creases)
         if best is None or crossings + inverted < best[0]:
             best = (crossings + inverted, result, crossings)
         if crossings + inverted == 0:
@@ -245,23 +274,24 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     if best[2] and over_budget_faces:
         fewest, misses = best[0], 0
         for budget in _over_budgets(target_faces, max_faces, int(over_budget_faces)):
-            result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
+            result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds,
+                                                       creases)
             if not crossings:
-                best = (None, result, 0)
-                break
+                return (crossings + inverted, result, 0)
             misses = 0 if crossings + inverted < fewest else misses + 1
             fewest = min(fewest, crossings + inverted)
             if misses == OVER_BUDGET_MISSES:
                 break
-    return replace(best[1], rounds=tuple(rounds), limit_crossings=int(best[2]))
+    return best
 
 
-def _flawed_mesh(decimation, budget, surface, rounds):
-    """The paired mesh of one budget, its inverted faces unshrunk
-    (:func:`core.quadmesh.limit_interpolation.unshrink_inverted`), those left edited where its
-    limit surface does not cross itself (:func:`core.quadmesh.local_repair.repair_inverted`),
-    and its :func:`limit_flaws`; appends its round."""
-    result = _paired_mesh(decimation, 2 * budget, surface)
+def _flawed_mesh(decimation, budget, surface, rounds, creases=False):
+    """The paired mesh of one budget (with crease tags if ``creases``), its inverted faces
+    unshrunk (:func:`core.quadmesh.limit_interpolation.unshrink_inverted`), those left edited
+    where its limit surface does not cross itself
+    (:func:`core.quadmesh.local_repair.repair_inverted`), and its :func:`limit_flaws`; appends
+    its round (with ``crease_edges`` when tagged)."""
+    result = _paired_mesh(decimation, 2 * budget, surface, creases)
     count_crossings = LimitCrossingCount(result.mesh)
     crossings = count_crossings.crossings
     inverted = int(inverted_faces(result.mesh, surface.vertices, surface.faces, surface).sum())
@@ -278,7 +308,8 @@ def _flawed_mesh(decimation, budget, surface, rounds):
     result = replace(result, mesh=mesh, quads=int((sizes == 4).sum()),
                      triangles=int((sizes == 3).sum()))
     rounds.append({"faces": int(result.mesh.n_faces), "limit_crossings": crossings,
-                   "inverted_faces": inverted, "moved_vertices": moved, "edits": edits})
+                   "inverted_faces": inverted, "moved_vertices": moved, "edits": edits,
+                   **({"crease_edges": int(mesh.n_creases)} if creases else {})})
     return result, crossings, inverted
 
 
@@ -314,10 +345,22 @@ def limit_flaws(mesh, surface):
             int(inverted_faces(mesh, surface.vertices, surface.faces, surface).sum()))
 
 
-def _paired_mesh(decimation, count, surface):
-    """Decimate to ``count`` triangles, even out, pair, merge and project (module docstring)."""
+def _paired_mesh(decimation, count, surface, tag_creases=False):
+    """Decimate to ``count`` triangles, even out, pair, merge and project (module docstring);
+    with ``tag_creases``, the edges on the target's sharp feature lines become crease edges
+    and are never paired across."""
     decimated_v, decimated_f = even_triangulation(*decimation.triangles(count), surface)
     pairs, quads, weight = _candidate_quads(decimated_v, decimated_f)
+    creases = None
+    if tag_creases:
+        creases = crease_edges(PolyMesh(decimated_v, decimated_f.reshape(-1),
+                                        np.arange(0, decimated_f.size + 1, 3, dtype=np.int64)),
+                               surface)
+    if creases is not None:
+        # a quad bent over a crease would hide it inside the quad: never pair across one
+        across = _pair_keys(quads[:, 1], quads[:, 3], len(decimated_v))
+        allowed = ~np.isin(across, _pair_keys(creases[:, 0], creases[:, 1], len(decimated_v)))
+        pairs, quads, weight = pairs[allowed], quads[allowed], weight[allowed]
     chosen = _match_pairs(len(decimated_f), pairs, weight)
     paired = np.zeros(len(decimated_f), dtype=bool)
     paired[pairs[chosen].reshape(-1)] = True
@@ -327,18 +370,34 @@ def _paired_mesh(decimation, count, surface):
     renumber = np.full(len(decimated_v), -1, dtype=np.int64)
     renumber[used] = np.arange(len(used))
     mesh = PolyMesh.from_faces(decimated_v[used], [renumber[f] for f in face_list])
+    if creases is not None:
+        mesh = replace(mesh, creases=_kept_creases(mesh, renumber[creases]))
     mesh = _projected_on_target(mesh, surface)
     sizes = mesh.face_sizes
     return PairedDecimation(mesh, int(len(decimated_f)), int((sizes == 4).sum()),
                             int((sizes == 3).sum()))
 
 
+def _pair_keys(a, b, n):
+    """(p,) int64 key of the unordered vertex pairs ``(a, b)`` of a mesh of ``n`` vertices."""
+    return np.minimum(a, b) * n + np.maximum(a, b)
+
+
+def _kept_creases(mesh, creases):
+    """The crease pairs ((c, 2) int64, -1 for removed vertices) still edges of ``mesh``
+    (merging vertices of two faces removes a few), as a closed network
+    (:func:`core.quadmesh.creases.closed_network`), or None."""
+    topo = mesh_topology(mesh.face_vertices, mesh.face_offsets, len(mesh.vertices))
+    kept = creases[(creases >= 0).all(axis=1)]
+    return closed_network(kept[topo.edge_index(kept[:, 0], kept[:, 1]) >= 0],
+                          len(mesh.vertices))
+
+
 def _projected_on_target(mesh, surface):
     """``mesh`` with its vertices moved to their closest points on the target ``surface``
     (QSlim places them off it by up to its quadric error); unchanged if that degenerates a
     face."""
-    projected = PolyMesh(surface.nearest(mesh.vertices).point,
-                         mesh.face_vertices, mesh.face_offsets)
+    projected = replace(mesh, vertices=surface.nearest(mesh.vertices).point)
     try:
         check_polymesh(projected)
     except InvalidMeshError:

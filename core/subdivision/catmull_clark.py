@@ -2,13 +2,25 @@
 """Catmull-Clark subdivision of closed polygon meshes as sparse matrices.
 
 The rules are the ones OpenSubdiv's Catmull-Clark scheme applies to a closed mesh
-without creases (the default "Catmark" triangle rule, so triangles and n-gons get
-no special weights):
+(the default "Catmark" triangle rule, so triangles and n-gons get no special weights):
 
 * face point: average of the face's corners;
 * edge point: ``(v0 + v1 + f0 + f1) / 4`` with ``f0, f1`` the adjacent face points;
 * vertex point of a valence-``n`` vertex: ``(Q + 2 R + (n - 3) S) / n``, i.e.
   ``(n - 2) / n * S + 1 / n**2 * (sum of neighbours + sum of adjacent face points)``.
+
+Edges may be tagged as infinitely sharp creases (``PolyMesh.creases``; Hoppe et al. 1994,
+DeRose, Kass & Truong 1998, OpenSubdiv's rules for sharpness infinity):
+
+* edge point of a crease edge: its midpoint;
+* vertex with exactly two crease edges (crease vertex): ``(e0 + 6 v + e1) / 8``, ``e0, e1``
+  its neighbours along the creases (the cubic B-spline curve rule);
+* vertex with three or more crease edges (corner): stays put;
+* vertex with one crease edge (dart): the smooth rule.
+
+Both halves of a crease edge are crease edges of the refined mesh, so a crease's limit is
+the uniform cubic B-spline curve of its crease polygon. Without creases the matrices are
+bit-identical to those of the smooth rules alone.
 
 Child vertex numbering: vertex points first (so a base vertex keeps its index at
 every level), then one face point per face, then one edge point per edge.
@@ -111,7 +123,62 @@ def _face_point_matrix(fv, fo, face_of_corner, n):
                          shape=(len(sizes), n))
 
 
-def subdivision_operator(face_vertices, face_offsets, n_vertices, allow_open=False):
+def crease_edge_mask(topology, creases):
+    """(e,) bool: which edges of ``topology`` are crease edges.
+
+    Parameters
+    ----------
+    topology : Topology of the mesh.
+    creases : None or (c, 2) int vertex pairs (``PolyMesh.creases``).
+
+    Raises
+    ------
+    InvalidMeshError (``crease_not_edge``) when a pair is not an edge of the mesh.
+    """
+    mask = np.zeros(len(topology.edges), dtype=bool)
+    if creases is None or len(creases) == 0:
+        return mask
+    pairs = np.asarray(creases, dtype=np.int64).reshape(-1, 2)
+    index = topology.edge_index(pairs[:, 0], pairs[:, 1])
+    missing = np.flatnonzero(index < 0)
+    if len(missing):
+        raise InvalidMeshError(
+            f"{len(missing)} crease pairs are not edges of the mesh, e.g. "
+            f"{pairs[missing[:5]].tolist()}", reason="crease_not_edge", count=len(missing),
+            examples=pairs[missing[:5]].tolist())
+    mask[index] = True
+    return mask
+
+
+def vertex_crease_counts(topology, crease, n_vertices):
+    """(n,) int64 number of crease edges at every vertex (``crease``: (e,) bool edge mask)."""
+    return np.bincount(topology.edges[crease].reshape(-1), minlength=n_vertices).astype(np.int64)
+
+
+def child_creases(topology, crease, n_vertices, n_faces):
+    """Crease pairs of the refined mesh of :func:`subdivision_operator`.
+
+    Parameters
+    ----------
+    topology : Topology of the parent mesh; crease : (e,) bool crease edges of it.
+    n_vertices, n_faces : int, vertices and faces of the parent mesh.
+
+    Returns
+    -------
+    None when there are no crease edges, else (2 c, 2) int64: both halves
+    ``(v, edge point)`` of every crease edge, in the child's vertex numbering.
+    """
+    index = np.flatnonzero(crease)
+    if not len(index):
+        return None
+    mid = n_vertices + n_faces + index
+    ends = topology.edges[index]
+    return np.concatenate([np.stack([ends[:, 0], mid], axis=1),
+                           np.stack([ends[:, 1], mid], axis=1)])
+
+
+def subdivision_operator(face_vertices, face_offsets, n_vertices, allow_open=False,
+                         creases=None):
     """One Catmull-Clark step on raw arrays.
 
     Parameters
@@ -124,6 +191,8 @@ def subdivision_operator(face_vertices, face_offsets, n_vertices, allow_open=Fal
         boundary edges get their midpoint and boundary vertices stay put; those
         rows are not Catmull-Clark (used only for local templates that are
         cropped away from their boundary).
+    creases : None or (c, 2) int vertex pairs of crease edges (module docstring);
+        :func:`child_creases` gives the refined mesh's.
 
     Returns
     -------
@@ -147,8 +216,9 @@ def subdivision_operator(face_vertices, face_offsets, n_vertices, allow_open=Fal
             count=len(bad), examples=topo.edges[bad[:5]].tolist())
     n_edges = len(topo.edges)
     face_pts = _face_point_matrix(fv, fo, topo.face_of_corner, n)
+    crease = crease_edge_mask(topo, creases)
 
-    interior_edge = count == 2
+    interior_edge = (count == 2) & ~crease
     end_w = np.where(interior_edge, 0.25, 0.5)
     edge_ends = sp.csr_matrix(
         (np.repeat(end_w, 2), (np.repeat(np.arange(n_edges), 2), topo.edges.reshape(-1))),
@@ -160,19 +230,27 @@ def subdivision_operator(face_vertices, face_offsets, n_vertices, allow_open=Fal
 
     valence = np.bincount(fv, minlength=n).astype(np.float64)
     on_boundary = np.zeros(n, dtype=bool)
-    on_boundary[topo.edges[~interior_edge].reshape(-1)] = True
+    on_boundary[topo.edges[count != 2].reshape(-1)] = True
+    n_crease = vertex_crease_counts(topo, crease, n)
+    corner = on_boundary | (n_crease >= 3)
+    crease_vertex = ~corner & (n_crease == 2)
     safe_val = np.maximum(valence, 1.0)
     inv_n2 = 1.0 / safe_val ** 2
-    inv_n2[on_boundary] = 0.0
-    self_w = np.where(on_boundary | (valence == 0), 1.0, (safe_val - 2.0) / safe_val)
+    inv_n2[corner | crease_vertex] = 0.0
+    self_w = np.where(corner | (valence == 0), 1.0,
+                      np.where(crease_vertex, 0.75, (safe_val - 2.0) / safe_val))
     nb_rows = topo.edges.reshape(-1)
     nb_cols = topo.edges[:, ::-1].reshape(-1)
-    neighbours = sp.csr_matrix((inv_n2[nb_rows], (nb_rows, nb_cols)), shape=(n, n))
+    nb_w = np.where(crease_vertex[nb_rows], np.where(np.repeat(crease, 2), 0.125, 0.0),
+                    inv_n2[nb_rows])
+    neighbours = sp.csr_matrix((nb_w, (nb_rows, nb_cols)), shape=(n, n))
     vert_faces = sp.csr_matrix((inv_n2[fv], (fv, topo.face_of_corner)), shape=(n, m))
     vert_pts = (sp.diags(self_w) + neighbours + vert_faces @ face_pts).tocsr()
 
     S = sp.vstack([vert_pts, face_pts, edge_pts], format="csr")
     S.sum_duplicates()
+    if crease.any():
+        S.eliminate_zeros()
 
     c = np.arange(len(fv), dtype=np.int64)
     child = np.stack([
@@ -194,17 +272,21 @@ def subdivide(mesh):
 
     Returns
     -------
-    refined : PolyMesh, all quads (one per corner of ``mesh``), vertices ``S @ V``.
+    refined : PolyMesh, all quads (one per corner of ``mesh``), vertices ``S @ V``, the
+        halves of ``mesh``'s crease edges as its creases.
     S : (n_fine, n_coarse) scipy.sparse.csr_matrix float64, every row sums to 1.
 
     Raises
     ------
     InvalidMeshError
-        ``open`` / ``non_manifold`` if an edge does not have exactly two faces.
+        ``open`` / ``non_manifold`` if an edge does not have exactly two faces,
+        ``crease_not_edge`` if a crease pair is not an edge.
     """
-    fv, fo, S, _ = subdivision_operator(mesh.face_vertices, mesh.face_offsets,
-                                        len(mesh.vertices))
-    return PolyMesh(S @ np.asarray(mesh.vertices, dtype=np.float64), fv, fo), S
+    n = len(mesh.vertices)
+    fv, fo, S, topo = subdivision_operator(mesh.face_vertices, mesh.face_offsets, n,
+                                           creases=mesh.creases)
+    creases = child_creases(topo, crease_edge_mask(topo, mesh.creases), n, mesh.n_faces)
+    return PolyMesh(S @ np.asarray(mesh.vertices, dtype=np.float64), fv, fo, creases), S
 
 
 @dataclass
@@ -251,7 +333,8 @@ def build_hierarchy(mesh, levels):
 
     Parameters
     ----------
-    mesh : PolyMesh, closed 2-manifold.
+    mesh : PolyMesh, closed 2-manifold; its ``creases`` are subdivided with the crease rules
+        and carried to every level.
     levels : int >= 0
 
     Returns

@@ -14,7 +14,8 @@ import scipy.sparse as sp
 
 from core.errors import InternalError, InvalidMeshError, ParameterError
 from core.geometry import polymesh_volume
-from core.subdivision.catmull_clark import build_hierarchy, mesh_topology, subdivision_operator
+from core.subdivision.catmull_clark import (build_hierarchy, crease_edge_mask, mesh_topology,
+                                            subdivision_operator, vertex_crease_counts)
 
 TEMPLATE_RADIUS = 3
 
@@ -85,16 +86,18 @@ def limit_matrices(quad_mesh):
 
     Parameters
     ----------
-    quad_mesh : PolyMesh, closed 2-manifold, all faces quads.
+    quad_mesh : PolyMesh, closed 2-manifold, all faces quads; its ``creases`` get the crease
+        masks (:func:`_crease_limit_rows`).
 
     Returns
     -------
     L : (n, n) csr_matrix, ``L @ V`` are the limit positions (rows sum to 1).
     Tu, Tv : (n, n) csr_matrix, ``Tu @ V`` and ``Tv @ V`` are two limit tangents
         (rows sum to 0); ``cross(Tu @ V, Tv @ V)`` points outward. At a valence-4
-        vertex they are the derivatives of the limit surface with respect to the
-        mesh's grid parameter (one edge = one unit) along the vertex's spoke 0 and
-        spoke 1; at other valences only their directions and the normal matter.
+        vertex without crease edges they are the derivatives of the limit surface with
+        respect to the mesh's grid parameter (one edge = one unit) along the vertex's spoke
+        0 and spoke 1; at other valences only their directions and the normal matter; at
+        crease vertices and corners they span one side's tangent plane.
 
     Raises
     ------
@@ -126,7 +129,120 @@ def limit_matrices(quad_mesh):
                         (rc, cc)), shape=(n, n))
     Tv = sp.csr_matrix((np.concatenate([a_n * np.sin(ang), np.sin(ang) + np.sin(ang1)]) / 12.0,
                         (rc, cc)), shape=(n, n))
+    crease = crease_edge_mask(topo, quad_mesh.creases)
+    if crease.any():
+        L, Tu, Tv = _crease_limit_rows(quad_mesh, topo, spoke, crease, L, Tu, Tv)
     return L, Tu, Tv
+
+
+def _crease_limit_rows(quad_mesh, topo, spoke, crease, L, Tu, Tv):
+    """``L, Tu, Tv`` with the rows of crease vertices and corners replaced.
+
+    A vertex with two crease edges has the limit ``(e0 + 4 v + e1) / 6`` of the cubic
+    B-spline crease curve; a corner (three or more) its own position; a dart (one) the
+    limit mask of :func:`dart_limit_mask` (its crease edge's midpoint rule makes the smooth
+    mask wrong by up to ~0.3% of a cage's size) and the smooth tangent masks (directions
+    only). The limit surface has one tangent plane per side at crease vertices and corners; the tangents given are those of the side after the first crease spoke
+    (counter-clockwise): ``Tu`` along that crease edge (``e - v``), ``Tv`` towards the mean of
+    the far corners of that side's faces, so ``cross(Tu, Tv)`` is the outward normal of
+    that side where it is planar (a direction only, not a derivative).
+    """
+    fv = quad_mesh.face_vertices
+    n = len(quad_mesh.vertices)
+    n_crease = vertex_crease_counts(topo, crease, n)
+    sharp = n_crease >= 2
+    rows_e = topo.edges[crease].reshape(-1)
+    cols_e = topo.edges[crease][:, ::-1].reshape(-1)
+    on_curve = n_crease[rows_e] == 2
+    curve = sp.csr_matrix((np.full(on_curve.sum(), 1.0 / 6.0), (rows_e[on_curve], cols_e[on_curve])),
+                          shape=(n, n))
+    self_w = np.where(n_crease == 2, 4.0 / 6.0, 1.0)
+    keep = sp.diags((~sharp).astype(np.float64))
+    L_sharp = sp.diags(np.where(sharp, self_w, 0.0)) + curve
+    dart = n_crease == 1
+    keep_l = sp.diags((~sharp & ~dart).astype(np.float64))
+    L = (keep_l @ L + L_sharp + _dart_rows(quad_mesh, topo, spoke, crease, dart)).tocsr()
+    L.eliminate_zeros()
+    # one side: the faces from the first crease spoke to the next one
+    corner_crease = crease[topo.corner_edge]
+    big = np.iinfo(np.int64).max
+    first = np.full(n, big, dtype=np.int64)
+    np.minimum.at(first, fv[corner_crease], spoke[corner_crease])
+    later = corner_crease & (spoke > first[fv])
+    second = np.full(n, big, dtype=np.int64)
+    np.minimum.at(second, fv[later], spoke[later])
+    corners = np.flatnonzero(sharp[fv])
+    v = fv[corners]
+    along = corners[spoke[corners] == first[v]]
+    side = corners[(spoke[corners] >= first[v]) & (spoke[corners] < second[v])]
+    side_size = np.bincount(fv[side], minlength=n).astype(np.float64)
+    sharp_ids = np.flatnonzero(sharp)
+    minus = sp.csr_matrix((np.full(len(sharp_ids), -1.0), (sharp_ids, sharp_ids)), shape=(n, n))
+    Tu_sharp = minus + sp.csr_matrix((np.ones(len(along)), (fv[along], fv[topo.next_corner[along]])),
+                                     shape=(n, n))
+    diag = fv[topo.next_corner[topo.next_corner[side]]]
+    Tv_sharp = minus + sp.csr_matrix((1.0 / side_size[fv[side]], (fv[side], diag)), shape=(n, n))
+    Tu = (keep @ Tu + Tu_sharp).tocsr()
+    Tv = (keep @ Tv + Tv_sharp).tocsr()
+    Tu.eliminate_zeros()
+    Tv.eliminate_zeros()
+    return L, Tu, Tv
+
+
+def _dart_rows(quad_mesh, topo, spoke, crease, dart):
+    """(n, n) csr rows of :func:`dart_limit_mask` at the ``dart`` vertices ((n,) bool)."""
+    fv = quad_mesh.face_vertices
+    n = len(quad_mesh.vertices)
+    valence = np.bincount(fv, minlength=n)
+    corners = np.flatnonzero(dart[fv])
+    v = fv[corners]
+    crease_spoke = np.zeros(n, dtype=np.int64)
+    along = corners[crease[topo.corner_edge[corners]]]
+    crease_spoke[fv[along]] = spoke[along]
+    k = np.mod(spoke[corners] - crease_spoke[v], valence[v])
+    darts = np.flatnonzero(dart)
+    top = int(valence.max())
+    table = np.zeros((top + 1, 2 * top + 1))
+    for m in np.unique(valence[darts]).tolist():
+        table[m, :2 * m + 1] = dart_limit_mask(m)
+    rows = np.concatenate([darts, v, v])
+    cols = np.concatenate([darts, fv[topo.next_corner[corners]],
+                           fv[topo.next_corner[topo.next_corner[corners]]]])
+    vals = np.concatenate([table[valence[darts], 0], table[valence[v], 1 + k],
+                           table[valence[v], 1 + valence[v] + k]])
+    return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+
+
+_DART_MASKS = {}
+
+
+def dart_limit_mask(n):
+    """Limit mask of a valence-``n`` dart (a vertex with one crease edge) of a quad mesh.
+
+    The dart's one-ring (the vertex, its ``n`` spoke ends, the ``n`` far corners of its
+    quads) maps to the next level's one-ring by a (2 n + 1, 2 n + 1) matrix of the crease
+    rules (its crease edge's point is the midpoint); the limit mask is its left eigenvector
+    of eigenvalue 1, summing to 1.
+
+    Returns
+    -------
+    (2 n + 1,) float64 weights of the vertex, the spoke ends (spoke 0 is the crease) and
+    the far corners (corner ``s`` between spokes ``s`` and ``s + 1``), counter-clockwise.
+    """
+    if n not in _DART_MASKS:
+        s = np.arange(n)
+        quads = np.stack([np.zeros(n, dtype=np.int64), 1 + s, 1 + n + s, 1 + (s + 1) % n],
+                         axis=1)
+        _, _, S, topo = subdivision_operator(quads.reshape(-1), np.arange(0, 4 * n + 1, 4),
+                                             2 * n + 1, allow_open=True,
+                                             creases=np.array([[0, 1]]))
+        spoke_edges = topo.edge_index(np.zeros(n, dtype=np.int64), 1 + s)
+        ring = np.concatenate([[0], 2 * n + 1 + n + spoke_edges, 2 * n + 1 + s])
+        M = S[ring].toarray()
+        values, vectors = np.linalg.eig(M.T)
+        mask = np.real(vectors[:, np.argmin(np.abs(values - 1.0))])
+        _DART_MASKS[n] = mask / mask.sum()
+    return _DART_MASKS[n]
 
 
 def limit_normals(quad_mesh):
@@ -181,15 +297,17 @@ def _template_grid(n, r=TEMPLATE_RADIUS):
 _TEMPLATE_CACHE = {}
 
 
-def template_matrix(n, r=TEMPLATE_RADIUS):
+def template_matrix(n, r=TEMPLATE_RADIUS, crease_spokes=0):
     """(K, K) dense subdivision matrix of the radius-``r`` neighbourhood of a valence-``n`` EV.
 
     The neighbourhood is ``n`` sectors of ``r x r`` quads around the EV (what every
     EV looks like after two subdivision steps); row order is :func:`_template_id`.
     Row ``i`` gives template point ``i`` one level finer, in the same sector
     coordinates, as exact Catmull-Clark combinations (valid for ``r >= 3``).
+    ``crease_spokes`` : int, bit ``s`` set when spoke ``s`` (the edges from the centre
+    along sector ``s``'s first axis) is a crease; the crease rules apply along it.
     """
-    key = (n, r)
+    key = (n, r, int(crease_spokes))
     if key in _TEMPLATE_CACHE:
         return _TEMPLATE_CACHE[key]
     K = 1 + n * r * (r + 1)
@@ -199,8 +317,13 @@ def template_matrix(n, r=TEMPLATE_RADIUS):
                       _template_id(n, s, i + 1, j + 1, r), _template_id(n, s, i, j + 1, r)],
                      axis=1)
     n_faces = len(quads)
+    creased = np.flatnonzero((int(crease_spokes) >> np.arange(n)) & 1)
+    cs, ca = np.repeat(creased, r), np.tile(np.arange(r), len(creased))
+    creases = np.stack([_template_id(n, cs, ca, np.zeros_like(ca), r),
+                        _template_id(n, cs, ca + 1, np.zeros_like(ca), r)], axis=1)
     _, _, S, topo = subdivision_operator(quads.reshape(-1),
-                                         np.arange(0, 4 * n_faces + 1, 4), K, allow_open=True)
+                                         np.arange(0, 4 * n_faces + 1, 4), K, allow_open=True,
+                                         creases=creases if len(creases) else None)
     fs, fa, fb = _template_grid(n, r)
     fs = np.concatenate([[0], fs])
     fa = np.concatenate([[0], fa])
@@ -230,6 +353,18 @@ class LimitEvaluator:
     -----
     The mesh is subdivided twice internally so that every EV is at least four edges
     from any other and every sub-quad has at most one EV corner.
+
+    Crease edges (``quad_mesh.creases``) are evaluated exactly too. A work quad is
+    *regular* when each corner is, for it: a valence-4 vertex without crease edges, a
+    valence-4 vertex on a straight crease (two opposite crease edges, one of them a side of
+    the quad), or a corner (three or more crease edges) whose two edges along the quad are
+    creases. Its limit is then the bicubic B-spline of its 4 x 4 stencil with the points
+    beyond each creased side replaced by the phantom points ``2 * crease - interior`` (as
+    OpenSubdiv's boundary patches: the crease rules on one side of the crease equal the
+    smooth rules on that reflected net). Any other corner (valence not 4, darts, crease
+    vertices and corners with more faces on the quad's side) is treated as an EV: local
+    subdivision templates with the crease rules along the creased spokes, and phantom points
+    in the sub-quads next to a creased spoke.
     """
 
     WORK_LEVELS = 2
@@ -245,22 +380,44 @@ class LimitEvaluator:
         L, _, _ = limit_matrices(work)
         self.work_limit = L @ work.vertices
         fv = work.face_vertices
-        corner_valence = self.valence[fv].reshape(-1, 4)
-        irregular = corner_valence != 4
+        crease = crease_edge_mask(topo, work.creases)
+        self.crease_sides = crease[topo.corner_edge].reshape(-1, 4)
+        self.crease_spokes = np.zeros(len(work.vertices), dtype=np.int64)
+        on = np.flatnonzero(crease[topo.corner_edge])
+        np.add.at(self.crease_spokes, fv[on], np.left_shift(1, self.spoke[on]))
+        irregular = ~self._regular_corners(crease).reshape(-1, 4)
         if (irregular.sum(axis=1) > 1).any():
             raise InternalError("a work quad has more than one extraordinary corner after "
                                 f"{self.WORK_LEVELS} subdivisions")
         self.ev_corner = np.where(irregular.any(axis=1), irregular.argmax(axis=1), -1)
         self.stencils = self._regular_stencils()
-        self.ev_vertices = np.flatnonzero(self.valence != 4)
+        self.ev_vertices = np.unique(fv[irregular.reshape(-1)])
         self._ev_slot = np.full(len(work.vertices), -1, dtype=np.int64)
         self._ev_levels = {}
-        self._ev_groups = {}
-        for n in np.unique(self.valence[self.ev_vertices]):
-            evs = self.ev_vertices[self.valence[self.ev_vertices] == n]
+        keys, kind = self._ev_kinds(self.ev_vertices)
+        for index, key in enumerate(keys):
+            evs = self.ev_vertices[kind == index]
             self._ev_slot[evs] = np.arange(len(evs))
-            self._ev_groups[int(n)] = evs
-            self._ev_levels[int(n)] = [self._gather_templates(evs, int(n))]
+            self._ev_levels[key] = [self._gather_templates(evs, key[0])]
+
+    def _ev_kinds(self, vertices):
+        """Template kinds of ``vertices`` ((p,) int64): the sorted distinct ``(valence, crease
+        spoke bits)`` tuples, and the index of each vertex's among them ((p,) int64)."""
+        pairs = np.stack([self.valence[vertices], self.crease_spokes[vertices]], axis=1)
+        distinct, kind = np.unique(pairs.reshape(-1, 2), axis=0, return_inverse=True)
+        return [tuple(int(x) for x in row) for row in distinct], kind.reshape(-1)
+
+    def _regular_corners(self, crease):
+        """(k,) bool: the vertex of every work corner is regular for the corner's quad (class
+        notes)."""
+        fv, topo = self.work.face_vertices, self.topo
+        n_crease = vertex_crease_counts(topo, crease, len(self.work.vertices))[fv]
+        valence = self.valence[fv]
+        bits = self.crease_spokes[fv]
+        smooth = (n_crease == 0) & (valence == 4)
+        straight = (n_crease == 2) & (valence == 4) & ((bits == 0b0101) | (bits == 0b1010))
+        both_sides = crease[topo.corner_edge] & crease[topo.corner_edge[topo.prev_corner]]
+        return smooth | straight | ((n_crease >= 3) & both_sides)
 
     # -- topology walks on the work mesh (corner = half-edge leaving it) --
     def _move(self, g, direction):
@@ -339,10 +496,10 @@ class LimitEvaluator:
                            np.broadcast_to(j + dj, shape).reshape(-1))
         return ids.reshape(n, 2, 2, 16)
 
-    def _ev_level(self, n, m):
-        levels = self._ev_levels[n]
+    def _ev_level(self, key, m):
+        levels = self._ev_levels[key]
         if m >= len(levels):
-            A = template_matrix(n)
+            A = template_matrix(key[0], crease_spokes=key[1])
             while len(levels) <= m:
                 levels.append(np.einsum("ij,ejk->eik", A, levels[-1]))
         return levels[m]
@@ -371,9 +528,13 @@ class LimitEvaluator:
         out = np.empty((len(face), 3))
         evc = self.ev_corner[face]
         reg = evc < 0
-        if reg.any():
-            out[reg] = self._eval_regular(self.stencils[face[reg]], u[reg], v[reg],
-                                          self.work.vertices)
+        plain = reg & ~self.crease_sides[face].any(axis=1)
+        if plain.any():
+            out[plain] = self._eval_regular(self.stencils[face[plain]], u[plain], v[plain],
+                                            self.work.vertices)
+        sharp = reg & ~plain
+        if sharp.any():
+            out[sharp] = self._eval_crease_regular(face[sharp], u[sharp], v[sharp])
         if (~reg).any():
             idx = np.flatnonzero(~reg)
             c = evc[idx]
@@ -388,6 +549,14 @@ class LimitEvaluator:
         w = (bspline_weights(u)[:, :, None] * bspline_weights(v)[:, None, :]).reshape(-1, 16)
         st = stencil.reshape(-1, 16)
         return np.stack([np.einsum("pi,pi->p", w, X[st, k]) for k in range(3)], axis=1)
+
+    def _eval_crease_regular(self, face, u, v):
+        """(p, 3) limit points of regular quads with creased sides (phantom nets)."""
+        P = self.work.vertices[self.stencils[face]]
+        side = self.crease_sides[face]
+        _reflect(P, side[:, 0], side[:, 2], side[:, 3], side[:, 1])
+        w = bspline_weights(u)[:, :, None] * bspline_weights(v)[:, None, :]
+        return np.einsum("pij,pijk->pk", w, P)
 
     def _eval_near_ev(self, ev, sector, a, b):
         out = np.empty((len(ev), 3))
@@ -405,19 +574,46 @@ class LimitEvaluator:
         j = np.minimum(np.floor(B), 1).astype(np.int64)
         wa = bspline_weights(A - i)
         wb = bspline_weights(B - j)
-        nval = self.valence[ev]
+        keys, kind = self._ev_kinds(ev)
         res = np.empty((len(rest), 3))
         w = (wa[:, :, None] * wb[:, None, :]).reshape(-1, 16)
-        for n in np.unique(nval):
-            table = self._stencil_table(int(n))
-            for lev in np.unique(m[nval == n]):
-                sel = np.flatnonzero((nval == n) & (m == lev))
-                C = self._ev_level(int(n), int(lev))
+        for index, key in enumerate(keys):
+            n, bits = key
+            of_key = kind == index
+            table = self._stencil_table(n)
+            for lev in np.unique(m[of_key]):
+                sel = np.flatnonzero(of_key & (m == lev))
+                C = self._ev_level(key, int(lev))
                 tid = table[sector[sel], i[sel], j[sel]]
                 pts = C[self._ev_slot[ev[sel]][:, None], tid]
+                if bits:
+                    # sub-quads next to a creased spoke: phantom points beyond it
+                    pts = pts.reshape(-1, 4, 4, 3).copy()
+                    below = (j[sel] == 0) & ((bits >> sector[sel]) & 1).astype(bool)
+                    left = (i[sel] == 0) & ((bits >> ((sector[sel] + 1) % n)) & 1).astype(bool)
+                    none = np.zeros(len(sel), dtype=bool)
+                    _reflect(pts, below, none, left, none)
+                    pts = pts.reshape(-1, 16, 3)
                 res[sel] = np.einsum("pi,pik->pk", w[sel], pts)
         out[rest] = res
         return out
+
+
+def _reflect(P, v_low, v_high, u_low, u_high):
+    """Replace the points of 4 x 4 nets beyond creased sides by phantom points, in place.
+
+    Parameters
+    ----------
+    P : (p, 4, 4, 3) nets ``P[:, a, b]`` of quads spanning ``a, b`` in 1..2.
+    v_low, v_high, u_low, u_high : (p,) bool, the side ``v = 0`` (row ``b = 1``),
+        ``v = 1``, ``u = 0`` (column ``a = 1``) or ``u = 1`` is a crease; the row or column
+        beyond it becomes ``2 * crease - interior``. Rows first, then columns, so a corner
+        between two creased sides gets the tensor-product reflection.
+    """
+    P[v_low, :, 0] = 2.0 * P[v_low, :, 1] - P[v_low, :, 2]
+    P[v_high, :, 3] = 2.0 * P[v_high, :, 2] - P[v_high, :, 1]
+    P[u_low, 0] = 2.0 * P[u_low, 1] - P[u_low, 2]
+    P[u_high, 3] = 2.0 * P[u_high, 2] - P[u_high, 1]
 
 
 def quad_mesh_of(mesh):

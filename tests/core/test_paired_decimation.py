@@ -150,15 +150,25 @@ def test_budgets_beyond_the_rule_stop_where_more_faces_do_not_unfold_the_limit_s
     target = load_dev_mesh("featuretype.stl")  # machined: counterbores, steps, genus 9
     surface = TargetSurface(target.vertices, target.faces)
     result = paired_decimation_base_mesh(target.vertices, target.faces, 300, surface, 375, 2500)
-    flaws = [r["limit_crossings"] + r["inverted_faces"] for r in result.rounds]
-    within = sum(r["faces"] <= 1.02 * 375 for r in result.rounds)
+    smooth = [r for r in result.rounds if "crease_edges" not in r]
+    creased = [r for r in result.rounds if "crease_edges" in r]
+    flaws = [r["limit_crossings"] + r["inverted_faces"] for r in smooth]
+    within = sum(r["faces"] <= 1.02 * 375 for r in smooth)
     # measured: 184, 207, 443 and 507 flaws within the rule, then 593 and 693 at 429 and 566
     # faces (of the five budgets up to 6 times 300)
-    assert within == 4 and len(result.rounds) == within + OVER_BUDGET_MISSES
-    assert all(r["limit_crossings"] > 0 for r in result.rounds)
+    assert within == 4 and len(smooth) == within + OVER_BUDGET_MISSES
+    assert all(r["limit_crossings"] > 0 for r in smooth)
     assert min(flaws[within:]) >= min(flaws[:within])
+    # every smooth cage crosses itself: the ladder ran again with crease tags, and its cage
+    # crosses itself less (measured: 86 flaws at 281 faces, 56 at 305 (kept: 51 crossing
+    # pairs, 91 crease edges), then 101 to 426 at 327 to 576 faces)
+    assert creased and result.rounds[:len(smooth)] == tuple(smooth)
+    assert all(r["crease_edges"] > 50 for r in creased)
+    assert result.mesh.n_creases > 50
     assert result.limit_crossings == count_limit_self_intersections(result.mesh, 2) > 0
-    assert result.mesh.n_faces == result.rounds[int(np.argmin(flaws))]["faces"] <= 375
+    assert result.limit_crossings < min(r["limit_crossings"] for r in smooth)
+    creased_flaws = [r["limit_crossings"] + r["inverted_faces"] for r in creased]
+    assert result.mesh.n_faces == creased[int(np.argmin(creased_flaws))]["faces"]
     # the stage says what is wrong
     path = os.path.join(MESHES, "featuretype.stl")
     report = reconstruct(path, {"base_mesh_method": "decimation"}, stop_after="basemesh").report
