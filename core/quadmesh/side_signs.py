@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint
 
-from core.errors import LabelingError, OTHER_PARTS
+from core.errors import InternalError, LabelingError, OTHER_PARTS
 from core.quadmesh.milp_solve import NODE_LIMIT, solve_milp
 
 AXES = np.eye(3)
@@ -124,7 +124,7 @@ def make_loops_rectilinear(complex_, collapsible=None, feasible_collapsible=None
     if feasible_collapsible is not None:
         feasible_collapsible = np.asarray(feasible_collapsible, dtype=bool)
         if (collapsible & ~feasible_collapsible).any():
-            raise ValueError("feasible_collapsible must hold every collapsible side")
+            raise InternalError("feasible_collapsible must hold every collapsible side")
     if loops_are_rectilinear(complex_) and charts_close(complex_, collapsible):
         return complex_, np.zeros((0, 2), dtype=np.int64)
     program = _direction_program(complex_, np.arange(complex_.n_charts), collapsible)

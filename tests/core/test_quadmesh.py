@@ -10,7 +10,7 @@ import pytest
 import trimesh
 from scipy.optimize import Bounds, LinearConstraint, milp
 
-from core.errors import LabelingError, ParameterError
+from core.errors import InternalError, LabelingError, ParameterError
 from core.polymesh_checks import check_polymesh
 from core.quality import point_surface_distance
 from core.quadmesh import build_base_mesh
@@ -242,7 +242,7 @@ def test_a_stricter_copy_of_a_feasible_program_is_searched_where_it_is_stricter(
     assert solved == []  # its loops are rectilinear and close: no program at all
     assert np.array_equal(make_loops_rectilinear(ell, none, feasible_collapsible=none)[0].side_sign,
                           plain[0].side_sign)
-    with pytest.raises(ValueError, match="every collapsible side"):
+    with pytest.raises(InternalError, match="every collapsible side"):
         make_loops_rectilinear(ell, ~none,
                                feasible_collapsible=none)
 
