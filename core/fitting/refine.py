@@ -19,7 +19,7 @@ import numpy as np
 
 from core.errors import ParameterError
 from core.geometry import sample_surface, triangulate
-from core.subdivision.catmull_clark import build_hierarchy, mesh_topology
+from core.subdivision.catmull_clark import build_hierarchy, fine_face_owner, mesh_topology
 from core.subdivision.limit import limit_matrices
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
@@ -118,8 +118,7 @@ def face_deviation(cage, levels, surface, samples):
     hierarchy = build_hierarchy(cage, levels)
     fine = hierarchy.meshes[levels]
     X = limit_matrices(fine)[0] @ hierarchy.composite(levels - 1) @ cage.vertices
-    # an n-gon has n level-1 quads, each 4 ** (levels - 1) level-``levels`` quads, contiguous
-    owner = np.repeat(np.arange(cage.n_faces), cage.face_sizes * 4 ** (levels - 1))
+    owner = fine_face_owner(cage, levels)
     corner_distance = surface.nearest(X).distance[fine.face_vertices.reshape(-1, 4)]
     forward = np.zeros(cage.n_faces)
     np.maximum.at(forward, owner, corner_distance.max(axis=1))

@@ -113,7 +113,7 @@ def limit_self_intersections(base, levels):
     """
     from core.geometry import triangulate
     from core.self_intersection import find_self_intersections
-    from core.subdivision.catmull_clark import build_hierarchy
+    from core.subdivision.catmull_clark import build_hierarchy, fine_face_owner
     from core.subdivision.limit import limit_matrices
 
     fine = build_hierarchy(base, levels).meshes[levels]
@@ -121,8 +121,7 @@ def limit_self_intersections(base, levels):
     points = limit @ fine.vertices
     triangles = triangulate(fine.face_vertices, fine.face_offsets)
     pairs = find_self_intersections(points, triangles)
-    level_one_face = pairs // 2 // 4 ** (levels - 1)
-    base_faces = np.repeat(np.arange(base.n_faces), base.face_sizes)[level_one_face]
+    base_faces = fine_face_owner(base, levels)[pairs // 2]
     return pairs, base_faces, points[triangles[pairs[:, 0]]].mean(axis=1)
 
 

@@ -356,6 +356,15 @@ def build_hierarchy(mesh, levels):
     return SubdivisionHierarchy(meshes, mats)
 
 
+def fine_face_owner(base, level):
+    """(n_fine,) int64 base face of every level-``level`` face (``level >= 1``).
+
+    A base n-gon has n level-1 quads (one per corner, in corner order) and each quad four
+    children, so the faces of one base face are contiguous, ``n * 4 ** (level - 1)`` of them.
+    """
+    return np.repeat(np.arange(base.n_faces), base.face_sizes * 4 ** (level - 1))
+
+
 def face_grids(hierarchy, level):
     """Level-``level`` vertex ids on a regular grid over each base face of a quad mesh.
 
