@@ -148,7 +148,7 @@ def test_time_cap_stops_a_mesh_and_it_runs_again_next_time(tmp_path):
 
 
 STAGES = ("startup", "intake", "parts", "frames", "labeling", "basemesh", "fit", "patches",
-          "solid", "thumbnail")
+          "solid", "writing", "thumbnail")
 CAP_MESSAGE = re.compile(r"memory limit of 120 MB exceeded at stage (\w+)$")
 
 
