@@ -44,7 +44,8 @@ def check_polymesh(mesh):
         coordinates), ``degenerate_faces`` (fewer than 3 corners, a repeated corner or
         zero area), ``open`` (an edge with one face), ``non_manifold`` (an edge with
         more than two faces, or a vertex whose faces form several fans),
-        ``orientation`` (neighbouring faces disagree, or all faces point inward).
+        ``orientation`` (neighbouring faces disagree, or all faces point inward),
+        ``crease_not_edge`` (a pair of ``mesh.creases`` that is not an edge).
     """
     V = np.asarray(mesh.vertices, dtype=np.float64)
     fv = np.asarray(mesh.face_vertices, dtype=np.int64)
@@ -96,6 +97,14 @@ def check_polymesh(mesh):
     if (counts > 2).any():
         bad = counts > 2
         _fail("has non-manifold edges (more than two faces)", "non_manifold", bad, edges[bad])
+    if mesh.n_creases:
+        pairs = np.asarray(mesh.creases, dtype=np.int64).reshape(-1, 2)
+        outside = (pairs < 0).any(axis=1) | (pairs >= n).any(axis=1)
+        keys = np.minimum(pairs[:, 0], pairs[:, 1]) * n + np.maximum(pairs[:, 0], pairs[:, 1])
+        bad = outside | ~np.isin(keys, uniq)
+        if bad.any():
+            _fail("has crease tags on vertex pairs that are not edges", "crease_not_edge", bad,
+                  pairs[bad])
     directed = a * n + b
     d_sorted = np.sort(directed)
     same_dir = d_sorted[1:] == d_sorted[:-1]

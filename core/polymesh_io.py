@@ -1,9 +1,17 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Polygon OBJ reading and writing that keeps n-gons (trimesh would triangulate).
 
-Only ``v`` and ``f`` records are used; texture coordinates, normals, groups and
-materials are ignored. Face corners may be written ``a``, ``a/b``, ``a//c`` or
+Only ``v``, ``f`` and ``t crease`` records are used; texture coordinates, normals, groups
+and materials are ignored. Face corners may be written ``a``, ``a/b``, ``a//c`` or
 ``a/b/c``; negative indices count back from the last vertex read so far.
+
+Sharp creases (``PolyMesh.creases``) are written as OpenSubdiv's OBJ tags (its regression
+shapes and ``osd_obj`` reader): ``t crease 2/1 a b 10``, one per crease edge, with
+**0-based** vertex indices ``a b`` (OpenSubdiv's convention, unlike the 1-based ``f``
+records) and sharpness 10, OpenSubdiv's ``SHARPNESS_INFINITE``. Read back, a sharpness of 10
+or more is an infinitely sharp crease and 0 no crease; semi-sharp creases (between) and
+other tags (``t corner``, ``t hole``, ...) are refused, since this workbench's subdivision
+has no rules for them and ignoring them would change the surface silently.
 """
 import os
 
@@ -12,6 +20,9 @@ import numpy as np
 from core.errors import InvalidMeshError
 from core.output_files import write_text_atomic
 from core.types import PolyMesh
+
+INFINITE_SHARPNESS = 10.0
+"""OpenSubdiv's ``Sdc::Crease::SHARPNESS_INFINITE``: the sharpness written for crease edges."""
 
 
 def parse_obj(text, name="OBJ"):
@@ -25,6 +36,7 @@ def parse_obj(text, name="OBJ"):
     """
     verts = []
     faces = []
+    creases = []
     for lineno, raw in enumerate(text.splitlines(), start=1):
         parts = raw.split("#", 1)[0].split()
         if not parts:
@@ -47,13 +59,45 @@ def parse_obj(text, name="OBJ"):
                 if min(idx) < 0 or max(idx) >= len(verts):
                     raise ValueError("vertex index out of range")
                 faces.append(idx)
+            elif tag == "t":
+                creases.extend(_crease_pairs(parts))
         except ValueError as exc:
             raise InvalidMeshError(f"{name} line {lineno}: {exc}: {raw.strip()!r}",
                                    reason="format", count=1, examples=[lineno]) from None
     if not verts or not faces:
         raise InvalidMeshError(f"{name} has {len(verts)} vertices and {len(faces)} faces; "
                                "a mesh needs both", reason="empty")
-    return PolyMesh.from_faces(np.array(verts, dtype=np.float64), faces)
+    mesh = PolyMesh.from_faces(np.array(verts, dtype=np.float64), faces)
+    if not creases:
+        return mesh
+    pairs = np.array(creases, dtype=np.int64)
+    outside = np.flatnonzero((pairs < 0).any(axis=1) | (pairs >= len(verts)).any(axis=1))
+    if len(outside):
+        raise InvalidMeshError(
+            f"{name}: {len(outside)} crease tags name vertices outside 0..{len(verts) - 1} "
+            f"(crease tags count from 0), e.g. {pairs[outside[:5]].tolist()}",
+            reason="format", count=len(outside), examples=pairs[outside[:5]].tolist())
+    return PolyMesh(mesh.vertices, mesh.face_vertices, mesh.face_offsets, pairs)
+
+
+def _crease_pairs(parts):
+    """The vertex pairs of one ``t crease 2/1 a b sharpness`` record (a list of 0 or 1 pairs).
+
+    Raises ValueError (the caller names the line) for other tags, other argument counts and
+    semi-sharp creases.
+    """
+    if len(parts) < 2 or parts[1] != "crease":
+        raise ValueError(f"tag {' '.join(parts[:2])!r} is not supported (only 't crease')")
+    if len(parts) != 6 or parts[2] != "2/1":
+        raise ValueError("a crease tag is 't crease 2/1 a b sharpness' (two 0-based vertex "
+                         "indices, one sharpness)")
+    a, b, sharpness = int(parts[3]), int(parts[4]), float(parts[5])
+    if sharpness == 0:
+        return []
+    if not sharpness >= INFINITE_SHARPNESS:
+        raise ValueError(f"semi-sharp creases are not supported (sharpness {sharpness:g}; "
+                         f"use {INFINITE_SHARPNESS:g}, infinitely sharp, or 0)")
+    return [(a, b)]
 
 
 def read_polymesh(path):
@@ -88,7 +132,7 @@ def read_polymesh(path):
 
 def write_polymesh(path, mesh, inputs=()):
     """Write ``mesh`` as a polygon OBJ (coordinates with 17 significant digits, so a
-    read-back is bit-identical), atomically and never over one of ``inputs``
+    read-back is bit-identical; crease edges as ``t crease`` tags, module docstring), atomically and never over one of ``inputs``
     (:func:`core.output_files.write_text_atomic`).
 
     Returns
@@ -105,4 +149,7 @@ def write_polymesh(path, mesh, inputs=()):
     fv = np.asarray(mesh.face_vertices) + 1
     fo = np.asarray(mesh.face_offsets)
     lines += ["f " + " ".join(map(str, fv[a:b])) for a, b in zip(fo[:-1], fo[1:])]
+    if mesh.n_creases:
+        lines += ["t crease 2/1 %d %d %g" % (a, b, INFINITE_SHARPNESS)
+                  for a, b in np.asarray(mesh.creases, dtype=np.int64).reshape(-1, 2)]
     return write_text_atomic(path, "\n".join(lines) + "\n", inputs, "base mesh")

@@ -8,6 +8,8 @@ the fit (read from ``core.pipeline.CORE_STAGES``: the quantized base mesh).
 Editing ``CageVertices`` reruns only the stages after it (the fit starts from the edited
 cage).
 """
+import numpy as np
+
 from core.params import BASE_MESH_METHODS
 from polycube_wb.objects.base import StageProxy, add_property, fingerprint, run_core_stages, \
     stage_params
@@ -32,7 +34,8 @@ class CageProxy(StageProxy):
     def show(self, obj):
         mesh = read_cage(obj)
         obj.Shape = cage_shape(mesh)
-        return fingerprint(mesh.vertices, mesh.face_vertices, mesh.face_offsets)
+        creases = ((np.asarray(mesh.creases, dtype=np.int64),) if mesh.n_creases else ())
+        return fingerprint(mesh.vertices, mesh.face_vertices, mesh.face_offsets, *creases)
 
     def load_outputs(self, obj):
         from core.types import BaseMeshResult, FitResult

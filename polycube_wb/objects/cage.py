@@ -3,7 +3,8 @@
 
 The base mesh and the fitted base mesh are kept as three list properties
 (``CageVertices``: one ``FreeCAD.Vector`` per vertex; ``CageFaceVertices`` and
-``CageFaceOffsets``: the faces in CSR form), so they are saved in the ``.FCStd`` and the
+``CageFaceOffsets``: the faces in CSR form; ``CageCreases``: the vertex pairs of the edges
+tagged as sharp creases, flattened, empty for none), so they are saved in the ``.FCStd`` and the
 user can edit the vertex coordinates. The object's ``Shape`` shows the cage: first one
 ``Part.Vertex`` per cage vertex (so ``VertexK`` of the shape is cage vertex ``K - 1``),
 then one edge per cage edge.
@@ -23,7 +24,8 @@ def add_cage_properties(obj):
     add_property(obj, "App::PropertyVectorList", "CageVertices", GROUP,
                  "Cage vertex coordinates (editable: the stages after this one follow)")
     for name, tooltip in (("CageFaceVertices", "Corners of all cage faces, concatenated"),
-                          ("CageFaceOffsets", "Face f is CageFaceVertices[o[f]:o[f + 1]]")):
+                          ("CageFaceOffsets", "Face f is CageFaceVertices[o[f]:o[f + 1]]"),
+                          ("CageCreases", "Vertex pairs of the sharp crease edges, flattened")):
         add_property(obj, "App::PropertyIntegerList", name, GROUP, tooltip, hidden=True,
                      output=True)
     for name, tooltip in (("Faces", "Cage faces"), ("Vertices", "Cage vertices"),
@@ -40,6 +42,8 @@ def store_cage(obj, mesh):
 
     obj.CageFaceVertices = np.asarray(mesh.face_vertices, dtype=int).tolist()
     obj.CageFaceOffsets = np.asarray(mesh.face_offsets, dtype=int).tolist()
+    obj.CageCreases = (np.asarray(mesh.creases, dtype=int).reshape(-1).tolist()
+                       if mesh.n_creases else [])
     summary = base_mesh_summary(mesh)
     obj.Faces, obj.Vertices = summary["faces"], summary["vertices"]
     obj.ExtraordinaryVertices, obj.Genus = summary["extraordinary_vertices"], summary["genus"]
@@ -48,6 +52,9 @@ def store_cage(obj, mesh):
 
 def read_cage(obj):
     """The PolyMesh stored on ``obj``.
+
+    Documents saved before ``CageCreases`` existed get it empty on restore (no creases, as
+    their cages had).
 
     Raises
     ------
@@ -65,7 +72,13 @@ def read_cage(obj):
             or face_vertices.min() < 0 or face_vertices.max() >= len(vertices)):
         raise StageFailed(f"{obj.Label}: no valid cage is stored ({len(vertices)} vertices, "
                           f"{max(len(offsets) - 1, 0)} faces); recompute it")
-    return PolyMesh(vertices, face_vertices, offsets)
+    creases = np.asarray(obj.CageCreases, dtype=np.int64)
+    if len(creases) % 2 or (len(creases) and (creases.min() < 0
+                                              or creases.max() >= len(vertices))):
+        raise StageFailed(f"{obj.Label}: its stored crease tags ({len(creases)} numbers) do "
+                          f"not name vertex pairs of its cage; recompute it")
+    return PolyMesh(vertices, face_vertices, offsets,
+                    creases.reshape(-1, 2) if len(creases) else None)
 
 
 def cage_edges(mesh):

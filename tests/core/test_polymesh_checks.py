@@ -93,6 +93,60 @@ def test_obj_round_trip_keeps_ngons(tmp_path):
     assert sorted(back.face_sizes.tolist()) == [4] * 5 + [5, 5]
 
 
+def _creased_cube():
+    """The unit cube with the four edges of its bottom face (vertices 0-3) tagged sharp."""
+    cube = sc.cube()
+    return PolyMesh(cube.vertices, cube.face_vertices, cube.face_offsets,
+                    np.array([[0, 1], [1, 2], [2, 3], [3, 0]], dtype=np.int64))
+
+
+def test_obj_round_trip_keeps_creases_as_opensubdiv_tags(tmp_path):
+    """Crease edges survive an OBJ round trip as OpenSubdiv's ``t crease 2/1 a b 10`` tags
+    (0-based indices), and the limit surface read back is the creased one, not the smooth."""
+    from core.subdivision.limit import limit_volume
+
+    mesh = _creased_cube()
+    path = tmp_path / "creased.obj"
+    write_polymesh(path, mesh)
+    text = path.read_text()
+    assert text.count("t crease 2/1 ") == 4 and "t crease 2/1 0 1 10" in text
+    back = read_polymesh(path)
+    check_polymesh(back)
+    assert np.array_equal(back.creases, mesh.creases)
+    smooth = limit_volume(sc.cube())
+    creased = limit_volume(back)
+    assert creased == pytest.approx(limit_volume(mesh), rel=1e-12)
+    assert creased > smooth * 1.05, "a sharp bottom keeps more of the cube than a smooth one"
+    # a cage without creases writes no tags and reads back without them
+    write_polymesh(path, sc.cube())
+    assert "t " not in path.read_text() and read_polymesh(path).creases is None
+
+
+@pytest.mark.parametrize("tag, match", [
+    ("t crease 2/1 0 1 2.5", "semi-sharp creases are not supported"),
+    ("t corner 1/1 0 10", "only 't crease'"),
+    ("t crease 2/1 0 10", "two 0-based vertex indices"),
+    ("t crease 2/1 0 8 10", "outside 0..7"),
+])
+def test_obj_bad_crease_tags_are_refused(tag, match):
+    text = "\n".join(["v %g %g %g" % tuple(p) for p in sc.cube().vertices]
+                     + ["f " + " ".join(str(i + 1) for i in f) for f in sc.cube().faces()]
+                     + [tag]) + "\n"
+    with pytest.raises(InvalidMeshError, match=match) as err:
+        parse_obj(text)
+    assert err.value.reason == "format"
+
+
+def test_crease_tag_on_a_face_diagonal_is_not_an_edge():
+    cube = sc.cube()
+    diagonal = PolyMesh(cube.vertices, cube.face_vertices, cube.face_offsets,
+                        np.array([[0, 1], [0, 2]], dtype=np.int64))
+    with pytest.raises(InvalidMeshError, match="not edges") as err:
+        check_polymesh(diagonal)
+    assert err.value.reason == "crease_not_edge" and err.value.examples == [[0, 2]]
+    check_polymesh(_creased_cube())
+
+
 def test_obj_write_protects_inputs_and_is_atomic(tmp_path):
     """The writer refuses to overwrite an input (even through another name), leaving
     it unchanged and no temporary file behind; an overwrite replaces the file whole."""

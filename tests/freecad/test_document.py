@@ -414,6 +414,40 @@ def test_plain_results_reopen_and_are_checked_and_exported(tmp_path):
         FreeCAD.closeDocument(reopened.Name)
 
 
+def test_creased_cage_survives_the_document_and_its_obj(tmp_path):
+    """A cage's crease tags are stored in the document (``CageCreases``) and come back after
+    save and reopen; the OBJ of a creased cage gives the creased solid, whose volume is the
+    creased limit surface's, not the smooth one's."""
+    from core.subdivision.limit import limit_volume
+    from core.types import PolyMesh
+    from polycube_wb import api
+    from polycube_wb.objects.cage import add_cage_properties, read_cage, store_cage
+
+    cube = sample_cages.cube(10.0)
+    creased = PolyMesh(cube.vertices, cube.face_vertices, cube.face_offsets,
+                       np.array([[0, 1], [1, 2], [2, 3], [3, 0]], dtype=np.int64))
+    doc = FreeCAD.newDocument("PolycubeCreases")
+    holder = doc.addObject("App::FeaturePython", "Cage")
+    add_cage_properties(holder)
+    store_cage(holder, creased)
+    path = str(tmp_path / "creases.FCStd")
+    doc.saveAs(path)
+    FreeCAD.closeDocument(doc.Name)
+    reopened = FreeCAD.openDocument(path)
+    try:
+        back = read_cage(reopened.getObject("Cage"))
+        assert np.array_equal(back.creases, creased.creases)
+        assert np.array_equal(back.vertices, creased.vertices)
+    finally:
+        FreeCAD.closeDocument(reopened.Name)
+    obj_path = tmp_path / "creased.obj"
+    write_polymesh(obj_path, creased)
+    solid, _ = api.subd_to_solid(obj_path, measure=False)
+    assert solid.isValid()
+    assert solid.Volume == pytest.approx(limit_volume(creased), rel=1e-4)
+    assert solid.Volume > 1.05 * limit_volume(cube)
+
+
 def test_package_manifest_parses():
     meta = FreeCAD.Metadata(os.path.join(REPO, "package.xml"))
     workbench = meta.Content["workbench"][0]
