@@ -45,6 +45,72 @@ def test_strip_splits_are_conforming_quads(seeds, extra):
     assert gap.max() <= 1e-12
 
 
+def _edge_neighbours(cage, face):
+    from core.subdivision.catmull_clark import mesh_topology
+
+    topo = mesh_topology(cage.face_vertices, cage.face_offsets, len(cage.vertices))
+    corners = range(cage.face_offsets[face], cage.face_offsets[face + 1])
+    return [int(topo.face_of_corner[topo.twin[k]]) for k in corners]
+
+
+def test_a_strip_within_one_quad_ends_in_two_pentagons():
+    """A strip kept to its seed quad cuts it in two and ends in the two quads across: each
+    keeps its corners plus the midpoint (a pentagon), so one face is added, not a ring."""
+    cage = grid_sphere(3)
+    within = np.zeros(cage.n_faces, dtype=bool)
+    within[0] = True
+    refined = split_quad_strips(cage, np.array([[0, 0]]), within=within)
+    check_polymesh(refined)
+    assert refined.n_faces == cage.n_faces + 1
+    assert sorted(refined.face_sizes.tolist()) == [4] * (cage.n_faces - 1) + [5, 5]
+
+
+def test_local_strips_change_only_the_region_and_its_neighbours():
+    """Strips in both directions through a cross of five quads: the result is conforming
+    (closed, 2-manifold, oriented), has only quads and pentagons, and every face that is
+    neither in the cross nor next to it is unchanged."""
+    cage = grid_sphere(3)
+    region = [0] + _edge_neighbours(cage, 0)
+    within = np.zeros(cage.n_faces, dtype=bool)
+    within[region] = True
+    seeds = np.array([[f, d] for f in region for d in (0, 1)])
+    refined = split_quad_strips(cage, seeds, within=within)
+    check_polymesh(refined)
+    assert set(refined.face_sizes.tolist()) == {4, 5}
+    touched = set(region)
+    for f in region:
+        touched.update(_edge_neighbours(cage, f))
+    kept = {tuple(np.roll(r, -int(np.argmin(r))).tolist()) for r in refined.faces()}
+    untouched = [f for f in range(cage.n_faces) if f not in touched]
+    assert len(untouched) >= 30
+    for f in untouched:
+        ring = cage.faces()[f]
+        assert tuple(np.roll(ring, -int(np.argmin(ring))).tolist()) in kept
+    assert cage.n_faces < refined.n_faces <= cage.n_faces + 3 * len(touched)
+
+
+def test_a_quad_entered_on_two_neighbouring_edges_becomes_three_quads():
+    """Two strips ending in the same quad from neighbouring sides cut it into three quads
+    around its centre (no T-junction, no pentagon there)."""
+    cage = grid_sphere(4)  # 96 quads; face f's neighbours across edges 0 and 1
+    f = 40
+    across = _edge_neighbours(cage, f)
+    within = np.zeros(cage.n_faces, dtype=bool)
+    within[[across[0], across[1]]] = True
+    # each neighbour's strip runs towards f: through the neighbour's edge shared with f
+    seeds = []
+    for g in (across[0], across[1]):
+        shared = _edge_neighbours(cage, g).index(f)
+        seeds.append([g, shared % 2])
+    refined = split_quad_strips(cage, np.array(seeds), within=within)
+    check_polymesh(refined)
+    ring = set(cage.faces()[f].tolist())
+    centre = refined.vertices[len(refined.vertices) - 1]
+    assert np.allclose(centre, cage.vertices[list(ring)].mean(axis=0))
+    around = [r for r in refined.faces() if len(refined.vertices) - 1 in r.tolist()]
+    assert len(around) == 3 and all(len(r) == 4 for r in around)
+
+
 def test_refinement_meets_the_tolerance_on_a_capsule():
     target, base = capsule_and_box_cage()
     tolerance = 0.01
