@@ -22,8 +22,9 @@ not a quad. There the mesh is closed conformingly, without T-junctions:
 
 Strips that ran round the whole part (the first version) tripled the cage in every round
 (``to_simp_mbb``: 319 -> 976 faces, the next round over 2,500), most of the new faces where
-the surface was already within the tolerance. The refined cage (midpoints of the fitted
-cage) is fitted again, until the largest deviation is at most the tolerance or the next
+the surface was already within the tolerance. The refined cage is placed so that
+its limit surface passes through the fitted one at every vertex (a sparse linear system of the
+limit masks), then fitted again, until the largest deviation is at most the tolerance or the next
 refinement would exceed the face budget.
 """
 from dataclasses import dataclass, field
@@ -38,6 +39,8 @@ from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
 DEVIATION_SAMPLES = 20000
+UNCROSS_TRIES = 3
+"""Refinements tried per round with the deviating faces under new crossings left whole."""
 
 
 @dataclass
@@ -59,7 +62,8 @@ class RefinementResult:
     reason: str = ""
 
 
-def fit_to_tolerance(base, target, tolerance, max_faces, fit, max_rounds=8):
+def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=None,
+                     max_rounds=8):
     """Fit, then split the deviating quad strips and refit until within ``tolerance``.
 
     Parameters
@@ -70,6 +74,11 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, max_rounds=8):
     max_faces : int, no refinement beyond this many faces.
     fit : callable ``fit(cage) -> (fitted PolyMesh, info dict)`` (the configured fit;
         its ``info["levels"]`` says the subdivision level of the fine limit points).
+    crossing_faces : None, or callable ``crossing_faces(cage) -> (k, 2) int`` the base faces
+        of the triangle pairs where the cage's limit surface crosses itself (at the fit's
+        level). Given, a refined cage that crosses itself more than the fitted one is not
+        fitted: the deviating faces under its crossings are left whole and the others split
+        again (:data:`UNCROSS_TRIES` times), since the fit keeps the crossings it starts from.
     max_rounds : int >= 1, most fits.
 
     Returns
@@ -102,8 +111,11 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, max_rounds=8):
         if not len(offending):
             result.met, result.reason = True, "tolerance met"
             return result
-        refined = split_quad_strips(fitted, _seed_directions(fitted, offending),
-                                    within=per_face > tolerance)
+        refined, why_not = _refined_without_crossings(fitted, per_face > tolerance,
+                                                      crossing_faces)
+        if refined is None:
+            result.reason = f"tolerance not met: {why_not}"
+            return result
         if refined.n_faces > max_faces:
             result.reason = (f"tolerance not met: the next refinement would have "
                              f"{refined.n_faces} faces, more than max_base_faces={max_faces}")
@@ -113,6 +125,36 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, max_rounds=8):
             return result
         cage = refined
     return result
+
+
+def _refined_without_crossings(fitted, deviating, crossing_faces):
+    """The fitted cage with the strips of its ``deviating`` (m,) bool faces split, placed on
+    its limit surface (``keep_limit``), and faces left whole where that made the limit
+    surface cross itself (see :func:`fit_to_tolerance`).
+
+    Returns ``(refined PolyMesh, None)``, or ``(None, reason str)`` when no deviating face
+    could be split without a crossing.
+    """
+    within = deviating.copy()
+    allowed = None
+    for _ in range(UNCROSS_TRIES + 1):
+        if not within.any():
+            return None, ("splitting the deviating faces makes the refined limit surface cross "
+                          "itself (thin or sharp features under them need other faces)")
+        seeds = _seed_directions(fitted, np.flatnonzero(within))
+        refined, parent = split_quad_strips(fitted, seeds, within=within, keep_limit=True,
+                                            with_parent=True)
+        if crossing_faces is None:
+            return refined, None
+        if allowed is None:
+            allowed = len(crossing_faces(fitted))
+        crossing = crossing_faces(refined)
+        if len(crossing) <= allowed:
+            return refined, None
+        within[parent[np.unique(crossing)]] = False
+    return None, (f"splitting the deviating faces makes the refined limit surface cross itself "
+                  f"({len(crossing)} triangle pairs after {UNCROSS_TRIES} tries leaving faces "
+                  f"whole)")
 
 
 def face_deviation(cage, levels, surface, samples):
@@ -143,7 +185,7 @@ def face_deviation(cage, levels, surface, samples):
     return np.maximum(forward, backward) / surface.diagonal
 
 
-def split_quad_strips(cage, seeds, within=None):
+def split_quad_strips(cage, seeds, within=None, keep_limit=False, with_parent=False):
     """Split the quad strips through ``seeds`` conformingly.
 
     A strip runs through quads across opposite edges, both ways from its seed, until it
@@ -158,12 +200,17 @@ def split_quad_strips(cage, seeds, within=None):
         its two directions); a strip seeded in another face starts across its edge ``edge``.
     within : None, or (m,) bool faces the strips may run through (the seeds' faces should
         be among them); None: strips run until they close or meet a face that is not a quad.
+    keep_limit : bool, place the vertices so the refined limit surface passes through the
+        cage's at every refined vertex (:func:`_on_the_limit_of`) instead of keeping the
+        cage's vertices and adding edge midpoints and face centres.
+    with_parent : bool, also return ``parent`` (m',) int64, the cage face each refined face
+        lies in.
 
     Returns
     -------
     PolyMesh, the new vertices (after the cage's) at the midpoints of the split edges, then
-    the centres of the faces cut in four or around their centre; both halves of
-    a split crease edge are crease edges.
+    the centres of the faces cut in four or around their centre (with ``keep_limit``, all
+    of them moved); both halves of a split crease edge are crease edges.
     """
     sizes = cage.face_sizes
     offsets = cage.face_offsets
@@ -200,7 +247,10 @@ def split_quad_strips(cage, seeds, within=None):
     corner_cut = entered.copy()
     quad_corners = offsets[:-1][quad][:, None] + np.arange(4)
     corner_cut[quad_corners] |= np.concatenate([split[quad], split[quad]], axis=1)
-    return _cut_faces(cage, topology, corner_cut)
+    refined, origin, parent = _cut_faces(cage, topology, corner_cut)
+    if keep_limit:
+        refined = _on_the_limit_of(cage, refined, origin)
+    return (refined, parent) if with_parent else refined
 
 
 def _cut_faces(cage, topology, corner_cut):
@@ -210,7 +260,17 @@ def _cut_faces(cage, topology, corner_cut):
     neighbouring edges three quads around its centre, on opposite edges two quads; a face
     cut on one edge (other than a quad) is cut from the midpoint to the corner
     ``(n + 1) // 2`` further on; every other cut face around its centre, one face per cut
-    (a quad cut on all four edges: four quads). Returns the PolyMesh.
+    (a quad cut on all four edges: four quads).
+
+    Returns
+    -------
+    refined : PolyMesh, the cage's vertices, then the midpoints of the cut edges, then the
+        centres of the faces cut around them.
+    origin : (n',) int64 the vertex of the cage's first Catmull-Clark refinement (old
+        vertices ``0..n-1``, face points ``n + face``, edge points ``n + m + edge``, as
+        :func:`core.subdivision.catmull_clark.subdivision_operator` numbers them) at the
+        same place of the surface's parameter domain as each vertex of ``refined``.
+    parent : (m',) int64 the cage face each face of ``refined`` lies in.
     """
     edge_cut = np.zeros(len(topology.edges), dtype=bool)
     edge_cut[topology.corner_edge[corner_cut]] = True
@@ -220,9 +280,11 @@ def _cut_faces(cage, topology, corner_cut):
     midpoint = np.full(len(topology.edges), -1, dtype=np.int64)
     midpoint[cut_edges] = n + np.arange(len(cut_edges))
     new_points = [V[topology.edges[cut_edges]].mean(axis=1)]
+    origin = [np.arange(n), n + cage.n_faces + cut_edges]
     next_index = n + len(cut_edges)
-    faces = []
+    faces, parent = [], []
     for face in range(cage.n_faces):
+        first = len(faces)
         corners = np.arange(cage.face_offsets[face], cage.face_offsets[face + 1])
         ring = cage.face_vertices[corners]
         mids = midpoint[topology.corner_edge[corners]]
@@ -238,6 +300,7 @@ def _cut_faces(cage, topology, corner_cut):
             j, centre = (i + 1) % 4, next_index
             next_index += 1
             new_points.append(V[ring].mean(axis=0)[None])
+            origin.append([n + face])
             faces += [np.array([centre, mids[i], ring[j], mids[j]]),
                       np.array([centre, mids[j], ring[(j + 1) % 4], ring[(j + 2) % 4]]),
                       np.array([centre, ring[(j + 2) % 4], ring[i], mids[i]])]
@@ -256,9 +319,11 @@ def _cut_faces(cage, topology, corner_cut):
             centre = next_index
             next_index += 1
             new_points.append(V[ring].mean(axis=0)[None])
+            origin.append([n + face])
             for a, b in zip(cuts, np.roll(cuts, -1)):
                 between = [ring[(a + 1 + t) % size] for t in range((b - a) % size)]
                 faces.append(np.array([centre, mids[a]] + between + [mids[b]]))
+        parent += [face] * (len(faces) - first)
     vertices = np.vstack([V] + new_points)
     face_vertices = np.concatenate(faces).astype(np.int64)
     face_offsets = np.concatenate([[0], np.cumsum([len(f) for f in faces])]).astype(np.int64)
@@ -269,7 +334,35 @@ def _cut_faces(cage, topology, corner_cut):
         cut = crease_mid >= 0
         creases = np.concatenate([pairs[~cut], np.stack([pairs[cut, 0], crease_mid[cut]], axis=1),
                                   np.stack([crease_mid[cut], pairs[cut, 1]], axis=1)])
-    return PolyMesh(vertices, face_vertices, face_offsets, creases)
+    return (PolyMesh(vertices, face_vertices, face_offsets, creases),
+            np.concatenate(origin).astype(np.int64), np.asarray(parent, dtype=np.int64))
+
+
+def _on_the_limit_of(cage, refined, origin):
+    """``refined`` with vertices whose limit positions lie on the limit surface of ``cage``.
+
+    Each vertex of ``refined`` is asked to have its limit position where the limit surface of
+    ``cage`` has the same parameter (``origin``: the limit positions of the cage's first
+    refinement, where Catmull-Clark subdivision leaves the surface unchanged), a sparse
+    square system ``L' V' = P`` (``L'``: the refined cage's vertex limit masks). So the refined
+    surface interpolates the fitted one at all its vertices and stays close between them;
+    with the edge midpoints of the fitted cage as vertices instead, the refined limit
+    surfaces of ``idler_riser`` crossed themselves (58 triangle pairs after the first round,
+    the fitted cage's none), and the refit kept what it started from. Where the system is
+    singular, the midpoint cage is returned unchanged.
+    """
+    import scipy.sparse.linalg as sla
+
+    from core.subdivision.catmull_clark import subdivide
+    from core.subdivision.limit import vertex_limit_matrix
+
+    fine, _ = subdivide(cage)
+    on_surface = (vertex_limit_matrix(fine) @ fine.vertices)[origin]
+    with np.errstate(all="ignore"):
+        vertices = sla.splu(vertex_limit_matrix(refined).tocsc()).solve(on_surface)
+    if not np.isfinite(vertices).all():
+        return refined
+    return PolyMesh(vertices, refined.face_vertices, refined.face_offsets, refined.creases)
 
 
 def _seed_directions(cage, faces):

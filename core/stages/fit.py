@@ -72,7 +72,10 @@ def run_fit(intake, basemesh, params, progress):
     if tolerance > 0:
         from core.fitting.refine import fit_to_tolerance
 
-        refinement = fit_to_tolerance(base, target, tolerance, params.max_base_faces, fit)
+        refinement = fit_to_tolerance(
+            base, target, tolerance, params.max_base_faces, fit,
+            crossing_faces=lambda cage: limit_self_intersections(
+                cage, fit_levels(cage.n_faces, params.subdivision_levels))[1])
         fitted, info = refinement.mesh, refinement.info
     else:
         fitted, info = fit(base)

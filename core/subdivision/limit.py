@@ -623,6 +623,21 @@ def quad_mesh_of(mesh):
     return build_hierarchy(mesh, 1).meshes[1]
 
 
+def vertex_limit_matrix(mesh):
+    """(n, n) csr_matrix: row ``i`` gives the Catmull-Clark limit position of vertex ``i`` of
+    ``mesh`` (a closed 2-manifold with faces of any size and its creases) from its vertices.
+
+    One subdivision step keeps the vertices first and makes every face a quad, so the rows
+    are those of :func:`limit_matrices` of the refined mesh times the step. (For positions
+    only, ``core.quadmesh.limit_interpolation.vertex_limit_positions`` applies the two
+    factors to the vertices one after the other.)
+    """
+    from core.subdivision.catmull_clark import subdivide
+
+    fine, step = subdivide(mesh)
+    return (limit_matrices(fine)[0] @ step)[:len(mesh.vertices)].tocsr()
+
+
 def limit_volume(mesh, level=5):
     """Volume enclosed by the Catmull-Clark limit surface of a closed polygon mesh.
 
