@@ -52,6 +52,11 @@ class FitProxy(CageProxy):
         add_property(obj, "App::PropertyFloat", "MinThickness", "Fit",
                      "Minimal wall thickness when not automatic, mm (0: no thickness "
                      "constraint)", 0.0)
+        add_property(obj, "App::PropertyFloat", "Tolerance", "Fit",
+                     "Largest deviation wanted between the fitted surface and the target, mm "
+                     "(0: none). Where the surface deviates more, the quad strips there are "
+                     "split and the cage fitted again (at most the base mesh's 'Most faces' "
+                     "default)", default("tolerance_mm"))
         add_cage_properties(obj)
         for name, _, tooltip in FIGURES:
             add_property(obj, "App::PropertyFloat", name, "Result", tooltip, 0.0,
@@ -59,12 +64,16 @@ class FitProxy(CageProxy):
         add_property(obj, "App::PropertyString", "Stopped", "Result",
                      "Why the fit stopped ('iterations' or 'stalled')", "", read_only=True,
                      output=True)
+        add_property(obj, "App::PropertyString", "Refinement", "Result",
+                     "With a tolerance: whether it was met, why the refinement stopped and the "
+                     "faces of every fitted cage", "", read_only=True, output=True)
 
     def parameters(self, obj):
         return {"fit_iterations": int(obj.Iterations),
                 "fit_convergence": float(obj.Convergence),
                 "subdivision_levels": int(obj.SubdivisionLevels), "fit_mode": obj.Mode,
-                "fit_t_min": None if obj.AutoMinThickness else float(obj.MinThickness)}
+                "fit_t_min": None if obj.AutoMinThickness else float(obj.MinThickness),
+                "tolerance_mm": float(obj.Tolerance)}
 
     def run(self, obj, progress):
         from core.types import BaseMeshResult
@@ -77,4 +86,14 @@ class FitProxy(CageProxy):
         for name, key, _ in FIGURES:
             setattr(obj, name, float(fit[key]))
         obj.Stopped = str(fit.get("stopped", ""))
+        obj.Refinement = refinement_summary(fit.get("tolerance"))
         store_cage(obj, state.fit.cage)
+
+
+def refinement_summary(tolerance):
+    """One line on a fit's tolerance refinement (its report's ``tolerance`` section or None)."""
+    if not tolerance:
+        return ""
+    faces = " -> ".join(str(round_["faces"]) for round_ in tolerance["rounds"])
+    return (f"{tolerance['reason']} ({tolerance['value_mm']:.4g} mm; faces {faces}; largest "
+            f"deviation {tolerance['rounds'][-1]['max_deviation']:.3g} of the diagonal)")

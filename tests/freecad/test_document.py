@@ -133,6 +133,26 @@ def test_parameter_change_reruns_that_stage_and_later_without_the_file(chain_doc
     assert api.recompute(chain_doc).ok and log.ran == [], "nothing changed, nothing reruns"
 
 
+def test_fit_tolerance_is_a_parameter_and_its_refinement_is_reported(chain_doc):
+    """The Fit's ``Tolerance`` (mm) reruns the fit with the refinement; a tolerance the
+    first fit meets keeps the cage and says so, 0 reports nothing."""
+    from polycube_wb import api
+
+    objects = _objects(chain_doc)
+    fit = objects["Fit"]
+    assert fit.Tolerance == 0.0 and fit.Refinement == ""
+    faces = fit.Faces
+    diagonal = objects["Target"].Mesh.BoundBox.DiagonalLength
+    log = RunLog(objects.values())
+    fit.Tolerance = 0.5 * diagonal
+    assert api.recompute(chain_doc).ok
+    assert log.ran == [fit.Name], "the same fitted cage: the solid does not rerun"
+    assert fit.Refinement.startswith(f"tolerance met ({0.5 * diagonal:.4g} mm; faces {faces};")
+    assert fit.Faces == faces and objects["Solid"].Shape.isValid()
+    fit.Tolerance = 0.0
+    assert api.recompute(chain_doc).ok and fit.Refinement == ""
+
+
 def test_edited_fitted_cage_moves_the_solid_without_refitting(chain_doc):
     from polycube_wb import api
 
