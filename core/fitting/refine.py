@@ -88,7 +88,7 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
     Raises
     ------
     ParameterError
-        ``tolerance`` is not positive, or the base mesh has a face that is not a quad.
+        ``tolerance`` is not positive.
     """
     if not (np.isfinite(tolerance) and tolerance > 0):
         raise ParameterError(f"tolerance must be a positive fraction of the bounding-box "
