@@ -99,7 +99,8 @@ FIELDS = {
         PanelField("AutoMinThickness", "Automatic minimal thickness", "bool"),
         PanelField("MinThickness", "Minimal thickness, mm (0: none)", "float",
                    parameter_range("fit_t_min")),
-        parameter_field("Tolerance", "Tolerance, mm (0: no refinement)", "tolerance_mm")),
+        PanelField("Tolerance", "Tolerance, mm (0: no refinement)", "float",
+                   parameter_range("tolerance_mm"))),
     "Solid": (PanelField("Depth", "Grading depth at extraordinary vertices", "int",
                          (1, MAX_EXPORT_DEPTH), EXPORT_DEPTH_KEY),),
     "Deviation": (

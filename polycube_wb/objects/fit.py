@@ -56,7 +56,7 @@ class FitProxy(CageProxy):
                      "Largest deviation wanted between the fitted surface and the target, mm "
                      "(0: none). Where the surface deviates more, the quad strips there are "
                      "split and the cage fitted again (at most the base mesh's 'Most faces' "
-                     "default)", default("tolerance_mm"))
+                     "default)", 0.0)
         add_cage_properties(obj)
         for name, _, tooltip in FIGURES:
             add_property(obj, "App::PropertyFloat", name, "Result", tooltip, 0.0,
