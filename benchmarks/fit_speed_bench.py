@@ -4,7 +4,7 @@
 Usage::
 
     .venv/bin/python benchmarks/fit_speed_bench.py --baseline OLD_TREE [--only NAME ...]
-                                                   [--seeds 0 1 2] [--cache DIR]
+                                                   [--seeds 0 1 2] [--cache DIR] [--json PATH]
 
 Each dev mesh's cage is built once by ``reconstruct(path, stop_after="basemesh")`` with this
 tree and pickled (cage and target) into ``--cache``, so both trees fit the same cage. For every
@@ -14,8 +14,9 @@ mode="inside", seed=k)`` for each seed, one after the other (interleaved per mes
 the same load). Each fit is timed by ``time.process_time`` around the call (CPU seconds of
 the process, report figures included) and hashed (its vertices' bytes), so identical results
 show as identical hashes. Prints a markdown table: CPU seconds per seed, the fit figures
-(volume outside, mean and max distance of the fine limit points over the diagonal), whether the
-vertices are bit-identical, and the load average when each run started.
+(volume outside, mean and max distance of the fine limit points over the diagonal, crossing
+triangle pairs of the fitted limit surface), whether the vertices are bit-identical, and the
+load average when each run started; ``--json`` writes the records too, one a line.
 """
 import argparse
 import hashlib
@@ -70,6 +71,7 @@ def worker(tree, path, seeds):
             "seed": seed, "cpu": cpu, "load": load, "triangles": len(target.faces),
             "faces": int(cage.n_faces), "outside": info["outside_volume_fraction"],
             "mean": info["mean_distance"], "max": info["max_distance"],
+            "crossings": info.get("self_intersections"),
             "hash": hashlib.sha1(fitted.vertices.tobytes()).hexdigest()}), flush=True)
 
 
@@ -83,14 +85,16 @@ def run(tree, path, seeds):
 def markdown(results):
     """Table rows: mesh, seed, CPU s before / after, figures, identical, load."""
     lines = ["| mesh | triangles | cage faces | seed | CPU s before | CPU s after | outside % "
-             "before / after | mean before / after | max before / after | identical | load |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "before / after | mean before / after | max before / after | crossings before / "
+             "after | identical | load |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, (before, after) in results.items():
         for b, a in zip(before, after):
             lines.append(
                 f"| {name} | {a['triangles']} | {a['faces']} | {a['seed']} | {b['cpu']:.2f} | "
                 f"{a['cpu']:.2f} | {100 * b['outside']:.3f} / {100 * a['outside']:.3f} | "
                 f"{b['mean']:.5f} / {a['mean']:.5f} | {b['max']:.4f} / {a['max']:.4f} | "
+                f"{b.get('crossings')} / {a.get('crossings')} | "
                 f"{'yes' if a['hash'] == b['hash'] else 'no'} | {b['load']:.1f}-{a['load']:.1f} |")
     return "\n".join(lines)
 
@@ -101,6 +105,7 @@ def main(argv=None):
     parser.add_argument("--only", nargs="*", default=list(CASES))
     parser.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2])
     parser.add_argument("--cache", default=os.path.join("/tmp", "fit_speed_cages"))
+    parser.add_argument("--json", help="also write every record here, one a line")
     args = parser.parse_args(argv)
     cache_cages(args.only, args.cache)
     results = {}
@@ -110,6 +115,12 @@ def main(argv=None):
                          run(REPO, path, args.seeds))
         print(f"{name} done", file=sys.stderr, flush=True)
     print(markdown(results))
+    if args.json:
+        with open(args.json, "w") as handle:
+            for name, (before, after) in results.items():
+                for tree, records in (("before", before), ("after", after)):
+                    for record in records:
+                        handle.write(json.dumps({"tree": tree, "name": name, **record}) + "\n")
 
 
 if __name__ == "__main__":
