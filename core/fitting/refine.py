@@ -39,7 +39,7 @@ from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
 DEVIATION_SAMPLES = 20000
-UNCROSS_TRIES = 3
+UNCROSS_TRIES = 5
 """Refinements tried per round with the deviating faces under new crossings left whole."""
 
 
@@ -132,10 +132,15 @@ def _refined_without_crossings(fitted, deviating, crossing_faces):
     its limit surface (``keep_limit``), and faces left whole where that made the limit
     surface cross itself (see :func:`fit_to_tolerance`).
 
+    The deviating faces under the crossings are left whole next time; where every crossing
+    lies in faces where strips ended (not deviating themselves), the deviating faces next to
+    those are.
+
     Returns ``(refined PolyMesh, None)``, or ``(None, reason str)`` when no deviating face
     could be split without a crossing.
     """
     within = deviating.copy()
+    topology = mesh_topology(fitted.face_vertices, fitted.face_offsets, len(fitted.vertices))
     allowed = None
     for _ in range(UNCROSS_TRIES + 1):
         if not within.any():
@@ -151,7 +156,14 @@ def _refined_without_crossings(fitted, deviating, crossing_faces):
         crossing = crossing_faces(refined)
         if len(crossing) <= allowed:
             return refined, None
-        within[parent[np.unique(crossing)]] = False
+        under = np.zeros(len(within), dtype=bool)
+        under[parent[np.unique(crossing)]] = True
+        if (under & within).any():
+            within[under] = False
+        else:  # every crossing in a face where strips ended: the deviating faces next to it
+            next_to = topology.face_of_corner[topology.twin[np.flatnonzero(
+                under[topology.face_of_corner])]]
+            within[next_to] = False
     return None, (f"splitting the deviating faces makes the refined limit surface cross itself "
                   f"({len(crossing)} triangle pairs after {UNCROSS_TRIES} tries leaving faces "
                   f"whole)")
