@@ -82,7 +82,9 @@ class FeatureDecimation:
     angle : float, degrees: the smallest dihedral angle of a feature edge.
 
     Targets of more than :data:`core.quadmesh.decimation.SOURCE_TRIANGLES` triangles are
-    decimated to that many once, on first use, and every count starts from that.
+    decimated to that many once, on first use, and every count starts from that (pure
+    Python, about 0.4 ms of CPU per collapse here: 62 s for the 151k triangles of
+    ``to_simp_torsion_arm_fine3``, 1.2-1.6 s for the 3.5k of ``featuretype`` to 600).
 
     Raises
     ------
