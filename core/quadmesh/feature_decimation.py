@@ -15,11 +15,13 @@ iso-surface are no feature lines) as edges of the result:
   :data:`TURN_ANGLE`) or a *corner* (three or more feature edges, or a sharp turn of the
   line: the junctions and kinks of the network);
 * a corner never moves and is never removed; a line vertex is removed only by a collapse
-  along its line, into a line neighbour (which then lies on the segment between them) or a
-  corner; a free vertex collapses into any neighbour (into a feature vertex at that vertex's
-  position, between two free vertices at the quadric optimum);
-* no collapse joins two feature vertices over an edge that is not a feature edge, and a
-  closed line without corners keeps :data:`MIN_LOOP_EDGES` edges;
+  along its line into a line neighbour or a corner, which stays where it is (so every
+  feature vertex stays a vertex of the target on its line); a free vertex collapses into any
+  neighbour (into a feature vertex at that vertex's position, between two free vertices at
+  the quadric optimum);
+* no collapse joins two feature vertices over an edge that is not a feature edge, and a line
+  vertex is removed only where the line's new edge passes within :data:`MAX_CHORD_SAG` of
+  its length of it (a round hole keeps 6 edges);
 * every feature edge adds the quadrics of the two planes through it perpendicular to its
   triangles, weighted by :data:`BOUNDARY_WEIGHT` times its squared length (the paper's
   boundary constraint planes), so a curved line loses its vertices last;
@@ -27,9 +29,12 @@ iso-surface are no feature lines) as edges of the result:
   topology; collapses that turn a triangle's normal by more than ``arccos``
   :data:`MIN_NORMAL_COSINE`, leave it thinner than :data:`MIN_QUALITY` (or, when it was
   already, than :data:`QUALITY_KEPT` of that), or make one whose normal is that far from the
-  target's (pseudo-)normal at the point closest to its centroid are refused; a refused edge
-  is tried again when its neighbourhood changes. The last rule keeps a triangle from capping
-  a slot: quadrics do not see a triangle in the plane of a wall that spans the slot's mouth
+  target's (pseudo-)normal at the point closest to its centroid, or whose centroid is
+  farther from the target than :data:`MAX_DEVIATION` times its longest edge, are refused; a
+  refused edge is tried again when its neighbourhood changes. The last two rules keep a
+  triangle from capping a slot or a notch: quadrics do not see a triangle in the plane of a
+  wall that spans a slot's mouth, nor one in the plane of a notch's rim once its floor's
+  vertices, free where its edges are rounded, have been collapsed into the rim
   (``featuretype``).
 
 Each feature edge of the result is the union of a chain of feature edges of the target, so
@@ -53,13 +58,24 @@ by 45 degrees at each corner; a circle of the dev meshes by 7.5 to 30 degrees pe
 BOUNDARY_WEIGHT = 10.0
 """Weight of the planes through a feature edge perpendicular to its triangles, per squared
 edge length (the triangle quadrics are weighted by area, the same units)."""
-MIN_LOOP_EDGES = 6
-"""A closed feature line without corners (a hole's rim) keeps at least this many edges: the
-crease rules make its limit the uniform cubic B-spline of its polygon, which lies at 1/2 of a
-triangle's circumradius at its vertices, 2/3 of a square's and 5/6 of a hexagon's, and the
-walls of a hole of three edges crossed the faces around it (``featuretype``)."""
+MAX_CHORD_SAG = 0.25
+"""A line vertex is removed only if it lies within this share of the new edge's length of
+it (the chord that replaces its two edges): the crease rules make a closed line's limit the
+uniform cubic B-spline of its polygon, which lies at 1/2 of a triangle's circumradius at its
+vertices, 2/3 of a square's and 5/6 of a hexagon's, and the walls of a hole of three edges
+crossed the faces around it (``featuretype``). A regular polygon's vertex lies 0.24 of the
+chord from it for 7 edges and 0.29 for 6, so a round hole keeps 6 edges; a half circle
+between two corners keeps 2 (a notch's U-shaped rim of ``featuretype`` went to a single
+edge across the notch's mouth, and the notch was capped)."""
 MIN_NORMAL_COSINE = 0.2
 """A collapse is refused when it turns a triangle's normal by more than about 78 degrees."""
+MAX_DEVIATION = 0.25
+"""A collapse is refused when it makes a triangle whose centroid lies farther from the target
+than this times its longest edge. A hexagonal hole's wall triangles lie at most 0.13 times
+their longest edge inside its cylinder; a triangle capping a notch whose floor and walls have
+rounded edges (no feature lines to keep them) lies in the plane of the rim, and its normal
+agrees with the floor's (``featuretype``: a cap 0.5 above a notch's floor, 8.7% of the
+bounding-box diagonal)."""
 MIN_QUALITY = 0.05
 """A collapse is refused when it leaves a triangle of a lower quality ``4 sqrt(3) area / (sum
 of squared edge lengths)`` (1 for an equilateral triangle) than this and than
@@ -289,7 +305,9 @@ class _CollapseState:
         if self.corner[a] or self.corner[b]:
             keep, remove = (a, b) if self.corner[a] else (b, a)
             return keep, remove, self.V[keep].copy()
-        return a, b, self._on_segment(a, b)
+        q = self.Q[a] + self.Q[b]
+        keep, remove = (a, b) if _error(q, self.V[a]) <= _error(q, self.V[b]) else (b, a)
+        return keep, remove, self.V[keep].copy()
 
     def _optimum(self, a, b):
         """(3,) the point least in the quadric of ``a`` and ``b``; the best of both ends and
@@ -300,15 +318,6 @@ class _CollapseState:
             return np.linalg.solve(A, -q[:3, 3])
         points = (self.V[a], self.V[b], 0.5 * (self.V[a] + self.V[b]))
         return min(points, key=lambda p: _error(q, p))
-
-    def _on_segment(self, a, b):
-        """(3,) the point of the segment ``a``-``b`` least in their summed quadric."""
-        q = self.Q[a] + self.Q[b]
-        start = np.append(self.V[a], 1.0)
-        step = np.append(self.V[b] - self.V[a], 0.0)
-        curvature = step @ q @ step
-        t = 0.0 if curvature <= 0.0 else float(np.clip(-(step @ q @ start) / curvature, 0, 1))
-        return self.V[a] + t * step[:3]
 
     def _push(self, a, b):
         """Queue the collapse of edge ``(a, b)`` at its quadric error, if the rules allow it."""
@@ -327,8 +336,7 @@ class _CollapseState:
         shared = self.vertex_faces[keep] & self.vertex_faces[remove]
         if len(shared) != 2 or len(self.neighbours(keep) & self.neighbours(remove)) != 2:
             return False
-        if (self.feature_nb[keep] and self.feature_nb[remove] and not self.corner[keep]
-                and not self.corner[remove] and self._is_short_loop(keep, remove)):
+        if self.feature_nb[remove] and not self._is_flat_chord(keep, remove):
             return False
         moved = [self.faces[f] for f in (self.vertex_faces[keep] | self.vertex_faces[remove])
                  if f not in shared]
@@ -341,21 +349,23 @@ class _CollapseState:
         if not ((np.einsum("ij,ij->i", normal_old, normal_new) >= MIN_NORMAL_COSINE).all()
                 and (quality_new >= np.minimum(MIN_QUALITY, QUALITY_KEPT * quality_old)).all()):
             return False
-        target_normal = self.surface.closest(new.mean(axis=1)).normal
-        return bool((np.einsum("ij,ij->i", normal_new, target_normal) >= MIN_NORMAL_COSINE).all())
+        near = self.surface.closest(new.mean(axis=1))
+        longest = np.sqrt(((new - new[:, [2, 0, 1]]) ** 2).sum(axis=2).max(axis=1))
+        return bool((np.einsum("ij,ij->i", normal_new, near.normal) >= MIN_NORMAL_COSINE).all()
+                    and (near.distance <= MAX_DEVIATION * longest).all())
 
-    def _is_short_loop(self, a, b):
-        """Whether the feature edge ``(a, b)`` is on a closed line without corners of at most
-        :data:`MIN_LOOP_EDGES` edges."""
-        previous, current = a, b
-        for _ in range(2, MIN_LOOP_EDGES + 1):
-            if self.corner[current]:
-                return False
-            previous, current = current, next(w for w in self.feature_nb[current]
-                                              if w != previous)
-            if current == a:
-                return True
-        return False
+    def _is_flat_chord(self, keep, remove):
+        """Whether removing line vertex ``remove`` (collapsed into its line neighbour
+        ``keep``) leaves its line's new edge within :data:`MAX_CHORD_SAG` of its length of
+        it, without closing the line into a loop of two edges."""
+        (other,) = self.feature_nb[remove] - {keep}
+        if other in self.feature_nb[keep]:
+            return False
+        start, end, point = self.V[other], self.V[keep], self.V[remove]
+        along = end - start
+        length2 = float(along @ along)
+        t = min(max(float((point - start) @ along) / length2, 0.0), 1.0)
+        return float(np.linalg.norm(point - start - t * along)) <= MAX_CHORD_SAG * np.sqrt(length2)
 
     def _collapse(self, keep, remove, position):
         """Merge ``remove`` into ``keep`` at ``position``: its two shared triangles go, its
