@@ -29,14 +29,18 @@ genus and orientation:
    them), larger budgets within the allowed range are tried; where they all cross themselves,
    budgets beyond it (a solid needs a surface that does not), until more faces stop helping.
 4. Where every budget's limit surface crosses itself (machined parts whose sharp steps the
-   smooth limit rounds over a face's length), the ladder runs again with sharp creases: the
-   edges of the decimation on the target's sharp feature lines (:mod:`core.quadmesh.creases`)
-   are never paired across, stay cage edges and are tagged as creases (``PolyMesh.creases``),
-   and the cage with fewer crossings of the two ladders is kept. Only there: on
-   ``tray_bottom`` (a thin plate with holes, clean without tags at 292 faces) every creased
-   cage within the budget rule crosses itself (49 pairs at best) and the first clean one has
-   879 faces, so tagging is not the default; the cages of every mesh whose smooth ladder ends
-   clean stay bit-identical.
+   smooth limit rounds over a face's length), the ladder runs again on feature-preserving
+   decimations (:mod:`core.quadmesh.feature_decimation`), not evened out: the target's sharp
+   feature lines (:mod:`core.quadmesh.creases`) stay chains of their edges, which are never
+   paired across, stay cage edges and are tagged as creases (``PolyMesh.creases``), and the
+   cage with fewer crossings of the two ladders is kept. A target without a closed network
+   of feature lines (a SIMP result's iso-surface) has nothing to crease and keeps its smooth
+   cage (and its large targets are spared the pure-Python decimation: 62 s for the 151k
+   triangles of ``to_simp_torsion_arm_fine3`` to 600). Only there: on ``tray_bottom`` (a
+   thin plate with holes, clean without tags at 292 faces) every creased cage within the
+   budget rule crossed itself when the tags were those of QSlim's edges (session 25), so
+   tagging is not the default; the cages of every mesh whose smooth ladder ends clean stay
+   bit-identical.
 """
 from dataclasses import dataclass, replace
 
@@ -44,10 +48,11 @@ import numpy as np
 
 from core.errors import InvalidMeshError
 from core.mesh_topology import edge_faces
-from core.quadmesh.creases import closed_network, crease_edges
+from core.quadmesh.creases import closed_network
 from core.quadmesh.crossing_count import LimitCrossingCount
 from core.quadmesh.decimation import Decimation
 from core.quadmesh.even_triangulation import even_triangulation
+from core.quadmesh.feature_decimation import FeatureDecimation
 from core.quadmesh.limit_interpolation import unshrink_inverted
 from core.quadmesh.local_repair import repair_inverted
 from core.quadmesh.orientation import inverted_faces
@@ -218,8 +223,9 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     ``target_faces`` (at most ``over_budget_faces``) are tried too, and the first whose limit
     surface does not cross itself is kept: a solid needs it, the face budget does not. They
     stop after :data:`OVER_BUDGET_MISSES` in a row that are not less flawed than all before.
-    When the cage kept still crosses itself, the whole ladder runs again with crease tags
-    (module docstring, step 4), and its cage is kept if it crosses itself less.
+    When the cage kept still crosses itself and the target has feature lines, the whole
+    ladder runs again with crease tags (module docstring, step 4), and its cage is kept if it
+    crosses itself less.
 
     Parameters
     ----------
@@ -252,21 +258,23 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     best = _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces,
                           rounds)
     if best[2] and over_budget_faces:
-        creased = _budget_ladder(decimation, surface, target_faces, max_faces,
-                                 over_budget_faces, rounds, creases=True)
-        if creased[2] < best[2]:
-            best = creased
+        feature_decimation = FeatureDecimation(vertices, faces, surface)
+        if len(feature_decimation.target_features):
+            creased = _budget_ladder(feature_decimation, surface, target_faces, max_faces,
+                                     over_budget_faces, rounds)
+            if creased[2] < best[2]:
+                best = creased
     return replace(best[1], rounds=tuple(rounds), limit_crossings=int(best[2]))
 
 
-def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces, rounds,
-                   creases=False):
-    """The budget ladder of :func:`paired_decimation_base_mesh` with or without crease tags;
+def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces, rounds):
+    """The budget ladder of :func:`paired_decimation_base_mesh`, of QSlim's decimations or
+    with crease tags of the feature-preserving ones (a Decimation or FeatureDecimation);
     appends its rounds and returns ``(flaws, PairedDecimation, crossings)`` of the cage
     kept."""
     best = None
     for budget in _ladder(target_faces, max_faces):
-        result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds, creases)
+        result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
         if best is None or crossings + inverted < best[0]:
             best = (crossings + inverted, result, crossings)
         if crossings + inverted == 0:
@@ -274,8 +282,7 @@ def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_fac
     if best[2] and over_budget_faces:
         fewest, misses = best[0], 0
         for budget in _over_budgets(target_faces, max_faces, int(over_budget_faces)):
-            result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds,
-                                                       creases)
+            result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
             if not crossings:
                 return (crossings + inverted, result, 0)
             misses = 0 if crossings + inverted < fewest else misses + 1
@@ -285,13 +292,13 @@ def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_fac
     return best
 
 
-def _flawed_mesh(decimation, budget, surface, rounds, creases=False):
-    """The paired mesh of one budget (with crease tags if ``creases``), its inverted faces
+def _flawed_mesh(decimation, budget, surface, rounds):
+    """The paired mesh of one budget (with crease tags from a FeatureDecimation), its inverted faces
     unshrunk (:func:`core.quadmesh.limit_interpolation.unshrink_inverted`), those left edited
     where its limit surface does not cross itself
     (:func:`core.quadmesh.local_repair.repair_inverted`), and its :func:`limit_flaws`; appends
     its round (with ``crease_edges`` when tagged)."""
-    result = _paired_mesh(decimation, 2 * budget, surface, creases)
+    result = _paired_mesh(decimation, 2 * budget, surface)
     count_crossings = LimitCrossingCount(result.mesh)
     crossings = count_crossings.crossings
     inverted = int(inverted_faces(result.mesh, surface.vertices, surface.faces, surface).sum())
@@ -309,7 +316,8 @@ def _flawed_mesh(decimation, budget, surface, rounds, creases=False):
                      triangles=int((sizes == 3).sum()))
     rounds.append({"faces": int(result.mesh.n_faces), "limit_crossings": crossings,
                    "inverted_faces": inverted, "moved_vertices": moved, "edits": edits,
-                   **({"crease_edges": int(mesh.n_creases)} if creases else {})})
+                   **({"crease_edges": int(mesh.n_creases)}
+                      if isinstance(decimation, FeatureDecimation) else {})})
     return result, crossings, inverted
 
 
@@ -345,18 +353,17 @@ def limit_flaws(mesh, surface):
             int(inverted_faces(mesh, surface.vertices, surface.faces, surface).sum()))
 
 
-def _paired_mesh(decimation, count, surface, tag_creases=False):
-    """Decimate to ``count`` triangles, even out, pair, merge and project (module docstring);
-    with ``tag_creases``, the edges on the target's sharp feature lines become crease edges
-    and are never paired across."""
-    decimated_v, decimated_f = even_triangulation(*decimation.triangles(count), surface)
+def _paired_mesh(decimation, count, surface):
+    """Decimate to ``count`` triangles, pair, merge and project (module docstring): QSlim's
+    result (a Decimation) evened out first; a FeatureDecimation's feature edges become crease
+    edges and are never paired across."""
+    if isinstance(decimation, FeatureDecimation):
+        decimated_v, decimated_f, creases = decimation.triangles(count)
+    else:
+        decimated_v, decimated_f = even_triangulation(*decimation.triangles(count), surface)
+        creases = None
     pairs, quads, weight = _candidate_quads(decimated_v, decimated_f)
-    creases = None
-    if tag_creases:
-        creases = crease_edges(PolyMesh(decimated_v, decimated_f.reshape(-1),
-                                        np.arange(0, decimated_f.size + 1, 3, dtype=np.int64)),
-                               surface)
-    if creases is not None:
+    if creases is not None and len(creases):
         # a quad bent over a crease would hide it inside the quad: never pair across one
         across = _pair_keys(quads[:, 1], quads[:, 3], len(decimated_v))
         allowed = ~np.isin(across, _pair_keys(creases[:, 0], creases[:, 1], len(decimated_v)))
@@ -365,7 +372,8 @@ def _paired_mesh(decimation, count, surface, tag_creases=False):
     paired = np.zeros(len(decimated_f), dtype=bool)
     paired[pairs[chosen].reshape(-1)] = True
     kept = decimated_f[~paired]
-    face_list = _merge_valence_two([list(q) for q in quads[chosen]] + [list(t) for t in kept])
+    face_list = _merge_valence_two([list(q) for q in quads[chosen]] + [list(t) for t in kept],
+                                   () if creases is None else set(creases.reshape(-1).tolist()))
     used = np.unique(np.concatenate(face_list))
     renumber = np.full(len(decimated_v), -1, dtype=np.int64)
     renumber[used] = np.arange(len(used))
@@ -405,7 +413,7 @@ def _projected_on_target(mesh, surface):
     return projected
 
 
-def _merge_valence_two(faces):
+def _merge_valence_two(faces, fixed=()):
     """Remove vertices with two faces: two quads around one merge into one quad.
 
     A vertex ``v`` between the quads ``(a, v, b, c)`` and ``(b, v, a, d)`` is a corner of
@@ -414,7 +422,11 @@ def _merge_valence_two(faces):
     faces, so it repeats until none is left. Vertices with two faces of which one is a
     triangle (rare) are kept.
 
-    faces : list of vertex-index lists (quads and triangles), outward. Returns the new list.
+    faces : list of vertex-index lists (quads and triangles), outward.
+    fixed : collection of vertices never removed (those on crease edges: the merged quad would
+        hide the crease in its diagonal).
+
+    Returns the new list.
     """
     faces = [list(f) for f in faces]
     while True:
@@ -424,7 +436,7 @@ def _merge_valence_two(faces):
                 incident.setdefault(v, []).append(index)
         merged = set()
         for v, around in sorted(incident.items()):
-            if len(around) != 2 or merged.intersection(around):
+            if len(around) != 2 or merged.intersection(around) or v in fixed:
                 continue
             first, second = (faces[i] for i in around)
             if len(first) != 4 or len(second) != 4:

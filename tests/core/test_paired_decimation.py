@@ -159,19 +159,18 @@ def test_budgets_beyond_the_rule_stop_where_more_faces_do_not_unfold_the_limit_s
     assert within == 4 and len(smooth) == within + OVER_BUDGET_MISSES
     assert all(r["limit_crossings"] > 0 for r in smooth)
     assert min(flaws[within:]) >= min(flaws[:within])
-    # every smooth cage crosses itself: the ladder ran again with crease tags, and its cage
-    # crosses itself less (measured: 86 flaws at 281 faces, 56 at 305 (kept: 51 crossing
-    # pairs, 91 crease edges), then 101 to 426 at 327 to 576 faces)
+    # every smooth cage crosses itself: the ladder ran again on feature-preserving
+    # decimations with crease tags, whose first cage is clean (measured: 313 faces, 304
+    # crease edges; with QSlim's edges tagged, session 25, 51 crossing pairs at best)
     assert creased and result.rounds[:len(smooth)] == tuple(smooth)
-    assert all(r["crease_edges"] > 50 for r in creased)
-    assert result.mesh.n_creases > 50
-    assert result.limit_crossings == count_limit_self_intersections(result.mesh, 2) > 0
-    assert result.limit_crossings < min(r["limit_crossings"] for r in smooth)
-    creased_flaws = [r["limit_crossings"] + r["inverted_faces"] for r in creased]
-    assert result.mesh.n_faces == creased[int(np.argmin(creased_flaws))]["faces"]
-    # the stage says what is wrong
+    assert len(creased) == 1 and creased[0]["crease_edges"] > 250
+    assert result.mesh.n_creases == creased[0]["crease_edges"]
+    assert result.limit_crossings == count_limit_self_intersections(result.mesh, 2) == 0
+    assert result.mesh.n_faces == creased[0]["faces"] <= 375
+    # the stage reports the creased cage it kept
     path = os.path.join(MESHES, "featuretype.stl")
     report = reconstruct(path, {"base_mesh_method": "decimation"}, stop_after="basemesh").report
-    assert report["base_mesh"]["limit_crossings"] > 0
-    message = report["stages"]["basemesh"]["message"]
-    assert "crosses itself" in message and "no solid can be built" in message
+    assert report["base_mesh"]["limit_crossings"] == 0
+    assert report["base_mesh"]["crossing_reason"] is None
+    assert report["base_mesh"]["crease_edges"] == result.mesh.n_creases
+    assert report["base_mesh"]["within_budget"]
