@@ -47,8 +47,9 @@ UNCROSS_TRIES = 5
 class RefinementResult:
     """Outcome of :func:`fit_to_tolerance`.
 
-    mesh : PolyMesh, the last fitted cage.
-    info : dict, the last fit's info.
+    mesh : PolyMesh, the fitted cage that met the tolerance, else the closest one (the
+        smallest largest deviation of all fits).
+    info : dict, its fit's info.
     rounds : list of dict, per fit: ``faces``, ``max_deviation`` and ``mean_deviation``
         (fractions of the target's bounding-box diagonal), ``offending_faces``.
     met : bool, the last fit's largest deviation is at most the tolerance.
@@ -99,32 +100,39 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
                          surface.vertices])
     cage = base
     result = RefinementResult(base, {})
+    closest = None  # (largest deviation, fitted cage, info) of the closest fit so far
     for done in range(max_rounds):
         fitted, info = fit(cage)
         per_face = face_deviation(fitted, info["levels"], surface, samples)
         offending = np.flatnonzero(per_face > tolerance)
-        result.mesh, result.info = fitted, info
         result.rounds.append({"faces": int(fitted.n_faces),
                               "max_deviation": float(per_face.max()),
                               "mean_deviation": float(info["mean_distance"]),
                               "offending_faces": int(len(offending))})
+        if closest is None or per_face.max() < closest[0]:
+            closest = (per_face.max(), fitted, info)
         if not len(offending):
+            result.mesh, result.info = fitted, info
             result.met, result.reason = True, "tolerance met"
             return result
         refined, why_not = _refined_without_crossings(fitted, per_face > tolerance,
                                                       crossing_faces)
         if refined is None:
-            result.reason = f"tolerance not met: {why_not}"
-            return result
-        if refined.n_faces > max_faces:
-            result.reason = (f"tolerance not met: the next refinement would have "
-                             f"{refined.n_faces} faces, more than max_base_faces={max_faces}")
-            return result
-        if done == max_rounds - 1:
-            result.reason = f"tolerance not met after {max_rounds} fits"
-            return result
-        cage = refined
-    return result
+            why_not = f"tolerance not met: {why_not}"
+        elif refined.n_faces > max_faces:
+            why_not = (f"tolerance not met: the next refinement would have {refined.n_faces} "
+                       f"faces, more than max_base_faces={max_faces}")
+        elif done == max_rounds - 1:
+            why_not = f"tolerance not met after {max_rounds} fits"
+        else:
+            cage = refined
+            continue
+        _, result.mesh, result.info = closest
+        result.reason = why_not + (
+            "" if result.mesh is fitted else
+            f"; the closest fit is kept ({result.mesh.n_faces} faces, largest deviation "
+            f"{closest[0]:.3g} of the diagonal)")
+        return result
 
 
 def _refined_without_crossings(fitted, deviating, crossing_faces):

@@ -190,6 +190,26 @@ def test_refinement_says_why_it_stops_at_the_face_budget():
     assert result.rounds[-1]["max_deviation"] > 0.002
 
 
+def test_refinement_keeps_the_closest_fit_when_it_stops_unmet():
+    """When the tolerance is not met, the cage returned is the fit with the smallest largest
+    deviation, not the last one (here every refined fit is made worse on purpose)."""
+    from dataclasses import replace
+
+    target, base = capsule_and_box_cage()
+
+    def fit(cage):
+        fitted, info = fit_base_mesh(cage, target, 2, 50, mode="best-fit")
+        if cage.n_faces == base.n_faces:
+            return fitted, info
+        return replace(fitted, vertices=fitted.vertices * 1.2), info
+
+    result = fit_to_tolerance(base, target, 0.001, 40, fit)
+    assert not result.met and len(result.rounds) >= 2
+    assert result.rounds[1]["max_deviation"] > result.rounds[0]["max_deviation"]
+    assert result.mesh.n_faces == base.n_faces
+    assert "the closest fit is kept (6 faces" in result.reason
+
+
 @pytest.mark.parametrize("make", [mixed_prism, pentagonal_prism])
 def test_strips_end_conformingly_in_faces_that_are_not_quads(make):
     """On prisms with triangles or pentagons, strips seeded in quads and in the other faces
