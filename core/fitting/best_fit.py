@@ -34,7 +34,6 @@ from scipy.sparse.linalg import spsolve
 from core.fitting.responses import INSIDE_SLACK, InsideBounds, vertex_normals
 from core.geometry import scatter_add
 from core.subdivision.catmull_clark import mesh_topology
-from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
 _DENSE_UNKNOWNS = 3000
@@ -103,8 +102,7 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
     for done in range(rounds + 1):
         X = mapping @ V
         forward = target.closest(X)
-        fitted = TargetSurface(X, triangles, "fitted surface")
-        back = fitted.nearest(points)
+        back, back_normal = target.samples_nearest(X, triangles, count, seed)
         rms.append(float(np.sqrt(0.5 * (np.mean(forward.distance ** 2)
                                         + np.mean(back.distance ** 2)))))
         if rms[-1] < best[0] and not (refit and done == 0 and rounds > 0):
@@ -116,7 +114,7 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
             break
         # pairs whose normals disagree (the far wall of a thin member) are left out
         keep_f = _dot(vertex_normals(X, triangles), forward.normal) > COMPATIBLE
-        keep_b = _dot(fitted.face_normals[back.face], sample_normal) > COMPATIBLE
+        keep_b = _dot(back_normal, sample_normal) > COMPATIBLE
         V = system.solve(V, [(forward.normal * keep_f[:, None], own, ones,
                               _dot(forward.normal, forward.point) * keep_f, n_fine),
                              (sample_normal * keep_b[:, None], triangles[back.face], back.bary,
