@@ -55,7 +55,8 @@ def _straddle(tri, normal, offset, a, b, eps):
     test removes most candidates before the edge tests.
     """
     side = np.einsum("pkd,pd->pk", tri[a], normal[b]) - offset[b][:, None]
-    return (side.max(axis=1) > eps) & (side.min(axis=1) < -eps)
+    above, below = side > eps, side < -eps
+    return (above[:, 0] | above[:, 1] | above[:, 2]) & (below[:, 0] | below[:, 1] | below[:, 2])
 
 
 def _candidate_pairs(tri, among=None):
@@ -69,8 +70,11 @@ def _candidate_pairs(tri, among=None):
     dropped too. The boxes are kept per axis ((3, nodes) arrays) and the node pairs are
     filtered one axis at a time, so each later test gathers only the survivors.
     """
-    lo, hi = tri.min(axis=1), tri.max(axis=1)
-    order = np.argsort(_morton_codes(tri.mean(axis=1)), kind="stable")
+    # the corners' minimum and maximum column by column (numpy's reductions over the
+    # middle axis of three are several times slower); the centroids only order the tree
+    lo = np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2])
+    hi = np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2])
+    order = np.argsort(_morton_codes(tri[:, 0] + tri[:, 1] + tri[:, 2]), kind="stable")
     depth = max(int(np.ceil(np.log2(max(len(tri), 2)))), 1)
     size = 1 << depth
     leaf_lo = np.full((3, size), np.inf)
@@ -84,42 +88,49 @@ def _candidate_pairs(tri, among=None):
         levels.insert(0, (np.minimum(child_lo[:, 0::2], child_lo[:, 1::2]),
                           np.maximum(child_hi[:, 0::2], child_hi[:, 1::2]),
                           child_marked[0::2] | child_marked[1::2]))
-    a, b = np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64)
+    # the nodes paired with themselves, kept apart from the pairs of two nodes (a < b)
+    selves = np.zeros(1, dtype=np.int64)
+    a = b = np.zeros(0, dtype=np.int64)
     for level_lo, level_hi, level_marked in levels[1:]:
-        a, b = _child_pairs(a, b)
+        a = np.concatenate([2 * selves, (2 * a[:, None] + _CROSS_CHILDREN[0]).reshape(-1)])
+        b = np.concatenate([2 * selves + 1, (2 * b[:, None] + _CROSS_CHILDREN[1]).reshape(-1)])
+        selves = (2 * selves[:, None] + _SELF_CHILDREN).reshape(-1)
         if among is not None:
+            selves = selves[level_marked[selves]]
             keep = level_marked[a] | level_marked[b]
             a, b = a[keep], b[keep]
         for axis_lo, axis_hi in zip(level_lo, level_hi):
+            selves = selves[axis_lo[selves] <= axis_hi[selves]]
             keep = (axis_lo[a] <= axis_hi[b]) & (axis_lo[b] <= axis_hi[a])
             a, b = a[keep], b[keep]
-    keep = a != b
-    return np.sort(np.stack([order[a[keep]], order[b[keep]]], axis=1), axis=1)
+    return np.sort(np.stack([order[a], order[b]], axis=1), axis=1)
 
 
-_SELF_CHILDREN = np.array([[0, 0], [1, 1], [0, 1]], dtype=np.int64)
-_CROSS_CHILDREN = np.array([[0, 0], [0, 1], [1, 0], [1, 1]], dtype=np.int64)
-
-
-def _child_pairs(a, b):
-    """Child node pairs of the node pairs ``(a[i], b[i])`` ((p,) int64 each) one level down:
-    three for a node with itself (each child with itself, the two children with each other),
-    four for two nodes; node ``k``'s children are ``2 k`` and ``2 k + 1``."""
-    same = a == b
-    return tuple(np.concatenate([(2 * a[same][:, None] + _SELF_CHILDREN[:, k]).reshape(-1),
-                                 (2 * node[~same][:, None] + _CROSS_CHILDREN[:, k]).reshape(-1)])
-                 for k, node in enumerate((a, b)))
+_SELF_CHILDREN = np.array([0, 1], dtype=np.int64)
+"""A node's children ``2 k + c``: each is paired with itself, and the two with each other."""
+_CROSS_CHILDREN = np.array([[0, 0, 1, 1], [0, 1, 0, 1]], dtype=np.int64)
+"""The four child pairs ``(2 a + c[0], 2 b + c[1])`` of two nodes ``a < b``."""
 
 
 def _morton_codes(points):
-    """(n,) int64 Z-order codes of points quantised to 2^10 cells per axis."""
-    span = np.maximum(points.max(axis=0) - points.min(axis=0), 1e-300)
-    cells = np.minimum(((points - points.min(axis=0)) / span * 1024).astype(np.int64), 1023)
+    """(n,) int64 Z-order codes of points quantised to 2^10 cells per axis (bit ``b`` of
+    axis ``a``'s cell at bit ``3 b + a``)."""
+    low = points.min(axis=0)
+    span = np.maximum(points.max(axis=0) - low, 1e-300)
+    cells = np.minimum(((points - low) / span * 1024).astype(np.int64), 1023)
     code = np.zeros(len(points), dtype=np.int64)
-    for bit in range(10):
-        for axis in range(3):
-            code |= ((cells[:, axis] >> bit) & 1) << (3 * bit + axis)
+    for axis in range(3):
+        code |= _spread_bits(cells[:, axis]) << axis
     return code
+
+
+def _spread_bits(values):
+    """(n,) int64 the ten low bits of ``values`` ((n,) int64) moved from bit ``b`` to bit
+    ``3 b`` (two zero bits between each)."""
+    values = values & 0x3FF
+    for shift, mask in ((16, 0x030000FF), (8, 0x0300F00F), (4, 0x030C30C3), (2, 0x09249249)):
+        values = (values | (values << shift)) & mask
+    return values
 
 
 def _pairs_intersect(tri, faces, pairs, eps):

@@ -49,8 +49,9 @@ _RAY_BLOCK = 200000
 _START_OFFSET = 1e-6
 CLOSEST_KEPT = 4
 """Most answers of :meth:`TargetSurface.closest` kept (the latest), each for its query
-points bit for bit: the fit queries some point sets again (a refit starts where the fit
-before it ended, the inside pull where the untangled fit is; fine3: 0.1 s a query). Two
+points bit for bit, and as many of :meth:`TargetSurface.samples_nearest`: the fit queries
+some point sets again (a refit starts where the fit before it ended, the inside pull where
+the untangled fit is; fine3: 0.1 s a query). Two
 already find those; 16 found only a few more small ones (the cold refits' first coarse
 rounds), at four times the memory (an answer and its points: about 120 bytes a point)."""
 
@@ -138,6 +139,7 @@ class TargetSurface:
         self._tree.init(V, F)
         self._samples = {}
         self._kept = OrderedDict()
+        self._kept_samples = OrderedDict()
 
     def nearest(self, points):
         """Closest points and unsigned distances (no pseudo-normals).
@@ -169,22 +171,46 @@ class TargetSurface:
             among the last ``CLOSEST_KEPT`` queries is returned again, not recomputed.
         """
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        key = hashlib.blake2b(points.tobytes(), digest_size=16).digest()
-        kept = self._kept.get(key)
-        if kept is not None and np.array_equal(kept[0], points):
-            self._kept.move_to_end(key)
-            return kept[1]
+        return _kept_or_new(self._kept, (points,), lambda: self._closest(points))
+
+    def _closest(self, points):
+        """:meth:`closest`, computed."""
         near = self.nearest(points)
         normal = self._normal_at(near.face, near.region)
         sign = np.where(np.einsum("ij,ij->i", points - near.point, normal) >= 0, 1.0, -1.0)
-        answer = ClosestPoints(near.point, near.face, near.bary, near.region, near.distance,
-                               normal, sign * near.distance)
-        for array in vars(answer).values():
-            array.setflags(write=False)
-        self._kept[key] = (points.copy(), answer)
-        if len(self._kept) > CLOSEST_KEPT:
-            self._kept.popitem(last=False)
-        return answer
+        return ClosestPoints(near.point, near.face, near.bary, near.region, near.distance,
+                             normal, sign * near.distance)
+
+    def samples_nearest(self, vertices, faces, count, seed=0):
+        """Closest points on another triangle mesh to this surface's samples (:meth:`samples`).
+
+        The least-squares fit's backward term asks this of its fitted limit surface every
+        round (:func:`core.fitting.best_fit.best_fit`), and a refit's first round asks it
+        again of the surface the fit before it ended with.
+
+        Parameters
+        ----------
+        vertices : (n, 3) float; faces : (m, 3) int, the other mesh (model units).
+        count, seed : int, which samples (:meth:`samples`).
+
+        Returns
+        -------
+        near : NearestPoints of the ``count`` samples on the other mesh.
+        normals : (count, 3) float64 unit normals of the other mesh's triangles holding them.
+            Both read only: the answer to the same mesh (bit for bit) and samples among the
+            last ``CLOSEST_KEPT`` such queries is returned again, not recomputed.
+        """
+        vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+        faces = np.ascontiguousarray(faces)
+        points, _ = self.samples(count, seed)
+
+        def compute():
+            other = TargetSurface(vertices, faces, "fitted surface")
+            near = other.nearest(points)
+            return near, other.face_normals[near.face]
+
+        return _kept_or_new(self._kept_samples, (vertices, faces, np.array([count, seed])),
+                            compute)
 
     def first_exit(self, origins, directions, max_length):
         """Where rays starting inside (or on) the surface first leave the solid.
@@ -424,3 +450,30 @@ def _unit(x):
     """``x`` scaled to unit length along its last axis (the coordinates); zero rows stay zero."""
     length = np.linalg.norm(x, axis=-1, keepdims=True)
     return np.divide(x, length, out=np.zeros_like(x), where=length > 0)
+
+
+def _kept_or_new(kept, arrays, compute):
+    """The answer of ``compute()`` for the query given by ``arrays`` (tuple of arrays), kept.
+
+    ``kept`` (OrderedDict, oldest first) maps a digest of the arrays to them and their
+    answer (an object of read-only arrays or a tuple of them); the answer to the same arrays
+    (bit for bit) is returned again, a new one is computed, made read only and kept, and
+    only the latest ``CLOSEST_KEPT`` stay.
+    """
+    digest = hashlib.blake2b(digest_size=16)
+    for array in arrays:
+        digest.update(repr((array.dtype.str, array.shape)).encode())
+        digest.update(array.tobytes())
+    key = digest.digest()
+    found = kept.get(key)
+    if found is not None and all(np.array_equal(a, b) for a, b in zip(found[0], arrays)):
+        kept.move_to_end(key)
+        return found[1]
+    answer = compute()
+    for part in answer if isinstance(answer, tuple) else (answer,):
+        for array in (part,) if isinstance(part, np.ndarray) else vars(part).values():
+            array.setflags(write=False)
+    kept[key] = (tuple(array.copy() for array in arrays), answer)
+    if len(kept) > CLOSEST_KEPT:
+        kept.popitem(last=False)
+    return answer

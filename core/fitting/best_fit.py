@@ -34,7 +34,6 @@ from scipy.sparse.linalg import spsolve
 from core.fitting.responses import INSIDE_SLACK, InsideBounds, vertex_normals
 from core.geometry import scatter_add
 from core.subdivision.catmull_clark import mesh_topology
-from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
 _DENSE_UNKNOWNS = 3000
@@ -103,8 +102,7 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
     for done in range(rounds + 1):
         X = mapping @ V
         forward = target.closest(X)
-        fitted = TargetSurface(X, triangles, "fitted surface")
-        back = fitted.nearest(points)
+        back, back_normal = target.samples_nearest(X, triangles, count, seed)
         rms.append(float(np.sqrt(0.5 * (np.mean(forward.distance ** 2)
                                         + np.mean(back.distance ** 2)))))
         if rms[-1] < best[0] and not (refit and done == 0 and rounds > 0):
@@ -116,7 +114,7 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
             break
         # pairs whose normals disagree (the far wall of a thin member) are left out
         keep_f = _dot(vertex_normals(X, triangles), forward.normal) > COMPATIBLE
-        keep_b = _dot(fitted.face_normals[back.face], sample_normal) > COMPATIBLE
+        keep_b = _dot(back_normal, sample_normal) > COMPATIBLE
         V = system.solve(V, [(forward.normal * keep_f[:, None], own, ones,
                               _dot(forward.normal, forward.point) * keep_f, n_fine),
                              (sample_normal * keep_b[:, None], triangles[back.face], back.bary,
@@ -191,10 +189,11 @@ class NormalEquations:
 
     Assembly: the data part's 3x3 blocks (coordinates ``a, b``) are
     ``M^T Z_ab M`` with ``Z_ab = sum_j (n_ja n_jb / count) w_j w_j^T`` on the fine
-    points (``w_j`` the row's corner weights), six symmetric blocks built at once on
-    the fine level and mapped by two sparse products per pair of blocks
-    (:meth:`_data_blocks`); a row through ``k`` corners costs ``k^2`` fine entries instead
-    of the square of its base-vertex support.
+    points (``w_j`` the row's corner weights), six symmetric blocks built on the fine
+    level two at a time (:class:`_FineEntries`, whose rows and columns they share) and
+    mapped by two sparse products per pair of blocks (:meth:`_data_blocks`); a row through
+    ``k`` corners costs ``k^2`` fine entries instead of the square of its base-vertex
+    support.
 
     Parameters
     ----------
@@ -259,30 +258,13 @@ class NormalEquations:
         real products bit for bit, in about 0.6 of their time (the products' cost is their
         index work, which the two parts share).
         """
-        n_f = self.n_fine
-        stacked = self._fine_blocks(terms)
-        fine = [stacked[k * n_f:(k + 1) * n_f] for k in range(len(_PAIRS))]
+        fine = _FineEntries(terms)
         blocks = {}
         for first, second in ((0, 1), (2, 3), (4, 5)):
-            both = self._mapping_t_c @ ((fine[first] + 1j * fine[second]) @ self._mapping_c)
+            both = self._mapping_t_c @ (fine.pair_matrix(first, second, self.n_fine)
+                                        @ self._mapping_c)
             blocks[_PAIRS[first]], blocks[_PAIRS[second]] = both.real, both.imag
         return blocks
-
-    def _fine_blocks(self, terms):
-        """(6 n_fine, n_fine) CSR: the six blocks ``Z_ab`` of :meth:`solve` stacked, ``_PAIRS``
-        order."""
-        n_f = self.n_fine
-        rows, cols, vals = [], [], []
-        for normal, corners, weights, _, count in terms:
-            pair = weights[:, :, None] * weights[:, None, :] / count
-            for block, (a, c) in enumerate(_PAIRS):
-                rows.append(block * n_f + np.broadcast_to(corners[:, :, None], pair.shape))
-                cols.append(np.broadcast_to(corners[:, None, :], pair.shape))
-                vals.append((normal[:, a] * normal[:, c])[:, None, None] * pair)
-        return sp.csr_matrix((np.concatenate([v.reshape(-1) for v in vals]),
-                              (np.concatenate([r.reshape(-1) for r in rows]),
-                               np.concatenate([c.reshape(-1) for c in cols]))),
-                             shape=(len(_PAIRS) * n_f, n_f))
 
     @cached_property
     def _smooth_dense(self):
@@ -292,6 +274,44 @@ class NormalEquations:
 
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 """The coordinate pairs ``(a, b)`` of the six distinct 3x3 blocks of the normal matrix."""
+
+
+class _FineEntries:
+    """The entries of the six fine-level blocks ``Z_ab`` of :meth:`NormalEquations.solve`
+    (``_PAIRS`` order), which share their rows and columns.
+
+    ``Z_ab = sum_j (n_ja n_jb / count) w_j w_j^T`` over the data rows ``j`` of every term
+    ``(normal, corners, weights, b, count)``, entry ``(corners_jk, corners_jl)`` for each
+    pair of a row's corners, duplicates summed.
+    """
+
+    def __init__(self, terms):
+        rows, cols, self._weights, self._normals = [], [], [], []
+        for normal, corners, weights, _, count in terms:
+            pair = weights[:, :, None] * weights[:, None, :] / count
+            rows.append(np.broadcast_to(corners[:, :, None], pair.shape).reshape(-1))
+            cols.append(np.broadcast_to(corners[:, None, :], pair.shape).reshape(-1))
+            self._weights.append(pair)
+            self._normals.append(normal)
+        self._rows, self._cols = np.concatenate(rows), np.concatenate(cols)
+
+    def pair_matrix(self, first, second, n_fine):
+        """(n_fine, n_fine) complex128 CSR ``Z_first + i Z_second`` (indices into ``_PAIRS``).
+
+        Built with complex entries, its duplicates are summed part by part in the order the
+        real blocks' are (the same rows and columns), and the entries that are zero in both
+        parts are dropped, as adding the two real blocks drops them: the same matrix as
+        ``Z_first + 1j * Z_second``, at half the sorting.
+        """
+        values = np.empty(len(self._rows), dtype=np.complex128)
+        for part, block in ((values.real, first), (values.imag, second)):
+            a, c = _PAIRS[block]
+            part[:] = np.concatenate([((normal[:, a] * normal[:, c])[:, None, None] * pair)
+                                      .reshape(-1) for normal, pair in zip(self._normals,
+                                                                            self._weights)])
+        matrix = sp.csr_matrix((values, (self._rows, self._cols)), shape=(n_fine, n_fine))
+        matrix.eliminate_zeros()
+        return matrix
 
 
 def _complex(matrix):

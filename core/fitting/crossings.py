@@ -54,9 +54,15 @@ class Untangled:
     pairs: np.ndarray
 
 
+def crossing_pairs(mapping, triangles, vertices):
+    """(k, 2) int64 intersecting triangle pairs of the fine mesh ``mapping @ vertices``
+    (:func:`core.self_intersection.find_self_intersections`)."""
+    return find_self_intersections(mapping @ vertices, triangles)
+
+
 def count_crossings(mapping, triangles, vertices):
     """Intersecting triangle pairs of the fine mesh ``mapping @ vertices`` (int)."""
-    return int(len(find_self_intersections(mapping @ vertices, triangles)))
+    return int(len(crossing_pairs(mapping, triangles, vertices)))
 
 
 def influencing(pairs, mapping, triangles):
@@ -68,7 +74,7 @@ def influencing(pairs, mapping, triangles):
     return np.unique(mapping[np.unique(triangles[pairs].reshape(-1))].indices)
 
 
-def stiffen_until_clean(vertices, refit, mapping, triangles, tries=STIFFEN_TRIES):
+def stiffen_until_clean(vertices, refit, mapping, triangles, tries=STIFFEN_TRIES, pairs=None):
     """Refit with a stiffer smoothness term under the crossings until nothing crosses.
 
     Parameters
@@ -81,13 +87,16 @@ def stiffen_until_clean(vertices, refit, mapping, triangles, tries=STIFFEN_TRIES
     mapping : (n_fine, n) sparse CSR, fine limit points ``mapping @ V``.
     triangles : (t, 3) int64 fine triangles.
     tries : int >= 0, most refits.
+    pairs : (k, 2) int64 or None, the crossing pairs of ``vertices``' fine mesh when they
+        are known (:func:`crossing_pairs`).
 
     Returns
     -------
     Untangled
     """
     stiffness = np.ones(mapping.shape[1])
-    pairs = find_self_intersections(mapping @ vertices, triangles)
+    if pairs is None:
+        pairs = crossing_pairs(mapping, triangles, vertices)
     counts = [int(len(pairs))]
     best = Untangled(vertices, counts[0], stiffness.copy(), 0, counts, pairs)
     for refit_number in range(1, tries + 1):
@@ -95,7 +104,7 @@ def stiffen_until_clean(vertices, refit, mapping, triangles, tries=STIFFEN_TRIES
             break
         stiffness[influencing(pairs, mapping, triangles)] *= STIFFEN
         vertices = refit(stiffness, vertices)
-        previous, pairs = pairs, find_self_intersections(mapping @ vertices, triangles)
+        previous, pairs = pairs, crossing_pairs(mapping, triangles, vertices)
         counts.append(int(len(pairs)))
         if len(pairs) < best.crossings:
             best = Untangled(vertices, int(len(pairs)), stiffness.copy(), 0, counts, pairs)
@@ -153,7 +162,7 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True, moved_
     crossings : int, intersecting triangle pairs of the returned fine mesh.
     """
     allowed = (np.zeros((0, 2), dtype=np.int64) if clean
-               else find_self_intersections(mapping @ reference, triangles))
+               else crossing_pairs(mapping, triangles, reference))
     fraction = np.ones(len(moved))
     moving = (moved != reference).any(axis=1)
     # the reference's pairs, of which only those near a moving vertex can change

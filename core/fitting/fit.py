@@ -18,7 +18,8 @@ from scipy.spatial import cKDTree
 from core.errors import InvalidMeshError, ParameterError
 from core.fitting.best_fit import BestFitResult, best_fit, pull_inside
 from core.fitting.contain import nudge_inside
-from core.fitting.crossings import count_crossings, hold_back_crossings, stiffen_until_clean
+from core.fitting.crossings import (count_crossings, crossing_pairs, hold_back_crossings,
+                                     stiffen_until_clean)
 from core.fitting.responses import thickness, volume
 from core.fitting.rgp import FitProblem, run_rgp
 from core.geometry import face_areas, sample_surface, triangulate
@@ -336,9 +337,10 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, in
         return _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness,
                                    seed)[0].vertices
 
-    untangled = stiffen_until_clean(vertices, refit, limit_map, T)
+    first = crossing_pairs(limit_map, T, vertices)
+    untangled = stiffen_until_clean(vertices, refit, limit_map, T, pairs=first)
     if untangled.crossings:
-        cold = stiffen_until_clean(vertices, cold_refit, limit_map, T)
+        cold = stiffen_until_clean(vertices, cold_refit, limit_map, T, pairs=first)
         info["cold_refit_crossings"] = cold.counts
         if cold.crossings < untangled.crossings:
             untangled = cold

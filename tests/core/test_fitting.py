@@ -6,7 +6,7 @@ import trimesh
 
 from core.errors import InvalidMeshError, ParameterError
 from core.fitting import TargetSurface, fit_base_mesh
-from core.fitting.best_fit import NormalEquations, _umbrella, best_fit
+from core.fitting.best_fit import NormalEquations, _FineEntries, _umbrella, best_fit
 from core.fitting.responses import (InsideBounds, packaging, thickness, thickness_constraint,
                                     volume)
 from core.geometry import triangulate
@@ -377,10 +377,34 @@ def test_normal_equations_pair_the_blocks_bit_for_bit_and_leave_the_mapping_alon
     np.testing.assert_array_equal(shuffled.data, data)
     np.testing.assert_array_equal(shuffled.indices, indices)
     blocks = system._data_blocks(terms)
-    stacked = system._fine_blocks(terms) @ system.mapping
-    for k, pair in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
-        real = system.mapping.T @ stacked[k * n_f:(k + 1) * n_f]
+    pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+    real_z = [_real_fine_block(terms, pair, n_f) for pair in pairs]
+    for k, pair in enumerate(pairs):
+        real = system.mapping.T @ (real_z[k] @ system.mapping)
         np.testing.assert_array_equal(blocks[pair].toarray(), real.toarray())
+    # the complex fine matrix is the sum of the two real ones, entry for entry
+    fine = _FineEntries(terms)
+    for first, second in ((0, 1), (2, 3), (4, 5)):
+        built, summed = fine.pair_matrix(first, second, n_f), real_z[first] + 1j * real_z[second]
+        np.testing.assert_array_equal(built.indptr, summed.indptr)
+        np.testing.assert_array_equal(built.indices, summed.indices)
+        np.testing.assert_array_equal(built.data, summed.data)
+
+
+def _real_fine_block(terms, pair, n_fine):
+    """(n_fine, n_fine) CSR the fine block ``Z_ab`` of the normal equations' data part,
+    entries as real numbers (summed in the sparse constructor's order)."""
+    import scipy.sparse as sp
+
+    a, c = pair
+    rows, cols, vals = [], [], []
+    for normal, corners, weights, _, count in terms:
+        product = weights[:, :, None] * weights[:, None, :] / count
+        rows.append(np.broadcast_to(corners[:, :, None], product.shape).reshape(-1))
+        cols.append(np.broadcast_to(corners[:, None, :], product.shape).reshape(-1))
+        vals.append(((normal[:, a] * normal[:, c])[:, None, None] * product).reshape(-1))
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(n_fine, n_fine))
 
 
 def test_a_refit_does_not_return_its_start():

@@ -212,3 +212,20 @@ def test_closest_answers_the_same_points_again_from_the_kept_answers():
     assert recomputed is not first
     for name, value in vars(first).items():
         np.testing.assert_array_equal(getattr(recomputed, name), value)
+
+
+def test_samples_nearest_keeps_its_answer_per_mesh():
+    """The closest points on another mesh to the samples are those of a fresh
+    ``TargetSurface`` of it; the same mesh (bit for bit) gets the kept answer again."""
+    mesh = trimesh.creation.icosphere(3)
+    surface = TargetSurface(mesh.vertices, mesh.faces)
+    other = trimesh.creation.icosphere(2)
+    vertices = 0.9 * other.vertices
+    near, normals = surface.samples_nearest(vertices, other.faces, 300, seed=2)
+    fresh = TargetSurface(vertices, other.faces).nearest(surface.samples(300, 2)[0])
+    np.testing.assert_array_equal(near.point, fresh.point)
+    np.testing.assert_array_equal(normals, TargetSurface(vertices, other.faces)
+                                  .face_normals[fresh.face])
+    again = surface.samples_nearest(vertices.copy(), other.faces.copy(), 300, seed=2)
+    assert again[0] is near and again[1] is normals
+    assert surface.samples_nearest(vertices * 1.01, other.faces, 300, seed=2)[0] is not near
