@@ -53,6 +53,23 @@ class _Entities:
         return list(range(first, first + len(reals) // 3))
 
 
+def _outermost_first(face_ids, patches):
+    """``face_ids`` with the face that reaches farthest along +x first (the rest in order).
+
+    OpenCascade's STEP reader orients a closed shell by classifying a point at infinity
+    (``ShapeFix_Solid``, ``BRepClass3d_SolidClassifier::PerformInfinitePoint``) along a ray
+    from a point of the shell's first usable face. From a face next to a crease vertex, where
+    the limit surface has no tangent plane (``docs/DESIGN.md``), that ray gave the wrong side:
+    ``featuretype``'s 300-face solid (outward, +11.2 mm^3) read back as -11.2 mm^3. From an
+    outermost face the ray leaves the solid through that face alone; on that solid every one
+    of 18 faces tried first (the six outermost along the axes and 12 at random) read back
+    outward. Face order means nothing else in STEP.
+    """
+    reach = [float(np.asarray(patch.poles)[..., 0].max()) for patch in patches]
+    first = int(np.argmax(reach))
+    return [face_ids[first]] + face_ids[:first] + face_ids[first + 1:]
+
+
 def _knot_args(knots, mults):
     """``(mults),(knots)`` arguments of a B-spline entity (formatted once per vector)."""
     return _knot_arg_text(np.asarray(knots, dtype=np.float64).tobytes(),
@@ -144,7 +161,7 @@ def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970
         loop = ent.add(f"EDGE_LOOP('',{_refs(oriented)})")
         bound = ent.add(f"FACE_OUTER_BOUND('',#{loop},{sense})")
         face_ids.append(ent.add(f"ADVANCED_FACE('',(#{bound}),#{surface},{sense})"))
-    shell = ent.add(f"CLOSED_SHELL('',{_refs(face_ids)})")
+    shell = ent.add(f"CLOSED_SHELL('',{_refs(_outermost_first(face_ids, patches))})")
     solid = ent.add(f"MANIFOLD_SOLID_BREP({step_string(name)},#{shell})")
     origin = ent.points(np.zeros((1, 3)))[0]
     z_axis = ent.add("DIRECTION('',(0.,0.,1.))")

@@ -37,6 +37,26 @@ def test_cages_become_valid_step_solids(tmp_path, name):
     assert json.loads((tmp_path / f"{name}.json").read_text())["brep"]["faces"] == brep["faces"]
 
 
+def test_creased_cage_reads_back_outward(tmp_path):
+    """The fitted creased cage of ``featuretype`` (300 faces, written by ``reconstruct
+    --base-mesh`` in session 26, crease tags included) has crease vertices where the limit
+    surface has no tangent plane. OpenCascade orients a shell read from STEP from a ray out of
+    its first face; from this solid's first patch that ray gave the inside (-11.2 mm^3 read
+    back). The STEP file lists the outermost face first, and the solid reads back as written."""
+    import Part
+
+    from polycube_wb.api import subd_to_solid
+    from polycube_wb.step_io import step_round_trip
+
+    cage = os.path.join(os.path.dirname(__file__), "data", "featuretype_creased_cage.obj")
+    solid, _ = subd_to_solid(cage, tmp_path / "featuretype.step", measure=False)
+    assert solid.isValid() and solid.Volume > 11.0
+    trip = step_round_trip(solid, tmp_path / "featuretype.step")
+    assert trip["ok"] and trip["volume_read"] > 0, trip
+    # the same faces in the order they were built: the reader's orientation fails
+    assert Part.Solid(Part.Shell(solid.Shells[0].Faces)).Volume < 0
+
+
 def test_genus_is_reported(tmp_path):
     from polycube_wb.api import base_mesh_summary
 
