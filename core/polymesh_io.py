@@ -60,7 +60,10 @@ def parse_obj(text, name="OBJ"):
                     raise ValueError("vertex index out of range")
                 faces.append(idx)
             elif tag == "t":
-                creases.extend(_crease_pairs(parts))
+                pairs, problem = _crease_pairs(parts)
+                if problem:
+                    raise ValueError(problem)
+                creases.extend(pairs)
         except ValueError as exc:
             raise InvalidMeshError(f"{name} line {lineno}: {exc}: {raw.strip()!r}",
                                    reason="format", count=1, examples=[lineno]) from None
@@ -81,23 +84,23 @@ def parse_obj(text, name="OBJ"):
 
 
 def _crease_pairs(parts):
-    """The vertex pairs of one ``t crease 2/1 a b sharpness`` record (a list of 0 or 1 pairs).
+    """The vertex pairs of one ``t crease 2/1 a b sharpness`` record.
 
-    Raises ValueError (the caller names the line) for other tags, other argument counts and
-    semi-sharp creases.
+    Returns ``(pairs, problem)``: a list of 0 or 1 pairs and None, or ``([], what is wrong)``
+    for other tags, other argument counts and semi-sharp creases (the caller names the line).
     """
     if len(parts) < 2 or parts[1] != "crease":
-        raise ValueError(f"tag {' '.join(parts[:2])!r} is not supported (only 't crease')")
+        return [], f"tag {' '.join(parts[:2])!r} is not supported (only 't crease')"
     if len(parts) != 6 or parts[2] != "2/1":
-        raise ValueError("a crease tag is 't crease 2/1 a b sharpness' (two 0-based vertex "
-                         "indices, one sharpness)")
+        return [], ("a crease tag is 't crease 2/1 a b sharpness' (two 0-based vertex indices, "
+                    "one sharpness)")
     a, b, sharpness = int(parts[3]), int(parts[4]), float(parts[5])
     if sharpness == 0:
-        return []
+        return [], None
     if not sharpness >= INFINITE_SHARPNESS:
-        raise ValueError(f"semi-sharp creases are not supported (sharpness {sharpness:g}; "
-                         f"use {INFINITE_SHARPNESS:g}, infinitely sharp, or 0)")
-    return [(a, b)]
+        return [], (f"semi-sharp creases are not supported (sharpness {sharpness:g}; use "
+                    f"{INFINITE_SHARPNESS:g}, infinitely sharp, or 0)")
+    return [(a, b)], None
 
 
 def read_polymesh(path):
