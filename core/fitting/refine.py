@@ -374,10 +374,10 @@ def _on_the_limit_of(cage, refined, origin):
     import scipy.sparse.linalg as sla
 
     from core.subdivision.catmull_clark import subdivide
-    from core.subdivision.limit import vertex_limit_matrix
+    from core.subdivision.limit import limit_matrices, vertex_limit_matrix
 
-    fine, _ = subdivide(cage)
-    on_surface = (vertex_limit_matrix(fine) @ fine.vertices)[origin]
+    fine, _ = subdivide(cage)  # all quads: its limit masks apply directly
+    on_surface = (limit_matrices(fine)[0] @ fine.vertices)[origin]
     with np.errstate(all="ignore"):
         vertices = sla.splu(vertex_limit_matrix(refined).tocsc()).solve(on_surface)
     if not np.isfinite(vertices).all():
