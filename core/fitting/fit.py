@@ -18,6 +18,7 @@ from scipy.spatial import cKDTree
 from core.errors import InvalidMeshError, ParameterError
 from core.fitting.best_fit import BestFitResult, best_fit, pull_inside
 from core.fitting.contain import nudge_inside
+from core.fitting.crease_curves import fit_crease_curves
 from core.fitting.crossings import (count_crossings, crossing_pairs, hold_back_crossings,
                                      stiffen_until_clean)
 from core.fitting.responses import thickness, volume
@@ -104,6 +105,11 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         of :func:`core.fitting.contain.nudge_inside`, which moves the held-back ones under
         the points left outside inwards); ``rgp_retried`` when the RGP ran again with a
         shorter step (:func:`_rgp`).
+        A cage with creases (``base.creases``) has ``crease_curves`` (``matched``,
+        ``creases``, ``held_back`` of :func:`core.fitting.crease_curves.fit_crease_curves`):
+        in both fitting modes the fit starts from the cage with its crease curves fitted to
+        the target's feature lines, which is also the reference of the smoothness term and
+        of the hold-backs (the ``initial_`` figures stay the cage's).
         The returned level-``levels`` limit surface does not cross itself when the cage's
         does not, and never where the start did not. The fit runs with one BLAS thread
         (:func:`core.threads.single_threaded`): the result does not depend on the
@@ -141,7 +147,15 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     T = triangulate(fine.face_vertices, fine.face_offsets)
     info = {"mode": mode, "levels": levels, "surface": surface, "rounds": 0, "rms": [],
             "iterations": 0, "stopped": "none", "objective": [], "volume": []}
-    vertices = V0
+    if mode != "none" and base.n_creases:
+        # the fit starts from crease curves on the target's feature lines; the cage so
+        # placed is also the reference of its smoothness term and its hold-backs
+        creased = fit_crease_curves(base, fine, limit_map, T, target_surface.vertices,
+                                    target_surface.faces)
+        info["crease_curves"] = {"matched": creased.matched, "creases": creased.creases,
+                                 "held_back": creased.held}
+        base = replace(base, vertices=creased.vertices)
+    vertices = base.vertices
     crossings = None
     if mode == "best-fit" or (mode == "inside" and start == "best-fit"):
         progress.report("fit", 0.0, "least-squares fit")

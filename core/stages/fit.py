@@ -25,7 +25,7 @@ FIT_REPORT_KEYS = ("start", "rounds", "iterations", "stopped", "mean_distance", 
                    "initial_target_max_distance", "t_min", "seconds", "measure_seconds", "refits",
                    "refit_crossings", "cold_refit_crossings", "stiffened", "held_back",
                    "rgp_held_back", "rgp_retried", "rgp_passes", "nudged", "pull_crossings",
-                   "cage_self_intersections")
+                   "cage_self_intersections", "crease_curves")
 """Figures of ``core.fitting.fit_base_mesh``'s info copied into the report, when present."""
 
 
