@@ -64,12 +64,14 @@ CASES = {
     "to_simp_mbb": os.path.join(MESHES, "to_simp_mbb.stl"),
     "ge_bracket_domain": os.path.join(MESHES, "ge_bracket_domain.stl"),
     "to_simp_torsion_arm_fine3": os.path.join(MESHES, "to_simp_torsion_arm_fine3.stl"),
+    "featuretype": os.path.join(MESHES, "featuretype.stl"),
+    "octagonal_pocket": os.path.join(MESHES, "octagonal_pocket.stl"),
 }
 RULE_ONLY = {name: os.path.join(MESHES, name + ext) for name, ext in (
     ("gripper_domain", ".stl"), ("fandisk", ".obj"), ("to_simp_lbracket", ".stl"),
     ("to_simp_pylon", ".stl"), ("to_simp_torsion_arm", ".stl"), ("tray_bottom", ".stl"))}
-"""The other dev meshes that reach the fit (featuretype and octagonal_pocket are refused
-before it): only the inside fit, ours and the baseline's, for the 0.5 % outside rule."""
+"""The other dev meshes that reach the fit: only the inside fit, ours and the baseline's, for
+the 0.5 % outside rule."""
 SEEDS = (0, 1, 2)
 """Sampling seeds of the before / after comparison: changing only the seed moves the inside
 mean by 20-40 %, so before and after are compared by the median over these seeds."""
