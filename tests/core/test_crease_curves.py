@@ -3,7 +3,7 @@
 (core.fitting.crease_curves)."""
 import numpy as np
 
-from core.fitting.crease_curves import fit_crease_curves
+from core.fitting.crease_curves import MAX_MOVE, _shortest_crease_edge, fit_crease_curves
 from core.fitting.crossings import count_crossings
 from core.geometry import triangulate
 from core.quality import containment
@@ -112,3 +112,24 @@ def test_machined_part_holes_open_up():
     assert after["outside_volume_fraction"] < 0.02
     assert count_crossings(mapping, triangles, fitted.vertices) <= count_crossings(
         mapping, triangles, cage.vertices)
+
+
+def test_pocket_plate_moves_stay_within_reach():
+    """octagonal_pocket's creased cage: 8.3 % of the target's volume outside its limit
+    solid, at most 2 % with the crease curves fitted (measured 1.33 %), and no crease
+    vertex moved farther than ``MAX_MOVE`` times its shortest crease edge (82 of them are
+    stopped there: next to kinks between long and short edges the line fit alone carries
+    them far off)."""
+    target = load_dev_mesh("octagonal_pocket.stl")
+    cage = _tagged_cage(target, 300)
+    fine, mapping, triangles = _limit(cage)
+    fitted = fit_crease_curves(cage, fine, mapping, triangles, target.vertices, target.faces)
+    before = containment(mapping @ cage.vertices, triangles, target.vertices, target.faces)
+    after = containment(mapping @ fitted.vertices, triangles, target.vertices, target.faces)
+    assert before["outside_volume_fraction"] > 0.06
+    assert after["outside_volume_fraction"] < 0.02
+    creases = np.sort(np.asarray(cage.creases), axis=1)
+    reach = MAX_MOVE * _shortest_crease_edge(cage.vertices, creases)
+    moved = np.linalg.norm(fitted.vertices - cage.vertices, axis=1)
+    assert (moved <= reach * (1 + 1e-9)).all()
+    assert (moved > 0.99 * reach).sum() > 10  # the reach is what stops them
