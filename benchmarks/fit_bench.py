@@ -207,7 +207,9 @@ sys.path.insert(0, sys.argv[1])
 from core.fitting import fit_base_mesh
 from core.types import PolyMesh
 data = np.load(sys.argv[2])
-base = PolyMesh(data["vertices"], data["face_vertices"], data["face_offsets"])
+creases = data["creases"]
+base = PolyMesh(data["vertices"], data["face_vertices"], data["face_offsets"],
+                creases if len(creases) else None)
 target = SimpleNamespace(vertices=data["target_vertices"], faces=data["target_faces"])
 rows, fitted = [], {}
 for run in sys.argv[4:]:
@@ -239,8 +241,9 @@ def baseline_fits(tree, base, target, work, name, modes=BASELINE_MODES, seeds=SE
     """
     levels = fit_levels(base.n_faces, 2)
     given, back = os.path.join(work, f"{name}_in.npz"), os.path.join(work, f"{name}_out.npz")
+    creases = np.zeros((0, 2), dtype=np.int64) if base.creases is None else base.creases
     np.savez(given, vertices=base.vertices, face_vertices=base.face_vertices,
-             face_offsets=base.face_offsets, target_vertices=target.vertices,
+             face_offsets=base.face_offsets, creases=creases, target_vertices=target.vertices,
              target_faces=target.faces, levels=levels)
     runs = [f"{mode}:{seed}" for mode in modes for seed in seeds]
     done = subprocess.run([sys.executable, "-c", BASELINE_CODE, tree, given, back, *runs],
@@ -248,7 +251,7 @@ def baseline_fits(tree, base, target, work, name, modes=BASELINE_MODES, seeds=SE
     rows = json.loads(done.stdout.strip().splitlines()[-1])
     fitted = np.load(back)
     for row, run in zip(rows, runs):
-        cage = PolyMesh(fitted[run], base.face_vertices, base.face_offsets)
+        cage = PolyMesh(fitted[run], base.face_vertices, base.face_offsets, base.creases)
         row["self_intersections"] = count_limit_self_intersections(cage, levels)
         row.update(surface_figures(*limit_mesh(cage), target))
     return rows
