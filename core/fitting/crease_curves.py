@@ -27,14 +27,13 @@ squares fit's maximum distance went from 2.2 % to 3.7 %). A vertex moves at most
 ``MAX_MOVE`` times its shortest crease edge, and the move is then held back where the
 limit surface would cross itself (:func:`core.fitting.crossings.hold_back_crossings`).
 
-Measured with the inside fit that starts from it (:func:`core.fitting.fit.fit_base_mesh`,
-the fit's own figures, sampling seed 0; seeds 0-2 in brackets): featuretype 1.63 % ->
-0.42 % (0.42-0.77 %) of the target's volume outside, mean distance 0.42 % -> 0.13 % of the
-diagonal; octagonal_pocket 1.62 % -> 0.62 % (0.53-0.62 %), 0.18 % -> 0.12 %. What stays
-outside is mostly where the crease polygons are too coarse for their outlines (a rounded
-octagon of 6-10 crease vertices: after the fit, 10 % of the crease curve's points are more
-than 0.3 % of the diagonal off the feature lines) and where moving a rim out would fold
-the wide faces round it (held back).
+Measured with the inside fit that starts from it (``benchmarks/FIT_RESULTS.md``, session 27,
+sampling seeds 0-2, level-3 limit): featuretype 1.02-1.59 % -> 0.40-0.76 % of the target's
+volume outside, octagonal_pocket 0.39-1.55 % -> 0.47-0.55 %; mean distance 0.47 and 0.64 of
+before (best-fit mode 0.46 and 0.63). What stays outside is mostly where the crease
+polygons are too coarse for their outlines (a rounded octagon of 6-10 crease vertices: after
+the fit, 10 % of the crease curves' points are more than 0.3 % of the diagonal off the
+feature lines) and where moving a rim out would fold the wide faces round it (held back).
 """
 from dataclasses import dataclass
 
