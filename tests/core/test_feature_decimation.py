@@ -105,7 +105,7 @@ def test_evening_a_feature_decimation_keeps_its_feature_lines_and_fattens_its_fa
 
 
 def test_pairing_never_merges_triangles_across_a_feature_edge():
-    from core.quadmesh.paired_decimation import _paired_mesh
+    from core.quadmesh.paired_decimation import _paired_mesh, _rim_folds
     from core.subdivision.catmull_clark import mesh_topology
     from core.target_surface import TargetSurface
 
@@ -117,7 +117,13 @@ def test_pairing_never_merges_triangles_across_a_feature_edge():
     assert cage.n_creases == len(features)  # every decimated feature edge stays a cage edge
     topo = mesh_topology(cage.face_vertices, cage.face_offsets, len(cage.vertices))
     assert (topo.edge_index(cage.creases[:, 0], cage.creases[:, 1]) >= 0).all()
-    assert (cage.face_sizes == 4).mean() > 0.9
+    # the bore's rims on the block's flat faces are fans: a quad of two fan triangles would
+    # have a reflex corner between two of its crease edges, and those are not paired
+    # (measured: 69.5 % quads; more than 90 % before the rule, session 27)
+    assert (cage.face_sizes == 4).mean() > 0.6
+    quads = np.array([cage.face_vertices[o:o + 4] for o, size in
+                      zip(cage.face_offsets[:-1], cage.face_sizes) if size == 4])
+    assert not _rim_folds(cage.vertices, quads, cage.creases).any()
 
 
 @pytest.mark.parametrize("name", ["octagonal_pocket.stl", "featuretype.stl"])
@@ -133,9 +139,10 @@ def test_creased_cage_of_a_machined_part_is_clean_at_the_default_budget(name):
     rounds = []
     result, crossings, inverted = _flawed_mesh(
         FeatureDecimation(target.vertices, target.faces, surface), 300, surface, rounds)
-    # measured: octagonal_pocket 307 faces (289 quads, evened), 298 crease edges; featuretype 313
-    # (287 quads, not evened: the evened cage had 4 flaws), 304 crease edges
+    # measured: octagonal_pocket 313 faces (283 quads, evened), 298 crease edges; featuretype
+    # 320 (280 quads, evened), 304 crease edges. Before the fans' rim quads were refused
+    # (session 27, paired_decimation._rim_folds): 307 (289 quads) and 313 (287, not evened)
     assert crossings == 0 and inverted == 0
     assert 0.75 * 300 <= result.mesh.n_faces <= 1.25 * 300
-    assert result.quads >= 0.9 * result.mesh.n_faces
+    assert result.quads >= 0.85 * result.mesh.n_faces
     assert rounds[0]["crease_edges"] > 250
