@@ -30,10 +30,12 @@ limit surface would cross itself (:func:`core.fitting.crossings.hold_back_crossi
 Measured with the inside fit that starts from it (``benchmarks/FIT_RESULTS.md``, session 27,
 sampling seeds 0-2, level-3 limit): featuretype 1.02-1.59 % -> 0.40-0.76 % of the target's
 volume outside, octagonal_pocket 0.39-1.55 % -> 0.47-0.55 %; mean distance 0.47 and 0.64 of
-before (best-fit mode 0.46 and 0.63). What stays outside is mostly where the crease
-polygons are too coarse for their outlines (a rounded octagon of 6-10 crease vertices: after
-the fit, 10 % of the crease curves' points are more than 0.3 % of the diagonal off the
-feature lines) and where moving a rim out would fold the wide faces round it (held back).
+before (best-fit mode 0.46 and 0.63). What stayed outside was mostly where moving a rim out
+would fold the wide fan quads round it (held back; the base mesh no longer makes those
+quads, :func:`core.quadmesh.paired_decimation._rim_folds`, and with its cages the inside
+fit leaves 0.08-0.10 % and 0.16-0.20 %) and where the crease polygons are too coarse for
+their outlines (a rounded octagon of 6-10 crease vertices: after the fit, 10 % of the crease
+curves' points are more than 0.3 % of the diagonal off the feature lines).
 """
 from dataclasses import dataclass
 
