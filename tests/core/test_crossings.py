@@ -9,7 +9,8 @@ import trimesh
 
 from core.errors import ExportError
 from core.fitting import crossings, fit_base_mesh
-from core.fitting.crossings import STIFFEN, hold_back_crossings, influencing, stiffen_until_clean
+from core.fitting.crossings import (STIFFEN, TANGLED, UNTANGLE_PROGRESS, hold_back_crossings,
+                                    influencing, stiffen_until_clean)
 from core.geometry import triangulate
 from core.params import ReconstructionParams
 from core.pipeline import reconstruct, run_stages
@@ -185,6 +186,37 @@ def test_stiffen_until_clean_stops_when_a_stiffer_refit_crosses_at_the_same_tria
     assert len(calls) == 2 and untangled.refits == 2
     assert untangled.counts[1] == untangled.counts[2] > untangled.counts[0]
     np.testing.assert_array_equal(untangled.vertices, one)
+
+
+def test_stiffen_until_clean_stops_when_a_refit_of_a_tangled_fit_takes_too_little_off():
+    V, T = icosphere()
+    M = sp.identity(len(V), format="csr")
+    spikes = [pushed_through(V, vertex) for vertex in (5, 7, 9, 80)]   # 10 pairs each
+    counts = [len(find_self_intersections(W, T)) for W in spikes]
+    assert len(set(counts)) == 1 and counts[0] > 0
+
+    def refits():
+        fits = iter(spikes[1:])                 # each refit crosses elsewhere, as much
+        return lambda stiffness, previous: next(fits)
+
+    stalled = stiffen_until_clean(spikes[0], refits(), M, T, tries=3,
+                                  progress=UNTANGLE_PROGRESS)
+    assert stalled.refits == 1 and stalled.counts == counts[:2]
+    np.testing.assert_array_equal(stalled.vertices, spikes[0])
+    assert stiffen_until_clean(spikes[0], refits(), M, T, tries=3).refits == 3
+
+
+def test_stiffen_until_clean_goes_on_without_progress_once_the_fit_is_near_clean():
+    V, T = icosphere()
+    M = sp.identity(len(V), format="csr")
+    two = pushed_through(pushed_through(V, 5), 120)
+    fits = iter([pushed_through(V, 5), pushed_through(V, 7), V])
+    untangled = stiffen_until_clean(two, lambda stiffness, previous: next(fits), M, T,
+                                    tries=3, progress=UNTANGLE_PROGRESS)
+    counts = untangled.counts
+    assert counts[1] == counts[2] <= TANGLED * counts[0]   # the second refit took nothing off
+    assert untangled.refits == 3 and untangled.crossings == 0
+    np.testing.assert_array_equal(untangled.vertices, V)
 
 
 @pytest.fixture(scope="module")
