@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.self_intersection import find_self_intersections
+from core.self_intersection import box_pairs, find_self_intersections
 
 STIFFEN = 10.0
 """Factor on the smoothness weight of the base vertices under a crossing, per refit."""
@@ -158,7 +158,8 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True, moved_
     2.8e-3 instead of 3.4e-3). Only the triangles that the moving base vertices influence
     are tested in the first round, and those that the halved ones influence in the later
     rounds (:func:`_crossings_after`): a pair of triangles that do not move keeps the
-    reference's answer.
+    reference's answer. The face pairs whose boxes may overlap at any fractions are found
+    once (:func:`_swept_pairs`) and each round tests only those of them that overlap now.
 
     Parameters
     ----------
@@ -186,11 +187,16 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True, moved_
     fraction = np.ones(len(moved))
     moving = (moved != reference).any(axis=1)
     # the reference's pairs, of which only those near a moving vertex can change
-    pairs, changed, halving = allowed, moving, 0
+    pairs, changed, halving, candidates = allowed, moving, 0, None
     while True:
         W = reference + fraction[:, None] * (moved - reference)
-        pairs = (moved_pairs if halving == 0 and moved_pairs is not None else
-                 _crossings_after(mapping @ W, triangles, pairs, mapping, changed))
+        if halving == 0 and moved_pairs is not None:
+            pairs = moved_pairs
+        else:
+            if candidates is None:
+                candidates = _swept_pairs(reference, moved, mapping, triangles)
+            pairs = _crossings_after(mapping @ W, triangles, pairs, mapping, changed,
+                                     candidates)
         new = pairs[~_rows_in(pairs, allowed)]
         if not len(new):
             return W, int(((fraction < 1) & moving).sum()), int(len(pairs))
@@ -214,18 +220,43 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True, moved_
             return reference.copy(), int(moving.sum()), int(len(allowed))
 
 
-def _crossings_after(X, triangles, pairs, mapping, changed):
+def _crossings_after(X, triangles, pairs, mapping, changed, candidates):
     """(k, 2) int64 crossing triangle pairs of the fine mesh ``X`` ((n_fine, 3)).
 
     ``pairs`` ((p, 2) int64) are those found before the base vertices marked in
     ``changed`` ((n,) bool) moved; only the triangles these base vertices influence
-    through ``mapping`` are tested again, the other pairs are kept.
+    through ``mapping`` are tested again, the other pairs are kept. ``candidates``
+    ((c, 2) int64, :func:`_swept_pairs`) hold every triangle pair whose boxes overlap.
     """
     fine = np.asarray(abs(mapping) @ changed.astype(np.float64)).ravel() > 0
     moved = fine[triangles].any(axis=1)
     kept = pairs[~moved[pairs].any(axis=1)]
-    found = np.concatenate([kept, find_self_intersections(X, triangles, among=moved)])
+    found = np.concatenate([kept, find_self_intersections(X, triangles, among=moved,
+                                                          candidates=candidates)])
     return found[np.lexsort((found[:, 1], found[:, 0]))]
+
+
+def _swept_pairs(reference, moved, mapping, triangles):
+    """(c, 2) int64 the fine triangle pairs whose bounding boxes overlap for some base
+    vertices ``reference + t (moved - reference)``, ``t`` in [0, 1] per vertex.
+
+    A fine point ``sum_v w_v (r_v + t_v d_v)`` stays within ``sum_v min(0, w_v d_v)`` and
+    ``sum_v max(0, w_v d_v)`` of its reference position, axis by axis; the boxes of those
+    ranges are widened by ``1e-9`` of the largest coordinate for the rounding of the points
+    as the fit computes them, so the pairs include every pair that overlaps at any ``t``
+    (:func:`core.self_intersection.box_pairs`). The terms are summed from ``mapping``'s
+    arrays, not by scipy's ``maximum``, which sorts the rows of the matrix it is called on
+    in place (every later product with it would round differently).
+    """
+    rows = np.repeat(np.arange(mapping.shape[0]), np.diff(mapping.indptr))
+    terms = mapping.data[:, None] * (moved - reference)[mapping.indices]
+    X = mapping @ reference
+    low, high = X.copy(), X.copy()
+    for axis in range(3):
+        low[:, axis] += np.bincount(rows, np.minimum(terms[:, axis], 0.0), len(X))
+        high[:, axis] += np.bincount(rows, np.maximum(terms[:, axis], 0.0), len(X))
+    slack = 1e-9 * max(float(np.abs(low).max()), float(np.abs(high).max()), 1e-300)
+    return box_pairs(low[triangles].min(axis=1) - slack, high[triangles].max(axis=1) + slack)
 
 
 def _rows_in(pairs, allowed):
