@@ -4,15 +4,15 @@
 Broad phase: a bounding-box hierarchy traversed against itself finds the face
 pairs whose boxes overlap (or, for a mesh searched again and again as it moves, a
 filter of the pairs found once for boxes holding each face's whole motion). Narrow
-phase: two non-coplanar triangles intersect exactly when an edge of one crosses the other; for triangles sharing a
-vertex only the edges opposite that vertex can cross. Edge-adjacent pairs cannot
-cross without a fold that the orientation check already rejects, so they are skipped.
-Touching contacts within ``core.tolerances.CONTACT`` of the bounding-box diagonal and
-exactly coplanar overlaps are not reported.
+phase: two non-coplanar triangles intersect exactly when an edge of one crosses the
+other; for triangles sharing a vertex only the edges opposite that vertex can cross.
+Edge-adjacent pairs cannot cross without a fold that the orientation check already
+rejects, so they are skipped. Touching contacts within ``core.tolerances.CONTACT`` of the
+bounding-box diagonal and exactly coplanar overlaps are not reported.
 """
 import numpy as np
 
-from core.geometry import unit_face_normals
+from core.geometry import morton_codes, unit_face_normals
 from core.tolerances import CONTACT
 
 _CHUNK = 400_000
@@ -88,7 +88,7 @@ def box_pairs(lo, hi, among=None):
     node pairs are filtered one axis at a time, so each later test gathers only the
     survivors. The pairs do not depend on the order (the tree's boxes bound their leaves).
     """
-    order = np.argsort(_morton_codes(lo + hi), kind="stable")
+    order = np.argsort(morton_codes(lo + hi), kind="stable")
     depth = max(int(np.ceil(np.log2(max(len(lo), 2)))), 1)
     size = 1 << depth
     leaf_lo = np.full((3, size), np.inf)
@@ -137,27 +137,6 @@ _SELF_CHILDREN = np.array([0, 1], dtype=np.int64)
 """A node's children ``2 k + c``: each is paired with itself, and the two with each other."""
 _CROSS_CHILDREN = np.array([[0, 0, 1, 1], [0, 1, 0, 1]], dtype=np.int64)
 """The four child pairs ``(2 a + c[0], 2 b + c[1])`` of two nodes ``a < b``."""
-
-
-def _morton_codes(points):
-    """(n,) int64 Z-order codes of points quantised to 2^10 cells per axis (bit ``b`` of
-    axis ``a``'s cell at bit ``3 b + a``)."""
-    low = points.min(axis=0)
-    span = np.maximum(points.max(axis=0) - low, 1e-300)
-    cells = np.minimum(((points - low) / span * 1024).astype(np.int64), 1023)
-    code = np.zeros(len(points), dtype=np.int64)
-    for axis in range(3):
-        code |= _spread_bits(cells[:, axis]) << axis
-    return code
-
-
-def _spread_bits(values):
-    """(n,) int64 the ten low bits of ``values`` ((n,) int64) moved from bit ``b`` to bit
-    ``3 b`` (two zero bits between each)."""
-    values = values & 0x3FF
-    for shift, mask in ((16, 0x030000FF), (8, 0x0300F00F), (4, 0x030C30C3), (2, 0x09249249)):
-        values = (values | (values << shift)) & mask
-    return values
 
 
 def _pairs_intersect(tri, faces, pairs, eps):
