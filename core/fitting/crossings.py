@@ -30,16 +30,19 @@ STIFFEN_TRIES = 4
 after the plain fit and three refits; later refits did not go lower on any dev mesh)."""
 UNTANGLE_PROGRESS = 0.05
 """Least fraction of the fewest crossing pairs so far that an untangling refit must take off
-for another while those fewest are more than ``TANGLED`` times the first fit's
-(:func:`stiffen_until_clean` from :func:`core.fitting.fit._untangled`). On the creased
-cages the refits do not untangle (featuretype seed 0: 400, 409, 452, 444, 484 pairs the
-short way, 400, 395, 401, 425, 498 the long way; octagonal_pocket 345, 295, 222, 215, 225
-and 345, 184, 187, 217, 208): they now stop after one to three refits with the fit they
-kept before. to_simp_lbracket seed 1's short way (77, 70, 31, 52, 22) goes on: 70 is 9 %
-off."""
+for another while those fewest are more than ``TANGLED`` times the first fit's and more
+than ``FEW_CROSSINGS`` (:func:`stiffen_until_clean` from
+:func:`core.fitting.fit._untangled`). On the creased cages the refits do not untangle
+(featuretype seed 0: 400, 409, 452, 444, 484 pairs the short way, 400, 395, 401, 425, 498
+the long way; octagonal_pocket 345, 295, 222, 215, 225 and 345, 184, 187, 217, 208): they
+now stop after one to three refits with the fit they kept before. to_simp_lbracket seed
+1's short way (77, 70, 31, 52, 22) goes on: 70 is 9 % off."""
 TANGLED = 0.5
 """... the fewest crossings so far, times the first fit's, at or below which the refits
 go on whatever they take off (tray_bottom's long way, 204, 3, 28, 0)."""
+FEW_CROSSINGS = 20
+"""... and the fewest crossing pairs at or below which they go on too
+(to_simp_torsion_arm_fine3 seed 2: 4, 8, 0)."""
 HALVINGS = 6
 """Rounds of halving the moves of the base vertices owning a crossing's corners, then as
 many of halving the moves of every base vertex influencing it, before those are held back
@@ -104,8 +107,9 @@ def stiffen_until_clean(vertices, refit, mapping, triangles, tries=STIFFEN_TRIES
         are known (:func:`crossing_pairs`).
     progress : float in [0, 1), the refits stop when one leaves more than ``1 - progress``
         times the fewest crossing pairs before it while those fewest are more than
-        ``TANGLED`` times the first fit's (0: only ``tries``, a clean fit or a refit
-        crossing at the same pairs as the one before stop them).
+        ``TANGLED`` times the first fit's and more than ``FEW_CROSSINGS`` (0: only
+        ``tries``, a clean fit or a refit crossing at the same pairs as the one before stop
+        them).
 
     Returns
     -------
@@ -128,7 +132,8 @@ def stiffen_until_clean(vertices, refit, mapping, triangles, tries=STIFFEN_TRIES
             best = Untangled(vertices, int(len(pairs)), stiffness.copy(), 0, counts, pairs)
         if np.array_equal(pairs, previous):
             break  # stiffer there, the same triangles cross: no untangling left to find
-        if progress and counts[0] * TANGLED < fewest < len(pairs) / (1.0 - progress):
+        tangled = max(counts[0] * TANGLED, FEW_CROSSINGS)
+        if progress and tangled < fewest < len(pairs) / (1.0 - progress):
             break  # far from clean, and stiffening no longer takes crossings off
     best.refits = len(counts) - 1
     return best

@@ -9,8 +9,8 @@ import trimesh
 
 from core.errors import ExportError
 from core.fitting import crossings, fit_base_mesh
-from core.fitting.crossings import (STIFFEN, TANGLED, UNTANGLE_PROGRESS, hold_back_crossings,
-                                    influencing, stiffen_until_clean)
+from core.fitting.crossings import (FEW_CROSSINGS, STIFFEN, TANGLED, UNTANGLE_PROGRESS,
+                                    hold_back_crossings, influencing, stiffen_until_clean)
 from core.geometry import triangulate
 from core.params import ReconstructionParams
 from core.pipeline import reconstruct, run_stages
@@ -222,19 +222,24 @@ def test_stiffen_until_clean_stops_when_a_stiffer_refit_crosses_at_the_same_tria
 def test_stiffen_until_clean_stops_when_a_refit_of_a_tangled_fit_takes_too_little_off():
     V, T = icosphere()
     M = sp.identity(len(V), format="csr")
-    spikes = [pushed_through(V, vertex) for vertex in (5, 7, 9, 80)]   # 10 pairs each
+    spikes = [pushed_through(pushed_through(V, a), b)        # 38 pairs each
+              for a, b in ((5, 120), (7, 80), (0, 80), (7, 120))]
     counts = [len(find_self_intersections(W, T)) for W in spikes]
-    assert len(set(counts)) == 1 and counts[0] > 0
+    assert len(set(counts)) == 1 and counts[0] > FEW_CROSSINGS
 
-    def refits():
-        fits = iter(spikes[1:])                 # each refit crosses elsewhere, as much
+    def refits(fits):
+        fits = iter(fits)                       # each refit crosses elsewhere, as much
         return lambda stiffness, previous: next(fits)
 
-    stalled = stiffen_until_clean(spikes[0], refits(), M, T, tries=3,
+    stalled = stiffen_until_clean(spikes[0], refits(spikes[1:]), M, T, tries=3,
                                   progress=UNTANGLE_PROGRESS)
     assert stalled.refits == 1 and stalled.counts == counts[:2]
     np.testing.assert_array_equal(stalled.vertices, spikes[0])
-    assert stiffen_until_clean(spikes[0], refits(), M, T, tries=3).refits == 3
+    assert stiffen_until_clean(spikes[0], refits(spikes[1:]), M, T, tries=3).refits == 3
+    # a few crossings (one spike, 10 pairs) are worth every refit, progress or not
+    few = [pushed_through(V, vertex) for vertex in (5, 7, 9, 80)]
+    assert stiffen_until_clean(few[0], refits(few[1:]), M, T, tries=3,
+                               progress=UNTANGLE_PROGRESS).refits == 3
 
 
 def test_stiffen_until_clean_goes_on_without_progress_once_the_fit_is_near_clean():
