@@ -200,3 +200,24 @@ def unit_face_normals(vertices, faces):
     cross = face_cross(vertices, faces)
     length = np.linalg.norm(cross, axis=1, keepdims=True)
     return np.divide(cross, length, out=np.zeros_like(cross), where=length > 0)
+
+
+def morton_codes(points):
+    """(n,) int64 Z-order codes of points quantised to 2^10 cells per axis (bit ``b`` of
+    axis ``a``'s cell at bit ``3 b + a``)."""
+    low = points.min(axis=0)
+    span = np.maximum(points.max(axis=0) - low, 1e-300)
+    cells = np.minimum(((points - low) / span * 1024).astype(np.int64), 1023)
+    code = np.zeros(len(points), dtype=np.int64)
+    for axis in range(3):
+        code |= _spread_bits(cells[:, axis]) << axis
+    return code
+
+
+def _spread_bits(values):
+    """(n,) int64 the ten low bits of ``values`` ((n,) int64) moved from bit ``b`` to bit
+    ``3 b`` (two zero bits between each)."""
+    values = values & 0x3FF
+    for shift, mask in ((16, 0x030000FF), (8, 0x0300F00F), (4, 0x030C30C3), (2, 0x09249249)):
+        values = (values | (values << shift)) & mask
+    return values

@@ -2,22 +2,23 @@
 """Triangle-triangle intersection test for whole meshes (vectorised).
 
 Broad phase: a bounding-box hierarchy traversed against itself finds the face
-pairs whose boxes overlap. Narrow phase: two non-coplanar triangles
-intersect exactly when an edge of one crosses the other; for triangles sharing a
-vertex only the edges opposite that vertex can cross. Edge-adjacent pairs cannot
-cross without a fold that the orientation check already rejects, so they are skipped.
-Touching contacts within ``core.tolerances.CONTACT`` of the bounding-box diagonal and
-exactly coplanar overlaps are not reported.
+pairs whose boxes overlap (or, for a mesh searched again and again as it moves, a
+filter of the pairs found once for boxes holding each face's whole motion). Narrow
+phase: two non-coplanar triangles intersect exactly when an edge of one crosses the
+other; for triangles sharing a vertex only the edges opposite that vertex can cross.
+Edge-adjacent pairs cannot cross without a fold that the orientation check already
+rejects, so they are skipped. Touching contacts within ``core.tolerances.CONTACT`` of the
+bounding-box diagonal and exactly coplanar overlaps are not reported.
 """
 import numpy as np
 
-from core.geometry import unit_face_normals
+from core.geometry import morton_codes, unit_face_normals
 from core.tolerances import CONTACT
 
 _CHUNK = 400_000
 
 
-def find_self_intersections(vertices, faces, among=None):
+def find_self_intersections(vertices, faces, among=None, candidates=None):
     """Pairs of faces that intersect each other.
 
     Parameters
@@ -27,13 +28,18 @@ def find_self_intersections(vertices, faces, among=None):
     among : (m,) bool or None, test only the pairs with at least one face marked (for a
         mesh of which only the marked faces moved since the pairs were last found);
         None tests all.
+    candidates : (c, 2) int64 or None, face pairs that include every pair whose bounding
+        boxes overlap now (:func:`box_pairs` of boxes holding each face wherever it may
+        have moved); only these are tested. None: the pairs are found from the faces.
 
     Returns
     -------
     pairs : (k, 2) int64, ``pairs[:, 0] < pairs[:, 1]``, sorted.
     """
     tri = vertices[faces]
-    pairs = _candidate_pairs(tri, among)
+    lo, hi = face_boxes(tri)
+    pairs = (box_pairs(lo, hi, among) if candidates is None
+             else _overlapping(candidates, lo, hi, among))
     eps = CONTACT * float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
     normal = unit_face_normals(vertices, faces)
     offset = np.einsum("ij,ij->i", normal, tri[:, 0])
@@ -59,29 +65,37 @@ def _straddle(tri, normal, offset, a, b, eps):
     return (above[:, 0] | above[:, 1] | above[:, 2]) & (below[:, 0] | below[:, 1] | below[:, 2])
 
 
-def _candidate_pairs(tri, among=None):
-    """(p, 2) int64 face pairs whose bounding boxes overlap (i < j).
+def face_boxes(tri):
+    """Bounding boxes of triangles ``tri`` ((m, 3, 3) float64): lo, hi, each (m, 3).
 
-    A bounding-volume hierarchy over the faces in Morton (Z-curve) order, a complete
-    binary tree stored level by level, is traversed against itself breadth-first:
-    every level keeps only the node pairs whose boxes overlap, so the work follows
-    the number of truly overlapping pairs, whatever the spread of triangle sizes.
-    With ``among`` ((t,) bool), node pairs without a marked face below either node are
-    dropped too. The boxes are kept per axis ((3, nodes) arrays) and the node pairs are
-    filtered one axis at a time, so each later test gathers only the survivors.
+    The corners' minimum and maximum column by column (numpy's reductions over the middle
+    axis of three are several times slower).
     """
-    # the corners' minimum and maximum column by column (numpy's reductions over the
-    # middle axis of three are several times slower); the centroids only order the tree
     lo = np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2])
     hi = np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2])
-    order = np.argsort(_morton_codes(tri[:, 0] + tri[:, 1] + tri[:, 2]), kind="stable")
-    depth = max(int(np.ceil(np.log2(max(len(tri), 2)))), 1)
+    return lo, hi
+
+
+def box_pairs(lo, hi, among=None):
+    """(p, 2) int64 pairs of boxes that overlap (i < j; touching counts).
+
+    A bounding-volume hierarchy over the boxes ``lo``, ``hi`` ((m, 3) float64 each) in
+    Morton (Z-curve) order of their centres, a complete binary tree stored level by level,
+    is traversed against itself breadth-first: every level keeps only the node pairs whose
+    boxes overlap, so the work follows the number of truly overlapping pairs, whatever the
+    spread of box sizes. With ``among`` ((m,) bool), node pairs without a marked box below
+    either node are dropped too. The boxes are kept per axis ((3, nodes) arrays) and the
+    node pairs are filtered one axis at a time, so each later test gathers only the
+    survivors. The pairs do not depend on the order (the tree's boxes bound their leaves).
+    """
+    order = np.argsort(morton_codes(lo + hi), kind="stable")
+    depth = max(int(np.ceil(np.log2(max(len(lo), 2)))), 1)
     size = 1 << depth
     leaf_lo = np.full((3, size), np.inf)
     leaf_hi = np.full((3, size), -np.inf)
-    leaf_lo[:, :len(tri)], leaf_hi[:, :len(tri)] = lo[order].T, hi[order].T
+    leaf_lo[:, :len(lo)], leaf_hi[:, :len(lo)] = lo[order].T, hi[order].T
     leaf_marked = np.zeros(size, dtype=bool)
-    leaf_marked[:len(tri)] = True if among is None else among[order]
+    leaf_marked[:len(lo)] = True if among is None else among[order]
     levels = [(leaf_lo, leaf_hi, leaf_marked)]
     while levels[0][0].shape[1] > 1:
         child_lo, child_hi, child_marked = levels[0]
@@ -106,31 +120,23 @@ def _candidate_pairs(tri, among=None):
     return np.sort(np.stack([order[a], order[b]], axis=1), axis=1)
 
 
+def _overlapping(candidates, lo, hi, among=None):
+    """(p, 2) int64 the rows of ``candidates`` ((c, 2) int64) whose boxes ``lo``, ``hi``
+    ((m, 3) float64) overlap, with a box marked in ``among`` ((m,) bool or None: all)."""
+    a, b = candidates[:, 0], candidates[:, 1]
+    if among is not None:
+        keep = among[a] | among[b]
+        a, b = a[keep], b[keep]
+    for axis in range(3):
+        keep = (lo[a, axis] <= hi[b, axis]) & (lo[b, axis] <= hi[a, axis])
+        a, b = a[keep], b[keep]
+    return np.stack([a, b], axis=1)
+
+
 _SELF_CHILDREN = np.array([0, 1], dtype=np.int64)
 """A node's children ``2 k + c``: each is paired with itself, and the two with each other."""
 _CROSS_CHILDREN = np.array([[0, 0, 1, 1], [0, 1, 0, 1]], dtype=np.int64)
 """The four child pairs ``(2 a + c[0], 2 b + c[1])`` of two nodes ``a < b``."""
-
-
-def _morton_codes(points):
-    """(n,) int64 Z-order codes of points quantised to 2^10 cells per axis (bit ``b`` of
-    axis ``a``'s cell at bit ``3 b + a``)."""
-    low = points.min(axis=0)
-    span = np.maximum(points.max(axis=0) - low, 1e-300)
-    cells = np.minimum(((points - low) / span * 1024).astype(np.int64), 1023)
-    code = np.zeros(len(points), dtype=np.int64)
-    for axis in range(3):
-        code |= _spread_bits(cells[:, axis]) << axis
-    return code
-
-
-def _spread_bits(values):
-    """(n,) int64 the ten low bits of ``values`` ((n,) int64) moved from bit ``b`` to bit
-    ``3 b`` (two zero bits between each)."""
-    values = values & 0x3FF
-    for shift, mask in ((16, 0x030000FF), (8, 0x0300F00F), (4, 0x030C30C3), (2, 0x09249249)):
-        values = (values | (values << shift)) & mask
-    return values
 
 
 def _pairs_intersect(tri, faces, pairs, eps):

@@ -35,8 +35,8 @@ from itertools import chain
 import numpy as np
 from scipy.spatial import cKDTree
 
-from core.geometry import (radius_classes, sample_surface, scatter_add, unit_face_normals,
-                           validate_triangles)
+from core.geometry import (morton_codes, radius_classes, sample_surface, scatter_add,
+                           unit_face_normals, validate_triangles)
 from core.optional_imports import optional_module
 
 EDGE_TOL = 1e-9
@@ -153,8 +153,13 @@ class TargetSurface:
         NearestPoints
         """
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        _, face, _ = self._tree.squared_distance(self.vertices, self.faces, points)
-        face = np.asarray(face, dtype=np.int64)
+        face = np.zeros(len(points), dtype=np.int64)
+        if len(points):
+            # in Z-order, neighbouring queries walk the same tree nodes (a fifth faster on
+            # the fit's fine limit points); each point's answer does not depend on the order
+            order = np.argsort(morton_codes(points), kind="stable")
+            face[order] = self._tree.squared_distance(self.vertices, self.faces,
+                                                      points[order])[1]
         point, bary, region = closest_on_triangles(self._tri[face], points)
         return NearestPoints(point, face, bary, region, np.linalg.norm(points - point, axis=1))
 

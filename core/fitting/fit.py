@@ -19,8 +19,8 @@ from core.errors import InvalidMeshError, ParameterError
 from core.fitting.best_fit import BestFitResult, best_fit, pull_inside
 from core.fitting.contain import nudge_inside
 from core.fitting.crease_curves import fit_crease_curves
-from core.fitting.crossings import (count_crossings, crossing_pairs, hold_back_crossings,
-                                     stiffen_until_clean)
+from core.fitting.crossings import (UNTANGLE_PROGRESS, count_crossings, crossing_pairs,
+                                     hold_back_crossings, stiffen_until_clean)
 from core.fitting.responses import thickness, volume
 from core.fitting.rgp import FitProblem, run_rgp
 from core.geometry import face_areas, sample_surface, triangulate
@@ -329,8 +329,11 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, in
     two-level fit from the cage (``cold_refit_crossings``), and the fit with fewer
     crossings is kept: where the cage itself crosses, stiffening towards it from a crossing
     fit can bring its crossings back (tray_bottom: 171, 72, 22, 156, 167 pairs the short way,
-    7 at best the long way). If the fit still crosses and the cage's limit surface does
-    not, the fit is held back towards the cage there
+    7 at best the long way). Either way the refits stop once one takes less than
+    ``UNTANGLE_PROGRESS`` off the fewest crossings of a fit still far from clean (the
+    creased cages' fits cross in hundreds of pairs, and stiffening does not untangle them).
+    If the fit still crosses and the cage's limit surface does not, the fit is held back
+    towards the cage there
     (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses itself is no
     reference to hold back to (on to_simp_torsion_arm every base vertex would go back).
     Records ``refits``, ``refit_crossings`` (crossing pairs after the first fit and each
@@ -352,9 +355,11 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, in
                                    seed)[0].vertices
 
     first = crossing_pairs(limit_map, T, vertices)
-    untangled = stiffen_until_clean(vertices, refit, limit_map, T, pairs=first)
+    untangled = stiffen_until_clean(vertices, refit, limit_map, T, pairs=first,
+                                    progress=UNTANGLE_PROGRESS)
     if untangled.crossings:
-        cold = stiffen_until_clean(vertices, cold_refit, limit_map, T, pairs=first)
+        cold = stiffen_until_clean(vertices, cold_refit, limit_map, T, pairs=first,
+                                   progress=UNTANGLE_PROGRESS)
         info["cold_refit_crossings"] = cold.counts
         if cold.crossings < untangled.crossings:
             untangled = cold

@@ -9,13 +9,14 @@ import trimesh
 
 from core.errors import ExportError
 from core.fitting import crossings, fit_base_mesh
-from core.fitting.crossings import STIFFEN, hold_back_crossings, influencing, stiffen_until_clean
+from core.fitting.crossings import (FEW_CROSSINGS, STIFFEN, TANGLED, UNTANGLE_PROGRESS,
+                                    hold_back_crossings, influencing, stiffen_until_clean)
 from core.geometry import triangulate
 from core.params import ReconstructionParams
 from core.pipeline import reconstruct, run_stages
 from core.progress import NO_PROGRESS
 from core.quadmesh.paired_decimation import paired_decimation_base_mesh
-from core.self_intersection import find_self_intersections
+from core.self_intersection import box_pairs, face_boxes, find_self_intersections
 from core.stages.fit import export_limit_crossings
 from core.stages.patches import run_patches
 from core.subdivision.catmull_clark import build_hierarchy
@@ -81,7 +82,7 @@ def test_hold_back_rechecking_only_what_moved_agrees_with_full_searches(monkeypa
     moved[(np.abs(V @ V[5]) < 0.5) & (np.abs(V @ V[120]) < 0.5)] *= 1.02
     quick = hold_back_crossings(V, moved, M, T)
     monkeypatch.setattr(crossings, "_crossings_after",
-                        lambda X, triangles, pairs, mapping, changed:
+                        lambda X, triangles, pairs, mapping, changed, candidates:
                         find_self_intersections(X, triangles))
     full = hold_back_crossings(V, moved, M, T)
     np.testing.assert_array_equal(quick[0], full[0])
@@ -100,19 +101,50 @@ def test_hold_back_tests_only_the_moving_triangles_from_the_first_round(monkeypa
     searched = []
     real = crossings.find_self_intersections
 
-    def recording(X, triangles, among=None):
+    def recording(X, triangles, among=None, candidates=None):
         searched.append(len(triangles) if among is None else int(among.sum()))
-        return real(X, triangles, among)
+        return real(X, triangles, among, candidates)
 
     monkeypatch.setattr(crossings, "find_self_intersections", recording)
     quick = hold_back_crossings(reference, moved, M, T, clean=False)
     assert searched[0] == len(T)                  # the reference's own pairs, once
     assert 0 < searched[1] <= 6                   # the one-ring of vertex 120
     monkeypatch.setattr(crossings, "_crossings_after",
-                        lambda X, triangles, pairs, mapping, changed: real(X, triangles))
+                        lambda X, triangles, pairs, mapping, changed, candidates:
+                        real(X, triangles))
     full = hold_back_crossings(reference, moved, M, T, clean=False)
     np.testing.assert_array_equal(quick[0], full[0])
     assert quick[1:] == full[1:] and quick[1] == 1
+
+
+def test_swept_pairs_hold_every_pair_overlapping_on_the_way_and_find_the_same_crossings():
+    """On a torus cage's level-2 limit surface, a random move: the triangle pairs whose
+    swept boxes overlap include those overlapping at any per-vertex fractions, and the
+    crossing search among them finds what the full search finds."""
+    cage = torus()
+    hierarchy = build_hierarchy(cage, 2)
+    fine = hierarchy.meshes[2]
+    M = (limit_matrices(fine)[0] @ hierarchy.composite(1)).tocsr()
+    T = triangulate(fine.face_vertices, fine.face_offsets)
+    rng = np.random.default_rng(3)
+    reference = cage.vertices
+    moved = reference + rng.normal(scale=0.6, size=reference.shape)
+    swept = crossings._swept_pairs(reference, moved, M, T)
+    known = {tuple(p) for p in swept}
+    found = 0
+    for fraction in (np.zeros(len(reference)), np.ones(len(reference)),
+                     *rng.random((4, len(reference)))):
+        X = M @ (reference + fraction[:, None] * (moved - reference))
+        now = box_pairs(*face_boxes(X[T]))
+        assert {tuple(p) for p in now} <= known
+        every = find_self_intersections(X, T)
+        found += len(every)
+        np.testing.assert_array_equal(find_self_intersections(X, T, candidates=swept), every)
+        marked = rng.random(len(T)) < 0.2
+        np.testing.assert_array_equal(
+            find_self_intersections(X, T, among=marked, candidates=swept),
+            find_self_intersections(X, T, among=marked))
+    assert found > 0 and len(swept) < len(T) * (len(T) - 1) // 4
 
 
 def test_hold_back_halves_a_mover_that_owns_none_of_the_crossing_corners():
@@ -185,6 +217,42 @@ def test_stiffen_until_clean_stops_when_a_stiffer_refit_crosses_at_the_same_tria
     assert len(calls) == 2 and untangled.refits == 2
     assert untangled.counts[1] == untangled.counts[2] > untangled.counts[0]
     np.testing.assert_array_equal(untangled.vertices, one)
+
+
+def test_stiffen_until_clean_stops_when_a_refit_of_a_tangled_fit_takes_too_little_off():
+    V, T = icosphere()
+    M = sp.identity(len(V), format="csr")
+    spikes = [pushed_through(pushed_through(V, a), b)        # 38 pairs each
+              for a, b in ((5, 120), (7, 80), (0, 80), (7, 120))]
+    counts = [len(find_self_intersections(W, T)) for W in spikes]
+    assert len(set(counts)) == 1 and counts[0] > FEW_CROSSINGS
+
+    def refits(fits):
+        fits = iter(fits)                       # each refit crosses elsewhere, as much
+        return lambda stiffness, previous: next(fits)
+
+    stalled = stiffen_until_clean(spikes[0], refits(spikes[1:]), M, T, tries=3,
+                                  progress=UNTANGLE_PROGRESS)
+    assert stalled.refits == 1 and stalled.counts == counts[:2]
+    np.testing.assert_array_equal(stalled.vertices, spikes[0])
+    assert stiffen_until_clean(spikes[0], refits(spikes[1:]), M, T, tries=3).refits == 3
+    # a few crossings (one spike, 10 pairs) are worth every refit, progress or not
+    few = [pushed_through(V, vertex) for vertex in (5, 7, 9, 80)]
+    assert stiffen_until_clean(few[0], refits(few[1:]), M, T, tries=3,
+                               progress=UNTANGLE_PROGRESS).refits == 3
+
+
+def test_stiffen_until_clean_goes_on_without_progress_once_the_fit_is_near_clean():
+    V, T = icosphere()
+    M = sp.identity(len(V), format="csr")
+    two = pushed_through(pushed_through(V, 5), 120)
+    fits = iter([pushed_through(V, 5), pushed_through(V, 7), V])
+    untangled = stiffen_until_clean(two, lambda stiffness, previous: next(fits), M, T,
+                                    tries=3, progress=UNTANGLE_PROGRESS)
+    counts = untangled.counts
+    assert counts[1] == counts[2] <= TANGLED * counts[0]   # the second refit took nothing off
+    assert untangled.refits == 3 and untangled.crossings == 0
+    np.testing.assert_array_equal(untangled.vertices, V)
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ import trimesh
 
 from core.errors import InvalidMeshError, ParameterError
 from core.mesh_io import read_triangle_soup
-from core.self_intersection import _candidate_pairs, find_self_intersections
+from core.self_intersection import box_pairs, face_boxes, find_self_intersections
 from core.validate import validate_target
 
 MESHES = os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data", "meshes")
@@ -136,7 +136,7 @@ def test_two_touching_faces_are_not_self_intersections():
     for shift, touching in ((0.0, True), (-1e-3, False)):
         V2, F2 = box(center=(1.0 + shift, 0.5, 0.25))
         V, F = np.vstack([V1, V2]), np.vstack([F1, F2 + len(V1)])
-        assert len(_candidate_pairs(V[F])) > 100, "the narrow phase sees the contact"
+        assert len(box_pairs(*face_boxes(V[F]))) > 100, "the narrow phase sees the contact"
         if touching:
             assert len(find_self_intersections(V, F)) == 0
             mesh, summary = validate_target(V, F, components="all")

@@ -229,3 +229,21 @@ def test_samples_nearest_keeps_its_answer_per_mesh():
     again = surface.samples_nearest(vertices.copy(), other.faces.copy(), 300, seed=2)
     assert again[0] is near and again[1] is normals
     assert surface.samples_nearest(vertices * 1.01, other.faces, 300, seed=2)[0] is not near
+
+
+def test_nearest_answers_each_point_as_the_tree_does_alone_whatever_the_order():
+    """The points are queried in Z-order: each answer is the tree's for that point (the
+    faces of a query point by point), and shuffling the points shuffles the answers."""
+    mesh = trimesh.creation.icosphere(3)
+    surface = TargetSurface(mesh.vertices, mesh.faces)
+    rng = np.random.default_rng(7)
+    points = rng.normal(size=(400, 3)) * rng.uniform(0.2, 2.0, (400, 1))
+    near = surface.nearest(points)
+    alone = [int(surface._tree.squared_distance(surface.vertices, surface.faces,
+                                                point[None])[1][0]) for point in points]
+    np.testing.assert_array_equal(near.face, alone)
+    shuffle = rng.permutation(len(points))
+    again = surface.nearest(points[shuffle])
+    np.testing.assert_array_equal(again.face, near.face[shuffle])
+    np.testing.assert_array_equal(again.point, near.point[shuffle])
+    assert len(surface.nearest(np.zeros((0, 3))).face) == 0
