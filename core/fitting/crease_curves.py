@@ -111,8 +111,10 @@ def fit_crease_curves(base, fine, limit_map, triangles, target_vertices, target_
     graph = _FeatureGraph(target_vertices, target_faces)
     ends = set(on_target[np.unique(creases)].tolist()) - {-1}
     rows, along, chains, polylines = [], [], [], []
-    for (a, b), inner in _fine_chains(fine, n, creases).items():
-        path = graph.path(on_target[a], on_target[b], ends)
+    fine_chains = _fine_chains(fine, n, creases)
+    ends_of = np.array(list(fine_chains), dtype=np.int64).reshape(-1, 2)
+    for ((a, b), inner), path in zip(fine_chains.items(),
+                                     graph.paths(on_target[ends_of], ends)):
         if path is None:
             continue
         steps = len(inner) + 1
@@ -245,28 +247,37 @@ class _FeatureGraph:
         self.graph = sp.coo_matrix((length, (local[:, 0], local[:, 1])), shape=(k, k)).tocsr()
         self.vertices = vertices
 
-    def path(self, a, b, ends):
-        """Target vertices of the shortest feature chain from ``a`` to ``b`` that passes
-        through no other vertex of ``ends``; None when ``a`` or ``b`` is -1 or not on the
-        network, or no such chain is within ``PATH_REACH`` times their distance."""
-        if a < 0 or b < 0 or a == b:
-            return None
-        la, lb = np.searchsorted(self.nodes, [a, b])
-        if la >= len(self.nodes) or lb >= len(self.nodes) or self.nodes[la] != a \
-                or self.nodes[lb] != b:
-            return None
-        reach = PATH_REACH * float(np.linalg.norm(self.vertices[a] - self.vertices[b]))
-        distance, previous = dijkstra(self.graph, directed=False, indices=la, limit=reach,
+    def paths(self, pairs, ends):
+        """For each target vertex pair ``(a, b)`` of ``pairs`` ((p, 2) int64), the target
+        vertices of the shortest feature chain from ``a`` to ``b``, or None when ``a`` or
+        ``b`` is -1 or not on the network, when no chain is within ``PATH_REACH`` times their
+        distance, or when the shortest passes through another vertex of ``ends`` (set).
+        One Dijkstra search per distinct start, as far as the farthest pair's reach."""
+        local = np.searchsorted(self.nodes, pairs) if len(self.nodes) else np.zeros_like(pairs)
+        local = np.minimum(local, max(len(self.nodes) - 1, 0))
+        usable = (pairs >= 0).all(axis=1) & (pairs[:, 0] != pairs[:, 1])
+        if len(self.nodes):
+            usable &= (self.nodes[local] == pairs).all(axis=1)
+        reach = PATH_REACH * np.linalg.norm(self.vertices[pairs[:, 0]]
+                                            - self.vertices[pairs[:, 1]], axis=1)
+        found = [None] * len(pairs)
+        if not usable.any():
+            return found
+        starts, row = np.unique(local[usable, 0], return_inverse=True)
+        distance, previous = dijkstra(self.graph, directed=False, indices=starts,
+                                      limit=float(reach[usable].max()),
                                       return_predecessors=True)
-        if not np.isfinite(distance[lb]):
-            return None
-        chain = [lb]
-        while chain[-1] != la:
-            chain.append(previous[chain[-1]])
-        path = self.nodes[np.asarray(chain[::-1])]
-        if ends.intersection(path[1:-1].tolist()):
-            return None
-        return path
+        for k, r in zip(np.flatnonzero(usable), row):
+            la, lb = local[k]
+            if not distance[r, lb] <= reach[k]:
+                continue
+            chain = [lb]
+            while chain[-1] != la:
+                chain.append(previous[r, chain[-1]])
+            path = self.nodes[np.asarray(chain[::-1])]
+            if not ends.intersection(path[1:-1].tolist()):
+                found[k] = path
+        return found
 
 
 def _along(polyline, fractions):
