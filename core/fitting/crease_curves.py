@@ -253,14 +253,14 @@ class _FeatureGraph:
         ``b`` is -1 or not on the network, when no chain is within ``PATH_REACH`` times their
         distance, or when the shortest passes through another vertex of ``ends`` (set).
         One Dijkstra search per distinct start, as far as the farthest pair's reach."""
-        local = np.searchsorted(self.nodes, pairs) if len(self.nodes) else np.zeros_like(pairs)
-        local = np.minimum(local, max(len(self.nodes) - 1, 0))
-        usable = (pairs >= 0).all(axis=1) & (pairs[:, 0] != pairs[:, 1])
-        if len(self.nodes):
-            usable &= (self.nodes[local] == pairs).all(axis=1)
+        found = [None] * len(pairs)
+        if not len(self.nodes) or not len(pairs):
+            return found
+        local = np.minimum(np.searchsorted(self.nodes, pairs), len(self.nodes) - 1)
+        usable = ((pairs >= 0).all(axis=1) & (pairs[:, 0] != pairs[:, 1])
+                  & (self.nodes[local] == pairs).all(axis=1))
         reach = PATH_REACH * np.linalg.norm(self.vertices[pairs[:, 0]]
                                             - self.vertices[pairs[:, 1]], axis=1)
-        found = [None] * len(pairs)
         if not usable.any():
             return found
         starts, row = np.unique(local[usable, 0], return_inverse=True)

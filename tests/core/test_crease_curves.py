@@ -134,3 +134,24 @@ def test_pocket_plate_moves_stay_within_reach():
     moved = np.linalg.norm(fitted.vertices - cage.vertices, axis=1)
     assert (moved <= reach * (1 + 1e-9)).all()
     assert (moved > 0.99 * reach).sum() > 10  # the reach is what stops them
+
+
+def test_feature_chains_need_feature_lines():
+    """A smooth target (a sphere, no edge above 60 degrees) has no feature network: no pair
+    of its vertices gets a chain, nor does a pair with an unmatched end (-1); on the
+    cylinder the chain between two rim vertices an eighth of the circle apart runs along the
+    rim (9 vertices)."""
+    import trimesh
+
+    from core.fitting.crease_curves import _FeatureGraph
+
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    graph = _FeatureGraph(np.asarray(sphere.vertices), np.asarray(sphere.faces, dtype=np.int64))
+    assert graph.paths(np.array([[0, 1], [2, 3]]), set()) == [None, None]
+    target_vertices, target_faces = _cylinder()
+    graph = _FeatureGraph(target_vertices, target_faces)
+    step = SECTIONS // RIM
+    found = graph.paths(np.array([[0, step], [-1, step], [0, SECTIONS]]), {0, step})
+    assert np.array_equal(found[0], np.arange(step + 1))
+    assert found[1] is None
+    assert found[2] is None  # the rims are not joined by feature edges
