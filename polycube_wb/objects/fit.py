@@ -67,6 +67,10 @@ class FitProxy(CageProxy):
         add_property(obj, "App::PropertyString", "Refinement", "Result",
                      "With a tolerance: whether it was met, why the refinement stopped and the "
                      "faces of every fitted cage", "", read_only=True, output=True)
+        add_property(obj, "App::PropertyString", "CreaseCurves", "Result",
+                     "A cage with sharp creases: how many of its crease edges were fitted to "
+                     "the target's feature lines before the fit", "", read_only=True,
+                     output=True)
 
     def parameters(self, obj):
         return {"fit_iterations": int(obj.Iterations),
@@ -87,6 +91,7 @@ class FitProxy(CageProxy):
             setattr(obj, name, float(fit[key]))
         obj.Stopped = str(fit.get("stopped", ""))
         obj.Refinement = refinement_summary(fit.get("tolerance"))
+        obj.CreaseCurves = crease_curves_summary(fit.get("crease_curves"))
         store_cage(obj, state.fit.cage)
 
 
@@ -97,3 +102,12 @@ def refinement_summary(tolerance):
     faces = " -> ".join(str(round_["faces"]) for round_ in tolerance["rounds"])
     return (f"{tolerance['reason']} ({tolerance['value_mm']:.4g} mm; faces {faces}; largest "
             f"deviation {tolerance['rounds'][-1]['max_deviation']:.3g} of the diagonal)")
+
+
+def crease_curves_summary(crease_curves):
+    """One line on the crease-curve fit (the fit report's ``crease_curves`` or None)."""
+    if not crease_curves:
+        return ""
+    return (f"{crease_curves['matched']} of {crease_curves['creases']} crease edges fitted to "
+            f"the target's feature lines, {crease_curves['held_back']} vertices held back "
+            "where the surface would cross itself")

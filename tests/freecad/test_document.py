@@ -153,6 +153,18 @@ def test_fit_tolerance_is_a_parameter_and_its_refinement_is_reported(chain_doc):
     assert api.recompute(chain_doc).ok and fit.Refinement == ""
 
 
+def test_crease_curves_line_only_for_creased_cages(chain_doc):
+    """The cantilever's cage has no creases: its Fit's ``CreaseCurves`` line stays empty;
+    a creased cage's report gives the counts."""
+    from polycube_wb.objects.fit import crease_curves_summary
+
+    assert _objects(chain_doc)["Fit"].CreaseCurves == ""
+    assert crease_curves_summary(None) == ""
+    assert crease_curves_summary({"matched": 298, "creases": 304, "held_back": 17}) == (
+        "298 of 304 crease edges fitted to the target's feature lines, 17 vertices held back "
+        "where the surface would cross itself")
+
+
 def test_edited_fitted_cage_moves_the_solid_without_refitting(chain_doc):
     from polycube_wb import api
 
