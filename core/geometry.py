@@ -157,6 +157,16 @@ def sample_surface(V, F, count, rng):
     return t[:, 0] + a[:, None] * (t[:, 1] - t[:, 0]) + b[:, None] * (t[:, 2] - t[:, 0])
 
 
+def shortest_edges_at(vertices, edges):
+    """(n,) float64 length of the shortest of ``edges`` ((e, 2) int vertex pairs) at every
+    vertex of ``vertices`` ((n, 3), model units); inf at a vertex on none of them."""
+    length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
+    shortest = np.full(len(vertices), np.inf)
+    np.minimum.at(shortest, edges[:, 0], length)
+    np.minimum.at(shortest, edges[:, 1], length)
+    return shortest
+
+
 def triangulate(face_vertices, face_offsets):
     """Fan triangulation of a CSR polygon mesh (``core.types.PolyMesh`` layout).
 

@@ -46,6 +46,7 @@ from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
 from core.fitting.crossings import hold_back_crossings
+from core.geometry import shortest_edges_at
 from core.quadmesh.creases import CREASE_ANGLE, closed_network, feature_edges
 
 CREASE_DAMPING = 1e-3
@@ -126,7 +127,7 @@ def fit_crease_curves(base, fine, limit_map, triangles, target_vertices, target_
         return CreaseFit(V0, len(chains), len(creases), 0)
     moved = _fitted(limit_map, np.asarray(rows), np.concatenate(along),
                     np.concatenate(chains), _Polylines(polylines), V0, free,
-                    MAX_MOVE * _shortest_crease_edge(V0, creases)[free])
+                    MAX_MOVE * shortest_edges_at(V0, creases)[free])
     vertices, held, _ = hold_back_crossings(V0, moved, limit_map, triangles, clean=False)
     return CreaseFit(vertices, len(chains), len(creases), held)
 
@@ -164,15 +165,6 @@ def _fitted(limit_map, rows, along, chain, curves, V0, free, reach):
         move *= np.minimum(1.0, reach / np.maximum(length, 1e-300))[:, None]
         V[free] = V0[free] + move
     return V
-
-
-def _shortest_crease_edge(V, creases):
-    """(n,) float64 length of the shortest crease edge at each vertex (inf without one)."""
-    length = np.linalg.norm(V[creases[:, 0]] - V[creases[:, 1]], axis=1)
-    shortest = np.full(len(V), np.inf)
-    np.minimum.at(shortest, creases[:, 0], length)
-    np.minimum.at(shortest, creases[:, 1], length)
-    return shortest
 
 
 class _Polylines:

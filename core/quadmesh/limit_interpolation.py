@@ -24,6 +24,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from core.geometry import shortest_edges_at
 from core.mesh_topology import next_corners
 from core.quadmesh.orientation import inverted_faces
 from core.subdivision.catmull_clark import subdivide
@@ -43,12 +44,8 @@ kept 11 of its 17 inverted faces, at 2 one; unbounded, vertices moved 12 edge le
 def shortest_edges(mesh):
     """(n,) float64 length of the shortest edge at every vertex of ``mesh`` (model units)."""
     corners = mesh.face_vertices
-    following = corners[next_corners(mesh.face_offsets)]
-    length = np.linalg.norm(mesh.vertices[corners] - mesh.vertices[following], axis=1)
-    shortest = np.full(len(mesh.vertices), np.inf)
-    np.minimum.at(shortest, corners, length)
-    np.minimum.at(shortest, following, length)
-    return shortest
+    return shortest_edges_at(mesh.vertices,
+                             np.stack([corners, corners[next_corners(mesh.face_offsets)]], axis=1))
 
 
 def vertex_limit_positions(mesh):

@@ -3,9 +3,9 @@
 (core.fitting.crease_curves)."""
 import numpy as np
 
-from core.fitting.crease_curves import MAX_MOVE, _shortest_crease_edge, fit_crease_curves
+from core.fitting.crease_curves import MAX_MOVE, fit_crease_curves
 from core.fitting.crossings import count_crossings
-from core.geometry import triangulate
+from core.geometry import shortest_edges_at, triangulate
 from core.quality import containment
 from core.subdivision.catmull_clark import build_hierarchy
 from core.subdivision.limit import limit_matrices
@@ -130,7 +130,7 @@ def test_pocket_plate_moves_stay_within_reach():
     assert before["outside_volume_fraction"] > 0.06
     assert after["outside_volume_fraction"] < 0.02
     creases = np.sort(np.asarray(cage.creases), axis=1)
-    reach = MAX_MOVE * _shortest_crease_edge(cage.vertices, creases)
+    reach = MAX_MOVE * shortest_edges_at(cage.vertices, creases)
     moved = np.linalg.norm(fitted.vertices - cage.vertices, axis=1)
     assert (moved <= reach * (1 + 1e-9)).all()
     assert (moved > 0.99 * reach).sum() > 10  # the reach is what stops them
