@@ -49,7 +49,7 @@ def find_self_intersections(vertices, faces, among=None, candidates=None):
         # the second order is tested only on the pairs that passed the first
         chunk = chunk[_straddle(tri, normal, offset, chunk[:, 0], chunk[:, 1], eps)]
         chunk = chunk[_straddle(tri, normal, offset, chunk[:, 1], chunk[:, 0], eps)]
-        hits.append(chunk[_pairs_intersect(tri, faces, chunk, eps)])
+        hits.append(chunk[_pairs_intersect(tri, faces, chunk, normal, eps)])
     hits = np.concatenate(hits) if hits else np.zeros((0, 2), dtype=np.int64)
     return hits[np.lexsort((hits[:, 1], hits[:, 0]))]
 
@@ -139,44 +139,54 @@ _CROSS_CHILDREN = np.array([[0, 0, 1, 1], [0, 1, 0, 1]], dtype=np.int64)
 """The four child pairs ``(2 a + c[0], 2 b + c[1])`` of two nodes ``a < b``."""
 
 
-def _pairs_intersect(tri, faces, pairs, eps):
-    """(p,) bool: does each candidate pair really intersect."""
+def _pairs_intersect(tri, faces, pairs, normal, eps):
+    """(p,) bool: does each candidate pair really intersect.
+
+    Every edge test of every pair (six for disjoint triangles, the two opposite edges for
+    triangles sharing a corner) goes through one vectorised :func:`_segment_crosses_triangle`.
+    ``normal`` : (m, 3) float64 unit face normals (:func:`core.geometry.unit_face_normals`).
+    """
     fa, fb = faces[pairs[:, 0]], faces[pairs[:, 1]]
     shared = (fa[:, :, None] == fb[:, None, :])
     n_shared = shared.sum(axis=(1, 2))
-    result = np.zeros(len(pairs), dtype=bool)
-
     disjoint = np.flatnonzero(n_shared == 0)
-    if len(disjoint):
-        ta, tb = tri[pairs[disjoint, 0]], tri[pairs[disjoint, 1]]
-        hit = np.zeros(len(disjoint), dtype=bool)
-        for k in range(3):
-            hit |= _segment_crosses_triangle(ta[:, k], ta[:, (k + 1) % 3], tb, eps)
-            hit |= _segment_crosses_triangle(tb[:, k], tb[:, (k + 1) % 3], ta, eps)
-        result[disjoint] = hit
-
     touching = np.flatnonzero(n_shared == 1)
+    # each test: the pair it belongs to, the face and first corner of the segment (its
+    # edge to the next corner), and the face it may cross
+    owner, segment_face, corner, crossed_face = [], [], [], []
+    if len(disjoint):
+        for k in range(3):
+            for first, second in ((0, 1), (1, 0)):
+                owner.append(disjoint)
+                segment_face.append(pairs[disjoint, first])
+                corner.append(np.full(len(disjoint), k))
+                crossed_face.append(pairs[disjoint, second])
     if len(touching):
-        ta, tb = tri[pairs[touching, 0]], tri[pairs[touching, 1]]
         corner_a = shared[touching].any(axis=2).argmax(axis=1)
         corner_b = shared[touching].any(axis=1).argmax(axis=1)
-        rows = np.arange(len(touching))
-        a1, a2 = ta[rows, (corner_a + 1) % 3], ta[rows, (corner_a + 2) % 3]
-        b1, b2 = tb[rows, (corner_b + 1) % 3], tb[rows, (corner_b + 2) % 3]
-        result[touching] = (_segment_crosses_triangle(a1, a2, tb, eps)
-                            | _segment_crosses_triangle(b1, b2, ta, eps))
+        for first, second, at in ((0, 1, corner_a), (1, 0, corner_b)):
+            owner.append(touching)
+            segment_face.append(pairs[touching, first])
+            corner.append((at + 1) % 3)
+            crossed_face.append(pairs[touching, second])
+    result = np.zeros(len(pairs), dtype=bool)
+    if owner:
+        owner, segment_face = np.concatenate(owner), np.concatenate(segment_face)
+        corner, crossed_face = np.concatenate(corner), np.concatenate(crossed_face)
+        hit = _segment_crosses_triangle(tri[segment_face, corner],
+                                        tri[segment_face, (corner + 1) % 3],
+                                        tri[crossed_face], normal[crossed_face], eps)
+        result[owner[hit]] = True
     return result
 
 
-def _segment_crosses_triangle(p0, p1, triangle, eps):
+def _segment_crosses_triangle(p0, p1, triangle, normal, eps):
     """(p,) bool: segment p0-p1 passes strictly through the interior of the triangle.
 
-    p0, p1 : (p, 3); triangle : (p, 3, 3).
+    p0, p1 : (p, 3); triangle : (p, 3, 3); normal : (p, 3) its unit normal (zero rows for
+    zero-area triangles, which nothing crosses).
     """
     a, b, c = triangle[:, 0], triangle[:, 1], triangle[:, 2]
-    normal = np.cross(b - a, c - a)
-    length = np.linalg.norm(normal, axis=1)
-    normal = normal / np.where(length > 0, length, 1.0)[:, None]
     d0 = np.einsum("ij,ij->i", p0 - a, normal)
     d1 = np.einsum("ij,ij->i", p1 - a, normal)
     crosses = ((d0 > eps) & (d1 < -eps)) | ((d0 < -eps) & (d1 > eps))
@@ -187,4 +197,4 @@ def _segment_crosses_triangle(p0, p1, triangle, eps):
         edge = v - u
         side = np.einsum("ij,ij->i", np.cross(edge, q - u), normal)
         inside &= side > eps * np.linalg.norm(edge, axis=1)
-    return crosses & inside & (length > 0)
+    return crosses & inside

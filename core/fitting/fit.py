@@ -19,8 +19,8 @@ from core.errors import InvalidMeshError, ParameterError
 from core.fitting.best_fit import BestFitResult, best_fit, pull_inside
 from core.fitting.contain import nudge_inside
 from core.fitting.crease_curves import fit_crease_curves
-from core.fitting.crossings import (UNTANGLE_PROGRESS, count_crossings, crossing_pairs,
-                                     hold_back_crossings, stiffen_until_clean)
+from core.fitting.crossings import (FEW_CROSSINGS, UNTANGLE_PROGRESS, count_crossings,
+                                     crossing_pairs, hold_back_crossings, stiffen_until_clean)
 from core.fitting.responses import thickness, volume
 from core.fitting.rgp import FitProblem, run_rgp
 from core.geometry import face_areas, sample_surface, triangulate
@@ -327,9 +327,12 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, in
     near the crossings, so the coarse rounds' large moves need not be made again). If they
     do not reach a clean fit, the refits are made again the long way, each a whole
     two-level fit from the cage (``cold_refit_crossings``), and the fit with fewer
-    crossings is kept: where the cage itself crosses, stiffening towards it from a crossing
-    fit can bring its crossings back (tray_bottom: 171, 72, 22, 156, 167 pairs the short way,
-    7 at best the long way). Either way the refits stop once one takes less than
+    crossings is kept: stiffening from a crossing fit can bring its crossings back
+    (tray_bottom seed 0: 204, 41, 3, 7, 3 pairs the short way, 204, 3, 28, 0 the long way).
+    The long way is taken only when the short way left at most ``FEW_CROSSINGS`` pairs: where
+    it left more (to_simp_lbracket, featuretype, octagonal_pocket: 21-83), the long way did
+    not clear them on any dev mesh (39-114 pairs) and cost 1-2.5 CPU s.
+    Either way the refits stop once one takes less than
     ``UNTANGLE_PROGRESS`` off the fewest crossings of a fit still far from clean (the
     creased cages' fits cross in hundreds of pairs, and stiffening does not untangle them).
     If the fit still crosses and the cage's limit surface does not, the fit is held back
@@ -357,7 +360,7 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, in
     first = crossing_pairs(limit_map, T, vertices)
     untangled = stiffen_until_clean(vertices, refit, limit_map, T, pairs=first,
                                     progress=UNTANGLE_PROGRESS)
-    if untangled.crossings:
+    if 0 < untangled.crossings <= FEW_CROSSINGS:
         cold = stiffen_until_clean(vertices, cold_refit, limit_map, T, pairs=first,
                                    progress=UNTANGLE_PROGRESS)
         info["cold_refit_crossings"] = cold.counts
@@ -400,7 +403,9 @@ def _pulled_inside(base, limit_map, T, target, vertices, stiffness):
     smoothness term stiffer there (:func:`core.fitting.crossings.stiffen_until_clean`,
     each pull from ``vertices``), so that less of it has to be held back: on
     gripper_domain 159, 75, 48, 27, 21 crossing pairs, the start 1.0 % of the target's
-    volume outside after the hold-back instead of 1.4 %.
+    volume outside after the hold-back instead of 1.4 %. The stiffer pulls stop as the
+    untangling refits do (``UNTANGLE_PROGRESS``): on the creased cages they do not
+    untangle (featuretype seed 0: 75, 88, 117, 88, 67 pairs).
 
     Returns
     -------
@@ -415,7 +420,8 @@ def _pulled_inside(base, limit_map, T, target, vertices, stiffness):
         return pull_inside(base, limit_map, target, vertices, margin, INSIDE_ROUNDS,
                            stiffness=stiffness * extra, start_closest=start)
 
-    pulled = stiffen_until_clean(pull(np.ones(len(vertices))), pull, limit_map, T)
+    pulled = stiffen_until_clean(pull(np.ones(len(vertices))), pull, limit_map, T,
+                                 progress=UNTANGLE_PROGRESS)
     return pulled, margin, pulled.counts
 
 
