@@ -32,7 +32,7 @@ UNTANGLE_PROGRESS = 0.05
 """Least fraction of the fewest crossing pairs so far that an untangling refit must take off
 for another while those fewest are more than ``TANGLED`` times the first fit's and more
 than ``FEW_CROSSINGS`` (:func:`stiffen_until_clean` from
-:func:`core.fitting.fit._untangled` and :func:`core.fitting.fit._pulled_inside`). On the creased cages the refits do not untangle
+:func:`core.fitting.fit._untangled`). On the creased cages the refits do not untangle
 (featuretype seed 0: 400, 409, 452, 444, 484 pairs the short way, 400, 395, 401, 425, 498
 the long way; octagonal_pocket 345, 295, 222, 215, 225 and 345, 184, 187, 217, 208): they
 now stop after one to three refits with the fit they kept before. to_simp_lbracket seed

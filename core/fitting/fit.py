@@ -19,8 +19,8 @@ from core.errors import InvalidMeshError, ParameterError
 from core.fitting.best_fit import BestFitResult, best_fit, pull_inside
 from core.fitting.contain import nudge_inside
 from core.fitting.crease_curves import fit_crease_curves
-from core.fitting.crossings import (FEW_CROSSINGS, UNTANGLE_PROGRESS, count_crossings,
-                                     crossing_pairs, hold_back_crossings, stiffen_until_clean)
+from core.fitting.crossings import (UNTANGLE_PROGRESS, count_crossings, crossing_pairs,
+                                     hold_back_crossings, stiffen_until_clean)
 from core.fitting.responses import thickness, volume
 from core.fitting.rgp import FitProblem, run_rgp
 from core.geometry import face_areas, sample_surface, triangulate
@@ -93,8 +93,8 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         (best-fit mode, inside mode from ``start='best-fit'``) ``self_intersections``
         (intersecting triangle pairs of the fine limit mesh, ``surface='limit'``),
         ``cage_self_intersections`` (the cage's, when the result still crosses), ``refits``,
-        ``refit_crossings``, ``cold_refit_crossings`` (when the short refits did not
-        untangle), ``stiffened`` (:func:`_untangled`) and ``held_back`` (base vertices held
+        ``refit_crossings``, ``cold_refit_crossings`` (when the short refits left a few
+        crossings), ``stiffened`` (:func:`_untangled`) and ``held_back`` (base vertices held
         back towards the cage or, inside mode, the least-squares start); inside mode also
         ``start_margin`` (depth of the start below the target, model units) and
         ``rgp_held_back`` (base vertices whose RGP move was cut back because the
@@ -318,6 +318,16 @@ mean distance after the RGP than 0 or 0.5)."""
 INSIDE_ROUNDS = 2
 
 
+LONG_WAY_LEFT = 0.15
+"""The untangling refits are made again the long way (:func:`_untangled`) only when the
+short way left at most this fraction of the first fit's crossing pairs. Where it left
+less, the long way cleared what was left (tray_bottom seed 0: 3 of 204 pairs left, idler_riser
+seed 1: 3 of 67, gripper_domain seeds 1 and 2: 57 of 952 and 33 of 1284; the long way 0-3);
+where it left more, the crossings are where the cage cannot follow the part and the long
+way never had fewer (to_simp_lbracket 21-22 of 67-77 left, 39-49 the long way; featuretype
+79-91 of 112-144, 107-114; octagonal_pocket 26-49 of 64-66, 42-70), at 1-2.5 CPU s."""
+
+
 def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, info):
     """The least-squares fit made not to cross itself where a refit or the cage allows.
 
@@ -329,9 +339,8 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, in
     two-level fit from the cage (``cold_refit_crossings``), and the fit with fewer
     crossings is kept: stiffening from a crossing fit can bring its crossings back
     (tray_bottom seed 0: 204, 41, 3, 7, 3 pairs the short way, 204, 3, 28, 0 the long way).
-    The long way is taken only when the short way left at most ``FEW_CROSSINGS`` pairs: where
-    it left more (to_simp_lbracket, featuretype, octagonal_pocket: 21-83), the long way did
-    not clear them on any dev mesh (39-114 pairs) and cost 1-2.5 CPU s.
+    The long way is taken only when the short way took most crossings off
+    (``LONG_WAY_LEFT``).
     Either way the refits stop once one takes less than
     ``UNTANGLE_PROGRESS`` off the fewest crossings of a fit still far from clean (the
     creased cages' fits cross in hundreds of pairs, and stiffening does not untangle them).
@@ -360,7 +369,7 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, in
     first = crossing_pairs(limit_map, T, vertices)
     untangled = stiffen_until_clean(vertices, refit, limit_map, T, pairs=first,
                                     progress=UNTANGLE_PROGRESS)
-    if 0 < untangled.crossings <= FEW_CROSSINGS:
+    if 0 < untangled.crossings <= LONG_WAY_LEFT * untangled.counts[0]:
         cold = stiffen_until_clean(vertices, cold_refit, limit_map, T, pairs=first,
                                    progress=UNTANGLE_PROGRESS)
         info["cold_refit_crossings"] = cold.counts
@@ -403,9 +412,7 @@ def _pulled_inside(base, limit_map, T, target, vertices, stiffness):
     smoothness term stiffer there (:func:`core.fitting.crossings.stiffen_until_clean`,
     each pull from ``vertices``), so that less of it has to be held back: on
     gripper_domain 159, 75, 48, 27, 21 crossing pairs, the start 1.0 % of the target's
-    volume outside after the hold-back instead of 1.4 %. The stiffer pulls stop as the
-    untangling refits do (``UNTANGLE_PROGRESS``): on the creased cages they do not
-    untangle (featuretype seed 0: 75, 88, 117, 88, 67 pairs).
+    volume outside after the hold-back instead of 1.4 %.
 
     Returns
     -------
@@ -420,8 +427,7 @@ def _pulled_inside(base, limit_map, T, target, vertices, stiffness):
         return pull_inside(base, limit_map, target, vertices, margin, INSIDE_ROUNDS,
                            stiffness=stiffness * extra, start_closest=start)
 
-    pulled = stiffen_until_clean(pull(np.ones(len(vertices))), pull, limit_map, T,
-                                 progress=UNTANGLE_PROGRESS)
+    pulled = stiffen_until_clean(pull(np.ones(len(vertices))), pull, limit_map, T)
     return pulled, margin, pulled.counts
 
 
