@@ -29,7 +29,7 @@ from core.progress import NO_PROGRESS
 from core.quality import containment
 from core.subdivision.catmull_clark import build_hierarchy
 from core.subdivision.limit import limit_matrices
-from core.target_surface import TargetSurface
+from core.target_surface import TREE_EDGE, TargetSurface
 from core.threads import single_threaded
 from core.types import PolyMesh
 
@@ -132,7 +132,7 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         raise ParameterError(f"tol must be >= 0 and patience an integer >= 1, got {tol!r}, "
                              f"{patience!r}")
     V0 = _check_base(base)
-    target_surface = TargetSurface(target.vertices, target.faces)
+    target_surface = TargetSurface(target.vertices, target.faces, tree_edge=TREE_EDGE)
     target_volume, _ = volume(target_surface.vertices, target_surface.faces)
     if not target_volume > 0:
         raise InvalidMeshError(f"target encloses a non-positive volume ({target_volume:g}); "

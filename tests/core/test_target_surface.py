@@ -247,3 +247,60 @@ def test_nearest_answers_each_point_as_the_tree_does_alone_whatever_the_order():
     np.testing.assert_array_equal(again.face, near.face[shuffle])
     np.testing.assert_array_equal(again.point, near.point[shuffle])
     assert len(surface.nearest(np.zeros((0, 3))).face) == 0
+
+
+def test_short_triangles_cover_each_triangle_with_pieces_no_longer_than_asked():
+    """Halving the longest edge: every piece lies in its owner's plane and inside it, the
+    pieces' areas add up to the owner's, and no piece edge is longer than asked."""
+    from core.target_surface import short_triangles
+
+    V, F = read_triangle_soup(MESHES / "featuretype.stl")
+    longest = 0.1 * float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    pieces_v, pieces_f, owner = short_triangles(V, F, longest)
+    pieces = pieces_v[pieces_f]
+    assert len(pieces) > len(F)
+    assert np.linalg.norm(np.roll(pieces, -1, axis=1) - pieces, axis=2).max() <= longest
+    area = 0.5 * np.linalg.norm(np.cross(pieces[:, 1] - pieces[:, 0],
+                                         pieces[:, 2] - pieces[:, 0]), axis=1)
+    whole = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]),
+                                 axis=1)
+    np.testing.assert_allclose(np.bincount(owner, area, len(F)), whole, rtol=1e-9)
+    corners = pieces.reshape(-1, 3)
+    back, _, _ = closest_on_triangles(V[F][np.repeat(owner, 3)], corners)
+    assert np.abs(back - corners).max() <= 1e-12 * 10 * longest   # rounding on slivers
+    # a mesh without longer edges is returned as it is
+    same_v, same_f, none = short_triangles(V, F, 10 * longest)
+    assert same_v is V and same_f is F and none is None
+
+
+def test_a_tree_of_cut_triangles_answers_as_the_mesh_does():
+    """featuretype's flat faces are fans of long slivers; the tree over them cut to a tenth
+    of the diagonal gives the brute-force distances and the mesh's own triangles, and the
+    ray exits the tree over the mesh finds, or the brute force's where they differ (the
+    cut tree's compiled cast found 11 exits of rays from the vertices that the mesh's own
+    missed)."""
+    from core.target_surface import TREE_EDGE
+
+    V, F = read_triangle_soup(MESHES / "featuretype.stl")
+    plain, cut = TargetSurface(V, F), TargetSurface(V, F, tree_edge=TREE_EDGE)
+    assert cut._tree_owner is not None
+    rng = np.random.default_rng(7)
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    points = lo + (hi - lo) * rng.uniform(-0.1, 1.1, size=(200, 3))
+    near = cut.closest(points)
+    brute = brute_force_distance(V[F], points)
+    assert np.max(np.abs(near.distance - brute)) <= 1e-12 * cut.diagonal
+    assert near.face.max() < len(F)
+    again, _, _ = closest_on_triangles(V[F][near.face], points)
+    assert np.allclose(again, near.point, atol=1e-12 * cut.diagonal)
+    assert np.array_equal(near.signed < 0, plain.closest(points).signed < 0)
+    direction = -vertex_normals(V, F)
+    hits, expected = (surface.first_exit(V, direction, surface.diagonal)
+                      for surface in (cut, plain))
+    assert np.array_equal(hits.face >= 0, expected.face >= 0)
+    found = np.flatnonzero(hits.face >= 0)
+    same = np.abs(hits.t[found] - expected.t[found]) <= 1e-12 * cut.diagonal
+    assert same.mean() > 0.99
+    other = found[~same]
+    brute = brute_force_exit(V, F, V[other], direction[other], cut.diagonal)
+    assert np.allclose(hits.t[other], brute, atol=1e-12 * cut.diagonal)
