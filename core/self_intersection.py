@@ -36,11 +36,28 @@ def find_self_intersections(vertices, faces, among=None, candidates=None):
     -------
     pairs : (k, 2) int64, ``pairs[:, 0] < pairs[:, 1]``, sorted.
     """
-    tri = vertices[faces]
-    lo, hi = face_boxes(tri)
-    pairs = (box_pairs(lo, hi, among) if candidates is None
-             else _overlapping(candidates, lo, hi, among))
     eps = CONTACT * float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+    if candidates is None:
+        tri = vertices[faces]
+        lo, hi = face_boxes(tri)
+        return _really_intersecting(vertices, faces, tri, box_pairs(lo, hi, among), eps)
+    # only the faces of the candidates with a marked face are looked at, renumbered in their
+    # order (so each pair keeps its order and the sorted pairs stay sorted) and numbered back
+    if among is not None:
+        candidates = candidates[among[candidates[:, 0]] | among[candidates[:, 1]]]
+    used = np.zeros(len(faces), dtype=bool)
+    used[candidates.reshape(-1)] = True
+    numbers = np.flatnonzero(used)
+    renumbered = (np.cumsum(used) - 1)[candidates]
+    tri = vertices[faces[numbers]]
+    lo, hi = face_boxes(tri)
+    return numbers[_really_intersecting(vertices, faces[numbers], tri,
+                                        _overlapping(renumbered, lo, hi), eps)]
+
+
+def _really_intersecting(vertices, faces, tri, pairs, eps):
+    """(k, 2) int64 the rows of ``pairs`` ((p, 2) int64 into ``faces``, whose corners are
+    ``tri``) that intersect (the narrow phase), sorted; ``eps`` the contact tolerance."""
     normal = unit_face_normals(vertices, faces)
     offset = np.einsum("ij,ij->i", normal, tri[:, 0])
     hits = []
@@ -120,13 +137,10 @@ def box_pairs(lo, hi, among=None):
     return np.sort(np.stack([order[a], order[b]], axis=1), axis=1)
 
 
-def _overlapping(candidates, lo, hi, among=None):
+def _overlapping(candidates, lo, hi):
     """(p, 2) int64 the rows of ``candidates`` ((c, 2) int64) whose boxes ``lo``, ``hi``
-    ((m, 3) float64) overlap, with a box marked in ``among`` ((m,) bool or None: all)."""
+    ((m, 3) float64) overlap."""
     a, b = candidates[:, 0], candidates[:, 1]
-    if among is not None:
-        keep = among[a] | among[b]
-        a, b = a[keep], b[keep]
     for axis in range(3):
         keep = (lo[a, axis] <= hi[b, axis]) & (lo[b, axis] <= hi[a, axis])
         a, b = a[keep], b[keep]
