@@ -6,8 +6,7 @@ distances with pseudo-normals, and first exits of rays.
 compiled C++) once and answers any number of queries; the fit (packaging response),
 the thickness rays and the quality check's surface distances all use it.
 
-Closest points: the tree (over the mesh's triangles, or with ``tree_edge`` over them with
-the long ones cut into pieces, :func:`short_triangles`) returns the nearest triangle of every query point; the point,
+Closest points: the tree returns the nearest triangle of every query point; the point,
 its barycentric coordinates and where on the triangle it lies (face, edge or corner)
 are then recomputed exactly in float64 on that triangle (Ericson's Voronoi-region
 test). The normal at the closest point is the angle-weighted pseudo-normal (Baerentzen
@@ -114,11 +113,6 @@ class TargetSurface:
     vertices : (n, 3) float, model units.
     faces : (m, 3) int, counter-clockwise seen from outside.
     name : str, what to call the mesh in error messages.
-    tree_edge : float > 0 or None, longest triangle edge in the query tree as a fraction of
-        the bounding-box diagonal (:data:`TREE_EDGE` for a mesh queried many times, such as
-        the fit's target: cutting its long triangles costs more than a few queries save);
-        None builds the tree on the mesh's own triangles. The answers are the same either
-        way (to rounding where a point is as near to two triangles).
 
     Attributes
     ----------
@@ -135,18 +129,14 @@ class TargetSurface:
         libigl is not installed (the message says how to install it).
     """
 
-    def __init__(self, vertices, faces, name="target", tree_edge=None):
+    def __init__(self, vertices, faces, name="target"):
         V, F = validate_triangles(vertices, faces, name)
         self.vertices, self.faces = V, F
         self._tri = V[F]
         self.face_normals = unit_face_normals(V, F)
         self.diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
-        # each of the tree's triangles lies in the mesh triangle _tree_owner names (None: the
-        # tree holds the mesh's own triangles)
-        self._tree_vertices, self._tree_faces, self._tree_owner = (
-            (V, F, None) if tree_edge is None else short_triangles(V, F, tree_edge * self.diagonal))
         self._tree = optional_module("igl", "libigl").AABB()
-        self._tree.init(self._tree_vertices, self._tree_faces)
+        self._tree.init(V, F)
         self._samples = {}
         self._kept = OrderedDict()
         self._kept_samples = OrderedDict()
@@ -168,8 +158,8 @@ class TargetSurface:
             # in Z-order, neighbouring queries walk the same tree nodes (a fifth faster on
             # the fit's fine limit points); each point's answer does not depend on the order
             order = np.argsort(morton_codes(points), kind="stable")
-            face[order] = self._mesh_faces(self._tree.squared_distance(
-                self._tree_vertices, self._tree_faces, points[order])[1])
+            face[order] = self._tree.squared_distance(self.vertices, self.faces,
+                                                      points[order])[1]
         point, bary, region = closest_on_triangles(self._tri[face], points)
         return NearestPoints(point, face, bary, region, np.linalg.norm(points - point, axis=1))
 
@@ -251,10 +241,9 @@ class TargetSurface:
         # started a little along the ray, the compiled cast does not stop on the triangles
         # around a start vertex; an exit it skips that way is caught like any other miss
         face, _, _ = self._tree.intersect_ray_first(
-            self._tree_vertices, self._tree_faces,
-            origins + (_START_OFFSET * max_length) * directions, directions)
+            self.vertices, self.faces, origins + (_START_OFFSET * max_length) * directions,
+            directions)
         face = np.asarray(face, dtype=np.int64)
-        face[face >= 0] = self._mesh_faces(face[face >= 0])
         t = np.full(k, np.inf)
         uv = np.zeros((k, 2))
         hit = np.flatnonzero(face >= 0)
@@ -281,11 +270,6 @@ class TargetSurface:
         normal = np.zeros((k, 3))
         normal[found] = self.face_normals[face[found]]
         return RayHits(t, face, bary, normal, int(len(recast)))
-
-    def _mesh_faces(self, tree_faces):
-        """(k,) int64 the mesh triangles holding the tree's triangles ``tree_faces``."""
-        tree_faces = np.asarray(tree_faces, dtype=np.int64)
-        return tree_faces if self._tree_owner is None else self._tree_owner[tree_faces]
 
     def samples(self, count, seed=0):
         """Area-weighted random points on the surface and the pseudo-normals there.
@@ -392,58 +376,6 @@ class TargetSurface:
         on_vertex = region >= 4
         normal[on_vertex] = vertex_normals[self.faces[face[on_vertex], region[on_vertex] - 4]]
         return normal
-
-
-TREE_EDGE = 0.1
-"""Longest triangle edge in the query tree, times the mesh's bounding-box diagonal. Machined
-parts' meshes span flat faces with long slivers, whose boxes overlap most of the part;
-cut in halves across their longest edge until no edge is longer, they are queried about
-twice as fast (featuretype's fine limit points: 6.1 -> 2.8-3.5 microseconds a point with
-3,476 -> 8,184 triangles; octagonal_pocket 7.5 -> 3.5). The SIMP results' meshes have no
-such edge and keep their own triangles. Used for the fit's target
-(:func:`core.fitting.fit.fit_base_mesh`, :func:`core.fitting.refine.fit_to_tolerance`)."""
-
-
-def short_triangles(vertices, faces, longest):
-    """The triangles cut by repeated halving of their longest edge until no edge is longer
-    than ``longest``.
-
-    Parameters
-    ----------
-    vertices : (n, 3) float64; faces : (m, 3) int64; longest : float > 0, model units.
-
-    Returns
-    -------
-    vertices, faces : the pieces as a triangle soup ((3 p, 3) float64 and (p, 3) int64,
-        same orientation), or the input itself when no edge is longer.
-    owner : (p,) int64 the input triangle each piece lies in, or None (the input).
-    """
-    tri = vertices[faces]
-    if not _edge_lengths(tri).max(initial=0.0) > longest:
-        return vertices, faces, None
-    owner = np.arange(len(faces))
-    kept_tri, kept_owner = [], []
-    while len(tri):
-        lengths = _edge_lengths(tri)
-        cut = lengths.max(axis=1) > longest
-        kept_tri.append(tri[~cut])
-        kept_owner.append(owner[~cut])
-        tri, owner = tri[cut], owner[cut]
-        # corners a, b of the longest edge a-b, c opposite, m its midpoint: (a, m, c), (m, b, c)
-        first = lengths[cut].argmax(axis=1)
-        rows = np.arange(len(tri))
-        a, b, c = (tri[rows, (first + k) % 3] for k in range(3))
-        middle = 0.5 * (a + b)
-        tri = np.concatenate([np.stack([a, middle, c], axis=1), np.stack([middle, b, c], axis=1)])
-        owner = np.concatenate([owner, owner])
-    tri = np.concatenate(kept_tri)
-    return (tri.reshape(-1, 3), np.arange(3 * len(tri), dtype=np.int64).reshape(-1, 3),
-            np.concatenate(kept_owner))
-
-
-def _edge_lengths(tri):
-    """(m, 3) float64 lengths of the edges v0-v1, v1-v2, v2-v0 of triangles ((m, 3, 3))."""
-    return np.linalg.norm(np.roll(tri, -1, axis=1) - tri, axis=2)
 
 
 def closest_on_triangles(triangles, points):

@@ -29,7 +29,7 @@ from core.progress import NO_PROGRESS
 from core.quality import containment
 from core.subdivision.catmull_clark import build_hierarchy
 from core.subdivision.limit import limit_matrices
-from core.target_surface import TREE_EDGE, TargetSurface
+from core.target_surface import TargetSurface
 from core.threads import single_threaded
 from core.types import PolyMesh
 
@@ -132,7 +132,7 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         raise ParameterError(f"tol must be >= 0 and patience an integer >= 1, got {tol!r}, "
                              f"{patience!r}")
     V0 = _check_base(base)
-    target_surface = TargetSurface(target.vertices, target.faces, tree_edge=TREE_EDGE)
+    target_surface = TargetSurface(target.vertices, target.faces)
     target_volume, _ = volume(target_surface.vertices, target_surface.faces)
     if not target_volume > 0:
         raise InvalidMeshError(f"target encloses a non-positive volume ({target_volume:g}); "
@@ -320,11 +320,11 @@ INSIDE_ROUNDS = 2
 
 LONG_WAY_LEFT = 0.15
 """The untangling refits are made again the long way (:func:`_untangled`) only when the
-short way left at most this fraction of the first fit's crossing pairs. Where it left
-less, the long way cleared what was left (tray_bottom seed 0: 3 of 204 pairs left, idler_riser
-seed 1: 3 of 67, gripper_domain seeds 1 and 2: 57 of 952 and 33 of 1284; the long way 0-3);
-where it left more, the crossings are where the cage cannot follow the part and the long
-way never had fewer (to_simp_lbracket 21-22 of 67-77 left, 39-49 the long way; featuretype
+short way left at most this fraction of the first fit's crossing pairs. Where it left less,
+the long way cleared what was left (tray_bottom seed 0: 3 of 204 pairs left, idler_riser seed
+1: 3 of 67, gripper_domain seeds 1 and 2: 57 of 952 and 33 of 1284; the long way 0-3); where
+it left more, the crossings are where the cage cannot follow the part and the long way never
+had fewer (to_simp_lbracket 21-22 of 67-77 left, 39-49 the long way; featuretype
 79-91 of 112-144, 107-114; octagonal_pocket 26-49 of 64-66, 42-70), at 1-2.5 CPU s."""
 
 

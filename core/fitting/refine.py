@@ -35,7 +35,7 @@ from core.errors import ParameterError
 from core.geometry import sample_surface, triangulate
 from core.subdivision.catmull_clark import build_hierarchy, fine_face_owner, mesh_topology
 from core.subdivision.limit import limit_matrices
-from core.target_surface import TREE_EDGE, TargetSurface
+from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
 DEVIATION_SAMPLES = 20000
@@ -94,7 +94,7 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
     if not (np.isfinite(tolerance) and tolerance > 0):
         raise ParameterError(f"tolerance must be a positive fraction of the bounding-box "
                              f"diagonal, got {tolerance!r}")
-    surface = TargetSurface(target.vertices, target.faces, tree_edge=TREE_EDGE)
+    surface = TargetSurface(target.vertices, target.faces)
     rng = np.random.default_rng(0)
     samples = np.vstack([sample_surface(surface.vertices, surface.faces, DEVIATION_SAMPLES, rng),
                          surface.vertices])
