@@ -280,6 +280,35 @@ def test_fit_of_a_decimation_cage_on_a_thin_part_does_not_cross_itself(idler, mo
         assert info["outside_volume_fraction"] <= 0.005
 
 
+@pytest.mark.parametrize("left, long_way", [(10, True), (40, False)])
+def test_the_long_refits_run_only_after_the_short_ones_took_most_crossings_off(
+        idler, monkeypatch, left, long_way):
+    """The short untangling refits are made to report ``left`` of 100 crossing pairs: the
+    long way (whole two-level refits from the cage) runs at 10 (within ``LONG_WAY_LEFT`` of
+    the first fit's pairs, where it cleared the rest on the dev meshes) and not at 40 (where
+    it never had fewer); either way the result does not cross itself."""
+    import core.fitting.fit as fit_module
+
+    assert 10 <= fit_module.LONG_WAY_LEFT * 100 < 40
+    real = fit_module.stiffen_until_clean
+    refits = []
+
+    def reported(vertices, refit, mapping, triangles, **options):
+        refits.append(refit.__name__)
+        untangled = real(vertices, refit, mapping, triangles, **options)
+        if refit.__name__ == "refit":
+            untangled.crossings, untangled.counts = left, [100, left]
+        return untangled
+
+    monkeypatch.setattr(fit_module, "stiffen_until_clean", reported)
+    target, cage = idler
+    _, info = fit_base_mesh(cage, target, mode="best-fit")
+    assert refits[0] == "refit"
+    assert ("cold_refit" in refits) == long_way
+    assert ("cold_refit_crossings" in info) == long_way
+    assert info["self_intersections"] == 0
+
+
 def test_the_rgp_runs_again_with_a_shorter_step_only_when_its_start_leaves_much_outside(
         idler, monkeypatch):
     """On idler_riser's decimation cage the RGP's first run keeps its start (its first step
