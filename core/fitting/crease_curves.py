@@ -144,6 +144,7 @@ def _fitted(limit_map, rows, along, chain, curves, V0, free, reach):
     """
     A = limit_map[rows]
     A_free = A[:, free].tocsr()
+    A_free_t = sp.block_diag([A_free.T] * 3, format="csr")  # x, y, z blocks
     fixed = A @ V0 - A_free @ V0[free]
     V = V0.copy()
     for _ in range(CREASE_ROUNDS):
@@ -155,10 +156,8 @@ def _fitted(limit_map, rows, along, chain, curves, V0, free, reach):
         blocks = [[sp.diags(weight[:, a, b]) @ A_free for b in range(3)] for a in range(3)]
         system = sp.bmat(blocks, format="csr")
         # minimise sum_j (X_j - foot_j)^T across_j (X_j - foot_j) + w |X_j - along_j|^2
-        lhs = (sp.block_diag([A_free.T] * 3, format="csr") @ system
-               + CREASE_DAMPING * sp.identity(3 * len(free)))
-        rhs = (sp.block_diag([A_free.T] * 3, format="csr")
-               @ (target - np.einsum("rab,rb->ra", weight, fixed)).T.reshape(-1)
+        lhs = A_free_t @ system + CREASE_DAMPING * sp.identity(3 * len(free))
+        rhs = (A_free_t @ (target - np.einsum("rab,rb->ra", weight, fixed)).T.reshape(-1)
                + CREASE_DAMPING * V0[free].T.reshape(-1))
         move = spsolve(lhs.tocsc(), rhs).reshape(3, -1).T - V0[free]
         length = np.linalg.norm(move, axis=1)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.self_intersection import box_pairs, find_self_intersections
+from core.self_intersection import box_pairs, face_boxes, find_self_intersections
 
 STIFFEN = 10.0
 """Factor on the smoothness weight of the base vertices under a crossing, per refit."""
@@ -261,7 +261,7 @@ def _swept_pairs(reference, moved, mapping, triangles):
         low[:, axis] += np.bincount(rows, np.minimum(terms[:, axis], 0.0), len(X))
         high[:, axis] += np.bincount(rows, np.maximum(terms[:, axis], 0.0), len(X))
     slack = 1e-9 * max(float(np.abs(low).max()), float(np.abs(high).max()), 1e-300)
-    return box_pairs(low[triangles].min(axis=1) - slack, high[triangles].max(axis=1) + slack)
+    return box_pairs(face_boxes(low[triangles])[0] - slack, face_boxes(high[triangles])[1] + slack)
 
 
 def _rows_in(pairs, allowed):

@@ -340,13 +340,11 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, in
     crossings is kept: stiffening from a crossing fit can bring its crossings back
     (tray_bottom seed 0: 204, 41, 3, 7, 3 pairs the short way, 204, 3, 28, 0 the long way).
     The long way is taken only when the short way took most crossings off
-    (``LONG_WAY_LEFT``).
-    Either way the refits stop once one takes less than
+    (``LONG_WAY_LEFT``). Either way the refits stop once one takes less than
     ``UNTANGLE_PROGRESS`` off the fewest crossings of a fit still far from clean (the
-    creased cages' fits cross in hundreds of pairs, and stiffening does not untangle them).
-    If the fit still crosses and the cage's limit surface does not, the fit is held back
-    towards the cage there
-    (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses itself is no
+    creased cages' fits cross in a hundred pairs or more, and stiffening does not untangle
+    them). If the fit still crosses and the cage's limit surface does not, the fit is held
+    back towards the cage there (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses itself is no
     reference to hold back to (on to_simp_torsion_arm every base vertex would go back).
     Records ``refits``, ``refit_crossings`` (crossing pairs after the first fit and each
     refit), ``stiffened`` (base vertices with a stiffer smoothness term), ``held_back`` and,

@@ -426,9 +426,10 @@ def _rim_folds(vertices, quads, creases):
     the inside fit left 0.42-0.77 % of the target's volume outside over sampling seeds 0-2
     (the fit's own figures); without them (320 faces, 280 quads: the fans' triangles stay
     triangles) 17 are held back and 0.08-0.10 % stays outside; ``octagonal_pocket``
-    0.53-0.62 % -> 0.16-0.20 % (313 faces, 283 quads). Refusing every non-convex quad, or every one with its reflex
-    corner on a crease vertex, cost more quads (71 % quads on featuretype) for no gain;
-    refusing only corners above 240 degrees kept octagonal_pocket's folds."""
+    0.53-0.62 % -> 0.16-0.20 % (313 faces, 283 quads). Refusing every non-convex quad, or
+    every one with its reflex corner on a crease vertex, cost more quads (71 % quads on
+    featuretype) for no gain; refusing only corners above 240 degrees kept
+    octagonal_pocket's folds."""
     P = vertices[quads]
     normal = np.cross(P[:, 2] - P[:, 0], P[:, 3] - P[:, 1])  # across the diagonals
     turn = np.einsum("qkj,qj->qk", np.cross(P - np.roll(P, 1, axis=1),
