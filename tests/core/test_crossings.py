@@ -280,6 +280,25 @@ def test_fit_of_a_decimation_cage_on_a_thin_part_does_not_cross_itself(idler, mo
         assert info["outside_volume_fraction"] <= 0.005
 
 
+def test_the_inside_fit_holds_local_crossings_back_and_refits_only_spread_ones(idler,
+                                                                             monkeypatch):
+    """idler_riser's least-squares fit crosses itself where at most ``SPREAD_CROSSINGS`` of the
+    base vertices influence the crossings: the inside fit holds it back towards the cage there,
+    without refits, and ends clean and inside. Made to count as spread (the fraction at 0),
+    the same fit is refitted stiffer first, as the best-fit mode always does."""
+    import core.fitting.fit as fit_module
+
+    target, cage = idler
+    _, info = fit_base_mesh(cage, target, mode="inside", seed=1)
+    assert info["refit_crossings"][0] > 0
+    assert info["refits"] == 0 and info["stiffened"] == 0 and info["held_back"] > 0
+    assert info["self_intersections"] == 0 and info["outside_volume_fraction"] <= 0.005
+    monkeypatch.setattr(fit_module, "SPREAD_CROSSINGS", 0.0)
+    _, spread = fit_base_mesh(cage, target, mode="inside", seed=1)
+    assert spread["refits"] >= 1 and spread["stiffened"] > 0
+    assert spread["self_intersections"] == 0
+
+
 @pytest.mark.parametrize("left, long_way", [(10, True), (40, False)])
 def test_the_long_refits_run_only_after_the_short_ones_took_most_crossings_off(
         idler, monkeypatch, left, long_way):
