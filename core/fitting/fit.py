@@ -91,13 +91,16 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         ``uncovered_volume_fraction`` (triangulated fine limit mesh minus target and
         target minus it, over the target volume; of the result only), ``t_min``,
         ``step`` (model units), ``seconds`` (all of it) and ``measure_seconds`` (the
-        part spent on those figures: one manifold3d boolean and the distance queries); with a least-squares fit
-        (best-fit mode, inside mode from ``start='best-fit'``) ``self_intersections``
+        part spent on those figures: one manifold3d boolean and the distance queries);
+        with a least-squares fit (best-fit mode, inside mode from ``start='best-fit'``)
+        ``self_intersections``
         (intersecting triangle pairs of the fine limit mesh, ``surface='limit'``),
         ``cage_self_intersections`` (the cage's, when the result still crosses), ``refits``,
         ``refit_crossings``, ``cold_refit_crossings`` (when the short refits left a few
         crossings), ``stiffened`` (:func:`_untangled`) and ``held_back`` (base vertices held
-        back towards the cage or, inside mode, the least-squares start); inside mode also
+        back towards the cage or, inside mode, the least-squares start), of which the
+        creased inside start (``CREASED_START``) has ``self_intersections`` and
+        ``held_back``; inside mode also
         ``start_margin`` (depth of the start below the target, model units) and
         ``rgp_held_back`` (base vertices whose RGP move was cut back because the
         limit surface crossed itself there), then ``rgp_passes`` (iterations and base
@@ -333,11 +336,11 @@ fit crossed itself at the creases, in 64-144 pairs, and holding it back there re
 of the base vertices to that cage anyway (featuretype 235-279 of 284, octagonal_pocket
 132-168 of 298, seeds 0-2), while its rounds and crossing searches cost a third of the fit;
 stiffer pulls did not untangle either (85, 78, 73, 119, 86 pairs on featuretype). Measured
-against the least-squares start (seeds 0-2): featuretype mean distance 1.23e-3 of the
-diagonal against 1.39-1.47e-3, 0.09 % of the volume outside against 0.08-0.11 %;
-octagonal_pocket 1.22e-3 against 1.07-1.15e-3, 0.30 % outside against 0.22-0.28 %; about
-0.9 CPU s less on each. Without samples of the target, this start does not depend on the
-seed."""
+against session 28's least-squares start (seeds 0-2): featuretype mean distance 1.23e-3 of
+the diagonal against 1.29-1.70e-3, max 2.2e-2 against 1.8-4.4e-2, 0.09 % of the volume
+outside against 0.05-0.08 %; octagonal_pocket 1.22e-3 against 1.10-1.13e-3, 0.30 % outside
+against 0.16-0.20 %; 1.3-2.2 CPU s less on each. Without samples of the target, this start
+does not depend on the seed."""
 
 
 SPREAD_CROSSINGS = 2.0 / 3.0
@@ -381,8 +384,9 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, in
     them). With ``refit_local=False`` (the inside fit) there are no refits when at most
     ``SPREAD_CROSSINGS`` of the base vertices influence the first fit's crossings. If the fit
     still crosses and the cage's limit surface does not, the fit is held back towards the
-    cage there (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses itself is no
-    reference to hold back to (on to_simp_torsion_arm every base vertex would go back).
+    cage there (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses
+    itself is no reference to hold back to (on to_simp_torsion_arm every base vertex would go
+    back).
     Records ``refits``, ``refit_crossings`` (crossing pairs after the first fit and each
     refit), ``stiffened`` (base vertices with a stiffer smoothness term), ``held_back`` and,
     when the fit still crosses, ``cage_self_intersections`` in ``info``.
