@@ -339,7 +339,7 @@ stiffer pulls did not untangle either (85, 78, 73, 119, 86 pairs on featuretype)
 against session 28's least-squares start (seeds 0-2): featuretype mean distance 1.23e-3 of
 the diagonal against 1.29-1.70e-3, max 2.2e-2 against 1.8-4.4e-2, 0.09 % of the volume
 outside against 0.05-0.08 %; octagonal_pocket 1.22e-3 against 1.10-1.13e-3, 0.30 % outside
-against 0.16-0.20 %; 1.3-2.2 CPU s less on each. Without samples of the target, this start
+against 0.16-0.20 %; 1.3-2.1 CPU s less on each. Without samples of the target, this start
 does not depend on the seed."""
 
 
