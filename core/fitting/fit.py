@@ -162,8 +162,9 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         base = replace(base, vertices=creased.vertices)
     vertices = base.vertices
     crossings = None
-    creased_start = mode == "inside" and start == "best-fit" and base.n_creases > 0
-    if mode == "best-fit" or (mode == "inside" and start == "best-fit" and not creased_start):
+    prepared_start = mode == "inside" and start == "best-fit"
+    creased_start = prepared_start and base.n_creases > 0
+    if mode == "best-fit" or (prepared_start and not creased_start):
         progress.report("fit", 0.0, "least-squares fit")
         fitted, coarse = _two_level_best_fit(base, hierarchy, limit_map, T, target_surface,
                                              rounds, seed=seed)
@@ -176,7 +177,7 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         # its crease curves lie on the target's feature lines already (CREASED_START)
         info["start"] = CREASED_START
         crossings, stiffness = count_crossings(limit_map, T, vertices), None
-    if mode == "inside" and start == "best-fit":
+    if prepared_start:
         # the RGP starts just inside the target, and nowhere crossing itself
         pulled, info["start_margin"], info["pull_crossings"] = _pulled_inside(
             base, limit_map, T, target_surface, vertices, stiffness)
@@ -406,8 +407,9 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, in
                                    seed)[0].vertices
 
     first = crossing_pairs(limit_map, T, vertices)
-    spread = len(influencing(first, limit_map, T)) > SPREAD_CROSSINGS * len(vertices)
-    tries = STIFFEN_TRIES if refit_local or spread else 0
+    refitted = refit_local or (len(influencing(first, limit_map, T))
+                               > SPREAD_CROSSINGS * len(vertices))
+    tries = STIFFEN_TRIES if refitted else 0
     untangled = stiffen_until_clean(vertices, refit, limit_map, T, tries=tries, pairs=first,
                                     progress=UNTANGLE_PROGRESS)
     if tries and 0 < untangled.crossings <= LONG_WAY_LEFT * untangled.counts[0]:
