@@ -191,6 +191,8 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True, moved_
                else crossing_pairs(mapping, triangles, reference))
     fraction = np.ones(len(moved))
     moving = (moved != reference).any(axis=1)
+    if not moving.any():
+        return reference.copy(), 0, int(len(allowed))
     # the reference's pairs, of which only those near a moving vertex can change
     pairs, changed, halving, candidates = allowed, moving, 0, None
     while True:
@@ -242,8 +244,10 @@ def _crossings_after(X, triangles, pairs, mapping, changed, candidates):
 
 
 def _swept_pairs(reference, moved, mapping, triangles):
-    """(c, 2) int64 the fine triangle pairs whose bounding boxes overlap for some base
-    vertices ``reference + t (moved - reference)``, ``t`` in [0, 1] per vertex.
+    """(c, 2) int64 the fine triangle pairs that may cross on the way from ``reference`` to
+    ``moved`` ((n, 3) base vertices): those with a triangle that a moving base vertex
+    influences, not sharing an edge, whose bounding boxes overlap for some base vertices
+    ``reference + t (moved - reference)``, ``t`` in [0, 1] per vertex.
 
     A fine point ``sum_v w_v (r_v + t_v d_v)`` stays within ``sum_v min(0, w_v d_v)`` and
     ``sum_v max(0, w_v d_v)`` of its reference position, axis by axis; the boxes of those
@@ -251,8 +255,12 @@ def _swept_pairs(reference, moved, mapping, triangles):
     as the fit computes them, so the pairs include every pair that overlaps at any ``t``
     (:func:`core.self_intersection.box_pairs`). The terms are summed from ``mapping``'s
     arrays, not by scipy's ``maximum``, which sorts the rows of the matrix it is called on
-    in place (every later product with it would round differently).
+    in place (every later product with it would round differently). A pair of triangles
+    that no moving vertex influences keeps its answer (:func:`_crossings_after`), and one
+    sharing an edge is never a crossing (:mod:`core.self_intersection`), so neither is
+    kept: a hold-back's rounds test each of its pairs again.
     """
+    moving = (moved != reference).any(axis=1)
     rows = np.repeat(np.arange(mapping.shape[0]), np.diff(mapping.indptr))
     terms = mapping.data[:, None] * (moved - reference)[mapping.indices]
     X = mapping @ reference
@@ -261,7 +269,22 @@ def _swept_pairs(reference, moved, mapping, triangles):
         low[:, axis] += np.bincount(rows, np.minimum(terms[:, axis], 0.0), len(X))
         high[:, axis] += np.bincount(rows, np.maximum(terms[:, axis], 0.0), len(X))
     slack = 1e-9 * max(float(np.abs(low).max()), float(np.abs(high).max()), 1e-300)
-    return box_pairs(face_boxes(low[triangles])[0] - slack, face_boxes(high[triangles])[1] + slack)
+    moving_fine = np.bincount(rows, moving[mapping.indices] & (mapping.data != 0), len(X)) > 0
+    pairs = box_pairs(face_boxes(low[triangles])[0] - slack,
+                      face_boxes(high[triangles])[1] + slack,
+                      among=moving_fine[triangles].any(axis=1))
+    return pairs[_shared_corners(triangles, pairs) < 2]
+
+
+def _shared_corners(triangles, pairs):
+    """(p,) int8 corners that the two triangles of each pair ((p, 2) int64 into
+    ``triangles``) have in common."""
+    first, second = triangles[pairs[:, 0]], triangles[pairs[:, 1]]
+    shared = np.zeros(len(pairs), dtype=np.int8)
+    for a in range(3):
+        for b in range(3):
+            shared += first[:, a] == second[:, b]
+    return shared
 
 
 def _rows_in(pairs, allowed):
