@@ -163,9 +163,11 @@ def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
     for done in range(rounds):
         X = mapping @ V
         query = known.undecided(X)
-        near = (start_closest if done == 0 and start_closest is not None
-                else target.closest(X[query]))
-        known.record(X, query, near.signed)
+        if done == 0 and start_closest is not None:
+            near = start_closest
+            known.record(X, query, near)
+        else:
+            near = known.closest(target, X, query)
         active = near.signed > -margin
         if not active.any():
             break

@@ -105,8 +105,7 @@ def _shift(V, mapping, triangles, target, movable, carry, known):
     """
     X = mapping @ V
     query = known.undecided(X)
-    near = target.closest(X[query])
-    known.record(X, query, near.signed)
+    near = known.closest(target, X, query)
     out = near.signed > 0
     outside = query[out]
     depth = near.signed[out]
@@ -123,7 +122,7 @@ def _shift(V, mapping, triangles, target, movable, carry, known):
         # other walls that were not queried this round are queried now
         undecided = (known.bound(X)[corners] >= room[:, None]).any(axis=1)
         unsure = np.setdiff1d(corners[undecided], query)
-        known.record(X, unsure, target.closest(X[unsure]).signed)
+        known.closest(target, X, unsure)
         roomy = known.bound(X)[corners].max(axis=1) < room
         far = np.flatnonzero(found)[roomy & (hits.t[found] < CARRY_REACH * depth[found])]
         owner = np.concatenate([owner, _owner(mapping, triangles[hits.face[far]].reshape(-1))])

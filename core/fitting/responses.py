@@ -14,12 +14,12 @@ base mesh (Eq. 11) is the caller's job.
   vertex along its inward normal to the opposite side of the surface itself, and a
   smooth aggregate constraint ``t_j >= t_min``.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from core.geometry import face_cross, scatter_add
-from core.target_surface import TargetSurface
+from core.target_surface import ClosestPoints, TargetSurface
 
 
 def volume(X, T):
@@ -66,11 +66,12 @@ def packaging(X, target, mode="inside", known=None):
     X = np.asarray(X, dtype=np.float64)
     signed = np.empty(len(X))
     gradient = np.zeros_like(X)
-    query = (np.arange(len(X)) if known is None or mode != "inside"
-             else known.undecided(X))
-    near = target.closest(X[query])
-    if known is not None and mode == "inside":
-        known.record(X, query, near.signed)
+    if known is None or mode != "inside":
+        query = np.arange(len(X))
+        near = target.closest(X)
+    else:
+        query = known.undecided(X)
+        near = known.closest(target, X, query)
         signed[:] = known.bound(X)
     signed[query] = near.signed
     region = near.region
@@ -97,13 +98,16 @@ queried again."""
 
 
 class InsideBounds:
-    """Points proven inside a target since their last closest-point query.
+    """Points proven inside a target since their last closest-point query, and the answers
+    of the points that have not moved since.
 
     The signed distance is 1-Lipschitz: a point at signed distance ``d < 0`` when it was
     last queried, moved by ``m`` since, has ``d' <= d + m``, so while ``d + m < -slack``
     it is still inside, and the inside packaging response (value and gradient zero
     there) does not need its closest point. Points that are outside or near the surface
-    are queried every time; the result is the same as querying all of them.
+    are queried every time, but for those at the very coordinates of their last query,
+    which keep its answer (:meth:`closest`; a point's answer does not depend on the other
+    query points): the result is the same as querying all of them.
 
     With ``depth > 0`` the points proven deeper than ``depth`` are skipped (the pull inside,
     :func:`core.fitting.best_fit.pull_inside`, leaves them free).
@@ -120,6 +124,7 @@ class InsideBounds:
         self.depth = float(depth)
         self.points = None
         self.signed = None
+        self.answers = None
 
     def bound(self, X):
         """(n,) float64 upper bounds of the signed distances of ``X`` ((n, 3))."""
@@ -128,16 +133,39 @@ class InsideBounds:
     def undecided(self, X):
         """(k,) int64 indices of the points of ``X`` ((n, 3)) to query."""
         if self.points is None or len(self.points) != len(X):
-            self.points, self.signed = None, None
+            self.points, self.signed, self.answers = None, None, None
             return np.arange(len(X))
         return np.flatnonzero(self.bound(X) >= -(self.depth + self.slack))
 
-    def record(self, X, query, signed):
-        """Keep the signed distances ``signed`` ((k,)) of the points ``X[query]``."""
-        if self.points is None:
+    def closest(self, target, X, query):
+        """The closest points (:meth:`core.target_surface.TargetSurface.closest`) of
+        ``X[query]`` (``X`` (n, 3), ``query`` (k,) int64), recorded; the points at the
+        coordinates of their last query keep its answer, the others are queried.
+
+        Returns
+        -------
+        core.target_surface.ClosestPoints of the ``k`` points.
+        """
+        fresh = query
+        if self.answers is not None and len(self.points) == len(X):
+            kept = self.answered[query] & (X[query] == self.points[query]).all(axis=1)
+            fresh = query[~kept]
+        self.record(X, fresh, target.closest(X[fresh]))
+        return ClosestPoints(**{name: rows[query] for name, rows in self.answers.items()})
+
+    def record(self, X, query, near):
+        """Keep the answers ``near`` (ClosestPoints of ``X[query]``, ``query`` (k,) int64)."""
+        if self.points is None or len(self.points) != len(X):
             self.points, self.signed = np.array(X, dtype=np.float64), np.zeros(len(X))
+            self.answers = {item.name: np.zeros((len(X),) + getattr(near, item.name).shape[1:],
+                                                dtype=getattr(near, item.name).dtype)
+                            for item in fields(near)}
+            self.answered = np.zeros(len(X), dtype=bool)
         self.points[query] = X[query]
-        self.signed[query] = signed
+        self.signed[query] = near.signed
+        for name, rows in self.answers.items():
+            rows[query] = getattr(near, name)
+        self.answered[query] = True
 
 
 def vertex_normals(X, T):
