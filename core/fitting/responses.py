@@ -125,6 +125,7 @@ class InsideBounds:
         self.points = None
         self.signed = None
         self.answers = None
+        self.answered = None
 
     def bound(self, X):
         """(n,) float64 upper bounds of the signed distances of ``X`` ((n, 3))."""
@@ -133,7 +134,7 @@ class InsideBounds:
     def undecided(self, X):
         """(k,) int64 indices of the points of ``X`` ((n, 3)) to query."""
         if self.points is None or len(self.points) != len(X):
-            self.points, self.signed, self.answers = None, None, None
+            self.points = self.signed = self.answers = self.answered = None
             return np.arange(len(X))
         return np.flatnonzero(self.bound(X) >= -(self.depth + self.slack))
 
