@@ -160,9 +160,7 @@ def _pairs_intersect(tri, faces, pairs, normal, eps):
     triangles sharing a corner) goes through one vectorised :func:`_segment_crosses_triangle`.
     ``normal`` : (m, 3) float64 unit face normals (:func:`core.geometry.unit_face_normals`).
     """
-    fa, fb = faces[pairs[:, 0]], faces[pairs[:, 1]]
-    shared = (fa[:, :, None] == fb[:, None, :])
-    n_shared = shared.sum(axis=(1, 2))
+    n_shared = shared_corners(faces, pairs)
     disjoint = np.flatnonzero(n_shared == 0)
     touching = np.flatnonzero(n_shared == 1)
     # each test: the pair it belongs to, the face and first corner of the segment (its
@@ -176,8 +174,10 @@ def _pairs_intersect(tri, faces, pairs, normal, eps):
                 corner.append(np.full(len(disjoint), k))
                 crossed_face.append(pairs[disjoint, second])
     if len(touching):
-        corner_a = shared[touching].any(axis=2).argmax(axis=1)
-        corner_b = shared[touching].any(axis=1).argmax(axis=1)
+        shared = (faces[pairs[touching, 0]][:, :, None]
+                  == faces[pairs[touching, 1]][:, None, :])
+        corner_a = shared.any(axis=2).argmax(axis=1)
+        corner_b = shared.any(axis=1).argmax(axis=1)
         for first, second, at in ((0, 1, corner_a), (1, 0, corner_b)):
             owner.append(touching)
             segment_face.append(pairs[touching, first])
@@ -192,6 +192,17 @@ def _pairs_intersect(tri, faces, pairs, normal, eps):
                                         tri[crossed_face], normal[crossed_face], eps)
         result[owner[hit]] = True
     return result
+
+
+def shared_corners(faces, pairs):
+    """(p,) int8 corners that the two faces of each pair ((p, 2) int64 into ``faces``,
+    (m, 3) int64) have in common: 2 for faces sharing an edge, which never cross."""
+    first, second = faces[pairs[:, 0]], faces[pairs[:, 1]]
+    shared = np.zeros(len(pairs), dtype=np.int8)
+    for a in range(3):
+        for b in range(3):
+            shared += first[:, a] == second[:, b]
+    return shared
 
 
 def _segment_crosses_triangle(p0, p1, triangle, normal, eps):
