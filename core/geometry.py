@@ -167,6 +167,51 @@ def shortest_edges_at(vertices, edges):
     return shortest
 
 
+def bisect_long_triangles(vertices, faces, longest, most):
+    """Long triangles cut, by halving their longest edge again and again, into pieces whose
+    edges are at most ``longest`` long.
+
+    The pieces cover each triangle exactly (a midpoint is not shared with the neighbour
+    across the halved edge: the pieces are a soup, for a search tree, not a mesh).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64, model units.
+    faces : (m, 3) int64
+    longest : float > 0, model units.
+    most : int, largest number of pieces.
+
+    Returns
+    -------
+    (vertices, pieces, owner) : (n', 3) float64 the vertices followed by the midpoints,
+        (p, 3) int64 the pieces (each oriented as its triangle), (p,) int64 the triangle
+        each piece lies in; None when the pieces would be more than ``most``.
+    """
+    points, count = [vertices], len(vertices)
+    done, done_owner = [], []
+    active, owner = faces, np.arange(len(faces))
+    total = len(faces)
+    while len(active):
+        P = np.concatenate(points) if len(points) > 1 else vertices
+        corner = P[active]
+        edge = np.linalg.norm(np.roll(corner, -1, axis=1) - corner, axis=2)
+        cut = edge.max(axis=1) > longest
+        done.append(active[~cut])
+        done_owner.append(owner[~cut])
+        active, owner, first = active[cut], owner[cut], edge[cut].argmax(axis=1)
+        total += len(active)
+        if total > most:
+            return None
+        a, b, c = (active[np.arange(len(active)), (first + k) % 3] for k in range(3))
+        middle = count + np.arange(len(active))
+        points.append(0.5 * (P[a] + P[b]))
+        count += len(active)
+        active = np.concatenate([np.stack([a, middle, c], axis=1),
+                                 np.stack([middle, b, c], axis=1)])
+        owner = np.concatenate([owner, owner])
+    return np.concatenate(points), np.concatenate(done), np.concatenate(done_owner)
+
+
 def triangulate(face_vertices, face_offsets):
     """Fan triangulation of a CSR polygon mesh (``core.types.PolyMesh`` layout).
 

@@ -137,7 +137,8 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         raise ParameterError(f"tol must be >= 0 and patience an integer >= 1, got {tol!r}, "
                              f"{patience!r}")
     V0 = _check_base(base)
-    target_surface = TargetSurface(target.vertices, target.faces)
+    # the fit's many closest-point queries search pieces of the target's long triangles
+    target_surface = TargetSurface(target.vertices, target.faces, split=True)
     target_volume, _ = volume(target_surface.vertices, target_surface.faces)
     if not target_volume > 0:
         raise InvalidMeshError(f"target encloses a non-positive volume ({target_volume:g}); "

@@ -9,6 +9,7 @@ import trimesh
 
 from core.errors import InvalidMeshError
 from core.fitting.responses import thickness, vertex_normals
+from core.geometry import bisect_long_triangles, face_areas, unit_face_normals
 from core.mesh_io import read_triangle_soup
 from core.target_surface import TargetSurface, closest_on_triangles
 
@@ -87,6 +88,73 @@ def test_mixed_triangle_sizes_on_a_real_mesh():
     points = lo + (hi - lo) * rng.uniform(-0.1, 1.1, size=(200, 3))
     brute = brute_force_distance(V[F], points)
     assert np.max(np.abs(target.closest(points).distance - brute)) <= 1e-12 * target.diagonal
+
+
+def test_bisected_pieces_cover_their_triangles_and_are_short_enough():
+    V, F = read_triangle_soup(MESHES / "featuretype.stl")
+    edge = np.linalg.norm(V[np.roll(F, -1, axis=1)] - V[F], axis=2)
+    longest = 2.0 * np.median(edge)
+    P, pieces, owner = bisect_long_triangles(V, F, longest, 10 * len(F))
+    assert len(pieces) > 2 * len(F)  # the fans of long slivers were cut
+    assert np.array_equal(P[:len(V)], V)
+    # every piece short enough, the pieces of a triangle fill it, oriented like it
+    piece_edge = np.linalg.norm(P[np.roll(pieces, -1, axis=1)] - P[pieces], axis=2)
+    assert piece_edge.max() <= longest
+    filled = np.bincount(owner, face_areas(P, pieces), len(F))
+    assert np.allclose(filled, face_areas(V, F), rtol=1e-9, atol=0)
+    along = np.einsum("ij,ij->i", unit_face_normals(P, pieces), unit_face_normals(V, F)[owner])
+    assert np.all(along[face_areas(P, pieces) > 1e-12 * longest ** 2] > 1 - 1e-6)
+    # each piece lies in its triangle: its centroid is its own closest point there (to the
+    # rounding of the projection onto a needle of a triangle)
+    centroid = P[pieces].mean(axis=1)
+    again, _, _ = closest_on_triangles(V[F][owner], centroid)
+    assert np.abs(again - centroid).max() <= 1e-8 * np.abs(V).max()
+    # too many pieces: None, nothing half done
+    assert bisect_long_triangles(V, F, longest, len(F) + 10) is None
+
+
+def test_a_split_search_tree_gives_the_same_distances_signs_and_exits():
+    V, F = read_triangle_soup(MESHES / "octagonal_pocket.stl")
+    whole, split = TargetSurface(V, F), TargetSurface(V, F, split=True)
+    assert len(split._tree_mesh[1]) > len(F)  # this CAD mesh's long triangles were cut
+    rng = np.random.default_rng(7)
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    points = np.vstack([lo + (hi - lo) * rng.uniform(-0.1, 1.1, size=(300, 3)),
+                        sample_points(V, F, 300, rng)])
+    a, b = whole.closest(points), split.closest(points)
+    brute = brute_force_distance(V[F], points)
+    assert np.max(np.abs(b.distance - brute)) <= 1e-12 * whole.diagonal
+    assert np.max(np.abs(b.distance - a.distance)) <= 1e-12 * whole.diagonal
+    # the face returned is a triangle of the mesh holding the closest point
+    again, _, _ = closest_on_triangles(V[F][b.face], points)
+    assert np.allclose(again, b.point, atol=1e-12 * whole.diagonal)
+    clear = np.abs(a.signed) > 1e-9 * whole.diagonal
+    assert np.array_equal(np.sign(a.signed[clear]), np.sign(b.signed[clear]))
+    direction = -vertex_normals(V, F)[::4]
+    start = V[::4] + 1e-3 * whole.diagonal * direction  # inside, off the vertices
+    exits_a = whole.first_exit(start, direction, whole.diagonal)
+    exits_b = split.first_exit(start, direction, whole.diagonal)
+    # the same exits but for a few rays (from all vertices 3 of 9,786) that the whole tree's
+    # cast took past an exit and the entry behind it; the brute force sides with the split
+    # tree on those
+    differ = np.flatnonzero(~np.isclose(exits_a.t, exits_b.t, rtol=0,
+                                        atol=1e-12 * whole.diagonal))
+    assert len(differ) <= 1e-3 * len(start)
+    brute = brute_force_exit(V, F, start[differ], direction[differ], whole.diagonal)
+    assert np.allclose(exits_b.t[differ], brute, rtol=0, atol=1e-12 * whole.diagonal)
+    # a mesh without long triangles keeps its own tree
+    sphere = trimesh.creation.icosphere(2)
+    assert TargetSurface(sphere.vertices, sphere.faces, split=True)._piece_face is None
+
+
+def sample_points(V, F, count, rng):
+    """``count`` random points on the triangles of ``V``, ``F``."""
+    face = rng.integers(len(F), size=count)
+    a, b = rng.uniform(size=(2, count))
+    flip = a + b > 1
+    a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
+    tri = V[F[face]]
+    return tri[:, 0] + a[:, None] * (tri[:, 1] - tri[:, 0]) + b[:, None] * (tri[:, 2] - tri[:, 0])
 
 
 def test_ray_exits_of_a_sphere_match_brute_force():
