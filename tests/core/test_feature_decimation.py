@@ -96,11 +96,14 @@ def test_evening_a_feature_decimation_keeps_its_feature_lines_and_fattens_its_fa
     assert distance.max() < BORE_RADIUS * (1.0 - np.cos(np.pi / 6))
     # the vertices stay on the block (planar moves only)
     assert surface.nearest(v).distance.max() < 1e-9
-    # the planar fans got fatter: the smallest angles went up (measured: the smallest 2.0 ->
-    # 3.0 degrees, median 15.1 -> 19.8; 56 of the 200 triangles flipped)
+    # the planar fans got fatter: the smallest angles went up (measured: median 15.1 -> 19.8
+    # degrees, 56 of the 200 triangles flipped). The very smallest may stay: where the
+    # decimation left a thin triangle with its three corners on feature lines (which never
+    # move), flips inside planar regions cannot always reach it (the decimation differs in
+    # the last bits between machines: one gave 2.0 -> 3.0 degrees, another 1.86 -> 1.86)
     before, after = _smallest_angles(plain_v, plain_f), _smallest_angles(v, f)
-    assert after.min() > before.min()
-    assert np.percentile(after, 10) >= np.percentile(before, 10)
+    assert after.min() >= before.min()
+    assert np.percentile(after, 10) > np.percentile(before, 10)
     assert np.median(after) > np.median(before) + 3.0
 
 

@@ -42,9 +42,10 @@ def test_creased_cage_reads_back_outward(tmp_path):
     --base-mesh`` in session 26, crease tags included) has crease vertices where the limit
     surface has no tangent plane. OpenCascade orients a shell read from STEP from a ray out of
     its first face; from this solid's first patch that ray gave the inside (-11.2 mm^3 read
-    back). The STEP file lists the outermost face first, and the solid reads back as written."""
-    import Part
-
+    back, session 26). The STEP file lists the outermost face first, and the solid reads back
+    as written. (That the faces in their build order read back inside out is not asserted:
+    the patches differ in the last bits between machines, and on some the ray from the first
+    patch happens to find the outside.)"""
     from polycube_wb.api import subd_to_solid
     from polycube_wb.step_io import step_round_trip
 
@@ -53,8 +54,7 @@ def test_creased_cage_reads_back_outward(tmp_path):
     assert solid.isValid() and solid.Volume > 11.0
     trip = step_round_trip(solid, tmp_path / "featuretype.step")
     assert trip["ok"] and trip["volume_read"] > 0, trip
-    # the same faces in the order they were built: the reader's orientation fails
-    assert Part.Solid(Part.Shell(solid.Shells[0].Faces)).Volume < 0
+    assert abs(trip["volume_read"] - solid.Volume) <= 1e-3 * solid.Volume
 
 
 def test_genus_is_reported(tmp_path):
