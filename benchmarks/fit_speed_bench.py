@@ -11,8 +11,8 @@ Each dev mesh's cage is built once by ``reconstruct(path, stop_after="basemesh")
 tree and pickled (cage and target) into ``--cache``, so both trees fit the same cage. For every
 mesh, a subprocess of the baseline tree (``--baseline``, for example ``git archive f8909fc core |
 tar -x -C OLD_TREE``) and one of this tree run ``fit_base_mesh(cage, target, levels=2,
-mode="inside", seed=k)`` for each seed, one after the other (interleaved per mesh, so both see
-the same load). Each fit is timed by ``time.process_time`` around the call (CPU seconds of
+mode="inside", seed=k)`` for each seed, taking turns fit by fit (so a slow spell of this
+machine, which comes and goes within minutes, falls on both alike). Each fit is timed by ``time.process_time`` around the call (CPU seconds of
 the process, report figures included) and hashed (its vertices' bytes), so identical results
 show as identical hashes. Prints a markdown table: CPU seconds per seed, the fit figures
 (volume outside, mean and max distance of the fine limit points over the diagonal, crossing
@@ -82,17 +82,19 @@ def perturbed(cage, k):
                    + PERTURBATION * float(np.abs(cage.vertices).max()) * noise)
 
 
-def worker(tree, path, seeds, perturbations=0):
-    """Fit one cached cage with ``tree``'s core for each seed (or, with ``perturbations``
-    K > 0, seed 0 of K perturbed copies, :func:`perturbed`); one JSON line per fit."""
+def worker(tree, path):
+    """Serve fits of one cached cage with ``tree``'s core: for each line ``SEED K`` read from
+    stdin, fit seed ``SEED`` of the cage (``K > 0``: of its perturbed copy ``K``,
+    :func:`perturbed`) and write one JSON line. One fit of the cage runs first, untimed, so
+    that no timed fit pays for the modules the fit imports on first use."""
     sys.path.insert(0, tree)
     from core.fitting import fit_base_mesh
 
     with open(path, "rb") as handle:
         cage, target = pickle.load(handle)
-    runs = ([(0, k) for k in range(perturbations)] if perturbations
-            else [(seed, 0) for seed in seeds])
-    for seed, k in runs:
+    fit_base_mesh(cage, target, levels=2, mode="inside")
+    for line in sys.stdin:
+        seed, k = map(int, line.split())
         load = os.getloadavg()[0]
         started = time.process_time()
         fitted, info = fit_base_mesh(perturbed(cage, k), target, levels=2, mode="inside",
@@ -107,11 +109,35 @@ def worker(tree, path, seeds, perturbations=0):
             "hash": hashlib.sha1(fitted.vertices.tobytes()).hexdigest()}), flush=True)
 
 
-def run(tree, path, seeds, perturbations=0):
-    """The JSON lines of :func:`worker` in a subprocess of this script."""
-    out = subprocess.run([sys.executable, __file__, "--worker", tree, path, str(perturbations),
-                          *map(str, seeds)], capture_output=True, text=True, check=True)
-    return [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
+def run(trees, path, runs):
+    """Records of both trees' fits of ``runs`` ((seed, k) pairs), fit by fit in turn.
+
+    One worker process per tree (:func:`worker`) is kept alive, and the two fit each run one
+    after the other, the baseline first on even runs and last on odd ones, so a slow or quiet
+    spell of the machine falls on both alike.
+
+    Returns
+    -------
+    (before, after) : lists of records, one per run each.
+    """
+    workers = [subprocess.Popen([sys.executable, __file__, "--worker", tree, path],
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+               for tree in trees]
+    records = ([], [])
+    try:
+        for number, (seed, k) in enumerate(runs):
+            for side in ((0, 1) if number % 2 == 0 else (1, 0)):
+                workers[side].stdin.write(f"{seed} {k}\n")
+                workers[side].stdin.flush()
+                line = workers[side].stdout.readline()
+                if not line:
+                    raise RuntimeError(f"the worker of {trees[side]} stopped on {path}")
+                records[side].append(json.loads(line))
+    finally:
+        for process in workers:
+            process.stdin.close()
+            process.wait()
+    return records
 
 
 def markdown(results):
@@ -135,9 +161,10 @@ def spread_markdown(results):
     """Table rows over perturbed fits: per mesh and tree the median and largest of each."""
     import numpy as np
 
-    lines = ["| mesh | fits | CPU s median / max, before -> after | outside % median / max | "
-             "mean (1e-3) median / max | max (1e-3) median / max | distinct fits |",
-             "|---|---|---|---|---|---|---|"]
+    lines = ["| mesh | fits | CPU s median / max, before -> after | CPU after / before, "
+             "median of pairs | outside % median / max | mean (1e-3) median / max | "
+             "max (1e-3) median / max | distinct fits |",
+             "|---|---|---|---|---|---|---|---|"]
 
     def spread(records, key, scale, digits):
         values = np.array([r[key] for r in records], dtype=float) * scale
@@ -148,6 +175,8 @@ def spread_markdown(results):
                  for key, scale, digits in (("cpu", 1, 2), ("outside", 100, 3),
                                             ("mean", 1e3, 2), ("max", 1e3, 1))]
         distinct = " -> ".join(str(len({r["hash"] for r in records})) for records in (before, after))
+        ratio = np.median([a["cpu"] / b["cpu"] for b, a in zip(before, after)])
+        cells.insert(1, f"{ratio:.2f}")
         lines.append(f"| {name} | {len(after)} | " + " | ".join(cells) + f" | {distinct} |")
     return "\n".join(lines)
 
@@ -166,9 +195,9 @@ def main(argv=None):
     results = {}
     for name in args.only:
         path = os.path.join(args.cache, name + ".pkl")
-        results[name] = (run(os.path.abspath(args.baseline), path, args.seeds,
-                             args.perturbations),
-                         run(REPO, path, args.seeds, args.perturbations))
+        runs = ([(0, k) for k in range(args.perturbations)] if args.perturbations
+                else [(seed, 0) for seed in args.seeds])
+        results[name] = run((os.path.abspath(args.baseline), REPO), path, runs)
         print(f"{name} done", file=sys.stderr, flush=True)
     print(spread_markdown(results) if args.perturbations else markdown(results))
     if args.json:
@@ -181,6 +210,6 @@ def main(argv=None):
 
 if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "--worker":
-        worker(sys.argv[2], sys.argv[3], [int(s) for s in sys.argv[5:]], int(sys.argv[4]))
+        worker(sys.argv[2], sys.argv[3])
     else:
         main()
