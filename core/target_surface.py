@@ -51,7 +51,8 @@ _RAY_BLOCK = 200000
 _START_OFFSET = 1e-6
 SPLIT_EDGE = 2.0
 """With ``split=True``, the search tree holds the triangles cut into pieces no longer than
-this many median edge lengths (:func:`core.geometry.bisect_long_triangles`). A long
+this many times the median of the triangles' longest edges
+(:func:`core.geometry.bisect_long_triangles`). A long
 triangle's box overlaps those of many short ones, and a query near it opens them all: the
 inside fit's closest points on its target took 9.0, 10.2, 4.8 and 20.6 us a point with the
 triangles in the tree on featuretype, octagonal_pocket, idler_riser and ge_bracket_domain,
@@ -407,8 +408,9 @@ class TargetSurface:
 
 
 def _pieces(V, F, tri):
-    """The pieces of :func:`core.geometry.bisect_long_triangles` for ``SPLIT_EDGE`` and
-    ``SPLIT_MOST`` (``tri`` = ``V[F]``), or None when no triangle is cut.
+    """The pieces of :func:`core.geometry.bisect_long_triangles` for ``SPLIT_EDGE`` times the
+    median of the triangles' longest edges and ``SPLIT_MOST`` (``tri`` = ``V[F]``), or None
+    when no triangle is cut.
 
     The longest edge allowed is doubled while ``sum (e / longest)^2`` over the triangles
     longer than it (``e`` a triangle's longest edge; about the pieces a well-shaped triangle
