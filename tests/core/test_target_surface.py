@@ -113,6 +113,22 @@ def test_bisected_pieces_cover_their_triangles_and_are_short_enough():
     assert bisect_long_triangles(V, F, longest, len(F) + 10) is None
 
 
+def test_bisecting_degenerate_triangles_ends():
+    # a zero-area needle along a long edge and a triangle with a repeated corner: cut into
+    # pieces no longer than asked, each on its line; a limit of 0 asks for endless cuts and
+    # gets None at the piece budget; a mesh of one point has nothing to cut
+    V = np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    F = np.array([[0, 1, 2], [0, 0, 2], [0, 2, 3]])
+    P, pieces, owner = bisect_long_triangles(V, F, 1.0, 10_000)
+    edge = np.linalg.norm(P[np.roll(pieces, -1, axis=1)] - P[pieces], axis=2)
+    assert edge.max() <= 1.0
+    assert np.allclose(P[pieces[owner < 2]][:, :, 1:], 0.0)  # the needles stay on their line
+    assert np.isclose(face_areas(P, pieces)[owner == 2].sum(), face_areas(V, F)[2])
+    assert bisect_long_triangles(V, F, 0.0, 1_000) is None
+    point = TargetSurface(np.zeros((3, 3)), np.array([[0, 1, 2]]), split=True)
+    assert point._piece_face is None and point.nearest(np.ones((1, 3))).distance[0] > 0
+
+
 def test_a_split_search_tree_gives_the_same_distances_signs_and_exits():
     V, F = read_triangle_soup(MESHES / "octagonal_pocket.stl")
     whole, split = TargetSurface(V, F), TargetSurface(V, F, split=True)
