@@ -110,6 +110,10 @@ class ReconstructionParams:
         diagonal; 0 = no refinement. Quad strips deviating more are split and refitted
         until it is met or ``max_base_faces`` would be exceeded.
     tolerance_mm : the same in millimetres (after ``units``); at most one of the two.
+    outside_refinement : inside mode: where the fit leaves more than this fraction of the
+        target's volume outside, the cage's quad strips under the outside points are split
+        and the cage fitted again (``core.fitting.outside_refinement``; default 0.003,
+        0 = off).
     fit_t_min : minimal wall thickness of the fit in model units; None picks it from the
         base mesh and the target (see ``core.fitting.fit_base_mesh``), 0 disables it.
     """
@@ -168,6 +172,10 @@ class ReconstructionParams:
                               metavar="T")
     tolerance_mm: float = _param(0.0, "largest deviation wanted in millimetres (given as "
                                  "--tolerance with a unit)", low=0.0, high=1e9)
+    outside_refinement: float = _param(
+        0.003, "inside mode: where the fit leaves more than this fraction of the target's "
+        "volume outside, split the cage's quad strips there and fit again (default "
+        "%(default)s; 0: off)", _flag("outside_refinement"), low=0.0, high=1.0)
 
     def __post_init__(self):
         for item in fields(self):

@@ -115,7 +115,7 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
             result.mesh, result.info = fitted, info
             result.met, result.reason = True, "tolerance met"
             return result
-        refined, why_not = _refined_without_crossings(fitted, per_face > tolerance,
+        refined, why_not = refined_without_crossings(fitted, per_face > tolerance,
                                                       crossing_faces)
         if refined is None:
             why_not = f"tolerance not met: {why_not}"
@@ -135,10 +135,11 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
         return result
 
 
-def _refined_without_crossings(fitted, deviating, crossing_faces):
-    """The fitted cage with the strips of its ``deviating`` (m,) bool faces split, placed on
-    its limit surface (``keep_limit``), and faces left whole where that made the limit
-    surface cross itself (see :func:`fit_to_tolerance`).
+def refined_without_crossings(fitted, deviating, crossing_faces):
+    """The cage ``fitted`` with the strips of its ``deviating`` (m,) bool faces split, placed
+    on its limit surface (``keep_limit``), and faces left whole where that made the limit
+    surface cross itself more than the cage's (see :func:`fit_to_tolerance`; the cage need
+    not be fitted, :mod:`core.fitting.outside_refinement` refines the unfitted one).
 
     The deviating faces under the crossings are left whole next time; where every crossing
     lies in faces where strips ended (not deviating themselves), the deviating faces next to
@@ -191,10 +192,7 @@ def face_deviation(cage, levels, surface, samples):
     -------
     (m,) float64, fractions of ``surface.diagonal``.
     """
-    hierarchy = build_hierarchy(cage, levels)
-    fine = hierarchy.meshes[levels]
-    X = limit_matrices(fine)[0] @ hierarchy.composite(levels - 1) @ cage.vertices
-    owner = fine_face_owner(cage, levels)
+    X, fine, owner = fine_limit_points(cage, levels)
     corner_distance = surface.nearest(X).distance[fine.face_vertices.reshape(-1, 4)]
     forward = np.zeros(cage.n_faces)
     np.maximum.at(forward, owner, corner_distance.max(axis=1))
@@ -203,6 +201,21 @@ def face_deviation(cage, levels, surface, samples):
     backward = np.zeros(cage.n_faces)
     np.maximum.at(backward, owner[back.face // 2], back.distance)
     return np.maximum(forward, backward) / surface.diagonal
+
+
+def fine_limit_points(cage, levels):
+    """The level-``levels`` limit points of ``cage`` (closed PolyMesh, ``levels >= 1``).
+
+    Returns
+    -------
+    X : (n_fine, 3) float64 limit positions of the level-``levels`` vertices (model units).
+    fine : PolyMesh, the level-``levels`` mesh (all quads).
+    owner : (m_fine,) int64 the base face of each of its quads.
+    """
+    hierarchy = build_hierarchy(cage, levels)
+    fine = hierarchy.meshes[levels]
+    X = limit_matrices(fine)[0] @ hierarchy.composite(levels - 1) @ cage.vertices
+    return X, fine, fine_face_owner(cage, levels)
 
 
 def split_quad_strips(cage, seeds, within=None, keep_limit=False, with_parent=False):

@@ -57,6 +57,10 @@ class FitProxy(CageProxy):
                      "(0: none). Where the surface deviates more, the quad strips there are "
                      "split and the cage fitted again (at most the base mesh's 'Most faces' "
                      "default)", 0.0)
+        add_property(obj, "App::PropertyFloat", "OutsideRefinement", "Fit",
+                     "Inside mode: where the fit leaves more than this fraction of the target's "
+                     "volume outside, the quad strips there are split and the cage fitted again "
+                     "(0: off)", default("outside_refinement"))
         add_cage_properties(obj)
         for name, _, tooltip in FIGURES:
             add_property(obj, "App::PropertyFloat", name, "Result", tooltip, 0.0,
@@ -65,8 +69,9 @@ class FitProxy(CageProxy):
                      "Why the fit stopped ('iterations' or 'stalled')", "", read_only=True,
                      output=True)
         add_property(obj, "App::PropertyString", "Refinement", "Result",
-                     "With a tolerance: whether it was met, why the refinement stopped and the "
-                     "faces of every fitted cage", "", read_only=True, output=True)
+                     "With a tolerance or volume left outside: whether the goal was met, why the "
+                     "refinement stopped and the faces of every fitted cage", "",
+                     read_only=True, output=True)
         add_property(obj, "App::PropertyString", "CreaseCurves", "Result",
                      "A cage with sharp creases: how many of its crease edges were fitted to "
                      "the target's feature lines before the fit", "", read_only=True,
@@ -77,7 +82,8 @@ class FitProxy(CageProxy):
                 "fit_convergence": float(obj.Convergence),
                 "subdivision_levels": int(obj.SubdivisionLevels), "fit_mode": obj.Mode,
                 "fit_t_min": None if obj.AutoMinThickness else float(obj.MinThickness),
-                "tolerance_mm": float(obj.Tolerance)}
+                "tolerance_mm": float(obj.Tolerance),
+                "outside_refinement": float(obj.OutsideRefinement)}
 
     def run(self, obj, progress):
         from core.types import BaseMeshResult
@@ -90,7 +96,9 @@ class FitProxy(CageProxy):
         for name, key, _ in FIGURES:
             setattr(obj, name, float(fit[key]))
         obj.Stopped = str(fit.get("stopped", ""))
-        obj.Refinement = refinement_summary(fit.get("tolerance"))
+        obj.Refinement = "; ".join(filter(None, (
+            refinement_summary(fit.get("tolerance")),
+            outside_refinement_summary(fit.get("outside_refinement")))))
         obj.CreaseCurves = crease_curves_summary(fit.get("crease_curves"))
         store_cage(obj, state.fit.cage)
 
@@ -102,6 +110,16 @@ def refinement_summary(tolerance):
     faces = " -> ".join(str(round_["faces"]) for round_ in tolerance["rounds"])
     return (f"{tolerance['reason']} ({tolerance['value_mm']:.4g} mm; faces {faces}; largest "
             f"deviation {tolerance['rounds'][-1]['max_deviation']:.3g} of the diagonal)")
+
+
+def outside_refinement_summary(outside):
+    """One line on a fit's refinement where it left volume outside (its report's
+    ``outside_refinement`` section or None)."""
+    if not outside:
+        return ""
+    faces = " -> ".join(str(round_["faces"]) for round_ in outside["rounds"])
+    return (f"volume outside above {outside['goal']:.2%}: {outside['reason']} (faces {faces}; "
+            f"kept {outside['faces']})")
 
 
 def crease_curves_summary(crease_curves):

@@ -396,6 +396,9 @@ def test_preferences_give_new_objects_their_defaults():
         fit.AutoMinThickness = False
         fit.MinThickness = 0.5
         assert fit.Proxy.parameters(fit)["fit_t_min"] == 0.5
+        assert fit.Proxy.parameters(fit)["outside_refinement"] == fit.OutsideRefinement == 0.003
+        fit.OutsideRefinement = 0.0
+        assert fit.Proxy.parameters(fit)["outside_refinement"] == 0.0
         set_default("fit_iterations", 100)  # the paper's value: stored as no preference
         assert default("fit_iterations") == 100
     finally:

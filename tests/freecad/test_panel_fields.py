@@ -23,7 +23,7 @@ PARAMETER_FIELDS = [field for fields in FIELDS.values() for field in fields
 
 
 def test_every_pipeline_parameter_a_panel_offers_has_its_declared_range_or_choices():
-    assert len(PARAMETER_FIELDS) == 13
+    assert len(PARAMETER_FIELDS) == 14
     for field in PARAMETER_FIELDS:
         item, option = parameter_option(field.key)
         if option.choices is not None:
@@ -61,7 +61,7 @@ def test_the_preferences_page_offers_every_parameter_field_once():
     from polycube_wb.preferences import PREFERENCE_FIELDS, paper_defaults
 
     keys = [field.key for field in PAGE_FIELDS]
-    assert len(keys) == len(set(keys)) == 14
+    assert len(keys) == len(set(keys)) == 15
     assert set(keys) == {f.key for f in PARAMETER_FIELDS} | {EXPORT_DEPTH_KEY}
     assert set(PREFERENCE_FIELDS) == {f.key for f in PARAMETER_FIELDS}
     defaults = paper_defaults()

@@ -1,0 +1,128 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Refine the cage where an inside fit leaves volume outside the target.
+
+The inside fit (:func:`core.fitting.fit.fit_base_mesh`) holds its moves back where the
+limit surface would cross itself. On a thin plate that a coarse cage spans with wide
+stencils (gripper_domain's 3.4 mm plate under 32 mm cage edges) the relaxed gradient
+projection pulls the plate's two walls through each other, the hold-back returns those
+base vertices towards the start, and the start lies partly outside: 0.35-0.55 % of the
+target's volume stays outside over 8 cages moved by 1e-12 (one above the issue's 0.5 %
+rule). A finer cage there has narrower stencils and fills the plate from inside.
+
+:func:`fit_with_outside_refinement` fits, and while more than ``goal`` of the target's volume
+lies outside, splits the quad strips of the **unfitted** cage through the base faces whose
+fine limit points lie outside (:func:`core.fitting.refine.refined_without_crossings`, the
+refined cage on the same limit surface) and fits that again. The fitted cage is not
+refined: its limit surface nearly touches itself where the walls were held back, and its
+refinements crossed themselves (gripper_domain: 36 triangle pairs after 5 tries). The fit
+that leaves the least volume outside is kept.
+
+The default goal (``outside_refinement`` of :class:`core.params.ReconstructionParams`, 0.003)
+is three fifths of the issue's 0.5 % rule, because a fit's outside volume moves by about
+0.1 % of the target's volume with the last bits of its cage (gripper_domain 0.35-0.55 %). Of
+the 16 dev meshes' fits at defaults only gripper_domain's leave more (octagonal_pocket, the
+next, 0.23-0.26 %).
+"""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from core.fitting.refine import fine_limit_points, refined_without_crossings
+from core.target_surface import TargetSurface
+
+OUTSIDE_DEPTH = 1e-3
+"""A base face is refined when one of its fine limit points lies deeper outside the target
+than this fraction of the target's bounding-box diagonal."""
+OUTSIDE_ROUNDS = 2
+"""Most refinements (gripper_domain: 320 -> 523 faces, 0.487 -> 0.074 % outside; a second
+round, 618 faces, 0.098 %)."""
+
+
+@dataclass
+class OutsideRefinement:
+    """Outcome of :func:`fit_with_outside_refinement`.
+
+    mesh : PolyMesh, the fitted cage leaving the least volume outside.
+    info : dict, its fit's info.
+    rounds : list of dict, per fit: ``faces``, ``outside_volume_fraction``,
+        ``refined_faces`` (base faces with outside points, whose strips the next cage
+        splits; 0 for the last fit).
+    reason : str, why the refinement stopped ('' when the first fit met the goal).
+    """
+
+    mesh: object
+    info: dict
+    rounds: list = field(default_factory=list)
+    reason: str = ""
+
+
+def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_faces=None,
+                                rounds=OUTSIDE_ROUNDS, progress=None):
+    """Fit ``base``; while too much volume is outside, refine the cage there and fit again.
+
+    Parameters
+    ----------
+    base : PolyMesh, the cage to fit (closed, quad-dominant, unfitted).
+    target : TriMesh, closed, outward oriented.
+    fit : callable ``fit(cage) -> (fitted PolyMesh, info dict)``, the configured inside fit
+        (its info has ``levels`` and ``outside_volume_fraction``).
+    goal : float >= 0, fraction of the target's volume allowed outside; 0: no refinement.
+    max_faces : int, no cage with more faces is fitted.
+    crossing_faces : None or callable ``crossing_faces(cage) -> (k, 2) int``, the base faces
+        where a cage's limit surface crosses itself (a refinement crossing more than the
+        unfitted cage is not fitted, :func:`core.fitting.refine.refined_without_crossings`).
+    rounds : int >= 0, most refinements.
+    progress : core.progress.Progress or None, told when a refined cage is fitted.
+
+    Returns
+    -------
+    OutsideRefinement
+    """
+    fitted, info = fit(base)
+    result = OutsideRefinement(fitted, info)
+    cage, surface = base, None
+    for done in range(rounds + 1):
+        outside = float(info["outside_volume_fraction"])
+        result.rounds.append({"faces": int(fitted.n_faces), "outside_volume_fraction": outside,
+                              "refined_faces": 0})
+        if outside < result.info["outside_volume_fraction"]:
+            result.mesh, result.info = fitted, info
+        if not goal or outside <= goal:
+            result.reason = "" if done == 0 else (f"{outside:.3%} of the volume outside after "
+                                                  f"{done} refinement{'s' * (done > 1)}")
+            return result
+        if done == rounds:
+            result.reason = f"still {outside:.3%} outside after {rounds} refinements"
+            return result
+        surface = surface or TargetSurface(target.vertices, target.faces)
+        marked = faces_outside(fitted, info["levels"], surface, OUTSIDE_DEPTH)
+        result.rounds[-1]["refined_faces"] = int(marked.sum())
+        refined, why_not = (None, "no point lies deeper outside than "
+                            f"{OUTSIDE_DEPTH:g} of the diagonal") if not marked.any() else \
+            refined_without_crossings(cage, marked, crossing_faces)
+        if refined is not None and refined.n_faces > max_faces:
+            why_not = (f"the refined cage would have {refined.n_faces} faces, more than "
+                       f"max_base_faces={max_faces}")
+            refined = None
+        if refined is None:
+            result.reason = f"{outside:.3%} outside, not refined: {why_not}"
+            return result
+        if progress is not None:
+            progress.report("fit", 0.0, f"{outside:.2%} of the volume outside: fitting a "
+                                        f"cage refined there ({refined.n_faces} faces)")
+        cage = refined
+        fitted, info = fit(cage)
+
+
+def faces_outside(cage, levels, surface, depth):
+    """(m,) bool base faces with a level-``levels`` limit point outside the target deeper
+    than ``depth`` (fraction of ``surface.diagonal``).
+
+    cage : PolyMesh, closed; surface : TargetSurface of the target.
+    """
+    X, fine, owner = fine_limit_points(cage, levels)
+    outside = surface.closest(X).signed > depth * surface.diagonal
+    quads = fine.face_vertices.reshape(-1, 4)
+    marked = np.zeros(cage.n_faces, dtype=bool)
+    marked[owner[outside[quads].any(axis=1)]] = True
+    return marked

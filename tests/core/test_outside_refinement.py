@@ -1,0 +1,111 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Refining the cage where an inside fit leaves volume outside the target."""
+import numpy as np
+import pytest
+import trimesh
+
+from core.errors import ParameterError
+from core.fitting.outside_refinement import (OUTSIDE_DEPTH, faces_outside,
+                                             fit_with_outside_refinement)
+from core.fitting.refine import fine_limit_points
+from core.params import ReconstructionParams
+from core.polymesh_checks import check_polymesh
+from core.subdivision.sample_cages import grid_sphere
+from core.target_surface import TargetSurface
+from core.types import TriMesh
+
+HALF = 0.3
+"""Half width of the box target along x, times the sphere cage's limit radius (about 1)."""
+
+
+def sphere_cut_by_a_box():
+    """A sphere cage (54 quads) and a box target cutting its limit surface at ``|x| = HALF``:
+    the caps beyond lie outside the target, the rest inside (the box is larger along y, z)."""
+    box = trimesh.creation.box(extents=[2 * HALF, 4.0, 4.0])
+    return grid_sphere(3), TriMesh(np.asarray(box.vertices),
+                                   np.asarray(box.faces, dtype=np.int64))
+
+
+def test_the_faces_marked_are_those_with_limit_points_outside_deeper_than_the_depth():
+    cage, target = sphere_cut_by_a_box()
+    surface = TargetSurface(target.vertices, target.faces)
+    depth = 0.01
+    marked = faces_outside(cage, 2, surface, depth)
+    # independently: the box's signed distance is |x| - HALF beyond its x faces
+    X, fine, owner = fine_limit_points(cage, 2)
+    beyond = np.abs(X[:, 0]) - HALF > depth * surface.diagonal
+    expected = np.zeros(cage.n_faces, dtype=bool)
+    expected[owner[beyond[fine.face_vertices.reshape(-1, 4)].any(axis=1)]] = True
+    assert 0 < marked.sum() < cage.n_faces
+    assert np.array_equal(marked, expected)
+
+
+def stub_fit(outside_by_faces, log):
+    """A fit that leaves the cage where it is and reports the outside volume fraction
+    ``outside_by_faces(n_faces)``; every cage it is given is appended to ``log``."""
+    def fit(cage):
+        log.append(cage)
+        return cage, {"levels": 2, "outside_volume_fraction": outside_by_faces(cage.n_faces)}
+    return fit
+
+
+def test_a_fit_within_the_goal_is_not_refined():
+    cage, target = sphere_cut_by_a_box()
+    log = []
+    result = fit_with_outside_refinement(cage, target, stub_fit(lambda n: 0.002, log), 0.003,
+                                         10_000)
+    assert len(log) == 1 and result.mesh is cage and result.reason == ""
+    assert result.rounds == [{"faces": 54, "outside_volume_fraction": 0.002,
+                              "refined_faces": 0}]
+
+
+def test_refinement_splits_the_unfitted_cage_under_the_outside_points():
+    cage, target = sphere_cut_by_a_box()
+    log = []
+    result = fit_with_outside_refinement(cage, target,
+                                         stub_fit(lambda n: 0.01 if n == 54 else 0.001, log),
+                                         0.003, 10_000)
+    assert len(log) == 2
+    refined = log[1]
+    check_polymesh(refined)  # closed, 2-manifold, consistently oriented
+    marked = faces_outside(cage, 2, TargetSurface(target.vertices, target.faces), OUTSIDE_DEPTH)
+    assert result.rounds[0]["refined_faces"] == marked.sum() > 0
+    assert refined.n_faces > cage.n_faces
+    # the refined cage keeps the unfitted cage's limit surface (the strips are split on it)
+    X, _, _ = fine_limit_points(cage, 3)
+    Y, fine, _ = fine_limit_points(refined, 2)
+    gap = TargetSurface(Y, fine.face_vertices.reshape(-1, 4)[:, [0, 1, 2, 0, 2, 3]].reshape(-1, 3))
+    assert gap.nearest(X).distance.max() < 0.02
+    assert result.mesh is refined and result.reason == "0.100% of the volume outside after 1 refinement"
+
+
+def test_the_fit_leaving_least_outside_is_kept_and_the_rounds_are_capped():
+    cage, target = sphere_cut_by_a_box()
+    log = []
+    outside = {54: 0.01}
+    result = fit_with_outside_refinement(
+        cage, target, stub_fit(lambda n: outside.setdefault(n, 0.02 + 1e-4 * n), log), 0.003,
+        10_000, rounds=2)
+    assert len(log) == 3  # the fit and two refinements
+    assert result.mesh is cage  # the refined cages left more outside
+    assert [r["outside_volume_fraction"] for r in result.rounds][0] == 0.01
+    assert result.reason.startswith("still ") and "after 2 refinements" in result.reason
+
+
+def test_refinement_stops_at_the_face_budget_and_says_so():
+    cage, target = sphere_cut_by_a_box()
+    log = []
+    result = fit_with_outside_refinement(cage, target, stub_fit(lambda n: 0.01, log), 0.003,
+                                         cage.n_faces)
+    assert len(log) == 1 and result.mesh is cage
+    assert "more than max_base_faces=54" in result.reason
+
+
+def test_a_zero_goal_turns_the_refinement_off_and_a_negative_one_is_refused():
+    cage, target = sphere_cut_by_a_box()
+    log = []
+    fit_with_outside_refinement(cage, target, stub_fit(lambda n: 0.5, log), 0.0, 10_000)
+    assert len(log) == 1
+    assert ReconstructionParams().outside_refinement == 0.003
+    with pytest.raises(ParameterError, match="outside_refinement"):
+        ReconstructionParams(outside_refinement=-0.1)
