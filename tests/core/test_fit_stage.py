@@ -96,22 +96,29 @@ def test_fit_convergence_zero_runs_every_iteration_the_default_stops_when_conver
         ReconstructionParams(fit_convergence=-1e-3)
 
 
-def test_outside_refinement_says_why_it_did_not_refine_shallow_outside_points():
-    """The level-set cantilever's inside fit leaves about 1e-4 of its volume outside, in
-    points shallower than ``OUTSIDE_DEPTH`` (1e-3 of the diagonal). With a goal below that,
-    the report's section says nothing was deep enough to refine and the stage warns; at the
-    default goal (0.003) there is no section. The refinement itself is tested in
-    ``test_outside_refinement.py``."""
+def test_outside_refinement_is_reported_and_keeps_the_fit_leaving_least_outside():
+    """The level-set cantilever's inside fit leaves about 1e-4 of its volume outside. With a
+    goal below that, the report's section lists the fits (the first on the base mesh), the
+    cage kept leaves the least outside, and the stage warns while it is above the goal; at
+    the default goal (0.003) there is no section and the fit is the same as the first. (Its
+    outside points lie about 0.9e-3 of the diagonal deep, just under ``OUTSIDE_DEPTH``, so
+    here it is usually not refined; the refinement itself is tested in
+    ``test_outside_refinement.py``.)"""
     goal = 1e-6
     result = reconstruct(TINY, {"outside_refinement": goal}, stop_after="fit")
     fit = result.report["fit"]
     section = fit["outside_refinement"]
-    assert section["goal"] == goal and section["faces"] == result.report["base_mesh"]["faces"]
-    assert section["rounds"] == [{"faces": section["faces"], "refined_faces": 0,
-                                  "outside_volume_fraction": fit["outside_volume_fraction"]}]
-    assert fit["outside_volume_fraction"] > goal
-    assert "no point lies deeper outside than 0.001 of the diagonal" in section["reason"]
-    assert section["reason"] in result.report["stages"]["fit"]["message"]
+    rounds = section["rounds"]
+    assert section["goal"] == goal and rounds[0]["faces"] == result.report["base_mesh"]["faces"]
+    assert rounds[0]["outside_volume_fraction"] > goal
+    least = min(round_["outside_volume_fraction"] for round_ in rounds)
+    assert fit["outside_volume_fraction"] == least
+    assert result.state.fit.cage.n_faces == section["faces"]
+    assert all(round_["refined_faces"] > 0 for round_ in rounds[:-1])
+    if len(rounds) == 1:
+        assert rounds[0]["refined_faces"] == 0
+        assert "no point lies deeper outside than 0.001 of the diagonal" in section["reason"]
+    assert (section["reason"] in result.report["stages"]["fit"]["message"]) == (least > goal)
     default = reconstruct(TINY, stop_after="fit").report["fit"]
     assert "outside_refinement" not in default
-    assert default["outside_volume_fraction"] == fit["outside_volume_fraction"]
+    assert default["outside_volume_fraction"] == rounds[0]["outside_volume_fraction"]
