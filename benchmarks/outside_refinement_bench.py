@@ -59,12 +59,14 @@ def markdown(records):
     lines = ["| mesh | k | first fit outside % | kept outside % | faces (fits) | mean / max "
              "(1e-3 of diagonal) | stage CPU s |", "|---|---|---|---|---|---|---|"]
     for r in records:
+        fits = " -> ".join(map(str, r["fits"]))
         lines.append(f"| `{r['mesh']}` | {r['k']} | {100 * r['first_outside']:.3f} | "
-                     f"{100 * r['outside']:.3f} | {r['faces']} ({' -> '.join(map(str, r['fits']))})"
-                     f" | {1e3 * r['mean']:.2f} / {1e3 * r['max']:.1f} | {r['cpu']:.1f} |")
+                     f"{100 * r['outside']:.3f} | {r['faces']} ({fits}) | "
+                     f"{1e3 * r['mean']:.2f} / {1e3 * r['max']:.1f} | {r['cpu']:.1f} |")
     for name in sorted({r["mesh"] for r in records}):
         mine = [r for r in records if r["mesh"] == name]
-        for key, label in (("first_outside", "first fit outside %"), ("outside", "kept outside %")):
+        for key, label in (("first_outside", "first fit outside %"),
+                           ("outside", "kept outside %")):
             values = [100 * r[key] for r in mine]
             lines.append(f"\n`{name}` {label}: median {statistics.median(values):.3f}, "
                          f"{min(values):.3f}-{max(values):.3f} over {len(values)} fits")

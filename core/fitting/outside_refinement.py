@@ -29,6 +29,7 @@ import numpy as np
 
 from core.fitting.refine import fine_limit_points, refined_without_crossings
 from core.target_surface import TargetSurface
+from core.types import PolyMesh
 
 OUTSIDE_DEPTH = 1e-3
 """A base face is refined when one of its fine limit points lies deeper outside the target
@@ -50,7 +51,7 @@ class OutsideRefinement:
     reason : str, why the refinement stopped ('' when the first fit met the goal).
     """
 
-    mesh: object
+    mesh: PolyMesh
     info: dict
     rounds: list = field(default_factory=list)
     reason: str = ""
@@ -92,7 +93,8 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
                                                   f"{done} refinement{'s' * (done > 1)}")
             return result
         if done == rounds:
-            result.reason = f"still {outside:.3%} outside after {rounds} refinements"
+            result.reason = _kept(result, f"still {outside:.3%} outside after {rounds} "
+                                          "refinements")
             return result
         surface = surface or TargetSurface(target.vertices, target.faces)
         marked = faces_outside(fitted, info["levels"], surface, OUTSIDE_DEPTH)
@@ -105,13 +107,21 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
                        f"max_base_faces={max_faces}")
             refined = None
         if refined is None:
-            result.reason = f"{outside:.3%} outside, not refined: {why_not}"
+            result.reason = _kept(result, f"{outside:.3%} outside, not refined: {why_not}")
             return result
         if progress is not None:
             progress.report("fit", 0.0, f"{outside:.2%} of the volume outside: fitting a "
                                         f"cage refined there ({refined.n_faces} faces)")
         cage = refined
         fitted, info = fit(cage)
+
+
+def _kept(result, reason):
+    """``reason``, and which fit is kept when it is not the last one."""
+    if result.mesh.n_faces == result.rounds[-1]["faces"]:
+        return reason
+    return (f"{reason}; the fit of the {result.mesh.n_faces}-face cage is kept "
+            f"({result.info['outside_volume_fraction']:.3%} outside)")
 
 
 def faces_outside(cage, levels, surface, depth):

@@ -116,7 +116,7 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
             result.met, result.reason = True, "tolerance met"
             return result
         refined, why_not = refined_without_crossings(fitted, per_face > tolerance,
-                                                      crossing_faces)
+                                                     crossing_faces)
         if refined is None:
             why_not = f"tolerance not met: {why_not}"
         elif refined.n_faces > max_faces:
