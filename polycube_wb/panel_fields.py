@@ -101,8 +101,8 @@ FIELDS = {
                    parameter_range("fit_t_min")),
         PanelField("Tolerance", "Tolerance, mm (0: no refinement)", "float",
                    parameter_range("tolerance_mm")),
-        parameter_field("OutsideRefinement", "Refine where more of the volume is outside "
-                        "(0: off)", "outside_refinement")),
+        parameter_field("OutsideRefinement", "Outside volume goal (0: off)",
+                        "outside_refinement")),
     "Solid": (PanelField("Depth", "Grading depth at extraordinary vertices", "int",
                          (1, MAX_EXPORT_DEPTH), EXPORT_DEPTH_KEY),),
     "Deviation": (

@@ -46,10 +46,14 @@ class StagePanel:
         layout = QtGui.QVBoxLayout(self.form)
         box = QtGui.QGroupBox("Parameters")
         form = QtGui.QFormLayout(box)
+        # the Combo View is narrow: each label goes above its field, which keeps its width
+        # (side by side, the number fields were squeezed out of sight by the long labels)
+        form.setRowWrapPolicy(QtGui.QFormLayout.WrapAllRows)
         for field in FIELDS.get(self.kind, ()):
             widget = make_widget(field.kind, field.limits)
             set_widget_value(widget, field.kind, getattr(obj, field.prop))
             widget.setToolTip(obj.getDocumentationOfProperty(field.prop))
+            widget.setMinimumWidth(FIELD_WIDTH)  # not as wide as its largest number
             form.addRow(field.label, widget)
             self.widgets[field.prop] = (widget, field.kind)
         defaults = QtGui.QPushButton("Paper defaults")
@@ -150,6 +154,7 @@ class StagePanel:
             field.setRange(-1e6, 1e6)
             field.setDecimals(4)
             field.setSuffix(" mm")
+            field.setMinimumWidth(FIELD_WIDTH)
             form.addRow(f"Move by {axis}", field)
             self.move_fields.append(field)
         move = QtGui.QPushButton("Move")
@@ -207,6 +212,11 @@ def _close(obj):
     gui_document = FreeCADGui.getDocument(obj.Document.Name)
     if gui_document is not None and gui_document.getInEdit() is not None:
         gui_document.resetEdit()
+
+
+FIELD_WIDTH = 100
+"""Least width of a number field, pixels: a spin box asks for the width of its largest
+number (``1e9`` with six decimals), which made the panel wider than the Combo View."""
 
 
 def make_widget(kind, limits):

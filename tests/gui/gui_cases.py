@@ -366,6 +366,11 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
         fit, solid = self.one("Fit"), self.one("Solid")
         volume = solid.Shape.Volume
         panel = self.open_panel(fit)
+        settled = time.monotonic() + 1.0  # the task box unfolds in an animation
+        while time.monotonic() < settled:
+            FreeCADGui.updateGui()
+            time.sleep(0.05)
+        FreeCADGui.getMainWindow().grab().save(os.path.join(OUTPUT, "polycube_fit_panel.png"))
         widget, _ = panel.widgets["Iterations"]
         self.assertIsInstance(widget, QtGui.QSpinBox)
         widget.setValue(FIT_ITERATIONS + 1)

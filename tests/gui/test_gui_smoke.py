@@ -25,9 +25,10 @@ SCREENSHOTS = ("polycube_torus_solid.png", "polycube_target_mesh.png", "polycube
                "polycube_deviation.png", "polycube_edited_cage.png", "polycube_reconstructed.png")
 CAGE_SCREENSHOTS = ("polycube_base_mesh.png",)
 WINDOW_GRABS = ("polycube_fit_progress.png", "polycube_batch_progress.png",
-                "polycube_cancelled.png")
-"""The main window during the fit (progress bar), during Reconstruct folder (its dialog) and
-after Esc in the fit (the Fit marked in the tree), grabbed at the window's own size."""
+                "polycube_cancelled.png", "polycube_fit_panel.png")
+"""The main window during the fit (progress bar), during Reconstruct folder (its dialog),
+after Esc in the fit (the Fit marked in the tree) and with the Fit's task panel open,
+grabbed at the window's own size."""
 MIN_CASES = 10
 TIMEOUT = 600
 """Guard against a hung GUI (FreeCAD under Xvfb without a window manager), not a timing
