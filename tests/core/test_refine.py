@@ -161,6 +161,38 @@ def test_refinement_leaves_faces_whole_where_a_split_would_cross():
     assert "cross itself" in result.reason and result.mesh.n_faces == base.n_faces
 
 
+def test_when_every_split_of_the_fitted_cage_crosses_the_cage_before_the_fit_is_split():
+    """Refinements of the fitted cage are reported as crossing (told apart by their limit
+    surface, which reaches the capsule's tips at |z| = 1.5, while the box cage's stops near
+    1.2): the strips of the cage the fit started from are split instead, on its surface."""
+    from core.fitting.refine import fine_limit_points
+
+    target, base = capsule_and_box_cage()
+
+    def height(cage):
+        return float(np.abs(fine_limit_points(cage, 1)[0][:, 2]).max())
+
+    def crossing(cage):
+        tall = cage.n_faces > base.n_faces and height(cage) > 1.35
+        return (np.stack([np.arange(cage.n_faces)] * 2, axis=1) if tall
+                else np.zeros((0, 2), dtype=np.int64))
+
+    fitted_cages = []
+
+    def fit(cage):
+        fitted, info = fit_base_mesh(cage, target, 2, 50, mode="best-fit")
+        fitted_cages.append((cage, fitted))
+        return fitted, info
+
+    result = fit_to_tolerance(base, target, 0.01, 2000, fit, crossing_faces=crossing,
+                              max_rounds=2)
+    (first, first_fit), (second, _) = fitted_cages
+    assert height(base) < 1.35 < height(first_fit)
+    assert result.rounds[0]["split"] == "unfitted cage"
+    assert second.n_faces > base.n_faces and height(second) < 1.35
+    assert result.met and len(result.rounds) == 2  # the refit from it met the tolerance
+
+
 def test_refinement_meets_the_tolerance_on_a_capsule():
     target, base = capsule_and_box_cage()
     tolerance = 0.01
