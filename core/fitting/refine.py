@@ -25,7 +25,9 @@ Strips that ran round the whole part (the first version) tripled the cage in eve
 the surface was already within the tolerance. The refined cage is placed so that
 its limit surface passes through the fitted one at every vertex (a sparse linear system of the
 limit masks), then fitted again, until the largest deviation is at most the tolerance or the next
-refinement would exceed the face budget.
+refinement would exceed the face budget. Where every split of the fitted cage crosses itself
+(an inside fit held a thin wall back, so its walls nearly touch), the cage the fit started
+from is split instead.
 """
 from dataclasses import dataclass, field
 
