@@ -45,7 +45,6 @@ class OutsideRefinement:
 
     mesh : PolyMesh, the fitted cage leaving the least volume outside.
     info : dict, its fit's info.
-    cage : PolyMesh, the cage that fit started from (``base`` or a refinement of it).
     rounds : list of dict, per fit: ``faces``, ``outside_volume_fraction``,
         ``refined_faces`` (base faces with outside points, whose strips the next cage
         splits; 0 for the last fit).
@@ -54,7 +53,6 @@ class OutsideRefinement:
 
     mesh: PolyMesh
     info: dict
-    cage: PolyMesh
     rounds: list = field(default_factory=list)
     reason: str = ""
 
@@ -82,14 +80,14 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
     OutsideRefinement
     """
     fitted, info = fit(base)
-    result = OutsideRefinement(fitted, info, base)
+    result = OutsideRefinement(fitted, info)
     cage, surface = base, None
     for done in range(rounds + 1):
         outside = float(info["outside_volume_fraction"])
         result.rounds.append({"faces": int(fitted.n_faces), "outside_volume_fraction": outside,
                               "refined_faces": 0})
         if outside < result.info["outside_volume_fraction"]:
-            result.mesh, result.info, result.cage = fitted, info, cage
+            result.mesh, result.info = fitted, info
         if not goal or outside <= goal:
             result.reason = "" if done == 0 else (f"{outside:.3%} of the volume outside after "
                                                   f"{done} refinement{'s' * (done > 1)}")

@@ -40,10 +40,6 @@ from core.subdivision.limit import limit_matrices
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
-FITTED_FROM = "fitted_from"
-"""Key of a fit's info holding the cage it started from when the fit refined the cage it
-was given (:mod:`core.fitting.outside_refinement`); :func:`fit_to_tolerance` splits that one
-when no split of the fitted cage is left."""
 DEVIATION_SAMPLES = 20000
 UNCROSS_TRIES = 5
 """Refinements tried per round with the deviating faces under new crossings left whole."""
@@ -82,15 +78,14 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
     tolerance : float > 0, fraction of the target's bounding-box diagonal.
     max_faces : int, no refinement beyond this many faces.
     fit : callable ``fit(cage) -> (fitted PolyMesh, info dict)`` (the configured fit;
-        its ``info["levels"]`` says the subdivision level of the fine limit points, and
-        ``info[FITTED_FROM]``, when there, the cage it started from if not ``cage``).
+        its ``info["levels"]`` says the subdivision level of the fine limit points).
     crossing_faces : None, or callable ``crossing_faces(cage) -> (k, 2) int`` the base faces
         of the triangle pairs where the cage's limit surface crosses itself (at the fit's
         level). Given, a refined cage that crosses itself more than the fitted one is not
         fitted: the deviating faces under its crossings are left whole and the others split
         again (:data:`UNCROSS_TRIES` times), since the fit keeps the crossings it starts from.
         When no split of the fitted cage is left, the same faces of the cage it was fitted
-        from are split instead (``cage``, or ``info[FITTED_FROM]``): where an inside fit held a
+        from are split instead (when the fit kept its faces): where an inside fit held a
         thin wall back, the fitted walls nearly touch, while the cage before the fit lies on
         the last clean surface (to_simp_lbracket at 0.005 of the diagonal: the refinement
         stopped after the first fit, largest deviation 0.0264; now 321 -> 408 -> 440 -> 493
@@ -133,9 +128,9 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
             return result
         deviating = per_face > tolerance
         refined, why_not = refined_without_crossings(fitted, deviating, crossing_faces)
-        split, started = "fitted cage", info.get(FITTED_FROM, cage)
-        if refined is None and fitted.n_faces == started.n_faces:
-            refined, _ = refined_without_crossings(started, deviating, crossing_faces)
+        split = "fitted cage"
+        if refined is None and fitted.n_faces == cage.n_faces:
+            refined, _ = refined_without_crossings(cage, deviating, crossing_faces)
             split = "unfitted cage"
         if refined is not None:
             result.rounds[-1]["split"] = split

@@ -75,8 +75,6 @@ def run_fit(intake, basemesh, params, progress):
                              progress=progress)
 
     def fit(cage):
-        from core.fitting.refine import FITTED_FROM
-
         if params.fit_mode != "inside" or not params.outside_refinement:
             return fit_once(cage)
         from core.fitting.outside_refinement import fit_with_outside_refinement
@@ -89,7 +87,6 @@ def run_fit(intake, basemesh, params, progress):
             info["outside_refinement"] = {"goal": params.outside_refinement,
                                           "reason": refined.reason, "rounds": refined.rounds,
                                           "faces": int(refined.mesh.n_faces)}
-            info[FITTED_FROM] = refined.cage  # for the tolerance refinement, not reported
         return refined.mesh, info
 
     diagonal_mm = float(np.linalg.norm(np.ptp(target.vertices, axis=0)))

@@ -192,23 +192,6 @@ def test_when_every_split_of_the_fitted_cage_crosses_the_cage_before_the_fit_is_
     assert second.n_faces > base.n_faces and height(second) < 1.35
     assert result.met and len(result.rounds) == 2  # the refit from it met the tolerance
 
-    # a fit that refined the cage it was given names the cage it started from, and that one
-    # is split (here a 10-face refinement of the box on its own limit surface)
-    from core.fitting.refine import FITTED_FROM, split_quad_strips
-
-    grown = split_quad_strips(base, np.array([[0, 0]]), keep_limit=True)
-    fitted_cages.clear()
-
-    def refining_fit(cage):
-        fitted, info = fit(grown if cage is base else cage)
-        return fitted, {**info, FITTED_FROM: grown} if cage is base else info
-
-    again = fit_to_tolerance(base, target, 0.01, 2000, refining_fit, crossing_faces=crossing,
-                             max_rounds=2)
-    assert again.rounds[0]["faces"] == grown.n_faces
-    assert again.rounds[0].get("split") == "unfitted cage"
-    assert height(fitted_cages[1][0]) < 1.35 and fitted_cages[1][0].n_faces > grown.n_faces
-
 
 def test_refinement_meets_the_tolerance_on_a_capsule():
     target, base = capsule_and_box_cage()
