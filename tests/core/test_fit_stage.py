@@ -61,6 +61,18 @@ def test_cli_rejects_an_unknown_fit_mode():
     assert result.returncode == 2 and "fit-mode" in result.stderr
 
 
+@pytest.mark.parametrize("value", ["-0.1", "1.5", "nan", "much"])
+def test_cli_rejects_a_bad_outside_refinement_and_writes_nothing(tmp_path, value):
+    step, report = tmp_path / "out.step", tmp_path / "r.json"
+    result = subprocess.run([sys.executable, "-m", "polycube_wb", "reconstruct", TINY,
+                             "-o", str(step), "--report", str(report),
+                             "--outside-refinement", value], cwd=REPO, capture_output=True,
+                            text=True, timeout=60)
+    assert result.returncode == 2
+    assert "outside" in result.stderr and "Traceback" not in result.stderr
+    assert not step.exists() and not report.exists() and os.listdir(tmp_path) == []
+
+
 def test_tolerance_in_millimetres_is_reported_per_round():
     result = reconstruct(TINY, {"fit_mode": "best-fit", "tolerance_mm": 0.1}, stop_after="fit")
     section = result.report["fit"]["tolerance"]
