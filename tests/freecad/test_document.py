@@ -165,6 +165,17 @@ def test_crease_curves_line_only_for_creased_cages(chain_doc):
         "where the surface would cross itself")
 
 
+def test_outside_refinement_line_names_the_goal_the_fits_and_the_cage_kept():
+    from polycube_wb.objects.fit import outside_refinement_summary
+
+    assert outside_refinement_summary(None) == ""
+    section = {"goal": 0.003, "reason": "0.074% of the volume outside after 1 refinement",
+               "faces": 523, "rounds": [{"faces": 320}, {"faces": 523}]}
+    assert outside_refinement_summary(section) == (
+        "volume outside above 0.30%: 0.074% of the volume outside after 1 refinement "
+        "(faces 320 -> 523; kept 523)")
+
+
 def test_edited_fitted_cage_moves_the_solid_without_refitting(chain_doc):
     from polycube_wb import api
 
