@@ -96,7 +96,8 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
             result.reason = _kept(result, f"still {outside:.3%} outside after {rounds} "
                                           "refinements")
             return result
-        surface = surface or TargetSurface(target.vertices, target.faces)
+        if surface is None:
+            surface = TargetSurface(target.vertices, target.faces)
         marked = faces_outside(fitted, info["levels"], surface, OUTSIDE_DEPTH)
         result.rounds[-1]["refined_faces"] = int(marked.sum())
         refined, why_not = (None, "no point lies deeper outside than "

@@ -107,7 +107,7 @@ def refinement_summary(tolerance):
     """One line on a fit's tolerance refinement (its report's ``tolerance`` section or None)."""
     if not tolerance:
         return ""
-    faces = " -> ".join(str(round_["faces"]) for round_ in tolerance["rounds"])
+    faces = _faces_of_fits(tolerance["rounds"])
     return (f"{tolerance['reason']} ({tolerance['value_mm']:.4g} mm; faces {faces}; largest "
             f"deviation {tolerance['rounds'][-1]['max_deviation']:.3g} of the diagonal)")
 
@@ -117,9 +117,14 @@ def outside_refinement_summary(outside):
     ``outside_refinement`` section or None)."""
     if not outside:
         return ""
-    faces = " -> ".join(str(round_["faces"]) for round_ in outside["rounds"])
+    faces = _faces_of_fits(outside["rounds"])
     return (f"volume outside above {outside['goal']:.2%}: {outside['reason']} (faces {faces}; "
             f"kept {outside['faces']})")
+
+
+def _faces_of_fits(rounds):
+    """``'320 -> 523'``: the faces of each fitted cage of a refinement's ``rounds``."""
+    return " -> ".join(str(round_["faces"]) for round_ in rounds)
 
 
 def crease_curves_summary(crease_curves):
