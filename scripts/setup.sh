@@ -38,7 +38,7 @@ echo "$PACKAGES" > "$SITE/polycube_runtime.pth"
 stamp_value=$(cat requirements.txt requirements-dev.txt | sha256sum | cut -c1-16)
 stamp_file=.venv/.polycube-setup-stamp
 if [ "$(cat "$stamp_file" 2>/dev/null)" != "$stamp_value:$PACKAGES" ] || \
-   ! .venv/bin/python -c "import trimesh, manifold3d, skimage.morphology, igl, threadpoolctl, pytest, FreeCAD" >/dev/null 2>&1; then
+   ! .venv/bin/python -c "import trimesh, manifold3d, skimage.morphology, igl, threadpoolctl, numba, pytest, FreeCAD" >/dev/null 2>&1; then
   echo "setup: installing runtime packages into $PACKAGES"
   # --no-deps: numpy and scipy must stay Debian's (FreeCAD's own modules are built against them);
   # pip's warning that scikit-image's optional image-file readers are missing is expected.
