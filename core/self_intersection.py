@@ -10,24 +10,17 @@ Edge-adjacent pairs cannot cross without a fold that the orientation check alrea
 rejects, so they are skipped. Touching contacts within ``core.tolerances.CONTACT`` of the
 bounding-box diagonal and exactly coplanar overlaps are not reported.
 
-The traversal and the narrow phase are compiled with numba: one loop over the pairs,
-about 30 ns a pair, where numpy's per-call cost was 5-10 ms for each of the hundred
-searches of a fit (featuretype's inside fit: 2.4 -> 1.6 CPU s, the same fit bit for
-bit). The compiled functions are cached on disk (numba's ``cache=True``: ``__pycache__``
-beside this file, or the user's cache folder when that is read-only), so only the first
-run on a machine compiles them (about 4 s).
+The tree's traversal (:mod:`core.box_tree`) and the narrow phase are compiled with
+numba: one loop over the pairs, about 30 ns a pair, where numpy's per-call cost was
+5-10 ms for each of the hundred searches of a fit (featuretype's inside fit: 2.4 -> 1.6 CPU
+s, the same fit bit for bit). Compiled functions are cached on disk, so only the first run
+on a machine compiles them (about 4 s).
 """
 import numpy as np
 
-from core.geometry import morton_codes
-from core.optional_imports import optional_module
+from core.box_tree import (boxes_overlap, build_tree, face_boxes, leaf_boxes, numba, push,
+                           tree_order)
 from core.tolerances import CONTACT
-
-numba = optional_module("numba")
-
-LEAF_BOXES = 4
-"""Boxes per leaf of the tree of :func:`box_pairs` (on featuretype's level-2 limit mesh,
-9,920 triangles and 80,574 overlapping pairs, four take about 0.6 of the time of one)."""
 
 
 def find_self_intersections(vertices, faces, among=None, candidates=None):
@@ -60,33 +53,21 @@ def find_self_intersections(vertices, faces, among=None, candidates=None):
     return np.sort(hits, axis=1)[np.lexsort((hits.max(axis=1), hits.min(axis=1)))]
 
 
-def face_boxes(tri):
-    """Bounding boxes of triangles ``tri`` ((m, 3, 3) float64): lo, hi, each (m, 3).
-
-    The corners' minimum and maximum column by column (numpy's reductions over the middle
-    axis of three are several times slower).
-    """
-    lo = np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2])
-    hi = np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2])
-    return lo, hi
-
-
 def box_pairs(lo, hi, among=None):
     """(p, 2) int64 pairs of boxes that overlap (i < j in each row; touching counts).
 
-    A bounding-volume hierarchy over the boxes ``lo``, ``hi`` ((m, 3) float64 each) in
-    Morton (Z-curve) order of their centres, a complete binary tree, is traversed against
-    itself (compiled, :func:`_tree_self_overlaps`): only node pairs whose boxes overlap are
-    opened, so the work follows the number of truly overlapping pairs, whatever the spread
-    of box sizes. With ``among`` ((m,) bool), node pairs without a marked box below either
-    node are dropped too. The rows come in the order of the traversal (the same for the
-    same boxes).
+    The tree of :mod:`core.box_tree` over the boxes ``lo``, ``hi`` ((m, 3) float64 each)
+    is traversed against itself (compiled, :func:`_tree_self_overlaps`): only node pairs
+    whose boxes overlap are opened, so the work follows the number of truly overlapping
+    pairs, whatever the spread of box sizes. With ``among`` ((m,) bool), node pairs without
+    a marked box below either node are dropped too. The rows come in the order of the
+    traversal (the same for the same boxes).
     """
     lo = np.ascontiguousarray(lo, dtype=np.float64)
     hi = np.ascontiguousarray(hi, dtype=np.float64)
     if not len(lo):
         return np.zeros((0, 2), dtype=np.int64)
-    order = np.argsort(morton_codes(lo + hi), kind="stable")
+    order = tree_order(lo, hi)
     marked = np.ones(len(lo), dtype=np.bool_) if among is None else np.asarray(among, np.bool_)
     return _tree_self_overlaps(lo[order], hi[order], marked[order], order)
 
@@ -119,7 +100,7 @@ def _intersecting(vertices, faces, pairs, marked, eps):
         a, b = pairs[i, 0], pairs[i, 1]
         if not (test_all or marked[a] or marked[b]):
             continue
-        if not _boxes_overlap(lo, hi, a, b):
+        if not boxes_overlap(lo, hi, a, b):
             continue
         if not (_straddles(vertices, faces[a], normal[b], offset[b], eps)
                 and _straddles(vertices, faces[b], normal[a], offset[a], eps)):
@@ -175,15 +156,6 @@ def _cross(ux, uy, uz, vx, vy, vz):
 
 
 @numba.njit(inline="always")
-def _boxes_overlap(lo, hi, a, b):
-    """Boxes ``a`` and ``b`` overlap on every axis (touching counts)."""
-    for d in range(3):
-        if lo[a, d] > hi[b, d] or lo[b, d] > hi[a, d]:
-            return False
-    return True
-
-
-@numba.njit(inline="always")
 def _straddles(vertices, corners, normal, offset, eps):
     """The face with vertex numbers ``corners`` (3,) has corners more than ``eps`` on both
     sides of the plane ``normal . x = offset``. Pairs failing this for either order cannot
@@ -229,45 +201,32 @@ def _tree_self_overlaps(lo, hi, marked, numbers):
     ((m, 3) float64, in tree order, ``marked`` (m,) bool), as ``numbers`` ((m,) int64) of
     the boxes, smaller first.
 
-    The tree is complete and stored as a heap: node 1 is the root, node ``k`` has the
-    children ``2 k`` and ``2 k + 1``, and leaf ``size + l`` holds the boxes ``LEAF_BOXES l``
-    to ``LEAF_BOXES (l + 1) - 1`` (empty leaves pad the tree to a power of two). A stack
-    holds the node pairs still to open (at most three per level for a node paired with
-    itself, four for two nodes); two overlapping leaves test their boxes pair by pair.
+    A stack holds the node pairs still to open (at most three per level for a node paired
+    with itself, four for two nodes); two overlapping leaves test their boxes pair by pair.
     """
     m = lo.shape[0]
-    size = 1
-    while size * LEAF_BOXES < m:
-        size *= 2
-    node_lo = np.full((2 * size, 3), np.inf)
-    node_hi = np.full((2 * size, 3), -np.inf)
+    node_lo, node_hi, size = build_tree(lo, hi)
     node_marked = np.zeros(2 * size, dtype=np.bool_)
-    for i in range(m):
-        leaf = size + i // LEAF_BOXES
-        for d in range(3):
-            node_lo[leaf, d] = min(node_lo[leaf, d], lo[i, d])
-            node_hi[leaf, d] = max(node_hi[leaf, d], hi[i, d])
-        node_marked[leaf] = node_marked[leaf] or marked[i]
+    for leaf in range(size, 2 * size):
+        first, stop = leaf_boxes(leaf, size, m)
+        node_marked[leaf] = marked[first:stop].any() if first < stop else False
     for k in range(size - 1, 0, -1):
-        for d in range(3):
-            node_lo[k, d] = min(node_lo[2 * k, d], node_lo[2 * k + 1, d])
-            node_hi[k, d] = max(node_hi[2 * k, d], node_hi[2 * k + 1, d])
         node_marked[k] = node_marked[2 * k] or node_marked[2 * k + 1]
     pairs = np.empty((4 * m + 16, 2), dtype=np.int64)
     count = 0
     stack = np.empty((4 * 64, 2), dtype=np.int64)
-    stack[0, 0], stack[0, 1], top = 1, 1, 1
+    top = push(stack, 0, 1, 1)
     while top:
         top -= 1
         a, b = stack[top, 0], stack[top, 1]
-        if not (node_marked[a] or node_marked[b]) or not _boxes_overlap(node_lo, node_hi, a, b):
+        if not (node_marked[a] or node_marked[b]) or not boxes_overlap(node_lo, node_hi, a, b):
             continue
         if a >= size:  # two leaves (or one leaf with itself)
-            first_a = (a - size) * LEAF_BOXES
-            first_b = (b - size) * LEAF_BOXES
-            for i in range(first_a, min(first_a + LEAF_BOXES, m)):
-                for j in range(i + 1 if a == b else first_b, min(first_b + LEAF_BOXES, m)):
-                    if not (marked[i] or marked[j]) or not _boxes_overlap(lo, hi, i, j):
+            first_a, stop_a = leaf_boxes(a, size, m)
+            first_b, stop_b = leaf_boxes(b, size, m)
+            for i in range(first_a, stop_a):
+                for j in range(i + 1 if a == b else first_b, stop_b):
+                    if not (marked[i] or marked[j]) or not boxes_overlap(lo, hi, i, j):
                         continue
                     if count == pairs.shape[0]:
                         pairs = np.concatenate((pairs, np.empty_like(pairs)))
@@ -275,19 +234,12 @@ def _tree_self_overlaps(lo, hi, marked, numbers):
                     pairs[count, 1] = max(numbers[i], numbers[j])
                     count += 1
         elif a == b:
-            top = _push(stack, top, 2 * a, 2 * a)
-            top = _push(stack, top, 2 * a + 1, 2 * a + 1)
-            top = _push(stack, top, 2 * a, 2 * a + 1)
+            top = push(stack, top, 2 * a, 2 * a)
+            top = push(stack, top, 2 * a + 1, 2 * a + 1)
+            top = push(stack, top, 2 * a, 2 * a + 1)
         else:
-            top = _push(stack, top, 2 * a, 2 * b)
-            top = _push(stack, top, 2 * a, 2 * b + 1)
-            top = _push(stack, top, 2 * a + 1, 2 * b)
-            top = _push(stack, top, 2 * a + 1, 2 * b + 1)
+            top = push(stack, top, 2 * a, 2 * b)
+            top = push(stack, top, 2 * a, 2 * b + 1)
+            top = push(stack, top, 2 * a + 1, 2 * b)
+            top = push(stack, top, 2 * a + 1, 2 * b + 1)
     return pairs[:count].copy()
-
-
-@numba.njit(inline="always")
-def _push(stack, top, a, b):
-    """Put the node pair ``(a, b)`` on ``stack`` ((s, 2) int64) at ``top``; the new top."""
-    stack[top, 0], stack[top, 1] = a, b
-    return top + 1

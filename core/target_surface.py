@@ -17,38 +17,34 @@ outward-oriented mesh. With ``split=True`` the tree holds the long triangles cut
 pieces (``SPLIT_EDGE``), each numbered back to its triangle, so a query opens fewer boxes;
 the answers are still computed on the mesh's own triangles.
 
-Rays (:meth:`TargetSurface.first_exit`): the compiled cast starts ``1e-6`` of the ray
-length along the ray (from a vertex it would otherwise stop on the vertex's own
-triangles); its first hit is accepted only if the exact float64 Moeller-Trumbore test
-of the whole ray on the same triangle confirms it and the ray leaves the solid there
-(``d . m > 0``). A compiled cast can miss a crossing exactly
-on an edge or a vertex (about 3 % of rays that start on a vertex, see
-``shared/METHODS.md``); on a closed surface the crossing after a missed exit is an
-entry, so every such miss shows up as a rejected hit (or no hit at all) and those rays
-are cast again by a vectorised numpy search whose barycentric test has a tolerance of
-``EDGE_TOL``, so a ray through an edge or a vertex hits one of its triangles.
+Rays (:meth:`TargetSurface.first_exit`): the compiled cast of :mod:`core.ray_exits`, on a
+tree built the first time a ray is cast, tests every triangle it reaches in float64 with a
+barycentric tolerance of ``EDGE_TOL``, so a ray through an edge or a vertex hits one of
+its triangles. (Before session 33, libigl's cast ran first; it misses about 3 % of the
+crossings exactly on an edge or a vertex, see ``shared/METHODS.md``, and those rays were
+cast again by a numpy search.) libigl's tree is built only for closest points.
 """
 import hashlib
 from collections import OrderedDict
 from dataclasses import dataclass
 from functools import cached_property
-from itertools import chain
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from core.geometry import (bisect_long_triangles, morton_codes, radius_classes,
-                           sample_surface, scatter_add, unit_face_normals, validate_triangles)
+from core.geometry import (bisect_long_triangles, morton_codes, sample_surface, scatter_add,
+                           unit_face_normals, validate_triangles)
 from core.optional_imports import optional_module
+from core.ray_exits import first_exits
 
 EDGE_TOL = 1e-9
 """Barycentric tolerance of the exact ray-triangle test (dimensionless)."""
+RAY_BOX_PAD = 1e-8
+"""The triangles' boxes of the ray cast are widened by this much of the diagonal, more than
+the hits ``EDGE_TOL`` admits outside a triangle and the slab test's rounding."""
 
 REGION_FACE = 0
 # region codes 1, 2, 3: edges (v0 v1), (v1 v2), (v2 v0); 4, 5, 6: corners v0, v1, v2
 
-_RAY_BLOCK = 200000
-_START_OFFSET = 1e-6
 SPLIT_EDGE = 2.0
 """With ``split=True``, the search tree holds the triangles cut into pieces no longer than
 this many times the median of the triangles' longest edges
@@ -109,14 +105,12 @@ class RayHits:
     face : (k,) int64 triangle exited through, ``-1`` where none.
     bary : (k, 3) float64 barycentric coordinates of the exit on ``face`` (zeros where none).
     normal : (k, 3) float64 unit outward normal of ``face`` (zeros where none).
-    recast : int, rays the compiled cast did not settle and the tolerant search did.
     """
 
     t: np.ndarray
     face: np.ndarray
     bary: np.ndarray
     normal: np.ndarray
-    recast: int
 
 
 class TargetSurface:
@@ -159,8 +153,7 @@ class TargetSurface:
             pieces = _pieces(V, F, self._tri)
             if pieces is not None:
                 self._tree_mesh, self._piece_face = pieces[:2], pieces[2]
-        self._tree = optional_module("igl", "libigl").AABB()
-        self._tree.init(*self._tree_mesh)
+        self._igl = optional_module("igl", "libigl")
         self._samples = {}
         self._kept = OrderedDict()
         self._kept_samples = OrderedDict()
@@ -246,7 +239,8 @@ class TargetSurface:
 
         A hit counts if the ray crosses a triangle from inside to outside (``d . m > 0``,
         ``m`` its outward normal) at ``1e-9 * max_length < t <= max_length``, so the
-        triangles around a ray's own start vertex, which it enters, never count.
+        triangles around a ray's own start vertex, which it enters, never count
+        (:func:`core.ray_exits.first_exits`, barycentric tolerance ``EDGE_TOL``).
 
         Parameters
         ----------
@@ -260,39 +254,15 @@ class TargetSurface:
         """
         origins = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
         directions = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
-        k = len(origins)
-        t_low = 1e-9 * max_length
-        # started a little along the ray, the compiled cast does not stop on the triangles
-        # around a start vertex; an exit it skips that way is caught like any other miss
-        face, _, _ = self._tree.intersect_ray_first(
-            *self._tree_mesh, origins + (_START_OFFSET * max_length) * directions, directions)
-        face = self._triangle_of(np.asarray(face, dtype=np.int64))
-        t = np.full(k, np.inf)
-        uv = np.zeros((k, 2))
-        hit = np.flatnonzero(face >= 0)
-        e1, e2 = self._edges
-        t_h, u_h, v_h, ok = _ray_triangle(origins[hit], directions[hit], self._tri[face[hit], 0],
-                                          e1[face[hit]], e2[face[hit]])
-        ok &= (t_h > t_low) & (np.einsum("ij,ij->i", directions[hit],
-                                         self.face_normals[face[hit]]) > 0)
-        t[hit[ok]] = t_h[ok]
-        uv[hit[ok]] = np.stack([u_h[ok], v_h[ok]], axis=1)
-        settled = np.zeros(k, dtype=bool)
-        settled[hit[ok]] = True
-        face[~settled] = -1
-        recast = np.flatnonzero(~settled)
-        if len(recast):
-            t_r, f_r, uv_r = self._tolerant_first_exit(origins[recast], directions[recast],
-                                                       max_length, t_low)
-            t[recast], face[recast], uv[recast] = t_r, f_r, uv_r
-        far = t > max_length
-        t[far], face[far], uv[far] = np.inf, -1, 0.0
+        t, face, uv = first_exits(self._tri, self.face_normals, origins, directions,
+                                  max_length, 1e-9 * max_length, EDGE_TOL,
+                                  RAY_BOX_PAD * self.diagonal)
         found = face >= 0
-        bary = np.zeros((k, 3))
+        bary = np.zeros((len(origins), 3))
         bary[found] = np.stack([1.0 - uv[found].sum(axis=1), uv[found, 0], uv[found, 1]], axis=1)
-        normal = np.zeros((k, 3))
+        normal = np.zeros((len(origins), 3))
         normal[found] = self.face_normals[face[found]]
-        return RayHits(t, face, bary, normal, int(len(recast)))
+        return RayHits(t, face, bary, normal)
 
     def samples(self, count, seed=0):
         """Area-weighted random points on the surface and the pseudo-normals there.
@@ -320,65 +290,11 @@ class TargetSurface:
         return np.where(found >= 0, self._piece_face[np.maximum(found, 0)], -1)
 
     @cached_property
-    def _edges(self):
-        """(m, 3) edge vectors ``v1 - v0`` and ``v2 - v0`` of every triangle."""
-        return self._tri[:, 1] - self._tri[:, 0], self._tri[:, 2] - self._tri[:, 0]
-
-    @cached_property
-    def _spheres(self):
-        """Bounding spheres (centres (m, 3), radii (m,)) and per-size-class centroid trees."""
-        centroid = self._tri.mean(axis=1)
-        radius = np.linalg.norm(self._tri - centroid[:, None], axis=2).max(axis=1)
-        classes = [(members, cKDTree(centroid[members]), float(radius[members].max()))
-                   for members in radius_classes(radius)]
-        return centroid, radius, classes
-
-    def _tolerant_first_exit(self, origins, directions, max_length, t_low):
-        """Numpy first exits with the barycentric tolerance ``EDGE_TOL``.
-
-        Broad phase: the triangles whose bounding sphere meets the sphere around the
-        segment's midpoint of radius ``max_length / 2`` (one k-d tree per size class);
-        narrow phase: exact Moeller-Trumbore on those pairs.
-
-        Returns
-        -------
-        t : (r,) float64, ``inf`` where none; face : (r,) int64, ``-1`` where none;
-        uv : (r, 2) float64 barycentric ``(u, v)`` of the exit.
-        """
-        r = len(origins)
-        centre = origins + 0.5 * max_length * directions
-        _, _, classes = self._spheres
-        found_f, found_o = [], []
-        for members, tree, class_radius in classes:
-            lists = tree.query_ball_point(centre, r=0.5 * max_length + class_radius)
-            lengths = np.fromiter(map(len, lists), np.int64, r)
-            if lengths.sum():
-                found_f.append(members[np.fromiter(chain.from_iterable(lists), np.int64,
-                                                   int(lengths.sum()))])
-                found_o.append(np.repeat(np.arange(r), lengths))
-        best = np.full(r, np.inf)
-        best_face = np.full(r, -1, dtype=np.int64)
-        best_uv = np.zeros((r, 2))
-        if not found_f:
-            return best, best_face, best_uv
-        cand, owner = np.concatenate(found_f), np.concatenate(found_o)
-        e1, e2 = self._edges
-        for start in range(0, len(cand), _RAY_BLOCK):
-            f, o = cand[start:start + _RAY_BLOCK], owner[start:start + _RAY_BLOCK]
-            t, u, v, ok = _ray_triangle(origins[o], directions[o], self._tri[f, 0], e1[f], e2[f])
-            ok &= np.einsum("ij,ij->i", directions[o], self.face_normals[f]) > 0
-            ok &= (t > t_low) & (t <= max_length)
-            f, o, t, u, v = f[ok], o[ok], t[ok], u[ok], v[ok]
-            if not len(o):
-                continue
-            order = np.lexsort((t, o))
-            first = order[np.flatnonzero(np.r_[True, o[order][1:] != o[order][:-1]])]
-            take = t[first] < best[o[first]]
-            who = o[first][take]
-            best[who] = t[first][take]
-            best_face[who] = f[first][take]
-            best_uv[who] = np.stack([u[first][take], v[first][take]], axis=1)
-        return best, best_face, best_uv
+    def _tree(self):
+        """libigl's tree over the tree mesh, built on the first closest-point query."""
+        tree = self._igl.AABB()
+        tree.init(*self._tree_mesh)
+        return tree
 
     @cached_property
     def _pseudo_normals(self):
@@ -478,27 +394,6 @@ def closest_on_triangles(triangles, points):
     closest = a + v[:, None] * ab + w[:, None] * ac
     bary = np.stack([1.0 - v - w, v, w], axis=1)
     return closest, bary, region
-
-
-def _ray_triangle(origin, direction, a, e1, e2):
-    """Moeller-Trumbore on row-wise pairs, float64, barycentric tolerance ``EDGE_TOL``.
-
-    Returns
-    -------
-    t, u, v : (p,) float64 ray parameter and barycentric coordinates of the crossing.
-    hit : (p,) bool, the ray's line crosses the triangle (edges and corners included).
-    """
-    p = np.cross(direction, e2)
-    det = _dot(e1, p)
-    ok = np.abs(det) > 1e-300
-    inv = np.divide(1.0, det, out=np.zeros_like(det), where=ok)
-    s = origin - a
-    u = _dot(s, p) * inv
-    q = np.cross(s, e1)
-    v = _dot(direction, q) * inv
-    t = _dot(e2, q) * inv
-    ok &= (u >= -EDGE_TOL) & (v >= -EDGE_TOL) & (u + v <= 1 + EDGE_TOL)
-    return t, u, v, ok
 
 
 def _dot(x, y):

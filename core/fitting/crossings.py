@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.self_intersection import (box_pairs, face_boxes, find_self_intersections,
-                                    shared_corners)
+from core.box_tree import face_boxes
+from core.self_intersection import box_pairs, find_self_intersections, shared_corners
 
 STIFFEN = 10.0
 """Factor on the smoothness weight of the base vertices under a crossing, per refit."""

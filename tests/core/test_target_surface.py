@@ -203,7 +203,9 @@ def test_rays_through_vertices_and_edges_of_a_slab_are_not_lost():
     brute = brute_force_exit(X, T, X, direction, 1.0)
     assert np.array_equal(np.isfinite(hits.t), np.isfinite(brute))
     assert np.allclose(hits.t[np.isfinite(brute)], brute[np.isfinite(brute)], atol=1e-12)
-    assert hits.recast > 0  # some of them went through the tolerant search
+    # some of them leave exactly through an edge or a vertex (a barycentric coordinate 0)
+    on_rim = hits.bary[np.isfinite(hits.t)].min(axis=1) <= 1e-12
+    assert on_rim.sum() > 10
 
 
 def test_ray_exits_on_a_real_mesh_match_brute_force():
