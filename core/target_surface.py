@@ -2,8 +2,8 @@
 """One compiled spatial-query object per closed triangle mesh: closest points, signed
 distances with pseudo-normals, and first exits of rays.
 
-:class:`TargetSurface` builds libigl's axis-aligned bounding-box tree (``igl.AABB``,
-compiled C++) once and answers any number of queries; the fit (packaging response),
+:class:`TargetSurface` builds the compiled trees of :mod:`core.tree_queries` once (on the
+first query of each kind) and answers any number of queries; the fit (packaging response),
 the thickness rays and the quality check's surface distances all use it.
 
 Closest points: the tree returns the nearest triangle of every query point; the point,
@@ -17,12 +17,9 @@ outward-oriented mesh. With ``split=True`` the tree holds the long triangles cut
 pieces (``SPLIT_EDGE``), each numbered back to its triangle, so a query opens fewer boxes;
 the answers are still computed on the mesh's own triangles.
 
-Rays (:meth:`TargetSurface.first_exit`): the compiled cast of :mod:`core.ray_exits`, on a
-tree built the first time a ray is cast, tests every triangle it reaches in float64 with a
-barycentric tolerance of ``EDGE_TOL``, so a ray through an edge or a vertex hits one of
-its triangles. (Before session 33, libigl's cast ran first; it misses about 3 % of the
-crossings exactly on an edge or a vertex, see ``shared/METHODS.md``, and those rays were
-cast again by a numpy search.) libigl's tree is built only for closest points.
+Rays (:meth:`TargetSurface.first_exit`): the compiled cast tests every triangle it reaches
+in float64 with a barycentric tolerance of ``EDGE_TOL``, so a ray through an edge or a
+vertex hits one of its triangles.
 """
 import hashlib
 from collections import OrderedDict
@@ -33,8 +30,8 @@ import numpy as np
 
 from core.geometry import (bisect_long_triangles, morton_codes, sample_surface, scatter_add,
                            unit_face_normals, validate_triangles)
-from core.optional_imports import optional_module
-from core.ray_exits import first_exits
+from core.tree_queries import (closest_on_triangles, first_exits, nearest_triangles,
+                                triangle_tree)
 
 EDGE_TOL = 1e-9
 """Barycentric tolerance of the exact ray-triangle test (dimensionless)."""
@@ -137,8 +134,6 @@ class TargetSurface:
     ------
     InvalidMeshError
         Malformed arrays (see :func:`core.geometry.validate_triangles`).
-    ImportError
-        libigl is not installed (the message says how to install it).
     """
 
     def __init__(self, vertices, faces, name="target", split=False):
@@ -147,13 +142,13 @@ class TargetSurface:
         self._tri = V[F]
         self.face_normals = unit_face_normals(V, F)
         self.diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
-        # the tree's own mesh: the triangles, or pieces of them numbered back by _piece_face
+        # the closest points' tree mesh: the triangles, or pieces of them numbered back by
+        # _piece_face
         self._tree_mesh, self._piece_face = (V, F), None
         if split:
             pieces = _pieces(V, F, self._tri)
             if pieces is not None:
                 self._tree_mesh, self._piece_face = pieces[:2], pieces[2]
-        self._igl = optional_module("igl", "libigl")
         self._samples = {}
         self._kept = OrderedDict()
         self._kept_samples = OrderedDict()
@@ -175,8 +170,7 @@ class TargetSurface:
             # in Z-order, neighbouring queries walk the same tree nodes (a fifth faster on
             # the fit's fine limit points); each point's answer does not depend on the order
             order = np.argsort(morton_codes(points), kind="stable")
-            face[order] = self._triangle_of(
-                self._tree.squared_distance(*self._tree_mesh, points[order])[1])
+            face[order] = self._triangle_of(nearest_triangles(self._point_tree, points[order]))
         point, bary, region = closest_on_triangles(self._tri[face], points)
         return NearestPoints(point, face, bary, region, np.linalg.norm(points - point, axis=1))
 
@@ -254,9 +248,8 @@ class TargetSurface:
         """
         origins = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
         directions = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
-        t, face, uv = first_exits(self._tri, self.face_normals, origins, directions,
-                                  max_length, 1e-9 * max_length, EDGE_TOL,
-                                  RAY_BOX_PAD * self.diagonal)
+        t, face, uv = first_exits(self._ray_tree, self.face_normals, origins, directions,
+                                  max_length, 1e-9 * max_length, EDGE_TOL)
         found = face >= 0
         bary = np.zeros((len(origins), 3))
         bary[found] = np.stack([1.0 - uv[found].sum(axis=1), uv[found, 0], uv[found, 1]], axis=1)
@@ -290,11 +283,17 @@ class TargetSurface:
         return np.where(found >= 0, self._piece_face[np.maximum(found, 0)], -1)
 
     @cached_property
-    def _tree(self):
-        """libigl's tree over the tree mesh, built on the first closest-point query."""
-        tree = self._igl.AABB()
-        tree.init(*self._tree_mesh)
-        return tree
+    def _ray_tree(self):
+        """The tree over the triangles for rays (:func:`core.tree_queries.triangle_tree`)."""
+        return triangle_tree(self._tri, RAY_BOX_PAD * self.diagonal)
+
+    @cached_property
+    def _point_tree(self):
+        """The tree over the closest points' tree mesh (the ray tree when not split)."""
+        if self._piece_face is None:
+            return self._ray_tree
+        V, F = self._tree_mesh
+        return triangle_tree(V[F], RAY_BOX_PAD * self.diagonal)
 
     @cached_property
     def _pseudo_normals(self):
@@ -346,58 +345,6 @@ def _pieces(V, F, tri):
                 return pieces if len(pieces[1]) > len(F) else None
         longest *= 2.0
     return None
-
-
-def closest_on_triangles(triangles, points):
-    """Closest point on ``triangles[i]`` to ``points[i]`` (Ericson's region test).
-
-    Parameters
-    ----------
-    triangles : (k, 3, 3) float64, corners ``a, b, c``.
-    points : (k, 3) float64
-
-    Returns
-    -------
-    closest : (k, 3) float64
-    bary : (k, 3) float64 barycentric coordinates of ``closest`` (sum 1).
-    region : (k,) int8, 0 face interior, 1..3 edges ab, bc, ca, 4..6 corners a, b, c.
-    """
-    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-    ab, ac = b - a, c - a
-    ap, bp, cp = points - a, points - b, points - c
-    d1, d2 = _dot(ab, ap), _dot(ac, ap)
-    d3, d4 = _dot(ab, bp), _dot(ac, bp)
-    d5, d6 = _dot(ab, cp), _dot(ac, cp)
-    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-    k = len(points)
-    v = np.zeros(k)
-    w = np.zeros(k)
-    region = np.full(k, -1, dtype=np.int8)
-
-    def claim(mask, code, vv, ww):
-        take = mask & (region < 0)
-        region[take] = code
-        v[take] = vv[take] if np.ndim(vv) else vv
-        w[take] = ww[take] if np.ndim(ww) else ww
-
-    with np.errstate(divide="ignore", invalid="ignore"):
-        claim((d1 <= 0) & (d2 <= 0), 4, 0.0, 0.0)
-        claim((d3 >= 0) & (d4 <= d3), 5, 1.0, 0.0)
-        claim((vc <= 0) & (d1 >= 0) & (d3 <= 0), 1, d1 / (d1 - d3), 0.0)
-        claim((d6 >= 0) & (d5 <= d6), 6, 0.0, 1.0)
-        claim((vb <= 0) & (d2 >= 0) & (d6 <= 0), 3, 0.0, d2 / (d2 - d6))
-        e = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        claim((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), 2, 1.0 - e, e)
-        denom = va + vb + vc
-        safe = np.where(denom != 0, denom, 1.0)
-        claim(np.ones(k, dtype=bool), REGION_FACE, vb / safe, vc / safe)
-    closest = a + v[:, None] * ab + w[:, None] * ac
-    bary = np.stack([1.0 - v - w, v, w], axis=1)
-    return closest, bary, region
-
-
-def _dot(x, y):
-    return np.einsum("ij,ij->i", x, y)
 
 
 def _unit(x):

@@ -1,6 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """The compiled target surface: closest points, signs, pseudo-normals and ray exits."""
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +10,8 @@ from core.errors import InvalidMeshError
 from core.fitting.responses import thickness, vertex_normals
 from core.geometry import bisect_long_triangles, face_areas, unit_face_normals
 from core.mesh_io import read_triangle_soup
-from core.target_surface import TargetSurface, closest_on_triangles
+from core.target_surface import TargetSurface
+from core.tree_queries import closest_on_triangles, nearest_triangles
 
 MESHES = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "meshes"
 
@@ -230,13 +230,10 @@ def test_rays_longer_than_the_wall_limit_report_no_hit():
     assert np.all(hits.bary == 0)
 
 
-def test_malformed_arrays_and_missing_libigl(monkeypatch):
+def test_malformed_arrays():
     sphere = trimesh.creation.icosphere(1)
     with pytest.raises(InvalidMeshError, match="target"):
         TargetSurface(sphere.vertices, np.asarray(sphere.faces) + 100)
-    monkeypatch.setitem(sys.modules, "igl", None)
-    with pytest.raises(ImportError, match="pip install libigl"):
-        TargetSurface(sphere.vertices, sphere.faces)
 
 
 def test_samples_lie_on_the_surface_and_are_drawn_once():
@@ -325,8 +322,7 @@ def test_nearest_answers_each_point_as_the_tree_does_alone_whatever_the_order():
     rng = np.random.default_rng(7)
     points = rng.normal(size=(400, 3)) * rng.uniform(0.2, 2.0, (400, 1))
     near = surface.nearest(points)
-    alone = [int(surface._tree.squared_distance(surface.vertices, surface.faces,
-                                                point[None])[1][0]) for point in points]
+    alone = [int(nearest_triangles(surface._point_tree, point[None])[0]) for point in points]
     np.testing.assert_array_equal(near.face, alone)
     shuffle = rng.permutation(len(points))
     again = surface.nearest(points[shuffle])
