@@ -18,11 +18,12 @@ on a machine compiles them (about 4 s).
 """
 import numpy as np
 
-from core.box_tree import (boxes_overlap, build_tree, face_boxes, leaf_boxes, numba, push,
-                           tree_order)
+from core.box_tree import box_pairs, face_boxes
+from core.compiled import keeps_interrupts, numba
 from core.tolerances import CONTACT
 
 
+@keeps_interrupts
 def find_self_intersections(vertices, faces, among=None, candidates=None):
     """Pairs of faces that intersect each other.
 
@@ -53,25 +54,6 @@ def find_self_intersections(vertices, faces, among=None, candidates=None):
     return np.sort(hits, axis=1)[np.lexsort((hits.max(axis=1), hits.min(axis=1)))]
 
 
-def box_pairs(lo, hi, among=None):
-    """(p, 2) int64 pairs of boxes that overlap (i < j in each row; touching counts).
-
-    The tree of :mod:`core.box_tree` over the boxes ``lo``, ``hi`` ((m, 3) float64 each)
-    is traversed against itself (compiled, :func:`_tree_self_overlaps`): only node pairs
-    whose boxes overlap are opened, so the work follows the number of truly overlapping
-    pairs, whatever the spread of box sizes. With ``among`` ((m,) bool), node pairs without
-    a marked box below either node are dropped too. The rows come in the order of the
-    traversal (the same for the same boxes).
-    """
-    lo = np.ascontiguousarray(lo, dtype=np.float64)
-    hi = np.ascontiguousarray(hi, dtype=np.float64)
-    if not len(lo):
-        return np.zeros((0, 2), dtype=np.int64)
-    order = tree_order(lo, hi)
-    marked = np.ones(len(lo), dtype=np.bool_) if among is None else np.asarray(among, np.bool_)
-    return _tree_self_overlaps(lo[order], hi[order], marked[order], order)
-
-
 def shared_corners(faces, pairs):
     """(p,) int8 corners that the two faces of each pair ((p, 2) int64 into ``faces``,
     (m, 3) int64) have in common: 2 for faces sharing an edge, which never cross."""
@@ -100,8 +82,9 @@ def _intersecting(vertices, faces, pairs, marked, eps):
         a, b = pairs[i, 0], pairs[i, 1]
         if not (test_all or marked[a] or marked[b]):
             continue
-        if not boxes_overlap(lo, hi, a, b):
-            continue
+        if (lo[a, 0] > hi[b, 0] or lo[b, 0] > hi[a, 0] or lo[a, 1] > hi[b, 1]
+                or lo[b, 1] > hi[a, 1] or lo[a, 2] > hi[b, 2] or lo[b, 2] > hi[a, 2]):
+            continue  # the boxes are apart (numba's cache forbids box_tree's test here)
         if not (_straddles(vertices, faces[a], normal[b], offset[b], eps)
                 and _straddles(vertices, faces[b], normal[a], offset[a], eps)):
             continue
@@ -193,53 +176,3 @@ def _edge_crosses(vertices, corners, k, crossed, normal, eps):
                 > eps * np.sqrt(edge[0] * edge[0] + edge[1] * edge[1] + edge[2] * edge[2])):
             return False
     return True
-
-
-@numba.njit(cache=True, nogil=True)
-def _tree_self_overlaps(lo, hi, marked, numbers):
-    """(p, 2) int64 the overlapping pairs (with a marked box) of the boxes ``lo``, ``hi``
-    ((m, 3) float64, in tree order, ``marked`` (m,) bool), as ``numbers`` ((m,) int64) of
-    the boxes, smaller first.
-
-    A stack holds the node pairs still to open (at most three per level for a node paired
-    with itself, four for two nodes); two overlapping leaves test their boxes pair by pair.
-    """
-    m = lo.shape[0]
-    node_lo, node_hi, size = build_tree(lo, hi)
-    node_marked = np.zeros(2 * size, dtype=np.bool_)
-    for leaf in range(size, 2 * size):
-        first, stop = leaf_boxes(leaf, size, m)
-        node_marked[leaf] = marked[first:stop].any() if first < stop else False
-    for k in range(size - 1, 0, -1):
-        node_marked[k] = node_marked[2 * k] or node_marked[2 * k + 1]
-    pairs = np.empty((4 * m + 16, 2), dtype=np.int64)
-    count = 0
-    stack = np.empty((4 * 64, 2), dtype=np.int64)
-    top = push(stack, 0, 1, 1)
-    while top:
-        top -= 1
-        a, b = stack[top, 0], stack[top, 1]
-        if not (node_marked[a] or node_marked[b]) or not boxes_overlap(node_lo, node_hi, a, b):
-            continue
-        if a >= size:  # two leaves (or one leaf with itself)
-            first_a, stop_a = leaf_boxes(a, size, m)
-            first_b, stop_b = leaf_boxes(b, size, m)
-            for i in range(first_a, stop_a):
-                for j in range(i + 1 if a == b else first_b, stop_b):
-                    if not (marked[i] or marked[j]) or not boxes_overlap(lo, hi, i, j):
-                        continue
-                    if count == pairs.shape[0]:
-                        pairs = np.concatenate((pairs, np.empty_like(pairs)))
-                    pairs[count, 0] = min(numbers[i], numbers[j])
-                    pairs[count, 1] = max(numbers[i], numbers[j])
-                    count += 1
-        elif a == b:
-            top = push(stack, top, 2 * a, 2 * a)
-            top = push(stack, top, 2 * a + 1, 2 * a + 1)
-            top = push(stack, top, 2 * a, 2 * a + 1)
-        else:
-            top = push(stack, top, 2 * a, 2 * b)
-            top = push(stack, top, 2 * a, 2 * b + 1)
-            top = push(stack, top, 2 * a + 1, 2 * b)
-            top = push(stack, top, 2 * a + 1, 2 * b + 1)
-    return pairs[:count].copy()

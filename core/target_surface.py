@@ -2,7 +2,7 @@
 """One compiled spatial-query object per closed triangle mesh: closest points, signed
 distances with pseudo-normals, and first exits of rays.
 
-:class:`TargetSurface` builds the compiled trees of :mod:`core.tree_queries` once (on the
+:class:`TargetSurface` builds the compiled trees of :mod:`core.box_tree` once (on the
 first query of each kind) and answers any number of queries; the fit (packaging response),
 the thickness rays and the quality check's surface distances all use it.
 
@@ -30,7 +30,7 @@ import numpy as np
 
 from core.geometry import (bisect_long_triangles, morton_codes, sample_surface, scatter_add,
                            unit_face_normals, validate_triangles)
-from core.tree_queries import (closest_on_triangles, first_exits, nearest_triangles,
+from core.box_tree import (closest_on_triangles, first_exits, nearest_triangles,
                                 triangle_tree)
 
 EDGE_TOL = 1e-9
@@ -234,7 +234,7 @@ class TargetSurface:
         A hit counts if the ray crosses a triangle from inside to outside (``d . m > 0``,
         ``m`` its outward normal) at ``1e-9 * max_length < t <= max_length``, so the
         triangles around a ray's own start vertex, which it enters, never count
-        (:func:`core.ray_exits.first_exits`, barycentric tolerance ``EDGE_TOL``).
+        (:func:`core.box_tree.first_exits`, barycentric tolerance ``EDGE_TOL``).
 
         Parameters
         ----------
@@ -284,7 +284,7 @@ class TargetSurface:
 
     @cached_property
     def _ray_tree(self):
-        """The tree over the triangles for rays (:func:`core.tree_queries.triangle_tree`)."""
+        """The tree over the triangles for rays (:func:`core.box_tree.triangle_tree`)."""
         return triangle_tree(self._tri, RAY_BOX_PAD * self.diagonal)
 
     @cached_property

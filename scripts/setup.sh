@@ -49,7 +49,7 @@ if [ "$(cat "$stamp_file" 2>/dev/null)" != "$stamp_value:$PACKAGES" ] || \
     || { cat .venv/pip-dev.log >&2; exit 1; }
   echo "$stamp_value:$PACKAGES" > "$stamp_file"
 fi
-.venv/bin/python -c "import numpy, scipy, trimesh, manifold3d, skimage.morphology, igl, threadpoolctl, FreeCAD, Part" \
+.venv/bin/python -c "import numpy, scipy, trimesh, manifold3d, skimage.morphology, igl, threadpoolctl, numba, FreeCAD, Part" \
   || { echo "setup: error: the packages do not import in .venv" >&2; exit 1; }
-(cd /tmp && freecadcmd -c "import trimesh, manifold3d, igl, threadpoolctl; print('setup: FreeCAD sees trimesh', trimesh.__version__)" 2>/dev/null | grep -q "setup: FreeCAD sees") \
+(cd /tmp && freecadcmd -c "import trimesh, manifold3d, igl, threadpoolctl, numba; print('setup: FreeCAD sees trimesh', trimesh.__version__)" 2>/dev/null | grep -q "setup: FreeCAD sees") \
   || { echo "setup: error: freecadcmd cannot import the runtime packages from $PACKAGES" >&2; exit 1; }

@@ -11,7 +11,7 @@ from core.fitting.responses import thickness, vertex_normals
 from core.geometry import bisect_long_triangles, face_areas, unit_face_normals
 from core.mesh_io import read_triangle_soup
 from core.target_surface import TargetSurface
-from core.tree_queries import closest_on_triangles, nearest_triangles
+from core.box_tree import closest_on_triangles, nearest_triangles
 
 MESHES = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "meshes"
 
