@@ -337,18 +337,10 @@ def _nearest(tri, order, node_lo, node_hi, points):
             if _box_distance(p, node_lo[node], node_hi[node]) > best:
                 continue  # farther than the nearest triangle found since it was put
             if node < size:
-                # the nearer child is opened first (put last)
-                first, second = 2 * node, 2 * node + 1
-                near = _box_distance(p, node_lo[first], node_hi[first])
-                far = _box_distance(p, node_lo[second], node_hi[second])
-                if far < near:
-                    first, second, near, far = second, first, far, near
-                if far <= best:
-                    stack[top] = second
-                    top += 1
-                if near <= best:
-                    stack[top] = first
-                    top += 1
+                top = _push_children(stack, top, node, best,
+                                     _box_distance(p, node_lo[2 * node], node_hi[2 * node]),
+                                     _box_distance(p, node_lo[2 * node + 1],
+                                                   node_hi[2 * node + 1]))
                 continue
             first_box, stop = _leaf_boxes(node, size, m)
             for i in range(first_box, stop):
@@ -448,20 +440,11 @@ def _cast(tri, normals, order, node_lo, node_hi, origins, directions, max_length
             if _segment_enters_box(o, d, best, node_lo[node], node_hi[node]) > best:
                 continue  # missed, or entered beyond the nearest exit found since it was put
             if node < size:
-                # the child entered nearer is opened first (put last): its exits cut the
-                # search of the other
-                near = _segment_enters_box(o, d, best, node_lo[2 * node], node_hi[2 * node])
-                far = _segment_enters_box(o, d, best, node_lo[2 * node + 1],
-                                          node_hi[2 * node + 1])
-                first, second = 2 * node, 2 * node + 1
-                if far < near:
-                    first, second, near, far = second, first, far, near
-                if far <= best:
-                    stack[top] = second
-                    top += 1
-                if near <= best:
-                    stack[top] = first
-                    top += 1
+                top = _push_children(stack, top, node, best,
+                                     _segment_enters_box(o, d, best, node_lo[2 * node],
+                                                         node_hi[2 * node]),
+                                     _segment_enters_box(o, d, best, node_lo[2 * node + 1],
+                                                         node_hi[2 * node + 1]))
                 continue
             first, stop = _leaf_boxes(node, size, m)
             for i in range(first, stop):
@@ -546,3 +529,21 @@ def _push(stack, top, a, b):
     """Put the pair ``(a, b)`` on ``stack`` ((s, 2) int64) at ``top``; the new top."""
     stack[top, 0], stack[top, 1] = a, b
     return top + 1
+
+
+@numba.njit(inline="always")
+def _push_children(stack, top, node, best, key_first, key_second):
+    """Put the children ``2 node`` and ``2 node + 1`` of ``node`` whose keys (a squared
+    distance, or where a ray enters their box) are at most ``best`` on ``stack`` at ``top``,
+    the one with the smaller key last, so that it is opened first and what it finds cuts the
+    search of the other; the new top."""
+    first, second = 2 * node, 2 * node + 1
+    if key_second < key_first:
+        first, second, key_first, key_second = second, first, key_second, key_first
+    if key_second <= best:
+        stack[top] = second
+        top += 1
+    if key_first <= best:
+        stack[top] = first
+        top += 1
+    return top
