@@ -208,7 +208,7 @@ def _kd_order(centres, leaf_boxes_count):
     return order
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(inline="always")
 def _select(order, keys, start, stop, kth):
     """Rearrange ``order[start:stop]`` in place so that the boxes before position ``kth``
     come before (:func:`_before`) those from it on (quickselect, Lomuto's partition about the

@@ -43,3 +43,4 @@ def _interrupt_behind(error):
         seen.add(id(error))
         error = error.__cause__ or error.__context__
     return None
+

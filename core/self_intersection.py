@@ -108,7 +108,7 @@ def _intersecting(vertices, faces, pairs, marked, eps):
     return result
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(inline="always")
 def _face_planes_and_boxes(vertices, faces):
     """Unit normals (m, 3) (zero for zero-area faces), plane offsets ``normal . a`` (m,) and
     bounding boxes lo, hi ((m, 3) each) of the faces, as numpy's
