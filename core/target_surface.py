@@ -28,10 +28,9 @@ from functools import cached_property
 
 import numpy as np
 
+from core.box_tree import closest_on_triangles, first_exits, nearest_triangles, triangle_tree
 from core.geometry import (bisect_long_triangles, morton_codes, sample_surface, scatter_add,
                            unit_face_normals, validate_triangles)
-from core.box_tree import (closest_on_triangles, first_exits, nearest_triangles,
-                                triangle_tree)
 
 EDGE_TOL = 1e-9
 """Barycentric tolerance of the exact ray-triangle test (dimensionless)."""
@@ -167,8 +166,9 @@ class TargetSurface:
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         face = np.zeros(len(points), dtype=np.int64)
         if len(points):
-            # in Z-order, neighbouring queries walk the same tree nodes (a fifth faster on
-            # the fit's fine limit points); each point's answer does not depend on the order
+            # in Z-order, neighbouring queries walk the same tree nodes (0.81-0.86 of the
+            # time for 5,000 scattered points on featuretype and to_simp_mbb); each point's
+            # answer does not depend on the order
             order = np.argsort(morton_codes(points), kind="stable")
             face[order] = self._triangle_of(nearest_triangles(self._point_tree, points[order]))
         point, bary, region = closest_on_triangles(self._tri[face], points)

@@ -7,6 +7,7 @@ into ``SystemError: ... returned a result with an exception set`` (seen in 55 of
 interrupted tree queries); the batch worker took that for a failed stage and wrote a report
 for a mesh the user had stopped. The chains below are built as CPython builds them.
 """
+import json
 import os
 import subprocess
 import sys
@@ -73,3 +74,28 @@ def test_compile_now_compiles_every_cached_function():
                           text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split("\n")[0] == "7 []"
+
+
+def test_without_numba_the_command_line_says_what_to_install_and_writes_nothing(tmp_path):
+    """numba missing (blocked in ``sys.modules``): the reconstruction stops at the intake with
+    the install hint, exit 1; no STEP is written, only the report naming the failed stage,
+    and the input is untouched."""
+    source = os.path.join(REPO, "examples", "to_simp_cantilever.stl")
+    with open(source, "rb") as handle:
+        before = handle.read()
+    step = tmp_path / "out.step"
+    script = ("import runpy, sys\n"
+              "sys.modules['numba'] = None\n"
+              f"sys.argv = ['polycube_wb', 'reconstruct', {source!r}, '-o', {str(step)!r},\n"
+              f"            '--report', {str(tmp_path / 'out.json')!r}]\n"
+              "runpy.run_module('polycube_wb', run_name='__main__')\n")
+    done = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 1
+    assert "pip install numba" in done.stdout + done.stderr
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["out.json"]
+    with open(tmp_path / "out.json", encoding="utf-8") as handle:
+        intake = json.load(handle)["stages"]["intake"]
+    assert intake["status"] == "failed" and "pip install numba" in intake["message"]
+    with open(source, "rb") as handle:
+        assert handle.read() == before
