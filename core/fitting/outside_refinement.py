@@ -27,7 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.fitting.refine import fine_limit_points, refined_without_crossings
+from core.fitting.deviation import fine_limit_points
+from core.fitting.refine import refined_without_crossings
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
 

@@ -34,13 +34,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from core.errors import ParameterError
-from core.geometry import sample_surface, triangulate
-from core.subdivision.catmull_clark import build_hierarchy, fine_face_owner, mesh_topology
-from core.subdivision.limit import limit_matrices
+from core.fitting.deviation import face_deviation
+from core.subdivision.catmull_clark import mesh_topology
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
-DEVIATION_SAMPLES = 20000
 UNCROSS_TRIES = 5
 """Refinements tried per round with the deviating faces under new crossings left whole."""
 
@@ -106,25 +104,27 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
         raise ParameterError(f"tolerance must be a positive fraction of the bounding-box "
                              f"diagonal, got {tolerance!r}")
     surface = TargetSurface(target.vertices, target.faces)
-    rng = np.random.default_rng(0)
-    samples = np.vstack([sample_surface(surface.vertices, surface.faces, DEVIATION_SAMPLES, rng),
-                         surface.vertices])
     cage = base
     result = RefinementResult(base, {})
     closest = None  # (largest deviation, fitted cage, info) of the closest fit so far
     for done in range(max_rounds):
         fitted, info = fit(cage)
-        per_face = face_deviation(fitted, info["levels"], surface, samples)
+        deviation = face_deviation(fitted, surface, tolerance)
+        per_face = deviation.per_face
         offending = np.flatnonzero(per_face > tolerance)
         result.rounds.append({"faces": int(fitted.n_faces),
                               "max_deviation": float(per_face.max()),
                               "mean_deviation": float(info["mean_distance"]),
-                              "offending_faces": int(len(offending))})
+                              "offending_faces": int(len(offending)),
+                              "unproven_area": deviation.unproven_area})
         if closest is None or per_face.max() < closest[0]:
             closest = (per_face.max(), fitted, info)
         if not len(offending):
             result.mesh, result.info = fitted, info
-            result.met, result.reason = True, "tolerance met"
+            result.met = deviation.unproven_area == 0
+            result.reason = ("tolerance met" if result.met else
+                             f"tolerance not proven: {deviation.unproven_area:.1%} of the "
+                             f"target's area lies in pieces too many to look at closely")
             return result
         deviating = per_face > tolerance
         refined, why_not = refined_without_crossings(fitted, deviating, crossing_faces)
@@ -193,46 +193,6 @@ def refined_without_crossings(fitted, deviating, crossing_faces):
     return None, (f"splitting the deviating faces makes the refined limit surface cross itself "
                   f"({len(crossing)} triangle pairs after {UNCROSS_TRIES} tries leaving faces "
                   f"whole)")
-
-
-def face_deviation(cage, levels, surface, samples):
-    """(m,) float64 largest two-sided deviation of each base face's limit-surface part.
-
-    Parameters
-    ----------
-    cage : PolyMesh, closed; faces of any size.
-    levels : int >= 1, level of the fine limit points.
-    surface : TargetSurface of the target.
-    samples : (s, 3) float64 points on the target.
-
-    Returns
-    -------
-    (m,) float64, fractions of ``surface.diagonal``.
-    """
-    X, fine, owner = fine_limit_points(cage, levels)
-    corner_distance = surface.nearest(X).distance[fine.face_vertices.reshape(-1, 4)]
-    forward = np.zeros(cage.n_faces)
-    np.maximum.at(forward, owner, corner_distance.max(axis=1))
-    T = triangulate(fine.face_vertices, fine.face_offsets)  # two triangles per fine quad
-    back = TargetSurface(X, T, "fitted surface").nearest(samples)
-    backward = np.zeros(cage.n_faces)
-    np.maximum.at(backward, owner[back.face // 2], back.distance)
-    return np.maximum(forward, backward) / surface.diagonal
-
-
-def fine_limit_points(cage, levels):
-    """The level-``levels`` limit points of ``cage`` (closed PolyMesh, ``levels >= 1``).
-
-    Returns
-    -------
-    X : (n_fine, 3) float64 limit positions of the level-``levels`` vertices (model units).
-    fine : PolyMesh, the level-``levels`` mesh (all quads).
-    owner : (m_fine,) int64 the base face of each of its quads.
-    """
-    hierarchy = build_hierarchy(cage, levels)
-    fine = hierarchy.meshes[levels]
-    X = limit_matrices(fine)[0] @ hierarchy.composite(levels - 1) @ cage.vertices
-    return X, fine, fine_face_owner(cage, levels)
 
 
 def split_quad_strips(cage, seeds, within=None, keep_limit=False, with_parent=False):

@@ -7,7 +7,7 @@ import trimesh
 from core.errors import ParameterError
 from core.fitting.outside_refinement import (OUTSIDE_DEPTH, faces_outside,
                                              fit_with_outside_refinement)
-from core.fitting.refine import fine_limit_points
+from core.fitting.deviation import fine_limit_points
 from core.params import ReconstructionParams
 from core.polymesh_checks import check_polymesh
 from core.subdivision.sample_cages import grid_sphere

@@ -165,7 +165,7 @@ def test_when_every_split_of_the_fitted_cage_crosses_the_cage_before_the_fit_is_
     """Refinements of the fitted cage are reported as crossing (told apart by their limit
     surface, which reaches the capsule's tips at |z| = 1.5, while the box cage's stops near
     1.2): the strips of the cage the fit started from are split instead, on its surface."""
-    from core.fitting.refine import fine_limit_points
+    from core.fitting.deviation import fine_limit_points
 
     target, base = capsule_and_box_cage()
 

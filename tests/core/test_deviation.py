@@ -1,0 +1,100 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""The tolerance's deviation measure: the whole target looked at, not samples of it."""
+import numpy as np
+import pytest
+
+import core.fitting.deviation as deviation
+from core.fitting.deviation import deviation_level, face_deviation
+from core.geometry import sample_surface
+from core.subdivision.sample_cages import cube
+from core.target_surface import TargetSurface
+
+
+def square(half):
+    """Two triangles covering ``[-half, half]^2`` at ``z = 0``."""
+    V = np.array([[-half, -half, 0], [half, -half, 0], [half, half, 0], [-half, half, 0]], float)
+    return TargetSurface(V, np.array([[0, 1, 2], [0, 2, 3]]), "square")
+
+
+def pitted_plane(half, width, depth):
+    """The square ``[-half, half]^2`` at ``z = 0`` with a square pit: its rim the square
+    ``[-width, width]^2``, its bottom the point ``(0, 0, -depth)``."""
+    outer = [[-half, -half], [half, -half], [half, half], [-half, half]]
+    rim = [[-width, -width], [width, -width], [width, width], [-width, width]]
+    V = np.array([[x, y, 0.0] for x, y in outer + rim] + [[0.0, 0.0, -depth]])
+    F = [[i, (i + 1) % 4, 4 + i] for i in range(4)]
+    F += [[(i + 1) % 4, 4 + (i + 1) % 4, 4 + i] for i in range(4)]
+    F += [[4 + i, 4 + (i + 1) % 4, 8] for i in range(4)]
+    return TargetSurface(V, np.array(F), "pitted plane")
+
+
+def test_the_whole_target_is_looked_at_to_its_resolution():
+    """Over a pit 1 wide in a 100 x 100 plane, the plane's points lie up to about 0.5 from the
+    pitted surface (0 at its corners); the search finds the largest deviation to within its
+    resolution, every piece proven."""
+    target, surface = square(50), pitted_plane(50, 0.5, 5.0)
+    near = np.stack(np.meshgrid(np.linspace(-1, 1, 401), np.linspace(-1, 1, 401)), -1)
+    dense = np.column_stack([near.reshape(-1, 2), np.zeros(401 * 401)])
+    largest = surface.nearest(dense).distance.max()  # spacing 0.005 where it is not 0
+    assert 0.45 < largest < 0.5
+    assert surface.nearest(target.vertices).distance.max() < 1e-9
+
+    threshold = 0.25
+    found = deviation._target_to_surface(target, surface, threshold)
+    assert found.unproven_area == 0.0
+    resolution = deviation.RESOLUTION * threshold
+    assert largest - resolution <= found.distance.max() <= largest + 1e-9
+    far = found.face[found.distance > threshold]
+    assert len(far) and (far >= 8).all()  # the pit's own triangles
+
+
+def test_a_deviation_samples_miss_is_found_before_the_budget_runs_out():
+    """A pit half as wide: 20,000 samples of the plane see at most a fifth of the largest
+    deviation; the search runs out of pieces before it has proven the rest of the plane but
+    has found a piece beyond the threshold by then."""
+    target, surface = square(50), pitted_plane(50, 0.25, 5.0)
+    samples = sample_surface(target.vertices, target.faces, 20000, np.random.default_rng(0))
+    assert surface.nearest(samples).distance.max() < 0.05
+    found = deviation._target_to_surface(target, surface, 0.12)
+    assert 0 < found.unproven_area < 1
+    assert 0.2 < found.distance.max() < 0.25
+
+
+def test_pieces_left_whole_when_the_budget_runs_out_are_reported(monkeypatch):
+    monkeypatch.setattr(deviation, "PIECE_BUDGET", 10)
+    found = deviation._target_to_surface(square(50), pitted_plane(50, 0.5, 5.0), 0.25)
+    # two triangles, their eight quarters looked at, then none: every quarter straddles
+    assert len(found.distance) == 2 + 8
+    assert found.unproven_area == pytest.approx(1.0)
+
+
+def test_face_deviation_of_a_scaled_limit_surface():
+    """The target is the cube cage's own limit surface (level 5) scaled by 1.02 about its
+    centre: every face deviates by about 0.02 of the distance from the centre, which lies
+    between half the cube's side (face centres) and its limit surface's corners."""
+    from core.fitting.deviation import fine_limit_points
+    from core.geometry import triangulate
+
+    cage = cube(1.0)
+    X, fine, _ = fine_limit_points(cage, 5)
+    centre = X.mean(axis=0)
+    radius = np.linalg.norm(X - centre, axis=1)
+    target = TargetSurface(centre + 1.02 * (X - centre),
+                           triangulate(fine.face_vertices, fine.face_offsets))
+    tolerance = 0.5 * 0.02 * radius.max() / target.diagonal
+    result = face_deviation(cage, target, tolerance)
+    assert result.per_face.shape == (6,)
+    assert result.unproven_area == 0.0
+    per_face = result.per_face * target.diagonal  # model units
+    # the scaled surface's distance is at most 0.02 r (r from the centre) and, the limit
+    # surface convex, at least 0.02 times its inscribed radius; the level-5 chords and the
+    # search's resolution add a little
+    assert np.all(per_face >= 0.02 * radius.min() * 0.99)
+    assert np.all(per_face <= 0.02 * radius.max() * 1.01)
+    assert np.ptp(per_face) < 1e-3 * per_face.max()  # the six faces alike
+
+
+@pytest.mark.parametrize("faces, level", [(6, 7), (300, 4), (600, 3), (1500, 3), (40000, 1)])
+def test_deviation_level_keeps_the_fine_mesh_within_its_budget(faces, level):
+    assert deviation_level(faces) == level
+    assert level == 1 or faces * 4 ** level <= deviation.DEVIATION_QUADS
