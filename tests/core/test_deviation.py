@@ -48,16 +48,17 @@ def test_the_whole_target_is_looked_at_to_its_resolution():
     assert len(far) and (far >= 8).all()  # the pit's own triangles
 
 
-def test_a_deviation_samples_miss_is_found_before_the_budget_runs_out():
+def test_a_deviation_samples_miss_is_found_and_the_rest_proven():
     """A pit half as wide: 20,000 samples of the plane see at most a fifth of the largest
-    deviation; the search runs out of pieces before it has proven the rest of the plane but
-    has found a piece beyond the threshold by then."""
+    deviation; the search finds it to within its resolution and proves the rest of the
+    plane."""
     target, surface = square(50), pitted_plane(50, 0.25, 5.0)
     samples = sample_surface(target.vertices, target.faces, 20000, np.random.default_rng(0))
     assert surface.nearest(samples).distance.max() < 0.05
-    found = deviation._target_to_surface(target, surface, 0.12)
-    assert 0 < found.unproven_area < 1
-    assert 0.2 < found.distance.max() < 0.25
+    threshold = 0.12
+    found = deviation._target_to_surface(target, surface, threshold)
+    assert found.unproven_area == 0.0
+    assert 0.24 - deviation.RESOLUTION * threshold < found.distance.max() < 0.25
 
 
 def test_pieces_left_whole_when_the_budget_runs_out_are_reported(monkeypatch):
@@ -98,3 +99,36 @@ def test_face_deviation_of_a_scaled_limit_surface():
 def test_deviation_level_keeps_the_fine_mesh_within_its_budget(faces, level):
     assert deviation_level(faces) == level
     assert level == 1 or faces * 4 ** level <= deviation.DEVIATION_QUADS
+
+
+def test_a_parallel_target_is_proven_without_cutting_it():
+    """A 100 x 100 square 0.24 above a 120 x 120 one: ``d + r`` (r about 47)
+    passes a threshold of 0.25 everywhere, the distance to the surface triangle closest to
+    each centroid is 0.24 at every corner, so the two triangles are proven as they are."""
+    square_above = square(50)
+    target = TargetSurface(square_above.vertices + [0.0, 0.0, 0.24], square_above.faces)
+    found = deviation._target_to_surface(target, square(60), 0.25)
+    assert len(found.distance) == 2
+    assert found.unproven_area == 0.0
+    assert found.distance == pytest.approx(0.24)
+
+
+def test_the_bounds_are_never_below_a_point_of_the_piece():
+    """Random target pieces near a curved surface (the cube's level-4 limit surface): no point
+    of a piece lies farther from the surface than the piece's bound."""
+    from core.fitting.deviation import fine_limit_points
+    from core.geometry import triangulate
+
+    X, fine, _ = fine_limit_points(cube(1.0), 4)
+    surface = TargetSurface(X, triangulate(fine.face_vertices, fine.face_offsets))
+    rng = np.random.default_rng(3)
+    corners = rng.uniform(-0.8, 0.8, (500, 1, 3)) + rng.normal(0, 0.1, (500, 3, 3))
+    centroid = corners.mean(axis=1)
+    radius = np.linalg.norm(corners - centroid[:, None], axis=2).max(axis=1)
+    bound = deviation._bounds(corners, surface.nearest(centroid), radius, surface)
+    weights = rng.dirichlet(np.ones(3), 200)  # (200, 3) points of every piece
+    inside = np.einsum("sj,kjd->ksd", weights, corners).reshape(-1, 3)
+    distance = surface.nearest(inside).distance.reshape(500, 200).max(axis=1)
+    assert np.all(distance <= bound + 1e-12)
+    assert np.mean(bound < np.linalg.norm(corners - centroid[:, None], axis=2).max(axis=1)
+                   + surface.nearest(centroid).distance) > 0.5  # tighter than d + r mostly
