@@ -3,8 +3,8 @@
 
 After a fit, every base face gets the largest deviation between its part of the limit
 surface and the target, both ways: the distance of its fine limit points to the target,
-and the distance of the target samples whose closest point on the limit surface lies in
-it. Each face deviating more than the tolerance has the quad strip through it split (for a
+and the distance of every part of the target whose closest point on the limit surface lies
+in it (:func:`core.fitting.deviation.face_deviation`). Each face deviating more than the tolerance has the quad strip through it split (for a
 quad, the strip through its two longer opposite edges; for another face, the strip across
 its longest edge). The strip runs through quads across opposite edges, both ways from its
 seed, **only through the deviating faces**: every quad of it is cut in two through the
