@@ -39,8 +39,15 @@ from core.subdivision.catmull_clark import mesh_topology
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
-UNCROSS_TRIES = 5
-"""Refinements tried per round with the deviating faces under new crossings left whole."""
+CROSSING_RINGS = 3
+"""How many rings of faces away from a crossing the deviating faces to turn or leave whole
+are looked for: the refined cage is placed on the limit surface as a whole, so a split can
+move the surface a ring or two beyond the faces it changed (to_simp_lbracket at 0.5 %,
+session 35: 7 triangle pairs, none in or next to a deviating face)."""
+UNCROSS_TRIES = 20
+"""Most refinements tried per round with the deviating faces under new crossings cut the
+other way, then left whole (each try costs a crossing search of the refined limit surface;
+to_simp_lbracket at 0.5 % ran out of 8)."""
 
 
 @dataclass
@@ -80,8 +87,9 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
     crossing_faces : None, or callable ``crossing_faces(cage) -> (k, 2) int`` the base faces
         of the triangle pairs where the cage's limit surface crosses itself (at the fit's
         level). Given, a refined cage that crosses itself more than the fitted one is not
-        fitted: the deviating faces under its crossings are left whole and the others split
-        again (:data:`UNCROSS_TRIES` times), since the fit keeps the crossings it starts from.
+        fitted: the deviating faces under its crossings are cut the other way, then left
+        whole, and the split tried again (at most :data:`UNCROSS_TRIES` times,
+        :func:`refined_without_crossings`), since the fit keeps the crossings it starts from.
         When no split of the fitted cage is left, the same faces of the cage it was fitted
         from are split instead (when the fit kept its faces): where an inside fit held a
         thin wall back, the fitted walls nearly touch, while the cage before the fit lies on
@@ -158,21 +166,25 @@ def refined_without_crossings(fitted, deviating, crossing_faces):
     surface cross itself more than the cage's (see :func:`fit_to_tolerance`; the cage need
     not be fitted, :mod:`core.fitting.outside_refinement` refines the unfitted one).
 
-    The deviating faces under the crossings are left whole next time; where every crossing
-    lies in faces where strips ended (not deviating themselves), the deviating faces next to
-    those are.
+    The deviating faces under the crossings (or, where every crossing lies in faces that
+    do not deviate, such as those where strips ended, the deviating faces nearest to them,
+    up to :data:`CROSSING_RINGS` rings of faces away) are cut the other way next time (a quad across its shorter edges, another face across its
+    second-longest edge); those already turned are left whole. On to_simp_mbb at 0.5 % of
+    the diagonal (session 35) the last deviating face's strip crossed itself in 29 triangle
+    pairs across its longer edges and in none across its shorter ones.
 
     Returns ``(refined PolyMesh, None)``, or ``(None, reason str)`` when no deviating face
     could be split without a crossing.
     """
     within = deviating.copy()
+    turned = np.zeros(len(within), dtype=bool)
     topology = mesh_topology(fitted.face_vertices, fitted.face_offsets, len(fitted.vertices))
     allowed = None
-    for _ in range(UNCROSS_TRIES + 1):
+    for tries in range(UNCROSS_TRIES + 1):
         if not within.any():
             return None, ("splitting the deviating faces makes the refined limit surface cross "
                           "itself (thin or sharp features under them need other faces)")
-        seeds = _seed_directions(fitted, np.flatnonzero(within))
+        seeds = _seed_directions(fitted, np.flatnonzero(within), turned)
         refined, parent = split_quad_strips(fitted, seeds, within=within, keep_limit=True,
                                             with_parent=True)
         if crossing_faces is None:
@@ -184,15 +196,20 @@ def refined_without_crossings(fitted, deviating, crossing_faces):
             return refined, None
         under = np.zeros(len(within), dtype=bool)
         under[parent[np.unique(crossing)]] = True
-        if (under & within).any():
-            within[under] = False
-        else:  # every crossing in a face where strips ended: the deviating faces next to it
-            next_to = topology.face_of_corner[topology.twin[np.flatnonzero(
-                under[topology.face_of_corner])]]
-            within[next_to] = False
+        hit = under & within
+        for _ in range(CROSSING_RINGS):  # crossings where strips ended, or a ring further
+            if hit.any():
+                break
+            under[topology.face_of_corner[topology.twin[np.flatnonzero(
+                under[topology.face_of_corner])]]] = True
+            hit = under & within
+        if not hit.any():
+            break
+        within[hit & turned] = False  # crossed both ways: left whole
+        turned[hit] = True
     return None, (f"splitting the deviating faces makes the refined limit surface cross itself "
-                  f"({len(crossing)} triangle pairs after {UNCROSS_TRIES} tries leaving faces "
-                  f"whole)")
+                  f"({len(crossing)} triangle pairs after {tries + 1} tries turning faces or "
+                  f"leaving them whole)")
 
 
 def split_quad_strips(cage, seeds, within=None, keep_limit=False, with_parent=False):
@@ -375,16 +392,17 @@ def _on_the_limit_of(cage, refined, origin):
     return PolyMesh(vertices, refined.face_vertices, refined.face_offsets, refined.creases)
 
 
-def _seed_directions(cage, faces):
+def _seed_directions(cage, faces, turned=None):
     """(s, 2) rows ``(face, edge)``: cut each face across its longest edge (a quad across its
-    two longer opposite edges)."""
+    two longer opposite edges), or, where ``turned`` ((m,) bool) says so, across its
+    second-longest edge (a quad across its shorter ones)."""
     rows = []
     V = cage.vertices
     for face in faces:
         ring = cage.face_vertices[cage.face_offsets[face]:cage.face_offsets[face + 1]]
         length = np.linalg.norm(V[np.roll(ring, -1)] - V[ring], axis=1)
         if len(ring) == 4:
-            rows.append((face, 0 if length[0] + length[2] >= length[1] + length[3] else 1))
-        else:
-            rows.append((face, int(np.argmax(length))))
+            length = length[:2] + length[2:]  # the two directions
+        rank = 1 if turned is not None and turned[face] else 0
+        rows.append((face, int(np.argsort(-length, kind="stable")[rank])))
     return np.asarray(rows, dtype=np.int64).reshape(-1, 2)

@@ -6,7 +6,7 @@ import trimesh
 
 from core.errors import ParameterError
 from core.fitting import fit_base_mesh
-from core.fitting.refine import fit_to_tolerance, split_quad_strips
+from core.fitting.refine import fit_to_tolerance, refined_without_crossings, split_quad_strips
 from core.geometry import triangulate
 from core.polymesh_checks import check_polymesh
 from core.quality import surface_distances
@@ -159,6 +159,47 @@ def test_refinement_leaves_faces_whole_where_a_split_would_cross():
         else np.stack([np.arange(cage.n_faces)] * 2, axis=1))
     assert not result.met and len(result.rounds) == 1
     assert "cross itself" in result.reason and result.mesh.n_faces == base.n_faces
+
+
+def face_centres(cage):
+    """(m, 3) the mean of each face's corners."""
+    return np.array([cage.vertices[cage.face_vertices[cage.face_offsets[f]:
+                                                      cage.face_offsets[f + 1]]].mean(0)
+                     for f in range(cage.n_faces)])
+
+
+@pytest.mark.parametrize("long_way_crosses, short_way_crosses, where", [
+    (True, False, "everywhere"), (True, True, "everywhere"), (True, False, "opposite")])
+def test_a_split_that_crosses_is_tried_the_other_way_before_the_face_is_left_whole(
+        long_way_crosses, short_way_crosses, where):
+    """A side face of the box cage (1 x 3) is cut across its long edges first; where that is
+    reported to cross, across its short edges; where that crosses too, it is left whole. A
+    crossing reported only in the opposite side face, two rings of faces away, counts for
+    the deviating face too."""
+    _, base = capsule_and_box_cage()
+    deviating = np.zeros(base.n_faces, dtype=bool)
+    deviating[np.argmax(face_centres(base)[:, 0])] = True  # +x: long edges along z
+    tried = []
+
+    def crossing(cage):
+        if cage.n_faces == base.n_faces:
+            return np.zeros((0, 2), dtype=np.int64)
+        new = cage.vertices[len(base.vertices):]
+        long_way = bool(np.any(np.abs(new[:, 2]) < 0.5))  # the long edges cut near z = 0
+        tried.append("long" if long_way else "short")
+        crosses = long_way_crosses if long_way else short_way_crosses
+        faces = (np.arange(cage.n_faces) if where == "everywhere"
+                 else np.flatnonzero(face_centres(cage)[:, 0] < -0.4))
+        return (np.stack([faces] * 2, axis=1) if crosses else np.zeros((0, 2), dtype=np.int64))
+
+    refined, why_not = refined_without_crossings(base, deviating, crossing)
+    assert tried == ["long", "short"]
+    if short_way_crosses:
+        assert refined is None and "cross itself" in why_not
+    else:
+        assert why_not is None and refined.n_faces == base.n_faces + 1
+        new = refined.vertices[len(base.vertices):]
+        assert np.all(np.abs(new[:, 2]) > 1.0)  # on the short edges, at the box's ends
 
 
 def test_when_every_split_of_the_fitted_cage_crosses_the_cage_before_the_fit_is_split():
