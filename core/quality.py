@@ -115,7 +115,8 @@ def containment(result_V, result_F, target_V, target_F):
     }
 
 
-def surface_distances(result_V, result_F, target_V, target_F, samples=20000, seed=0):
+def surface_distances(result_V, result_F, target_V, target_F, samples=20000, seed=0,
+                      resolution=1e-4):
     """Two-sided distances between two triangle surfaces, as fractions of the target size.
 
     Parameters
@@ -125,6 +126,8 @@ def surface_distances(result_V, result_F, target_V, target_F, samples=20000, see
     samples : int
         Area-weighted random points drawn on each surface (deterministic for a seed).
     seed : int
+    resolution : float > 0
+        Fraction of ``bbox_diagonal``: the maxima are found to within it.
 
     Returns
     -------
@@ -133,9 +136,15 @@ def surface_distances(result_V, result_F, target_V, target_F, samples=20000, see
         target surface; ``target_to_result_mean`` / ``_max`` the other way; ``hausdorff``
         the larger maximum. All divided by ``bbox_diagonal``, the target's bounding-box
         diagonal (model units, also returned). Means are area-weighted averages over
-        the random samples; maxima are over the samples and all vertices, so they are
-        lower bounds of the true one-sided Hausdorff distances.
+        the random samples. Maxima are searched over every triangle, not samples
+        (:func:`core.farthest.farthest_pieces`; also over the samples and vertices): the
+        true one-sided Hausdorff distance lies between ``..._max`` and ``..._max_bound``,
+        at most ``resolution`` apart. On the bundled cantilever's STEP tessellated to
+        1e-4 of the diagonal (session 35), 20,000 samples a side and the vertices saw
+        0.529 % and 0.543 %; the search found 0.541 % and 0.543 %, bounds equal to four
+        digits, in 0.5 s more.
     """
+    from core.farthest import farthest_pieces
     from core.target_surface import TargetSurface
 
     samples = int(samples)
@@ -150,20 +159,31 @@ def surface_distances(result_V, result_F, target_V, target_F, samples=20000, see
     rng = np.random.default_rng(seed)
     result_points = sample_surface(result_V, result_F, samples, rng)
     target_points = sample_surface(target_V, target_F, samples, rng)
-    to_target = TargetSurface(target_V, target_F).nearest(np.vstack([result_points, result_V]))
-    to_result = TargetSurface(result_V, result_F, "result").nearest(
-        np.vstack([target_points, target_V]))
+    target_surface = TargetSurface(target_V, target_F)
+    result_surface = TargetSurface(result_V, result_F, "result")
+    to_target = target_surface.nearest(np.vstack([result_points, result_V]))
+    to_result = result_surface.nearest(np.vstack([target_points, target_V]))
     forward, forward_vertices = np.split(to_target.distance / diagonal, [samples])
     backward, backward_vertices = np.split(to_result.distance / diagonal, [samples])
+    forward_far = farthest_pieces(result_V, result_F, target_surface, np.inf,
+                                  resolution * diagonal)
+    backward_far = farthest_pieces(target_V, target_F, result_surface, np.inf,
+                                   resolution * diagonal)
     report = {
         "result_to_target_mean": float(forward.mean()),
-        "result_to_target_max": float(max(forward.max(), forward_vertices.max())),
+        "result_to_target_max": float(max(forward.max(), forward_vertices.max(),
+                                          forward_far.distance.max() / diagonal)),
+        "result_to_target_max_bound": forward_far.largest_bound / diagonal,
         "target_to_result_mean": float(backward.mean()),
-        "target_to_result_max": float(max(backward.max(), backward_vertices.max())),
+        "target_to_result_max": float(max(backward.max(), backward_vertices.max(),
+                                          backward_far.distance.max() / diagonal)),
+        "target_to_result_max_bound": backward_far.largest_bound / diagonal,
         "bbox_diagonal": diagonal,
         "samples": samples,
-        "method": "exact point-to-triangle distance (libigl AABB tree, float64 closest "
-                  "point on the triangle found) at area-weighted samples and vertices",
+        "method": "exact point-to-triangle distance (compiled box tree, float64 closest "
+                  "point on the triangle found): means at area-weighted samples, maxima "
+                  "over every triangle to within the resolution",
+        "resolution": float(resolution),
     }
     report["hausdorff"] = max(report["result_to_target_max"], report["target_to_result_max"])
     return report

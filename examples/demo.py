@@ -48,7 +48,7 @@ def main(out_dir):
         distances = figures["distances"]
         print(f"   check: valid={figures['valid']}, watertight={figures['watertight']}, "
               f"{figures['faces']} faces; mean distance {distances['result_to_target_mean']:.2%} "
-              f"and max {distances['result_to_target_max']:.2%} of the bounding-box diagonal; "
+              f"and max {distances['hausdorff']:.2%} (both ways) of the bounding-box diagonal; "
               f"{figures['outside_volume_fraction']:.3%} of the target volume outside")
 
     cage = os.path.join(HERE, "genus3_cage.obj")

@@ -125,6 +125,10 @@ def test_concentric_boxes_give_analytic_distances():
     assert report["target_to_result_max"] == pytest.approx(0.1 / diagonal, rel=1e-9)
     # outer -> inner: 0.1 over the face centres, up to 0.1 * sqrt(3) at the corners
     assert report["result_to_target_max"] == pytest.approx(0.1 * np.sqrt(3) / diagonal, rel=1e-9)
+    # the bounds of the search over every triangle: within its resolution of the maxima
+    for side in ("result_to_target", "target_to_result"):
+        assert (report[f"{side}_max"] - 1e-12 <= report[f"{side}_max_bound"]
+                <= report[f"{side}_max"] + report["resolution"])
     h, b, a = 0.1, 1.0, 1.1
     strip = 0.5 * h * h * (np.sqrt(2.0) + np.arcsinh(1.0))
     corner, _ = dblquad(lambda s, t: np.sqrt(h * h + s * s + t * t), 0, h, 0, h)
