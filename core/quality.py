@@ -144,7 +144,6 @@ def surface_distances(result_V, result_F, target_V, target_F, samples=20000, see
         0.529 % and 0.543 %; the search found 0.541 % and 0.543 %, bounds equal to four
         digits, in 0.5 s more.
     """
-    from core.farthest import farthest_pieces
     from core.target_surface import TargetSurface
 
     samples = int(samples)
@@ -165,10 +164,8 @@ def surface_distances(result_V, result_F, target_V, target_F, samples=20000, see
     to_result = result_surface.nearest(np.vstack([target_points, target_V]))
     forward, forward_vertices = np.split(to_target.distance / diagonal, [samples])
     backward, backward_vertices = np.split(to_result.distance / diagonal, [samples])
-    forward_far = farthest_pieces(result_V, result_F, target_surface, np.inf,
-                                  resolution * diagonal)
-    backward_far = farthest_pieces(target_V, target_F, result_surface, np.inf,
-                                   resolution * diagonal)
+    forward_far, backward_far = largest_distances(result_surface, target_surface,
+                                                  resolution * diagonal)
     report = {
         "result_to_target_mean": float(forward.mean()),
         "result_to_target_max": float(max(forward.max(), forward_vertices.max(),
@@ -187,6 +184,30 @@ def surface_distances(result_V, result_F, target_V, target_F, samples=20000, see
     }
     report["hausdorff"] = max(report["result_to_target_max"], report["target_to_result_max"])
     return report
+
+
+def largest_distances(result_surface, target_surface, resolution):
+    """The largest distance from the result to the target and from the target to the result,
+    searched over every triangle of each (:func:`core.farthest.farthest_pieces`).
+
+    Parameters
+    ----------
+    result_surface, target_surface : TargetSurface
+    resolution : float > 0, model units: each largest distance is found to within it.
+
+    Returns
+    -------
+    (forward, backward) : FarthestPieces of the result's triangles against the target and of
+        the target's against the result (``distance.max()`` the largest distance found,
+        ``largest_bound`` one no point exceeds).
+    """
+    from core.farthest import farthest_pieces
+
+    forward = farthest_pieces(result_surface.vertices, result_surface.faces, target_surface,
+                              np.inf, resolution)
+    backward = farthest_pieces(target_surface.vertices, target_surface.faces, result_surface,
+                               np.inf, resolution)
+    return forward, backward
 
 
 def point_surface_distance(points, V, F):

@@ -322,6 +322,37 @@ def test_deviation_map_colours_and_figures(chain_doc):
                           axis=1)) > 0.0
 
 
+def test_the_largest_deviation_counts_what_the_solid_misses():
+    """A 10 mm cube against a target cube with a 3 mm pyramid on its top face: the solid's
+    tessellation vertices all lie on the target (its corners), but the pyramid's apex lies
+    3 mm above the solid, and the largest deviation says so (both ways, to 1e-4 of the
+    diagonal)."""
+    import Mesh
+    import Part
+
+    from polycube_wb import api
+
+    doc = FreeCAD.newDocument("spike")
+    try:
+        solid = doc.addObject("Part::Feature", "Cube")
+        solid.Shape = Part.makeBox(10, 10, 10)
+        corners = [(x, y, z) for z in (0, 10) for y in (0, 10) for x in (0, 10)]
+        apex = (5, 5, 13)
+        facets = [(0, 2, 3), (0, 3, 1), (0, 1, 5), (0, 5, 4), (1, 3, 7), (1, 7, 5),
+                  (3, 2, 6), (3, 6, 7), (2, 0, 4), (2, 4, 6),
+                  (4, 5, 8), (5, 7, 8), (7, 6, 8), (6, 4, 8)]  # 8: the apex
+        points = corners + [apex]
+        target = doc.addObject("Mesh::Feature", "Target")
+        target.Mesh = Mesh.Mesh([[points[i] for i in facet] for facet in facets])
+        deviation = api.make_deviation(doc, solid, target)
+        assert api.recompute(doc).ok
+        diagonal = np.sqrt(10 ** 2 + 10 ** 2 + 13 ** 2)
+        assert np.abs(np.asarray(deviation.SignedDistance)).max() < 1e-9  # the corners
+        assert deviation.MaxDeviation == pytest.approx(3.0, abs=1e-4 * diagonal)
+    finally:
+        FreeCAD.closeDocument(doc.Name)
+
+
 def test_moving_the_target_moves_the_labeling(tmp_path):
     from polycube_wb import api
 
