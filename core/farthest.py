@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.box_tree import closest_on_triangles
+from core.errors import ParameterError
+from core.geometry import face_areas
 
 PIECE_BUDGET = 1_000_000
 """Most centroids looked at in one search (the source's own triangles always are); then the
@@ -64,7 +66,17 @@ def farthest_pieces(vertices, faces, surface, threshold, resolution):
     Returns
     -------
     FarthestPieces
+
+    Raises
+    ------
+    ParameterError
+        ``resolution`` is not a positive finite length, or ``threshold`` is NaN.
     """
+    if not (np.isfinite(resolution) and resolution > 0):
+        raise ParameterError(f"the search's resolution must be a positive length, "
+                             f"got {resolution!r}")
+    if np.isnan(threshold):
+        raise ParameterError("the search's threshold is NaN")
     corners = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]  # (m, 3, 3)
     total_area = float(np.sum(_areas(corners)))
     budget = max(PIECE_BUDGET - len(corners), 0)
@@ -110,9 +122,8 @@ def _bounds(corners, near, radius, surface):
 
 
 def _areas(corners):
-    """(k,) float64 areas of the (k, 3, 3) triangles."""
-    return 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
-                                         corners[:, 2] - corners[:, 0]), axis=1)
+    """(k,) float64 areas of the (k, 3, 3) triangles (:func:`core.geometry.face_areas`)."""
+    return face_areas(corners.reshape(-1, 3), np.arange(corners.size // 3).reshape(-1, 3))
 
 
 def _quartered(corners):

@@ -168,8 +168,9 @@ def refined_without_crossings(fitted, deviating, crossing_faces):
 
     The deviating faces under the crossings (or, where every crossing lies in faces that
     do not deviate, such as those where strips ended, the deviating faces nearest to them,
-    up to :data:`CROSSING_RINGS` rings of faces away) are cut the other way next time (a quad across its shorter edges, another face across its
-    second-longest edge); those already turned are left whole. On to_simp_mbb at 0.5 % of
+    up to :data:`CROSSING_RINGS` rings of faces away) are cut the other way next time (a
+    quad across its shorter edges, another face across its second-longest edge); those
+    already turned are left whole. On to_simp_mbb at 0.5 % of
     the diagonal (session 35) the last deviating face's strip crossed itself in 29 triangle
     pairs across its longer edges and in none across its shorter ones.
 

@@ -103,15 +103,15 @@ class DeviationProxy(StageProxy):
         signed = surface.closest(V).signed
         progress.check_cancel()
         progress.report("largest distances", 0.55)
-        largest = max(float(np.abs(signed).max()),
-                      *(float(far.distance.max()) for far in largest_distances(
-                          TargetSurface(V, F, "solid"), surface,
-                          MAX_RESOLUTION * surface.diagonal)))
+        distance = np.abs(signed)
+        searched = largest_distances(TargetSurface(V, F, "solid"), surface,
+                                     MAX_RESOLUTION * surface.diagonal)
         progress.check_cancel()
         progress.report("containment", 0.7)
         inside = containment(V, F, target_V, target_F)
-        obj.MeanDeviation = float(np.abs(signed).mean())
-        obj.MaxDeviation = largest
+        obj.MeanDeviation = float(distance.mean())
+        obj.MaxDeviation = max(float(distance.max()),
+                               *(float(far.distance.max()) for far in searched))
         obj.MeanDeviationPercent = 100.0 * obj.MeanDeviation / surface.diagonal
         obj.MaxDeviationPercent = 100.0 * obj.MaxDeviation / surface.diagonal
         obj.OutsideVolume = 100.0 * inside["outside_volume_fraction"]

@@ -124,3 +124,14 @@ def test_only_the_largest_distance_is_searched_for_without_a_threshold():
     assert found.unproven_area == 0.0
     assert largest - 0.005 <= found.distance.max() <= largest + 1e-9
     assert largest <= found.largest_bound <= found.distance.max() + 0.005 + 1e-9
+
+
+@pytest.mark.parametrize("threshold, resolution", [(0.25, 0.0), (0.25, -1.0),
+                                                   (0.25, np.nan), (0.25, np.inf),
+                                                   (np.nan, 0.01)])
+def test_a_bad_resolution_or_threshold_is_refused(threshold, resolution):
+    from core.errors import ParameterError
+
+    target, surface = square(50), pitted_plane(50, 0.5, 5.0)
+    with pytest.raises(ParameterError, match="resolution|threshold"):
+        farthest_pieces(target.vertices, target.faces, surface, threshold, resolution)
