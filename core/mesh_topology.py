@@ -108,15 +108,6 @@ def vertex_face_matrix(faces, n_vertices):
     return sp.csr_matrix((np.ones(3 * m, dtype=np.int8), (rows, cols)), shape=(n_vertices, m))
 
 
-def vertex_adjacency_matrix(faces, n_vertices):
-    """(n, n) CSR bool matrix, True where two vertices share an edge."""
-    edges, _ = unique_edges(faces)
-    data = np.ones(2 * len(edges), dtype=bool)
-    rows = np.concatenate([edges[:, 0], edges[:, 1]])
-    cols = np.concatenate([edges[:, 1], edges[:, 0]])
-    return sp.csr_matrix((data, (rows, cols)), shape=(n_vertices, n_vertices))
-
-
 def connected_face_components(faces):
     """(m,) int64 component id of each face (faces connected through shared edges)."""
     from scipy.sparse.csgraph import connected_components

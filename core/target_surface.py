@@ -38,9 +38,6 @@ RAY_BOX_PAD = 1e-8
 """The triangles' boxes of the ray cast are widened by this much of the diagonal, more than
 the hits ``EDGE_TOL`` admits outside a triangle and the slab test's rounding."""
 
-REGION_FACE = 0
-# region codes 1, 2, 3: edges (v0 v1), (v1 v2), (v2 v0); 4, 5, 6: corners v0, v1, v2
-
 SPLIT_EDGE = 2.0
 """With ``split=True``, the search tree holds the triangles cut into pieces no longer than
 this many times the median of the triangles' longest edges
