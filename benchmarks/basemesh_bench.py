@@ -66,7 +66,8 @@ def run_case(path, mode, method, out_json, image, solid):
             "method", "fallback_reason", "faces", "quads", "triangles",
             "extraordinary_vertices", "min_valence", "max_valence", "genus", "target_faces",
             "within_budget", "minimum_reason", "scale", "solver_status", "collapsed_sides",
-            "side_directions_flipped", "rectangles", "crossing_reason")}
+            "side_directions_flipped", "rectangles", "crossing_reason", "candidates",
+            "layout_inverted_faces")}
         row["inverted_faces"] = int(inverted_faces(base, target.vertices, target.faces).sum())
         row["limit_self_intersections"] = count_limit_self_intersections(base, 2)
         render_cage(image, target.vertices, target.faces, base,
@@ -175,6 +176,29 @@ def markdown(rows, meta):
             cells += ["–" if valid is None else ("yes" if valid else "no"),
                       _percent(symmetric.get("mean_frac")), _percent(symmetric.get("max_frac"))]
         lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", "## Both routes", "",
+              "The candidates of `base_mesh.candidates`: the polycube layout (faces and "
+              "extraordinary vertices where built, else the size of its smallest layout found "
+              "or bounded) and the paired decimation (where it was built). The layout is kept "
+              "within 1.5 times the budget unless it has more inverted faces after its repair "
+              "than the decimation.", "",
+              "| mesh | parts | genus | polycube faces | polycube EVs | polycube inverted "
+              "after repair | decimation faces | decimation EVs | route |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for r in reached:
+        b = r["base_mesh"]
+        candidates = b.get("candidates") or {}
+        poly = candidates.get("polycube") or {}
+        deci = candidates.get("paired decimation") or {}
+        poly_faces = (str(poly.get("faces")) if poly.get("built")
+                      else (f"> rule ({poly['faces']})" if poly.get("faces") else
+                            ("failed" if poly else "–")))
+        lines.append("| " + " | ".join([
+            f"`{r['mesh']}`", r["mode"], str(r["input_genus"]), poly_faces,
+            str(poly.get("extraordinary_vertices", "–")),
+            str(poly.get("inverted_faces", "–")),
+            str(deci.get("faces", "–")), str(deci.get("extraordinary_vertices", "–")),
+            b.get("method") or "polycube"]) + " |")
     lines += ["", "Where the base mesh was not reached, the stage's message; where the route "
               "fell back from the polycube layout, why; where no cage tried had a limit surface "
               "that does not cross itself, the stage's reason:", ""]

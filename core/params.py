@@ -96,7 +96,8 @@ class ReconstructionParams:
     max_base_faces : a base mesh with more faces stops the run with a message (its fit would
         take many minutes, and such a model is not the few-patch result the tool is for).
     base_mesh_method : ``auto`` (the quantized polycube layout; where it cannot be built, needs more
-        than twice the budget or has inverted faces, the paired decimation of the target),
+        than 1.5 times the budget or has more inverted faces after its repair, the paired
+        decimation of the target),
         ``polycube`` (never falls back) or ``decimation`` (the paired decimation only).
     subdivision_levels : Catmull-Clark levels used by the fit (paper: 2).
     fit_iterations : most shape-optimisation iterations (paper: 100); the fit stops earlier
@@ -148,7 +149,8 @@ class ReconstructionParams:
                                  low=6, high=1_000_000)
     base_mesh_method: str = _param(
         "auto", "auto: the polycube layout, falling back to a paired decimation of the target "
-        "where the layout fails, needs more than twice --target-faces or has inverted faces; "
+        "where the layout fails, needs more than 1.5 times --target-faces or has more inverted "
+        "faces after its repair; "
         "polycube: never fall back; decimation: the paired decimation only (default auto)",
         _flag("base_mesh_method"), choices=BASE_MESH_METHODS)
     subdivision_levels: int = _param(2, "Catmull-Clark levels of the fit (paper: %(default)s)",

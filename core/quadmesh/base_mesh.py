@@ -10,6 +10,10 @@
 5. :mod:`embed`: quads placed on the target (corners, sides by arc length, interiors by a
    Tutte map of each chart region onto its polygon); :mod:`relax` evens them out, each point
    kept on its own chart or side.
+6. Faces whose limit surface faces away from the target are repaired as on the paired
+   decimation's cages (:mod:`limit_interpolation` moves their vertices off the target until
+   the limit reaches it; :mod:`local_repair` moves a corner or splits a quad), so a layout is
+   not given up for a few folded quads that a local edit unfolds.
 """
 import time
 
@@ -22,7 +26,10 @@ from core.polymesh_checks import check_polymesh
 from core.quadmesh.chart_complex import build_chart_complex
 from core.quadmesh.embed import (interior_point_positions, side_point_positions,
                                  tutte_coordinates)
+from core.quadmesh.crossing_count import LimitCrossingCount
 from core.quadmesh.lattice import OverlappingChartsError, build_lattice, chart_orientation
+from core.quadmesh.limit_interpolation import unshrink_inverted
+from core.quadmesh.local_repair import repair_inverted
 from core.quadmesh.milp_solve import MilpTimeLimitError
 from core.quadmesh.orientation import inverted_faces
 from core.quadmesh.paired_decimation import paired_decimation_base_mesh
@@ -40,12 +47,21 @@ at least this many, so every chart has interior vertices for its Tutte map and i
 
 
 class LayoutTooLargeError(LabelingError):
-    """The quantized layout needs more quads than the caller accepts."""
+    """The quantized layout needs more quads than the caller accepts.
+
+    ``faces`` is the number of quads of the smallest layout found, or the linear bound on every
+    layout (an int), or None.
+    """
+
+    def __init__(self, message, faces=None):
+        super().__init__(message)
+        self.faces = faces
 
 
-FALLBACK_OVER_BUDGET = 2.0
-"""Polycube layouts with more faces than this many times the budget give way to the paired
-decimation (which meets the budget)."""
+FALLBACK_OVER_BUDGET = 1.5
+"""Polycube layouts with up to this many times the budget are kept over the paired decimation
+(which meets the budget, but whose cages have far more extraordinary vertices); larger ones
+give way to it."""
 
 REFINEMENT_ROUNDS = 24
 """Rounds of quantization, each splitting one more overlapping chart into rectangles."""
@@ -125,7 +141,7 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
             raise LayoutTooLargeError(
                 f"the smallest quantized layout found has {polycube.faces} quads, more than "
                 f"{_give_up_limit(give_up_faces, max_base_faces)} ({complex_.n_charts} charts, "
-                f"{complex_.n_sides} sides, each at least one unit long)")
+                f"{complex_.n_sides} sides, each at least one unit long)", polycube.faces)
         try:
             lattice = build_lattice(complex_, tables, polycube)
         except OverlappingChartsError as exc:
@@ -188,7 +204,7 @@ def _check_minimum(complex_, tables, refinement, collapsible, give_up_faces, max
             f"every quantized layout of this labeling has at least {least} quads (a linear "
             f"bound), more than {_give_up_limit(give_up_faces, max_base_faces)} "
             f"({complex_.n_charts} charts, {complex_.n_sides} sides, "
-            f"{refinement.rectangles} rectangles)")
+            f"{refinement.rectangles} rectangles)", least)
 
 
 def _merge_points(n, pairs):
@@ -211,11 +227,13 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     docstring) is built first. Where it cannot be built, exceeds ``max_base_faces`` or needs
     more than ``FALLBACK_OVER_BUDGET`` times the budget, the stage falls back to
     :mod:`core.quadmesh.paired_decimation`, which needs no labeling, and the report says why
-    (``method``, ``fallback_reason``); where it has inverted faces
-    (:func:`core.quadmesh.orientation.inverted_faces`), the paired decimation is built too and
-    the one with fewer inverted faces is kept. ``method="polycube"`` never falls back (its errors are
-    raised; layouts up to ``max_base_faces`` are kept); ``method="decimation"`` skips the
-    polycube layout.
+    (``method``, ``fallback_reason``); a layout within that limit is kept even where the
+    decimation would meet the budget more closely. Inverted faces
+    (:func:`core.quadmesh.orientation.inverted_faces`) of the layout are repaired
+    (:func:`_repaired_layout`); where some remain, the paired decimation is built too and
+    the one with fewer inverted faces is kept. ``method="polycube"`` never falls back (its
+    errors are raised; layouts up to ``max_base_faces`` are kept, repaired as in ``auto``);
+    ``method="decimation"`` skips the polycube layout.
 
     Parameters
     ----------
@@ -232,9 +250,9 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
 
     Returns
     -------
-    mesh : core.types.PolyMesh, quads (a few triangles possible in the fallback), closed,
-        2-manifold, outward, vertices on the target (in the fallback, those of inverted faces
-        may be moved off it: :mod:`core.quadmesh.limit_interpolation`).
+    mesh : core.types.PolyMesh, quads (a few triangles possible where a quad was split by a
+        repair, or in the fallback), closed, 2-manifold, outward, vertices on the target (those
+        of repaired inverted faces may be moved off it: :mod:`core.quadmesh.limit_interpolation`).
     info : dict (JSON-serialisable) with ``method`` ("polycube" or "paired decimation"),
         ``fallback_reason`` (None for the polycube layout), ``faces``, ``quads``,
         ``triangles``, ``other``, ``vertices``, ``crease_edges`` (edges tagged as sharp
@@ -242,9 +260,15 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         smooth one crossed itself, else 0),
         ``extraordinary_vertices``, ``min_valence``,
         ``max_valence``, ``genus``, ``target_faces``, ``within_budget``, ``minimum_reason``,
-        ``inverted_faces`` and ``seconds``; the polycube layout adds ``scale``,
+        ``inverted_faces``, ``seconds`` and ``candidates`` (for each route, ``"polycube"``
+        and ``"paired decimation"``: None where it was not tried, else ``built`` and, when
+        built, its ``faces``, ``extraordinary_vertices``, ``min_valence``, ``max_valence``,
+        ``genus`` and ``inverted_faces``, or where it failed its ``reason`` and ``faces``: the
+        size of the smallest layout found or bounded, where that was the reason, else None);
+        the polycube layout adds ``scale``,
         ``solver_status``, ``scale_rounds``, ``charts``, ``sides``, ``corners``,
-        ``side_directions_flipped``, ``folded_points``, ``rectangles`` and ``collapsed_sides``;
+        ``side_directions_flipped``, ``folded_points``, ``rectangles``, ``collapsed_sides``,
+        ``layout_inverted_faces`` (before the repair), ``moved_vertices`` and ``edits``;
         the paired decimation adds ``decimated_triangles``, ``budget_rounds`` (the budgets
         tried while its limit surface crossed itself or had inverted faces; beyond the budget
         rule while it crossed itself, and ``minimum_reason`` says so), ``limit_crossings``
@@ -267,11 +291,12 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     target_f = np.asarray(target.faces, dtype=np.int64)
     surface = TargetSurface(target_v, target_f)  # one search tree for every check below
     reason = "asked for (--base-mesh-method decimation)" if method == "decimation" else None
+    polycube_candidate, decimation_candidate = None, None
     if method == "polycube":
         mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames,
                                          int(target_faces), max_base_faces, face_interface_axis,
                                          max_base_faces)
-        info["inverted_faces"] = int(inverted_faces(mesh, target_v, target_f, surface).sum())
+        mesh, info = _repaired_layout(mesh, info, surface)
     elif method == "auto":
         give_up = int(min(max_base_faces, FALLBACK_OVER_BUDGET * target_faces))
         try:
@@ -281,19 +306,67 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
                                              FALLBACK_REFINEMENT_ROUNDS)
         except (LabelingError, InvalidMeshError) as exc:
             reason = f"the polycube layout failed: {exc}"
+            polycube_candidate = {"built": False, "faces": getattr(exc, "faces", None),
+                                  "reason": str(exc)}
         else:
-            info["inverted_faces"] = int(inverted_faces(mesh, target_v, target_f, surface).sum())
+            mesh, info = _repaired_layout(mesh, info, surface)
+            polycube_candidate = _candidate(info)
             if info["inverted_faces"]:
                 other_mesh, other_info = _paired_decimation_base_mesh(
                     target_v, target_f, surface, int(target_faces), max_base_faces,
-                    f"the polycube layout has {info['inverted_faces']} inverted faces")
+                    f"the polycube layout has {info['inverted_faces']} inverted faces after "
+                    f"its repair")
+                decimation_candidate = _candidate(other_info)
                 if other_info["inverted_faces"] < info["inverted_faces"]:
                     other_info["fallback_reason"] += f", this one {other_info['inverted_faces']}"
                     mesh, info = other_mesh, other_info
     if reason is not None:
         mesh, info = _paired_decimation_base_mesh(target_v, target_f, surface, int(target_faces),
                                                   max_base_faces, reason)
+        decimation_candidate = _candidate(info)
+    info["candidates"] = {"polycube": polycube_candidate,
+                          "paired decimation": decimation_candidate}
     info["seconds"] = round(time.perf_counter() - started, 4)
+    return mesh, info
+
+
+def _candidate(info):
+    """A built route's figures for the report's ``candidates`` (a dict)."""
+    return {"built": True, **{key: info[key] for key in (
+        "faces", "extraordinary_vertices", "min_valence", "max_valence", "genus",
+        "inverted_faces")}}
+
+
+def _repaired_layout(mesh, info, surface):
+    """The polycube layout with its inverted faces repaired where that helps, and its report.
+
+    The repairs of the paired decimation's cages: vertices of inverted faces moved off the
+    target towards a limit surface through their on-target positions
+    (:func:`core.quadmesh.limit_interpolation.unshrink_inverted`), then, where the limit surface
+    does not cross itself, a corner moved or a quad split
+    (:func:`core.quadmesh.local_repair.repair_inverted`); each is kept only where it lowers the
+    inverted faces without adding self-crossings of the limit surface.
+
+    Returns ``(mesh, info)``: ``info`` updated with the figures of the repaired mesh,
+    ``inverted_faces`` (after the repair), ``layout_inverted_faces`` (before it),
+    ``moved_vertices`` and ``edits``.
+    """
+    inverted = int(inverted_faces(mesh, surface.vertices, surface.faces, surface).sum())
+    moved, edits, layout_inverted = 0, 0, inverted
+    if inverted:
+        count_crossings = LimitCrossingCount(mesh)
+        crossings = count_crossings.crossings
+        mesh, crossings, inverted, moved = unshrink_inverted(mesh, surface, crossings, inverted,
+                                                             count_crossings)
+        if not crossings:
+            # as on the decimation's cages: edits are judged by the crossings they add, which
+            # a limit surface that already crosses itself cannot show (and they cost time)
+            mesh, crossings, inverted, edits = repair_inverted(mesh, surface, crossings,
+                                                               inverted, count_crossings)
+    sizes = mesh.face_sizes
+    info = {**info, **_mesh_figures(mesh), "quads": int((sizes == 4).sum()),
+            "triangles": int((sizes == 3).sum()), "inverted_faces": inverted,
+            "layout_inverted_faces": layout_inverted, "moved_vertices": moved, "edits": edits}
     return mesh, info
 
 

@@ -9,8 +9,8 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     """Quantize the labeling's polycube and lay its unit quads on the target, or decimate.
 
     With ``base_mesh_method="auto"`` an invalid labeling, or a layout that fails, needs
-    more than twice the budget or has inverted faces, falls back to the paired decimation
-    of the target (``core.quadmesh.build_base_mesh``).
+    more than 1.5 times the budget or has more inverted faces after its repair, falls back to
+    the paired decimation of the target (``core.quadmesh.build_base_mesh``).
 
     Parameters
     ----------

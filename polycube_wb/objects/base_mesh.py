@@ -62,8 +62,8 @@ class BaseMeshProxy(CageProxy):
                      default("max_base_faces"))
         add_property(obj, "App::PropertyEnumeration", "Method", "Base mesh",
                      "'auto': the polycube layout, or a paired decimation of the target where "
-                     "the layout fails, needs more than twice the budget or has inverted "
-                     "faces; 'polycube': never fall back; 'decimation': the paired "
+                     "the layout fails, needs more than 1.5 times the budget or has more "
+                     "inverted faces after its repair; 'polycube': never fall back; 'decimation': the paired "
                      "decimation only", list(BASE_MESH_METHODS), choice=default("base_mesh_method"))
         add_cage_properties(obj)
 

@@ -1,0 +1,79 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""The route policy of the base-mesh stage on shapes with holes: the polycube layout is kept
+within 1.5 times the budget, its inverted faces are repaired, and the report names both
+candidates."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from core.mesh_topology import polymesh_genus
+from core.polymesh_checks import check_polymesh
+from core.quadmesh import build_base_mesh
+from core.quadmesh.base_mesh import FALLBACK_OVER_BUDGET, _repaired_layout
+from core.quadmesh.orientation import inverted_faces
+from core.target_surface import TargetSurface
+from core.types import TriMesh
+from tests.core.test_quadmesh import (FRAME, euler_genus, identity_frames, nearest_labels,
+                                      union_of_boxes)
+
+# a plate with two square through-holes (genus 2) built of boxes
+TWO_HOLES = [[[0, 0, 0], [5, 1, 1]], [[0, 2, 0], [5, 3, 1]], [[0, 0, 0], [1, 3, 1]],
+             [[2, 0, 0], [3, 3, 1]], [[4, 0, 0], [5, 3, 1]]]
+
+
+def auto_base_mesh(boxes, target_faces):
+    V, F = union_of_boxes(boxes)
+    face_frame, part_frames = identity_frames(len(F))
+    base, info = build_base_mesh(TriMesh(V, F), np.zeros(len(F), dtype=np.int64),
+                                 nearest_labels(V, F), face_frame, part_frames, target_faces)
+    return V, F, base, info
+
+
+@pytest.mark.parametrize("boxes", [FRAME, TWO_HOLES], ids=["frame", "two-holes"])
+def test_a_shape_with_holes_takes_the_polycube_route_with_its_genus(boxes):
+    V, F, base, info = auto_base_mesh(boxes, 300)
+    assert info["method"] == "polycube" and info["fallback_reason"] is None
+    check_polymesh(base)  # closed, 2-manifold, outward, no degenerate face
+    assert info["genus"] == polymesh_genus(base) == euler_genus(V, F) >= 1
+    assert not inverted_faces(base, V, F).any() and info["inverted_faces"] == 0
+    assert base.n_faces <= FALLBACK_OVER_BUDGET * 300
+    assert info["candidates"]["polycube"]["faces"] == base.n_faces
+    assert info["candidates"]["paired decimation"] is None  # not needed, not built
+
+
+def test_a_layout_over_the_rule_gives_way_and_the_report_names_both_candidates():
+    # six faces cannot hold a frame's layout (each of its 16 charts needs a quad)
+    V, F, base, info = auto_base_mesh(FRAME, 6)
+    polycube = info["candidates"]["polycube"]
+    assert info["method"] == "paired decimation" and not polycube["built"]
+    assert polycube["faces"] > FALLBACK_OVER_BUDGET * 6 and polycube["reason"]
+    decimation = info["candidates"]["paired decimation"]
+    assert decimation["built"] and decimation["faces"] == base.n_faces
+    assert decimation["extraordinary_vertices"] == info["extraordinary_vertices"]
+    assert info["genus"] == euler_genus(V, F)
+
+
+def test_a_folded_layout_vertex_is_repaired():
+    V, F, base, info = auto_base_mesh(FRAME, 300)
+    surface = TargetSurface(V, F)
+    # fold the layout: one vertex of the frame's top face pushed across its neighbours
+    top = np.flatnonzero((np.abs(base.vertices[:, 2] - 1.0) < 1e-9)
+                         & (base.vertices[:, 0] > 0.05) & (base.vertices[:, 0] < 0.95)
+                         & (base.vertices[:, 1] > 1.05) & (base.vertices[:, 1] < 1.95))
+    assert len(top)
+    vertex = top[0]
+    neighbours = [f for f in base.faces() if vertex in f]
+    ring = np.unique(np.concatenate([np.asarray(f) for f in neighbours]))
+    spread = base.vertices[ring] - base.vertices[vertex]
+    folded = base.vertices.copy()
+    folded[vertex] += 2.0 * spread[np.argmax(np.linalg.norm(spread, axis=1))]
+    folded_base = replace(base, vertices=folded)
+    before = int(inverted_faces(folded_base, V, F, surface).sum())
+    assert before > 0
+    repaired, repaired_info = _repaired_layout(folded_base, info, surface)
+    check_polymesh(repaired)
+    assert repaired_info["layout_inverted_faces"] == before
+    assert repaired_info["inverted_faces"] == int(inverted_faces(repaired, V, F, surface).sum())
+    assert repaired_info["inverted_faces"] == 0  # one corner moved back unfolds it
+    assert polymesh_genus(repaired) == euler_genus(V, F)
