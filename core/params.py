@@ -79,6 +79,9 @@ class ReconstructionParams:
         file are in millimetres, FreeCAD's and STEP's usual unit.
     components : what to do with several connected components (``largest``, ``all``, ``error``).
     check_self_intersections : run the triangle-triangle test at intake.
+    repair_mesh : repair, at intake, faces with coincident corners, duplicate and zero-area
+        faces and a few intersecting faces (``core.mesh_repair``; each repair is listed in
+        the report's ``input.repairs``); False refuses such a mesh.
     parts : ``single`` (whole mesh one part), ``auto`` (curve-skeleton based) or ``file``
         (chosen by the user, read from ``parts_file``).
     parts_file : JSON file with one of ``{"face_part": [p_0, ..., p_m-1]}``, ``{"groups":
@@ -128,6 +131,9 @@ class ReconstructionParams:
     check_self_intersections: bool = _param(
         True, "do not run the triangle-triangle intersection test at intake",
         "--skip-self-intersection-check")
+    repair_mesh: bool = _param(
+        True, "refuse a mesh with duplicate or zero-area faces or a few intersecting faces "
+        "instead of repairing it", "--no-mesh-repair")
     parts: str = _param("single", "part segmentation: whole mesh one part, or curve-skeleton "
                         "based", _flag("parts"), choices=PART_MODES)
     parts_file: str = _param("", "user parts: JSON with 'face_part' (per-face part ids), 'groups' "

@@ -3,26 +3,30 @@
 
 Each failed check raises ``InvalidMeshError`` naming what is wrong, how many items,
 and an example (index and coordinates). Repairs are made only where they are
-unambiguous (merging bit-identical vertices, flipping a consistently inward mesh,
-re-orienting an orientable mesh) and are listed in the returned warnings.
+unambiguous and are listed, with their counts and places, in the returned summary:
+always merging coincident vertices and orienting an orientable surface outwards; unless
+``repair=False``, also removing faces with coincident corners, duplicate faces and
+zero-area faces and smoothing out a few intersecting faces (:mod:`core.mesh_repair`).
 """
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from core.errors import InvalidMeshError, ParameterError
-from core.geometry import face_areas, triangle_signed_volumes
+from core.geometry import triangle_signed_volumes
+from core.mesh_repair import (Repair, collapse_zero_area_faces, degenerate_face_mask,
+                              drop_collapsed_faces, format_point, remove_duplicate_faces,
+                              resolve_self_intersections)
 from core.mesh_topology import directed_edges, genus_of, unique_edges
 from core.polymesh_checks import check_coordinate_range
 from core.self_intersection import find_self_intersections
-from core.tolerances import MERGE, ZERO_AREA
+from core.tolerances import MERGE
 from core.types import TriMesh
 
 COMPONENT_POLICIES = ("largest", "all", "error")
 
 
-def _fmt(point):
-    return "(" + ", ".join(f"{c:.6g}" for c in point) + ")"
+_fmt = format_point
 
 
 def check_finite(vertices, name="mesh"):
@@ -64,9 +68,7 @@ def merge_identical_vertices(vertices, faces):
     faces : (m, 3) int64 re-indexed.
     n_merged : int, how many input vertices were merged away or dropped.
     """
-    diag = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))) or 1.0
-    grid = np.round(vertices / (MERGE * diag)).astype(np.int64)
-    first_of_key, inverse = _unique_rows(grid)
+    first_of_key, inverse = _unique_rows(_merge_grid(vertices))
     unique = vertices[first_of_key]
     faces = inverse.reshape(-1)[faces]
     used, first = np.unique(faces.reshape(-1), return_index=True)
@@ -76,13 +78,29 @@ def merge_identical_vertices(vertices, faces):
     return unique[order], remap[faces], len(vertices) - len(order)
 
 
+def _merge_grid(vertices):
+    """(n, 3) int64 cells of the ``MERGE * diagonal`` grid: vertices in one cell are merged."""
+    diag = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))) or 1.0
+    return np.round(vertices / (MERGE * diag)).astype(np.int64)
+
+
+def near_duplicate_vertices(vertices):
+    """(k, 3) float64 distinct coordinates that :func:`merge_identical_vertices` merges with
+    other coordinates (vertices within ``MERGE`` of the diagonal, not bit-identical)."""
+    distinct = vertices[_unique_rows(np.ascontiguousarray(vertices).view(np.int64))[0]]
+    _, cell = _unique_rows(_merge_grid(distinct))
+    return distinct[np.bincount(cell)[cell] > 1]
+
+
+def _drop_unused_vertices(vertices, faces):
+    used, faces = np.unique(faces, return_inverse=True)
+    return vertices[used], faces.reshape(-1, 3)
+
+
 def check_degenerate_faces(vertices, faces, name="mesh"):
     """Raise ``degenerate_faces`` for faces with a repeated vertex or (near) zero area."""
-    repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
     tri = vertices[faces]
-    double_area = 2.0 * face_areas(vertices, faces)
-    diag = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
-    bad = repeated | (double_area <= ZERO_AREA * diag * diag)
+    bad = degenerate_face_mask(vertices, faces)
     if bad.any():
         idx = np.flatnonzero(bad)
         f = idx[0]
@@ -171,7 +189,8 @@ def check_manifold_vertices(vertices, faces, name="mesh"):
 def orient_consistently(vertices, faces, name="mesh"):
     """Make the winding consistent and the normals point outwards.
 
-    Every edge must have two faces. Returns ``(faces, n_flipped)``. Raises
+    Every edge must have two faces. Returns ``(faces (m, 3) int64, flipped (m,) bool)``,
+    the faces whose winding was reversed. Raises
     ``orientation`` if the surface is not orientable (no consistent winding exists).
     """
     m = len(faces)
@@ -190,7 +209,7 @@ def orient_consistently(vertices, faces, name="mesh"):
     volume = np.bincount(component, weights=triangle_signed_volumes(vertices, faces))
     inward = volume[component] < 0
     faces = np.where(inward[:, None], faces[:, ::-1], faces)
-    return faces, int(np.count_nonzero(flip.astype(bool) ^ inward))
+    return faces, flip.astype(bool) ^ inward
 
 
 def _face_graph(m, f1, f2):
@@ -255,7 +274,7 @@ def select_components(vertices, faces, policy, name="mesh"):
 
 
 def validate_target(vertices, faces, components="largest", check_self_intersections=True,
-                    name="mesh", unit_to_mm=1.0):
+                    name="mesh", unit_to_mm=1.0, repair=True):
     """Validate raw triangle data and return a clean closed mesh plus a summary.
 
     Parameters
@@ -271,12 +290,17 @@ def validate_target(vertices, faces, components="largest", check_self_intersecti
     unit_to_mm : float
         Millimetres per unit of ``vertices``: the coordinates in millimetres must suit a
         B-rep (``core.polymesh_checks.check_coordinate_range``).
+    repair : bool
+        Repair faces with coincident corners, duplicate and zero-area faces and a few
+        intersecting faces (:mod:`core.mesh_repair`); False refuses them.
 
     Returns
     -------
     mesh : TriMesh, watertight, 2-manifold, outward oriented.
     summary : dict, JSON-serialisable: triangles, vertices, genus, components,
-        bbox_diagonal, merged_vertices, reoriented_faces, warnings (list of str).
+        bbox_diagonal, volume, merged_vertices, reoriented_faces, repairs (one entry per
+        kind of repair: kind, count, action, bbox_min, bbox_max in the file's units,
+        largest_move; see ``core.mesh_repair.Repair``), warnings (list of str).
 
     Raises
     ------
@@ -290,33 +314,58 @@ def validate_target(vertices, faces, components="largest", check_self_intersecti
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise InvalidMeshError(f"{name}: face indices outside 0..{len(vertices) - 1}", reason="unreadable")
     n_input_vertices = len(vertices)
-    used, faces = np.unique(faces, return_inverse=True)
-    vertices, faces = vertices[used], faces.reshape(-1, 3)
+    vertices, faces = _drop_unused_vertices(vertices, faces)
     check_finite(vertices, name)
     check_coordinate_range(vertices, f"{name}:", "scale the mesh or give its --units",
                            unit_to_mm)
-    warnings = []
+    repairs = []
+    near = near_duplicate_vertices(vertices)
+    if len(near):
+        repairs.append(Repair.around(
+            "near_duplicate_vertices", len(near),
+            f"merged {len(near)} vertices lying within {MERGE:g} of the diagonal of another",
+            near))
     vertices, faces, _ = merge_identical_vertices(vertices, faces)
     merged = n_input_vertices - len(vertices)
-    check_degenerate_faces(vertices, faces, name)
-    check_duplicate_faces(vertices, faces, name)
+    if repair:
+        faces, done = drop_collapsed_faces(vertices, faces)
+        repairs.append(done)
+        if len(faces):
+            faces, done = remove_duplicate_faces(vertices, faces, name)
+            repairs.append(done)
+        if len(faces) == 0:
+            raise InvalidMeshError(f"{name}: every face has coincident corners", reason="degenerate_faces",
+                                   count=merged)
+        vertices, faces = _drop_unused_vertices(vertices, faces)
+    else:
+        check_degenerate_faces(vertices, faces, name)
+        check_duplicate_faces(vertices, faces, name)
     check_edges(vertices, faces, name)
     check_manifold_vertices(vertices, faces, name)
     faces, flipped = orient_consistently(vertices, faces, name)
-    if flipped:
-        warnings.append(f"re-oriented {flipped} faces so that all normals point outwards "
-                        "(the fix is unambiguous for a closed orientable surface)")
+    if flipped.any():
+        repairs.append(Repair.around(
+            "reoriented_faces", int(flipped.sum()),
+            f"re-oriented {int(flipped.sum())} faces so that all normals point outwards "
+            "(the fix is unambiguous for a closed orientable surface)", vertices[faces[flipped]]))
+    if repair:
+        vertices, faces, done = collapse_zero_area_faces(vertices, faces, name)
+        repairs.append(done)
     vertices, faces, n_components, component_warnings = select_components(
         vertices, faces, components, name)
-    warnings.extend(component_warnings)
     if check_self_intersections:
         pairs = find_self_intersections(vertices, faces)
+        if len(pairs) and repair:
+            vertices, done = resolve_self_intersections(vertices, faces, pairs, name)
+            repairs.append(done)
+            pairs = find_self_intersections(vertices, faces)
         if len(pairs):
             a, b = pairs[0]
             raise InvalidMeshError(
                 f"{name}: {len(pairs)} pairs of intersecting faces, e.g. faces {a} and {b} near "
                 f"{_fmt(vertices[faces[a]].mean(axis=0))}",
                 reason="self_intersecting", count=len(pairs), examples=[tuple(map(int, p)) for p in pairs[:5]])
+    repairs = [done for done in repairs if done is not None]
     kept_components = n_components if components == "all" else 1
     summary = {
         "triangles": int(len(faces)),
@@ -326,7 +375,9 @@ def validate_target(vertices, faces, components="largest", check_self_intersecti
         "bbox_diagonal": float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))),
         "volume": float(triangle_signed_volumes(vertices, faces).sum()),
         "merged_vertices": int(merged),
-        "reoriented_faces": int(flipped),
-        "warnings": warnings,
+        "reoriented_faces": int(flipped.sum()),
+        "repairs": [done.to_report() for done in repairs],
+        "warnings": [done.message() for done in repairs if done.kind != "near_duplicate_vertices"]
+        + component_warnings,
     }
     return TriMesh(vertices, faces), summary

@@ -411,7 +411,7 @@ def stage_kind(obj):
 
 
 def make_target(doc, source, name="Target", components="largest",
-                check_self_intersections=True):
+                check_self_intersections=True, repair=True):
     """Add a Target object holding a validated mesh (embedded in the document).
 
     Parameters
@@ -420,7 +420,8 @@ def make_target(doc, source, name="Target", components="largest",
     source : path of a mesh file (STL, OBJ, PLY, OFF), a ``core.types.TriMesh``, or a
         ``Mesh::Feature`` (e.g. the plain target of a document made by an older version;
         its placement is applied).
-    components, check_self_intersections : as in ``core.validate.validate_target``.
+    components, check_self_intersections, repair : as in ``core.validate.validate_target``
+        (the command line's intake: the target holds the repaired mesh).
 
     Returns
     -------
@@ -448,7 +449,7 @@ def make_target(doc, source, name="Target", components="largest",
         vertices, faces = read_triangle_soup(source_file)
     mesh, _ = validate_target(vertices, faces, components=components,
                               check_self_intersections=check_self_intersections,
-                              name=source_file or name)
+                              name=source_file or name, repair=repair)
     obj = _make(doc, "Target", name, {}, {"CheckSelfIntersections": check_self_intersections})
     obj.Mesh = arrays_to_mesh(mesh.vertices, mesh.faces)
     obj.SourceFile = source_file

@@ -15,7 +15,7 @@ def run_intake(source, params, progress):
     ----------
     source : core.types.MeshSource, the file, or arrays in memory.
     params : core.params.ReconstructionParams (``units``, ``components``,
-        ``check_self_intersections``).
+        ``check_self_intersections``, ``repair_mesh``).
     progress : core.progress.Progress.
 
     Returns
@@ -24,7 +24,8 @@ def run_intake(source, params, progress):
 
     Raises
     ------
-    InvalidMeshError when the mesh is not a closed, consistently oriented 2-manifold.
+    InvalidMeshError when the mesh is not a closed, consistently oriented 2-manifold after
+    the repairs ``params.repair_mesh`` allows.
     """
     from core.mesh_io import read_triangle_soup
     from core.validate import validate_target
@@ -37,7 +38,8 @@ def run_intake(source, params, progress):
     factor = UNIT_TO_MM[params.units]
     mesh, summary = validate_target(vertices, faces, components=params.components,
                                     check_self_intersections=params.check_self_intersections,
-                                    name=str(source.path), unit_to_mm=factor)
+                                    name=str(source.path), unit_to_mm=factor,
+                                    repair=params.repair_mesh)
     report = {"file": str(source.path), "units": params.units, "unit_to_mm": factor, **summary}
     return IntakeResult(target=TriMesh(mesh.vertices * factor, mesh.faces),
                         genus=int(summary["genus"]), report=report,

@@ -104,17 +104,18 @@ def test_nan_vertex_is_rejected():
     assert error.reason == "non_finite" and "vertex 5" in str(error)
 
 
-def test_zero_area_faces_are_rejected():
+def test_zero_area_faces_are_rejected_without_repair():
     V, F = box()
     V2 = np.vstack([V, V[F[0, 0]] * 0.5 + V[F[0, 1]] * 0.5])
     F2 = np.vstack([F, [[F[0, 0], F[0, 1], len(V)]]])
-    error = reason_of(V2, F2)
+    error = reason_of(V2, F2, repair=False)
     assert error.reason == "degenerate_faces" and "1 degenerate" in str(error)
+    assert reason_of(V2, F2).reason == "open"  # a zero-area fin is no repairable defect
 
 
-def test_duplicate_faces_are_rejected():
+def test_duplicate_faces_are_rejected_without_repair():
     V, F = box()
-    error = reason_of(V, np.vstack([F, F[4:5]]))
+    error = reason_of(V, np.vstack([F, F[4:5]]), repair=False)
     assert error.reason == "duplicate_faces" and "face 12" in str(error)
 
 

@@ -62,7 +62,7 @@ SHAPES = {
     "single_triangle": ((fm.tetrahedron()[0], fm.tetrahedron()[1][:1]), (2,), ("boundary edges",)),
     "collinear": (fm.collinear_soup(), (2,), ("degenerate",)),
     "coplanar_two_sided": (fm.flat_square_both_sides(), (2,), ("duplicate faces",)),
-    "duplicated_surface": (fm.concatenate(fm.box(), fm.box()), (2,), ("duplicate faces",)),
+    "duplicated_surface": (fm.concatenate(fm.box(), fm.box()), (0,), ()),  # one copy kept
     "vertex_fan": (fm.boxes_sharing_a_vertex(), (2,), ("non-manifold vertices",)),
     "edge_fan": (fm.boxes_sharing_an_edge(), (2,), ("non-manifold edges",)),
     "fin": (fm.box_with_fin(), (2,), ("boundary edges",)),
@@ -73,13 +73,17 @@ SHAPES = {
 
 
 def shape_cases():
-    """Every shape in every format the intake reads."""
+    """Every shape in every format the intake reads; the repairable ones once more with
+    ``--no-mesh-repair``, which refuses them."""
     cases = []
     for shape_name, (shape, codes, words) in SHAPES.items():
         for kind, writer in fm.WRITERS.items():
             suffix = kind.rsplit(".", 1)[-1]
             cases.append(intake(f"shape-{shape_name}-{kind}", f"{shape_name}.{suffix}",
                                 writer(shape), codes, words))
+    cases.append(intake("shape-duplicated_surface-strict", "d.obj",
+                        fm.obj_text(fm.concatenate(fm.box(), fm.box())),
+                        words=("duplicate faces",), extra=("--no-mesh-repair",)))
     return cases
 
 
