@@ -44,6 +44,8 @@ REPAIRABLE_REGION_FRACTION = 0.05
 """The vertices a self-intersection repair may move, as a fraction of all vertices."""
 REPAIR_VOLUME_CHANGE = 0.01
 """A self-intersection repair may change the enclosed volume by at most this fraction."""
+MAX_PLACES = 10
+"""A repair's report lists the places of at most this many of its items."""
 NEEDLE_RATIO = 0.1
 """A zero-area face whose shortest edge is at most this fraction of its longest is a needle
 (its shortest edge is collapsed); otherwise it is a cap (its longest edge is flipped)."""
@@ -59,6 +61,7 @@ class Repair:
     action : what was done, one sentence.
     bbox_min, bbox_max : (3,) tuple of float, corners of the box holding the repaired
         items, in the file's units.
+    places : tuple of (3,) tuples, the centres of the first :data:`MAX_PLACES` items.
     largest_move : the farthest any kept vertex moved, in the file's units.
     """
 
@@ -67,14 +70,20 @@ class Repair:
     action: str
     bbox_min: tuple
     bbox_max: tuple
+    places: tuple
     largest_move: float = 0.0
 
     @classmethod
-    def around(cls, kind, count, action, points, largest_move=0.0):
-        """A repair whose place is the bounding box of ``points`` ((k, 3) float64)."""
-        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        return cls(kind, int(count), action, tuple(map(float, points.min(axis=0))),
-                   tuple(map(float, points.max(axis=0))), float(largest_move))
+    def around(cls, kind, count, action, items, places=None, largest_move=0.0):
+        """A repair of the ``items`` ((k, c, 3) float64: the c points of each vertex, face
+        or pair; (k, 3) for single points); ``places`` ((p, 3)) default to their centres."""
+        items = np.asarray(items, dtype=np.float64)
+        items = items.reshape(len(items), -1, 3)
+        places = items.mean(axis=1) if places is None else np.asarray(places).reshape(-1, 3)
+        flat = items.reshape(-1, 3)
+        return cls(kind, int(count), action, tuple(map(float, flat.min(axis=0))),
+                   tuple(map(float, flat.max(axis=0))),
+                   tuple(tuple(map(float, p)) for p in places[:MAX_PLACES]), float(largest_move))
 
     def message(self):
         """One line for the warnings: the action and where."""
@@ -85,7 +94,7 @@ class Repair:
     def to_report(self):
         return {"kind": self.kind, "count": self.count, "action": self.action,
                 "bbox_min": list(self.bbox_min), "bbox_max": list(self.bbox_max),
-                "largest_move": self.largest_move}
+                "places": [list(p) for p in self.places], "largest_move": self.largest_move}
 
 
 def format_point(point):
@@ -168,7 +177,7 @@ def remove_duplicate_faces(vertices, faces, name="mesh"):
     return repaired, Repair.around(
         "duplicate_faces", removed,
         f"removed {removed} duplicate faces ({int((copies > 1).sum())} faces were written "
-        "more than once)", vertices[faces[duplicated]])
+        "more than once)", vertices[faces[~keep]])
 
 
 def _every_edge_on_two_faces(faces, where):
@@ -211,7 +220,7 @@ def collapse_zero_area_faces(vertices, faces, name="mesh"):
     bad = degenerate_face_mask(vertices, faces, diag)
     if not bad.any():
         return vertices, faces, None
-    found, where = int(bad.sum()), vertices[faces[bad]].reshape(-1, 3)
+    found, where = int(bad.sum()), vertices[faces[bad]]
     editor = _FaceEditor(vertices, faces, ZERO_AREA * diag * diag)
     for _ in range(8):
         progressed = False
@@ -235,7 +244,7 @@ def collapse_zero_area_faces(vertices, faces, name="mesh"):
     return editor.vertices[used], remap[editor.faces[editor.alive]], Repair.around(
         "zero_area_faces", found,
         f"collapsed or flipped {found} zero-area faces ({editor.collapses} edge collapses, "
-        f"{editor.flips} edge flips)", where, moved)
+        f"{editor.flips} edge flips)", where, largest_move=moved)
 
 
 class _FaceEditor:
@@ -394,7 +403,7 @@ def resolve_self_intersections(vertices, faces, pairs, name="mesh"):
             "self_intersections", len(pairs),
             f"smoothed out {len(pairs)} pairs of intersecting faces by moving "
             f"{int(free.sum())} vertices (volume changed by {change / abs(volume):.2%})",
-            vertices[free], move)
+            vertices[free], vertices[faces[pairs]].reshape(-1, 6, 3).mean(axis=1), move)
     raise InvalidMeshError(f"{what}; {why}", reason="self_intersecting", count=len(pairs),
                            examples=[tuple(map(int, p)) for p in pairs[:5]])
 

@@ -57,10 +57,10 @@ def the_repair(summary, kind):
 
 
 def assert_within(entry, points, margin=1e-9):
-    """The repair's box holds ``points`` ((k, 3))."""
-    points = np.asarray(points).reshape(-1, 3)
-    assert (points >= np.asarray(entry["bbox_min"]) - margin).all()
-    assert (points <= np.asarray(entry["bbox_max"]) + margin).all()
+    """The repair's box holds ``points`` ((k, 3)) and its places."""
+    for inside in (np.asarray(points).reshape(-1, 3), np.asarray(entry["places"])):
+        assert (inside >= np.asarray(entry["bbox_min"]) - margin).all()
+        assert (inside <= np.asarray(entry["bbox_max"]) + margin).all()
 
 
 def test_caps_are_flipped_away_and_the_surface_stays_in_place():
@@ -80,6 +80,10 @@ def test_caps_are_flipped_away_and_the_surface_stays_in_place():
     assert entry["count"] == len(SPREAD_FACES) and entry["largest_move"] == 0.0
     assert len(mesh.faces) == len(F)
     assert_within(entry, damaged[F[list(SPREAD_FACES)]])
+    centres = damaged[F[list(SPREAD_FACES)]].mean(axis=1)
+    places = np.asarray(entry["places"])
+    assert len(places) == len(SPREAD_FACES)
+    assert np.abs(places[:, None] - centres[None]).max(axis=2).min(axis=1).max() < 1e-12
     assert any("zero-area faces" in line for line in summary["warnings"])
 
 

@@ -534,3 +534,40 @@ def test_package_manifest_parses():
     assert os.path.isfile(os.path.join(REPO, meta.Icon))
     with open(os.path.join(REPO, "polycube_wb", "gui", "workbench.py"), encoding="utf-8") as handle:
         assert f"class {workbench.Classname}" in handle.read()
+
+
+def test_a_damaged_mesh_is_repaired_as_on_the_command_line(tmp_path):
+    """The Target's import runs the command line's intake: a sphere with a zero-area cap,
+    a duplicate face and inward normals becomes the same closed outward mesh; without
+    repair it is refused and nothing is added."""
+    import trimesh
+
+    from core.errors import InvalidMeshError
+    from core.mesh_io import read_triangle_soup
+    from core.validate import validate_target
+    from polycube_wb import api
+
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    V, F = np.array(sphere.vertices), np.array(sphere.faces)[:, ::-1]
+    a, b, c = F[100]
+    V[c] = (V[a] + V[b]) / 2
+    path = str(tmp_path / "damaged.obj")
+    with open(path, "w") as handle:  # every digit: the cap stays of zero area
+        handle.writelines("v %r %r %r\n" % tuple(p) for p in V)
+        handle.writelines("f %d %d %d\n" % tuple(f + 1) for f in np.vstack([F, F[7:8]]))
+    mesh, summary = validate_target(*read_triangle_soup(path))
+    assert {entry["kind"] for entry in summary["repairs"]} == \
+        {"duplicate_faces", "reoriented_faces", "zero_area_faces"}
+    doc = FreeCAD.newDocument("PolycubeRepair")
+    try:
+        with pytest.raises(InvalidMeshError):
+            api.make_target(doc, path, repair=False)
+        assert doc.Objects == []
+        target = api.make_target(doc, path)
+        assert api.recompute(doc).ok and target.Genus == 0
+        points = np.array([[p.x, p.y, p.z] for p in target.Mesh.Points])
+        facets = np.array([f.PointIndices for f in target.Mesh.Facets])
+        assert len(facets) == len(mesh.faces) == len(F)
+        assert np.allclose(points[facets], mesh.vertices[mesh.faces], atol=1e-6)
+    finally:
+        FreeCAD.closeDocument(doc.Name)
