@@ -35,6 +35,9 @@ from core.mesh_topology import unique_edges, vertex_adjacency_matrix
 from core.self_intersection import find_self_intersections
 from core.tolerances import ZERO_AREA
 
+REPAIRABLE_DEGENERATE_FRACTION = 0.1
+"""Zero-area faces are repaired when they are at most this fraction of the faces; more is a
+surface that mostly has no area, not a few defects."""
 REPAIRABLE_INTERSECTING_FRACTION = 0.01
 """Self-intersections are repaired when the faces of the intersecting pairs are at most
 this fraction of the faces; more is not a local defect but a surface that crosses itself."""
@@ -202,7 +205,8 @@ def collapse_zero_area_faces(vertices, faces, name="mesh"):
     flipped, which replaces it and its neighbour by two faces covering the same place.
     Each operation keeps the mesh closed and 2-manifold (the link condition, no edge made
     twice, no valence below 3) and turns no face over; when one is refused the other is
-    tried, and faces that neither can remove raise ``InvalidMeshError``
+    tried. Faces that neither can remove, or more than
+    :data:`REPAIRABLE_DEGENERATE_FRACTION` of the faces, raise ``InvalidMeshError``
     ``degenerate_faces``.
 
     Parameters
@@ -221,6 +225,13 @@ def collapse_zero_area_faces(vertices, faces, name="mesh"):
     if not bad.any():
         return vertices, faces, None
     found, where = int(bad.sum()), vertices[faces[bad]]
+    if found > REPAIRABLE_DEGENERATE_FRACTION * len(faces):
+        f = int(np.flatnonzero(bad)[0])
+        raise InvalidMeshError(
+            f"{name}: {found} of {len(faces)} faces are degenerate (zero-area), more than the "
+            f"{REPAIRABLE_DEGENERATE_FRACTION:.0%} a repair may collapse, e.g. face {f} at "
+            f"{format_point(where[0].mean(axis=0))}",
+            reason="degenerate_faces", count=found, examples=np.flatnonzero(bad)[:5].tolist())
     editor = _FaceEditor(vertices, faces, ZERO_AREA * diag * diag)
     for _ in range(8):
         progressed = False

@@ -26,9 +26,6 @@ from core.types import TriMesh
 COMPONENT_POLICIES = ("largest", "all", "error")
 
 
-_fmt = format_point
-
-
 def check_finite(vertices, name="mesh"):
     """Raise ``non_finite`` if any coordinate is NaN or infinite."""
     bad = ~np.isfinite(vertices).all(axis=1)
@@ -36,7 +33,7 @@ def check_finite(vertices, name="mesh"):
         idx = np.flatnonzero(bad)
         raise InvalidMeshError(
             f"{name}: {len(idx)} vertices have NaN or infinite coordinates, "
-            f"e.g. vertex {idx[0]} = {_fmt(vertices[idx[0]])}",
+            f"e.g. vertex {idx[0]} = {format_point(vertices[idx[0]])}",
             reason="non_finite", count=len(idx), examples=idx[:5].tolist())
 
 
@@ -106,7 +103,7 @@ def check_degenerate_faces(vertices, faces, name="mesh"):
         f = idx[0]
         raise InvalidMeshError(
             f"{name}: {len(idx)} degenerate (zero-area) faces, e.g. face {f} with corners "
-            f"{faces[f].tolist()} at {_fmt(tri[f].mean(axis=0))}",
+            f"{faces[f].tolist()} at {format_point(tri[f].mean(axis=0))}",
             reason="degenerate_faces", count=len(idx), examples=idx[:5].tolist())
 
 
@@ -120,7 +117,7 @@ def check_duplicate_faces(vertices, faces, name="mesh"):
         f = idx[0]
         raise InvalidMeshError(
             f"{name}: {len(idx)} duplicate faces, e.g. face {f} repeats vertices "
-            f"{faces[f].tolist()} at {_fmt(vertices[faces[f]].mean(axis=0))}",
+            f"{faces[f].tolist()} at {format_point(vertices[faces[f]].mean(axis=0))}",
             reason="duplicate_faces", count=len(idx), examples=idx[:5].tolist())
 
 
@@ -136,7 +133,7 @@ def check_edges(vertices, faces, name="mesh"):
             face = int(np.flatnonzero(he_edge == idx[0])[0] // 3)
             raise InvalidMeshError(
                 f"{name}: {len(idx)} {what}, e.g. edge ({a}, {b}) of face {face} at "
-                f"{_fmt((vertices[a] + vertices[b]) / 2)}",
+                f"{format_point((vertices[a] + vertices[b]) / 2)}",
                 reason=reason, count=len(idx), examples=[tuple(map(int, edges[i])) for i in idx[:5]])
 
 
@@ -182,7 +179,7 @@ def check_manifold_vertices(vertices, faces, name="mesh"):
         v = bad[0]
         raise InvalidMeshError(
             f"{name}: {len(bad)} non-manifold vertices (two surface sheets touch at a point), "
-            f"e.g. vertex {v} at {_fmt(vertices[v])}",
+            f"e.g. vertex {v} at {format_point(vertices[v])}",
             reason="non_manifold", count=len(bad), examples=bad[:5].tolist())
 
 
@@ -263,7 +260,7 @@ def select_components(vertices, faces, policy, name="mesh"):
         f = int(np.flatnonzero(component == others[0])[0])
         raise InvalidMeshError(
             f"{name}: {n} separate components (expected one solid), e.g. face {f} at "
-            f"{_fmt(vertices[faces[f]].mean(axis=0))} is not connected to the largest one; "
+            f"{format_point(vertices[faces[f]].mean(axis=0))} is not connected to the largest one; "
             "use components='largest' to keep only the largest",
             reason="multiple_components", count=n, examples=[f])
     keep = component == largest
@@ -299,8 +296,8 @@ def validate_target(vertices, faces, components="largest", check_self_intersecti
     mesh : TriMesh, watertight, 2-manifold, outward oriented.
     summary : dict, JSON-serialisable: triangles, vertices, genus, components,
         bbox_diagonal, volume, merged_vertices, reoriented_faces, repairs (one entry per
-        kind of repair: kind, count, action, bbox_min, bbox_max in the file's units,
-        largest_move; see ``core.mesh_repair.Repair``), warnings (list of str).
+        kind of repair: kind, count, action, bbox_min, bbox_max and places in the file's
+        units, largest_move; see ``core.mesh_repair.Repair``), warnings (list of str).
 
     Raises
     ------
@@ -363,7 +360,7 @@ def validate_target(vertices, faces, components="largest", check_self_intersecti
             a, b = pairs[0]
             raise InvalidMeshError(
                 f"{name}: {len(pairs)} pairs of intersecting faces, e.g. faces {a} and {b} near "
-                f"{_fmt(vertices[faces[a]].mean(axis=0))}",
+                f"{format_point(vertices[faces[a]].mean(axis=0))}",
                 reason="self_intersecting", count=len(pairs), examples=[tuple(map(int, p)) for p in pairs[:5]])
     repairs = [done for done in repairs if done is not None]
     kept_components = n_components if components == "all" else 1

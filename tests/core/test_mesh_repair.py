@@ -231,3 +231,14 @@ def test_the_command_line_repairs_lists_and_refuses(tmp_path):
         assert result.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), name
         assert words in lines[0], (name, lines[0])
         assert not out.exists()
+
+
+def test_a_mostly_degenerate_mesh_is_refused():
+    """The torus's vertices spread along a line: a closed 2-manifold whose faces have no
+    area, no surface to repair."""
+    V, F = torus()
+    line = np.zeros_like(V)
+    line[:, 0] = np.arange(len(V)) / len(V)
+    with pytest.raises(InvalidMeshError) as info:
+        validate_target(line, F)
+    assert info.value.reason == "degenerate_faces" and "of 3072 faces are degenerate" in str(info.value)
