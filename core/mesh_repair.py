@@ -31,7 +31,7 @@ from scipy.sparse.csgraph import connected_components
 
 from core.errors import InvalidMeshError
 from core.geometry import face_cross, triangle_signed_volumes
-from core.mesh_topology import unique_edges, vertex_adjacency_matrix
+from core.mesh_topology import unique_edges
 from core.self_intersection import find_self_intersections
 from core.tolerances import ZERO_AREA
 
@@ -381,7 +381,9 @@ def resolve_self_intersections(vertices, faces, pairs, name="mesh"):
             f"{REPAIRABLE_INTERSECTING_FRACTION:.0%} a local repair may change",
             reason="self_intersecting", count=len(pairs), examples=[tuple(map(int, p)) for p in pairs[:5]])
     n = len(vertices)
-    adjacency = vertex_adjacency_matrix(faces, n).astype(np.float64)
+    edges, _ = unique_edges(faces)
+    ends = (edges.reshape(-1), edges[:, ::-1].reshape(-1))
+    adjacency = sp.coo_matrix((np.ones(2 * len(edges)), ends), shape=(n, n)).tocsr()
     valence = np.asarray(adjacency.sum(axis=1)).reshape(-1)
     laplacian = (sp.diags(valence) - adjacency).tocsr()
     _, component = connected_components(adjacency, directed=False)
