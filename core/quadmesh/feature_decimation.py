@@ -134,7 +134,8 @@ class FeatureDecimation:
         -------
         vertices : (n', 3) float64; faces : (m', 3) int64 closed, outward, the target's genus;
         features : (k', 2) int64 sorted vertex pairs, its feature edges. The same count gives
-        the same (cached) arrays.
+        the same (cached) arrays, and so does every count below the triangles of a
+        decimation that stopped short of its count (:meth:`_floor`).
         """
         count = int(count)
         if self._source is None:
@@ -143,8 +144,23 @@ class FeatureDecimation:
         if count >= len(self._source[1]):
             return self._source[:3]
         if count not in self._results:
-            self._results[count] = self._decimated(self._source, count)
+            floor = self._floor()
+            self._results[count] = (floor if floor is not None and count < len(floor[1]) else
+                                    self._decimated(self._source, count))
         return self._results[count][:3]
+
+    def _floor(self):
+        """The cached decimation that stopped short of its count because every collapse left
+        was refused, or None.
+
+        The collapses run in a fixed order (quadric error, ties by the order they were
+        queued), so a decimation to any count below that result's triangles makes the same
+        collapses and ends at the same refusals: the same result, not worth computing again
+        (the budget ladder asks for up to 12 such counts on a target whose feature network
+        stops the decimation early).
+        """
+        short = [result for count, result in self._results.items() if len(result[1]) > count]
+        return min(short, key=lambda result: len(result[1]), default=None)
 
     def _decimated(self, source, count):
         vertices, faces, features, corner = collapse_edges(*source, count, self._surface)

@@ -276,9 +276,14 @@ def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_fac
     """The budget ladder of :func:`paired_decimation_base_mesh`, of QSlim's decimations or
     with crease tags of the feature-preserving ones (a Decimation or FeatureDecimation);
     appends its rounds and returns ``(flaws, PairedDecimation, crossings)`` of the cage
-    kept."""
+    kept. A budget whose decimation is one an earlier budget got (a feature-preserving
+    decimation whose every collapse left was refused) would give the same cage again: it is
+    not built, and beyond the budget rule it counts as a budget no less flawed."""
     best = None
-    for budget in _ladder(target_faces, max_faces):
+    ladder = _ladder(target_faces, max_faces)
+    for budget, new in _repeats_marked(decimation, ladder):
+        if not new:
+            continue
         result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
         if best is None or crossings + inverted < best[0]:
             best = (crossings + inverted, result, crossings)
@@ -286,7 +291,13 @@ def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_fac
             break
     if best[2] and over_budget_faces:
         fewest, misses = best[0], 0
-        for budget in _over_budgets(target_faces, max_faces, int(over_budget_faces)):
+        for budget, new in _repeats_marked(decimation, _over_budgets(
+                target_faces, max_faces, int(over_budget_faces)), ladder):
+            if not new:
+                misses += 1
+                if misses == OVER_BUDGET_MISSES:
+                    break
+                continue
             result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
             if not crossings:
                 return (crossings + inverted, result, 0)
@@ -295,6 +306,17 @@ def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_fac
             if misses == OVER_BUDGET_MISSES:
                 break
     return best
+
+
+def _repeats_marked(decimation, budgets, tried=()):
+    """``(budget, new)`` for each of ``budgets``: ``new`` is False when its decimation (to
+    twice as many triangles) is the cached result of an earlier one or of a budget in
+    ``tried``, the same triangles."""
+    seen = {id(decimation.triangles(2 * budget)[1]) for budget in tried}
+    for budget in budgets:
+        faces = decimation.triangles(2 * budget)[1]
+        yield budget, id(faces) not in seen
+        seen.add(id(faces))
 
 
 def _flawed_mesh(decimation, budget, surface, rounds):

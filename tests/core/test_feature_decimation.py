@@ -149,3 +149,21 @@ def test_creased_cage_of_a_machined_part_is_clean_at_the_default_budget(name):
     assert 0.75 * 300 <= result.mesh.n_faces <= 1.25 * 300
     assert result.quads >= 0.85 * result.mesh.n_faces
     assert rounds[0]["crease_edges"] > 250
+
+
+def test_a_decimation_that_stops_short_answers_every_smaller_count_alike():
+    """Where every collapse left is refused, the decimation to any count below the triangles
+    reached is the same; the cached answer equals a fresh decimation to that count."""
+    box = trimesh.creation.box([2.0, 2.0, 1.0])
+    V, F = trimesh.remesh.subdivide_to_size(box.vertices, box.faces, 0.3)
+    merged = trimesh.Trimesh(V, F, process=True)
+    V, F = np.asarray(merged.vertices, dtype=np.float64), np.asarray(merged.faces, dtype=np.int64)
+    decimation = FeatureDecimation(V, F)
+    floor = decimation.triangles(2)
+    assert len(floor[1]) > 2  # the box's corners and edges stop it
+    count = len(floor[1]) - 1
+    cached = decimation.triangles(count)
+    assert cached[1] is floor[1]
+    for mine, fresh in zip(cached, FeatureDecimation(V, F).triangles(count)):
+        np.testing.assert_array_equal(mine, fresh)
+    assert len(decimation.triangles(len(floor[1]) + 4)[1]) == len(floor[1]) + 4

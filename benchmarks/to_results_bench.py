@@ -1,0 +1,127 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Topology-optimisation results published by others: per-stage seconds end to end.
+
+Usage::
+
+    .venv/bin/python benchmarks/to_results_bench.py --label after [--repo PATH]
+                                                    [--meshes DIR] [--only NAME ...]
+
+``--repo`` is the checkout whose CLI is run (default: this one; for a "before" column, an
+export of the commit to compare with, e.g. ``git archive COMMIT | tar -x -C DIR``). Each mesh
+runs the command a user runs, ``python -m polycube_wb reconstruct MESH -o OUT.step --report
+OUT.json`` with default parameters, in its own process with this checkout's interpreter. Per
+mesh: the wall seconds of every stage (from the report), the total, the exit code, the
+base-mesh method, faces and limit-surface crossings of the cage kept, the fit's crossings and
+volume outside, and the first line of the error of a failed run; with ``--evaluate``, the
+verdict of ``../shared/tools/evaluate.py`` on the STEP written. Rows are kept per label in
+``benchmarks/to_results.json``; ``benchmarks/TO_RESULTS.md`` shows the labels side by side.
+The machine has 2 cores shared with other jobs: compare labels measured in one run.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+DEFAULT_MESHES = os.path.join(REPO, "..", "shared", "data", "meshes")
+MESHES = ("simjeb76_ge_bracket_to.stl", "toplib_michell3d_density_mc.stl")
+"""The public TO results among the dev meshes (genus 52 and 48; see SOURCES.md there)."""
+EVALUATE = os.path.join(REPO, "..", "shared", "tools", "evaluate.py")
+STAGES = ("intake", "parts", "frames", "labeling", "basemesh", "fit", "patches", "solid")
+RESULTS_JSON = os.path.join(HERE, "to_results.json")
+RESULTS_MD = os.path.join(HERE, "TO_RESULTS.md")
+
+
+def run_mesh(repo, path, evaluate=False):
+    """One reconstruction of ``path`` by the CLI of ``repo``; a JSON-serialisable row."""
+    with tempfile.TemporaryDirectory() as work:
+        step, report_path = os.path.join(work, "out.step"), os.path.join(work, "out.json")
+        started = time.perf_counter()
+        done = subprocess.run([sys.executable, "-m", "polycube_wb", "reconstruct", path, "-o",
+                               step, "--report", report_path], cwd=repo, capture_output=True,
+                              text=True)
+        row = {"mesh": os.path.basename(path), "exit": done.returncode,
+               "wall": round(time.perf_counter() - started, 1)}
+        errors = [line for line in done.stderr.splitlines() + done.stdout.splitlines()
+                  if line.startswith(("failed", "error"))]
+        row["error"] = errors[0][:300] if errors else ""
+        if os.path.exists(report_path):
+            with open(report_path) as handle:
+                report = json.load(handle)
+            row["stages"] = {name: report["stages"][name].get("seconds")
+                             for name in STAGES if name in report.get("stages", {})}
+            row["total"] = report.get("total_seconds")
+            base = report.get("base_mesh", {})
+            row["base_mesh"] = {key: base.get(key) for key in ("method", "faces", "genus",
+                                                               "limit_crossings")}
+            fit = report.get("fit", {})
+            row["fit"] = {key: fit.get(key) for key in ("self_intersections",
+                                                        "outside_volume_fraction")}
+        if evaluate and done.returncode == 0 and os.path.exists(EVALUATE):
+            checked = subprocess.run([sys.executable, EVALUATE, step, path], capture_output=True,
+                                     text=True)
+            row["evaluate"] = (checked.stdout.strip().splitlines() or [""])[-1][:200]
+    return row
+
+
+def write_markdown(results):
+    """``RESULTS_MD`` from all labels' rows."""
+    lines = ["# Topology-optimisation results of others: seconds per stage", "",
+             "Written by `benchmarks/to_results_bench.py`: the CLI with default parameters, "
+             "one process per mesh, wall seconds of each stage from its report (`-`: not "
+             "reached). `cage` is the base-mesh faces and the crossing triangle pairs of their "
+             "level-2 limit surface, `fit x` the fitted limit surface's crossing pairs, "
+             "`outside` the share of the target's volume outside it. The machine has 2 cores "
+             "shared with other jobs: labels measured in one run compare; figures across runs "
+             "vary by a factor up to 2.", ""]
+    header = ["label", "mesh", *STAGES, "total", "exit", "cage", "fit x", "outside", "error"]
+    lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for label, rows in results.items():
+        for row in rows:
+            stages = row.get("stages", {})
+            base, fit = row.get("base_mesh", {}), row.get("fit", {})
+            outside = fit.get("outside_volume_fraction")
+            cells = [label, row["mesh"],
+                     *[("-" if stages.get(name) is None else f"{stages[name]:.1f}")
+                       for name in STAGES],
+                     f"{row.get('total') or row['wall']:.1f}", str(row["exit"]),
+                     f"{base.get('faces')} / {base.get('limit_crossings')}",
+                     str(fit.get("self_intersections", "-")),
+                     "-" if outside is None else f"{outside:.2%}",
+                     row.get("evaluate") or row["error"].replace("|", "/")[:160]]
+            lines.append("| " + " | ".join(cells) + " |")
+    with open(RESULTS_MD, "w") as handle:
+        handle.write("\n".join(lines) + "\n")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--label", required=True)
+    parser.add_argument("--repo", default=REPO)
+    parser.add_argument("--meshes", default=DEFAULT_MESHES)
+    parser.add_argument("--only", nargs="*", default=None)
+    parser.add_argument("--evaluate", action="store_true")
+    args = parser.parse_args()
+    names = args.only or MESHES
+    results = {}
+    if os.path.exists(RESULTS_JSON):
+        with open(RESULTS_JSON) as handle:
+            results = json.load(handle)
+    rows = []
+    for name in names:
+        row = run_mesh(os.path.abspath(args.repo), os.path.join(args.meshes, name),
+                       args.evaluate)
+        print(json.dumps(row), flush=True)
+        rows.append(row)
+    results[args.label] = rows
+    with open(RESULTS_JSON, "w") as handle:
+        json.dump(results, handle, indent=1)
+    write_markdown(results)
+
+
+if __name__ == "__main__":
+    main()
