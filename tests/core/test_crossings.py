@@ -267,8 +267,8 @@ def test_stiffen_until_clean_goes_on_without_progress_once_the_fit_is_near_clean
 
 @pytest.fixture(scope="module")
 def idler():
-    """idler_riser and its paired-decimation cage (280 faces, about the pipeline's 300; its
-    plain least-squares fit crosses itself at 97 triangle pairs)."""
+    """idler_riser and its paired-decimation cage (280 faces, about the pipeline's 300), whose
+    plain least-squares fit crosses itself."""
     target = load_dev_mesh("idler_riser.stl")
     cage = paired_decimation_base_mesh(target.vertices, target.faces, 280).mesh
     return target, cage

@@ -260,9 +260,9 @@ def test_absorb_tangent_cuts_merges_a_cap_cut_along_its_wall():
 
 
 def test_automatic_parts_of_idler_riser_are_cut_across():
-    """The curve skeleton of idler_riser ends in a 78-face sliver of a curved wall whose cut runs
-    along it (a 0.25 share, labelled 16 degrees above its nearest directions by Eq. 3's term 4);
-    no automatic part may keep such a cut."""
+    """The curve skeleton of idler_riser ends in a small sliver of a curved wall whose cut runs
+    along it (Eq. 3's term 4 would label it well above its nearest directions); no automatic
+    part may keep such a cut."""
     mesh = _load("idler_riser.stl")
     part = skeleton_segmentation(mesh).face_part
     validate_face_part(mesh, part)
