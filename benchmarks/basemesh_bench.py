@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Base-mesh benchmark (issue 8): every dev mesh, one part and automatic parts.
+"""Base-mesh benchmark: every dev mesh, one part and automatic parts.
 
 Usage::
 
@@ -133,7 +133,7 @@ def render_cage(path, V, F, base, title):
 
 
 def markdown(rows, meta):
-    lines = ["# Base-mesh benchmark (issue 8)", "",
+    lines = ["# Base-mesh benchmark", "",
              "Written by `benchmarks/basemesh_bench.py`; do not edit by hand.", "",
              f"- Date: {meta['date']}; commit {meta['commit']}; load (1 min) at start "
              f"{meta['load']}; every case in its own process (timeout {meta['timeout']} s)."

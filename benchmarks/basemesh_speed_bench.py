@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Base-mesh stage speed and determinism (issue 8): CPU seconds per dev mesh, before and after.
+"""Base-mesh stage speed and determinism: CPU seconds per dev mesh, before and after.
 
 Usage::
 
@@ -164,7 +164,7 @@ def profile_stage(state, params):
 def write_markdown(results):
     """BASEMESH_SPEED_RESULTS.md from every label in ``results`` (label -> mesh -> row): one
     table per face budget, its labels side by side."""
-    lines = ["# Base-mesh stage: CPU seconds and determinism (issue 8)", "",
+    lines = ["# Base-mesh stage: CPU seconds and determinism", "",
              "Written by `benchmarks/basemesh_speed_bench.py` (one process per mesh; default "
              "parameters, the face budget and parts mode of the table; the labeling is not in "
              "`stage`). "

@@ -103,7 +103,7 @@ def _stage_text(stages):
 def markdown(results, baseline, repeats):
     lines = ["# Export benchmark: sample cages to STEP", "",
              f"Written by `benchmarks/export_bench.py` on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; "
-             f"this tree against the baseline commit `{baseline}` (before issue 15). Each figure is "
+             f"this tree against the baseline commit `{baseline}`. Each figure is "
              f"the median of {repeats} runs, each in a fresh process. The machine (2 cores) was shared "
              "with other jobs: the 1-minute load average at the start of each run is given, and "
              "the process CPU time next to the wall time.", "",
@@ -139,7 +139,7 @@ def markdown(results, baseline, repeats):
                          f"{old['wall']:.2f} ({old['cpu']:.2f}) | {new['wall']:.2f} ({new['cpu']:.2f}) | "
                          f"{old['load']:.1f} / {new['load']:.1f} | {_stage_text(new['stages'])} | "
                          f"{new['read_valid']}, {new['read_faces']}, {new['read_seconds']:.2f} |")
-    lines += ["", "## Speed bars (issue 15)", "",
+    lines += ["", "## Speed bars", "",
               "| bar | case | limit s | wall s | CPU s | load | verdict on wall / on CPU |",
               "|---|---|---|---|---|---|---|"]
     for cage, limit in (("grid_sphere_18", 3.0), ("grid_sphere_7", 1.0)):

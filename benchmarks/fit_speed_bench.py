@@ -49,7 +49,7 @@ CASES = {"to_simp_cantilever": os.path.join(REPO, "examples", "to_simp_cantileve
              ("gripper_domain", ".stl"), ("ge_bracket_domain", ".stl"),
              ("to_simp_torsion_arm_fine3", ".stl"), ("featuretype", ".stl"),
              ("octagonal_pocket", ".stl"))}}
-"""The dev meshes that reach the fit (all 16 since session 26)."""
+"""The dev meshes that reach the fit."""
 PERTURBATION = 1e-12
 """Relative size of the noise added to a cage's vertices by ``--perturbations`` (about the
 rounding of coordinates computed another way)."""

@@ -56,7 +56,7 @@ BASEMESH_BEFORE = {
                 "to_simp_torsion_arm_fine3": "no: 2553 quads > max_base_faces 2500"},
 }
 """Turning points and base-mesh outcome of the SIMP dev meshes (one part) on main at ``commit``,
-before the turning-point pass of issue 14 (same command as :func:`basemesh_case`)."""
+before the turning-point pass (same command as :func:`basemesh_case`)."""
 
 
 SPEED_MESH = "to_simp_torsion_arm_fine3.stl"

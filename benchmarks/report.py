@@ -332,10 +332,10 @@ def _labeling_section(results):
              "Invalid items are written `charts/boundaries/corners/turning points`. *Before repair*: "
              "HBECVT alone (`hbecvt_labeling` + `check_validity`, same frames). *After repair*: the "
              "pipeline's labeling stage. *Labels file valid*: validity recomputed from the written "
-             "`--labels` PLY (`validity_from_labels_file`), the judge of issue 5; turning points are "
+             "`--labels` PLY (`validity_from_labels_file`), the independent judge; turning points are "
              "counted but do not make a labeling invalid. Mean angle: between face normal and label "
              "direction, against the nearest-direction labeling in the same frames (Δ = excess; "
-             "issue 5 asks for at most 5°). HBECVT s: the energy minimisation alone; labeling s: the "
+             "the goal is at most 5°). HBECVT s: the energy minimisation alone; labeling s: the "
              "whole stage (HBECVT, repair, validity, figures); pipeline s: intake to labeling; peak "
              "MiB: process peak at the end of the pipeline.", ""]
     header = ["mesh", "parts", "charts", "corners", "invalid before repair", "invalid after repair",
@@ -349,7 +349,7 @@ def _labeling_section(results):
         lines.append("")
         lines += _why(results, mode)
     lines += ["### Nearest-direction baselines (no smoothing, no repair)", "",
-              f"Identity frames, one part (the reference of issue 5): valid on "
+              f"Identity frames, one part (the reference): valid on "
               f"{s['nearest_identity_valid']} of {s['nearest_identity_labeled']}. "
               "Same frames as the pipeline (PCA, blended), per part mode:", ""]
     rows = []

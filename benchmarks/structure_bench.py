@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Structure benchmark (issue 9): the restructured pipeline gives the same reports.
+"""Structure benchmark: the restructured pipeline gives the same reports.
 
 Usage::
 
@@ -145,7 +145,7 @@ def main(argv=None):
 
 def write_results(rows, imports, meta, base, head):
     same = sum(1 for row in rows if not row["differences"] and not row["error"])
-    lines = ["# Structure benchmark (issue 9)", "",
+    lines = ["# Structure benchmark", "",
              "Written by `benchmarks/structure_bench.py`; do not edit by hand.", "",
              f"- Date: {meta['date']}; load (1 min) at start {meta['load']}; base commit "
              f"{base}, this branch at {head}; every run in its own process.",

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""``--tolerance`` on the dev meshes (issue 10: "meets the tolerance it was given or says why").
+"""``--tolerance`` on the dev meshes: each run meets the tolerance it was given or says why.
 
 Usage::
 

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""The pipeline on SIMP results that are not in ../shared/ (issue 8, "done when").
+"""The pipeline on SIMP results that are not in ../shared/ (the development meshes).
 
 Usage::
 
@@ -290,7 +290,7 @@ def _earlier_rows(rows, meta):
 
 
 def markdown(rows, manifest, meta):
-    lines = ["# The pipeline on unseen SIMP results (issue 8)", "",
+    lines = ["# The pipeline on unseen SIMP results", "",
              "Written by `benchmarks/unseen_bench.py`; do not edit by hand.", "",
              f"- Date: {meta['date']}; commit {meta['commit']}; load (1 min) at start "
              f"{meta['load']}; timeout per case {meta['timeout']} s.",

@@ -27,12 +27,10 @@ counts when the ray leaves the solid there (``d . m > 0``, ``m`` the triangle's 
 unit normal) beyond a small ``t_low``, so the triangles around a ray's own start vertex,
 which it enters, never count. Equal distances go to the lower triangle number.
 
-Before session 33 libigl's tree answered the last two (``igl.AABB``): its
-``squared_distance`` took about 8 ms for the 5,000 fine limit points of a fit on
-idler_riser's 3,000-triangle target, and its ``intersect_ray_first``, unbounded and missing
-about 3 % of the crossings exactly on an edge or a vertex, 22 ms for the 4,524 thickness
-rays of idler_riser's fitted limit surface plus 7 ms to build the tree (the rays it missed
-were then cast again by a numpy search); here about 4 ms and 10 ms, tree included.
+This tree replaces libigl's (``igl.AABB``) for the last two queries: libigl's ray query
+is unbounded and misses some crossings exactly on an edge or a vertex, which then had to be
+cast again by a numpy search, and both of its queries are slower on the fit's point and ray
+sets than this tree, whose build is included in the query.
 
 Every function is compiled with numba and cached on disk (``cache=True``: ``__pycache__``
 beside this file, or the user's cache folder when that is read-only), so only the first run
@@ -47,8 +45,8 @@ import numpy as np
 from core.compiled import keeps_interrupts, numba
 
 LEAF_BOXES = 4
-"""Boxes per leaf (on featuretype's level-2 limit mesh, 9,920 triangles and 80,574
-overlapping pairs, four take about 0.6 of the self-overlap search time of one)."""
+"""Boxes per leaf: a few boxes a leaf make the tree shallower and the self-overlap search
+of a limit mesh faster than one box a leaf."""
 STACK_DEPTH = 64
 """Room of the traversal stack (nodes): one per level of the tree is pushed at most."""
 

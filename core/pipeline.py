@@ -70,7 +70,7 @@ class PipelineResult:
     """Everything a run produced.
 
     state : core.types.PipelineState, the typed result of every stage that ran.
-    report : dict, the JSON report (see README, "Report").
+    report : dict, the JSON report (see docs/REFERENCE.md, "The report").
     failed : the exception of a stage that failed unexpectedly, else None.
     """
 

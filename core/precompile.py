@@ -1,8 +1,8 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Compile every cached compiled function of the spatial queries now (``make setup``).
 
-numba compiles a function the first time it is called with new argument types, about 14 s
-for all of them here, and keeps the result in its cache (:mod:`core.compiled`); run once at
+numba compiles a function the first time it is called with new argument types, several
+seconds for all of them here, and keeps the result in its cache (:mod:`core.compiled`); run once at
 set-up, the first reconstruction on a machine does not spend its first seconds on it.
 """
 import time

@@ -11,10 +11,9 @@ rejects, so they are skipped. Touching contacts within ``core.tolerances.CONTACT
 bounding-box diagonal and exactly coplanar overlaps are not reported.
 
 The tree's traversal (:mod:`core.box_tree`) and the narrow phase are compiled with
-numba: one loop over the pairs, about 30 ns a pair, where numpy's per-call cost was
-5-10 ms for each of the hundred searches of a fit (featuretype's inside fit: 2.4 -> 1.6 CPU
-s, the same fit bit for bit). Compiled functions are cached on disk, so only the first run
-on a machine compiles them (about 4 s).
+numba: one loop over the pairs, so a fit's hundred searches do not each pay numpy's
+per-call cost (the result is the same bit for bit). Compiled functions are cached on disk,
+so only the first run on a machine compiles them (a few seconds).
 """
 import numpy as np
 

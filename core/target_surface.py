@@ -42,11 +42,9 @@ SPLIT_EDGE = 2.0
 """With ``split=True``, the search tree holds the triangles cut into pieces no longer than
 this many times the median of the triangles' longest edges
 (:func:`core.geometry.bisect_long_triangles`). A long
-triangle's box overlaps those of many short ones, and a query near it opens them all: the
-inside fit's closest points on its target took 9.0, 10.2, 4.8 and 20.6 us a point with the
-triangles in the tree on featuretype, octagonal_pocket, idler_riser and ge_bracket_domain,
-5.2, 4.3, 3.4 and 8.6 with the pieces (tray_bottom 2.5 and 2.7; the SIMP meshes have no
-triangle this long)."""
+triangle's box overlaps those of many short ones, and a query near it opens them all;
+cut into pieces, the closest-point queries of the fit on a CAD-like target with long
+triangles take about half the time. Meshes without long triangles are unchanged."""
 SPLIT_MOST = 4
 """... and at most this many times as many pieces as triangles: while more, the longest
 piece allowed is doubled."""
@@ -54,7 +52,7 @@ CLOSEST_KEPT = 4
 """Most answers of :meth:`TargetSurface.closest` kept (the latest), each for its query
 points bit for bit, and as many of :meth:`TargetSurface.samples_nearest`: the fit queries
 some point sets again (a refit starts where the fit before it ended, the inside pull where
-the untangled fit is; fine3: 0.1 s a query). Two
+the untangled fit is; a query on a fine target is costly). Two
 already find those; 16 found only a few more small ones (the cold refits' first coarse
 rounds), at four times the memory (an answer and its points: about 120 bytes a point)."""
 
@@ -163,9 +161,8 @@ class TargetSurface:
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         face = np.zeros(len(points), dtype=np.int64)
         if len(points):
-            # in Z-order, neighbouring queries walk the same tree nodes (0.81-0.86 of the
-            # time for 5,000 scattered points on featuretype and to_simp_mbb); each point's
-            # answer does not depend on the order
+            # in Z-order, neighbouring queries walk the same tree nodes, which is faster
+            # than scattered order; each point's answer does not depend on the order
             order = np.argsort(morton_codes(points), kind="stable")
             face[order] = self._triangle_of(nearest_triangles(self._point_tree, points[order]))
         point, bary, region = closest_on_triangles(self._tri[face], points)

@@ -5,8 +5,8 @@ machine's core count.
 A multi-threaded BLAS splits a dot product or a matrix product into per-thread partial
 sums whose number, and so whose rounding, follows the thread count. The fit feeds such
 products into branching decisions (a point inside or outside, a crossing held back or
-not), so last-bit differences grow into different results: fine3's inside fit left
-1.17 % of the volume outside with one OpenBLAS thread and 0.62 % with two. The fit's
+not), so last-bit differences grow into different results (the volume left outside by an
+inside fit differs visibly between one OpenBLAS thread and two). The fit's
 products are small (a few thousand rows), so one thread costs no time (see
 ``benchmarks/FIT_RESULTS.md``).
 """

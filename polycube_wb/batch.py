@@ -51,7 +51,7 @@ class MeshJob:
     out_dir : absolute output folder.
     params : keyword arguments of ``reconstruct_to_step`` (ReconstructionParams fields).
     timeout : seconds the mesh may take, or None.
-    memory_mb : address-space cap of the mesh's process in MiB, None for none, or
+    memory_mb : resident-memory cap of the mesh's process in MiB, None for none, or
         ``AUTO_MEMORY``: the default share of the machine that runs it with one mesh per
         core (:func:`polycube_wb.batch_memory.default_memory_limit_mb`; Dask workers).
     """

@@ -10,7 +10,7 @@ poll before it is stopped.
 An address-space limit inside the worker (``RLIMIT_AS``) is not used: the libraries do not
 all fail cleanly when an allocation is refused. OpenBLAS's ``blas_memory_alloc`` retries a
 refused work buffer forever, and manifold3d's TBB spins in ``sched_yield`` after a refused
-``cache_aligned_allocate`` (both seen under gdb on the tiny cantilever), so a capped worker
+``cache_aligned_allocate`` (both seen under gdb), so a capped worker
 could hang until its time cap instead of failing.
 """
 import os

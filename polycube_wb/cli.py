@@ -89,9 +89,9 @@ def build_parser():
     bat.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
                      help="time cap per mesh; a mesh over it is stopped and reported")
     bat.add_argument("--memory-limit", type=float, default=None, metavar="MB",
-                     help="address-space cap per mesh process in MiB (Linux RLIMIT_AS); 0 for "
-                          "none (default: 80%% of the RAM shared by the meshes at once, at "
-                          "least 2048)")
+                     help="resident-memory cap per mesh process in MiB, watched from outside "
+                          "it; 0 for none (default: 80%% of the RAM shared by the meshes at "
+                          "once, at least 512)")
     bat.add_argument("--scheduler", metavar="ADDRESS",
                      help="send the meshes to this Dask distributed scheduler (tcp://host:8786); "
                           "inputs and OUT_DIR must be on a path every worker shares")

@@ -83,8 +83,7 @@ def _fit_with_ends(ctx, B, X, start, end, start_pos, end_pos):
     to it is projected onto the exact limit tangent plane, so all patches there share it. At a
     vertex on a crease nothing is projected: its limit surface has one tangent plane per
     side, and in sectors of a wide angle the crease rules leave it without a well-defined
-    one (on ``idler_riser`` the secant normal of such a sector turns by 150 degrees between
-    parameter offsets of 2^-10 and 2^-24).
+    one (the secant normal of such a sector keeps turning as the parameter offset shrinks).
     """
     Q = np.empty((len(X), B.shape[1], 3))
     Q[:, 0] = start_pos

@@ -59,11 +59,10 @@ def _outermost_first(face_ids, patches):
     OpenCascade's STEP reader orients a closed shell by classifying a point at infinity
     (``ShapeFix_Solid``, ``BRepClass3d_SolidClassifier::PerformInfinitePoint``) along a ray
     from a point of the shell's first usable face. From a face next to a crease vertex, where
-    the limit surface has no tangent plane (``docs/DESIGN.md``), that ray gave the wrong side:
-    ``featuretype``'s 300-face solid (outward, +11.2 mm^3) read back as -11.2 mm^3. From an
-    outermost face the ray leaves the solid through that face alone; on that solid every one
-    of 18 faces tried first (the six outermost along the axes and 12 at random) read back
-    outward. Face order means nothing else in STEP.
+    the limit surface has no tangent plane (``docs/DESIGN.md``), that ray can give the wrong
+    side, and an outward solid reads back with a negative volume. From an outermost face the
+    ray leaves the solid through that face alone, so the shell reads back outward. Face order
+    means nothing else in STEP.
     """
     reach = [float(np.asarray(patch.poles)[..., 0].max()) for patch in patches]
     first = int(np.argmax(reach))

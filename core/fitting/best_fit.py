@@ -132,8 +132,8 @@ def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
     gets the residual ``n_j . (X_j - c_j) + margin``; the points deeper inside are free.
     The same smoothness and damping terms as :func:`best_fit` hold the rest of the cage,
     with ``start`` as the smoothness term's reference (not the cage: its limit surface
-    cuts convex corners, and pulling towards its shape cut them again; on polycube_mambo_b0
-    the inside fit's largest distance is 5.8e-3 of the diagonal this way, 1.5e-2 the other).
+    cuts convex corners, and pulling towards its shape would cut them again, which more than
+    doubles the inside fit's largest distance on a polycube-like part).
     Used as the inside fit's start: the least-squares fit lies about half outside the
     target, and the relaxed gradient projection starts better from just inside it.
 

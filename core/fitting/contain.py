@@ -24,21 +24,19 @@ from core.target_surface import TargetSurface
 
 NUDGE_ROUNDS = 4
 """Rounds of each kind of :func:`nudge_inside`: near walls alone, then with far walls
-(the owner moves stall after about four rounds on fine3 and gripper_domain)."""
+(the owner moves stall after about four rounds)."""
 NUDGE_HALVINGS = 2
 """Halvings of each kind in a round's hold-back (:func:`core.fitting.crossings.
 hold_back_crossings`): a round moves by a point's depth, and what a quarter of that does
-not bring in, the next round tries again (fine3, seed 0: 0.92 % of the target's volume
-outside with 2, 0.90 % with 6, at half the nudge's CPU time)."""
+not bring in, the next round tries again (more halvings bring in hardly more volume, at
+twice the nudge's CPU time)."""
 NUDGE_PROGRESS = 0.01
 """Least fraction of the summed outside depth a round must take off for another round of
-its kind (fine3 and gripper_domain, seed 0: the third and later rounds of a kind took
-0.1-1.9 % off, 0.00-0.01 % of the target's volume; this stops after 4 of 8 rounds on
-fine3 at 0.93 % instead of 0.92 %, gripper at 0.379 % as with 8)."""
+its kind (the third and later rounds of a kind take off a negligible share of the target's
+volume, so stopping then costs almost nothing and saves half the rounds)."""
 CARRY_REACH = 8.0
 """A far wall moves along when it is hit within this many depths of the outside point
-along its inward normal (fine3, seed 0: 0.52 % of the target's volume left outside with
-3 depths, 0.43 % with 8)."""
+along its inward normal (a shorter reach leaves more of the target's volume outside)."""
 CARRY_ROOM = 0.5
 """... and when every corner of the hit triangle lies deeper inside the target than this
 fraction of the depth (so carrying it does not push the far wall out of the target's

@@ -6,8 +6,8 @@ A crease of the cage is the uniform cubic B-spline curve of its crease polygon
 target's feature line, as the feature-preserving decimation leaves them
 (:mod:`core.quadmesh.feature_decimation`), gives a curve that cuts inside every turn: a
 hole's rim of five crease vertices on a circle of radius ``r`` has a limit curve of radius
-about ``0.77 r``, and the material of the limit solid reaches into the hole. On
-``featuretype`` (about 20 such holes) the cage's limit solid has 4.8 % of the target's
+about ``0.77 r``, and the material of the limit solid reaches into the hole. On a machined
+part with many such holes the cage's limit solid leaves a clear share of the target's
 volume outside it, and the least-squares fit cannot take it out: moving a rim outwards
 folds the few wide faces round it, and the fit's crossing hold-back puts the rim back.
 
@@ -22,20 +22,16 @@ residual across the chain at its closest point), with a weak pull of each point 
 chain's point at the same arc-length fraction (so the points do not bunch up where the
 line leaves them free) and a small pull towards the cage (vertices without a chain stay).
 A point-to-point fit at the arc-length fractions alone bends the curve far off next to a
-kink between a long and a short edge (octagonal_pocket: 6 % of the diagonal; the least
-squares fit's maximum distance went from 2.2 % to 3.7 %). A vertex moves at most
+kink between a long and a short edge, and raises the fit's largest distance. A vertex moves at most
 ``MAX_MOVE`` times its shortest crease edge, and the move is then held back where the
 limit surface would cross itself (:func:`core.fitting.crossings.hold_back_crossings`).
 
-Measured with the inside fit that starts from it (``benchmarks/FIT_RESULTS.md``, session 27,
-sampling seeds 0-2, level-3 limit): featuretype 1.02-1.59 % -> 0.40-0.76 % of the target's
-volume outside, octagonal_pocket 0.39-1.55 % -> 0.47-0.55 %; mean distance 0.47 and 0.64 of
-before (best-fit mode 0.46 and 0.63). What stayed outside was mostly where moving a rim out
-would fold the wide fan quads round it (held back; the base mesh no longer makes those
-quads, :func:`core.quadmesh.paired_decimation._rim_folds`, and with its cages the inside
-fit leaves 0.08-0.10 % and 0.16-0.20 %) and where the crease polygons are too coarse for
-their outlines (a rounded octagon of 6-10 crease vertices: after the fit, 10 % of the crease
-curves' points are more than 0.3 % of the diagonal off the feature lines).
+The inside fit that starts from it leaves much less of the target's volume outside and comes
+closer on average (``benchmarks/FIT_RESULTS.md``). What can stay outside is where moving a rim
+out would fold wide fan quads round it (held back; the base mesh does not make those quads,
+:func:`core.quadmesh.paired_decimation._rim_folds`) and where the crease polygons are too
+coarse for their outlines (a rounded octagon of a few crease vertices keeps some of its
+crease curve off the feature lines).
 """
 from dataclasses import dataclass
 
@@ -58,8 +54,8 @@ CREASE_ROUNDS = 4
 MAX_MOVE = 1.0
 """Farthest a crease vertex moves, times its shortest crease edge. A five-vertex hole rim
 moves out by about a quarter of its edges; a vertex at a kink between a long and a short
-straight edge was carried out by 0.04 (18 times its short edge, octagonal_pocket), the
-curve still on the lines but the faces round it dragged off the target."""
+straight edge can otherwise be carried out by many times its short edge, the curve still on
+the lines but the faces round it dragged off the target."""
 MATCH_TOLERANCE = 1e-9
 """A cage vertex sits on a target vertex when nearer than this times the target's
 bounding-box diagonal (the decimation copies the target's coordinates)."""

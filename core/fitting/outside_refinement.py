@@ -3,25 +3,23 @@
 
 The inside fit (:func:`core.fitting.fit.fit_base_mesh`) holds its moves back where the
 limit surface would cross itself. On a thin plate that a coarse cage spans with wide
-stencils (gripper_domain's 3.4 mm plate under 32 mm cage edges) the relaxed gradient
+stencils (a plate many times thinner than the cage's edges) the relaxed gradient
 projection pulls the plate's two walls through each other, the hold-back returns those
-base vertices towards the start, and the start lies partly outside: 0.35-0.55 % of the
-target's volume stays outside over 8 cages moved by 1e-12 (one above the issue's 0.5 %
-rule). A finer cage there has narrower stencils and fills the plate from inside.
+base vertices towards the start, and the start lies partly outside, so a visible share of
+the target's volume stays outside, varying with the last bits of the cage. A finer cage there has narrower stencils and fills the plate from inside.
 
 :func:`fit_with_outside_refinement` fits, and while more than ``goal`` of the target's volume
 lies outside, splits the quad strips of the **unfitted** cage through the base faces whose
 fine limit points lie outside (:func:`core.fitting.refine.refined_without_crossings`, the
 refined cage on the same limit surface) and fits that again. The fitted cage is not
 refined: its limit surface nearly touches itself where the walls were held back, and its
-refinements crossed themselves (gripper_domain: 36 triangle pairs after 5 tries). The fit
+refinements cross themselves. The fit
 that leaves the least volume outside is kept.
 
 The default goal (``outside_refinement`` of :class:`core.params.ReconstructionParams`, 0.003)
-is three fifths of the issue's 0.5 % rule, because a fit's outside volume moves by about
-0.1 % of the target's volume with the last bits of its cage (gripper_domain 0.35-0.55 %). Of
-the 16 dev meshes' fits at defaults only gripper_domain's leave more (octagonal_pocket, the
-next, 0.23-0.26 %).
+is three fifths of the 0.5 % containment goal, because a fit's outside volume moves by about
+0.1 % of the target's volume with the last bits of its cage. Most fits at defaults leave less
+and are not refined.
 """
 from dataclasses import dataclass, field
 
@@ -36,8 +34,7 @@ OUTSIDE_DEPTH = 1e-3
 """A base face is refined when one of its fine limit points lies deeper outside the target
 than this fraction of the target's bounding-box diagonal."""
 OUTSIDE_ROUNDS = 2
-"""Most refinements (gripper_domain: 320 -> 523 faces, 0.487 -> 0.074 % outside; a second
-round, 618 faces, 0.098 %)."""
+"""Most refinements (a second round seldom leaves less outside than the first)."""
 
 
 @dataclass

@@ -20,9 +20,8 @@ not a quad. There the mesh is closed conformingly, without T-junctions:
   on (a triangle into two triangles, a pentagon into two quads), entered more often around
   its centre.
 
-Strips that ran round the whole part (the first version) tripled the cage in every round
-(``to_simp_mbb``: 319 -> 976 faces, the next round over 2,500), most of the new faces where
-the surface was already within the tolerance. The refined cage is placed so that
+Strips that ran round the whole part would triple the cage in every round, most of the new
+faces where the surface is already within the tolerance, so strips end where they can. The refined cage is placed so that
 its limit surface passes through the fitted one at every vertex (a sparse linear system of the
 limit masks), then fitted again, until the largest deviation is at most the tolerance or the next
 refinement would exceed the face budget. Where every split of the fitted cage crosses itself
@@ -42,12 +41,12 @@ from core.types import PolyMesh
 CROSSING_RINGS = 3
 """How many rings of faces away from a crossing the deviating faces to turn or leave whole
 are looked for: the refined cage is placed on the limit surface as a whole, so a split can
-move the surface a ring or two beyond the faces it changed (to_simp_lbracket at 0.5 %,
-session 35: 7 triangle pairs, none in or next to a deviating face)."""
+move the surface a ring or two beyond the faces it changed, so a crossing need not lie in or
+next to a deviating face."""
 UNCROSS_TRIES = 20
 """Most refinements tried per round with the deviating faces under new crossings cut the
 other way, then left whole (each try costs a crossing search of the refined limit surface;
-to_simp_lbracket at 0.5 % ran out of 8)."""
+a tight tolerance can need more than a few)."""
 
 
 @dataclass
@@ -93,10 +92,8 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
         When no split of the fitted cage is left, the same faces of the cage it was fitted
         from are split instead (when the fit kept its faces): where an inside fit held a
         thin wall back, the fitted walls nearly touch, while the cage before the fit lies on
-        the last clean surface (to_simp_lbracket at 0.005 of the diagonal: the refinement
-        stopped after the first fit, largest deviation 0.0264; now 321 -> 408 -> 440 -> 493
-        faces and the 408-face fit, 0.0127, kept; tray_bottom 292 -> 343 faces, 0.0158;
-        now 407 faces, 0.0076).
+        the last clean surface, so the refinement can go on where splitting the fitted cage
+        would stop it.
     max_rounds : int >= 1, most fits.
 
     Returns
@@ -170,9 +167,8 @@ def refined_without_crossings(fitted, deviating, crossing_faces):
     do not deviate, such as those where strips ended, the deviating faces nearest to them,
     up to :data:`CROSSING_RINGS` rings of faces away) are cut the other way next time (a
     quad across its shorter edges, another face across its second-longest edge); those
-    already turned are left whole. On to_simp_mbb at 0.5 % of
-    the diagonal (session 35) the last deviating face's strip crossed itself in 29 triangle
-    pairs across its longer edges and in none across its shorter ones.
+    already turned are left whole: a strip that crosses itself cut one way often does not
+    cut the other.
 
     Returns ``(refined PolyMesh, None)``, or ``(None, reason str)`` when no deviating face
     could be split without a crossing.
@@ -375,8 +371,8 @@ def _on_the_limit_of(cage, refined, origin):
     square system ``L' V' = P`` (``L'``: the refined cage's vertex limit masks). So the refined
     surface interpolates the fitted one at all its vertices and stays close between them;
     with the edge midpoints of the fitted cage as vertices instead, the refined limit
-    surfaces of ``idler_riser`` crossed themselves (58 triangle pairs after the first round,
-    the fitted cage's none), and the refit kept what it started from. Where the system is
+    surface can cross itself where the fitted one does not, and the refit keeps what it
+    started from. Where the system is
     singular, the midpoint cage is returned unchanged.
     """
     import scipy.sparse.linalg as sla

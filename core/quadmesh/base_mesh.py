@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Coarse quad base mesh of a labelled target (paper Sect. 2.3; issue 8).
+"""Coarse quad base mesh of a labelled target (paper Sect. 2.3).
 
 1. :mod:`chart_complex`: charts, sides and corners of the labeling, measured on the target.
 2. :mod:`side_signs`: side directions that make every chart a rectilinear polygon.
@@ -66,8 +66,8 @@ give way to it."""
 REFINEMENT_ROUNDS = 24
 """Rounds of quantization, each splitting one more overlapping chart into rectangles."""
 FALLBACK_REFINEMENT_ROUNDS = 8
-"""The same where the paired decimation can take over: on the dev meshes, layouts within the
-budget needed at most five refinements."""
+"""The same where the paired decimation can take over: layouts within the budget seldom need
+more than a few refinements."""
 
 
 def refined_target(target):

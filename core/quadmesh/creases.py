@@ -2,8 +2,8 @@
 """The target's sharp feature lines, and the crease networks of cages.
 
 A machined part's sharp steps (counterbores, pockets) are rounded by the smooth Catmull-Clark
-limit over a face's length, which makes the limit of a coarse cage fold there (issue 8,
-docs/DESIGN.md). Cage edges along them tagged as infinitely sharp creases
+limit over a face's length, which makes the limit of a coarse cage fold there
+(docs/DESIGN.md). Cage edges along them tagged as infinitely sharp creases
 (``PolyMesh.creases``, :mod:`core.subdivision.catmull_clark`) keep the step. The target's
 feature lines are its edges whose dihedral angle exceeds :data:`CREASE_ANGLE`
 (:func:`feature_edges`); the feature-preserving decimation
@@ -14,10 +14,10 @@ edge) are cut back until every crease vertex has two or more crease edges
 (:func:`closed_network`): a machined part's feature lines are closed or end at corners, and
 a chain ends inside only where the cage lost part of its line.
 
-An earlier tagging of the edges of a QSlim decimation that happened to lie along the feature
-lines (session 25) left many steps crossed diagonally by cage edges, which cannot be creased
-(``featuretype`` at 300 faces: 51 crossing pairs of the limit surface; none with the
-feature-preserving decimation, ``benchmarks/BASEMESH_RESULTS.md``).
+Tagging only the edges of a QSlim decimation that happen to lie along the feature lines is
+not enough: QSlim crosses many steps diagonally with cage edges, which cannot be creased, and
+the limit surface then crosses itself there. The feature-preserving decimation
+(:mod:`core.quadmesh.feature_decimation`) keeps every line a chain of cage edges.
 """
 import numpy as np
 

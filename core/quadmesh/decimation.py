@@ -6,13 +6,10 @@ libigl's ``igl.qslim``) collapses edges in quadric-error order and refuses colla
 change the topology. Its quadrics are those of the mesh it is given, which matters twice:
 
 - decimated again, a coarse result gives more even triangles, and the paired cages of them fit
-  SIMP results closer (measured end to end at 300 faces: mean distance 0.118% against 0.153%
-  of the diagonal on ``to_simp_torsion_arm``, 0.105% against 0.147% on ``to_simp_mbb``, when
-  each budget was decimated from the target instead). So budgets up to ``coarse_triangles``
+  SIMP results closer than when each budget is decimated from the target. So budgets up to ``coarse_triangles``
   start from one coarse decimation, as the budget ladder of the pairing always did;
-- but a coarse result has lost the small features: QSlim of ``featuretype``'s 600-triangle
-  result down to 450 folded stepped holes into their walls (91 intersecting triangle pairs,
-  none from the target). Larger budgets therefore start from the target, or for large targets
+- but a coarse result has lost the small features: QSlim of a coarse result of a machined
+  part folds stepped holes into their walls, where QSlim of the target does not. Larger budgets therefore start from the target, or for large targets
   from one fine decimation of it (:data:`SOURCE_TRIANGLES`), which keeps each one quick.
 
 The coarse decimation of a very large target (:data:`REDUCE_ABOVE`) starts from a reduction by
@@ -26,22 +23,18 @@ from core.mesh_topology import connected_face_components, genus_of
 
 SOURCE_TRIANGLES = 20000
 """Targets with more triangles are decimated to this many once, when a decimation larger than
-the coarse one is first asked for; those then start from it. On ``to_simp_torsion_arm_fine3``
-(151k triangles) this took 3.2 s, and each further decimation to 450-600 triangles 0.4 s
-instead of 3.4 s; the results had 4-7 intersecting triangle pairs where QSlim of the target
-itself gave 12."""
+the coarse one is first asked for; those then start from it, which makes each further
+decimation several times faster on a fine target, and its results no more tangled than QSlim
+of the target itself."""
 REDUCE_ABOVE = 100000
 """The coarse decimation of targets with more triangles starts from their reduction to
 :data:`SOURCE_TRIANGLES` by shortest-edge collapses (``igl.decimate``: a collapsed edge becomes
-its midpoint; collapses that would change the topology are refused). On
-``to_simp_torsion_arm_fine3`` (151k triangles) the reduction took 1.1 s, and QSlim of it to
-750 triangles 0.2 s, where QSlim of the target to 750 took 2.6 s; its paired cage needed 345
-faces instead of 291 for a limit surface without flaws, which follows the target closer
-(level-2 limit surface: mean distance 0.41% of the diagonal against 0.45%, largest 2.5%
-against 4.0%). Smaller targets keep QSlim's own quadrics (on ``ge_bracket_domain``, 76k
-triangles, the reduction cost 3 budgets more), and so do the larger budgets: from the
-reduction, every cage of ``simp_crank_arm_loop2`` up to 6 times the budget crossed itself
-(227 pairs at 311 faces), from QSlim's fine decimation the one at 1,726 faces did not."""
+its midpoint; collapses that would change the topology are refused). On a very fine target
+this is much faster than QSlim of the whole target, and its paired cage, a little larger,
+follows the target closer. Smaller targets keep QSlim's own quadrics (there the reduction
+needed more budgets of the ladder), and so do the larger budgets: from the reduction, the
+cages of a thin-walled SIMP result kept crossing themselves where those from QSlim's fine
+decimation did not."""
 
 
 class Decimation:

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Lattice points placed on the target surface (issue 8, item 3).
+"""Lattice points placed on the target surface.
 
 Corners are the target's corner vertices. A point on a side lies on the side's vertex chain of
 the target at the arc-length fraction ``step / length`` (computed once per side, so both charts

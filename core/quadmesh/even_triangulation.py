@@ -3,7 +3,7 @@
 
 QSlim keeps a flat plate with only its rim vertices, so the plate becomes a fan of long
 triangles, and near the end of a strong decimation it leaves triangles folded over their
-neighbours (on ``tray_bottom``, 59 of 600 face away from the target). The paired quads inherit
+neighbours, facing away from the target. The paired quads inherit
 both, and the Catmull-Clark limit surface crosses itself and turns inside out there. This module
 repairs the triangulation with the topology-preserving operators of isotropic remeshing (Botsch
 & Kobbelt, "A remeshing approach to multiresolution modeling", SGP 2004), keeping QSlim's
@@ -23,11 +23,9 @@ there splits and flips were measured to make the fit of thin struts worse.
    triangles are all coplanar moves to the mean of its neighbours, which lies in the same
    plane (the shape is kept).
 
-Measured on the dev meshes at 300 faces (quads paired afterwards, level-2 limit surface,
-the least flawed of the budget ladder of :mod:`core.quadmesh.paired_decimation`), crossing
-triangle pairs + inverted faces: ``featuretype`` 1,038 + 18 -> 126 + 8, ``tray_bottom``
-515 + 14 -> 56 + 6, ``gripper_domain`` 70 + 17 -> 0 + 17. (Tangential smoothing on the
-target everywhere, tried first, gave more inverted faces on thin SIMP members.)
+On machined parts and plates this removes most of the crossing triangle pairs and inverted
+faces of the paired cages' limit surfaces (``benchmarks/BASEMESH_RESULTS.md``). Tangential
+smoothing on the target everywhere is not used: it inverts faces on thin SIMP members.
 """
 import numpy as np
 
@@ -94,8 +92,8 @@ def even_creased_triangulation(decimation, count, surface):
     inside planar regions only, keep the shape and the feature lines. Step 1 (QSlim's second
     pass, then splits) is left out: QSlim would cut across the feature lines, and a
     feature-preserving decimation to fewer triangles before the splits drops line vertices
-    (``octagonal_pocket`` at 300 faces: 227 crease edges instead of 298, the fitted solid
-    farther from the target at 350; ``featuretype``: 38 crossing pairs, session 26).
+    (fewer crease edges, a fitted solid farther from the target, and crossings of the
+    limit surface).
 
     Parameters
     ----------
@@ -306,7 +304,7 @@ def _flip_pass(vertices, faces, surface, max_passes=20, fixed=None):
             & (gain > 1e-6)
         # both flipped triangles must face the target: untangling then raises the triangles
         # facing it and reshaping keeps them, so no flip is undone later (without this, flips
-        # went back and forth until max_passes on featuretype, 60% of its base-mesh time)
+        # can go back and forth until max_passes)
         wanted = np.flatnonzero(untangle | reshape)
         new_facing = np.zeros(len(edges), dtype=bool)
         new_facing[wanted] = _facing_target(vertices, new_first[wanted], None, surface) \

@@ -3,7 +3,7 @@
 
 QSlim (:mod:`core.quadmesh.decimation`) places its edges wherever the quadric error is least,
 so on a machined part many cage edges cross a sharp step diagonally and cannot be tagged as
-creases (issue 8). This decimation (Garland & Heckbert, "Surface simplification using quadric
+creases. This decimation (Garland & Heckbert, "Surface simplification using quadric
 error metrics", SIGGRAPH 1997: edge collapses in the order of their quadric error, each
 collapsed pair placed where the sum of its quadrics is least) keeps the whole feature network
 (target edges whose dihedral angle exceeds :data:`core.quadmesh.creases.CREASE_ANGLE`,
@@ -34,8 +34,7 @@ iso-surface are no feature lines) as edges of the result:
   refused edge is tried again when its neighbourhood changes. The last two rules keep a
   triangle from capping a slot or a notch: quadrics do not see a triangle in the plane of a
   wall that spans a slot's mouth, nor one in the plane of a notch's rim once its floor's
-  vertices, free where its edges are rounded, have been collapsed into the rim
-  (``featuretype``).
+  vertices, free where its edges are rounded, have been collapsed into the rim.
 
 Each feature edge of the result is the union of a chain of feature edges of the target, so
 pairing triangles into quads never across them keeps them cage edges, which become the
@@ -53,8 +52,8 @@ from core.target_surface import TargetSurface
 
 TURN_ANGLE = 40.0
 """Degrees: a vertex with two feature edges whose directions turn by more than this is a
-corner of the network (a kink of a line is kept where it is). An octagonal pocket's rim turns
-by 45 degrees at each corner; a circle of the dev meshes by 7.5 to 30 degrees per segment."""
+corner of the network (a kink of a line is kept where it is). A regular octagon's rim turns
+by 45 degrees at each corner; a tessellated circle by much less per segment."""
 BOUNDARY_WEIGHT = 10.0
 """Weight of the planes through a feature edge perpendicular to its triangles, per squared
 edge length (the triangle quadrics are weighted by area, the same units)."""
@@ -63,10 +62,10 @@ MAX_CHORD_SAG = 0.25
 it (the chord that replaces its two edges): the crease rules make a closed line's limit the
 uniform cubic B-spline of its polygon, which lies at 1/2 of a triangle's circumradius at its
 vertices, 2/3 of a square's and 5/6 of a hexagon's, and the walls of a hole of three edges
-crossed the faces around it (``featuretype``). A regular polygon's vertex lies 0.24 of the
+crossed the faces around it. A regular polygon's vertex lies 0.24 of the
 chord from it for 7 edges and 0.29 for 6, so a round hole keeps 6 edges; a half circle
-between two corners keeps 2 (a notch's U-shaped rim of ``featuretype`` went to a single
-edge across the notch's mouth, and the notch was capped)."""
+between two corners keeps 2 (with one, a notch's U-shaped rim becomes a single edge across
+the notch's mouth, and the notch is capped)."""
 MIN_NORMAL_COSINE = 0.2
 """A collapse is refused when it turns a triangle's normal by more than about 78 degrees."""
 MAX_DEVIATION = 0.25
@@ -74,17 +73,16 @@ MAX_DEVIATION = 0.25
 than this times its longest edge. A hexagonal hole's wall triangles lie at most 0.13 times
 their longest edge inside its cylinder; a triangle capping a notch whose floor and walls have
 rounded edges (no feature lines to keep them) lies in the plane of the rim, and its normal
-agrees with the floor's (``featuretype``: a cap 0.5 above a notch's floor, 8.7% of the
-bounding-box diagonal)."""
+agrees with the floor's, far above it."""
 MIN_QUALITY = 0.05
 """A collapse is refused when it leaves a triangle of a lower quality ``4 sqrt(3) area / (sum
 of squared edge lengths)`` (1 for an equilateral triangle) than this and than
 :data:`QUALITY_KEPT` times the quality it had."""
 QUALITY_KEPT = 0.9
 """Share of its quality a triangle already thinner than :data:`MIN_QUALITY` may lose in one
-collapse: the long thin triangles along a straight feature line (quality 0.02 on
-``featuretype``) change by a little whenever a line vertex next to them moves along its line,
-and refusing every such change stopped the decimation of ``featuretype`` at 750 triangles."""
+collapse: the long thin triangles along a straight feature line change by a little whenever
+a line vertex next to them moves along its line, and refusing every such change would stop
+the decimation of a machined part well above its budget."""
 
 
 class FeatureDecimation:
@@ -99,8 +97,8 @@ class FeatureDecimation:
 
     Targets of more than :data:`core.quadmesh.decimation.SOURCE_TRIANGLES` triangles are
     decimated to that many once, on first use, and every count starts from that (pure
-    Python, about 0.4 ms of CPU per collapse here: 62 s for the 151k triangles of
-    ``to_simp_torsion_arm_fine3``, 1.2-1.6 s for the 3.5k of ``featuretype`` to 600).
+    Python, so its time grows with the triangles collapsed: about a second for a few
+    thousand, a minute for 150k).
 
     Raises
     ------

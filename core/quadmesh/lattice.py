@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Unit-lattice quads of the integer chart polygons (issue 8, item 2).
+"""Unit-lattice quads of the integer chart polygons.
 
 Every chart of the integer polycube (:mod:`core.quadmesh.quantize`) is a rectilinear polygon
 with integer corners; its unit squares are the base-mesh quads of that chart. A lattice point

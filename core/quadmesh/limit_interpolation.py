@@ -1,15 +1,13 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Unshrink the limit surface of a cage at its inverted faces (issue 8, "no inverted face").
+"""Unshrink the limit surface of a cage at its inverted faces.
 
 A paired-decimation cage has its vertices on the target, and the Catmull-Clark limit surface
 lies inside such a cage, pulled in by about the size of its faces. Where a feature is thinner
 than that, the limit surface is pulled past the feature's middle and its nearest target point
 lies on the far side (:func:`core.quadmesh.orientation.inverted_faces` counts the face as
-inverted). Measured at 300 faces: the 3.2 mm rim of ``tray_bottom`` (rim quads 3.2 x 177 mm)
-has its limit 6 mm inside the rim, nearer the plate's faces; the end annulus of
-``gripper_domain``'s pin eye (a 2.5 mm wall round a 9 mm bore) has its limit 4.6 mm inside the
-end face, nearer the bore; a thin strut of ``to_simp_torsion_arm`` collapses the same way. The
-cage faces there face the right way, their limit does not reach the target.
+inverted). A plate's thin rim, the thin wall round a pin's bore or a thin SIMP strut each
+have their limit surface pulled inside past the wall's middle this way. The cage faces there
+face the right way, their limit does not reach the target.
 
 The repair asks the limit surface to pass through the cage's original vertices (which lie on
 the target, on the right side of the feature): Jacobi steps ``v += p - L(v)`` on the vertices
@@ -31,14 +29,14 @@ from core.subdivision.catmull_clark import subdivide
 from core.subdivision.limit import limit_matrices
 
 STEPS = 8
-"""Jacobi steps tried. On ``tray_bottom`` the inverted faces went 6, 4, 2, 3, 2, 0 (and the
-level-2 crossings 56, 36, 18, 0, 0, 0), on ``gripper_domain`` 17, 16, 11, 2, 1."""
+"""Jacobi steps tried: the inverted faces (and crossings) usually fall over the first
+five or six steps."""
 STEP_SHARE = 0.5
-"""Largest move of one step, as a share of the vertex's shortest edge (full steps overshot on
-``to_simp_torsion_arm_fine3``: 6 -> 2 inverted faces, but with 4 crossing pairs)."""
+"""Largest move of one step, as a share of the vertex's shortest edge (full steps overshoot:
+fewer inverted faces, but new crossings of the limit surface)."""
 MOVE_SHARE = 2.0
-"""Largest move in all, as a share of the vertex's shortest edge (at 1 the gripper's pin eye
-kept 11 of its 17 inverted faces, at 2 one; unbounded, vertices moved 12 edge lengths)."""
+"""Largest move in all, as a share of the vertex's shortest edge (at 1 a thin pin eye keeps
+most of its inverted faces; unbounded, vertices move many edge lengths)."""
 
 
 def shortest_edges(mesh):

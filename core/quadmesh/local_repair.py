@@ -1,26 +1,22 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Local edits of a cage at the faces still inverted after unshrinking (issue 8, "no inverted
-face").
+"""Local edits of a cage at the faces still inverted after unshrinking.
 
 :mod:`core.quadmesh.limit_interpolation` repairs faces whose limit surface is pulled past a
 thin feature. Two other causes of inverted faces were found on paired-decimation cages:
 
 - a quad paired across a sharp fold: its two triangles lie on two sheets of a thin wall or on
   both sides of a strut's ridge (the matching takes such a pair where an augmenting path
-  needs it). On ``gripper_domain`` (320 faces) the two triangles of the one face left, over
-  the edge of a 2 mm wall, are 174 degrees apart; its limit surface runs across the wall,
-  not round it;
-- a quad folded over its neighbours: QSlim left sliver triangles 80 mm long facing away from
-  the nearly flat top of ``to_simp_torsion_arm_fine3`` (:mod:`core.quadmesh.even_triangulation`
-  untangles only planar regions), so a quad there was clockwise seen from outside.
+  needs it). Two triangles over the edge of a thin wall can be nearly opposite; the quad's
+  limit surface then runs across the wall, not round it;
+- a quad folded over its neighbours: QSlim can leave long sliver triangles facing away from a
+  nearly flat top (:mod:`core.quadmesh.even_triangulation` untangles only planar regions),
+  so a quad there is clockwise seen from outside.
 
 Two edits act on such a face: moving one of its corners to the target point nearest the mean
 of the corner's neighbours (which unfolds a folded quad and evens out a pair over a fold), and
 splitting the quad into two triangles along either diagonal (each sheet of a fold then has its
-own face). Measured: the one face of ``gripper_domain`` and the three of
-``to_simp_torsion_arm_fine3`` (its cage of QSlim of the whole target, 291 faces) each went
-with one corner moved; ``simp_shelf_bracket`` (``benchmarks/simp_unseen``, 335 faces) needed
-four edits, two of them splits.
+own face). Most such faces go with one corner moved; a few need several edits, some of them
+splits.
 
 For each inverted face the edits are tried in this order: each corner moved (the faces stay
 quads), then the split along each diagonal (while the triangles stay within
@@ -39,7 +35,7 @@ from core.quadmesh.orientation import inverted_faces
 from core.types import PolyMesh
 
 MAX_TRIANGLE_SHARE = 0.1
-"""Splits keep at least 90% of the faces quads (the issue's quad-dominance rule)."""
+"""Splits keep at least 90% of the faces quads (the base mesh's quad-dominance rule)."""
 MAX_EDITS = 12
 """Edits kept at most (each one lowers the inverted faces, so a cage has at most as many
 as it has inverted faces; this bounds the time on cages with many)."""

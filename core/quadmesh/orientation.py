@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Inverted base faces: the limit surface facing away from the target (issue 8, "done when").
+"""Inverted base faces: the limit surface facing away from the target.
 
 A base face is inverted when the Catmull-Clark limit-surface normal at its centre points more
 than 90 degrees away from the target's normal at the target point closest to that limit point.

@@ -33,18 +33,16 @@ genus and orientation:
    decimations (:mod:`core.quadmesh.feature_decimation`), evened out inside their planar
    regions without touching a feature edge
    (:func:`core.quadmesh.even_triangulation.even_creased_triangulation`; where that cage is
-   flawed and the one of the decimation as it is is less so, the latter is kept: on
-   ``featuretype`` the evened cages crossed themselves, 38 pairs at 300 faces, session 26):
-   the target's sharp
+   flawed and the one of the decimation as it is is less so, the latter is kept, since evening
+   out can itself make a cage cross): the target's sharp
    feature lines (:mod:`core.quadmesh.creases`) stay chains of their edges, which are never
    paired across, stay cage edges and are tagged as creases (``PolyMesh.creases``), and the
    cage with fewer crossings of the two ladders is kept. A target without a closed network
    of feature lines (a SIMP result's iso-surface) has nothing to crease and keeps its smooth
-   cage (and its large targets are spared the pure-Python decimation: 62 s for the 151k
-   triangles of ``to_simp_torsion_arm_fine3`` to 600). Only there: on ``tray_bottom`` (a
-   thin plate with holes, clean without tags at 292 faces) every creased cage within the
-   budget rule crossed itself when the tags were those of QSlim's edges (session 25), so
-   tagging is not the default; the cages of every mesh whose smooth ladder ends clean stay
+   cage (and its large targets are spared the pure-Python decimation, which takes about a
+   minute on 150k triangles). Only there: a thin plate with holes that is clean without tags
+   can have every creased cage within the budget rule cross itself, so tagging is not the
+   default; the cages of every mesh whose smooth ladder ends clean stay
    bit-identical.
 """
 from dataclasses import dataclass, replace
@@ -73,20 +71,16 @@ LADDER_STEPS = 3
 flawed."""
 OVER_BUDGET_FACTORS = (1.5, 2.0, 3.0, 4.0, 6.0)
 """Budgets beyond the budget rule, as multiples of the face budget, tried while the limit surface
-of every cage crosses itself. On SIMP results with thin perforated walls (``simp_crank_arm``,
-genus 20; ``simp_two_load_bracket``, genus 34; ``simp_gripper_jaw``, genus 9) the crossings
-ended at 2 or 3 times 300 faces, on the 167k-triangle surface of the crank arm
-(``benchmarks/unseen_bench.py --large``) at 6 times (58 pairs at 870 faces, 43 at 1,154, none
-at 1,726); on machined parts with small steps and counterbores (``featuretype``) they grow
-with the budget (171 pairs at 282 faces, 3,757 at 1,468): :data:`OVER_BUDGET_MISSES`."""
+of every cage crosses itself. On SIMP results with thin perforated walls of high genus the
+crossings end at 2 or 3 times the budget, on a very fine such surface at up to 6 times
+(``benchmarks/unseen_bench.py --large``); on machined parts with small steps and counterbores
+they grow with the budget: :data:`OVER_BUDGET_MISSES`."""
 OVER_BUDGET_MISSES = 2
 """The budgets beyond the budget rule end after this many in a row whose cages are not less
 flawed (crossing pairs plus inverted faces) than every smaller one: more faces do not unfold
-that limit surface. The flaws fall unevenly on SIMP results (``simp_two_load_bracket``: 42 in
-the rule, then 36, 44 and none at 870 faces; ``simp_gripper_jaw``: 4, then 92 and none at
-561), so one miss is not enough; on ``featuretype`` (184, then 593 and 693) and
-``octagonal_pocket`` (153, then 241 and 261) two end the ladder after 2 of its 5 steps, where
-the limit surfaces of a machined part's sharp steps cross themselves (Catmull-Clark without
+that limit surface. The flaws fall unevenly on SIMP results (a budget with more flaws can be
+followed by a clean one), so one miss is not enough; on machined parts whose flaws grow with
+the budget two end the ladder after 2 of its 5 steps, where the limit surfaces of a machined part's sharp steps cross themselves (Catmull-Clark without
 crease rules rounds them)."""
 
 
@@ -163,10 +157,10 @@ def _match_pairs(n_faces, pairs, weight):
     augmenting path: alternately an unchosen and a chosen pair, ending at another unmatched
     triangle; flipping the path matches both ends. (Without Edmonds' blossom contraction an
     augmenting path through an odd cycle can be missed; such a triangle stays a triangle.)
-    Linear in the faces per unmatched triangle: 0.01-0.08 s for 600-2,000 triangles, where an
-    exact maximum-weight blossom matching (``networkx``) took 7 s and 108 s on this machine;
-    its total weight was 89% of the exact optimum's on ``to_simp_mbb`` (600 triangles), and
-    every dev mesh tried was matched perfectly (all quads).
+    Linear in the faces per unmatched triangle, so a small fraction of a second for a few
+    thousand triangles, where an exact maximum-weight blossom matching (``networkx``) takes
+    seconds to minutes; its total weight comes close to the exact optimum's, and the meshes
+    tried are matched perfectly (all quads).
     """
     mate = np.full(n_faces, -1, dtype=np.int64)
     via = np.full(n_faces, -1, dtype=np.int64)
@@ -354,8 +348,8 @@ def _repaired(result, surface):
     edits = 0
     if not crossings:
         # a cage whose limit surface crosses itself is refused or outranked by one that does
-        # not, whatever its inverted faces: the edits would only cost time (on featuretype
-        # 5-12 edits per budget, 125 s in all)
+        # not, whatever its inverted faces: the edits would only cost time (several edits
+        # per budget on a machined part)
         mesh, crossings, inverted, edits = repair_inverted(mesh, surface, crossings, inverted,
                                                            count_crossings)
     sizes = mesh.face_sizes
@@ -440,18 +434,15 @@ def _rim_folds(vertices, quads, creases):
     their own crease edges (``creases``, (c, 2) int64 vertex pairs).
 
     Such a quad is two triangles of a fan round a convex feature loop (a hole's rim of a
-    flat face: three consecutive rim vertices and the fan's far apex, the rim corner at
-    219-285 degrees on ``featuretype``). When the fit moves the rim out so that its crease
+    flat face: three consecutive rim vertices and the fan's far apex, the rim corner well
+    above 180 degrees). When the fit moves the rim out so that its crease
     curve follows the hole (:mod:`core.fitting.crease_curves`), the quad's limit patch folds
-    over itself next to that corner, and the crossing hold-back keeps the rim in: on
-    ``featuretype`` 24 of its 287 quads were such, 36 crease vertices were held back, and
-    the inside fit left 0.42-0.77 % of the target's volume outside over sampling seeds 0-2
-    (the fit's own figures); without them (320 faces, 280 quads: the fans' triangles stay
-    triangles) 17 are held back and 0.08-0.10 % stays outside; ``octagonal_pocket``
-    0.53-0.62 % -> 0.16-0.20 % (313 faces, 283 quads). Refusing every non-convex quad, or
-    every one with its reflex corner on a crease vertex, cost more quads (71 % quads on
-    featuretype) for no gain; refusing only corners above 240 degrees kept
-    octagonal_pocket's folds."""
+    over itself next to that corner, and the crossing hold-back keeps the rim in, leaving
+    part of the target's volume outside. Without such quads (the fans' triangles stay
+    triangles) fewer crease vertices are held back and much less volume stays outside, for
+    a few more faces. Refusing every non-convex quad, or every one with its reflex corner on a
+    crease vertex, costs many more quads for no gain; refusing only the sharpest reflex
+    corners keeps some of the folds."""
     P = vertices[quads]
     normal = np.cross(P[:, 2] - P[:, 0], P[:, 3] - P[:, 1])  # across the diagonals
     turn = np.einsum("qkj,qj->qk", np.cross(P - np.roll(P, 1, axis=1),

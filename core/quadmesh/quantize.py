@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Integer chart polygons: every side of the chart complex gets an integer length (issue 8, item 1).
+"""Integer chart polygons: every side of the chart complex gets an integer length.
 
 Each chart is a rectilinear polygon in its label plane, walked with the chart on the left
 (slits make every chart a disk, :mod:`core.quadmesh.chart_complex`). Its sides have integer
@@ -29,14 +29,14 @@ Each side's cost ``t >= |l - g|`` is written with the convex hull of its integer
 tighter. Without slits and rectangles the closure rows are the node-arc rows of a network
 (along each axis a side adds its length to one chart and takes it from the other), so with the
 chord the relaxation is a convex-cost flow with integral vertex optima; slit and rectangle rows
-break that structure in general, yet on every program of the dev meshes HiGHS's root LP is
-integral and the program closes in about 0.01 s. Without the chord the relaxation lets the
-sides sit at their real goals, and HiGHS 1.2 spent up to 3.8 s on cuts and heuristics at the
-root (``benchmarks/BASEMESH_SPEED_RESULTS.md``). The optimum is then exact rather than within
+break that structure in general, yet on the programs met in practice HiGHS's root LP is
+integral and the program closes at once. Without the chord the relaxation lets the sides sit
+at their real goals, and HiGHS spends seconds on cuts and heuristics at the root
+(``benchmarks/BASEMESH_SPEED_RESULTS.md``). The optimum is then exact rather than within
 ``MILP_GAP``. Several lengths often reach the same closeness (it is flat when one side grows
 and another shrinks on the same side of their goals), and another solver path would pick
 another of them; a small cost per unit of side length (``LENGTH_COST``) prefers the shorter
-ones, which on the dev meshes gives the same base meshes as before the chord.
+ones, which gives the base meshes the closeness alone would give when they are unique.
 
 After Protais, Bourcier, Ledoux, Lévy, "Robust quantization for polycube maps" (CAD 2022);
 Lyon, Campen, Kobbelt, "Quad layouts via constrained T-mesh quantization" (EG 2021); Tamassia,

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Even out the embedded base mesh on the target (issue 8, item 3, last step).
+"""Even out the embedded base mesh on the target (the last step of the embedding).
 
 The Tutte map places lattice points where a chart's integer polygon says, which is uneven where
 the polygon's proportions differ from the chart's (a tapered flange is a rectangle in the

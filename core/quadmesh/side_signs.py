@@ -38,11 +38,10 @@ but the layout stops being a polycube there."""
 CLOSURE_BOUND = 1000.0
 """Largest side length (relative to the shortest, 1) in the closure check."""
 ROOT_NODES = 1
-"""Nodes of the first solve of the whole program. Every program of the dev meshes that has a
-solution closes at its root node; one that does not is first checked for a neighbourhood that
+"""Nodes of the first solve of the whole program. The programs met in practice that have a
+solution close at their root node; one that does not is first checked for a neighbourhood that
 cannot close (:func:`_local_contradiction`), which proves it infeasible in a fraction of the
-full search (``to_simp_torsion_arm_fine3`` with ``--parts auto``, its retry with no
-collapsible side: 29 CPU s of branch and bound to prove it infeasible)."""
+time a full branch and bound takes to prove it."""
 LIMIT_REACHED, INFEASIBLE = 1, 2
 """``scipy.optimize.milp`` statuses: a node (or other) limit reached; infeasible."""
 
@@ -107,8 +106,7 @@ def make_loops_rectilinear(complex_, collapsible=None, feasible_collapsible=None
         known to have a solution, or None. Every neighbourhood holding no side of the
         difference then has a solution, so the search for a contradiction
         (:func:`_local_contradiction`) tries only the others, and before the root solve
-        (``to_simp_torsion_arm_fine3`` with ``--parts auto``: its retry without collapsible
-        sides: about 4.5 -> 1.5 CPU s).
+        (a retry with fewer collapsible sides is then much quicker).
 
     Returns
     -------
@@ -186,7 +184,7 @@ def _local_contradiction(complex_, collapsible, stricter=None):
     nothing and the next is tried. ``stricter``: (k,) int64 sides that lost the freedom to
     collapse in a program otherwise known to have a solution, or None; then only the
     neighbourhoods holding one of them are tried, those holding most first (they are the likely
-    contradictions: ``to_simp_torsion_arm_fine3``'s chart 7 comes sixth instead of 163rd).
+    contradictions, found among the first few tried instead of among the last).
 
     Returns
     -------

@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Charts, boundaries and corners of a polycube labeling, as plain arrays.
 
-Definitions (issue 5, the ones polycube codes use):
+Definitions (the ones polycube codes use):
 
 - a *chart* is a connected set of faces (through shared edges) with the same part and label;
 - a *chart-separating edge* is an edge whose two faces lie in different charts (edges between

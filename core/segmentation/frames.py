@@ -31,10 +31,9 @@ def blend_target(interface, k, part_frames_, face_part, weight, face_area, part_
     The frame of the part whose blend band covers the larger share of it, ``sum A w_k`` over its
     faces over its area (the first part on ties): that part keeps its own frame up to the
     interface and the other turns towards it within its band. The paper blends both towards the
-    interface's PCA frame, but the in-plane axes of a cut follow the outline of the cut, 20 to 55
-    degrees from the parts' frames on the topology-optimisation dev meshes, so a small part whose
-    band covers most of it (``idler_riser``, ``octagonal_pocket``) was labelled in a frame that
-    fits neither part.
+    interface's PCA frame, but the in-plane axes of a cut follow the outline of the cut, often
+    tens of degrees away from the parts' frames on topology-optimisation results, so a small part
+    whose band covers most of it would be labelled in a frame that fits neither part.
 
     Parameters
     ----------

@@ -28,9 +28,9 @@ turning point's next candidate in that order, applies those far enough apart tog
 the whole mesh once (:func:`straighten_boundaries`); a candidate counts when its neighbourhood lost
 turning points and gained no invalid chart, boundary or corner, and the area-weighted mean
 normal-to-label angle stays within ``max_angle_increase`` of the input. Judging candidates one by
-one on the charts around them costs, on a fine mesh, as much per candidate as a whole-mesh
-judgement (the charts are most of the mesh): the 151k-face torsion arm then had its pass capped
-at 16 of its 38 turning points and kept 28.
+one on the charts around them would cost, on a fine mesh, as much per candidate as a whole-mesh
+judgement (the charts are most of the mesh), so the pass would run out of its budget long before
+it reached every turning point.
 """
 import numpy as np
 import scipy.sparse as sp

@@ -116,7 +116,7 @@ def thin(grid):
     """Curve skeleton voxels of ``grid`` by 3-D thinning.
 
     scikit-image's thinning can delete a whole simply connected component (scikit-image
-    issue 3757); such a component keeps its deepest voxel (largest distance to the
+    bug #3757); such a component keeps its deepest voxel (largest distance to the
     outside) as its skeleton.
 
     Returns

@@ -321,9 +321,8 @@ def smooth_boundaries(vertices, faces, face_part, width, max_iter=8):
     shared edge length / centroid distance, ``t = width**2``) and each face takes the
     part with the largest value; repeated until nothing changes or ``max_iter``. The
     factorisation is made once, and after the first step only the columns of the parts that
-    gained or lost faces are solved again (on ``to_simp_torsion_arm_fine3`` with
-    ``--parts auto``: about 15 of 153 per step, 16 CPU s instead of 44 for the eight steps,
-    the same parts).
+    gained or lost faces are solved again (on a fine mesh with many parts, a small fraction of
+    the columns per step, with the same result).
     This moves boundaries by their geodesic curvature: staircase steps about
     ``width`` wide vanish and loops around a bar settle on short cross-sections.
 
@@ -385,7 +384,7 @@ Over a part cut off by planar loops the sum of ``A n`` is minus that of its cut 
 least one half means the cut is as large as half the part's surface, a layer of the solid
 lying on the cut (an ``a x a`` plate of thickness ``a / 4`` or less) rather than a member
 cut across. Its interface runs along its largest face, whose own label Eq. 3's term 4 then
-forbids next to the interface (``octagonal_pocket``: a 0.59 layer of the top face)."""
+forbids next to the interface."""
 
 
 def _shared_lengths(vertices, faces, label):
@@ -452,9 +451,8 @@ TANGENT_SHARE = 0.1
 share of its area lies next to one of its interfaces (a vertex on it) with normals within 45
 degrees of that interface's x-axis. Eq. 3's term 4 forbids those faces the label nearest to their
 normal whatever the frame, so the part's labeling angle rises by about the share times the 50 to
-80 degrees those faces then miss (``idler_riser``: a 0.25 share, a 78-face curved sliver of 4 %
-of the surface labelled 16 degrees above its nearest directions). Every other automatic part of
-the dev meshes stays under 0.04."""
+80 degrees those faces then miss. A part cut across a member has almost none of its area
+there, so the threshold sits well above that."""
 TANGENT_AREA = 0.1
 """Largest share of the mesh's area a part cut along its wall may have to be merged: a larger
 part is a member the skeleton found (a tube meeting another one flush with its side keeps its

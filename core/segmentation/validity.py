@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Validity of a polycube labeling: invalid charts, boundaries, corners and turning points.
 
-Rules (issue 5; charts, boundaries and corners as in :mod:`core.segmentation.charts`):
+Rules (charts, boundaries and corners as in :mod:`core.segmentation.charts`):
 
 - a chart with three or fewer boundaries is invalid;
 - a boundary between opposite labels (e.g. +X / -X) of one part is invalid;

@@ -15,8 +15,8 @@ EXPORT_CHECK_LEVELS = 2
 """Subdivision level at which the export checks that a limit surface does not cross itself
 (:func:`export_limit_crossings`): the fit's default (paper: 2), at which the fit holds
 crossings back, fewer only where the fit also takes fewer (:data:`FIT_FACE_BUDGET`). A coarser
-check refused fitted cages the fit had found clean: on ``simp_crank_arm`` (848 faces), 15
-crossing triangle pairs at level 1 and none at level 2."""
+check would refuse fitted cages the fit found clean: coarse level-1 triangles can cross where
+the level-2 surface does not."""
 
 FIT_REPORT_KEYS = ("start", "rounds", "iterations", "stopped", "mean_distance", "max_distance",
                    "target_mean_distance", "target_max_distance",

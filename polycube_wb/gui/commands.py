@@ -75,7 +75,7 @@ def run_guarded(title, work, with_progress=False):
     except ImportError as exc:
         FreeCAD.Console.PrintError(f"Polycube: {title}: missing Python package: {exc}\n")
         box = ("critical", f"A Python package is missing:\n\n{exc}\n\n"
-               "See the README, section on installing the dependencies.")
+               "See the README, \"Install as a FreeCAD addon\", step 2.")
     except Exception as exc:  # last resort: show the user the traceback of an internal error
         FreeCAD.Console.PrintError(f"Polycube: {title} failed:\n{traceback.format_exc()}")
         box = ("critical", f"Internal error: {type(exc).__name__}: {exc}\n\n"

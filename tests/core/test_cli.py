@@ -257,9 +257,8 @@ def test_a_layout_over_the_users_max_base_faces_exits_2_and_writes_nothing(tmp_p
 
 
 def test_a_labeling_that_cannot_be_quantized_exits_1_naming_the_charts_or_falls_back(tmp_path):
-    # the gripper's labeling with automatic parts is valid, but seven of its charts do not close
-    # as rectilinear polygons (benchmarks/BASEMESH_RESULTS.md; the idler riser, which did so
-    # before, is one automatic part now)
+    # the gripper's labeling with automatic parts is valid, but some of its charts do not close
+    # as rectilinear polygons (benchmarks/BASEMESH_RESULTS.md)
     mesh = os.path.join(REPO, "..", "shared", "data", "meshes", "gripper_domain.stl")
     before = digest(mesh)
     result = run("reconstruct", mesh, "-o", tmp_path / "out.step", "--report", tmp_path / "r.json",

@@ -68,12 +68,12 @@ def _rim_radii(fine, mapping, V):
 def test_octagon_rims_follow_the_circle():
     """An octagon of crease vertices on a circle has a limit curve about 10 % inside it
     (0.902 of the radius at the vertices); fitted to the cylinder's rims, every limit point
-    of both rims lies within 0.5 % of the radius of the circle (measured 0.07 %)."""
+    of both rims lies within 0.5 % of the radius of the circle."""
     target_vertices, target_faces = _cylinder()
     cage = _octagonal_cage(target_vertices)
     fine, mapping, triangles = _limit(cage)
     before = _rim_radii(fine, mapping, cage.vertices)
-    assert before.max() < 0.91 * RADIUS  # measured 0.902 at the vertices
+    assert before.max() < 0.91 * RADIUS  # 0.902 of the radius at the vertices
     fitted = fit_crease_curves(cage, fine, mapping, triangles, target_vertices, target_faces)
     assert fitted.matched == fitted.creases == 2 * RIM
     assert fitted.held == 0
@@ -97,11 +97,10 @@ def test_no_feature_lines_no_move():
 
 
 def test_machined_part_holes_open_up():
-    """featuretype's creased cage: its five- and six-vertex hole rims cut into the holes,
-    and 4.6 % of the target's volume lies outside the cage's limit solid; with the crease
-    curves fitted, at most 2 % (measured 1.01 %; all 304 crease edges matched, 17 base
-    vertices held back; 1.39 % and 70 before the fans' rim quads were refused, session 27),
-    without a crossing the cage has not (it has none)."""
+    """A machined part's creased cage: its five- and six-vertex hole rims cut into the holes,
+    and more than 4 % of the target's volume lies outside the cage's limit solid; with the
+    crease curves fitted, under 2 %, nearly every crease edge matched, and no more crossings
+    than the cage has."""
     target = load_dev_mesh("featuretype.stl")
     cage = _tagged_cage(target, 300)
     fine, mapping, triangles = _limit(cage)
@@ -116,11 +115,10 @@ def test_machined_part_holes_open_up():
 
 
 def test_pocket_plate_moves_stay_within_reach():
-    """octagonal_pocket's creased cage: 8.3 % of the target's volume outside its limit
-    solid, at most 2 % with the crease curves fitted (measured 1.33 %), and no crease
-    vertex moved farther than ``MAX_MOVE`` times its shortest crease edge (82 of them are
-    stopped there: next to kinks between long and short edges the line fit alone carries
-    them far off)."""
+    """A pocketed plate's creased cage: more than 6 % of the target's volume outside its
+    limit solid, under 2 % with the crease curves fitted, and no crease vertex moved farther
+    than ``MAX_MOVE`` times its shortest crease edge (next to kinks between long and short
+    edges the line fit alone would carry vertices far off)."""
     target = load_dev_mesh("octagonal_pocket.stl")
     cage = _tagged_cage(target, 300)
     fine, mapping, triangles = _limit(cage)

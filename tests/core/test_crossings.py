@@ -267,8 +267,8 @@ def test_stiffen_until_clean_goes_on_without_progress_once_the_fit_is_near_clean
 
 @pytest.fixture(scope="module")
 def idler():
-    """idler_riser and its paired-decimation cage (280 faces, about the pipeline's 300; its
-    plain least-squares fit crosses itself at 97 triangle pairs)."""
+    """idler_riser and its paired-decimation cage (280 faces, about the pipeline's 300), whose
+    plain least-squares fit crosses itself."""
     target = load_dev_mesh("idler_riser.stl")
     cage = paired_decimation_base_mesh(target.vertices, target.faces, 280).mesh
     return target, cage
@@ -396,8 +396,8 @@ def test_the_export_checks_at_the_fits_level_up_to_large_cages():
     from core.stages.fit import EXPORT_CHECK_LEVELS, FIT_FACE_BUDGET, fit_levels
     from core.subdivision.sample_cages import grid_sphere
 
-    # 864 faces: the fit works at level 2, and so does the check (it was level 1 above 625
-    # faces, and refused cages the fit had found clean)
+    # 864 faces: the fit works at level 2, and so does the check (a level-1 check would
+    # refuse cages the fit found clean)
     medium = grid_sphere(12)
     assert medium.n_faces == 864
     assert fit_levels(medium.n_faces, EXPORT_CHECK_LEVELS) == EXPORT_CHECK_LEVELS == 2
@@ -414,9 +414,8 @@ def test_the_fit_stage_types_the_levels_and_the_cages_crossings():
     result; the report keeps both. A spindle torus whose hole is nearly closed (major radius
     0.3, tube radius 1), fitted to its own self-crossing limit surface: no clean surface is
     near that target, so the fit still crosses itself and the cage's crossings are counted
-    (measured: 316 crossing pairs after the fit, 896 in the cage; the wider spindle torus
-    of the other tests is untangled by the fit since the vertex pseudo-normals are
-    angle-weighted as intended)."""
+    (the wider spindle torus of the other tests is untangled by the fit, the vertex
+    pseudo-normals being angle-weighted)."""
     from core.stages.fit import limit_self_intersections, run_fit
     from core.types import BaseMeshResult, IntakeResult, TriMesh
 

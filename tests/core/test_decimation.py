@@ -17,8 +17,7 @@ def test_decimating_from_the_target_keeps_small_machined_features_unfolded():
     vertices, faces = decimation.triangles(450)
     assert len(faces) <= 450
     assert genus_of(len(vertices), faces, 1) == 9
-    # measured: 0 intersecting triangle pairs, where QSlim of QSlim's 600-triangle result
-    # down to 450 gave 91
+    # no intersecting triangle pair (QSlim of a coarse QSlim result folds the stepped holes)
     assert len(find_self_intersections(vertices, faces)) == 0
     from_coarse = Decimation(target.vertices, target.faces, coarse_triangles=600)
     again_v, again_f = from_coarse.triangles(450)
@@ -67,8 +66,8 @@ def test_the_coarse_decimation_of_a_very_large_target_starts_from_a_reduction(mo
     coarse_v, coarse_f = decimation.triangles(600)
     assert 500 <= len(coarse_f) <= 600
     assert genus_of(len(coarse_v), coarse_f, 1) == 1
-    # near the torus (major radius 3, minor radius 1); measured 3.8% of the minor radius
-    # (QSlim places the coarse vertices off the surface)
+    # near the torus (major radius 3, minor radius 1), though not on it (QSlim places the
+    # coarse vertices off the surface)
     ring = np.hypot(coarse_v[:, 0], coarse_v[:, 1]) - 3.0
     assert np.abs(np.hypot(ring, coarse_v[:, 2]) - 1.0).max() < 0.06
     # larger budgets from QSlim's fine decimation of the target, not from the reduction

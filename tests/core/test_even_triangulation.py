@@ -40,14 +40,14 @@ def test_planar_caps_get_interior_vertices_keeping_count_and_topology():
 
     assert interior(qslim_v) == 0
     vertices, faces = even_triangulation(qslim_v, qslim_f, surface)
-    # measured: 12 interior vertices, for 100 triangles as before
+    # interior vertices appear, for as many triangles as before
     assert interior(vertices) >= 6
     assert len(qslim_f) - 2 <= len(faces) <= len(qslim_f)
     assert closed_manifold(faces)
     assert genus_of(len(vertices), faces, 1) == 0
     # the new interior vertices lie on the caps, to the 2-degree planarity that lets a vertex
-    # be smoothed (measured 1.9e-4 for a disc of diameter 4; the pairing then projects every
-    # vertex onto the target), and every triangle faces outwards
+    # be smoothed (the pairing then projects every vertex onto the target), and every
+    # triangle faces outwards
     inner = np.linalg.norm(vertices[:, :2], axis=1) < 1.9
     assert np.abs(np.abs(vertices[inner, 2]) - 0.1).max() < 1e-3
     assert facing_away(vertices, faces, surface) == 0
@@ -63,7 +63,7 @@ def test_qslim_folds_on_a_real_cad_like_mesh_mostly_repaired():
     assert genus_of(len(vertices), faces, 1) == genus
     assert closed_manifold(faces)
     assert len(faces) >= 0.95 * len(qslim_f)
-    # measured: 59 -> 3 of 600 triangles face away from the target
+    # most of the triangles facing away from the target are turned round
     assert facing_away(qslim_v, qslim_f, surface) >= 40
     assert facing_away(vertices, faces, surface) <= 10
 
@@ -88,6 +88,6 @@ def test_flips_on_a_machined_part_end_in_a_triangulation_no_flip_changes():
     assert closed_manifold(faces)
     assert genus_of(len(vertices), faces, 1) == 9
     # every flip makes both its triangles face the target, so none is undone: the result is a
-    # fixed point (measured: flips went back and forth, 4 in every pass up to the last, when an
-    # untangling flip could leave a triangle facing away)
+    # fixed point (flips would go back and forth if an untangling flip could leave a triangle
+    # facing away)
     assert np.array_equal(_flip_pass(vertices, faces, surface, max_passes=1), faces)

@@ -121,7 +121,7 @@ def test_compute_frames_reports_the_choice_per_part_and_pca_mode_keeps_pca():
 @pytest.mark.parametrize("name", ["to_simp_lbracket.stl", "ge_bracket_domain.stl"])
 def test_dev_mesh_frame_is_no_worse_than_world_or_pca(name):
     """On TO results the chosen frame's nearest-direction angle is at most that of the better of
-    the world axes and PCA (the issue's figure: PCA was 10 degrees worse on the L-bracket)."""
+    the world axes and PCA (PCA alone is clearly worse on the L-bracket)."""
     mesh = load_dev_mesh(name)
     part = np.zeros(len(mesh.faces), dtype=np.int64)
     pca = part_frames(mesh.vertices, mesh.faces, part)

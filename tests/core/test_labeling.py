@@ -240,7 +240,7 @@ def test_dev_mesh_with_automatic_parts_ends_valid(name):
 
 
 def test_fandisk_with_the_chosen_frame_has_no_chart_below_four_boundaries():
-    """With PCA frames fandisk kept a +X chart with two boundaries between +Y and +Z (a lens
+    """With PCA frames fandisk keeps a +X chart with two boundaries between +Y and +Z (a lens
     whose tips are X, Y, Z corners, which no local split can make four-sided); the frame chosen by
     labeling energy labels it validly and fits the normals better."""
     from dev_meshes import load_dev_mesh

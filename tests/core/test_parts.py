@@ -260,9 +260,9 @@ def test_absorb_tangent_cuts_merges_a_cap_cut_along_its_wall():
 
 
 def test_automatic_parts_of_idler_riser_are_cut_across():
-    """The curve skeleton of idler_riser ends in a 78-face sliver of a curved wall whose cut runs
-    along it (a 0.25 share, labelled 16 degrees above its nearest directions by Eq. 3's term 4);
-    no automatic part may keep such a cut."""
+    """The curve skeleton of idler_riser ends in a small sliver of a curved wall whose cut runs
+    along it (Eq. 3's term 4 would label it well above its nearest directions); no automatic
+    part may keep such a cut."""
     mesh = _load("idler_riser.stl")
     part = skeleton_segmentation(mesh).face_part
     validate_face_part(mesh, part)
@@ -329,9 +329,8 @@ def test_frames_validity_and_repair_share_one_interface_grouping_and_axis(bar):
     pairs = np.array([itf.parts for itf in itfs])[face_itf[near]]
     assert ((pairs == part[near, None]).any(axis=1)).all()  # never another pair's axis
 
-    # a band of +Y across the junctions gives the repair work where the axes matter (the
-    # earlier derivation of the repair gave two junction faces another interface's axis and
-    # repaired 4 faces differently)
+    # a band of +Y across the junctions gives the repair work where the axes matter (a
+    # junction face given another interface's axis would be repaired differently)
     labels = hbecvt_labeling(bar.vertices, bar.faces, part, field.face_frame, max_sweeps=3)[0]
     labels[np.abs(c[:, 0] - 5.0) < 1.3] = 2
     given = repair_labeling(bar.vertices, bar.faces, part, labels, field.face_frame,

@@ -318,8 +318,8 @@ def test_real_simp_cantilever_base_mesh():
     info = result.report["base_mesh"]
     assert info["genus"] == result.report["input"]["genus"] == 0
     assert info["within_budget"] and abs(info["faces"] - 300) <= 75
-    # at most 1% of the faces inverted (the limit surface facing away from the target; today
-    # one face of the clamped end's collapsed slivers)
+    # at most 1% of the faces inverted (the limit surface facing away from the target, such
+    # as a face of the clamped end's collapsed slivers)
     assert inverted_faces(base, target.vertices, target.faces).mean() <= 0.01
     diag = float(np.linalg.norm(np.ptp(target.vertices, axis=0)))
     assert on_surface_distance(base.vertices, target.vertices, target.faces).max() < 1e-9 * diag

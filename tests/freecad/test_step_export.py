@@ -8,8 +8,8 @@ import Part
 from core.polymesh_io import write_polymesh
 from core.subdivision import sample_cages
 
-# patches expected per cage (one per quad, n per n-gon) and today's accuracy figures:
-# largest patch deviation from the exact limit surface (fraction of the bbox diagonal)
+# patches expected per cage (one per quad, n per n-gon) and the bound on the largest patch
+# deviation from the exact limit surface (fraction of the bbox diagonal)
 CAGES = {"mixed_prism": (7 + 3 * 10, 6.4e-5), "pentagonal_prism": (5 + 2 * 5, 3.1e-5),
          "genus3_block": (68, 1.6e-5), "cube": (6, 3.8e-6)}
 NORMAL_JUMP_MAX_DEG = 0.315

@@ -39,10 +39,10 @@ def test_cages_become_valid_step_solids(tmp_path, name):
 
 def test_creased_cage_reads_back_outward(tmp_path):
     """The fitted creased cage of ``featuretype`` (300 faces, written by ``reconstruct
-    --base-mesh`` in session 26, crease tags included) has crease vertices where the limit
-    surface has no tangent plane. OpenCascade orients a shell read from STEP from a ray out of
-    its first face; from this solid's first patch that ray gave the inside (-11.2 mm^3 read
-    back, session 26). The STEP file lists the outermost face first, and the solid reads back
+    --base-mesh``, crease tags included) has crease vertices where the limit surface has no
+    tangent plane. OpenCascade orients a shell read from STEP from a ray out of its first face;
+    from this solid's first patch that ray can give the inside (a negative volume read back).
+    The STEP file lists the outermost face first, and the solid reads back
     as written. (That the faces in their build order read back inside out is not asserted:
     the patches differ in the last bits between machines, and on some the ray from the first
     patch happens to find the outside.)"""

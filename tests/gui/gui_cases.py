@@ -572,8 +572,8 @@ class ReconstructAllTest(unittest.TestCase, _ScreenshotAssertions):
 
 class EntryPointTest(unittest.TestCase):
     """The GUI gives the command line's result: the same fitted base-mesh bytes and a
-    solid with the poles and volume of the command line's STEP solid (the issue saw two
-    different ``BoundBox`` values: the box of a displayed, hence tessellated, shape comes
+    solid with the poles and volume of the command line's STEP solid (``BoundBox`` values
+    are not compared: the box of a displayed, hence tessellated, shape comes
     from its triangulation, so it is no measure of the geometry and is not compared)."""
 
     FIT = 3
