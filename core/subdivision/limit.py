@@ -271,6 +271,54 @@ def corner_frame(u, v, corner):
     return a, b
 
 
+def _walk(topo, g, direction):
+    """The half-edge of the neighbouring quad in ``direction`` (``"+a"``, ``"+b"``, ``"-a"`` or
+    ``"-b"``) of the quads walked by half-edges ``g`` (corner = half-edge leaving it), in the
+    same orientation."""
+    nx, pv, tw = topo.next_corner, topo.prev_corner, topo.twin
+    if direction == "+a":
+        return nx[tw[nx[g]]]
+    if direction == "+b":
+        return tw[nx[nx[g]]]
+    if direction == "-a":
+        return pv[tw[pv[g]]]
+    return nx[nx[tw[g]]]
+
+
+def _corner_vertex(face_vertices, topo, g, la, lb):
+    """Vertex at local corner (la, lb) in {0,1}^2 of the quad walked by half-edge g."""
+    nx, pv = topo.next_corner, topo.prev_corner
+    c = np.select([(la == 0) & (lb == 0), (la == 1) & (lb == 0), (la == 1) & (lb == 1)],
+                  [g, nx[g], nx[nx[g]]], pv[g])
+    return face_vertices[c]
+
+
+def quad_stencils(quad_mesh, topo):
+    """(m, 4, 4) int64 uniform bicubic B-spline stencil of every face of a closed quad mesh.
+
+    ``stencil[f, a, b]`` is the vertex at grid position ``(a - 1, b - 1)`` of face ``f``'s
+    frame (corner 0 at (0, 0), corner 1 at (1, 0), corner 3 at (0, 1)). Meaningful only for
+    faces whose four corners have valence 4 (their limit is the bicubic B-spline of the
+    stencil); other faces get whatever the walk meets.
+    """
+    fv = quad_mesh.face_vertices
+    m = quad_mesh.n_faces
+    g00 = 4 * np.arange(m, dtype=np.int64)
+    faces = {}
+    for i in (-1, 0, 1):
+        gi = g00 if i == 0 else _walk(topo, g00, "+a" if i > 0 else "-a")
+        for j in (-1, 0, 1):
+            faces[i, j] = gi if j == 0 else _walk(topo, gi, "+b" if j > 0 else "-b")
+    st = np.empty((m, 4, 4), dtype=np.int64)
+    for a in range(-1, 3):
+        i = min(max(a - 1, -1), 1)
+        for b in range(-1, 3):
+            j = min(max(b - 1, -1), 1)
+            st[:, a + 1, b + 1] = _corner_vertex(fv, topo, faces[i, j], np.full(m, a - i),
+                                                 np.full(m, b - j))
+    return st
+
+
 # ---------------------------------------------------------------- EV templates ----
 
 def _template_id(n, s, a, b, r=TEMPLATE_RADIUS):
@@ -390,7 +438,7 @@ class LimitEvaluator:
             raise InternalError("a work quad has more than one extraordinary corner after "
                                 f"{self.WORK_LEVELS} subdivisions")
         self.ev_corner = np.where(irregular.any(axis=1), irregular.argmax(axis=1), -1)
-        self.stencils = self._regular_stencils()
+        self.stencils = quad_stencils(work, topo)
         self.ev_vertices = np.unique(fv[irregular.reshape(-1)])
         self._ev_slot = np.full(len(work.vertices), -1, dtype=np.int64)
         self._ev_levels = {}
@@ -421,39 +469,10 @@ class LimitEvaluator:
 
     # -- topology walks on the work mesh (corner = half-edge leaving it) --
     def _move(self, g, direction):
-        nx, pv, tw = self.topo.next_corner, self.topo.prev_corner, self.topo.twin
-        if direction == "+a":
-            return nx[tw[nx[g]]]
-        if direction == "+b":
-            return tw[nx[nx[g]]]
-        if direction == "-a":
-            return pv[tw[pv[g]]]
-        return nx[nx[tw[g]]]
+        return _walk(self.topo, g, direction)
 
     def _corner_vertex(self, g, la, lb):
-        """Vertex at local corner (la, lb) in {0,1}^2 of the face walked by half-edge g."""
-        nx, pv = self.topo.next_corner, self.topo.prev_corner
-        c = np.select([(la == 0) & (lb == 0), (la == 1) & (lb == 0), (la == 1) & (lb == 1)],
-                      [g, nx[g], nx[nx[g]]], pv[g])
-        return self.work.face_vertices[c]
-
-    def _regular_stencils(self):
-        """(m_work, 4, 4) int64 stencil vertices of each work quad (junk for EV quads)."""
-        m = self.work.n_faces
-        g00 = 4 * np.arange(m, dtype=np.int64)
-        faces = {}
-        for i in (-1, 0, 1):
-            gi = g00 if i == 0 else self._move(g00, "+a" if i > 0 else "-a")
-            for j in (-1, 0, 1):
-                faces[i, j] = gi if j == 0 else self._move(gi, "+b" if j > 0 else "-b")
-        st = np.empty((m, 4, 4), dtype=np.int64)
-        for a in range(-1, 3):
-            i = min(max(a - 1, -1), 1)
-            for b in range(-1, 3):
-                j = min(max(b - 1, -1), 1)
-                st[:, a + 1, b + 1] = self._corner_vertex(
-                    faces[i, j], np.full(m, a - i), np.full(m, b - j))
-        return st
+        return _corner_vertex(self.work.face_vertices, self.topo, g, la, lb)
 
     def _gather_templates(self, evs, n, r=TEMPLATE_RADIUS):
         """(len(evs), K, 3) float64 positions of the template points around EVs."""

@@ -1,0 +1,397 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Tangent-continuous (G1) bicubic B-spline patches of a Catmull-Clark cage, few poles each.
+
+The light alternative to the graded export (:mod:`core.export.bspline`): one B-spline face
+per quad of the cage (the cage itself if it is all quads, else its first Catmull-Clark
+refinement), with at most one interior knot per direction.
+
+Method
+------
+* A *regular* quad (its four corners have valence 4) is exactly its limit surface: the
+  bicubic Bezier patch of its 4 x 4 B-spline stencil (C2 with its regular neighbours).
+* A quad with an extraordinary corner (EV, valence ``n != 4``) becomes a *free* patch: a
+  bicubic B-spline with a double knot at 1/2 in each direction (6 x 6 poles, C1 inside).
+  Its poles are the solution of one sparse least-squares problem over all free patches:
+  they fit exact limit points (4 Gauss points per knot span and direction) subject to
+
+  - C0: neighbouring patches share their boundary poles (one unknown per shared pole; a
+    free patch's side next to a regular quad takes the quad's side, its knot-inserted
+    Bezier row);
+  - G1 along every edge next to a free patch, with the symmetric connection of
+    Peters' G1 constructions: for the edge ``b(t)`` from vertex ``A`` to ``B`` and the
+    inward cross-boundary derivatives ``L(t)``, ``R(t)`` of its two patches,
+    ``L(t) + R(t) = alpha(t) b'(t)`` with
+    ``alpha(t) = 2 cos(2 pi / n_A) (1 - 2 t)`` on ``[0, 1/2]`` and
+    ``alpha(t) = -2 cos(2 pi / n_B) (2 t - 1)`` on ``[1/2, 1]``
+    (``n`` the valences; ``alpha = 0``, i.e. C1, at valence 4 and at the edge's middle).
+    Both sides are cubic on each knot span, so the condition holds identically once it
+    holds at four parameters per span. At an EV it forces the spoke tangents into one plane
+    (the relation ``x_{k-1} + x_{k+1} = 2 cos(2 pi / n) x_k`` of an affine image of a
+    regular ``n``-gon), so the patches share a normal there.
+
+  The constraints enter as a penalty of weight :data:`G1_PENALTY` relative to the fit
+  (their residual is about ``1 / G1_PENALTY^2`` of the fit's, far below rounding of the
+  normals). Everything is linear in the cage with fixed coefficients: every pole is a
+  fixed affine combination of cage vertices (weights summing to 1), so translating or
+  scaling the cage translates or scales the patches.
+
+The patches meet along whole sides; the shared vertices and edges are returned as a
+:class:`core.export.brep_topology.BRepTopology` (an edge next to a regular quad takes the
+quad's Bezier row, an edge between two free patches their shared 6-pole row).
+"""
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+from scipy.sparse.linalg import splu
+
+from core.errors import ExportError
+from core.export.brep_topology import CORNER_UV, BRepTopology, EdgeCurve
+from core.export.bspline_basis import basis_matrix
+from core.export.bspline_measure import normal_jumps, patch_deviation
+from core.export.patch_context import PatchContext
+from core.subdivision.catmull_clark import mesh_topology
+from core.subdivision.limit import LimitEvaluator, quad_mesh_of, quad_stencils
+from core.types import BSplinePatch, PatchSet
+
+SPLIT_KNOTS = np.array([0.0, 0.5, 1.0])
+SPLIT_MULTS = np.array([4, 2, 4], dtype=np.int64)
+BEZIER_KNOTS = np.array([0.0, 1.0])
+BEZIER_MULTS = np.array([4, 4], dtype=np.int64)
+N_SPLIT = 6
+"""Poles per direction of a free patch (cubic, double knot at 1/2)."""
+G1_PENALTY = 1.0e4
+"""Weight of the G1 and C1 conditions against the fit to limit points."""
+
+BSPLINE_TO_BEZIER = np.array([[1.0, 4.0, 1.0, 0.0], [0.0, 4.0, 2.0, 0.0],
+                              [0.0, 2.0, 4.0, 0.0], [0.0, 1.0, 4.0, 1.0]]) / 6.0
+"""(4, 4) Bezier points of the middle span of a uniform cubic B-spline from its 4 poles."""
+BEZIER_TO_SPLIT = np.array([[1.0, 0.0, 0.0, 0.0], [0.5, 0.5, 0.0, 0.0],
+                            [0.25, 0.5, 0.25, 0.0], [0.0, 0.25, 0.5, 0.25],
+                            [0.0, 0.0, 0.5, 0.5], [0.0, 0.0, 0.0, 1.0]])
+"""(6, 4) poles on the knots :data:`SPLIT_KNOTS` of a cubic Bezier curve (knot insertion)."""
+
+
+def _gauss_params(per_span=4):
+    """(2 per_span,) Gauss-Legendre parameters in each half of [0, 1]."""
+    x = 0.5 * (np.polynomial.legendre.leggauss(per_span)[0] + 1.0)
+    return np.concatenate([0.5 * x, 0.5 + 0.5 * x])
+
+
+def _side_slots(n):
+    """(4, n) int64 slots ``i * n + j`` of an (n, n) pole grid along each side, in loop
+    order: side ``k`` runs from patch corner ``k`` to ``k + 1``."""
+    r = np.arange(n)
+    return np.stack([r * n, (n - 1) * n + r, (n - 1 - r) * n + (n - 1), (n - 1) - r])
+
+
+def _side_uv(side, s):
+    """Patch parameters (u, v) at position ``s`` along ``side`` (arrays, broadcast)."""
+    u = np.select([side == 0, side == 1, side == 2], [s, np.ones_like(s), 1.0 - s],
+                  np.zeros_like(s))
+    v = np.select([side == 0, side == 1, side == 2], [np.zeros_like(s), s, np.ones_like(s)],
+                  1.0 - s)
+    return u, v
+
+
+def _tensor_rows(u, v, du, dv):
+    """(p, 36) weights of a free patch's poles for the point or derivative at (u, v)."""
+    bu = basis_matrix(SPLIT_KNOTS, SPLIT_MULTS, u, du)
+    bv = basis_matrix(SPLIT_KNOTS, SPLIT_MULTS, v, dv)
+    return (bu[:, :, None] * bv[:, None, :]).reshape(len(u), -1)
+
+
+def _side_derivatives(side, s):
+    """Pole weights (p, 36) of the derivative along ``side`` (towards corner side + 1) and
+    of the inward cross-boundary derivative, at positions ``s`` (p,) along it."""
+    u, v = _side_uv(side, s)
+    d_u = _tensor_rows(u, v, 1, 0)
+    d_v = _tensor_rows(u, v, 0, 1)
+    k = side[:, None]
+    along = np.select([k == 0, k == 1, k == 2], [d_u, d_v, -d_u], -d_v)
+    inward = np.select([k == 0, k == 1, k == 2], [d_v, -d_u, -d_v], d_u)
+    return along, inward
+
+
+def connection_alpha(t, valence_start, valence_end):
+    """The G1 connection function ``alpha(t)`` along edges (module docstring).
+
+    With ``c = cos(2 pi / n)`` of each end (0 at valence 4):
+
+    * both ends extraordinary: linear, ``2 c_start (1 - t) - 2 c_end t``;
+    * only the start: ``2 c (1 - 4 t / 3)`` on ``[0, 1/2]``, ``8 c (1 - t)^2 / 3`` on
+      ``[1/2, 1]`` (C1 at 1/2, value and slope 0 at the valence-4 end); mirrored for only
+      the end;
+    * neither: 0 (C1).
+
+    ``alpha`` reaches a valence-4 vertex with zero slope: there the G1 conditions of the
+    four edges are compatible only when opposite edges leave with equal slopes (the vertex
+    enclosure condition of an even valence), and zero slopes keep the regular edges beyond
+    it C1. It is C1 at the double knot 1/2: the patches are C1 there, so a kink of
+    ``alpha`` would force a kink of the edge curve's tangent length (or a zero tangent).
+    The quadratic half needs a quadratic edge curve on it (:func:`_g1_system`).
+
+    Parameters
+    ----------
+    t : (p,) float64 edge parameters, 0 at the start vertex.
+    valence_start, valence_end : (p,) int64 valences of the edge's end vertices.
+
+    Returns
+    -------
+    (p,) float64
+    """
+    ev_start, ev_end = valence_start != 4, valence_end != 4
+    c_start = np.where(ev_start, np.cos(2.0 * np.pi / valence_start), 0.0)
+    c_end = np.where(ev_end, np.cos(2.0 * np.pi / valence_end), 0.0)
+    both = 2.0 * c_start * (1.0 - t) - 2.0 * c_end * t
+
+    def one_end(c, s):
+        return np.where(s < 0.5, 2.0 * c * (1.0 - 4.0 * s / 3.0), 8.0 * c * (1.0 - s) ** 2 / 3.0)
+
+    return np.select([ev_start & ev_end, ev_start, ev_end],
+                     [both, one_end(c_start, t), -one_end(c_end, 1.0 - t)], 0.0)
+
+
+class _Layout:
+    """Pole slots of every quad (36 each), merged where patches share poles.
+
+    ``label[slot]`` is the shared pole of a slot; ``fixed_value`` holds the poles of regular
+    quads (NaN for unknown ones) and ``unknown[label]`` the unknown index (-1 if fixed).
+    """
+
+    def __init__(self, quads, topo, free, bezier):
+        m = quads.n_faces
+        n2 = N_SPLIT * N_SPLIT
+        sides = _side_slots(N_SPLIT)
+        corner = np.arange(len(quads.face_vertices))
+        face, local = corner // 4, corner % 4
+        twin = topo.twin
+        a = (face[:, None] * n2 + sides[local]).reshape(-1)
+        b = (face[twin][:, None] * n2 + sides[local[twin]][:, ::-1]).reshape(-1)
+        n_slots = m * n2
+        graph = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(n_slots, n_slots))
+        _, self.label = connected_components(graph, directed=False)
+        n_labels = int(self.label.max()) + 1
+        split = np.einsum("ia,fabk,jb->fijk", BEZIER_TO_SPLIT, bezier, BEZIER_TO_SPLIT)
+        fixed_slots = (np.flatnonzero(~free)[:, None] * n2 + np.arange(n2)).reshape(-1)
+        self.fixed_value = np.full((n_labels, 3), np.nan)
+        self.fixed_value[self.label[fixed_slots]] = split[~free].reshape(-1, 3)
+        is_unknown = np.isnan(self.fixed_value[:, 0])
+        self.unknown = np.full(n_labels, -1, dtype=np.int64)
+        self.unknown[is_unknown] = np.arange(int(is_unknown.sum()))
+        self.n_unknowns = int(is_unknown.sum())
+
+    def split_columns(self, w, f):
+        """Sparse matrix over unknowns and the constant part for rows of pole weights.
+
+        Parameters
+        ----------
+        w : (p, 36) pole weights of free-patch points or derivatives; f : (p,) int64 quads.
+
+        Returns
+        -------
+        A : (p, n_unknowns) csr_matrix; c : (p, 3) the fixed poles' contribution.
+        """
+        n2 = N_SPLIT * N_SPLIT
+        lab = self.label[f[:, None] * n2 + np.arange(n2)]
+        unk = self.unknown[lab]
+        r = np.repeat(np.arange(len(w)), n2).reshape(len(w), n2)
+        known = unk < 0
+        A = sp.csr_matrix((w[~known], (r[~known], unk[~known])),
+                          shape=(len(w), self.n_unknowns))
+        c = np.einsum("pi,pik->pk", np.where(known, w, 0.0),
+                      np.nan_to_num(self.fixed_value[lab]))
+        return A, c
+
+
+def _regular_bezier(quads, topo):
+    """(m, 4, 4, 3) Bezier poles of every quad's bicubic B-spline stencil (exact limit of the
+    quads whose corners have valence 4)."""
+    st = quad_stencils(quads, topo)
+    P = quads.vertices[st]
+    return np.einsum("ia,fabk,jb->fijk", BSPLINE_TO_BEZIER, P, BSPLINE_TO_BEZIER)
+
+
+def _fit_system(layout, quads, evaluator, free_faces):
+    """Least-squares rows fitting free patches to exact limit points (4 per span each way)."""
+    s = _gauss_params()
+    U, V = np.meshgrid(s, s, indexing="ij")
+    U, V = U.reshape(-1), V.reshape(-1)
+    w = _tensor_rows(U, V, 0, 0)
+    faces = np.repeat(free_faces, len(U))
+    A, c = layout.split_columns(np.tile(w, (len(free_faces), 1)), faces)
+    target = evaluator.evaluate(faces, np.tile(U, len(free_faces)), np.tile(V, len(free_faces)))
+    return A, target - c
+
+
+def _g1_system(layout, quads, topo, free, valence):
+    """Rows of the G1 conditions on every edge next to a free patch.
+
+    ``L + R - alpha b' = 0`` at 4 Gauss points per knot span (both sides are cubic there),
+    and, on the half of an edge from an EV to a valence-4 vertex, a quadratic edge curve
+    (zero third difference of its Bezier points) so that ``alpha b'`` stays cubic.
+    """
+    fv = quads.face_vertices
+    corner = np.arange(len(fv))
+    rep = corner[corner < topo.twin]
+    face, twin_face = rep // 4, topo.twin[rep] // 4
+    rep = rep[free[face] | free[twin_face]]
+    if not len(rep):
+        return None, None
+    t = _gauss_params()
+    p = len(t)
+    c_near = np.repeat(rep, p)
+    c_far = np.repeat(topo.twin[rep], p)
+    tt = np.tile(t, len(rep))
+    along, inward_near = _side_derivatives(c_near % 4, tt)
+    _, inward_far = _side_derivatives(c_far % 4, 1.0 - tt)
+    alpha = connection_alpha(tt, valence[fv[c_near]], valence[fv[topo.next_corner[c_near]]])
+    A_near, c_near_fixed = layout.split_columns(inward_near - alpha[:, None] * along, c_near // 4)
+    A_far, c_far_fixed = layout.split_columns(inward_far, c_far // 4)
+    A = [A_near + A_far]
+    y = [-(c_near_fixed + c_far_fixed)]
+    ev_start = valence[fv[rep]] != 4
+    ev_end = valence[fv[topo.next_corner[rep]]] != 4
+    sides = _side_slots(N_SPLIT)
+    for mask, weights in ((ev_start & ~ev_end, [0.0, 0.0, -0.5, 2.5, -3.0, 1.0]),
+                          (~ev_start & ev_end, [1.0, -3.0, 2.5, -0.5, 0.0, 0.0])):
+        c = rep[mask]
+        if not len(c):
+            continue
+        w = np.zeros((len(c), N_SPLIT * N_SPLIT))
+        w[np.arange(len(c))[:, None], sides[c % 4]] = weights
+        A_q, c_q = layout.split_columns(w, c // 4)
+        A.append(A_q)
+        y.append(-c_q)
+    return sp.vstack(A).tocsr(), np.concatenate(y)
+
+
+def _solve(A_fit, y_fit, A_g1, y_g1):
+    """(n_unknowns, 3) minimiser of ``|A_fit x - y_fit|^2 + G1_PENALTY^2 |A_g1 x - y_g1|^2``."""
+    K = (A_fit.T @ A_fit).tocsc()
+    rhs = A_fit.T @ y_fit
+    if A_g1 is not None:
+        K = (K + G1_PENALTY ** 2 * (A_g1.T @ A_g1)).tocsc()
+        rhs = rhs + G1_PENALTY ** 2 * (A_g1.T @ y_g1)
+    return splu(K).solve(np.ascontiguousarray(rhs))
+
+
+def _side_row(poles, side):
+    """Boundary pole row (n, 3) of a patch's (n, n, 3) poles from corner ``side`` to ``side + 1``."""
+    return (poles[:, 0], poles[-1, :], poles[::-1, -1], poles[0, ::-1])[side]
+
+
+def _topology(quads, topo, patches, free):
+    """The BRepTopology of quad patches that meet along whole sides: one vertex per used cage
+    vertex, one edge per cage edge (a regular patch's Bezier row where it has one)."""
+    fv = quads.face_vertices
+    used = np.unique(fv)
+    index = np.full(len(quads.vertices), -1, dtype=np.int64)
+    index[used] = np.arange(len(used))
+    n_edges = len(topo.edges)
+    corner = np.arange(len(fv), dtype=np.int64)
+    rep = np.full(n_edges, -1, dtype=np.int64)
+    rep[topo.corner_edge[::-1]] = corner[::-1]
+    twin = topo.twin[rep]
+    curves = []
+    for c, t in zip(rep.tolist(), twin.tolist()):
+        if not free[c // 4] or free[t // 4]:
+            row = _side_row(patches[c // 4].poles, c % 4)
+        else:
+            row = _side_row(patches[t // 4].poles, t % 4)[::-1]
+        knots, mults = (BEZIER_KNOTS, BEZIER_MULTS) if len(row) == 4 else (SPLIT_KNOTS, SPLIT_MULTS)
+        curves.append(EdgeCurve(np.ascontiguousarray(row), knots, mults))
+    vertices = np.empty((len(used), 3))
+    vertices[index[fv]] = np.stack([patches[c // 4].poles[(0, -1, -1, 0)[c % 4], (0, 0, -1, -1)[c % 4]]
+                                    for c in corner.tolist()])
+    edge_vertices = np.stack([index[fv[rep]], index[fv[topo.next_corner[rep]]]], axis=1)
+    reversed_use = rep[topo.corner_edge] != corner
+    uv = np.stack([CORNER_UV[corner % 4], CORNER_UV[(corner + 1) % 4]], axis=1)
+    uv[reversed_use] = uv[reversed_use][:, ::-1]
+    return BRepTopology(vertices, edge_vertices, curves, corner // 4,
+                        topo.corner_edge.astype(np.int64), reversed_use, uv)
+
+
+def g1_surface_patches(base, measure=True):
+    """G1 bicubic B-spline patches close to the Catmull-Clark limit surface of ``base``.
+
+    Parameters
+    ----------
+    base : PolyMesh, closed 2-manifold polygon mesh without crease edges (validated by the
+        caller).
+    measure : bool, if True fill ``info`` with the deviation from the exact limit surface
+        and the normal jumps across edges.
+
+    Returns
+    -------
+    PatchSet
+        One patch per quad of ``base`` if it is all quads, else per quad of its first
+        Catmull-Clark refinement (``patch_level`` 1); ``face_of_patch`` is the base face;
+        ``topology`` the shared vertices and edges; ``d/du x d/dv`` points outward.
+        ``info`` holds ``export`` ("g1"), ``patch_level``, ``n_patches``,
+        ``patches_per_base_face``, ``n_extraordinary_vertices``, ``n_g1_patches`` (free
+        patches), ``n_poles``, ``g1_residual`` (largest residual of the G1 conditions,
+        model units per unit parameter), ``bbox_diagonal`` and, if ``measure``, the figures
+        of :func:`core.export.bspline_measure.patch_deviation` and
+        :func:`core.export.bspline_measure.normal_jumps`.
+
+    Raises
+    ------
+    ExportError when ``base`` has crease edges (their limit surface has no tangent plane to
+        join G1; the graded export handles them).
+    """
+    if base.n_creases:
+        raise ExportError(f"the G1 export does not support crease edges: the cage has "
+                          f"{base.n_creases}; use the exact (graded) export")
+    quads = quad_mesh_of(base)
+    level = 0 if quads is base else 1
+    fv = quads.face_vertices
+    topo = mesh_topology(fv, quads.face_offsets, len(quads.vertices))
+    valence = np.bincount(fv, minlength=len(quads.vertices))
+    free = (valence[fv].reshape(-1, 4) != 4).any(axis=1)
+    bezier = _regular_bezier(quads, topo)
+    layout = _Layout(quads, topo, free, bezier)
+    free_faces = np.flatnonzero(free)
+    slots = np.nan_to_num(layout.fixed_value)
+    residual = 0.0
+    if len(free_faces):
+        evaluator = LimitEvaluator(quads)
+        A_fit, y_fit = _fit_system(layout, quads, evaluator, free_faces)
+        A_g1, y_g1 = _g1_system(layout, quads, topo, free, valence)
+        x = _solve(A_fit, y_fit, A_g1, y_g1)
+        slots[layout.unknown >= 0] = x[layout.unknown[layout.unknown >= 0]]
+        residual = float(np.abs(A_g1 @ x - y_g1).max())
+    n2 = N_SPLIT * N_SPLIT
+    patches = []
+    for f in range(quads.n_faces):
+        if free[f]:
+            P = slots[layout.label[f * n2:(f + 1) * n2]].reshape(N_SPLIT, N_SPLIT, 3)
+            patches.append(BSplinePatch(P, SPLIT_KNOTS, SPLIT_MULTS, SPLIT_KNOTS, SPLIT_MULTS))
+        else:
+            patches.append(BSplinePatch(np.ascontiguousarray(bezier[f]), BEZIER_KNOTS,
+                                        BEZIER_MULTS, BEZIER_KNOTS, BEZIER_MULTS))
+    topology = _topology(quads, topo, patches, free)
+    if level == 0:
+        face_of_patch = np.arange(base.n_faces, dtype=np.int64)
+    else:
+        face_of_patch = mesh_topology(base.face_vertices, base.face_offsets,
+                                      len(base.vertices)).face_of_corner.astype(np.int64)
+    sizes = base.face_sizes
+    per_face = np.bincount(face_of_patch, minlength=base.n_faces)
+    ctx = PatchContext(quads, 1)
+    info = {
+        "export": "g1",
+        "patch_level": level,
+        "n_patches": len(patches),
+        "patches_per_base_face": {str(n): float(per_face[sizes == n].mean())
+                                  for n in np.unique(sizes).tolist()},
+        "n_extraordinary_vertices": int((valence[np.unique(fv)] != 4).sum()),
+        "n_g1_patches": int(free.sum()),
+        "n_poles": int(sum(p.poles.shape[0] * p.poles.shape[1] for p in patches)),
+        "g1_residual": residual,
+        "bbox_diagonal": ctx.bbox_diagonal,
+    }
+    result = PatchSet(patches, face_of_patch, info, topology)
+    if measure:
+        info.update(patch_deviation(result, quads, context=ctx))
+        info.update(normal_jumps(result, quads, context=ctx))
+    return result
