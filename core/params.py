@@ -23,6 +23,12 @@ UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 EXPORT_DEPTH = 8
 """Grading depth of the B-spline patches at extraordinary vertices (``core.export.bspline``):
 a patch is exact except in a corner cell of size 2^-depth."""
+EXPORT_FORMS = ("exact", "g1")
+"""The surface forms of ``subd-to-step``: ``exact``, the graded patches of
+``core.export.bspline`` (the Catmull-Clark limit except in corner cells of size 2^-depth);
+``g1``, the light tangent-continuous patches of ``core.export.g1_patches`` (one face per quad,
+at most 36 poles, close to the limit near extraordinary vertices)."""
+DEFAULT_EXPORT_FORM = "exact"
 MAX_EXPORT_DEPTH = 12
 """Deeper grading adds (2 depth + 3)^2 poles per patch at an extraordinary vertex for no
 visible gain (the error is already ~1e-6 of the diagonal at depth 8)."""
@@ -68,6 +74,12 @@ def check_export_depth(depth, name="depth"):
     if isinstance(depth, bool) or not isinstance(depth, Integral):
         raise ParameterError(f"{name} must be an integer, got {depth!r}")
     _range(name, depth, 1, MAX_EXPORT_DEPTH)
+
+
+def check_export_form(form, name="export"):
+    """Raise ParameterError unless ``form`` is one of :data:`EXPORT_FORMS`."""
+    if form not in EXPORT_FORMS:
+        raise ParameterError(f"{name} must be one of {', '.join(EXPORT_FORMS)}, got {form!r}")
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,8 @@ import numpy as np
 
 from core.errors import StageNotAvailableError
 from core.output_files import check_output_path, output_transaction, write_json_atomic
-from core.params import EXPORT_DEPTH, check_export_depth
+from core.params import (DEFAULT_EXPORT_FORM, EXPORT_DEPTH, check_export_depth,
+                         check_export_form)
 from core.pipeline import (LAST_CORE_STAGE, STOP_AFTER_CHOICES, peak_memory_mb,
                            reconstruct as run_pipeline)
 from core.progress import NO_PROGRESS
@@ -168,7 +169,7 @@ def _input_name(path):
 
 
 def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT_DEPTH,
-                  measure=True, progress=NO_PROGRESS):
+                  measure=True, progress=NO_PROGRESS, export=DEFAULT_EXPORT_FORM):
     """Turn a closed polygon base mesh (a SubD cage, OBJ) into a FreeCAD solid.
 
     The solid's faces are bicubic B-spline patches of the Catmull-Clark limit surface.
@@ -181,12 +182,16 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT
     measure : compute the approximation error, continuity figures and the limit-surface
         volume the solid is compared with (costs about as much as the export).
     progress : core.progress.Progress.
+    export : ``"exact"`` (graded patches, ``depth`` applies) or ``"g1"`` (one light
+        tangent-continuous patch per quad, :mod:`core.export.g1_patches`; cages without
+        creases).
 
     Returns
     -------
     (Part.Solid, dict report)
     """
     from core.export.bspline import limit_surface_patches
+    from core.export.g1_patches import g1_surface_patches
     from core.polymesh_checks import check_export_range, check_polymesh, check_single_shell
     from core.polymesh_io import read_polymesh
     from core.subdivision.limit import limit_volume
@@ -194,6 +199,7 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT
     from polycube_wb.step_io import write_solid_step
 
     check_export_depth(depth)
+    check_export_form(export)
     inputs = (base_mesh_path,)
     for path, what in ((step_path, "STEP file"), (report_path, "report")):
         if path is not None:
@@ -209,7 +215,10 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT
     stages["intake"] = _ok(clock)
     progress.report("patches", 0.1)
     clock = time.perf_counter()
-    patches = limit_surface_patches(base, depth=depth, measure=measure)
+    if export == "g1":
+        patches = g1_surface_patches(base, measure=measure)
+    else:
+        patches = limit_surface_patches(base, depth=depth, measure=measure)
     stages["patches"] = _ok(clock)
     progress.check_cancel()
     progress.report("solid", 0.5)

@@ -14,7 +14,8 @@ import traceback
 
 from core.errors import PolycubeInputError
 from core.output_files import committed_count
-from core.params import (EXPORT_DEPTH, MAX_EXPORT_DEPTH, UNIT_TO_MM, ReconstructionParams,
+from core.params import (DEFAULT_EXPORT_FORM, EXPORT_DEPTH, EXPORT_FORMS, MAX_EXPORT_DEPTH,
+                         UNIT_TO_MM, ReconstructionParams,
                          parameter_options)
 from core.pipeline import STOP_AFTER_CHOICES
 from polycube_wb.stage_lines import StageLines
@@ -112,7 +113,13 @@ def build_parser():
     sub.add_argument("--report", help="write the JSON report here")
     sub.add_argument("--depth", type=int, default=EXPORT_DEPTH,
                      help=f"patch grading depth at extraordinary vertices, 1..{MAX_EXPORT_DEPTH} "
-                          f"(default {EXPORT_DEPTH})")
+                          f"(default {EXPORT_DEPTH}; exact export only)")
+    sub.add_argument("--export", choices=EXPORT_FORMS, default=DEFAULT_EXPORT_FORM,
+                     help="exact: graded patches, the Catmull-Clark limit except in a 2^-depth "
+                          "cell at each extraordinary vertex (large STEP); g1: one light "
+                          "tangent-continuous patch per quad, close to the limit near "
+                          "extraordinary vertices (cages without creases) "
+                          f"(default {DEFAULT_EXPORT_FORM})")
     sub.add_argument("--no-measure", action="store_true",
                      help="skip measuring approximation error and continuity (faster)")
     sub.add_argument("--progress", action="store_true",
@@ -242,7 +249,7 @@ def _subd_to_step(args, stages):
     from polycube_wb.api import subd_to_solid
 
     _, report = subd_to_solid(args.base_mesh, args.output, args.report, depth=args.depth,
-                              measure=not args.no_measure, progress=stages)
+                              measure=not args.no_measure, progress=stages, export=args.export)
     base, brep, patches = report["base_mesh"], report["brep"], report["patches"]
     print(f"base mesh: {base['faces']} faces ({base['quads']} quads, {base['triangles']} triangles, "
           f"{base['other']} other), {base['extraordinary_vertices']} extraordinary vertices, genus {base['genus']}")

@@ -266,13 +266,24 @@ def _g1_system(layout, quads, topo, free, valence):
 
 
 def _solve(A_fit, y_fit, A_g1, y_g1):
-    """(n_unknowns, 3) minimiser of ``|A_fit x - y_fit|^2 + G1_PENALTY^2 |A_g1 x - y_g1|^2``."""
-    K = (A_fit.T @ A_fit).tocsc()
-    rhs = A_fit.T @ y_fit
-    if A_g1 is not None:
-        K = (K + G1_PENALTY ** 2 * (A_g1.T @ A_g1)).tocsc()
-        rhs = rhs + G1_PENALTY ** 2 * (A_g1.T @ y_g1)
-    return splu(K).solve(np.ascontiguousarray(rhs))
+    """(n_unknowns, 3) least-squares fit ``A_fit x ~ y_fit`` subject to ``A_g1 x = y_g1``.
+
+    Solved as the KKT system ``[[A^T A, C^T], [C, -delta I]]`` (``delta = G1_PENALTY^-2``
+    times the fit's scale): the G1 conditions are redundant where several meet (at every
+    vertex), and ``delta`` keeps the system regular with its small eigenvalues in the
+    multipliers of those redundant rows, not in the poles. The data are centred first, so a
+    translation of the cage moves the poles by exactly that vector up to rounding.
+    """
+    centre = y_fit.mean(axis=0)
+    H = (A_fit.T @ A_fit).tocsc()
+    rhs = A_fit.T @ (y_fit - A_fit @ np.broadcast_to(centre, (A_fit.shape[1], 3)))
+    if A_g1 is None:
+        return splu(H).solve(np.ascontiguousarray(rhs)) + centre
+    delta = H.diagonal().mean() / G1_PENALTY ** 2
+    y_c = y_g1 - A_g1 @ np.broadcast_to(centre, (A_g1.shape[1], 3))
+    K = sp.bmat([[H, A_g1.T], [A_g1, -delta * sp.identity(A_g1.shape[0])]]).tocsc()
+    x = splu(K).solve(np.ascontiguousarray(np.vstack([rhs, y_c])))
+    return x[:A_fit.shape[1]] + centre
 
 
 def _side_row(poles, side):

@@ -122,3 +122,27 @@ def test_huge_coordinates_get_a_clear_range_error(tmp_path):
     assert result.returncode == 2, result.stderr
     assert result.stderr.startswith("error: base mesh coordinates reach 1e+15 mm")
     assert not (tmp_path / "x.step").exists()
+
+
+@pytest.mark.parametrize("name", ["cube", "mixed_prism", "genus3_block"])
+def test_g1_export_is_a_valid_light_solid(tmp_path, name):
+    """``--export g1``: a valid closed solid, no normal jump, far fewer poles than exact."""
+    cage = tmp_path / f"{name}.obj"
+    write_polymesh(cage, getattr(sample_cages, name)())
+    out = run("subd-to-step", cage, "-o", tmp_path / "g1.step", "--report", tmp_path / "g1.json",
+              "--export", "g1")
+    assert out.returncode == 0, out.stderr
+    report = json.loads((tmp_path / "g1.json").read_text())
+    assert report["brep"]["valid"] and report["brep"]["closed"]
+    assert report["patches"]["export"] == "g1"
+    assert report["patches"]["normal_jump_max_deg"] <= 0.01
+    assert report["brep"]["volume_error_rel"] < 1e-2
+    assert run("subd-to-step", cage, "-o", tmp_path / "exact.step").returncode == 0
+    assert os.path.getsize(tmp_path / "g1.step") < 0.5 * os.path.getsize(tmp_path / "exact.step")
+
+
+def test_unknown_export_form_is_refused(tmp_path):
+    cage = tmp_path / "cube.obj"
+    write_polymesh(cage, sample_cages.cube())
+    out = run("subd-to-step", cage, "-o", tmp_path / "x.step", "--export", "light")
+    assert out.returncode == 2 and "light" in out.stderr

@@ -1,0 +1,115 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""The light G1 export (core.export.g1_patches) on cages built here: a closed shell, tangent
+continuity across every edge, closeness to the Catmull-Clark limit, exact regular faces and
+poles that are affine combinations of the cage."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from core.errors import ExportError
+from core.export.brep_topology import check_topology
+from core.export.bspline_basis import evaluate_patch_points
+from core.export.g1_patches import connection_alpha, g1_surface_patches
+from core.geometry import triangulate
+from core.subdivision import sample_cages
+from core.subdivision.catmull_clark import build_hierarchy
+from core.subdivision.limit import limit_matrices, quad_mesh_of
+from core.target_surface import TargetSurface
+
+CAGES = ("cube", "torus", "genus3_block", "mixed_prism", "pentagonal_prism")
+
+
+@pytest.fixture(scope="module", params=CAGES)
+def exported(request):
+    cage = getattr(sample_cages, request.param)()
+    return request.param, cage, g1_surface_patches(cage)
+
+
+def _patch_samples(patchset, n=17):
+    s = np.linspace(0.0, 1.0, n)
+    u, v = (a.reshape(-1) for a in np.meshgrid(s, s, indexing="ij"))
+    k = len(patchset.patches)
+    return evaluate_patch_points(patchset.patches, np.repeat(np.arange(k), len(u)),
+                                 np.tile(u, k), np.tile(v, k))
+
+
+def test_patches_form_one_closed_shell(exported):
+    _, _, ps = exported
+    diag = ps.info["bbox_diagonal"]
+    assert check_topology(ps.topology, ps.patches, 1e-9 * diag) <= 1e-9 * diag
+    assert max(p.poles.shape[0] * p.poles.shape[1] for p in ps.patches) <= 36
+
+
+def test_normals_do_not_jump_across_edges(exported):
+    """G1 holds up to the penalty's residual: far below the 1 degree a CAD model may show."""
+    _, _, ps = exported
+    assert ps.info["normal_jump_max_deg"] <= 0.01
+    assert ps.info["normal_jump_ev_max_deg"] <= 0.01
+
+
+def test_surface_is_close_to_the_limit_surface(exported):
+    """Every patch point lies near the limit surface (a level-5 mesh of exact limit points,
+    whose own chordal error is far smaller). These cages have 6 to 58 quads, so a
+    patch spans a large part of the shape; the bound is on the bounding-box diagonal."""
+    _, cage, ps = exported
+    fine = build_hierarchy(cage, 5).meshes[-1]
+    limit = limit_matrices(fine)[0] @ fine.vertices
+    surface = TargetSurface(limit, triangulate(fine.face_vertices, fine.face_offsets))
+    distance = surface.nearest(_patch_samples(ps)).distance
+    assert distance.max() <= 5e-3 * ps.info["bbox_diagonal"]
+
+
+def test_regular_faces_are_the_exact_limit(exported):
+    """Quads whose corners all have valence 4 are single Bezier patches equal to the limit."""
+    name, cage, ps = exported
+    quads = quad_mesh_of(cage)
+    regular = np.flatnonzero([p.poles.shape[:2] == (4, 4) for p in ps.patches])
+    if name == "torus":
+        assert len(regular) == len(ps.patches)
+    if name in ("genus3_block", "mixed_prism"):
+        assert len(regular) > 0
+    if not len(regular):
+        return
+    from core.subdivision.limit import LimitEvaluator
+
+    s = np.linspace(0.0, 1.0, 7)
+    u, v = (a.reshape(-1) for a in np.meshgrid(s, s, indexing="ij"))
+    face = np.repeat(regular, len(u))
+    U, V = np.tile(u, len(regular)), np.tile(v, len(regular))
+    exact = LimitEvaluator(quads).evaluate(face, U, V)
+    ours = evaluate_patch_points(ps.patches, face, U, V)
+    assert np.abs(ours - exact).max() <= 1e-12 * ps.info["bbox_diagonal"]
+
+
+def test_poles_are_affine_combinations_of_the_cage():
+    """Moving the cage by an affine map moves every pole by it: the pole weights are fixed
+    and sum to 1 (a translation moves the poles by the same vector)."""
+    cage = sample_cages.mixed_prism()
+    rng = np.random.default_rng(5)
+    M = np.eye(3) + 0.3 * rng.standard_normal((3, 3))
+    shift = np.array([3.0, -7.0, 11.0])
+    moved = dataclasses.replace(cage, vertices=cage.vertices @ M.T + shift)
+    a = g1_surface_patches(cage, measure=False)
+    b = g1_surface_patches(moved, measure=False)
+    for pa, pb in zip(a.patches, b.patches):
+        assert np.abs(pa.poles @ M.T + shift - pb.poles).max() <= 1e-9
+
+
+def test_connection_function_ends():
+    """alpha is 2 cos(2 pi / n) at an extraordinary end and 0 with slope 0 at a valence-4 end."""
+    t = np.array([0.0, 1.0, 1.0 - 1e-6])
+    n3, n4 = np.full(3, 3), np.full(3, 4)
+    a = connection_alpha(t, n3, n4)
+    assert abs(a[0] - 2.0 * np.cos(2.0 * np.pi / 3.0)) <= 1e-15 and a[1] == 0.0
+    assert abs(a[2]) <= 1e-11
+    mirrored = connection_alpha(1.0 - t, n4, n3)
+    assert np.allclose(mirrored, -a, atol=1e-15)
+    assert np.all(connection_alpha(t, n4, n4) == 0.0)
+
+
+def test_creased_cage_is_refused():
+    cage = sample_cages.cube()
+    creased = dataclasses.replace(cage, creases=np.array([[0, 1]]))
+    with pytest.raises(ExportError, match="crease"):
+        g1_surface_patches(creased)
