@@ -1,5 +1,11 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Every test run gets a FreeCAD of its own (a temporary user-data folder) and Ctrl-C.
+"""Test tiers, and every test run gets a FreeCAD of its own (a temporary user-data folder) and
+Ctrl-C.
+
+Tiers: each test is marked by its folder, ``unit`` (``tests/core``, ``tests/fuzz``), ``freecad``
+(``tests/freecad``, headless FreeCAD) or ``gui`` (``tests/gui``, the GUI under Xvfb); tests
+that take more than about a second on an idle machine are marked ``slow`` where they are
+defined. ``make test-fast`` runs the unit tests that are not slow; ``make test`` runs all.
 
 Ctrl-C: the cancel tests send SIGINT to this process and to the command-line runs they
 start. A shell without job control starts its background jobs with SIGINT ignored, and a
@@ -54,6 +60,29 @@ signal.signal(signal.SIGINT, signal.default_int_handler)
 # At import, not in pytest_configure: pytest imports tests/freecad/conftest.py (which
 # imports FreeCAD) before calling any hook, and always after this parent conftest.
 _USER_HOME = _make_user_home()
+
+
+TIER_OF_FOLDER = {"core": "unit", "fuzz": "unit", "freecad": "freecad", "gui": "gui"}
+MARKERS = {"unit": "pure-Python tests of core and the command line",
+           "freecad": "tests that need FreeCAD (headless)",
+           "gui": "tests that drive the FreeCAD GUI under Xvfb",
+           "slow": "tests that take more than about a second; left out by make test-fast"}
+
+
+def pytest_configure(config):
+    for name, meaning in MARKERS.items():
+        config.addinivalue_line("markers", f"{name}: {meaning}")
+
+
+def pytest_collection_modifyitems(config, items):
+    import pytest
+
+    tests_folder = os.path.dirname(os.path.abspath(__file__))
+    for item in items:
+        relative = os.path.relpath(str(item.path), tests_folder)
+        tier = TIER_OF_FOLDER.get(relative.split(os.sep)[0])
+        if tier is not None:
+            item.add_marker(getattr(pytest.mark, tier))
 
 
 def pytest_unconfigure(config):

@@ -24,6 +24,7 @@ def patchsets():
             for name in EV_CAGES + ["torus", "grid_sphere"]}
 
 
+@pytest.mark.slow
 def test_knot_layout_and_mults(patchsets):
     for ps in patchsets.values():
         for p in ps.patches:

@@ -29,6 +29,7 @@ def test_help(command):
     assert result.returncode == 0 and "usage:" in result.stdout
 
 
+@pytest.mark.slow
 def test_labeling_run_writes_labels_and_report(tmp_path):
     before = digest(SAMPLE)
     result = run("reconstruct", SAMPLE, "--stop-after", "labeling", "--labels",
@@ -49,6 +50,7 @@ def test_labeling_run_writes_labels_and_report(tmp_path):
     assert again.returncode == 0 and digest(tmp_path / "l.ply") == digest(tmp_path / "m.ply")
 
 
+@pytest.mark.slow
 def test_full_run_writes_a_step_solid_and_every_report_section(tmp_path):
     result = run("reconstruct", SAMPLE, "-o", tmp_path / "out.step", "--report", tmp_path / "r.json",
                  "--base-mesh", tmp_path / "base.obj", "--fit-iterations", "5")
@@ -69,6 +71,7 @@ def test_full_run_writes_a_step_solid_and_every_report_section(tmp_path):
     assert (tmp_path / "out.step").stat().st_size > 0 and (tmp_path / "base.obj").exists()
 
 
+@pytest.mark.slow
 def test_automatic_parts_are_assembled_into_one_base_mesh(tmp_path):
     result = run("reconstruct", SAMPLE, "--parts", "auto", "--stop-after", "basemesh",
                  "--report", tmp_path / "r.json", "--base-mesh", tmp_path / "base.obj")
@@ -172,6 +175,7 @@ def test_every_parameter_option_reaches_the_parameters_and_the_help():
         assert "levels of the fit (paper: 2) [1..5]" in " ".join(shown.split())
 
 
+@pytest.mark.slow
 def test_max_sweeps_and_subdivision_levels_reach_the_run(tmp_path):
     result = run("reconstruct", SAMPLE, "--stop-after", "labeling", "--max-sweeps", "3",
                  "--subdivision-levels", "1", "--report", tmp_path / "r.json")
@@ -203,6 +207,7 @@ def test_self_intersecting_mesh_exits_2(tmp_path):
     assert_rejected(run("reconstruct", path, "--stop-after", "intake"), "intersecting faces")
 
 
+@pytest.mark.slow
 def test_user_parts_from_a_file(tmp_path):
     planes = tmp_path / "planes.json"
     planes.write_text(json.dumps({"planes": [[[80.0, 0.0, 0.0], [1.0, 0.0, 0.0]]]}))
@@ -245,6 +250,7 @@ def test_bad_base_mesh_options_exit_2_and_write_nothing(tmp_path, option, value,
     assert list(tmp_path.iterdir()) == [] and digest(SAMPLE) == before
 
 
+@pytest.mark.slow
 def test_a_layout_over_the_users_max_base_faces_exits_2_and_writes_nothing(tmp_path):
     """The user's own face limit is bad input (exit 2, what to change), not a labeling
     failure: fandisk's polycube layout needs 112 quads at least."""
@@ -256,6 +262,7 @@ def test_a_layout_over_the_users_max_base_faces_exits_2_and_writes_nothing(tmp_p
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_a_labeling_that_cannot_be_quantized_exits_1_naming_the_charts_or_falls_back(tmp_path):
     # the gripper's labeling with automatic parts is valid, but some of its charts do not close
     # as rectilinear polygons (benchmarks/BASEMESH_RESULTS.md)

@@ -2,6 +2,7 @@
 """The crease curves of a cage fitted to the target's feature lines
 (core.fitting.crease_curves)."""
 import numpy as np
+import pytest
 
 from core.fitting.crease_curves import MAX_MOVE, fit_crease_curves
 from core.fitting.crossings import count_crossings
@@ -96,6 +97,7 @@ def test_no_feature_lines_no_move():
     assert np.array_equal(fitted.vertices, shifted.vertices)
 
 
+@pytest.mark.slow
 def test_machined_part_holes_open_up():
     """A machined part's creased cage: its five- and six-vertex hole rims cut into the holes,
     and more than 4 % of the target's volume lies outside the cage's limit solid; with the
@@ -114,6 +116,7 @@ def test_machined_part_holes_open_up():
         mapping, triangles, cage.vertices)
 
 
+@pytest.mark.slow
 def test_pocket_plate_moves_stay_within_reach():
     """A pocketed plate's creased cage: more than 6 % of the target's volume outside its
     limit solid, under 2 % with the crease curves fitted, and no crease vertex moved farther
@@ -155,6 +158,7 @@ def test_feature_chains_need_feature_lines():
     assert found[2] is None  # the rims are not joined by feature edges
 
 
+@pytest.mark.slow
 def test_the_inside_fit_of_a_creased_cage_starts_from_its_fitted_crease_curves():
     """octagonal_pocket's creased cage: the inside fit starts from the cage with its crease
     curves fitted (``CREASED_START``), no least-squares rounds and no target samples, so two

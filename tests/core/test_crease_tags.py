@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Which cage edges are tagged as sharp creases (core.quadmesh.creases)."""
 import numpy as np
+import pytest
 import trimesh
 
 from core.quadmesh.creases import closed_network
@@ -35,6 +36,7 @@ def _tagged_cage(target, budget):
     return _paired_mesh(decimation, 2 * budget, surface).mesh
 
 
+@pytest.mark.slow
 def test_machined_part_cage_has_crease_network_and_simp_cage_none():
     featuretype = load_dev_mesh("featuretype.stl")
     cage = _tagged_cage(featuretype, 300)

@@ -4,6 +4,7 @@
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from core.quadmesh.crossing_count import LimitCrossingCount
 from core.quadmesh.paired_decimation import paired_decimation_base_mesh
@@ -13,6 +14,7 @@ from core.types import PolyMesh
 from dev_meshes import load_dev_mesh
 
 
+@pytest.mark.slow
 def test_the_crossing_count_of_moved_vertices_is_the_full_count():
     target = load_dev_mesh("gripper_domain.stl")
     surface = TargetSurface(target.vertices, target.faces)

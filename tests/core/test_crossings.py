@@ -282,6 +282,7 @@ def idler_290(idler):
     return target, paired_decimation_base_mesh(target.vertices, target.faces, 290).mesh
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["best-fit", "inside"])
 def test_fit_of_a_decimation_cage_on_a_thin_part_does_not_cross_itself(idler, mode):
     target, cage = idler
@@ -299,6 +300,7 @@ def test_fit_of_a_decimation_cage_on_a_thin_part_does_not_cross_itself(idler, mo
         assert info["outside_volume_fraction"] <= 0.01
 
 
+@pytest.mark.slow
 def test_the_inside_fit_ends_clean_and_inside_whether_crossings_count_as_local_or_spread(
         idler, monkeypatch):
     """idler_riser's least-squares fit crosses itself. Local crossings are held back towards
@@ -317,6 +319,7 @@ def test_the_inside_fit_ends_clean_and_inside_whether_crossings_count_as_local_o
     assert spread["outside_volume_fraction"] <= 0.01
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("left, long_way", [(10, True), (40, False)])
 def test_the_long_refits_run_only_after_the_short_ones_took_most_crossings_off(
         idler, monkeypatch, left, long_way):
@@ -346,6 +349,7 @@ def test_the_long_refits_run_only_after_the_short_ones_took_most_crossings_off(
     assert info["self_intersections"] == 0
 
 
+@pytest.mark.slow
 def test_the_rgp_retry_with_a_shorter_step_ends_clean_and_inside(idler_290, monkeypatch):
     """Where the RGP's first run keeps its start and that start leaves more than
     ``RETRY_OUTSIDE`` of the volume outside, the RGP runs again with a shorter step. With the
@@ -409,6 +413,7 @@ def test_the_export_checks_at_the_fits_level_up_to_large_cages():
     assert export_limit_crossings(large).levels == fit_levels(large.n_faces, 2) == 1
 
 
+@pytest.mark.slow
 def test_the_fit_stage_types_the_levels_and_the_cages_crossings():
     """The patches stage reads ``levels`` and ``cage_self_intersections`` from the typed
     result; the report keeps both. A spindle torus whose hole is nearly closed (major radius
@@ -461,6 +466,7 @@ def gripper():
     return state.intake.target, state.basemesh.cage
 
 
+@pytest.mark.slow
 def test_inside_fit_of_a_thin_plate_stays_inside_and_clean(gripper):
     """The RGP pulls the plate's two walls through each other; the fit holds those moves
     back, so its limit surface does not cross itself, most of the cage still moves, and little

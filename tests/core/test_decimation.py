@@ -4,6 +4,7 @@ size (which folds small machined features), from the target above it (which does
 cached; genus kept."""
 
 import numpy as np
+import pytest
 
 from core.mesh_topology import genus_of
 from core.quadmesh.decimation import REDUCE_ABOVE, SOURCE_TRIANGLES, Decimation
@@ -29,6 +30,7 @@ def test_decimating_from_the_target_keeps_small_machined_features_unfolded():
     assert decimation.triangles(450)[1] is faces
 
 
+@pytest.mark.slow
 def test_large_targets_start_from_one_fine_decimation():
     target = load_dev_mesh("ge_bracket_domain.stl")  # 76,652 triangles, genus 5
     assert len(target.faces) > SOURCE_TRIANGLES
@@ -46,6 +48,7 @@ def test_large_targets_start_from_one_fine_decimation():
     assert len(decimation.triangles(10 ** 6)[1]) == len(target.faces)
 
 
+@pytest.mark.slow
 def test_the_coarse_decimation_of_a_very_large_target_starts_from_a_reduction(monkeypatch):
     import igl
 

@@ -10,6 +10,7 @@ from core.subdivision.sample_cages import cube
 from core.target_surface import TargetSurface
 
 
+@pytest.mark.slow
 def test_face_deviation_of_a_scaled_limit_surface():
     """The target is the cube cage's own limit surface (level 5) scaled by 1.02 about its
     centre: every face deviates by about 0.02 of the distance from the centre, which lies

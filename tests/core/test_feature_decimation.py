@@ -39,6 +39,7 @@ def _distance_to_segments(points, starts, ends):
     return np.linalg.norm(points[:, None] - foot, axis=2).min(axis=1)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("count", [300, 120])
 def test_every_feature_line_of_a_counterbored_block_stays_a_chain_of_edges(count):
     V, F = _counterbored_block()
@@ -76,6 +77,7 @@ def _smallest_angles(v, f):
     return np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))).min(axis=1)
 
 
+@pytest.mark.slow
 def test_evening_a_feature_decimation_keeps_its_feature_lines_and_fattens_its_fans():
     from core.target_surface import TargetSurface
 
@@ -106,6 +108,7 @@ def test_evening_a_feature_decimation_keeps_its_feature_lines_and_fattens_its_fa
     assert np.median(after) > np.median(before) + 3.0
 
 
+@pytest.mark.slow
 def test_pairing_never_merges_triangles_across_a_feature_edge():
     from core.quadmesh.paired_decimation import _paired_mesh, _rim_folds
     from core.subdivision.catmull_clark import mesh_topology
@@ -128,6 +131,7 @@ def test_pairing_never_merges_triangles_across_a_feature_edge():
     assert not _rim_folds(cage.vertices, quads, cage.creases).any()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["octagonal_pocket.stl", "featuretype.stl"])
 def test_creased_cage_of_a_machined_part_is_clean_at_the_default_budget(name):
     """The creased ladder's first cage (300 faces wanted) of two machined parts: no
@@ -147,6 +151,7 @@ def test_creased_cage_of_a_machined_part_is_clean_at_the_default_budget(name):
     assert rounds[0]["crease_edges"] > 250
 
 
+@pytest.mark.slow
 def test_a_decimation_that_stops_short_answers_every_smaller_count_alike():
     """Where every collapse left is refused, the decimation to any count below the triangles
     reached is the same; the cached answer equals a fresh decimation to that count."""

@@ -16,6 +16,7 @@ REPO = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 TINY = os.path.join(REPO, "..", "shared", "data", "meshes", "to_levelset_cantilever_tiny.stl")
 
 
+@pytest.mark.slow
 def test_units_scale_the_target_to_millimetres():
     mm = reconstruct(TINY, {"units": "mm"}, stop_after="basemesh")
     inches = reconstruct(TINY, {"units": "in"}, stop_after="basemesh")
@@ -37,6 +38,7 @@ def test_fit_mode_is_checked():
         ReconstructionParams(fit_mode="outside")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["best-fit", "none"])
 def test_cli_fit_mode_is_run_and_reported(tmp_path, mode):
     result = subprocess.run([sys.executable, "-m", "polycube_wb", "reconstruct", TINY,
@@ -73,6 +75,7 @@ def test_cli_rejects_a_bad_outside_refinement_and_writes_nothing(tmp_path, value
     assert not step.exists() and not report.exists() and os.listdir(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_tolerance_in_millimetres_is_reported_per_round():
     result = reconstruct(TINY, {"fit_mode": "best-fit", "tolerance_mm": 0.1}, stop_after="fit")
     section = result.report["fit"]["tolerance"]
@@ -96,6 +99,7 @@ def test_tolerance_without_a_fit_is_refused():
         ReconstructionParams(tolerance=0.01, tolerance_mm=1.0)
 
 
+@pytest.mark.slow
 def test_fit_convergence_zero_runs_every_iteration_the_default_stops_when_converged():
     """The inside fit on the level-set cantilever converges within a few iterations at the
     default ``fit_convergence``; with 0 it runs all ``fit_iterations`` (the cap)."""
@@ -108,6 +112,7 @@ def test_fit_convergence_zero_runs_every_iteration_the_default_stops_when_conver
         ReconstructionParams(fit_convergence=-1e-3)
 
 
+@pytest.mark.slow
 def test_outside_refinement_is_reported_and_keeps_the_fit_leaving_least_outside():
     """The level-set cantilever's inside fit leaves about 1e-4 of its volume outside. With a
     goal below that, the report's section lists the fits (the first on the base mesh), the

@@ -167,6 +167,7 @@ def test_cube_cage_fills_a_sphere_from_inside():
     assert lsq["mean_distance"] < 0.1 * lsq["initial_mean_distance"]
 
 
+@pytest.mark.slow
 def test_best_fit_recovers_a_scaled_limit_surface():
     # the target is the (finely sampled) limit surface of the cage scaled by 1.2; since
     # the limit map is linear, the cage scaled by 1.2 fits it exactly (the fit may slide

@@ -136,6 +136,7 @@ def test_the_cycle_check_sees_a_cycle_through_a_function_level_import(tmp_path, 
     assert import_cycles(_python_files("core")) == [["core.pkg.a", "core.pkg.b", "core.pkg.c"]]
 
 
+@pytest.mark.slow
 def test_importing_all_of_core_loads_no_freecad_module():
     modules = [_module_of(path) for path in _python_files("core")]
     code = ("import importlib, sys\n"

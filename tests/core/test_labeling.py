@@ -210,6 +210,7 @@ def test_dev_mesh_ends_valid_with_few_charts(name):
 @pytest.mark.parametrize("name", ["to_simp_lbracket.stl", "to_simp_cantilever.stl",
                                   "gripper_domain.stl", "octagonal_pocket.stl",
                                   "to_simp_torsion_arm.stl"])
+@pytest.mark.slow
 def test_dev_mesh_with_automatic_parts_ends_valid(name):
     # the interface x-axis of Eq. 3 term 4 and of the validity rules is one and the same
     from core.segmentation.frames import compute_frames, mean_edge_length
@@ -314,6 +315,7 @@ def test_candidate_judge_judges_a_labeling_once():
     assert turning.report == whole.report and turning.report["turning_points"]["count"] >= 1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["fandisk.obj", "octagonal_pocket.stl"])
 def test_automatic_parts_are_labelled_near_their_nearest_directions(name):
     """With automatic parts every part's area-weighted mean normal-to-label angle is at most

@@ -56,6 +56,7 @@ def test_an_unflawed_cage_is_returned_as_it_is(box):
     assert repair_inverted(cage, surface, 0, 0, LimitCrossingCount(cage)) == (cage, 0, 0, 0)
 
 
+@pytest.mark.slow
 def test_the_thin_shelf_bracket_gets_a_clean_cage_on_budget_with_split_quads():
     mesh = trimesh.load(SHELF_BRACKET, process=True)  # genus 7, walls two elements thick
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
@@ -72,6 +73,7 @@ def test_the_thin_shelf_bracket_gets_a_clean_cage_on_budget_with_split_quads():
     assert polymesh_genus(result.mesh) == 7
 
 
+@pytest.mark.slow
 def test_the_gripper_domain_cage_has_no_inverted_face():
     target = load_dev_mesh("gripper_domain.stl")  # genus 3, a 2 mm wall round a pin eye
     surface = TargetSurface(target.vertices, target.faces)

@@ -200,6 +200,7 @@ def write_obj(path, V, F):
     return path
 
 
+@pytest.mark.slow
 def test_the_command_line_repairs_lists_and_refuses(tmp_path):
     """The pierced torus is repaired and the report's ``input.repairs`` says where; with
     ``--no-mesh-repair``, and for an open or a mostly self-intersecting mesh, exit 2 with

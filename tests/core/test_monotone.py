@@ -39,6 +39,7 @@ def test_monotone_labeling_is_left_alone():
     assert sum(rep["moves"].values()) == 0 and rep["evaluations"] == 0 and val.is_valid
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, most", [("to_simp_lbracket.stl", 1), ("to_simp_cantilever.stl", 1)])
 def test_turning_points_removed_without_losing_validity(name, most):
     V, F, parts, labels, frame = repaired(name)
@@ -58,6 +59,7 @@ def test_turning_points_removed_without_losing_validity(name, most):
     assert 0 < (out != labels).sum() < 0.05 * len(F)
 
 
+@pytest.mark.slow
 def test_cantilever_flange_tips_get_turn_cuts():
     """The cantilever's flange tops are +-Z strips whose boundary with the +-Y sides wraps round
     the tapering flange tip (two turning points per strip edge); cutting a +-X strip from the tip
@@ -71,6 +73,7 @@ def test_cantilever_flange_tips_get_turn_cuts():
     assert val.is_valid and (val.layout.chart_boundary_count >= 4).all()
 
 
+@pytest.mark.slow
 def test_local_judgement_of_candidates_matches_whole_mesh():
     """For every notch and turn-cut candidate at the lbracket's turning points, the invalid-item
     and turning-point changes judged on the zone around the candidate equal the whole-mesh ones."""
@@ -109,6 +112,7 @@ def test_local_judgement_of_candidates_matches_whole_mesh():
     assert checked >= 6
 
 
+@pytest.mark.slow
 def test_fine_mesh_loses_most_turning_points():
     """The 151k-face torsion arm: the boundaries leave their corners backwards by one to three
     mean edge lengths (38 turning points after repair); the pass judged in whole-mesh rounds

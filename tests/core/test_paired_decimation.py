@@ -95,6 +95,7 @@ def test_augmenting_path_completes_a_greedy_matching():
     assert np.bincount(pairs[chosen].ravel(), minlength=4).max() == 1
 
 
+@pytest.mark.slow
 def test_larger_budgets_are_tried_while_the_limit_surface_of_thin_struts_is_flawed():
     from core.quadmesh.paired_decimation import limit_flaws
     from core.target_surface import TargetSurface
@@ -112,6 +113,7 @@ def test_larger_budgets_are_tried_while_the_limit_surface_of_thin_struts_is_flaw
     assert polymesh_genus(result.mesh) == 18
 
 
+@pytest.mark.slow
 def test_budgets_beyond_the_rule_are_tried_while_every_cage_crosses_itself():
     from core.quadmesh import build_base_mesh
     from core.stages.fit import count_limit_self_intersections
@@ -139,6 +141,7 @@ def test_budgets_beyond_the_rule_are_tried_while_every_cage_crosses_itself():
     assert info["budget_rounds"] == list(result.rounds)
 
 
+@pytest.mark.slow
 def test_budgets_beyond_the_rule_stop_where_more_faces_do_not_unfold_the_limit_surface():
     from core.pipeline import reconstruct
     from core.quadmesh.paired_decimation import OVER_BUDGET_MISSES

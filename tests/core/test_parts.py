@@ -120,6 +120,7 @@ def _assert_legs_split(mesh, part, reach):
     assert len(itfs) == 1 and itfs[0].closed == [True]
 
 
+@pytest.mark.slow
 def test_automatic_parts_split_an_l_of_boxes_at_the_corner():
     mesh = _mesh((m3.Manifold.cube([10, 2, 2]) + m3.Manifold.cube([2, 2, 10])).refine(4))
     part = automatic_parts(mesh)
@@ -148,6 +149,7 @@ def test_smooth_boundaries_straightens_a_jagged_cut():
     assert np.ptp(bar.vertices[itfs[0].vertices, 0]) < 1e-9  # one cross-section
 
 
+@pytest.mark.slow
 def test_smooth_boundaries_equals_a_full_heat_step_every_round():
     """Solving only the parts that changed gives the labels of solving every part each round
     (the threshold dynamics written out here), on a real SIMP mesh cut into six slabs whose
@@ -259,6 +261,7 @@ def test_absorb_tangent_cuts_merges_a_cap_cut_along_its_wall():
     assert np.array_equal(absorb_tangent_cuts(V, F, halves), halves)
 
 
+@pytest.mark.slow
 def test_automatic_parts_of_idler_riser_are_cut_across():
     """The curve skeleton of idler_riser ends in a small sliver of a curved wall whose cut runs
     along it (Eq. 3's term 4 would label it well above its nearest directions); no automatic
@@ -280,6 +283,7 @@ def test_automatic_parameter_errors(bar):
         automatic_parts(bar, max_parts=len(bar.faces) // MIN_PART_FACES + 1)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, low, high", [("to_simp_lbracket.stl", 2, 8),
                                              ("polycube_bone.obj", 1, 4)])
 def test_automatic_parts_on_dev_meshes(name, low, high):

@@ -97,6 +97,7 @@ def test_base_mesh_is_a_closed_quad_mesh_on_the_target_with_its_genus(boxes):
     assert info["folded_points"] == 0
 
 
+@pytest.mark.slow
 def test_face_budget_is_met_within_a_quarter_and_grows_with_it():
     counts = []
     for budget in (150, 300, 1000):
@@ -307,6 +308,7 @@ def test_opposite_labels_on_one_boundary_are_refused():
     assert info["genus"] == 0 and info["within_budget"]
 
 
+@pytest.mark.slow
 def test_real_simp_cantilever_base_mesh():
     from core.pipeline import reconstruct
 
@@ -429,6 +431,7 @@ def test_the_hang_guard_is_an_error_not_another_answer(monkeypatch):
                    [LinearConstraint(np.ones((1, 3)), 4.5, np.inf)])
 
 
+@pytest.mark.slow
 def test_the_same_labelled_dev_mesh_gives_the_same_base_mesh_twice():
     from core.pipeline import reconstruct
 
@@ -448,6 +451,7 @@ def test_the_same_labelled_dev_mesh_gives_the_same_base_mesh_twice():
     assert np.array_equal(first.face_vertices, second.face_vertices)
 
 
+@pytest.mark.slow
 def test_side_directions_that_cannot_be_found_end_the_attempt_after_one_program(monkeypatch):
     """With slivers allowed length zero no directions exist for ge_bracket_domain's labeling
     (one part); the retry that keeps every side one unit long is stricter, so it is not run."""

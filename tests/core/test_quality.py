@@ -86,6 +86,7 @@ def test_containment_rejects_open_or_inverted_meshes():
     assert info.value.reason == "orientation"
 
 
+@pytest.mark.slow
 def test_point_distance_equals_brute_force_on_mixed_triangle_sizes():
     sphere = trimesh.creation.icosphere(4)
     big, big_f = box((2.0, 2.0, 2.0))

@@ -147,6 +147,7 @@ def test_kept_limit_interpolates_the_cages_surface():
     assert kept_distance <= 0.3 * d  # 0.005 against 0.022 (sizes 1.8-3.1)
 
 
+@pytest.mark.slow
 def test_refinement_leaves_faces_whole_where_a_split_would_cross():
     """A refined cage whose limit crosses itself more than the fitted one's is not fitted:
     the deviating faces under the crossings stay whole, and when none is left the
@@ -202,6 +203,7 @@ def test_a_split_that_crosses_is_tried_the_other_way_before_the_face_is_left_who
         assert np.all(np.abs(new[:, 2]) > 1.0)  # on the short edges, at the box's ends
 
 
+@pytest.mark.slow
 def test_when_every_split_of_the_fitted_cage_crosses_the_cage_before_the_fit_is_split():
     """Refinements of the fitted cage are reported as crossing (told apart by their limit
     surface, which reaches the capsule's tips at |z| = 1.5, while the box cage's stops near
@@ -234,6 +236,7 @@ def test_when_every_split_of_the_fitted_cage_crosses_the_cage_before_the_fit_is_
     assert result.met and len(result.rounds) == 2  # the refit from it met the tolerance
 
 
+@pytest.mark.slow
 def test_refinement_meets_the_tolerance_on_a_capsule():
     target, base = capsule_and_box_cage()
     tolerance = 0.01
@@ -253,6 +256,7 @@ def test_refinement_meets_the_tolerance_on_a_capsule():
     assert d["hausdorff"] <= 1.2 * tolerance
 
 
+@pytest.mark.slow
 def test_refinement_says_why_it_stops_at_the_face_budget():
     target, base = capsule_and_box_cage()
     result = fit_to_tolerance(base, target, 0.002, 60,
@@ -263,6 +267,7 @@ def test_refinement_says_why_it_stops_at_the_face_budget():
     assert result.rounds[-1]["max_deviation"] > 0.002
 
 
+@pytest.mark.slow
 def test_refinement_keeps_the_closest_fit_when_it_stops_unmet():
     """When the tolerance is not met, the cage returned is the fit with the smallest largest
     deviation, not the last one (here every refined fit is made worse on purpose)."""
@@ -317,6 +322,7 @@ def test_a_pentagon_entered_once_becomes_two_quads():
     assert (across.face_sizes == 4).all() and across.n_faces == cage.n_faces + 3
 
 
+@pytest.mark.slow
 def test_refinement_meets_the_tolerance_on_a_quad_dominant_cage():
     """A hexagonal prism cage of quads and triangle fans is refined to fit a cylinder within
     the tolerance (no all-quad requirement), the result still a closed 2-manifold."""

@@ -54,6 +54,7 @@ def test_every_stage_reads_only_declared_results_and_returns_its_own_type(stage)
     assert {"report", "message"} <= names
 
 
+@pytest.mark.slow
 def test_a_run_holds_one_result_of_the_documented_type_per_stage(tmp_path):
     import trimesh
 
