@@ -45,7 +45,7 @@ def run_case(path, mode, method, out_json, image, solid):
     import numpy as np
 
     from core.pipeline import reconstruct
-    from core.stages.fit import count_limit_self_intersections
+    from core.subdivision.limit_crossings import count_limit_self_intersections
     from core.quadmesh.orientation import inverted_faces
 
     started = time.perf_counter()

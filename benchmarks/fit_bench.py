@@ -47,7 +47,7 @@ sys.path.insert(0, REPO)
 from core.fitting import fit_base_mesh  # noqa: E402
 from core.geometry import triangulate  # noqa: E402
 from core.pipeline import reconstruct  # noqa: E402
-from core.stages.fit import count_limit_self_intersections, fit_levels  # noqa: E402
+from core.subdivision.limit_crossings import count_limit_self_intersections, fit_levels  # noqa: E402
 from core.quality import containment, sample_surface, surface_distances  # noqa: E402
 from core.subdivision.catmull_clark import build_hierarchy  # noqa: E402
 from core.subdivision.limit import limit_matrices  # noqa: E402

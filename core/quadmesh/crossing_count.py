@@ -4,7 +4,7 @@ only, counted again only where the limit surface moved.
 
 The repairs of the budget ladder of :mod:`core.quadmesh.paired_decimation` judge every trial
 cage by the self-crossing triangle pairs of its level-2 limit surface (as
-``core.stages.fit.count_limit_self_intersections``). Their trials move a few vertices of one
+``core.subdivision.limit_crossings.count_limit_self_intersections``). Their trials move a few vertices of one
 cage, which moves a part of the limit mesh's triangles; the pairs of two unmoved triangles are
 those of the first cage. So the limit mesh is built once as a matrix of the base vertices, and
 each count tests only the pairs with a moved triangle

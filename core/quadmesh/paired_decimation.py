@@ -381,10 +381,10 @@ def limit_flaws(mesh, surface):
     """Self-crossing triangle pairs of the level-2 limit surface, and inverted faces.
 
     mesh : PolyMesh base mesh; surface : TargetSurface of its target. Returns two ints
-    (``core.stages.fit.limit_self_intersections`` and
+    (``core.subdivision.limit_crossings.limit_self_intersections`` and
     :func:`core.quadmesh.orientation.inverted_faces`).
     """
-    from core.stages.fit import count_limit_self_intersections
+    from core.subdivision.limit_crossings import count_limit_self_intersections
 
     return (count_limit_self_intersections(mesh, 2),
             int(inverted_faces(mesh, surface.vertices, surface.faces, surface).sum()))

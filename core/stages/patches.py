@@ -23,10 +23,10 @@ def run_patches(fit, params, progress):
     ------
     ExportError
         The fitted cage's limit surface crosses itself (the check ``subd-to-step`` makes,
-        ``core.stages.fit.export_limit_crossings``): no solid is built of it.
+        ``core.subdivision.limit_crossings.export_limit_crossings``): no solid is built of it.
     """
     from core.export.bspline import limit_surface_patches
-    from core.stages.fit import export_limit_crossings
+    from core.subdivision.limit_crossings import export_limit_crossings
 
     progress.check_cancel()
     crossings = export_limit_crossings(fit.cage)

@@ -8,7 +8,7 @@ import pytest
 
 from core.quadmesh.crossing_count import LimitCrossingCount
 from core.quadmesh.paired_decimation import paired_decimation_base_mesh
-from core.stages.fit import count_limit_self_intersections
+from core.subdivision.limit_crossings import count_limit_self_intersections
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
 from dev_meshes import load_dev_mesh

@@ -17,7 +17,7 @@ from core.pipeline import reconstruct, run_stages
 from core.progress import NO_PROGRESS
 from core.quadmesh.paired_decimation import paired_decimation_base_mesh
 from core.self_intersection import box_pairs, face_boxes, find_self_intersections
-from core.stages.fit import export_limit_crossings
+from core.subdivision.limit_crossings import export_limit_crossings
 from core.stages.patches import run_patches
 from core.subdivision.catmull_clark import build_hierarchy
 from core.subdivision.limit import limit_matrices
@@ -397,7 +397,7 @@ def test_patches_of_a_clean_cage_are_built():
 
 
 def test_the_export_checks_at_the_fits_level_up_to_large_cages():
-    from core.stages.fit import EXPORT_CHECK_LEVELS, FIT_FACE_BUDGET, fit_levels
+    from core.subdivision.limit_crossings import EXPORT_CHECK_LEVELS, FIT_FACE_BUDGET, fit_levels
     from core.subdivision.sample_cages import grid_sphere
 
     # 864 faces: the fit works at level 2, and so does the check (a level-1 check would
@@ -421,7 +421,8 @@ def test_the_fit_stage_types_the_levels_and_the_cages_crossings():
     near that target, so the fit still crosses itself and the cage's crossings are counted
     (the wider spindle torus of the other tests is untangled by the fit, the vertex
     pseudo-normals being angle-weighted)."""
-    from core.stages.fit import limit_self_intersections, run_fit
+    from core.stages.fit import run_fit
+    from core.subdivision.limit_crossings import limit_self_intersections
     from core.types import BaseMeshResult, IntakeResult, TriMesh
 
     cage = torus(major_radius=0.3, minor_radius=1.0)

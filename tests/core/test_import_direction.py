@@ -118,6 +118,21 @@ def import_cycles(files):
                   for c in np.flatnonzero(sizes > 1))
 
 
+CORE_LAYERS = (("core.stages", "core.pipeline"),)
+"""Packages of ``core`` above the algorithms: the stages and their runner call the algorithm
+packages (``core.quadmesh``, ``core.fitting``, ``core.subdivision``, ``core.export``, ...),
+never the other way round."""
+
+
+def test_the_algorithms_never_import_the_stages_or_the_runner():
+    upper = CORE_LAYERS[0]
+    offending = sorted(
+        (path, name) for path in _python_files("core")
+        if not _module_of(path).startswith(upper)
+        for name in imported_modules(path) if any(_is_within(name, top) for top in upper))
+    assert offending == []
+
+
 def test_core_has_no_import_cycle():
     assert import_cycles(_python_files("core")) == []
 

@@ -10,7 +10,7 @@ from core.quadmesh.limit_interpolation import (MOVE_SHARE, shortest_edges, unshr
                                                vertex_limit_positions)
 from core.quadmesh.orientation import inverted_faces
 from core.quadmesh.paired_decimation import limit_flaws, paired_decimation_base_mesh
-from core.stages.fit import count_limit_self_intersections
+from core.subdivision.limit_crossings import count_limit_self_intersections
 from dev_meshes import load_dev_mesh
 
 

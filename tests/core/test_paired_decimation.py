@@ -116,7 +116,7 @@ def test_larger_budgets_are_tried_while_the_limit_surface_of_thin_struts_is_flaw
 @pytest.mark.slow
 def test_budgets_beyond_the_rule_are_tried_while_every_cage_crosses_itself():
     from core.quadmesh import build_base_mesh
-    from core.stages.fit import count_limit_self_intersections
+    from core.subdivision.limit_crossings import count_limit_self_intersections
     from core.target_surface import TargetSurface
 
     target = load_dev_mesh("to_simp_torsion_arm.stl")  # genus 18, thin struts
@@ -145,7 +145,7 @@ def test_budgets_beyond_the_rule_are_tried_while_every_cage_crosses_itself():
 def test_budgets_beyond_the_rule_stop_where_more_faces_do_not_unfold_the_limit_surface():
     from core.pipeline import reconstruct
     from core.quadmesh.paired_decimation import OVER_BUDGET_MISSES
-    from core.stages.fit import count_limit_self_intersections
+    from core.subdivision.limit_crossings import count_limit_self_intersections
     from core.target_surface import TargetSurface
 
     target = load_dev_mesh("featuretype.stl")  # machined: counterbores, steps, genus 9
