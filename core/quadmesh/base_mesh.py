@@ -13,7 +13,9 @@
 6. Faces whose limit surface faces away from the target are repaired as on the paired
    decimation's cages (:mod:`limit_interpolation` moves their vertices off the target until
    the limit reaches it; :mod:`local_repair` moves a corner or splits a quad), so a layout is
-   not given up for a few folded quads that a local edit unfolds.
+   not given up for a few folded quads that a local edit unfolds. The self-crossings of the
+   repaired cage's limit surface are counted as on the decimation's cages: a layout whose
+   limit surface crosses itself gives way to a decimation cage whose limit surface does not.
 """
 import time
 
@@ -230,8 +232,10 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     (``method``, ``fallback_reason``); a layout within that limit is kept even where the
     decimation would meet the budget more closely. Inverted faces
     (:func:`core.quadmesh.orientation.inverted_faces`) of the layout are repaired
-    (:func:`_repaired_layout`); where some remain, the paired decimation is built too and
-    the one with fewer inverted faces is kept. ``method="polycube"`` never falls back (its
+    (:func:`_repaired_layout`) and the self-crossings of its limit surface counted; where
+    inverted faces or crossings remain, the paired decimation is built too and the one with
+    fewer flaws is kept (:func:`_flaw_rank`: a limit surface that crosses itself never wins
+    over one that does not). ``method="polycube"`` never falls back (its
     errors are raised; layouts up to ``max_base_faces`` are kept, repaired as in ``auto``);
     ``method="decimation"`` skips the polycube layout.
 
@@ -263,12 +267,13 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         ``inverted_faces``, ``seconds`` and ``candidates`` (for each route, ``"polycube"``
         and ``"paired decimation"``: None where it was not tried, else ``built`` and, when
         built, its ``faces``, ``extraordinary_vertices``, ``min_valence``, ``max_valence``,
-        ``genus`` and ``inverted_faces``, or where it failed its ``reason`` and ``faces``: the
+        ``genus``, ``inverted_faces`` and ``limit_crossings``, or where it failed its ``reason`` and ``faces``: the
         size of the smallest layout found or bounded, where that was the reason, else None);
         the polycube layout adds ``scale``,
         ``solver_status``, ``scale_rounds``, ``charts``, ``sides``, ``corners``,
         ``side_directions_flipped``, ``folded_points``, ``rectangles``, ``collapsed_sides``,
-        ``layout_inverted_faces`` (before the repair), ``moved_vertices`` and ``edits``;
+        ``layout_inverted_faces`` (before the repair), ``limit_crossings`` (self-crossing
+        triangle pairs of its level-2 limit surface), ``moved_vertices`` and ``edits``;
         the paired decimation adds ``decimated_triangles``, ``budget_rounds`` (the budgets
         tried while its limit surface crossed itself or had inverted faces; beyond the budget
         rule while it crossed itself, and ``minimum_reason`` says so), ``limit_crossings``
@@ -311,14 +316,13 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         else:
             mesh, info = _repaired_layout(mesh, info, surface)
             polycube_candidate = _candidate(info)
-            if info["inverted_faces"]:
+            if info["inverted_faces"] or info["limit_crossings"]:
                 other_mesh, other_info = _paired_decimation_base_mesh(
                     target_v, target_f, surface, int(target_faces), max_base_faces,
-                    f"the polycube layout has {info['inverted_faces']} inverted faces after "
-                    f"its repair")
+                    f"the polycube layout has {_flaws(info)} after its repair")
                 decimation_candidate = _candidate(other_info)
-                if other_info["inverted_faces"] < info["inverted_faces"]:
-                    other_info["fallback_reason"] += f", this one {other_info['inverted_faces']}"
+                if _flaw_rank(other_info) < _flaw_rank(info):
+                    other_info["fallback_reason"] += f", this one {_flaws(other_info)}"
                     mesh, info = other_mesh, other_info
     if reason is not None:
         mesh, info = _paired_decimation_base_mesh(target_v, target_f, surface, int(target_faces),
@@ -334,7 +338,22 @@ def _candidate(info):
     """A built route's figures for the report's ``candidates`` (a dict)."""
     return {"built": True, **{key: info[key] for key in (
         "faces", "extraordinary_vertices", "min_valence", "max_valence", "genus",
-        "inverted_faces")}}
+        "inverted_faces", "limit_crossings")}}
+
+
+def _flaw_rank(info):
+    """Order of two built cages' limit flaws, the smaller the better (a tuple).
+
+    A limit surface that crosses itself gives no solid, so a cage without crossings comes
+    first; then fewer inverted faces, then fewer crossing pairs.
+    """
+    return (info["limit_crossings"] > 0, info["inverted_faces"], info["limit_crossings"])
+
+
+def _flaws(info):
+    """The limit flaws of a built cage in words (a str)."""
+    return (f"{info['inverted_faces']} inverted faces and {info['limit_crossings']} "
+            f"self-crossing triangle pairs of its limit surface (level 2)")
 
 
 def _repaired_layout(mesh, info, surface):
@@ -349,13 +368,15 @@ def _repaired_layout(mesh, info, surface):
 
     Returns ``(mesh, info)``: ``info`` updated with the figures of the repaired mesh,
     ``inverted_faces`` (after the repair), ``layout_inverted_faces`` (before it),
-    ``moved_vertices`` and ``edits``.
+    ``limit_crossings`` (self-crossing triangle pairs of the repaired cage's level-2 limit
+    surface, :class:`core.quadmesh.crossing_count.LimitCrossingCount`), ``moved_vertices`` and
+    ``edits``.
     """
     inverted = int(inverted_faces(mesh, surface.vertices, surface.faces, surface).sum())
     moved, edits, layout_inverted = 0, 0, inverted
+    count_crossings = LimitCrossingCount(mesh)
+    crossings = count_crossings.crossings
     if inverted:
-        count_crossings = LimitCrossingCount(mesh)
-        crossings = count_crossings.crossings
         mesh, crossings, inverted, moved = unshrink_inverted(mesh, surface, crossings, inverted,
                                                              count_crossings)
         if not crossings:
@@ -366,7 +387,8 @@ def _repaired_layout(mesh, info, surface):
     sizes = mesh.face_sizes
     info = {**info, **_mesh_figures(mesh), "quads": int((sizes == 4).sum()),
             "triangles": int((sizes == 3).sum()), "inverted_faces": inverted,
-            "layout_inverted_faces": layout_inverted, "moved_vertices": moved, "edits": edits}
+            "layout_inverted_faces": layout_inverted, "limit_crossings": crossings,
+            "moved_vertices": moved, "edits": edits}
     return mesh, info
 
 

@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """The route policy of the base-mesh stage on shapes with holes: the polycube layout is kept
-within 1.5 times the budget, its inverted faces are repaired, and the report names both
-candidates."""
+within 1.5 times the budget, its inverted faces are repaired, a layout whose limit surface
+crosses itself gives way to a clean decimation cage, and the report names both candidates."""
 from dataclasses import replace
 
 import numpy as np
@@ -9,8 +9,10 @@ import pytest
 
 from core.mesh_topology import polymesh_genus
 from core.polymesh_checks import check_polymesh
+from core.quadmesh import base_mesh as base_mesh_module
 from core.quadmesh import build_base_mesh
 from core.quadmesh.base_mesh import FALLBACK_OVER_BUDGET, _repaired_layout
+from core.stages.fit import count_limit_self_intersections
 from core.quadmesh.orientation import inverted_faces
 from core.target_surface import TargetSurface
 from core.types import TriMesh
@@ -20,6 +22,12 @@ from tests.core.test_quadmesh import (FRAME, euler_genus, identity_frames, neare
 # a plate with two square through-holes (genus 2) built of boxes
 TWO_HOLES = [[[0, 0, 0], [5, 1, 1]], [[0, 2, 0], [5, 3, 1]], [[0, 0, 0], [1, 3, 1]],
              [[2, 0, 0], [3, 3, 1]], [[4, 0, 0], [5, 3, 1]]]
+# a plate with three square through-holes in a row (genus 3)
+THREE_HOLES = [[[0, 0, 0], [7, 1, 1]], [[0, 2, 0], [7, 3, 1]], [[0, 0, 0], [1, 3, 1]],
+               [[2, 0, 0], [3, 3, 1]], [[4, 0, 0], [5, 3, 1]], [[6, 0, 0], [7, 3, 1]]]
+# an L-shaped plate with one square through-hole in its long leg (genus 1)
+L_PLATE_WITH_HOLE = [[[0, 0, 0], [5, 1, 1]], [[0, 2, 0], [5, 3, 1]], [[0, 0, 0], [1, 3, 1]],
+                     [[2, 0, 0], [5, 3, 1]], [[0, 3, 0], [1, 5, 1]]]
 
 
 def auto_base_mesh(boxes, target_faces):
@@ -30,13 +38,15 @@ def auto_base_mesh(boxes, target_faces):
     return V, F, base, info
 
 
-@pytest.mark.parametrize("boxes", [FRAME, TWO_HOLES], ids=["frame", "two-holes"])
+@pytest.mark.parametrize("boxes", [FRAME, TWO_HOLES, THREE_HOLES, L_PLATE_WITH_HOLE],
+                         ids=["frame", "two-holes", "three-holes", "l-plate-with-hole"])
 def test_a_shape_with_holes_takes_the_polycube_route_with_its_genus(boxes):
     V, F, base, info = auto_base_mesh(boxes, 300)
     assert info["method"] == "polycube" and info["fallback_reason"] is None
     check_polymesh(base)  # closed, 2-manifold, outward, no degenerate face
     assert info["genus"] == polymesh_genus(base) == euler_genus(V, F) >= 1
     assert not inverted_faces(base, V, F).any() and info["inverted_faces"] == 0
+    assert count_limit_self_intersections(base, 2) == info["limit_crossings"] == 0
     assert base.n_faces <= FALLBACK_OVER_BUDGET * 300
     assert info["candidates"]["polycube"]["faces"] == base.n_faces
     assert info["candidates"]["paired decimation"] is None  # not needed, not built
@@ -77,3 +87,31 @@ def test_a_folded_layout_vertex_is_repaired():
     assert repaired_info["inverted_faces"] == int(inverted_faces(repaired, V, F, surface).sum())
     assert repaired_info["inverted_faces"] == 0  # one corner moved back unfolds it
     assert polymesh_genus(repaired) == euler_genus(V, F)
+
+
+def test_a_layout_whose_limit_surface_crosses_itself_gives_way_to_a_clean_cage(monkeypatch):
+    layout = base_mesh_module._polycube_base_mesh
+
+    def pierced_layout(*args, **kwargs):
+        # one vertex of the frame's top face pushed far down through its bottom face
+        mesh, info = layout(*args, **kwargs)
+        top = np.flatnonzero((np.abs(mesh.vertices[:, 2] - 1.0) < 1e-9)
+                             & (np.abs(mesh.vertices[:, 0] - 0.5) < 0.3)
+                             & (mesh.vertices[:, 1] > 1.2) & (mesh.vertices[:, 1] < 1.8))
+        pierced = mesh.vertices.copy()
+        pierced[top[0], 2] = -3.0
+        return replace(mesh, vertices=pierced), info
+
+    monkeypatch.setattr(base_mesh_module, "_polycube_base_mesh", pierced_layout)
+    V, F, base, info = auto_base_mesh(FRAME, 300)
+    polycube = info["candidates"]["polycube"]
+    decimation = info["candidates"]["paired decimation"]
+    assert polycube["built"] and polycube["limit_crossings"] > 0
+    assert decimation["built"]  # built to compare, since the layout's limit crosses itself
+    kept = count_limit_self_intersections(base, 2)
+    assert kept == info["limit_crossings"]
+    # the cage kept has the fewer flaws: no crossing first, then fewer inverted faces
+    assert (kept > 0, info["inverted_faces"]) == min(
+        (c["limit_crossings"] > 0, c["inverted_faces"]) for c in (polycube, decimation))
+    if kept == 0:
+        assert info["method"] == "paired decimation" and "self-crossing" in info["fallback_reason"]
