@@ -180,11 +180,14 @@ def markdown(rows, meta):
               "The candidates of `base_mesh.candidates`: the polycube layout (faces and "
               "extraordinary vertices where built, else the size of its smallest layout found "
               "or bounded) and the paired decimation (where it was built). The layout is kept "
-              "within 1.5 times the budget unless it has more inverted faces after its repair "
-              "than the decimation.", "",
+              "within 1.5 times the budget unless the decimation's cage has fewer flaws: no "
+              "self-crossing of its limit surface where the layout's crosses itself, else fewer "
+              "inverted faces after the repair. Crossings: self-crossing triangle pairs of the "
+              "level-2 limit surface of the cage.", "",
               "| mesh | parts | genus | polycube faces | polycube EVs | polycube inverted "
-              "after repair | decimation faces | decimation EVs | route |",
-              "|---|---|---|---|---|---|---|---|---|"]
+              "after repair | polycube crossings | decimation faces | decimation EVs | "
+              "decimation crossings | route |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in reached:
         b = r["base_mesh"]
         candidates = b.get("candidates") or {}
@@ -196,9 +199,9 @@ def markdown(rows, meta):
         lines.append("| " + " | ".join([
             f"`{r['mesh']}`", r["mode"], str(r["input_genus"]), poly_faces,
             str(poly.get("extraordinary_vertices", "–")),
-            str(poly.get("inverted_faces", "–")),
+            str(poly.get("inverted_faces", "–")), str(poly.get("limit_crossings", "–")),
             str(deci.get("faces", "–")), str(deci.get("extraordinary_vertices", "–")),
-            b.get("method") or "polycube"]) + " |")
+            str(deci.get("limit_crossings", "–")), b.get("method") or "polycube"]) + " |")
     lines += ["", "Where the base mesh was not reached, the stage's message; where the route "
               "fell back from the polycube layout, why; where no cage tried had a limit surface "
               "that does not cross itself, the stage's reason:", ""]

@@ -34,6 +34,7 @@ from core.quadmesh.limit_interpolation import unshrink_inverted
 from core.quadmesh.local_repair import repair_inverted
 from core.quadmesh.milp_solve import MilpTimeLimitError
 from core.quadmesh.orientation import inverted_faces
+from core.quadmesh.overlap_cuts import corners_to_cut
 from core.quadmesh.paired_decimation import paired_decimation_base_mesh
 from core.quadmesh.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapsible_sides,
                                     loop_tables, minimum_faces, quantize, quantize_for_budget,
@@ -109,10 +110,10 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     ``max_base_faces``); InvalidMeshError when the
     embedded quads are not a closed 2-manifold (a collapse that pinched a vertex).
     """
-    refine, unrefinable, last = {}, set(), None
+    refine, cuts, unrefinable, last = {}, {}, set(), None
     scale, rounds = None, []
     for _ in range(refinement_rounds):
-        refinement = rectangular_refinement(complex_, tables, refine)
+        refinement = rectangular_refinement(complex_, tables, refine, cuts)
         if not refine or not np.any(collapsible):
             _check_minimum(complex_, tables, refinement, collapsible, give_up_faces,
                            max_base_faces)
@@ -134,10 +135,16 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
             following = REFINEMENTS.index(refine[last]) + 1
             if following < len(REFINEMENTS):
                 refine[last] = REFINEMENTS[following]
+            elif last in cuts:
+                del cuts[last]  # its partial cuts failed every way: all its reflex corners
+                refine[last] = REFINEMENTS[0]
             else:
                 del refine[last]
                 unrefinable.add(last)
                 last = None
+            continue
+        if polycube.faces > give_up_faces and scale is not None:
+            scale = None  # the cuts made it larger at this scale: search the budget again
             continue
         if polycube.faces > give_up_faces:
             raise LayoutTooLargeError(
@@ -147,11 +154,10 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
         try:
             lattice = build_lattice(complex_, tables, polycube)
         except OverlappingChartsError as exc:
-            candidates = [c for c in exc.charts if c not in refine and c not in unrefinable]
-            if not candidates:
+            last = _cut_overlapping_chart(complex_, tables, polycube, exc.charts, refine, cuts,
+                                          unrefinable)
+            if last is None:
                 raise
-            last = candidates[0]
-            refine[last] = REFINEMENTS[0]
             scale = polycube.scale
             continue
         if scale is None or abs(polycube.faces - target_faces) <= BUDGET_TOLERANCE * target_faces:
@@ -165,10 +171,12 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     points = np.concatenate([V[complex_.corner_vertex],
                              side_point_positions(V, complex_, lattice, polycube.side_length),
                              interior])
-    # identified points become one vertex (the lowest name: a corner where there is one)
+    # identified points become one vertex (the lowest name: a corner where there is one);
+    # points no quad uses (on sides of charts the quantization collapsed to no area) are
+    # dropped, and the checks below judge whether what remains is closed with the genus kept
     vertex = _merge_points(lattice.n_points, lattice.identified)
-    used, compact = np.unique(vertex, return_inverse=True)
-    mesh = PolyMesh(points[used], compact[lattice.quads.reshape(-1)].astype(np.int64),
+    used, compact = np.unique(vertex[lattice.quads.reshape(-1)], return_inverse=True)
+    mesh = PolyMesh(points[used], compact.astype(np.int64),
                     np.arange(0, 4 * len(lattice.quads) + 1, 4, dtype=np.int64))
     check_polymesh(mesh)
     n_side_points = len(lattice.side_point_side)
@@ -188,6 +196,30 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     except InvalidMeshError:
         pass  # smoothing degenerated a face somewhere: keep the Tutte placement
     return mesh, polycube, rounds, refinement, folded
+
+
+def _cut_overlapping_chart(complex_, tables, polycube, charts, refine, cuts, unrefinable):
+    """Cut one more overlapping chart, or cut one further; returns it (None: none left).
+
+    The first of ``charts`` that is not split into rectangles yet gets the reflex corners next
+    to its overlapping cells cut (:func:`core.quadmesh.overlap_cuts.corners_to_cut`), added to
+    those it has in ``cuts``; where none is left to cut, all of them (``cuts`` loses the
+    chart). ``refine`` and ``cuts`` are updated in place.
+    """
+    orientation = chart_orientation(complex_, tables, polycube.corner_uv)
+    first = None
+    for chart in charts:
+        if chart in unrefinable or (chart in refine and chart not in cuts):
+            continue
+        done = cuts.get(chart, set())
+        more = corners_to_cut(tables, polycube.corner_uv, chart, int(orientation[chart]), done)
+        if more:
+            cuts[chart] = done | more
+        else:
+            cuts.pop(chart, None)
+        refine.setdefault(chart, REFINEMENTS[0])
+        first = chart if first is None else first
+    return first
 
 
 def _give_up_limit(give_up_faces, max_base_faces):

@@ -233,7 +233,7 @@ first candidate fronts, or measured fronts of the loop walked backwards (each re
 then extends its other side)."""
 
 
-def rectangular_refinement(complex_, tables, refine=()):
+def rectangular_refinement(complex_, tables, refine=(), cuts=None):
     """Closure rows of every chart; the charts in ``refine`` are split into rectangles first.
 
     Parameters
@@ -243,12 +243,17 @@ def rectangular_refinement(complex_, tables, refine=()):
         ``"measured"``): charts split into rectangles (Tamassia's rectangular refinement of
         their turns, fronts by :func:`_front`); every other chart only closes as a whole
         polygon.
+    cuts : dict chart -> set of references, or None: for the charts of ``refine`` in it, only
+        the reflex corners at the start of these references are extended (a partial
+        refinement: the pieces are closed polygons, rectangles where no reflex corner of
+        theirs is cut); the other charts of ``refine`` extend every reflex corner.
 
     Returns
     -------
     Refinement
     """
     refine = dict(refine) if isinstance(refine, dict) else dict.fromkeys(refine, "measured")
+    cuts = {} if cuts is None else cuts
     n_vars = complex_.n_sides
     rows, cols, vals = [], [], []
     ext_rows, ext_cols = [], []
@@ -269,20 +274,40 @@ def rectangular_refinement(complex_, tables, refine=()):
         # a face edge: ((axis, direction), length unknown, measured start point)
         face = [((int(tables.ref_axis[r]), int(tables.ref_sign[r])), int(tables.ref_side[r]),
                  tables.ref_measured[r]) for r in walk]
+        # the reference whose start corner each face edge starts at (None: a point inserted
+        # by a split)
+        start_ref = list(walk)
         mode = refine.get(chart)
         if mode == "mirrored":
             # the same polygon walked backwards (interior on the right); each edge then starts
             # where it ended
             face = [((axis, -direction), var, face[(j + 1) % len(face)][2])
                     for j, ((axis, direction), var, _) in enumerate(face)][::-1]
+            start_ref = [walk[(j + 1) % len(walk)] for j in range(len(walk))][::-1]
             sign = -sign
-        faces = [face]
+        chosen = cuts.get(chart) if chart in refine else None
+        faces = [(face, start_ref)]
         while faces:
-            face = faces.pop()
+            face, start_ref = faces.pop()
             n = len(face)
             turns = [_turn(face[j][0], face[(j + 1) % n][0], sign) for j in range(n)]
-            reflex = [j for j, t in enumerate(turns) if t < 0] if chart in refine else []
+            reflex = ([] if chart not in refine else
+                      [j for j, t in enumerate(turns)
+                       if t < 0 and (chosen is None or start_ref[(j + 1) % n] in chosen)])
             if not reflex:
+                if chart in refine and any(t < 0 for t in turns):
+                    # a piece of a partial refinement: it closes as a polygon
+                    row = {0: {}, 1: {}}
+                    for (axis, direction), var, _ in face:
+                        row[axis][var] = row[axis].get(var, 0) + direction
+                    for axis_row in row.values():
+                        for v, c in axis_row.items():
+                            if c != 0:
+                                rows.append(n_rows)
+                                cols.append(v)
+                                vals.append(float(c))
+                        n_rows += 1
+                    continue
                 # a rectangle closes: the signed lengths along each axis add up to zero
                 row = {0: {}, 1: {}}
                 for (axis, direction), var, _ in face:
@@ -317,8 +342,12 @@ def rectangular_refinement(complex_, tables, refine=()):
             back = (direction_i[0], -direction_i[1])
             ahead = [face[(i + 1 + j) % n] for j in range((k - i - 1) % n)]
             behind = [face[(k + 1 + j) % n] for j in range((i - k) % n)]
-            faces.append(ahead + [(dir_k, a, start_k), (back, dummy, hit)])
-            faces.append([(direction_i, dummy, origin), (dir_k, b, hit)] + behind)
+            ahead_refs = [start_ref[(i + 1 + j) % n] for j in range((k - i - 1) % n)]
+            behind_refs = [start_ref[(k + 1 + j) % n] for j in range((i - k) % n)]
+            faces.append((ahead + [(dir_k, a, start_k), (back, dummy, hit)],
+                          ahead_refs + [start_ref[k], None]))
+            faces.append(([(direction_i, dummy, origin), (dir_k, b, hit)] + behind,
+                          [None, None] + behind_refs))
     # the walk inside every slit closes, so both banks of the slit coincide
     for walk in complex_.slit_walks():
         for axis in (0, 1):
@@ -399,6 +428,34 @@ def closeness_rows(goal, n_vars):
                                                           goal - floor - slope * floor]), np.inf)
 
 
+def _open_hole_rows(complex_, tables, n_columns):
+    """Rows that keep every hole open: the walk inside each slit spans at least one unit along
+    both axes of its chart.
+
+    A slit cuts an annular chart (a plate around a hole) into a disk; the references between
+    its two traversals walk around the hole (:meth:`ChartComplex.slit_walks`). Where short sides
+    may collapse to length zero, a narrow hole could close to a segment, which removes a handle
+    of the design; ``sum l >= 1`` over the references of the walk that advance along an axis
+    keeps the hole at least one unit wide that way.
+
+    Returns
+    -------
+    scipy.optimize.LinearConstraint with two rows per slit, ``n_columns`` columns (the side
+    lengths first), each row ``>= 1``.
+    """
+    rows, cols = [], []
+    n_rows = 0
+    for walk in complex_.slit_walks():
+        for axis in (0, 1):
+            ahead = walk[(tables.ref_axis[walk] == axis) & (tables.ref_sign[walk] > 0)]
+            if len(ahead):
+                rows += [n_rows] * len(ahead)
+                cols += tables.ref_side[ahead].tolist()
+                n_rows += 1
+    matrix = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_rows, n_columns))
+    return LinearConstraint(matrix, 1.0, np.inf)
+
+
 def quantize(complex_, tables, refinement, scale, collapsible=None):
     """Integer side lengths closest to ``scale`` times the measured ones, every rectangle closed.
 
@@ -427,6 +484,8 @@ def quantize(complex_, tables, refinement, scale, collapsible=None):
                                     sp.csr_matrix((refinement.extents.shape[0], n_sides))]),
                          1.0, np.inf),
     ]
+    if collapsible is not None and np.any(collapsible):
+        constraints.append(_open_hole_rows(complex_, tables, n + n_sides))
     # inserted edges and split pieces carry a small cost: no larger than the sides need
     cost = np.concatenate([np.full(n_sides, LENGTH_COST), np.full(n - n_sides, EXTRA_COST),
                            np.ones(n_sides)])
