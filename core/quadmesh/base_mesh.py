@@ -67,7 +67,7 @@ FALLBACK_OVER_BUDGET = 1.5
 give way to it."""
 
 REFINEMENT_ROUNDS = 24
-"""Rounds of quantization, each splitting one more overlapping chart into rectangles."""
+"""Rounds of quantization, each cutting the overlapping charts at more reflex corners."""
 FALLBACK_REFINEMENT_ROUNDS = 8
 """The same where the paired decimation can take over: layouts within the budget seldom need
 more than a few refinements."""
@@ -94,9 +94,12 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
                       give_up_faces, refinement_rounds):
     """Quantize, lay out and embed; returns ``(mesh, polycube, rounds, refinement, folded)``.
 
-    Charts whose integer polygon overlaps itself are split into rectangles, lazily and one at a
-    time (only those, so the other charts keep their freedom; a chart whose rectangles make
-    the program infeasible stays whole), and the quantization is repeated.
+    Charts whose integer polygon overlaps itself are cut at the reflex corners next to the
+    overlap (:mod:`core.quadmesh.overlap_cuts`; only those charts, so the others keep their
+    freedom), and the quantization is repeated at the same scale; a chart that still overlaps
+    is cut at more corners, up to its full rectangular refinement (a chart whose refinement
+    makes the program infeasible stays whole). Where the cuts made the layout larger than
+    ``give_up_faces``, the scale is searched again with them.
 
     Before a program is solved, a linear lower bound on the quads of every layout it could
     lead to (:func:`core.quadmesh.quantize.minimum_faces`) ends an attempt that cannot stay
@@ -207,7 +210,6 @@ def _cut_overlapping_chart(complex_, tables, polycube, charts, refine, cuts, unr
     chart). ``refine`` and ``cuts`` are updated in place.
     """
     orientation = chart_orientation(complex_, tables, polycube.corner_uv)
-    first = None
     for chart in charts:
         if chart in unrefinable or (chart in refine and chart not in cuts):
             continue
@@ -218,8 +220,8 @@ def _cut_overlapping_chart(complex_, tables, polycube, charts, refine, cuts, unr
         else:
             cuts.pop(chart, None)
         refine.setdefault(chart, REFINEMENTS[0])
-        first = chart if first is None else first
-    return first
+        return chart
+    return None
 
 
 def _give_up_limit(give_up_faces, max_base_faces):

@@ -16,6 +16,16 @@ closes when its opposite sides are equally long, and any lengths >= 1 that close
 rectangle draw every chart as a simple polygon tiled by those rectangles: no chart can fold
 over, collapse or overlap itself, whatever the scale.
 
+Splitting every chart that way makes a layout several times larger than its features need
+where a chart has many reflex corners (a plate around holes), so the base-mesh stage splits only
+the charts whose integer polygon overlaps itself, and those only at the reflex corners next to
+the overlap at first (``cuts`` of :func:`rectangular_refinement`, chosen by
+:mod:`core.quadmesh.overlap_cuts`): the pieces then close as polygons of their own.
+
+Where short sides may collapse to length zero, the walk around every hole that a slit reaches
+keeps a width of at least one unit along both axes (:func:`_open_hole_rows`), so a narrow hole
+does not close and take a handle of the design with it.
+
 The objective keeps the side lengths close to their measured lengths on the target times a
 scale ``s`` (units per target length): ``min sum |l - s L|`` (a mixed-integer program solved by
 HiGHS, ``scipy.optimize.milp``). Short sides land on one unit wherever the constraints allow,
