@@ -305,20 +305,8 @@ def rectangular_refinement(complex_, tables, refine=(), cuts=None):
                       [j for j, t in enumerate(turns)
                        if t < 0 and (chosen is None or start_ref[(j + 1) % n] in chosen)])
             if not reflex:
-                if chart in refine and any(t < 0 for t in turns):
-                    # a piece of a partial refinement: it closes as a polygon
-                    row = {0: {}, 1: {}}
-                    for (axis, direction), var, _ in face:
-                        row[axis][var] = row[axis].get(var, 0) + direction
-                    for axis_row in row.values():
-                        for v, c in axis_row.items():
-                            if c != 0:
-                                rows.append(n_rows)
-                                cols.append(v)
-                                vals.append(float(c))
-                        n_rows += 1
-                    continue
-                # a rectangle closes: the signed lengths along each axis add up to zero
+                # a rectangle, a piece of a partial refinement or a whole chart closes: the
+                # signed lengths along each axis add up to zero
                 row = {0: {}, 1: {}}
                 for (axis, direction), var, _ in face:
                     row[axis][var] = row[axis].get(var, 0) + direction
@@ -329,7 +317,7 @@ def rectangular_refinement(complex_, tables, refine=(), cuts=None):
                         cols.append(v)
                         vals.append(float(c))
                     n_rows += 1
-                if chart in refine:
+                if chart in refine and min(turns) >= 0:
                     for axis in (0, 1):
                         forward = sorted({var for (a, d), var, _ in face if a == axis and d > 0})
                         ext_rows += [2 * rectangles + axis] * len(forward)
@@ -494,7 +482,7 @@ def quantize(complex_, tables, refinement, scale, collapsible=None):
                                     sp.csr_matrix((refinement.extents.shape[0], n_sides))]),
                          1.0, np.inf),
     ]
-    if collapsible is not None and np.any(collapsible):
+    if collapsible is not None and np.any(collapsible) and complex_.slit_walks():
         constraints.append(_open_hole_rows(complex_, tables, n + n_sides))
     # inserted edges and split pieces carry a small cost: no larger than the sides need
     cost = np.concatenate([np.full(n_sides, LENGTH_COST), np.full(n - n_sides, EXTRA_COST),
