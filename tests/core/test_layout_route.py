@@ -12,8 +12,8 @@ from core.polymesh_checks import check_polymesh
 from core.quadmesh import base_mesh as base_mesh_module
 from core.quadmesh import build_base_mesh
 from core.quadmesh.base_mesh import FALLBACK_OVER_BUDGET, _repaired_layout
-from core.stages.fit import count_limit_self_intersections
 from core.quadmesh.orientation import inverted_faces
+from core.subdivision.limit_crossings import count_limit_self_intersections
 from core.target_surface import TargetSurface
 from core.types import TriMesh
 from tests.core.test_quadmesh import (FRAME, euler_genus, identity_frames, nearest_labels,
