@@ -259,9 +259,9 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT
 
 def _refuse_self_intersections(base, path):
     """InvalidMeshError if the limit surface of ``base`` intersects itself
-    (``core.stages.fit.export_limit_crossings``, the check the pipeline's solid uses too)."""
+    (``core.subdivision.limit_crossings.export_limit_crossings``, the check the pipeline's solid uses too)."""
     from core.errors import InvalidMeshError
-    from core.stages.fit import export_limit_crossings
+    from core.subdivision.limit_crossings import export_limit_crossings
 
     crossings = export_limit_crossings(base)
     if crossings.count:

@@ -41,7 +41,7 @@ class SolidProxy(StageProxy):
         from core.export.bspline import limit_surface_patches
         from core.params import check_export_depth
         from core.progress import SubProgress
-        from core.stages.fit import export_limit_crossings
+        from core.subdivision.limit_crossings import export_limit_crossings
         from polycube_wb.brep import build_solid
 
         check_export_depth(obj.Depth, "Depth")
