@@ -168,3 +168,48 @@ def test_a_decimation_that_stops_short_answers_every_smaller_count_alike():
     for mine, fresh in zip(cached, FeatureDecimation(V, F).triangles(count)):
         np.testing.assert_array_equal(mine, fresh)
     assert len(decimation.triangles(len(floor[1]) + 4)[1]) == len(floor[1]) + 4
+
+
+def _closed_loop(points):
+    """(n, 3) vertices and (n, 2) edges of the closed polyline through ``points``."""
+    vertices = np.asarray(points, dtype=np.float64)
+    n = len(vertices)
+    edges = np.stack([np.arange(n), (np.arange(n) + 1) % n], axis=1)
+    return vertices, np.sort(edges, axis=1)
+
+
+def test_a_zig_zag_network_is_a_staircase_and_a_pockets_rim_is_not():
+    from core.quadmesh.feature_decimation import is_staircase
+
+    # a square rim of 40 edges: four corners
+    side = np.linspace(0.0, 1.0, 11)[:-1]
+    rim = np.concatenate([np.stack([side, 0 * side, 0 * side], 1),
+                          np.stack([1 + 0 * side, side, 0 * side], 1),
+                          np.stack([1 - side, 1 + 0 * side, 0 * side], 1),
+                          np.stack([0 * side, 1 - side, 0 * side], 1)])
+    V, E = _closed_loop(rim)
+    assert not is_staircase(E, corner_vertices(V, E))
+    # the same square's sides as voxel steps: every vertex turns by 90 degrees
+    steps = [(0, 0, 0)]
+    for dx, dy in [(1, 1)] * 5 + [(-1, 1)] * 5 + [(-1, -1)] * 5 + [(1, -1)] * 5:
+        x, y, _ = steps[-1]
+        steps += [(x + dx, y, 0), (x + dx, y + dy, 0)]
+    V, E = _closed_loop(steps[:-1])
+    assert not len(np.unique(V, axis=0)) < len(V)
+    assert is_staircase(E, corner_vertices(V, E))
+
+
+@pytest.mark.parametrize("name", ["octagonal_pocket.stl", "featuretype.stl", "tray_bottom.stl"])
+def test_a_machined_part_keeps_its_whole_feature_network(name):
+    from core.quadmesh.creases import closed_network
+
+    target = load_dev_mesh(name)
+    kept = FeatureDecimation(target.vertices, target.faces).target_features
+    network = closed_network(feature_edges(target.vertices, target.faces), len(target.vertices))
+    assert len(kept) == len(network) > 100
+
+
+def test_a_raw_marching_cubes_result_has_no_feature_network():
+    target = load_dev_mesh("toplib_michell3d_density_mc.stl")
+    assert len(feature_edges(target.vertices, target.faces)) > 100  # its voxel steps
+    assert len(FeatureDecimation(target.vertices, target.faces).target_features) == 0
