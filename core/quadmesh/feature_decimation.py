@@ -9,8 +9,7 @@ collapsed pair placed where the sum of its quadrics is least) keeps the whole fe
 (target edges whose dihedral angle exceeds :data:`core.quadmesh.creases.CREASE_ANGLE`,
 :func:`core.quadmesh.creases.feature_edges`, without the chains that end inside a face region,
 :func:`core.quadmesh.creases.closed_network`: the isolated sharp edges of a SIMP result's
-iso-surface are no feature lines, and none when the network is a voxel staircase,
-:func:`is_staircase`) as edges of the result:
+iso-surface are no feature lines) as edges of the result:
 
 * every vertex is *free* (no feature edge), on a *line* (two feature edges turning by at most
   :data:`TURN_ANGLE`) or a *corner* (three or more feature edges, or a sharp turn of the
@@ -55,11 +54,6 @@ TURN_ANGLE = 40.0
 """Degrees: a vertex with two feature edges whose directions turn by more than this is a
 corner of the network (a kink of a line is kept where it is). A regular octagon's rim turns
 by 45 degrees at each corner; a tessellated circle by much less per segment."""
-STAIRCASE_CORNER_SHARE = 0.25
-"""A feature network with a larger share of corners among its vertices is the staircase of a
-voxel iso-surface (:func:`is_staircase`) and is not kept: a machined part's corners are the
-ends of its lines, each line many target edges long; a zig-zag turns every one or two edges
-(``benchmarks/staircase_bench.py`` lists the share on the dev meshes)."""
 BOUNDARY_WEIGHT = 10.0
 """Weight of the planes through a feature edge perpendicular to its triangles, per squared
 edge length (the triangle quadrics are weighted by area, the same units)."""
@@ -118,11 +112,7 @@ class FeatureDecimation:
         self._surface = TargetSurface(vertices, faces) if surface is None else surface
         features = closed_network(feature_edges(vertices, faces, angle), len(vertices))
         features = np.zeros((0, 2), dtype=np.int64) if features is None else features
-        corner = corner_vertices(vertices, features)
-        if is_staircase(features, corner):
-            features = np.zeros((0, 2), dtype=np.int64)
-            corner = np.zeros(len(vertices), dtype=bool)
-        self._target = (vertices, faces, features, corner)
+        self._target = (vertices, faces, features, corner_vertices(vertices, features))
         self._components = int(connected_face_components(faces).max()) + 1
         self._genus = genus_of(len(vertices), faces, self._components)
         self._source = None
@@ -176,31 +166,6 @@ class FeatureDecimation:
             raise InvalidMeshError("the decimated target changed its genus; the input surface "
                                    "is not a clean 2-manifold")
         return vertices, faces, features, corner
-
-
-def is_staircase(features, corner):
-    """True when a feature network is the staircase of a voxel iso-surface, not feature lines.
-
-    Marching cubes of voxel densities without smoothing leaves steps of a voxel's size whose
-    sharp edges form closed networks too, but zig-zags: the line turns by more than
-    :data:`TURN_ANGLE` or branches at almost every other vertex. A machined part's lines
-    turn only at their ends (a pocket's or a block's corners, a polygon's kinks), so their
-    corners are a small share of their vertices. Creasing a staircase would keep every
-    voxel step as cage edges at a large cost and for no shape the part has.
-
-    Parameters
-    ----------
-    features : (k, 2) int64 feature edges; corner : (n,) bool their corners
-        (:func:`corner_vertices`).
-
-    Returns
-    -------
-    bool: more than :data:`STAIRCASE_CORNER_SHARE` of the network's vertices are corners.
-    """
-    if not len(features):
-        return False
-    on_network = np.unique(features)
-    return bool(corner[on_network].mean() > STAIRCASE_CORNER_SHARE)
 
 
 def corner_vertices(vertices, features):

@@ -38,9 +38,7 @@ genus and orientation:
    feature lines (:mod:`core.quadmesh.creases`) stay chains of their edges, which are never
    paired across, stay cage edges and are tagged as creases (``PolyMesh.creases``), and the
    cage with fewer crossings of the two ladders is kept. A target without a closed network
-   of feature lines (a SIMP result's iso-surface, or the voxel staircase of a raw
-   marching-cubes result, :func:`core.quadmesh.feature_decimation.is_staircase`) has nothing
-   to crease and keeps its smooth
+   of feature lines (a SIMP result's iso-surface) has nothing to crease and keeps its smooth
    cage (and its large targets are spared the pure-Python decimation, which takes about a
    minute on 150k triangles). Only there: a thin plate with holes that is clean without tags
    can have every creased cage within the budget rule cross itself, so tagging is not the
