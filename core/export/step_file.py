@@ -39,18 +39,26 @@ class _Entities:
 
     def __init__(self):
         self.lines = []
+        self.point_ids = {}
 
     def add(self, text):
         self.lines.append(text)
         return len(self.lines)
 
     def points(self, xyz):
-        """One CARTESIAN_POINT per row of ``xyz`` (n, 3); returns their ids."""
-        first = len(self.lines) + 1
+        """The CARTESIAN_POINT ids of the rows of ``xyz`` (n, 3): one entity per distinct
+        point, shared by every vertex, curve and surface that has a pole there (the poles
+        along a shared patch side are equal bit for bit), so each is written and read once.
+        """
         reals = step_reals(xyz)
-        self.lines += [f"CARTESIAN_POINT('',({reals[i]},{reals[i + 1]},{reals[i + 2]}))"
-                       for i in range(0, len(reals), 3)]
-        return list(range(first, first + len(reals) // 3))
+        ids = []
+        for i in range(0, len(reals), 3):
+            text = f"CARTESIAN_POINT('',({reals[i]},{reals[i + 1]},{reals[i + 2]}))"
+            known = self.point_ids.get(text)
+            if known is None:
+                known = self.point_ids[text] = self.add(text)
+            ids.append(known)
+        return ids
 
 
 def _outermost_first(face_ids, patches):
