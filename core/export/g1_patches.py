@@ -370,7 +370,7 @@ def g1_surface_patches(base, measure=True):
         A_g1, y_g1 = _g1_system(layout, quads, topo, free, valence)
         x = _solve(A_fit, y_fit, A_g1, y_g1)
         slots[layout.unknown >= 0] = x[layout.unknown[layout.unknown >= 0]]
-        residual = float(np.abs(A_g1 @ x - y_g1).max())
+        residual = float(np.abs(A_g1 @ x - y_g1).max()) if A_g1 is not None else 0.0
     n2 = N_SPLIT * N_SPLIT
     patches = []
     for f in range(quads.n_faces):
