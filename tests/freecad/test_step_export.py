@@ -55,6 +55,19 @@ def test_step_file_is_ap214_in_millimetres_with_the_input_name(exported, name):
     assert text.count("MANIFOLD_SOLID_BREP(") == 1 and text.count("CLOSED_SHELL(") == 1
 
 
+@pytest.mark.parametrize("name", ["mixed_prism", "genus3_block"])
+def test_each_point_is_written_once(exported, name):
+    """Vertices, edge curves and neighbouring patches share their equal poles' entities."""
+    import re
+
+    _, _, step = exported[name]
+    points = re.findall(r"CARTESIAN_POINT\('',\(([^)]*)\)\)", step.read_text())
+    assert len(points) == len(set(points))
+    edge_poles = sum(len(e.Curve.getPoles()) for e in exported[name][0].Edges)
+    assert len(points) < edge_poles + sum(
+        len(f.Surface.getPoles()) * len(f.Surface.getPoles()[0]) for f in exported[name][0].Faces)
+
+
 def test_freecad_reads_back_the_same_solid(exported):
     solid, report, step = exported["mixed_prism"]
     shape = Part.read(str(step))
