@@ -11,8 +11,12 @@ Gauss-Newton round linearises both distances point-to-plane:
   closest point ``y_k = B_k X`` on the triangulated limit surface (``B`` the barycentric
   rows): ``r_k = m_k . (B_k M V - s_k)``;
 
-(a pair counts only if the two surfaces' normals there are within 60 degrees, so the
-far wall of a thin member does not pull the near one through), and minimises
+(a pair counts fully where the two surfaces' normals there are within about 50 degrees and
+not at all beyond about 70, so the far wall of a thin member does not pull the near one
+through; the weight ramps between, and the limit surface's normal is interpolated from its
+vertex normals, so that a pair whose closest point lies on an edge of the limit mesh gets
+the same weight whichever triangle holds it, and rounding cannot switch a pair on or off),
+and minimises
 
     E(V) = mean_j r_j^2 + mean_k r_k^2 + lam * |D (V - V_init)|^2 / n_base
            + mu * |V - V_prev|^2 / n_base
@@ -40,7 +44,10 @@ _DENSE_UNKNOWNS = 3000
 """Most unknowns solved by dense Cholesky (the Catmull-Clark limit stencils make the normal
 matrix about 15 % full); above, sparse LU with a symmetric minimum-degree ordering."""
 COMPATIBLE = 0.5
-"""Pairs count only if their two unit normals have a dot product above this (60 degrees)."""
+"""Pairs whose two unit normals have a dot product below ``COMPATIBLE - COMPATIBLE_RAMP``
+do not count, above ``COMPATIBLE + COMPATIBLE_RAMP`` they count fully (:func:`compatibility`)."""
+COMPATIBLE_RAMP = 0.15
+"""Half width of the dot products over which a pair's weight ramps from 0 to 1."""
 
 
 @dataclass
@@ -102,7 +109,7 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
     for done in range(rounds + 1):
         X = mapping @ V
         forward = target.closest(X)
-        back, back_normal = target.samples_nearest(X, triangles, count, seed)
+        back, _ = target.samples_nearest(X, triangles, count, seed)
         rms.append(float(np.sqrt(0.5 * (np.mean(forward.distance ** 2)
                                         + np.mean(back.distance ** 2)))))
         if rms[-1] < best[0] and not (refit and done == 0 and rounds > 0):
@@ -113,8 +120,10 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
         if done == rounds:
             break
         # pairs whose normals disagree (the far wall of a thin member) are left out
-        keep_f = _dot(vertex_normals(X, triangles), forward.normal) > COMPATIBLE
-        keep_b = _dot(back_normal, sample_normal) > COMPATIBLE
+        normals = vertex_normals(X, triangles)
+        keep_f = compatibility(_dot(normals, forward.normal))
+        keep_b = compatibility(_dot(_interpolated(normals, triangles[back.face], back.bary),
+                                    sample_normal))
         V = system.solve(V, [(forward.normal * keep_f[:, None], own, ones,
                               _dot(forward.normal, forward.point) * keep_f, n_fine),
                              (sample_normal * keep_b[:, None], triangles[back.face], back.bary,
@@ -321,6 +330,23 @@ def _complex(matrix):
     order (scipy's ``astype`` sorts them, in the arrays it may share with ``matrix``)."""
     return sp.csr_matrix((matrix.data.astype(np.complex128), matrix.indices.copy(),
                           matrix.indptr.copy()), shape=matrix.shape)
+
+
+def compatibility(dots):
+    """(k,) float64 in [0, 1]: the weight of pairs whose unit normals have the dot products
+    ``dots`` ((k,) float64), 0 below ``COMPATIBLE - COMPATIBLE_RAMP``, 1 above
+    ``COMPATIBLE + COMPATIBLE_RAMP``, linear between (a continuous weight, so that a dot
+    product moved by rounding moves the fit by as little)."""
+    return np.clip((dots - (COMPATIBLE - COMPATIBLE_RAMP)) / (2.0 * COMPATIBLE_RAMP), 0.0, 1.0)
+
+
+def _interpolated(normals, corners, bary):
+    """(k, 3) float64 unit normals at points with barycentric coordinates ``bary`` ((k, 3))
+    in triangles with corners ``corners`` ((k, 3) int64) of a mesh with vertex normals
+    ``normals`` ((n, 3)): continuous over the mesh, also across its edges and vertices."""
+    mixed = np.einsum("kc,kcj->kj", bary, normals[corners])
+    length = np.linalg.norm(mixed, axis=1, keepdims=True)
+    return mixed / np.where(length > 0, length, 1.0)
 
 
 def _dot(a, b):

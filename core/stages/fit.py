@@ -3,7 +3,8 @@
 Eqs. 4-11), refining quad strips until a tolerance is met when one is asked for."""
 import numpy as np
 
-from core.subdivision.limit_crossings import fit_levels, limit_self_intersections
+from core.subdivision.limit_crossings import (count_limit_self_intersections, fit_levels,
+                                              limit_self_intersections)
 from core.types import FitResult
 
 FIT_REPORT_KEYS = ("start", "rounds", "iterations", "stopped", "mean_distance", "max_distance",
