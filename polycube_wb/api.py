@@ -630,8 +630,13 @@ class RecomputeOutcome:
         return not self.failures and not self.cancelled
 
 
-def recompute(doc, progress=NO_PROGRESS):
+def recompute(doc, progress=NO_PROGRESS, run_job=None):
     """``doc.recompute()`` with ``progress`` reaching the stage objects; returns the outcome.
+
+    With ``run_job`` (``run_job(compute, progress) -> result``, e.g. the GUI's worker thread,
+    :mod:`polycube_wb.gui.worker`), the stale stage objects' computations are run by it and
+    their results stored before the recompute (:func:`polycube_wb.objects.base.run_pending_stages`);
+    the outcome is the same as without it.
 
     FreeCAD does not propagate errors from ``execute``; the outcome lists them. An object
     whose stage failed is marked invalid (``obj.isValid()`` is False) with the reason in its
@@ -640,9 +645,11 @@ def recompute(doc, progress=NO_PROGRESS):
     "cancelled by the user" and keeps its last result; it and the objects that did not run
     after it stay touched (the next recompute runs them).
     """
-    from polycube_wb.objects.base import recompute_session
+    from polycube_wb.objects.base import recompute_session, run_pending_stages
 
     with recompute_session(doc, progress) as session:
+        if run_job is not None:
+            run_pending_stages(doc, session, run_job)
         doc.recompute()
     if session.cancelled:
         for name in list(session.failures) + session.skipped:
@@ -650,8 +657,10 @@ def recompute(doc, progress=NO_PROGRESS):
     return RecomputeOutcome(dict(session.failures), session.cancelled)
 
 
-def run_in_transaction(doc, title, build, progress=NO_PROGRESS):
+def run_in_transaction(doc, title, build, progress=NO_PROGRESS, run_job=None):
     """Run ``build()`` (adds or changes objects), then recompute, as one undo step.
+
+    ``run_job`` runs the stages' computations (see :func:`recompute`).
 
     When ``build`` raises, the document is rolled back to what it was before. When the user
     cancels during the recompute, the stages that finished keep their results, the stage
@@ -675,7 +684,7 @@ def run_in_transaction(doc, title, build, progress=NO_PROGRESS):
     doc.openTransaction(title)
     try:
         built = build()
-        outcome = recompute(doc, progress)
+        outcome = recompute(doc, progress, run_job)
     except BaseException:
         doc.abortTransaction()
         raise

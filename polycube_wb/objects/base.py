@@ -16,6 +16,14 @@ coordinates) changes the ``ResultId`` and reruns the stages after it, not the st
 The objects' ``execute`` is called by ``doc.recompute()``, which cannot pass arguments;
 ``recompute_session`` hands them the progress object of the command that recomputes and
 collects their failures (an exception in ``execute`` does not propagate from recompute).
+
+A stage's run is split in three: ``prepare`` reads what it needs from the document and
+returns the computation, a function of a progress object that touches no document object;
+``store`` writes the computation's result back. ``run`` chains them in the calling thread
+(``doc.recompute()`` in scripts and ``freecadcmd``). :func:`run_pending_stages` instead hands
+each computation to a job runner (the GUI runs it in a worker thread while FreeCAD's event
+loop keeps going) and stores its result in the calling thread; the ``doc.recompute()`` that
+follows then finds every stage up to date.
 """
 import contextlib
 import hashlib
@@ -54,13 +62,19 @@ class _Session:
         self.failures = {}
         self.cancelled = False
         self.skipped = []
+        self.spans = {}
+        self.stored = set()
+        self.errors = {}
 
     def span(self, obj):
-        """The ``SubProgress`` of ``obj``'s run: its share of the bar, in run order."""
-        weight = self.weights.get(obj.Name, 0.0)
-        start = self.done / self.total
-        self.done = min(self.total, self.done + weight)
-        return SubProgress(self.progress, start, self.done / self.total)
+        """The ``SubProgress`` of ``obj``'s run: its share of the bar, in run order (the same
+        one when asked again for ``obj``)."""
+        if obj.Name not in self.spans:
+            weight = self.weights.get(obj.Name, 0.0)
+            start = self.done / self.total
+            self.done = min(self.total, self.done + weight)
+            self.spans[obj.Name] = SubProgress(self.progress, start, self.done / self.total)
+        return self.spans[obj.Name]
 
 
 _SESSIONS = []
@@ -82,7 +96,9 @@ def recompute_session(doc, progress=NO_PROGRESS):
     _Session
         ``failures`` maps object names to the one-line reason their stage failed;
         ``cancelled`` is True when the user cancelled; ``skipped`` names the objects
-        that did not run after the cancel.
+        that did not run after the cancel; ``stored`` names the objects whose result
+        :func:`run_pending_stages` stored, ``errors`` the exception of those whose stage
+        failed there (their ``execute`` raises it again, so FreeCAD marks them invalid).
     """
     weights = {}
     for obj in pending_objects(doc):
@@ -106,6 +122,71 @@ def pending_objects(doc):
             for dependent in obj.InListRecursive:
                 pending[dependent.Name] = dependent
     return list(pending.values())
+
+
+def run_pending_stages(doc, session, run_job):
+    """Bring the stale stage objects of ``doc`` up to date, each computation run by
+    ``run_job``, before the ``doc.recompute()`` of ``session`` (which then only marks them).
+
+    The stage objects a recompute would run are taken in dependency order. For each stale
+    one, :meth:`StageProxy.prepare` reads its inputs in this thread, ``run_job`` runs the
+    computation, and its result is stored here (one object at a time, so the next stage
+    reads the stored result exactly as ``doc.recompute()`` would). A stage that fails is
+    marked as ``execute`` marks it, and nothing that depends on it runs; a cancel marks the
+    object that was running and stops.
+
+    Parameters
+    ----------
+    doc : App.Document
+    session : the ``recompute_session`` of ``doc`` that the recompute after this call uses.
+    run_job : callable ``run_job(compute, progress) -> result`` running
+        ``compute(progress)`` (for example in a worker thread while the GUI stays live);
+        ``progress`` is the object's share of the session's bar.
+    """
+    blocked = set()
+    for obj in _dependency_order(pending_objects(doc)):
+        kind = stage_kind(obj)
+        if kind is None or getattr(obj, "Proxy", None) is None:
+            continue
+        if session.cancelled:
+            return
+        if blocked & {upstream.Name for upstream in obj.OutListRecursive}:
+            blocked.add(obj.Name)
+            continue
+        proxy = obj.Proxy
+        progress = session.span(obj)
+        try:
+            proxy.bring_up_to_date(
+                obj, lambda: proxy.store(obj, run_job(proxy.prepare(obj), progress)))
+        except Cancelled:
+            proxy._fail(obj, session, CANCELLED_STATUS, cancelled=True)
+            return
+        except Exception as exc:  # raised again by its execute, where FreeCAD reports it
+            if isinstance(exc, (PolycubeError, ImportError)):
+                proxy._fail(obj, session, _one_line(exc))
+            session.errors[obj.Name] = exc
+            blocked.add(obj.Name)
+            continue
+        progress.report(kind, 1.0)
+        obj.Status = "ok"
+        session.stored.add(obj.Name)
+
+
+def _dependency_order(objects):
+    """``objects`` ordered so that each comes after the ones of them it depends on."""
+    names = {obj.Name for obj in objects}
+    placed, ordered = set(), []
+    remaining = list(objects)
+    while remaining:
+        ready = [obj for obj in remaining
+                 if not ({o.Name for o in obj.OutListRecursive} & names) - placed]
+        if not ready:  # a dependency cycle: FreeCAD's recompute reports it
+            ready = remaining[:1]
+        for obj in ready:
+            placed.add(obj.Name)
+            ordered.append(obj)
+            remaining.remove(obj)
+    return ordered
 
 
 def stage_kind(obj):
@@ -230,22 +311,38 @@ class StageProxy:
         return (not obj.ResultId or obj.InputId != self.input_id(obj)
                 or obj.ParamsId != fingerprint(self.parameters(obj)))
 
+    def prepare(self, obj):
+        """Read what the stage needs from the document (the thread that owns it).
+
+        Returns
+        -------
+        callable ``compute(progress) -> result`` that touches no document object, so it may
+        run in a worker thread; ``progress`` is a ``core.progress.Progress``.
+        """
+        raise NotImplementedError(f"{type(self).__name__} must implement prepare")
+
+    def store(self, obj, result):
+        """Write ``result`` (what the computation of :meth:`prepare` returned) to ``obj`` and
+        keep the typed core results later stages need in the cache."""
+        raise NotImplementedError(f"{type(self).__name__} must implement store")
+
+    def run(self, obj, progress):
+        """Run the stage in this thread and store its result (may raise)."""
+        self.store(obj, self.prepare(obj)(progress))
+
     def execute(self, obj):
         session = _current()
         if session is not None and session.cancelled:  # after Esc nothing else runs
             session.skipped.append(obj.Name)
             return
+        if session is not None and obj.Name in session.errors:  # failed in run_pending_stages
+            raise session.errors[obj.Name]
+        if session is not None and obj.Name in session.stored:  # up to date already
+            obj.Status = "ok"
+            return
         progress = session.span(obj) if session is not None else NO_PROGRESS
         try:
-            if self.is_stale(obj):
-                self._cache = None
-                self.run(obj, progress)
-                obj.InputId = self.input_id(obj)
-                obj.ParamsId = fingerprint(self.parameters(obj))
-            result_id = self.show(obj)
-            if result_id != obj.ResultId:  # a new or edited result: forget the cached one
-                self._cache = None
-                obj.ResultId = result_id
+            self.bring_up_to_date(obj, lambda: self.run(obj, progress))
         except Cancelled:  # not raised on: FreeCAD would print a traceback for it
             self._fail(obj, session, CANCELLED_STATUS, cancelled=True)
             return
@@ -254,6 +351,26 @@ class StageProxy:
             raise
         progress.report(self.TYPE.split("::")[1], 1.0)
         obj.Status = "ok"
+
+    def bring_up_to_date(self, obj, run):
+        """Call ``run()`` (runs the stage and stores its result) when the stage is stale, then
+        rebuild the display and the ids.
+
+        The cache ``run`` fills holds the typed results of the run itself, so the stages after
+        it start from them; a result that changed without a run (an edited cage) empties the
+        cache, and the typed results are rebuilt from the document when asked for.
+        """
+        ran = self.is_stale(obj)
+        if ran:
+            self._cache = None
+            run()
+            obj.InputId = self.input_id(obj)
+            obj.ParamsId = fingerprint(self.parameters(obj))
+        result_id = self.show(obj)
+        if result_id != obj.ResultId:
+            if not ran:
+                self._cache = None
+            obj.ResultId = result_id
 
     def _fail(self, obj, session, reason, cancelled=False):
         obj.Status = reason

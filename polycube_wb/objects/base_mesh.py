@@ -71,7 +71,9 @@ class BaseMeshProxy(CageProxy):
         return {"target_faces": int(obj.TargetFaces), "max_base_faces": int(obj.MaxBaseFaces),
                 "base_mesh_method": str(obj.Method)}
 
-    def run(self, obj, progress):
-        state = run_core_stages(self.upstream_state(obj), base_mesh_stages(),
-                                stage_params(**self.parameters(obj)), progress)
+    def prepare(self, obj):
+        state, params = self.upstream_state(obj), stage_params(**self.parameters(obj))
+        return lambda progress: run_core_stages(state, base_mesh_stages(), params, progress)
+
+    def store(self, obj, state):
         store_cage(obj, state.basemesh.cage)

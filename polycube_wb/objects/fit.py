@@ -85,13 +85,15 @@ class FitProxy(CageProxy):
                 "tolerance_mm": float(obj.Tolerance),
                 "outside_refinement": float(obj.OutsideRefinement)}
 
-    def run(self, obj, progress):
+    def prepare(self, obj):
         from core.types import BaseMeshResult
 
-        state = self.upstream_state(obj)
+        state, params = self.upstream_state(obj), stage_params(**self.parameters(obj))
         # the cage to fit is the linked object's, possibly edited: a base mesh or an earlier fit
         state.basemesh = BaseMeshResult(state.cage)
-        state = run_core_stages(state, ["fit"], stage_params(**self.parameters(obj)), progress)
+        return lambda progress: run_core_stages(state, ["fit"], params, progress)
+
+    def store(self, obj, state):
         fit = state.fit.report
         for name, key, _ in FIGURES:
             setattr(obj, name, float(fit[key]))

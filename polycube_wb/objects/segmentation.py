@@ -72,9 +72,11 @@ class SegmentationProxy(StageProxy):
                 "lam": float(obj.Lambda), "penalty": float(obj.Penalty),
                 "max_sweeps": int(obj.MaxSweeps), "repair": bool(obj.Repair)}
 
-    def run(self, obj, progress):
-        state = run_core_stages(self.upstream_state(obj), STAGES,
-                                stage_params(**self.parameters(obj)), progress)
+    def prepare(self, obj):
+        state, params = self.upstream_state(obj), stage_params(**self.parameters(obj))
+        return lambda progress: run_core_stages(state, STAGES, params, progress)
+
+    def store(self, obj, state):
         labeling = state.labeling.report
         obj.FacePart = state.parts.face_part.astype(int).tolist()
         obj.FaceLabel = state.labeling.face_label.astype(int).tolist()

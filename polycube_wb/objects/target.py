@@ -39,9 +39,14 @@ class TargetProxy(StageProxy):
         V, F = _mesh_arrays(obj)
         return fingerprint(V, F)
 
-    def run(self, obj, progress):
-        self._cache = self._intake(obj, progress)
-        intake = self._cache["intake"]
+    def prepare(self, obj):
+        V, F = _mesh_arrays(obj)
+        label, check = obj.Label, bool(obj.CheckSelfIntersections)
+        return lambda progress: _intake(label, V, F, check, progress)
+
+    def store(self, obj, result):
+        self._cache = result
+        intake = result["intake"]
         obj.Genus = intake.genus
         obj.Triangles = int(len(intake.target.faces))
 
@@ -50,17 +55,19 @@ class TargetProxy(StageProxy):
         return fingerprint(V, F)
 
     def load_outputs(self, obj):
-        return self._intake(obj)
-
-    def _intake(self, obj, progress=None):
         from core.progress import NO_PROGRESS
-        from core.types import MeshSource, PipelineState
 
-        V, F = _mesh_arrays(obj)
-        params = stage_params(check_self_intersections=bool(obj.CheckSelfIntersections))
-        state = PipelineState(source=MeshSource(obj.Label, (V, F)))
-        state = run_core_stages(state, ["intake"], params, progress or NO_PROGRESS)
-        return {"intake": state.intake}
+        return self.prepare(obj)(NO_PROGRESS)
+
+
+def _intake(label, V, F, check_self_intersections, progress):
+    """``{"intake": IntakeResult}`` of the mesh ``(V, F)`` (the intake stage)."""
+    from core.types import MeshSource, PipelineState
+
+    params = stage_params(check_self_intersections=check_self_intersections)
+    state = PipelineState(source=MeshSource(label, (V, F)))
+    state = run_core_stages(state, ["intake"], params, progress)
+    return {"intake": state.intake}
 
 
 def _mesh_arrays(obj):
