@@ -445,24 +445,75 @@ def make_target(doc, source, name="Target", components="largest",
     from core.validate import validate_target
     from polycube_wb.convert import arrays_to_mesh, mesh_to_arrays
 
+    options = {"components": components, "check_self_intersections": check_self_intersections,
+               "repair": repair}
     source_file = ""
     if isinstance(source, TriMesh):
-        vertices, faces = source.vertices, source.faces
+        mesh, _ = validate_target(source.vertices, source.faces, name=name, **options)
     elif hasattr(source, "Mesh"):
-        vertices, faces = mesh_to_arrays(source.Mesh)
         source_file = getattr(source, "PolycubeSource", "") or getattr(source, "SourceFile", "")
+        mesh, _ = validate_target(*mesh_to_arrays(source.Mesh), name=source_file or name,
+                                  **options)
     else:
-        from core.mesh_io import read_triangle_soup
-
         source_file = os.path.abspath(os.fspath(source))
-        vertices, faces = read_triangle_soup(source_file)
-    mesh, _ = validate_target(vertices, faces, components=components,
-                              check_self_intersections=check_self_intersections,
-                              name=source_file or name, repair=repair)
+        mesh = _READ_AHEAD.pop(_read_ahead_key(source_file, **options), None) \
+            or read_target_file(source_file, **options)
     obj = _make(doc, "Target", name, {}, {"CheckSelfIntersections": check_self_intersections})
     obj.Mesh = arrays_to_mesh(mesh.vertices, mesh.faces)
     obj.SourceFile = source_file
     return obj
+
+
+def read_target_file(path, components="largest", check_self_intersections=True, repair=True):
+    """The validated target mesh (``core.types.TriMesh``) of a mesh file.
+
+    Raises
+    ------
+    InvalidMeshError
+        The file cannot be read or the mesh is not a valid closed solid.
+    """
+    from core.mesh_io import read_triangle_soup
+    from core.validate import validate_target
+
+    path = os.path.abspath(os.fspath(path))
+    vertices, faces = read_triangle_soup(path)
+    mesh, _ = validate_target(vertices, faces, components=components,
+                              check_self_intersections=check_self_intersections, name=path,
+                              repair=repair)
+    return mesh
+
+
+_READ_AHEAD = {}
+"""At most one mesh read by :func:`read_ahead_target`, by :func:`_read_ahead_key`."""
+
+
+def read_ahead_target(path, components="largest", check_self_intersections=True, repair=True):
+    """Read and validate a mesh file for the next :func:`make_target` of the same file.
+
+    The GUI reads a file in a worker thread with this, then calls ``make_target`` (through
+    the Python console, which shows the line to replay) in its own thread, which takes the
+    mesh read here instead of reading the file again. A file changed since is read again.
+
+    Raises
+    ------
+    InvalidMeshError
+        As :func:`read_target_file`.
+    """
+    path = os.path.abspath(os.fspath(path))
+    mesh = read_target_file(path, components, check_self_intersections, repair)
+    _READ_AHEAD.clear()
+    _READ_AHEAD[_read_ahead_key(path, components, check_self_intersections, repair)] = mesh
+
+
+def _read_ahead_key(path, components, check_self_intersections, repair):
+    """What identifies a read: the file (its size and change time, None when it cannot be
+    looked at) and the options."""
+    try:
+        info = os.stat(path)
+    except OSError:
+        return (path, None, components, bool(check_self_intersections), bool(repair))
+    return (path, (info.st_size, info.st_mtime_ns), components, bool(check_self_intersections),
+            bool(repair))
 
 
 def make_segmentation(doc, target, name="Segmentation", **properties):

@@ -44,53 +44,73 @@ def report_success(text):
 
 
 def run_guarded(title, work, with_progress=False):
-    """Run ``work(progress)`` with a wait cursor and report any failure.
+    """Run ``work(progress)`` with a busy cursor and report any failure.
+
+    With ``with_progress``, ``progress`` is a :class:`polycube_wb.gui.worker.GuiProgress`
+    (bar, *Cancel*, Esc) for ``work`` to run its computations with
+    (:func:`polycube_wb.gui.worker.run_job`); otherwise None.
 
     Returns
     -------
     What ``work`` returns, or None after a failure or a cancel. The bar is stopped and
-    the cursor restored before a message box opens.
+    the cursor restored before a message is shown.
     """
     from PySide import QtCore, QtGui
 
-    from core.errors import Cancelled, PolycubeInputError, StageNotAvailableError
-    from polycube_wb.gui.fc_progress import FreeCADProgress
+    from polycube_wb.gui.worker import GuiProgress
 
-    progress = FreeCADProgress(title) if with_progress else None
-    box = None
-    QtGui.QApplication.setOverrideCursor(QtCore.Qt.WaitCursor)
+    progress = GuiProgress(title) if with_progress else None
+    if progress is not None:
+        progress.start()
+    else:
+        QtGui.QApplication.setOverrideCursor(QtCore.Qt.WaitCursor)
     try:
-        if progress is not None:
-            progress.start()
         return work(progress)
-    except Cancelled as exc:
-        FreeCAD.Console.PrintWarning(f"Polycube: {exc}\n")
-        FreeCADGui.getMainWindow().statusBar().showMessage(f"Polycube: {exc}", 15000)
-    except StageNotAvailableError as exc:
-        FreeCAD.Console.PrintWarning(f"Polycube: {title}: {NOT_AVAILABLE}: {exc}\n")
-        box = ("information", f"Stage {NOT_AVAILABLE}:\n\n{exc}")
-    except PolycubeInputError as exc:
-        FreeCAD.Console.PrintError(f"Polycube: {title}: {exc}\n")
-        box = ("warning", str(exc))
-    except ImportError as exc:
-        FreeCAD.Console.PrintError(f"Polycube: {title}: missing Python package: {exc}\n")
-        box = ("critical", f"A Python package is missing:\n\n{exc}\n\n"
-               "See the README, \"Install as a FreeCAD addon\", step 2.")
-    except Exception as exc:  # last resort: show the user the traceback of an internal error
-        FreeCAD.Console.PrintError(f"Polycube: {title} failed:\n{traceback.format_exc()}")
-        box = ("critical", f"Internal error: {type(exc).__name__}: {exc}\n\n"
-               "The Report view shows the traceback.")
+    except Exception as exc:
+        failure = exc
     finally:
         if progress is not None:
             progress.stop()
-        QtGui.QApplication.restoreOverrideCursor()
+        else:
+            QtGui.QApplication.restoreOverrideCursor()
+    box = _report_failure(title, failure)
     if box is not None:
-        dialogs.message_box(box[0], title, box[1])
+        dialogs.message_box(*box)
     return None
 
 
-def run_stage_command(title, doc, build):
+def _report_failure(title, exc):
+    """Write a failure of ``title`` to the Report view (a cancel also to the status bar);
+    returns the message box to show, ``(kind, title, text)``, or None."""
+    from core.errors import Cancelled, PolycubeInputError, StageNotAvailableError
+
+    if isinstance(exc, Cancelled):
+        FreeCAD.Console.PrintWarning(f"Polycube: {exc}\n")
+        FreeCADGui.getMainWindow().statusBar().showMessage(f"Polycube: {exc}", 15000)
+        return None
+    if isinstance(exc, StageNotAvailableError):
+        FreeCAD.Console.PrintWarning(f"Polycube: {title}: {NOT_AVAILABLE}: {exc}\n")
+        return ("information", title, f"Stage {NOT_AVAILABLE}:\n\n{exc}")
+    if isinstance(exc, PolycubeInputError):
+        FreeCAD.Console.PrintError(f"Polycube: {title}: {exc}\n")
+        return ("warning", title, str(exc))
+    if isinstance(exc, ImportError):
+        FreeCAD.Console.PrintError(f"Polycube: {title}: missing Python package: {exc}\n")
+        return ("critical", title, f"A Python package is missing:\n\n{exc}\n\n"
+                "See the README, \"Install as a FreeCAD addon\", step 2.")
+    # last resort: show the user the traceback of an internal error
+    trace = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+    FreeCAD.Console.PrintError(f"Polycube: {title} failed:\n{trace}")
+    return ("critical", title, f"Internal error: {type(exc).__name__}: {exc}\n\n"
+            "The Report view shows the traceback.")
+
+
+def run_stage_command(title, doc, build, read_ahead=None):
     """Run ``build()`` and the recompute it needs as one undo step, with progress.
+
+    The stages' computations run in a worker thread while FreeCAD stays live
+    (:mod:`polycube_wb.gui.worker`); their results are stored in the document in this
+    thread.
 
     Parameters
     ----------
@@ -98,6 +118,9 @@ def run_stage_command(title, doc, build):
     doc : App.Document
     build : callable creating or changing objects (through ``FreeCADGui.doCommand``);
         may return a stage object to report on and show.
+    read_ahead : path of a mesh file ``build`` makes a target of, or None: the file is read
+        and validated in the worker first (:func:`polycube_wb.api.read_ahead_target`); a bad
+        file is reported before the undo step opens.
 
     Returns
     -------
@@ -107,9 +130,16 @@ def run_stage_command(title, doc, build):
     """
     from polycube_wb import api
 
-    done = run_guarded(title, lambda progress: api.run_in_transaction(doc, title, build,
-                                                                      progress),
-                       with_progress=True)
+    from core.progress import SubProgress
+    from polycube_wb.gui.worker import run_job
+
+    def work(progress):
+        if read_ahead is not None:
+            run_job(lambda worker: _read_mesh_file(read_ahead, worker),
+                    SubProgress(progress, 0.0, 0.0))
+        return api.run_in_transaction(doc, title, build, progress, run_job)
+
+    done = run_guarded(title, work, with_progress=True)
     if done is None:
         return None
     shown, outcome = done
@@ -125,6 +155,14 @@ def run_stage_command(title, doc, build):
     elif not outcome.failures:
         report_success(f"{title}: done")
     return outcome
+
+
+def _read_mesh_file(path, progress):
+    """Read and validate a mesh file for the ``make_target`` after it (a worker's job)."""
+    from polycube_wb import api
+
+    progress.report("reading and validating the mesh", 0.0, os.path.basename(path))
+    api.read_ahead_target(path)
 
 
 def _supersede(obj):
@@ -222,7 +260,7 @@ class ImportTargetCommand(_Command):
         doc = FreeCAD.ActiveDocument or FreeCAD.newDocument()
         name = os.path.splitext(os.path.basename(path))[0]
         run_stage_command("Import target mesh", doc, lambda: _do(
-            f"api.make_target(App.ActiveDocument, {path!r}, name={name!r})"))
+            f"api.make_target(App.ActiveDocument, {path!r}, name={name!r})"), read_ahead=path)
         _view_fit()
 
 
@@ -359,9 +397,11 @@ class ReconstructAllCommand(_Command):
                 made = _do(f"api.make_target(App.ActiveDocument, {path!r}, name={name!r})")
                 return _make_chain_to_solid(made)
         else:
+            path = None
+
             def build():
                 return _make_chain_to_solid(target)
-        run_stage_command("Reconstruct all", doc, build)
+        run_stage_command("Reconstruct all", doc, build, read_ahead=path)
         _view_fit()
 
 
