@@ -487,20 +487,23 @@ _READ_AHEAD = {}
 """At most one mesh read by :func:`read_ahead_target`, by :func:`_read_ahead_key`."""
 
 
-def read_ahead_target(path, components="largest", check_self_intersections=True, repair=True):
+def read_ahead_target(path, components="largest", check_self_intersections=True, repair=True,
+                      mesh=None):
     """Read and validate a mesh file for the next :func:`make_target` of the same file.
 
-    The GUI reads a file in a worker thread with this, then calls ``make_target`` (through
-    the Python console, which shows the line to replay) in its own thread, which takes the
-    mesh read here instead of reading the file again. A file changed since is read again.
+    The GUI reads a file in its stage process (:func:`read_target_file`) and hands the mesh
+    here as ``mesh``, then calls ``make_target`` (through the Python console, which shows
+    the line to replay), which takes this mesh instead of reading the file again. A file
+    changed since is read again.
 
     Raises
     ------
     InvalidMeshError
-        As :func:`read_target_file`.
+        As :func:`read_target_file` (when ``mesh`` is None).
     """
     path = os.path.abspath(os.fspath(path))
-    mesh = read_target_file(path, components, check_self_intersections, repair)
+    if mesh is None:
+        mesh = read_target_file(path, components, check_self_intersections, repair)
     _READ_AHEAD.clear()
     _READ_AHEAD[_read_ahead_key(path, components, check_self_intersections, repair)] = mesh
 

@@ -132,11 +132,13 @@ def run_stage_command(title, doc, build, read_ahead=None):
 
     from core.progress import SubProgress
     from polycube_wb.gui.worker import run_job
+    from polycube_wb.stage_jobs import StageJob, read_mesh_file
 
     def work(progress):
         if read_ahead is not None:
-            run_job(lambda worker: _read_mesh_file(read_ahead, worker),
-                    SubProgress(progress, 0.0, 0.0))
+            mesh = run_job(StageJob(read_mesh_file, (read_ahead,)),
+                           SubProgress(progress, 0.0, 0.0))
+            api.read_ahead_target(read_ahead, mesh=mesh)
         return api.run_in_transaction(doc, title, build, progress, run_job)
 
     done = run_guarded(title, work, with_progress=True)
@@ -155,14 +157,6 @@ def run_stage_command(title, doc, build, read_ahead=None):
     elif not outcome.failures:
         report_success(f"{title}: done")
     return outcome
-
-
-def _read_mesh_file(path, progress):
-    """Read and validate a mesh file for the ``make_target`` after it (a worker's job)."""
-    from polycube_wb import api
-
-    progress.report("reading and validating the mesh", 0.0, os.path.basename(path))
-    api.read_ahead_target(path)
 
 
 def _supersede(obj):

@@ -1,26 +1,33 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Stage computations in a worker thread while FreeCAD's event loop keeps running.
+"""Stage computations off FreeCAD's GUI thread while its event loop keeps running.
 
-The heavy work of a stage is numpy, scipy and numba (whose spatial queries release the
-GIL); the rest is Python, which hands the GIL to the main thread every few milliseconds.
-So a Python thread suffices: the GUI thread waits for it in a nested ``QEventLoop`` (as a
-modal dialog does), which repaints the window, lets the user turn and zoom the 3D view and
-answers Esc, while a ``QTimer`` moves the progress bar from what the stage reports.
+A job (:class:`polycube_wb.stage_jobs.StageJob`) runs in the GUI's stage process
+(:mod:`polycube_wb.stage_worker`, started at the first job and kept), so that no
+computation can hold up the event loop, whatever it does with Python's GIL; a job that
+makes FreeCAD shapes (``needs_freecad``) runs in a worker thread of FreeCAD itself. Either
+way the GUI thread waits in a nested ``QEventLoop`` (as a modal dialog does), which
+repaints the window, lets the user turn and zoom the 3D view and answers Esc, while a
+``QTimer`` moves the progress bar from what the stage reports.
 
 :class:`GuiProgress` is the progress of one command: a bar with a *Cancel* button in the
 status bar, the stage in the status-bar message, a busy cursor, and an input guard that
 turns Esc into a cancel and keeps every other click and key away from FreeCAD meanwhile
 (only the 3D view's navigation and the *Cancel* button stay live), so the document cannot
-change under a running stage. :func:`run_job` runs one computation with it.
+change under a running stage. :func:`run_job` runs one job with it.
 
-A cancel is passed to the worker twice: its progress raises ``Cancelled`` at the stage's
-next progress report, and ``Cancelled`` is raised asynchronously in the worker thread at
-its next Python instruction (``PyThreadState_SetAsyncExc``), which stops a stage between
-two reports too. A worker still inside one long compiled call after
-:data:`CANCEL_GRACE_SECONDS` is left to end alone (its result is dropped); the next job
-waits for it first.
+A cancel ends the stage process at once (the next job starts a new one). A worker thread
+is told twice: its progress raises ``Cancelled`` at the stage's next report, and
+``Cancelled`` is raised asynchronously in the thread at its next Python instruction
+(``PyThreadState_SetAsyncExc``); one still inside a long compiled call after
+:data:`CANCEL_GRACE_SECONDS` is left to end alone (its result is dropped), and the next
+job waits for it first.
 """
+import atexit
 import ctypes
+import os
+import queue
+import signal
+import subprocess
 import threading
 import time
 
@@ -57,7 +64,23 @@ class WorkerProgress(Progress):
             raise Cancelled("cancelled by the user")
 
 
-def run_job(compute, progress):
+def run_job(job, progress):
+    """Run ``job`` (a ``StageJob``) in the stage process, or in a worker thread when it needs
+    FreeCAD; the GUI stays live meanwhile. Returns what the job returned.
+
+    Raises
+    ------
+    Cancelled
+        The user cancelled; nothing of the computation is returned.
+    Exception
+        What the job raised, raised again in the GUI thread.
+    """
+    if job.needs_freecad:
+        return run_in_thread(job, progress)
+    return run_in_process(job, progress)
+
+
+def run_in_thread(compute, progress):
     """Run ``compute(worker_progress)`` in a worker thread; the GUI stays live meanwhile.
 
     Parameters
@@ -129,6 +152,124 @@ def run_job(compute, progress):
         raise Cancelled("cancelled by the user")
     if "error" in outcome:
         raise outcome["error"]
+    return outcome["result"]
+
+
+class StageProcess:
+    """The stage process (:mod:`polycube_wb.stage_worker`) and a thread reading its frames."""
+
+    def __init__(self):
+        from polycube_wb import ADDON_DIR
+        from polycube_wb.gui.batch_command import batch_interpreter
+
+        python, env = batch_interpreter()
+        self.process = subprocess.Popen([python, "-m", "polycube_wb.stage_worker"],
+                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                        cwd=ADDON_DIR, env=env, start_new_session=True)
+        self.frames = queue.Queue()
+        threading.Thread(target=self._read, name="polycube-stage-reader", daemon=True).start()
+
+    def _read(self):
+        from polycube_wb.stage_worker import read_frame
+
+        while True:
+            try:
+                self.frames.put(read_frame(self.process.stdout))
+            except Exception as exc:  # the process ended (or sent what cannot be read)
+                self.frames.put(("ended", exc))
+                return
+
+    def send(self, job):
+        from polycube_wb.stage_worker import write_frame
+
+        write_frame(self.process.stdin, (job.function, job.args))
+
+    def alive(self):
+        return self.process.poll() is None
+
+    def end(self):
+        """End the process at once (its group: anything it started too)."""
+        if self.alive():
+            try:
+                os.killpg(self.process.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        self.process.wait()
+        for stream in (self.process.stdin, self.process.stdout):
+            try:
+                stream.close()
+            except OSError:
+                pass
+
+
+_PROCESS = None
+atexit.register(lambda: end_stage_process())
+
+
+def stage_process():
+    """The running stage process (started when there is none)."""
+    global _PROCESS
+    if _PROCESS is None or not _PROCESS.alive():
+        _PROCESS = StageProcess()
+    return _PROCESS
+
+
+def end_stage_process():
+    """End the stage process (a cancel; FreeCAD closing)."""
+    global _PROCESS
+    if _PROCESS is not None:
+        _PROCESS.end()
+        _PROCESS = None
+atexit.register(lambda: end_stage_process())
+
+
+def run_in_process(job, progress):
+    """Run ``job`` in the stage process; the GUI stays live meanwhile (see :func:`run_job`)."""
+    from PySide import QtCore
+
+    from polycube_wb.stage_jobs import StageFailed
+    from polycube_wb.stage_worker import RebuiltError
+
+    worker = stage_process()
+    worker.send(job)
+    loop = QtCore.QEventLoop()
+    outcome = {}
+
+    def poll():
+        try:
+            progress.check_cancel()
+            while True:
+                frame = worker.frames.get_nowait()
+                if frame[0] == "progress":
+                    progress.report(*frame[1:])
+                else:
+                    outcome[frame[0]] = frame[1]
+                    loop.quit()
+                    return
+        except queue.Empty:
+            return
+        except Cancelled:
+            outcome["cancelled"] = True
+            loop.quit()
+
+    timer = QtCore.QTimer()
+    timer.setInterval(POLL_MS)
+    timer.timeout.connect(poll)
+    timer.start()
+    try:
+        loop.exec_()
+    finally:
+        timer.stop()
+    if "cancelled" in outcome:
+        end_stage_process()
+        raise Cancelled("cancelled by the user")
+    if "ended" in outcome:
+        end_stage_process()
+        raise StageFailed(f"the stage process ended unexpectedly ({outcome['ended']}); "
+                          "the Report view may say why")
+    if "error" in outcome:
+        error = outcome["error"]
+        raise error.rebuild() if isinstance(error, RebuiltError) else error
     return outcome["result"]
 
 

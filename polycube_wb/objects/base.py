@@ -35,6 +35,7 @@ import FreeCAD
 
 from core.errors import Cancelled, PolycubeError
 from core.progress import NO_PROGRESS, SubProgress
+from polycube_wb.stage_jobs import StageFailed  # noqa: F401  (raised by the stage objects)
 
 STATUS_GROUP = "Status"
 STAGE_WEIGHTS = {"Target": 1.0, "Segmentation": 1.0, "BaseMesh": 2.0, "Fit": 12.0,
@@ -45,10 +46,6 @@ their run times on the bundled sample: the fit dominates)."""
 
 CANCELLED_STATUS = "cancelled by the user"
 """``Status`` of a stage object whose run the user cancelled (Esc)."""
-
-
-class StageFailed(PolycubeError):
-    """A core stage did not produce its result; the message is the stage's own reason."""
 
 
 class _Session:
@@ -316,8 +313,9 @@ class StageProxy:
 
         Returns
         -------
-        callable ``compute(progress) -> result`` that touches no document object, so it may
-        run in a worker thread; ``progress`` is a ``core.progress.Progress``.
+        polycube_wb.stage_jobs.StageJob, callable as ``job(progress) -> result``; it touches
+        no document object, so it may run in a worker thread or process (``progress`` is a
+        ``core.progress.Progress``).
         """
         raise NotImplementedError(f"{type(self).__name__} must implement prepare")
 
@@ -446,29 +444,6 @@ FreeCAD.addDocumentObserver(_UNDO_OBSERVER)
 def _one_line(exc):
     text = " ".join(str(exc).split())
     return text or type(exc).__name__
-
-
-def run_core_stages(state, stages, params, progress):
-    """Run core pipeline stages on ``state`` (a ``core.types.PipelineState``); returns it.
-
-    Raises
-    ------
-    Cancelled, PolycubeInputError
-        As raised by the stages.
-    StageFailed
-        A stage did not run to the end; the message names it and its reason.
-    """
-    from core.pipeline import run_stages
-
-    state, report, failed = run_stages(state, list(stages), params, progress)
-    if isinstance(failed, (Cancelled, PolycubeError)):
-        raise failed
-    for name in stages:
-        entry = report["stages"].get(name, {})
-        if entry.get("status") != "ok":
-            raise StageFailed(f"the '{name}' stage {entry.get('status', 'did not run')}: "
-                              f"{entry.get('message', '')}".rstrip(": "))
-    return state
 
 
 def stage_params(**values):

@@ -11,8 +11,8 @@ cage).
 import numpy as np
 
 from core.params import BASE_MESH_METHODS
-from polycube_wb.objects.base import StageProxy, add_property, fingerprint, run_core_stages, \
-    stage_params
+from polycube_wb.stage_jobs import StageJob, core_stages
+from polycube_wb.objects.base import StageProxy, add_property, fingerprint, stage_params
 from polycube_wb.objects.cage import add_cage_properties, cage_shape, read_cage, store_cage
 
 
@@ -73,7 +73,7 @@ class BaseMeshProxy(CageProxy):
 
     def prepare(self, obj):
         state, params = self.upstream_state(obj), stage_params(**self.parameters(obj))
-        return lambda progress: run_core_stages(state, base_mesh_stages(), params, progress)
+        return StageJob(core_stages, (state, tuple(base_mesh_stages()), params))
 
     def store(self, obj, state):
         store_cage(obj, state.basemesh.cage)

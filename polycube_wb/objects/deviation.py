@@ -87,6 +87,7 @@ class DeviationProxy(StageProxy):
 
     def prepare(self, obj):
         from core.errors import ParameterError
+        from polycube_wb.stage_jobs import StageJob
 
         if not 0 < obj.Tolerance <= 0.1:
             raise ParameterError(f"{obj.Label}: its Tessellation tolerance must be in (0, 0.1] "
@@ -97,7 +98,7 @@ class DeviationProxy(StageProxy):
         # a copy: the worker tessellates it while the 3D view may draw the original
         solid, tolerance = solids[0].copy(), float(obj.Tolerance)
         target_V, target_F = _mesh_arrays(obj.Target)
-        return lambda progress: _deviation(solid, target_V, target_F, tolerance, progress)
+        return StageJob(_deviation, (solid, target_V, target_F, tolerance), needs_freecad=True)
 
     def store(self, obj, result):
         from polycube_wb.convert import arrays_to_mesh

@@ -6,7 +6,8 @@ is any cage object (a BaseMesh, or another Fit to refine further). Editing the f
 ``CageVertices`` does not rerun the fit; the Solid after it follows the edit.
 """
 from core.params import FIT_MODES
-from polycube_wb.objects.base import add_property, run_core_stages, stage_params
+from polycube_wb.stage_jobs import StageJob, core_stages
+from polycube_wb.objects.base import add_property, stage_params
 from polycube_wb.objects.base_mesh import CageProxy
 from polycube_wb.objects.cage import add_cage_properties, store_cage
 
@@ -91,7 +92,7 @@ class FitProxy(CageProxy):
         state, params = self.upstream_state(obj), stage_params(**self.parameters(obj))
         # the cage to fit is the linked object's, possibly edited: a base mesh or an earlier fit
         state.basemesh = BaseMeshResult(state.cage)
-        return lambda progress: run_core_stages(state, ["fit"], params, progress)
+        return StageJob(core_stages, (state, ("fit",), params))
 
     def store(self, obj, state):
         fit = state.fit.report

@@ -8,8 +8,9 @@ validity, which later stages need too, are rebuilt from them when the document i
 """
 import numpy as np
 
+from polycube_wb.stage_jobs import StageJob, core_stages
 from polycube_wb.objects.base import StageFailed, StageProxy, add_property, fingerprint, \
-    run_core_stages, stage_params
+    stage_params
 
 STAGES = ("parts", "frames", "labeling")
 PART_MODES = ["single", "auto"]
@@ -74,7 +75,7 @@ class SegmentationProxy(StageProxy):
 
     def prepare(self, obj):
         state, params = self.upstream_state(obj), stage_params(**self.parameters(obj))
-        return lambda progress: run_core_stages(state, STAGES, params, progress)
+        return StageJob(core_stages, (state, tuple(STAGES), params))
 
     def store(self, obj, state):
         labeling = state.labeling.report
@@ -109,7 +110,7 @@ class SegmentationProxy(StageProxy):
         mesh = state.intake.target
         face_part, face_label = stored_arrays(obj, len(mesh.faces))
         state.parts = PartsResult(face_part)
-        state = run_core_stages(state, ["frames"], stage_params(**self.parameters(obj)),
+        state = core_stages(state, ["frames"], stage_params(**self.parameters(obj)),
                                 _no_progress())
         validity = check_validity(mesh.vertices, mesh.faces, face_part, face_label,
                                   state.frames.frame_field.face_frame)

@@ -38,11 +38,12 @@ class SolidProxy(StageProxy):
 
     def prepare(self, obj):
         from core.params import check_export_depth
+        from polycube_wb.stage_jobs import StageJob
 
         check_export_depth(obj.Depth, "Depth")
         base, depth = self.upstream_state(obj).cage, int(obj.Depth)
         what = f"{obj.Label}: the cage of {obj.Cage.Label}"
-        return lambda progress: _limit_solid(base, depth, what, progress)
+        return StageJob(_limit_solid, (base, depth, what), needs_freecad=True)
 
     def store(self, obj, result):
         solid, brep = result

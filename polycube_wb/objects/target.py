@@ -8,8 +8,7 @@ when its points or placement changed.
 """
 import numpy as np
 
-from polycube_wb.objects.base import StageProxy, add_property, fingerprint, run_core_stages, \
-    stage_params
+from polycube_wb.objects.base import StageProxy, add_property, fingerprint, stage_params
 
 GROUP = "Target"
 
@@ -40,9 +39,11 @@ class TargetProxy(StageProxy):
         return fingerprint(V, F)
 
     def prepare(self, obj):
+        from polycube_wb.stage_jobs import StageJob, intake
+
         V, F = _mesh_arrays(obj)
-        label, check = obj.Label, bool(obj.CheckSelfIntersections)
-        return lambda progress: _intake(label, V, F, check, progress)
+        params = stage_params(check_self_intersections=bool(obj.CheckSelfIntersections))
+        return StageJob(intake, (obj.Label, V, F, params))
 
     def store(self, obj, result):
         self._cache = result
@@ -58,16 +59,6 @@ class TargetProxy(StageProxy):
         from core.progress import NO_PROGRESS
 
         return self.prepare(obj)(NO_PROGRESS)
-
-
-def _intake(label, V, F, check_self_intersections, progress):
-    """``{"intake": IntakeResult}`` of the mesh ``(V, F)`` (the intake stage)."""
-    from core.types import MeshSource, PipelineState
-
-    params = stage_params(check_self_intersections=check_self_intersections)
-    state = PipelineState(source=MeshSource(label, (V, F)))
-    state = run_core_stages(state, ["intake"], params, progress)
-    return {"intake": state.intake}
 
 
 def _mesh_arrays(obj):
