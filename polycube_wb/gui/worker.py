@@ -75,9 +75,14 @@ def run_job(job, progress):
     Exception
         What the job raised, raised again in the GUI thread.
     """
-    if job.needs_freecad:
-        return run_in_thread(job, progress)
-    return run_in_process(job, progress)
+    if not job.needs_freecad:
+        try:
+            stage_process()
+        except RuntimeError as exc:  # no interpreter for the process: FreeCAD's own thread
+            FreeCAD.Console.PrintLog(f"Polycube: {exc}; the stage runs in a thread\n")
+        else:
+            return run_in_process(job, progress)
+    return run_in_thread(job, progress)
 
 
 def run_in_thread(compute, progress):
