@@ -20,6 +20,7 @@ import sys
 
 import polycube_wb  # noqa: F401  (installs the guard that makes ``core`` ours)
 from core.progress import Progress
+from polycube_wb.stage_jobs import portable_error
 
 _HEADER = struct.Struct("<Q")
 
@@ -51,35 +52,6 @@ class FrameProgress(Progress):
 
     def report(self, stage, fraction, message=""):
         write_frame(self.stream, ("progress", str(stage), float(fraction), str(message)))
-
-
-def portable_error(exc):
-    """``exc`` if it survives pickling, else an exception of the same class with its message
-    (an exception whose constructor takes more than the message does not unpickle)."""
-    try:
-        pickle.loads(pickle.dumps(exc))
-        return exc
-    except Exception:
-        return RebuiltError(type(exc).__module__, type(exc).__qualname__, str(exc))
-
-
-class RebuiltError:
-    """An exception's class (module, name) and message, for :meth:`rebuild` in the GUI."""
-
-    def __init__(self, module, name, message):
-        self.module, self.name, self.message = module, name, message
-
-    def rebuild(self):
-        """The exception: of its own class when it can be imported, else a RuntimeError."""
-        import importlib
-
-        try:
-            cls = getattr(importlib.import_module(self.module), self.name)
-            exc = cls.__new__(cls)
-            Exception.__init__(exc, self.message)
-            return exc
-        except Exception:
-            return RuntimeError(f"{self.name}: {self.message}")
 
 
 def main():

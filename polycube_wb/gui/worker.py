@@ -233,7 +233,7 @@ def run_in_process(job, progress):
     from PySide import QtCore
 
     from polycube_wb.stage_jobs import StageFailed
-    from polycube_wb.stage_worker import RebuiltError
+    from polycube_wb.stage_jobs import RebuiltError
 
     worker = stage_process()
     worker.send(job)
