@@ -772,18 +772,34 @@ def describe(obj):
         line = (f"{obj.Label}: cage of {obj.Faces} faces, {obj.Vertices} vertices, "
                 f"{obj.ExtraordinaryVertices} extraordinary, genus {obj.Genus}")
         if kind == "Fit":
-            line += (f"; mean distance {obj.MeanDistance:.2e}, max {obj.MaxDistance:.2e} of "
-                     f"the diagonal, outside volume {obj.OutsideVolume:.2e} ({obj.Stopped})")
+            size = _target_diagonal(obj)
+            line += (f"; distance to the target mean {_mm(obj.MeanDistance, size)}, max "
+                     f"{_mm(obj.MaxDistance, size)}; volume outside the target "
+                     f"{100 * obj.OutsideVolume:.2f} % ({obj.Stopped})")
         return line
     if kind == "Solid":
         return (f"{obj.Label}: solid of {obj.BrepFaces} B-spline faces, valid "
-                f"{obj.BrepValid}, volume {obj.BrepVolume:.6g}")
+                f"{obj.BrepValid}, volume {obj.BrepVolume:.6g} mm³")
     if kind == "Deviation":
-        return (f"{obj.Label}: deviation mean {obj.MeanDeviation:.3g} ({obj.MeanDeviationPercent:.3f} "
-                f"% of the diagonal), max {obj.MaxDeviation:.3g} ({obj.MaxDeviationPercent:.3f} "
-                f"%); outside volume {obj.OutsideVolume:.3f} %, uncovered {obj.UncoveredVolume:.3f} "
-                f"%; watertight {obj.Watertight}")
+        return (f"{obj.Label}: distance to the target mean {obj.MeanDeviation:.3g} mm "
+                f"({obj.MeanDeviationPercent:.3f} % of the size), max {obj.MaxDeviation:.3g} mm "
+                f"({obj.MaxDeviationPercent:.3f} %); volume outside the target "
+                f"{obj.OutsideVolume:.3f} %, not covered {obj.UncoveredVolume:.3f} %; watertight "
+                f"{obj.Watertight}")
     return obj.Label
+
+
+def _target_diagonal(obj):
+    """Bounding-box diagonal of the target ``obj`` is built from, mm (None without one)."""
+    target = upstream_objects(obj).get("Target")
+    return target.Mesh.BoundBox.DiagonalLength if target is not None else None
+
+
+def _mm(fraction, diagonal):
+    """A distance given as a fraction of the diagonal, in mm and in % of the size."""
+    if not diagonal:
+        return f"{100 * fraction:.3g} % of the size"
+    return f"{fraction * diagonal:.3g} mm ({100 * fraction:.3g} % of the size)"
 
 
 def import_subd_cage(doc, path, progress=NO_PROGRESS, depth=EXPORT_DEPTH):

@@ -83,6 +83,7 @@ def _report_failure(title, exc):
     """Write a failure of ``title`` to the Report view (a cancel also to the status bar);
     returns the message box to show, ``(kind, title, text)``, or None."""
     from core.errors import Cancelled, PolycubeInputError, StageNotAvailableError
+    from polycube_wb.panel_fields import in_gui_words
 
     if isinstance(exc, Cancelled):
         FreeCAD.Console.PrintWarning(f"Polycube: {exc}\n")
@@ -92,8 +93,9 @@ def _report_failure(title, exc):
         FreeCAD.Console.PrintWarning(f"Polycube: {title}: {NOT_AVAILABLE}: {exc}\n")
         return ("information", title, f"Stage {NOT_AVAILABLE}:\n\n{exc}")
     if isinstance(exc, PolycubeInputError):
-        FreeCAD.Console.PrintError(f"Polycube: {title}: {exc}\n")
-        return ("warning", title, str(exc))
+        text = in_gui_words(str(exc))
+        FreeCAD.Console.PrintError(f"Polycube: {title}: {text}\n")
+        return ("warning", title, text)
     if isinstance(exc, ImportError):
         FreeCAD.Console.PrintError(f"Polycube: {title}: missing Python package: {exc}\n")
         return ("critical", title, f"A Python package is missing:\n\n{exc}\n\n"
@@ -142,6 +144,7 @@ def run_stage_command(title, doc, build, read_ahead=None):
         return api.run_in_transaction(doc, title, build, progress, run_job)
 
     done = run_guarded(title, work, with_progress=True)
+    _hide_superseded(doc)
     if done is None:
         return None
     shown, outcome = done
@@ -170,6 +173,27 @@ def _supersede(obj):
     for kind in SUPERSEDES.get(api.stage_kind(obj), ()):
         if kind in chain and chain[kind] is not obj and chain[kind].ViewObject is not None:
             chain[kind].ViewObject.Visibility = False
+
+
+def _hide_superseded(doc):
+    """Hide every stage result that a shown, up-to-date later result replaces (also after
+    a cancel, a resume or a recompute, which show each object whose display they rebuild)."""
+    from polycube_wb import api
+
+    if FreeCAD.getDocument(doc.Name) is None:
+        return
+    for later in doc.Objects:
+        kind = api.stage_kind(later)
+        if kind not in SUPERSEDES or later.ViewObject is None or \
+                not later.ViewObject.Visibility or later.Status != "ok" or not later.ResultId:
+            continue
+        for name in later.Proxy.INPUTS:
+            earlier = getattr(later, name, None)
+            while earlier is not None and api.stage_kind(earlier) in SUPERSEDES[kind]:
+                if earlier.ViewObject is not None:
+                    earlier.ViewObject.Visibility = False
+                links = earlier.Proxy.INPUTS if hasattr(earlier, "Proxy") else ()
+                earlier = getattr(earlier, links[0], None) if links else None
 
 
 def _selection():

@@ -54,7 +54,7 @@ class StagePanel:
             set_widget_value(widget, field.kind, getattr(obj, field.prop))
             widget.setToolTip(obj.getDocumentationOfProperty(field.prop))
             widget.setMinimumWidth(FIELD_WIDTH)  # not as wide as its largest number
-            form.addRow(field.label, widget)
+            form.addRow(_wrapping_label(field.label), widget)
             self.widgets[field.prop] = (widget, field.kind)
         defaults = QtGui.QPushButton("Paper defaults")
         defaults.clicked.connect(self.paper_defaults)
@@ -155,7 +155,7 @@ class StagePanel:
             field.setDecimals(4)
             field.setSuffix(" mm")
             field.setMinimumWidth(FIELD_WIDTH)
-            form.addRow(f"Move by {axis}", field)
+            form.addRow(_wrapping_label(f"Move by {axis}"), field)
             self.move_fields.append(field)
         move = QtGui.QPushButton("Move")
         move.clicked.connect(self.move_vertices)
@@ -217,6 +217,13 @@ def _close(obj):
 FIELD_WIDTH = 100
 """Least width of a number field, pixels: a spin box asks for the width of its largest
 number (``1e9`` with six decimals), which made the panel wider than the Combo View."""
+
+
+def _wrapping_label(text):
+    """A form label that wraps rather than widen the panel past the Combo View."""
+    label = QtGui.QLabel(text)
+    label.setWordWrap(True)
+    return label
 
 
 def make_widget(kind, limits):

@@ -6,7 +6,7 @@ need are imported in ``Initialize()``, the first time the user opens the workben
 """
 import FreeCADGui
 
-from polycube_wb.gui import icon_path
+from polycube_wb.gui import ICON_DIR, icon_path
 
 MENU_AND_TOOLBAR = "Polycube"
 
@@ -25,6 +25,8 @@ class PolycubeWorkbench(FreeCADGui.Workbench):
         from polycube_wb.gui.preferences import PreferencesPage
 
         commands.register()
+        # the preferences dialog shows the icon "preferences-<group>" of the icon paths
+        FreeCADGui.addIconPath(ICON_DIR)
         FreeCADGui.addPreferencePage(PreferencesPage, "Polycube")
         self.appendToolbar(MENU_AND_TOOLBAR, list(commands.TOOLBAR))
         self.appendMenu(MENU_AND_TOOLBAR, list(commands.MENU))

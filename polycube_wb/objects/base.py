@@ -371,6 +371,9 @@ class StageProxy:
             obj.ResultId = result_id
 
     def _fail(self, obj, session, reason, cancelled=False):
+        from polycube_wb.panel_fields import in_gui_words
+
+        reason = in_gui_words(reason)
         obj.Status = reason
         FreeCAD.Console.PrintError(f"Polycube: {obj.Label}: {reason}\n")
         if session is not None:

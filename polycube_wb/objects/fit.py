@@ -24,6 +24,10 @@ FIGURES = (("MeanDistance", "mean_distance", "Mean distance of the limit surface
             "(fraction of the target volume)"))
 
 
+STOPPED_WORDS = {"stalled": "converged"}
+"""The fit report's reason to stop -> the word the GUI shows."""
+
+
 class FitProxy(CageProxy):
     TYPE = "Polycube::Fit"
     INPUTS = ("BaseMesh",)
@@ -67,7 +71,8 @@ class FitProxy(CageProxy):
             add_property(obj, "App::PropertyFloat", name, "Result", tooltip, 0.0,
                          read_only=True, output=True)
         add_property(obj, "App::PropertyString", "Stopped", "Result",
-                     "Why the fit stopped ('iterations' or 'stalled')", "", read_only=True,
+                     "Why the fit stopped: 'iterations' (all of them ran) or 'converged' "
+                     "(its objective stopped improving)", "", read_only=True,
                      output=True)
         add_property(obj, "App::PropertyString", "Refinement", "Result",
                      "With a tolerance or volume left outside: whether the goal was met, why the "
@@ -98,7 +103,8 @@ class FitProxy(CageProxy):
         fit = state.fit.report
         for name, key, _ in FIGURES:
             setattr(obj, name, float(fit[key]))
-        obj.Stopped = str(fit.get("stopped", ""))
+        stopped = str(fit.get("stopped", ""))
+        obj.Stopped = STOPPED_WORDS.get(stopped, stopped)
         obj.Refinement = "; ".join(filter(None, (
             refinement_summary(fit.get("tolerance")),
             outside_refinement_summary(fit.get("outside_refinement")))))

@@ -42,13 +42,16 @@ class SegmentationProxy(StageProxy):
                      "Frame blending distance near part interfaces, in mean edge lengths "
                      "(paper: 4)", default("blend_factor"))
         add_property(obj, "App::PropertyFloat", "Lambda", "Labeling",
-                     "Eq. 3 lambda: weight of neighbours with another label (paper: 0.5)",
+                     "Compactness weight (λ, Eq. 3): weight of neighbours with another label "
+                     "(paper: 0.5)",
                      default("lam"))
         add_property(obj, "App::PropertyFloat", "Penalty", "Labeling",
-                     "Eq. 3 p: weight of opposite and interface-parallel labels (paper: 1e5)",
+                     "Opposite-label penalty (p, Eq. 3): weight of opposite and "
+                     "interface-parallel labels (paper: 1e5)",
                      default("penalty"))
         add_property(obj, "App::PropertyInteger", "MaxSweeps", "Labeling",
-                     "Most HBECVT sweeps", default("max_sweeps"))
+                     "Most sweeps of the labeling's optimisation (HBECVT)",
+                     default("max_sweeps"))
         add_property(obj, "App::PropertyBool", "Repair", "Labeling",
                      "Repair invalid charts, boundaries and corners after HBECVT",
                      default("repair"))

@@ -9,7 +9,7 @@ from polycube_wb.objects.base import StageProxy, add_property
 
 FIGURES = (("BrepFaces", "faces", "App::PropertyInteger", "B-spline faces of the solid"),
            ("BrepValid", "valid", "App::PropertyBool", "OpenCascade finds the solid valid"),
-           ("BrepVolume", "volume", "App::PropertyFloat", "Volume of the solid (model units^3)"),
+           ("BrepVolume", "volume", "App::PropertyFloat", "Volume of the solid, mm³"),
            ("MaxNormalJump", "max_normal_jump_deg", "App::PropertyFloat",
             "Largest normal jump across patch boundaries, degrees"))
 
@@ -27,8 +27,9 @@ class SolidProxy(StageProxy):
         add_property(obj, "App::PropertyLink", "Cage", "Solid",
                      "The cage whose limit surface becomes the solid (a Fit or a BaseMesh)")
         add_property(obj, "App::PropertyInteger", "Depth", "Solid",
-                     "Grading depth of the patches at extraordinary vertices "
-                     f"(1..{MAX_EXPORT_DEPTH}; exact except in a cell of size 2^-depth)",
+                     "Patch refinement at irregular (extraordinary) vertices: the grading "
+                     f"depth, 1..{MAX_EXPORT_DEPTH}; the solid is the exact limit surface "
+                     "except in a cell of size 2^-depth around them",
                      default(EXPORT_DEPTH_KEY))
         for name, _, kind, tooltip in FIGURES:
             add_property(obj, kind, name, "Result", tooltip, read_only=True, output=True)
