@@ -143,8 +143,11 @@ def run_stage_command(title, doc, build, read_ahead=None):
             api.read_ahead_target(read_ahead, mesh=mesh)
         return api.run_in_transaction(doc, title, build, progress, run_job)
 
+    first = not _has_results(doc)
     done = run_guarded(title, work, with_progress=True)
     _hide_superseded(doc)
+    if first and _has_results(doc):  # the document's first result: show all of it
+        _view_fit()
     if done is None:
         return None
     shown, outcome = done
@@ -175,12 +178,28 @@ def _supersede(obj):
             chain[kind].ViewObject.Visibility = False
 
 
+def _has_results(doc):
+    """Whether a stage object of ``doc`` holds a result."""
+    from polycube_wb import api
+
+    return _is_open(doc) and any(
+        api.stage_kind(obj) is not None and obj.ResultId for obj in doc.Objects)
+
+
+def _is_open(doc):
+    """Whether ``doc`` is still open in FreeCAD."""
+    try:
+        return doc.Name in FreeCAD.listDocuments()
+    except ReferenceError:
+        return False
+
+
 def _hide_superseded(doc):
     """Hide every stage result that a shown, up-to-date later result replaces (also after
     a cancel, a resume or a recompute, which show each object whose display they rebuild)."""
     from polycube_wb import api
 
-    if FreeCAD.getDocument(doc.Name) is None:
+    if not _is_open(doc):
         return
     for later in doc.Objects:
         kind = api.stage_kind(later)

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Task panels of the stage objects: their parameters, OK / Apply / Cancel.
+"""Task panels of the stage objects: their parameters, OK / Cancel and Apply.
 
 One panel class serves every stage: its fields are ``polycube_wb.panel_fields.FIELDS``
 (property, label, kind, range or choices from ``core.params``). OK and Apply write the fields
@@ -58,7 +58,15 @@ class StagePanel:
             self.widgets[field.prop] = (widget, field.kind)
         defaults = QtGui.QPushButton("Paper defaults")
         defaults.clicked.connect(self.paper_defaults)
-        form.addRow(defaults)
+        # Apply sits here, not beside OK and Cancel: three buttons there are wider than
+        # FreeCAD's default Combo View
+        apply = QtGui.QPushButton("Apply")
+        apply.setToolTip("Write the fields to the object and recompute; the panel stays open")
+        apply.clicked.connect(lambda: self.apply())
+        buttons = QtGui.QHBoxLayout()
+        buttons.addWidget(defaults)
+        buttons.addWidget(apply)
+        form.addRow(buttons)
         layout.addWidget(box)
         if self.kind in CAGE_KINDS:
             layout.addWidget(self._cage_box())
@@ -72,11 +80,7 @@ class StagePanel:
 
     def getStandardButtons(self):
         buttons = QtGui.QDialogButtonBox
-        return int(buttons.Ok | buttons.Apply | buttons.Cancel)
-
-    def clicked(self, button):
-        if button == int(QtGui.QDialogButtonBox.Apply):
-            self.apply()
+        return int(buttons.Ok | buttons.Cancel)
 
     def accept(self):
         """Write the fields and recompute; the panel stays open when the user cancelled
