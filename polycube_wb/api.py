@@ -17,6 +17,7 @@ from core.params import (DEFAULT_EXPORT_FORM, EXPORT_DEPTH, check_export_depth,
 from core.pipeline import (LAST_CORE_STAGE, STOP_AFTER_CHOICES, peak_memory_mb,
                            reconstruct as run_pipeline)
 from core.progress import NO_PROGRESS
+from polycube_wb.stage_jobs import read_target_file
 from polycube_wb.view_hook import attach_view_provider
 
 
@@ -464,25 +465,6 @@ def make_target(doc, source, name="Target", components="largest",
     return obj
 
 
-def read_target_file(path, components="largest", check_self_intersections=True, repair=True):
-    """The validated target mesh (``core.types.TriMesh``) of a mesh file.
-
-    Raises
-    ------
-    InvalidMeshError
-        The file cannot be read or the mesh is not a valid closed solid.
-    """
-    from core.mesh_io import read_triangle_soup
-    from core.validate import validate_target
-
-    path = os.path.abspath(os.fspath(path))
-    vertices, faces = read_triangle_soup(path)
-    mesh, _ = validate_target(vertices, faces, components=components,
-                              check_self_intersections=check_self_intersections, name=path,
-                              repair=repair)
-    return mesh
-
-
 _READ_AHEAD = {}
 """At most one mesh read by :func:`read_ahead_target`, by :func:`_read_ahead_key`."""
 
@@ -687,7 +669,7 @@ class RecomputeOutcome:
 def recompute(doc, progress=NO_PROGRESS, run_job=None):
     """``doc.recompute()`` with ``progress`` reaching the stage objects; returns the outcome.
 
-    With ``run_job`` (``run_job(compute, progress) -> result``, e.g. the GUI's worker thread,
+    With ``run_job`` (``run_job(job, progress) -> result``, e.g. the GUI's stage process,
     :mod:`polycube_wb.gui.worker`), the stale stage objects' computations are run by it and
     their results stored before the recompute (:func:`polycube_wb.objects.base.run_pending_stages`);
     the outcome is the same as without it.

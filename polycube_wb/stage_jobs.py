@@ -7,6 +7,7 @@ process (:mod:`polycube_wb.stage_worker`) or run in the calling thread. This mod
 imports FreeCAD, so that process starts without it; jobs whose function needs FreeCAD
 (OpenCascade shapes) say so and run in FreeCAD's own process.
 """
+import os
 from dataclasses import dataclass
 
 from core.errors import Cancelled, PolycubeError
@@ -65,12 +66,27 @@ def intake(label, vertices, faces, params, progress):
     return {"intake": core_stages(state, ["intake"], params, progress).intake}
 
 
+def read_target_file(path, components="largest", check_self_intersections=True, repair=True):
+    """The validated target mesh (``core.types.TriMesh``) of a mesh file.
+
+    Raises
+    ------
+    InvalidMeshError
+        The file cannot be read or the mesh is not a valid closed solid.
+    """
+    from core.mesh_io import read_triangle_soup
+    from core.validate import validate_target
+
+    path = os.path.abspath(os.fspath(path))
+    vertices, faces = read_triangle_soup(path)
+    mesh, _ = validate_target(vertices, faces, components=components,
+                              check_self_intersections=check_self_intersections, name=path,
+                              repair=repair)
+    return mesh
+
+
 def read_mesh_file(path, progress):
     """The validated target mesh (``core.types.TriMesh``) of the mesh file ``path``."""
-    import os
-
-    from polycube_wb.api import read_target_file
-
     progress.report("reading and validating the mesh", 0.0, os.path.basename(path))
     return read_target_file(path)
 

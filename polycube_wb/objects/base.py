@@ -18,12 +18,13 @@ The objects' ``execute`` is called by ``doc.recompute()``, which cannot pass arg
 collects their failures (an exception in ``execute`` does not propagate from recompute).
 
 A stage's run is split in three: ``prepare`` reads what it needs from the document and
-returns the computation, a function of a progress object that touches no document object;
-``store`` writes the computation's result back. ``run`` chains them in the calling thread
-(``doc.recompute()`` in scripts and ``freecadcmd``). :func:`run_pending_stages` instead hands
-each computation to a job runner (the GUI runs it in a worker thread while FreeCAD's event
-loop keeps going) and stores its result in the calling thread; the ``doc.recompute()`` that
-follows then finds every stage up to date.
+returns the computation as a ``polycube_wb.stage_jobs.StageJob`` (a function and plain data
+that touch no document object); ``store`` writes the job's result back. ``run`` chains them
+in the calling thread (``doc.recompute()`` in scripts and ``freecadcmd``).
+:func:`run_pending_stages` instead hands each job to a job runner (the GUI runs it in its
+stage process or a worker thread while FreeCAD's event loop keeps going) and stores its
+result in the calling thread; the ``doc.recompute()`` that follows then finds every stage up
+to date.
 """
 import contextlib
 import hashlib
@@ -136,9 +137,9 @@ def run_pending_stages(doc, session, run_job):
     ----------
     doc : App.Document
     session : the ``recompute_session`` of ``doc`` that the recompute after this call uses.
-    run_job : callable ``run_job(compute, progress) -> result`` running
-        ``compute(progress)`` (for example in a worker thread while the GUI stays live);
-        ``progress`` is the object's share of the session's bar.
+    run_job : callable ``run_job(job, progress) -> result`` running the ``StageJob``
+        ``job(progress)`` (in the GUI: in another process or thread while FreeCAD stays
+        live); ``progress`` is the object's share of the session's bar.
     """
     blocked = set()
     for obj in _dependency_order(pending_objects(doc)):
