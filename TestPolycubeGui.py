@@ -5,7 +5,7 @@
 
 (``-t`` before ``-M``: FreeCAD 0.20.2 rejects the other order). FreeCAD loads the
 module by name, so this root-level file has a unique name and loads the cases from
-``tests/gui/gui_cases.py`` and ``tests/gui/gui_cases_batch.py`` by path; a ``tests``
+``tests/gui/gui_cases*.py`` by path; a ``tests``
 package of another addon cannot shadow them. Screenshots go to ``$POLYCUBE_GUI_OUTPUT`` or
 ``tests/gui/output/``.
 """
@@ -15,7 +15,8 @@ import sys
 
 _CASES_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "tests", "gui")
 _CASES = (("polycube_gui_cases", "gui_cases.py"),
-          ("polycube_gui_cases_batch", "gui_cases_batch.py"))
+          ("polycube_gui_cases_batch", "gui_cases_batch.py"),
+          ("polycube_gui_cases_responsive", "gui_cases_responsive.py"))
 """(module name, file in tests/gui) of every group of GUI cases."""
 
 

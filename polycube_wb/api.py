@@ -17,6 +17,7 @@ from core.params import (DEFAULT_EXPORT_FORM, EXPORT_DEPTH, check_export_depth,
 from core.pipeline import (LAST_CORE_STAGE, STOP_AFTER_CHOICES, peak_memory_mb,
                            reconstruct as run_pipeline)
 from core.progress import NO_PROGRESS
+from polycube_wb.stage_jobs import read_target_file
 from polycube_wb.view_hook import attach_view_provider
 
 
@@ -445,24 +446,59 @@ def make_target(doc, source, name="Target", components="largest",
     from core.validate import validate_target
     from polycube_wb.convert import arrays_to_mesh, mesh_to_arrays
 
+    options = {"components": components, "check_self_intersections": check_self_intersections,
+               "repair": repair}
     source_file = ""
     if isinstance(source, TriMesh):
-        vertices, faces = source.vertices, source.faces
+        mesh, _ = validate_target(source.vertices, source.faces, name=name, **options)
     elif hasattr(source, "Mesh"):
-        vertices, faces = mesh_to_arrays(source.Mesh)
         source_file = getattr(source, "PolycubeSource", "") or getattr(source, "SourceFile", "")
+        mesh, _ = validate_target(*mesh_to_arrays(source.Mesh), name=source_file or name,
+                                  **options)
     else:
-        from core.mesh_io import read_triangle_soup
-
         source_file = os.path.abspath(os.fspath(source))
-        vertices, faces = read_triangle_soup(source_file)
-    mesh, _ = validate_target(vertices, faces, components=components,
-                              check_self_intersections=check_self_intersections,
-                              name=source_file or name, repair=repair)
+        mesh = _READ_AHEAD.pop(_read_ahead_key(source_file, **options), None) \
+            or read_target_file(source_file, **options)
     obj = _make(doc, "Target", name, {}, {"CheckSelfIntersections": check_self_intersections})
     obj.Mesh = arrays_to_mesh(mesh.vertices, mesh.faces)
     obj.SourceFile = source_file
     return obj
+
+
+_READ_AHEAD = {}
+"""At most one mesh read by :func:`read_ahead_target`, by :func:`_read_ahead_key`."""
+
+
+def read_ahead_target(path, components="largest", check_self_intersections=True, repair=True,
+                      mesh=None):
+    """Read and validate a mesh file for the next :func:`make_target` of the same file.
+
+    The GUI reads a file in its stage process (:func:`read_target_file`) and hands the mesh
+    here as ``mesh``, then calls ``make_target`` (through the Python console, which shows
+    the line to replay), which takes this mesh instead of reading the file again. A file
+    changed since is read again.
+
+    Raises
+    ------
+    InvalidMeshError
+        As :func:`read_target_file` (when ``mesh`` is None).
+    """
+    path = os.path.abspath(os.fspath(path))
+    if mesh is None:
+        mesh = read_target_file(path, components, check_self_intersections, repair)
+    _READ_AHEAD.clear()
+    _READ_AHEAD[_read_ahead_key(path, components, check_self_intersections, repair)] = mesh
+
+
+def _read_ahead_key(path, components, check_self_intersections, repair):
+    """What identifies a read: the file (its size and change time, None when it cannot be
+    looked at) and the options."""
+    try:
+        info = os.stat(path)
+    except OSError:
+        return (path, None, components, bool(check_self_intersections), bool(repair))
+    return (path, (info.st_size, info.st_mtime_ns), components, bool(check_self_intersections),
+            bool(repair))
 
 
 def make_segmentation(doc, target, name="Segmentation", **properties):
@@ -630,8 +666,13 @@ class RecomputeOutcome:
         return not self.failures and not self.cancelled
 
 
-def recompute(doc, progress=NO_PROGRESS):
+def recompute(doc, progress=NO_PROGRESS, run_job=None):
     """``doc.recompute()`` with ``progress`` reaching the stage objects; returns the outcome.
+
+    With ``run_job`` (``run_job(job, progress) -> result``, e.g. the GUI's stage process,
+    :mod:`polycube_wb.gui.worker`), the stale stage objects' computations are run by it and
+    their results stored before the recompute (:func:`polycube_wb.objects.base.run_pending_stages`);
+    the outcome is the same as without it.
 
     FreeCAD does not propagate errors from ``execute``; the outcome lists them. An object
     whose stage failed is marked invalid (``obj.isValid()`` is False) with the reason in its
@@ -640,9 +681,11 @@ def recompute(doc, progress=NO_PROGRESS):
     "cancelled by the user" and keeps its last result; it and the objects that did not run
     after it stay touched (the next recompute runs them).
     """
-    from polycube_wb.objects.base import recompute_session
+    from polycube_wb.objects.base import recompute_session, run_pending_stages
 
     with recompute_session(doc, progress) as session:
+        if run_job is not None:
+            run_pending_stages(doc, session, run_job)
         doc.recompute()
     if session.cancelled:
         for name in list(session.failures) + session.skipped:
@@ -650,8 +693,10 @@ def recompute(doc, progress=NO_PROGRESS):
     return RecomputeOutcome(dict(session.failures), session.cancelled)
 
 
-def run_in_transaction(doc, title, build, progress=NO_PROGRESS):
+def run_in_transaction(doc, title, build, progress=NO_PROGRESS, run_job=None):
     """Run ``build()`` (adds or changes objects), then recompute, as one undo step.
+
+    ``run_job`` runs the stages' computations (see :func:`recompute`).
 
     When ``build`` raises, the document is rolled back to what it was before. When the user
     cancels during the recompute, the stages that finished keep their results, the stage
@@ -675,7 +720,7 @@ def run_in_transaction(doc, title, build, progress=NO_PROGRESS):
     doc.openTransaction(title)
     try:
         built = build()
-        outcome = recompute(doc, progress)
+        outcome = recompute(doc, progress, run_job)
     except BaseException:
         doc.abortTransaction()
         raise
@@ -709,18 +754,34 @@ def describe(obj):
         line = (f"{obj.Label}: cage of {obj.Faces} faces, {obj.Vertices} vertices, "
                 f"{obj.ExtraordinaryVertices} extraordinary, genus {obj.Genus}")
         if kind == "Fit":
-            line += (f"; mean distance {obj.MeanDistance:.2e}, max {obj.MaxDistance:.2e} of "
-                     f"the diagonal, outside volume {obj.OutsideVolume:.2e} ({obj.Stopped})")
+            size = _target_diagonal(obj)
+            line += (f"; distance to the target mean {_mm(obj.MeanDistance, size)}, max "
+                     f"{_mm(obj.MaxDistance, size)}; volume outside the target "
+                     f"{100 * obj.OutsideVolume:.2f} % ({obj.Stopped})")
         return line
     if kind == "Solid":
         return (f"{obj.Label}: solid of {obj.BrepFaces} B-spline faces, valid "
-                f"{obj.BrepValid}, volume {obj.BrepVolume:.6g}")
+                f"{obj.BrepValid}, volume {obj.BrepVolume:.6g} mm³")
     if kind == "Deviation":
-        return (f"{obj.Label}: deviation mean {obj.MeanDeviation:.3g} ({obj.MeanDeviationPercent:.3f} "
-                f"% of the diagonal), max {obj.MaxDeviation:.3g} ({obj.MaxDeviationPercent:.3f} "
-                f"%); outside volume {obj.OutsideVolume:.3f} %, uncovered {obj.UncoveredVolume:.3f} "
-                f"%; watertight {obj.Watertight}")
+        return (f"{obj.Label}: distance to the target mean {obj.MeanDeviation:.3g} mm "
+                f"({obj.MeanDeviationPercent:.3f} % of the size), max {obj.MaxDeviation:.3g} mm "
+                f"({obj.MaxDeviationPercent:.3f} %); volume outside the target "
+                f"{obj.OutsideVolume:.3f} %, not covered {obj.UncoveredVolume:.3f} %; watertight "
+                f"{obj.Watertight}")
     return obj.Label
+
+
+def _target_diagonal(obj):
+    """Bounding-box diagonal of the target ``obj`` is built from, mm (None without one)."""
+    target = upstream_objects(obj).get("Target")
+    return target.Mesh.BoundBox.DiagonalLength if target is not None else None
+
+
+def _mm(fraction, diagonal):
+    """A distance given as a fraction of the diagonal, in mm and in % of the size."""
+    if not diagonal:
+        return f"{100 * fraction:.3g} % of the size"
+    return f"{fraction * diagonal:.3g} mm ({100 * fraction:.3g} % of the size)"
 
 
 def import_subd_cage(doc, path, progress=NO_PROGRESS, depth=EXPORT_DEPTH):

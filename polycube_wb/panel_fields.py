@@ -82,9 +82,9 @@ FIELDS = {
     "Segmentation": (
         parameter_field("PartMode", "Parts", "parts", choices=("single", "auto")),
         parameter_field("BlendFactor", "Frame blending (mean edge lengths)", "blend_factor"),
-        parameter_field("Lambda", "λ (Eq. 3)", "lam"),
-        parameter_field("Penalty", "p (Eq. 3)", "penalty"),
-        parameter_field("MaxSweeps", "Most HBECVT sweeps", "max_sweeps"),
+        parameter_field("Lambda", "Compactness weight", "lam"),
+        parameter_field("Penalty", "Opposite-label penalty", "penalty"),
+        parameter_field("MaxSweeps", "Most labeling sweeps", "max_sweeps"),
         parameter_field("Repair", "Repair the labeling", "repair"),
         PanelField("ColourBy", "Colour by", "choice", ("Labels", "Parts"))),
     "BaseMesh": (
@@ -101,12 +101,13 @@ FIELDS = {
                    parameter_range("fit_t_min")),
         PanelField("Tolerance", "Tolerance, mm (0: no refinement)", "float",
                    parameter_range("tolerance_mm")),
-        parameter_field("OutsideRefinement", "Outside volume goal (0: off)",
+        parameter_field("OutsideRefinement", "Most volume outside, fraction (0: off)",
                         "outside_refinement")),
-    "Solid": (PanelField("Depth", "Grading depth at extraordinary vertices", "int",
+    "Solid": (PanelField("Depth", "Patch refinement at irregular vertices", "int",
                          (1, MAX_EXPORT_DEPTH), EXPORT_DEPTH_KEY),),
     "Deviation": (
-        PanelField("Tolerance", "Tessellation tolerance (of the diagonal)", "float", (1e-6, 0.1)),
+        PanelField("Tolerance", "Tessellation tolerance, fraction of the size", "float",
+                   (1e-6, 0.1)),
         PanelField("Scale", "Colour scale, mm (0: largest deviation)", "float", (0.0, 1e9))),
 }
 """Stage kind -> its task panel's fields, in form order."""
@@ -115,3 +116,36 @@ PREFERENCE_KINDS = ("Segmentation", "BaseMesh", "Fit", "Solid")
 PAGE_FIELDS = tuple(field for kind in PREFERENCE_KINDS for field in FIELDS[kind]
                     if field.key is not None)
 """The preferences page's fields: every panel field with a default (``key``)."""
+
+
+_OBJECT_OF_KIND = {"Segmentation": "the Segmentation's", "BaseMesh": "the BaseMesh's",
+                   "Fit": "the Fit's", "Solid": "the Solid's"}
+_GUI_PHRASES = (
+    ("other parts (--parts auto, or your own with --parts file)",
+     "other parts (a Segmentation with 'Parts' set to 'auto')"),
+    ("scale the mesh or give its --units", "scale the mesh"),
+    ("--parts file", "parts of your own (command line only)"),
+)
+
+
+def in_gui_words(text):
+    """``text`` (a stage's message) with its command-line options named as the GUI names them.
+
+    ``--target-faces`` becomes "the BaseMesh's 'Target faces' (TargetFaces)": the panel field
+    and the property to change. Options the GUI does not have are reworded
+    (:data:`_GUI_PHRASES`).
+    """
+    import re
+
+    for phrase, words in _GUI_PHRASES:
+        text = text.replace(phrase, words)
+
+    def field_words(match):
+        key = match.group(1).replace("-", "_")
+        for kind in PREFERENCE_KINDS:
+            for field in FIELDS[kind]:
+                if field.key == key:
+                    return f"{_OBJECT_OF_KIND[kind]} '{field.label}' ({field.prop})"
+        return match.group(0)
+
+    return re.sub(r"--([a-z][a-z0-9-]*)", field_words, text)

@@ -47,6 +47,28 @@ def ask_folder(title, start):
     return path or None
 
 
+def _ask_output_folder(folder):
+    """Folder dialog for the output, proposing ``folder/OUTPUT_FOLDER`` (made first, as the
+    dialog only offers folders that exist; removed again while empty when another is chosen
+    or the dialog is cancelled). Returns the chosen folder or None."""
+    suggested = os.path.join(folder, OUTPUT_FOLDER)
+    made = False
+    if not os.path.isdir(suggested):
+        try:
+            os.makedirs(suggested)
+            made = True
+        except OSError:  # a read-only mesh folder: the dialog starts in it
+            pass
+    chosen = ask_folder("Reconstruct folder: the output folder",
+                        suggested if os.path.isdir(suggested) else folder)
+    if made and (chosen is None or os.path.realpath(chosen) != os.path.realpath(suggested)):
+        try:
+            os.rmdir(suggested)  # only while empty
+        except OSError:
+            pass
+    return chosen
+
+
 def open_summary(path):
     """Open ``summary.html`` in the desktop's browser."""
     from PySide import QtCore, QtGui
@@ -290,8 +312,7 @@ class ReconstructFolderCommand:
         folder = ask_folder("Reconstruct folder: the meshes", last_directory())
         if folder is None:
             return
-        out_dir = ask_folder("Reconstruct folder: the output folder",
-                             os.path.join(folder, OUTPUT_FOLDER))
+        out_dir = _ask_output_folder(folder)
         if out_dir is None:
             return
         try:

@@ -44,53 +44,75 @@ def report_success(text):
 
 
 def run_guarded(title, work, with_progress=False):
-    """Run ``work(progress)`` with a wait cursor and report any failure.
+    """Run ``work(progress)`` with a busy cursor and report any failure.
+
+    With ``with_progress``, ``progress`` is a :class:`polycube_wb.gui.worker.GuiProgress`
+    (bar, *Cancel*, Esc) for ``work`` to run its computations with
+    (:func:`polycube_wb.gui.worker.run_job`); otherwise None.
 
     Returns
     -------
     What ``work`` returns, or None after a failure or a cancel. The bar is stopped and
-    the cursor restored before a message box opens.
+    the cursor restored before a message is shown.
     """
     from PySide import QtCore, QtGui
 
-    from core.errors import Cancelled, PolycubeInputError, StageNotAvailableError
-    from polycube_wb.gui.fc_progress import FreeCADProgress
+    from polycube_wb.gui.worker import GuiProgress
 
-    progress = FreeCADProgress(title) if with_progress else None
-    box = None
-    QtGui.QApplication.setOverrideCursor(QtCore.Qt.WaitCursor)
+    progress = GuiProgress(title) if with_progress else None
+    if progress is not None:
+        progress.start()
+    else:
+        QtGui.QApplication.setOverrideCursor(QtCore.Qt.WaitCursor)
     try:
-        if progress is not None:
-            progress.start()
         return work(progress)
-    except Cancelled as exc:
-        FreeCAD.Console.PrintWarning(f"Polycube: {exc}\n")
-        FreeCADGui.getMainWindow().statusBar().showMessage(f"Polycube: {exc}", 15000)
-    except StageNotAvailableError as exc:
-        FreeCAD.Console.PrintWarning(f"Polycube: {title}: {NOT_AVAILABLE}: {exc}\n")
-        box = ("information", f"Stage {NOT_AVAILABLE}:\n\n{exc}")
-    except PolycubeInputError as exc:
-        FreeCAD.Console.PrintError(f"Polycube: {title}: {exc}\n")
-        box = ("warning", str(exc))
-    except ImportError as exc:
-        FreeCAD.Console.PrintError(f"Polycube: {title}: missing Python package: {exc}\n")
-        box = ("critical", f"A Python package is missing:\n\n{exc}\n\n"
-               "See the README, \"Install as a FreeCAD addon\", step 2.")
-    except Exception as exc:  # last resort: show the user the traceback of an internal error
-        FreeCAD.Console.PrintError(f"Polycube: {title} failed:\n{traceback.format_exc()}")
-        box = ("critical", f"Internal error: {type(exc).__name__}: {exc}\n\n"
-               "The Report view shows the traceback.")
+    except Exception as exc:
+        failure = exc
     finally:
         if progress is not None:
             progress.stop()
-        QtGui.QApplication.restoreOverrideCursor()
+        else:
+            QtGui.QApplication.restoreOverrideCursor()
+    box = _report_failure(title, failure)
     if box is not None:
-        dialogs.message_box(box[0], title, box[1])
+        dialogs.message_box(*box)
     return None
 
 
-def run_stage_command(title, doc, build):
+def _report_failure(title, exc):
+    """Write a failure of ``title`` to the Report view (a cancel also to the status bar);
+    returns the message box to show, ``(kind, title, text)``, or None."""
+    from core.errors import Cancelled, PolycubeInputError, StageNotAvailableError
+    from polycube_wb.panel_fields import in_gui_words
+
+    if isinstance(exc, Cancelled):
+        FreeCAD.Console.PrintWarning(f"Polycube: {exc}\n")
+        FreeCADGui.getMainWindow().statusBar().showMessage(f"Polycube: {exc}", 15000)
+        return None
+    if isinstance(exc, StageNotAvailableError):
+        FreeCAD.Console.PrintWarning(f"Polycube: {title}: {NOT_AVAILABLE}: {exc}\n")
+        return ("information", title, f"Stage {NOT_AVAILABLE}:\n\n{exc}")
+    if isinstance(exc, PolycubeInputError):
+        text = in_gui_words(str(exc))
+        FreeCAD.Console.PrintError(f"Polycube: {title}: {text}\n")
+        return ("warning", title, text)
+    if isinstance(exc, ImportError):
+        FreeCAD.Console.PrintError(f"Polycube: {title}: missing Python package: {exc}\n")
+        return ("critical", title, f"A Python package is missing:\n\n{exc}\n\n"
+                "See the README, \"Install as a FreeCAD addon\", step 2.")
+    # last resort: show the user the traceback of an internal error
+    trace = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+    FreeCAD.Console.PrintError(f"Polycube: {title} failed:\n{trace}")
+    return ("critical", title, f"Internal error: {type(exc).__name__}: {exc}\n\n"
+            "The Report view shows the traceback.")
+
+
+def run_stage_command(title, doc, build, read_ahead=None):
     """Run ``build()`` and the recompute it needs as one undo step, with progress.
+
+    The stages' computations run in a worker thread while FreeCAD stays live
+    (:mod:`polycube_wb.gui.worker`); their results are stored in the document in this
+    thread.
 
     Parameters
     ----------
@@ -98,6 +120,9 @@ def run_stage_command(title, doc, build):
     doc : App.Document
     build : callable creating or changing objects (through ``FreeCADGui.doCommand``);
         may return a stage object to report on and show.
+    read_ahead : path of a mesh file ``build`` makes a target of, or None: the file is read
+        and validated in the worker first (:func:`polycube_wb.api.read_ahead_target`); a bad
+        file is reported before the undo step opens.
 
     Returns
     -------
@@ -107,9 +132,22 @@ def run_stage_command(title, doc, build):
     """
     from polycube_wb import api
 
-    done = run_guarded(title, lambda progress: api.run_in_transaction(doc, title, build,
-                                                                      progress),
-                       with_progress=True)
+    from core.progress import SubProgress
+    from polycube_wb.gui.worker import run_job
+    from polycube_wb.stage_jobs import StageJob, read_mesh_file
+
+    def work(progress):
+        if read_ahead is not None:
+            mesh = run_job(StageJob(read_mesh_file, (read_ahead,)),
+                           SubProgress(progress, 0.0, 0.0))
+            api.read_ahead_target(read_ahead, mesh=mesh)
+        return api.run_in_transaction(doc, title, build, progress, run_job)
+
+    first = not _has_results(doc)
+    done = run_guarded(title, work, with_progress=True)
+    _hide_superseded(doc)
+    if first and _has_results(doc):  # the document's first result: show all of it
+        _view_fit()
     if done is None:
         return None
     shown, outcome = done
@@ -138,6 +176,43 @@ def _supersede(obj):
     for kind in SUPERSEDES.get(api.stage_kind(obj), ()):
         if kind in chain and chain[kind] is not obj and chain[kind].ViewObject is not None:
             chain[kind].ViewObject.Visibility = False
+
+
+def _has_results(doc):
+    """Whether a stage object of ``doc`` holds a result."""
+    from polycube_wb import api
+
+    return _is_open(doc) and any(
+        api.stage_kind(obj) is not None and obj.ResultId for obj in doc.Objects)
+
+
+def _is_open(doc):
+    """Whether ``doc`` is still open in FreeCAD."""
+    try:
+        return doc.Name in FreeCAD.listDocuments()
+    except ReferenceError:
+        return False
+
+
+def _hide_superseded(doc):
+    """Hide every stage result that a shown, up-to-date later result replaces (also after
+    a cancel, a resume or a recompute, which show each object whose display they rebuild)."""
+    from polycube_wb import api
+
+    if not _is_open(doc):
+        return
+    for later in doc.Objects:
+        kind = api.stage_kind(later)
+        if kind not in SUPERSEDES or later.ViewObject is None or \
+                not later.ViewObject.Visibility or later.Status != "ok" or not later.ResultId:
+            continue
+        for name in later.Proxy.INPUTS:
+            earlier = getattr(later, name, None)
+            while earlier is not None and api.stage_kind(earlier) in SUPERSEDES[kind]:
+                if earlier.ViewObject is not None:
+                    earlier.ViewObject.Visibility = False
+                links = earlier.Proxy.INPUTS if hasattr(earlier, "Proxy") else ()
+                earlier = getattr(earlier, links[0], None) if links else None
 
 
 def _selection():
@@ -222,7 +297,7 @@ class ImportTargetCommand(_Command):
         doc = FreeCAD.ActiveDocument or FreeCAD.newDocument()
         name = os.path.splitext(os.path.basename(path))[0]
         run_stage_command("Import target mesh", doc, lambda: _do(
-            f"api.make_target(App.ActiveDocument, {path!r}, name={name!r})"))
+            f"api.make_target(App.ActiveDocument, {path!r}, name={name!r})"), read_ahead=path)
         _view_fit()
 
 
@@ -359,9 +434,11 @@ class ReconstructAllCommand(_Command):
                 made = _do(f"api.make_target(App.ActiveDocument, {path!r}, name={name!r})")
                 return _make_chain_to_solid(made)
         else:
+            path = None
+
             def build():
                 return _make_chain_to_solid(target)
-        run_stage_command("Reconstruct all", doc, build)
+        run_stage_command("Reconstruct all", doc, build, read_ahead=path)
         _view_fit()
 
 

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Task panels of the stage objects: their parameters, OK / Apply / Cancel.
+"""Task panels of the stage objects: their parameters, OK / Cancel and Apply.
 
 One panel class serves every stage: its fields are ``polycube_wb.panel_fields.FIELDS``
 (property, label, kind, range or choices from ``core.params``). OK and Apply write the fields
@@ -54,11 +54,19 @@ class StagePanel:
             set_widget_value(widget, field.kind, getattr(obj, field.prop))
             widget.setToolTip(obj.getDocumentationOfProperty(field.prop))
             widget.setMinimumWidth(FIELD_WIDTH)  # not as wide as its largest number
-            form.addRow(field.label, widget)
+            form.addRow(_wrapping_label(field.label), widget)
             self.widgets[field.prop] = (widget, field.kind)
         defaults = QtGui.QPushButton("Paper defaults")
         defaults.clicked.connect(self.paper_defaults)
-        form.addRow(defaults)
+        # Apply sits here, not beside OK and Cancel: three buttons there are wider than
+        # FreeCAD's default Combo View
+        apply = QtGui.QPushButton("Apply")
+        apply.setToolTip("Write the fields to the object and recompute; the panel stays open")
+        apply.clicked.connect(lambda: self.apply())
+        buttons = QtGui.QHBoxLayout()
+        buttons.addWidget(defaults)
+        buttons.addWidget(apply)
+        form.addRow(buttons)
         layout.addWidget(box)
         if self.kind in CAGE_KINDS:
             layout.addWidget(self._cage_box())
@@ -72,11 +80,7 @@ class StagePanel:
 
     def getStandardButtons(self):
         buttons = QtGui.QDialogButtonBox
-        return int(buttons.Ok | buttons.Apply | buttons.Cancel)
-
-    def clicked(self, button):
-        if button == int(QtGui.QDialogButtonBox.Apply):
-            self.apply()
+        return int(buttons.Ok | buttons.Cancel)
 
     def accept(self):
         """Write the fields and recompute; the panel stays open when the user cancelled
@@ -155,7 +159,7 @@ class StagePanel:
             field.setDecimals(4)
             field.setSuffix(" mm")
             field.setMinimumWidth(FIELD_WIDTH)
-            form.addRow(f"Move by {axis}", field)
+            form.addRow(_wrapping_label(f"Move by {axis}"), field)
             self.move_fields.append(field)
         move = QtGui.QPushButton("Move")
         move.clicked.connect(self.move_vertices)
@@ -217,6 +221,13 @@ def _close(obj):
 FIELD_WIDTH = 100
 """Least width of a number field, pixels: a spin box asks for the width of its largest
 number (``1e9`` with six decimals), which made the panel wider than the Combo View."""
+
+
+def _wrapping_label(text):
+    """A form label that wraps rather than widen the panel past the Combo View."""
+    label = QtGui.QLabel(text)
+    label.setWordWrap(True)
+    return label
 
 
 def make_widget(kind, limits):

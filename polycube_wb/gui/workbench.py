@@ -6,7 +6,7 @@ need are imported in ``Initialize()``, the first time the user opens the workben
 """
 import FreeCADGui
 
-from polycube_wb.gui import icon_path
+from polycube_wb.gui import ICON_DIR, icon_path
 
 MENU_AND_TOOLBAR = "Polycube"
 
@@ -25,9 +25,12 @@ class PolycubeWorkbench(FreeCADGui.Workbench):
         from polycube_wb.gui.preferences import PreferencesPage
 
         commands.register()
+        # the preferences dialog shows the icon "preferences-<group>" of the icon paths
+        FreeCADGui.addIconPath(ICON_DIR)
         FreeCADGui.addPreferencePage(PreferencesPage, "Polycube")
         self.appendToolbar(MENU_AND_TOOLBAR, list(commands.TOOLBAR))
         self.appendMenu(MENU_AND_TOOLBAR, list(commands.MENU))
+        _warm_up()
 
     def Activated(self):
         """Nothing to set up when the workbench is switched to."""
@@ -37,3 +40,23 @@ class PolycubeWorkbench(FreeCADGui.Workbench):
 
     def GetClassName(self):
         return "Gui::PythonWorkbench"
+
+
+def _warm_up():
+    """Load now what the first command would load while the user waits: the stage objects'
+    modules (FreeCAD's Mesh and MeshPart among them) and the stage process
+    (``polycube_wb.gui.worker``), which starts in the background."""
+    import importlib
+
+    from polycube_wb.gui.worker import stage_process
+
+    for module in ("polycube_wb.api", "polycube_wb.convert", "polycube_wb.objects.target",
+                   "polycube_wb.objects.segmentation", "polycube_wb.objects.fit",
+                   "polycube_wb.objects.solid", "polycube_wb.objects.deviation"):
+        importlib.import_module(module)
+    try:
+        stage_process()
+    except RuntimeError as exc:  # no interpreter for it: the first stage command says so
+        import FreeCAD
+
+        FreeCAD.Console.PrintWarning(f"Polycube: {exc}\n")

@@ -16,6 +16,15 @@ coordinates) changes the ``ResultId`` and reruns the stages after it, not the st
 The objects' ``execute`` is called by ``doc.recompute()``, which cannot pass arguments;
 ``recompute_session`` hands them the progress object of the command that recomputes and
 collects their failures (an exception in ``execute`` does not propagate from recompute).
+
+A stage's run is split in three: ``prepare`` reads what it needs from the document and
+returns the computation as a ``polycube_wb.stage_jobs.StageJob`` (a function and plain data
+that touch no document object); ``store`` writes the job's result back. ``run`` chains them
+in the calling thread (``doc.recompute()`` in scripts and ``freecadcmd``).
+:func:`run_pending_stages` instead hands each job to a job runner (the GUI runs it in its
+stage process or a worker thread while FreeCAD's event loop keeps going) and stores its
+result in the calling thread; the ``doc.recompute()`` that follows then finds every stage up
+to date.
 """
 import contextlib
 import hashlib
@@ -27,6 +36,7 @@ import FreeCAD
 
 from core.errors import Cancelled, PolycubeError
 from core.progress import NO_PROGRESS, SubProgress
+from polycube_wb.stage_jobs import StageFailed  # noqa: F401  (raised by the stage objects)
 
 STATUS_GROUP = "Status"
 STAGE_WEIGHTS = {"Target": 1.0, "Segmentation": 1.0, "BaseMesh": 2.0, "Fit": 12.0,
@@ -37,10 +47,6 @@ their run times on the bundled sample: the fit dominates)."""
 
 CANCELLED_STATUS = "cancelled by the user"
 """``Status`` of a stage object whose run the user cancelled (Esc)."""
-
-
-class StageFailed(PolycubeError):
-    """A core stage did not produce its result; the message is the stage's own reason."""
 
 
 class _Session:
@@ -54,13 +60,19 @@ class _Session:
         self.failures = {}
         self.cancelled = False
         self.skipped = []
+        self.spans = {}
+        self.stored = set()
+        self.errors = {}
 
     def span(self, obj):
-        """The ``SubProgress`` of ``obj``'s run: its share of the bar, in run order."""
-        weight = self.weights.get(obj.Name, 0.0)
-        start = self.done / self.total
-        self.done = min(self.total, self.done + weight)
-        return SubProgress(self.progress, start, self.done / self.total)
+        """The ``SubProgress`` of ``obj``'s run: its share of the bar, in run order (the same
+        one when asked again for ``obj``)."""
+        if obj.Name not in self.spans:
+            weight = self.weights.get(obj.Name, 0.0)
+            start = self.done / self.total
+            self.done = min(self.total, self.done + weight)
+            self.spans[obj.Name] = SubProgress(self.progress, start, self.done / self.total)
+        return self.spans[obj.Name]
 
 
 _SESSIONS = []
@@ -82,7 +94,9 @@ def recompute_session(doc, progress=NO_PROGRESS):
     _Session
         ``failures`` maps object names to the one-line reason their stage failed;
         ``cancelled`` is True when the user cancelled; ``skipped`` names the objects
-        that did not run after the cancel.
+        that did not run after the cancel; ``stored`` names the objects whose result
+        :func:`run_pending_stages` stored, ``errors`` the exception of those whose stage
+        failed there (their ``execute`` raises it again, so FreeCAD marks them invalid).
     """
     weights = {}
     for obj in pending_objects(doc):
@@ -106,6 +120,71 @@ def pending_objects(doc):
             for dependent in obj.InListRecursive:
                 pending[dependent.Name] = dependent
     return list(pending.values())
+
+
+def run_pending_stages(doc, session, run_job):
+    """Bring the stale stage objects of ``doc`` up to date, each computation run by
+    ``run_job``, before the ``doc.recompute()`` of ``session`` (which then only marks them).
+
+    The stage objects a recompute would run are taken in dependency order. For each stale
+    one, :meth:`StageProxy.prepare` reads its inputs in this thread, ``run_job`` runs the
+    computation, and its result is stored here (one object at a time, so the next stage
+    reads the stored result exactly as ``doc.recompute()`` would). A stage that fails is
+    marked as ``execute`` marks it, and nothing that depends on it runs; a cancel marks the
+    object that was running and stops.
+
+    Parameters
+    ----------
+    doc : App.Document
+    session : the ``recompute_session`` of ``doc`` that the recompute after this call uses.
+    run_job : callable ``run_job(job, progress) -> result`` running the ``StageJob``
+        ``job(progress)`` (in the GUI: in another process or thread while FreeCAD stays
+        live); ``progress`` is the object's share of the session's bar.
+    """
+    blocked = set()
+    for obj in _dependency_order(pending_objects(doc)):
+        kind = stage_kind(obj)
+        if kind is None or getattr(obj, "Proxy", None) is None:
+            continue
+        if session.cancelled:
+            return
+        if blocked & {upstream.Name for upstream in obj.OutListRecursive}:
+            blocked.add(obj.Name)
+            continue
+        proxy = obj.Proxy
+        progress = session.span(obj)
+        try:
+            proxy.bring_up_to_date(
+                obj, lambda: proxy.store(obj, run_job(proxy.prepare(obj), progress)))
+        except Cancelled:
+            proxy._fail(obj, session, CANCELLED_STATUS, cancelled=True)
+            return
+        except Exception as exc:  # raised again by its execute, where FreeCAD reports it
+            if isinstance(exc, (PolycubeError, ImportError)):
+                proxy._fail(obj, session, _one_line(exc))
+            session.errors[obj.Name] = exc
+            blocked.add(obj.Name)
+            continue
+        progress.report(kind, 1.0)
+        obj.Status = "ok"
+        session.stored.add(obj.Name)
+
+
+def _dependency_order(objects):
+    """``objects`` ordered so that each comes after the ones of them it depends on."""
+    names = {obj.Name for obj in objects}
+    placed, ordered = set(), []
+    remaining = list(objects)
+    while remaining:
+        ready = [obj for obj in remaining
+                 if not ({o.Name for o in obj.OutListRecursive} & names) - placed]
+        if not ready:  # a dependency cycle: FreeCAD's recompute reports it
+            ready = remaining[:1]
+        for obj in ready:
+            placed.add(obj.Name)
+            ordered.append(obj)
+            remaining.remove(obj)
+    return ordered
 
 
 def stage_kind(obj):
@@ -230,22 +309,39 @@ class StageProxy:
         return (not obj.ResultId or obj.InputId != self.input_id(obj)
                 or obj.ParamsId != fingerprint(self.parameters(obj)))
 
+    def prepare(self, obj):
+        """Read what the stage needs from the document (the thread that owns it).
+
+        Returns
+        -------
+        polycube_wb.stage_jobs.StageJob, callable as ``job(progress) -> result``; it touches
+        no document object, so it may run in a worker thread or process (``progress`` is a
+        ``core.progress.Progress``).
+        """
+        raise NotImplementedError(f"{type(self).__name__} must implement prepare")
+
+    def store(self, obj, result):
+        """Write ``result`` (what the computation of :meth:`prepare` returned) to ``obj`` and
+        keep the typed core results later stages need in the cache."""
+        raise NotImplementedError(f"{type(self).__name__} must implement store")
+
+    def run(self, obj, progress):
+        """Run the stage in this thread and store its result (may raise)."""
+        self.store(obj, self.prepare(obj)(progress))
+
     def execute(self, obj):
         session = _current()
         if session is not None and session.cancelled:  # after Esc nothing else runs
             session.skipped.append(obj.Name)
             return
+        if session is not None and obj.Name in session.errors:  # failed in run_pending_stages
+            raise session.errors[obj.Name]
+        if session is not None and obj.Name in session.stored:  # up to date already
+            obj.Status = "ok"
+            return
         progress = session.span(obj) if session is not None else NO_PROGRESS
         try:
-            if self.is_stale(obj):
-                self._cache = None
-                self.run(obj, progress)
-                obj.InputId = self.input_id(obj)
-                obj.ParamsId = fingerprint(self.parameters(obj))
-            result_id = self.show(obj)
-            if result_id != obj.ResultId:  # a new or edited result: forget the cached one
-                self._cache = None
-                obj.ResultId = result_id
+            self.bring_up_to_date(obj, lambda: self.run(obj, progress))
         except Cancelled:  # not raised on: FreeCAD would print a traceback for it
             self._fail(obj, session, CANCELLED_STATUS, cancelled=True)
             return
@@ -255,7 +351,30 @@ class StageProxy:
         progress.report(self.TYPE.split("::")[1], 1.0)
         obj.Status = "ok"
 
+    def bring_up_to_date(self, obj, run):
+        """Call ``run()`` (runs the stage and stores its result) when the stage is stale, then
+        rebuild the display and the ids.
+
+        The cache ``run`` fills holds the typed results of the run itself, so the stages after
+        it start from them; a result that changed without a run (an edited cage) empties the
+        cache, and the typed results are rebuilt from the document when asked for.
+        """
+        ran = self.is_stale(obj)
+        if ran:
+            self._cache = None
+            run()
+            obj.InputId = self.input_id(obj)
+            obj.ParamsId = fingerprint(self.parameters(obj))
+        result_id = self.show(obj)
+        if result_id != obj.ResultId:
+            if not ran:
+                self._cache = None
+            obj.ResultId = result_id
+
     def _fail(self, obj, session, reason, cancelled=False):
+        from polycube_wb.panel_fields import in_gui_words
+
+        reason = in_gui_words(reason)
         obj.Status = reason
         FreeCAD.Console.PrintError(f"Polycube: {obj.Label}: {reason}\n")
         if session is not None:
@@ -329,29 +448,6 @@ FreeCAD.addDocumentObserver(_UNDO_OBSERVER)
 def _one_line(exc):
     text = " ".join(str(exc).split())
     return text or type(exc).__name__
-
-
-def run_core_stages(state, stages, params, progress):
-    """Run core pipeline stages on ``state`` (a ``core.types.PipelineState``); returns it.
-
-    Raises
-    ------
-    Cancelled, PolycubeInputError
-        As raised by the stages.
-    StageFailed
-        A stage did not run to the end; the message names it and its reason.
-    """
-    from core.pipeline import run_stages
-
-    state, report, failed = run_stages(state, list(stages), params, progress)
-    if isinstance(failed, (Cancelled, PolycubeError)):
-        raise failed
-    for name in stages:
-        entry = report["stages"].get(name, {})
-        if entry.get("status") != "ok":
-            raise StageFailed(f"the '{name}' stage {entry.get('status', 'did not run')}: "
-                              f"{entry.get('message', '')}".rstrip(": "))
-    return state
 
 
 def stage_params(**values):

@@ -11,8 +11,8 @@ cage).
 import numpy as np
 
 from core.params import BASE_MESH_METHODS
-from polycube_wb.objects.base import StageProxy, add_property, fingerprint, run_core_stages, \
-    stage_params
+from polycube_wb.stage_jobs import StageJob, core_stages
+from polycube_wb.objects.base import StageProxy, add_property, fingerprint, stage_params
 from polycube_wb.objects.cage import add_cage_properties, cage_shape, read_cage, store_cage
 
 
@@ -71,7 +71,9 @@ class BaseMeshProxy(CageProxy):
         return {"target_faces": int(obj.TargetFaces), "max_base_faces": int(obj.MaxBaseFaces),
                 "base_mesh_method": str(obj.Method)}
 
-    def run(self, obj, progress):
-        state = run_core_stages(self.upstream_state(obj), base_mesh_stages(),
-                                stage_params(**self.parameters(obj)), progress)
+    def prepare(self, obj):
+        state, params = self.upstream_state(obj), stage_params(**self.parameters(obj))
+        return StageJob(core_stages, (state, tuple(base_mesh_stages()), params))
+
+    def store(self, obj, state):
         store_cage(obj, state.basemesh.cage)

@@ -9,6 +9,8 @@ at ``Scale`` (model units; 0 picks the largest distance). It also holds the figu
 too), volume outside the target and target volume not covered, and watertightness of the
 tessellation.
 """
+from dataclasses import dataclass
+
 import numpy as np
 
 from polycube_wb.objects.base import StageFailed, StageProxy, add_property, fingerprint
@@ -83,42 +85,29 @@ class DeviationProxy(StageProxy):
                 ids.append(fingerprint(len(shape.Faces), shape.Volume, shape.Area))
         return fingerprint(ids)
 
-    def run(self, obj, progress):
+    def prepare(self, obj):
         from core.errors import ParameterError
-        from core.target_surface import TargetSurface
-        from core.quality import containment, is_watertight_manifold, largest_distances
-        from polycube_wb.brep import tessellate
-        from polycube_wb.convert import arrays_to_mesh
+        from polycube_wb.stage_jobs import StageJob
 
         if not 0 < obj.Tolerance <= 0.1:
-            raise ParameterError(f"Tolerance must be in (0, 0.1], got {obj.Tolerance}")
+            raise ParameterError(f"{obj.Label}: its Tessellation tolerance must be in (0, 0.1] "
+                                 f"of the diagonal, got {obj.Tolerance:g}")
         solids = obj.Solid.Shape.Solids
         if len(solids) != 1:
             raise StageFailed(f"{obj.Solid.Label}: expected one solid, found {len(solids)}")
+        # a copy: the worker tessellates it while the 3D view may draw the original
+        solid, tolerance = solids[0].copy(), float(obj.Tolerance)
         target_V, target_F = _mesh_arrays(obj.Target)
-        surface = TargetSurface(target_V, target_F)
-        progress.report("tessellate", 0.1)
-        V, F = tessellate(solids[0], obj.Tolerance * surface.diagonal)
-        progress.report("distances", 0.4)
-        signed = surface.closest(V).signed
-        progress.check_cancel()
-        progress.report("largest distances", 0.55)
-        distance = np.abs(signed)
-        searched = largest_distances(TargetSurface(V, F, "solid"), surface,
-                                     MAX_RESOLUTION * surface.diagonal)
-        progress.check_cancel()
-        progress.report("containment", 0.7)
-        inside = containment(V, F, target_V, target_F)
-        obj.MeanDeviation = float(distance.mean())
-        obj.MaxDeviation = max(float(distance.max()),
-                               *(float(far.distance.max()) for far in searched))
-        obj.MeanDeviationPercent = 100.0 * obj.MeanDeviation / surface.diagonal
-        obj.MaxDeviationPercent = 100.0 * obj.MaxDeviation / surface.diagonal
-        obj.OutsideVolume = 100.0 * inside["outside_volume_fraction"]
-        obj.UncoveredVolume = 100.0 * inside["uncovered_volume_fraction"]
-        obj.Watertight = bool(is_watertight_manifold(V, F))
-        obj.SignedDistance = signed.tolist()
-        obj.Mesh = arrays_to_mesh(V, F)
+        return StageJob(_deviation, (solid, target_V, target_F, tolerance), needs_freecad=True)
+
+    def store(self, obj, result):
+        from polycube_wb.convert import arrays_to_mesh
+
+        for name, value in result.figures.items():
+            setattr(obj, name, value)
+        obj.Watertight = result.watertight
+        obj.SignedDistance = result.signed.tolist()
+        obj.Mesh = arrays_to_mesh(result.vertices, result.faces)
 
     def show(self, obj):
         signed = np.asarray(obj.SignedDistance, dtype=np.float64)
@@ -137,6 +126,54 @@ def _mesh_arrays(obj):
     from polycube_wb.convert import mesh_to_arrays
 
     return mesh_to_arrays(obj.Mesh)
+
+
+@dataclass
+class DeviationResult:
+    """The deviation map's computation.
+
+    vertices : (n, 3) float64, faces : (m, 3) int64, the tessellation of the solid (mm).
+    signed : (n,) float64 signed distance of every vertex to the target (mm, + outside).
+    figures : dict ``FIGURES`` property name -> value (without ``ScaleUsed``).
+    watertight : bool, the tessellation is closed and 2-manifold.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    signed: np.ndarray
+    figures: dict
+    watertight: bool
+
+
+def _deviation(solid, target_V, target_F, tolerance, progress):
+    """:class:`DeviationResult` of ``solid`` (Part.Solid) against the target mesh
+    ``(target_V, target_F)``; ``tolerance`` is the tessellation's, a fraction of the target's
+    bounding-box diagonal."""
+    from core.quality import containment, is_watertight_manifold, largest_distances
+    from core.target_surface import TargetSurface
+    from polycube_wb.brep import tessellate
+
+    surface = TargetSurface(target_V, target_F)
+    progress.report("tessellate", 0.1)
+    V, F = tessellate(solid, tolerance * surface.diagonal)
+    progress.report("distances", 0.4)
+    signed = surface.closest(V).signed
+    progress.check_cancel()
+    progress.report("largest distances", 0.55)
+    distance = np.abs(signed)
+    searched = largest_distances(TargetSurface(V, F, "solid"), surface,
+                                 MAX_RESOLUTION * surface.diagonal)
+    progress.check_cancel()
+    progress.report("containment", 0.7)
+    inside = containment(V, F, target_V, target_F)
+    mean = float(distance.mean())
+    largest = max(float(distance.max()), *(float(far.distance.max()) for far in searched))
+    figures = {"MeanDeviation": mean, "MaxDeviation": largest,
+               "MeanDeviationPercent": 100.0 * mean / surface.diagonal,
+               "MaxDeviationPercent": 100.0 * largest / surface.diagonal,
+               "OutsideVolume": 100.0 * inside["outside_volume_fraction"],
+               "UncoveredVolume": 100.0 * inside["uncovered_volume_fraction"]}
+    return DeviationResult(V, F, signed, figures, bool(is_watertight_manifold(V, F)))
 
 
 def deviation_colours(signed, scale):

@@ -6,7 +6,8 @@ is any cage object (a BaseMesh, or another Fit to refine further). Editing the f
 ``CageVertices`` does not rerun the fit; the Solid after it follows the edit.
 """
 from core.params import FIT_MODES
-from polycube_wb.objects.base import add_property, run_core_stages, stage_params
+from polycube_wb.stage_jobs import StageJob, core_stages
+from polycube_wb.objects.base import add_property, stage_params
 from polycube_wb.objects.base_mesh import CageProxy
 from polycube_wb.objects.cage import add_cage_properties, store_cage
 
@@ -21,6 +22,10 @@ FIGURES = (("MeanDistance", "mean_distance", "Mean distance of the limit surface
             "of the target volume)"),
            ("UncoveredVolume", "uncovered_volume_fraction", "Target volume not covered "
             "(fraction of the target volume)"))
+
+
+STOPPED_WORDS = {"stalled": "converged"}
+"""The fit report's reason to stop -> the word the GUI shows."""
 
 
 class FitProxy(CageProxy):
@@ -66,7 +71,8 @@ class FitProxy(CageProxy):
             add_property(obj, "App::PropertyFloat", name, "Result", tooltip, 0.0,
                          read_only=True, output=True)
         add_property(obj, "App::PropertyString", "Stopped", "Result",
-                     "Why the fit stopped ('iterations' or 'stalled')", "", read_only=True,
+                     "Why the fit stopped: 'iterations' (all of them ran) or 'converged' "
+                     "(its objective stopped improving)", "", read_only=True,
                      output=True)
         add_property(obj, "App::PropertyString", "Refinement", "Result",
                      "With a tolerance or volume left outside: whether the goal was met, why the "
@@ -85,17 +91,20 @@ class FitProxy(CageProxy):
                 "tolerance_mm": float(obj.Tolerance),
                 "outside_refinement": float(obj.OutsideRefinement)}
 
-    def run(self, obj, progress):
+    def prepare(self, obj):
         from core.types import BaseMeshResult
 
-        state = self.upstream_state(obj)
+        state, params = self.upstream_state(obj), stage_params(**self.parameters(obj))
         # the cage to fit is the linked object's, possibly edited: a base mesh or an earlier fit
         state.basemesh = BaseMeshResult(state.cage)
-        state = run_core_stages(state, ["fit"], stage_params(**self.parameters(obj)), progress)
+        return StageJob(core_stages, (state, ("fit",), params))
+
+    def store(self, obj, state):
         fit = state.fit.report
         for name, key, _ in FIGURES:
             setattr(obj, name, float(fit[key]))
-        obj.Stopped = str(fit.get("stopped", ""))
+        stopped = str(fit.get("stopped", ""))
+        obj.Stopped = STOPPED_WORDS.get(stopped, stopped)
         obj.Refinement = "; ".join(filter(None, (
             refinement_summary(fit.get("tolerance")),
             outside_refinement_summary(fit.get("outside_refinement")))))

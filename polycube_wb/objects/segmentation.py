@@ -8,8 +8,9 @@ validity, which later stages need too, are rebuilt from them when the document i
 """
 import numpy as np
 
+from polycube_wb.stage_jobs import StageJob, core_stages
 from polycube_wb.objects.base import StageFailed, StageProxy, add_property, fingerprint, \
-    run_core_stages, stage_params
+    stage_params
 
 STAGES = ("parts", "frames", "labeling")
 PART_MODES = ["single", "auto"]
@@ -41,13 +42,16 @@ class SegmentationProxy(StageProxy):
                      "Frame blending distance near part interfaces, in mean edge lengths "
                      "(paper: 4)", default("blend_factor"))
         add_property(obj, "App::PropertyFloat", "Lambda", "Labeling",
-                     "Eq. 3 lambda: weight of neighbours with another label (paper: 0.5)",
+                     "Compactness weight (λ, Eq. 3): weight of neighbours with another label "
+                     "(paper: 0.5)",
                      default("lam"))
         add_property(obj, "App::PropertyFloat", "Penalty", "Labeling",
-                     "Eq. 3 p: weight of opposite and interface-parallel labels (paper: 1e5)",
+                     "Opposite-label penalty (p, Eq. 3): weight of opposite and "
+                     "interface-parallel labels (paper: 1e5)",
                      default("penalty"))
         add_property(obj, "App::PropertyInteger", "MaxSweeps", "Labeling",
-                     "Most HBECVT sweeps", default("max_sweeps"))
+                     "Most sweeps of the labeling's optimisation (HBECVT)",
+                     default("max_sweeps"))
         add_property(obj, "App::PropertyBool", "Repair", "Labeling",
                      "Repair invalid charts, boundaries and corners after HBECVT",
                      default("repair"))
@@ -72,9 +76,11 @@ class SegmentationProxy(StageProxy):
                 "lam": float(obj.Lambda), "penalty": float(obj.Penalty),
                 "max_sweeps": int(obj.MaxSweeps), "repair": bool(obj.Repair)}
 
-    def run(self, obj, progress):
-        state = run_core_stages(self.upstream_state(obj), STAGES,
-                                stage_params(**self.parameters(obj)), progress)
+    def prepare(self, obj):
+        state, params = self.upstream_state(obj), stage_params(**self.parameters(obj))
+        return StageJob(core_stages, (state, tuple(STAGES), params))
+
+    def store(self, obj, state):
         labeling = state.labeling.report
         obj.FacePart = state.parts.face_part.astype(int).tolist()
         obj.FaceLabel = state.labeling.face_label.astype(int).tolist()
@@ -107,7 +113,7 @@ class SegmentationProxy(StageProxy):
         mesh = state.intake.target
         face_part, face_label = stored_arrays(obj, len(mesh.faces))
         state.parts = PartsResult(face_part)
-        state = run_core_stages(state, ["frames"], stage_params(**self.parameters(obj)),
+        state = core_stages(state, ["frames"], stage_params(**self.parameters(obj)),
                                 _no_progress())
         validity = check_validity(mesh.vertices, mesh.faces, face_part, face_label,
                                   state.frames.frame_field.face_frame)

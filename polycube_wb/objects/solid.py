@@ -9,7 +9,7 @@ from polycube_wb.objects.base import StageProxy, add_property
 
 FIGURES = (("BrepFaces", "faces", "App::PropertyInteger", "B-spline faces of the solid"),
            ("BrepValid", "valid", "App::PropertyBool", "OpenCascade finds the solid valid"),
-           ("BrepVolume", "volume", "App::PropertyFloat", "Volume of the solid (model units^3)"),
+           ("BrepVolume", "volume", "App::PropertyFloat", "Volume of the solid, mm³"),
            ("MaxNormalJump", "max_normal_jump_deg", "App::PropertyFloat",
             "Largest normal jump across patch boundaries, degrees"))
 
@@ -27,8 +27,9 @@ class SolidProxy(StageProxy):
         add_property(obj, "App::PropertyLink", "Cage", "Solid",
                      "The cage whose limit surface becomes the solid (a Fit or a BaseMesh)")
         add_property(obj, "App::PropertyInteger", "Depth", "Solid",
-                     "Grading depth of the patches at extraordinary vertices "
-                     f"(1..{MAX_EXPORT_DEPTH}; exact except in a cell of size 2^-depth)",
+                     "Patch refinement at irregular (extraordinary) vertices: the grading "
+                     f"depth, 1..{MAX_EXPORT_DEPTH}; the solid is the exact limit surface "
+                     "except in a cell of size 2^-depth around them",
                      default(EXPORT_DEPTH_KEY))
         for name, _, kind, tooltip in FIGURES:
             add_property(obj, kind, name, "Result", tooltip, read_only=True, output=True)
@@ -36,27 +37,18 @@ class SolidProxy(StageProxy):
     def parameters(self, obj):
         return {"depth": int(obj.Depth)}
 
-    def run(self, obj, progress):
-        from core.errors import ExportError
-        from core.export.bspline import limit_surface_patches
+    def prepare(self, obj):
         from core.params import check_export_depth
-        from core.progress import SubProgress
-        from core.subdivision.limit_crossings import export_limit_crossings
-        from polycube_wb.brep import build_solid
+        from polycube_wb.stage_jobs import StageJob
 
         check_export_depth(obj.Depth, "Depth")
-        base = self.upstream_state(obj).cage
-        progress.report("patches", 0.05)
-        crossings = export_limit_crossings(base)  # the check of subd-to-step and the pipeline
-        if crossings.count:
-            raise ExportError(f"{obj.Label}: the cage of {obj.Cage.Label}: "
-                              f"{crossings.message()}")
-        patches = limit_surface_patches(base, depth=int(obj.Depth), measure=False)
-        progress.check_cancel()
-        solid, brep = build_solid(patches, SubProgress(progress, 0.5, 1.0))
+        base, depth = self.upstream_state(obj).cage, int(obj.Depth)
+        what = f"{obj.Label}: the cage of {obj.Cage.Label}"
+        return StageJob(_limit_solid, (base, depth, what), needs_freecad=True)
+
+    def store(self, obj, result):
+        solid, brep = result
         obj.Shape = solid
-        jump = patches.info.get("normal_jump_max_deg")
-        brep["max_normal_jump_deg"] = -1.0 if jump is None else float(jump)
         for name, key, _, _ in FIGURES:
             setattr(obj, name, brep[key])
 
@@ -72,3 +64,29 @@ class SolidProxy(StageProxy):
     def load_outputs(self, obj):
         return {}
 
+
+def _limit_solid(base, depth, what, progress):
+    """(Part.Solid, its figures) of the limit surface of the cage ``base`` (B-spline faces,
+    grading ``depth``); ``what`` names the cage in the error when the surface crosses itself.
+
+    Raises
+    ------
+    core.errors.ExportError
+        The limit surface crosses itself (the check of subd-to-step and the pipeline).
+    """
+    from core.errors import ExportError
+    from core.export.bspline import limit_surface_patches
+    from core.progress import SubProgress
+    from core.subdivision.limit_crossings import export_limit_crossings
+    from polycube_wb.brep import build_solid
+
+    progress.report("patches", 0.05)
+    crossings = export_limit_crossings(base)
+    if crossings.count:
+        raise ExportError(f"{what}: {crossings.message()}")
+    patches = limit_surface_patches(base, depth=depth, measure=False)
+    progress.check_cancel()
+    solid, brep = build_solid(patches, SubProgress(progress, 0.5, 1.0))
+    jump = patches.info.get("normal_jump_max_deg")
+    brep["max_normal_jump_deg"] = -1.0 if jump is None else float(jump)
+    return solid, brep

@@ -8,8 +8,7 @@ when its points or placement changed.
 """
 import numpy as np
 
-from polycube_wb.objects.base import StageProxy, add_property, fingerprint, run_core_stages, \
-    stage_params
+from polycube_wb.objects.base import StageProxy, add_property, fingerprint, stage_params
 
 GROUP = "Target"
 
@@ -39,9 +38,16 @@ class TargetProxy(StageProxy):
         V, F = _mesh_arrays(obj)
         return fingerprint(V, F)
 
-    def run(self, obj, progress):
-        self._cache = self._intake(obj, progress)
-        intake = self._cache["intake"]
+    def prepare(self, obj):
+        from polycube_wb.stage_jobs import StageJob, intake
+
+        V, F = _mesh_arrays(obj)
+        params = stage_params(check_self_intersections=bool(obj.CheckSelfIntersections))
+        return StageJob(intake, (obj.Label, V, F, params))
+
+    def store(self, obj, result):
+        self._cache = result
+        intake = result["intake"]
         obj.Genus = intake.genus
         obj.Triangles = int(len(intake.target.faces))
 
@@ -50,17 +56,9 @@ class TargetProxy(StageProxy):
         return fingerprint(V, F)
 
     def load_outputs(self, obj):
-        return self._intake(obj)
-
-    def _intake(self, obj, progress=None):
         from core.progress import NO_PROGRESS
-        from core.types import MeshSource, PipelineState
 
-        V, F = _mesh_arrays(obj)
-        params = stage_params(check_self_intersections=bool(obj.CheckSelfIntersections))
-        state = PipelineState(source=MeshSource(obj.Label, (V, F)))
-        state = run_core_stages(state, ["intake"], params, progress or NO_PROGRESS)
-        return {"intake": state.intake}
+        return self.prepare(obj)(NO_PROGRESS)
 
 
 def _mesh_arrays(obj):

@@ -131,11 +131,11 @@ def _select(*objects):
 
 
 class EscapeKey:
-    """Presses a real Esc key during the next long run and answers FreeCAD's question.
+    """Presses a real Esc key during the next long run.
 
-    A Qt timer (it fires while the progress bar processes events) grabs the main window
-    after ``after`` seconds (the bar shows after 2 s), then posts an Esc key press to
-    the main window and clicks *Yes* in FreeCAD's "Do you really want to abort?" box.
+    A Qt timer (it fires while the stage runs: FreeCAD's event loop keeps going) grabs the
+    main window after ``after`` seconds, then posts an Esc key press to the main window;
+    ``answered`` counts the question boxes it had to answer (a cancel asks none).
     """
 
     def __init__(self, after, grab_path):
@@ -408,7 +408,7 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
         seconds = time.monotonic() - started
         self.assertFalse(accepted, "the panel stays open after a cancel")
         self.assertGreaterEqual(escape.sent, 1)
-        self.assertEqual(escape.answered, 1, "FreeCAD asked to confirm the abort")
+        self.assertEqual(escape.answered, 0, "Esc cancels without a question")
         self.assertLess(seconds, 60, "cancelled inside the fit, not after 400 iterations")
         self.assertIsNone(panel.outcome)
         self.assertTrue(os.path.isfile(grab))

@@ -25,10 +25,11 @@ SCREENSHOTS = ("polycube_torus_solid.png", "polycube_target_mesh.png", "polycube
                "polycube_deviation.png", "polycube_edited_cage.png", "polycube_reconstructed.png")
 CAGE_SCREENSHOTS = ("polycube_base_mesh.png",)
 WINDOW_GRABS = ("polycube_fit_progress.png", "polycube_batch_progress.png",
-                "polycube_cancelled.png", "polycube_fit_panel.png")
+                "polycube_cancelled.png", "polycube_fit_panel.png",
+                "polycube_responsive_fit.png")
 """The main window during the fit (progress bar), during Reconstruct folder (its dialog),
-after Esc in the fit (the Fit marked in the tree) and with the Fit's task panel open,
-grabbed at the window's own size."""
+after Esc in the fit (the Fit marked in the tree), with the Fit's task panel open and
+during the torsion arm's fit, grabbed at the window's own size."""
 MIN_CASES = 10
 TIMEOUT = 600
 """Guard against a hung GUI (FreeCAD under Xvfb without a window manager), not a timing
