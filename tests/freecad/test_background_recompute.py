@@ -20,10 +20,8 @@ import pytest
 import FreeCAD
 
 from core.errors import Cancelled, InvalidMeshError
+from tiny_chain import KINDS, REPO, TINY, record_runs
 
-REPO = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
-TINY = os.path.join(REPO, "..", "shared", "data", "meshes", "to_levelset_cantilever_tiny.stl")
-KINDS = ("Target", "Segmentation", "BaseMesh", "Fit", "Solid", "Deviation")
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -73,20 +71,6 @@ def _kinds(doc):
     return {api.stage_kind(obj): obj for obj in doc.Objects}
 
 
-def _record_runs(doc):
-    """Names of the objects whose ``run`` (the synchronous path) is called."""
-    ran = []
-    for obj in doc.Objects:
-        original = obj.Proxy.run
-
-        def run(o, progress, original=original):
-            ran.append(o.Name)
-            return original(o, progress)
-
-        obj.Proxy.run = run
-    return ran
-
-
 def _fresh(name):
     doc = FreeCAD.newDocument(name)
     doc.UndoMode = 1
@@ -101,7 +85,7 @@ def test_runner_gives_the_results_of_the_plain_recompute_each_stage_computed_onc
         _build(plain)
         assert api.recompute(plain).ok
         _build(threaded)
-        ran = _record_runs(threaded)
+        ran = record_runs(threaded.Objects)
         runner = ThreadRunner()
         api.run_in_transaction(threaded, "Chain", lambda: None, run_job=runner)
         assert ran == [], "doc.recompute() found every stage up to date"

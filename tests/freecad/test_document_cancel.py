@@ -17,10 +17,8 @@ import FreeCAD
 
 from core.errors import Cancelled
 from core.progress import Progress
+from tiny_chain import KINDS, TINY, record_runs
 
-REPO = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
-TINY = os.path.join(REPO, "..", "shared", "data", "meshes", "to_levelset_cantilever_tiny.stl")
-KINDS = ("Target", "Segmentation", "BaseMesh", "Fit", "Solid", "Deviation")
 STAGES_OF = {"Target": ("intake",), "Segmentation": ("parts", "frames", "labeling"),
              "BaseMesh": ("basemesh",), "Fit": ("fit",), "Solid": ("patches",),
              "Deviation": ("tessellate",)}
@@ -56,20 +54,6 @@ def _build(doc):
     target = api.make_target(doc, TINY, check_self_intersections=False)
     chain = api.make_chain(doc, target, "Solid", Fit={"Iterations": 2})
     api.make_deviation(doc, chain["Solid"], target)
-
-
-def _record_runs(objects):
-    """The list the names of ``objects`` are appended to when they run their stage."""
-    ran = []
-    for obj in objects:
-        original = obj.Proxy.run
-
-        def run(o, progress, original=original):
-            ran.append(o.Name)
-            return original(o, progress)
-
-        obj.Proxy.run = run
-    return ran
 
 
 def _has_result(obj):
@@ -115,7 +99,7 @@ def test_cancel_in_a_stage_keeps_the_earlier_ones_marks_it_and_resumes_after_reo
         doc = FreeCAD.openDocument(path)
         objects = _kinds(doc)
         assert objects[kind].Status == "cancelled by the user"
-        ran = _record_runs(objects.values())
+        ran = record_runs(objects.values())
         for obj in objects.values():
             obj.touch()  # a user's "recompute all": only stale stages run
         outcome = api.recompute(doc)
