@@ -22,6 +22,8 @@ from core.fitting.crease_curves import fit_crease_curves
 from core.fitting.crossings import (STIFFEN_TRIES, UNTANGLE_PROGRESS, count_crossings,
                                      crossing_pairs, hold_back_crossings, influencing,
                                      stiffen_until_clean)
+from core.fitting.records import (Distances, FitFigures, FitRecord, FitSetup, InsideFit,
+                                    InsideStart, LeastSquaresFit, Untangling)
 from core.fitting.responses import thickness, volume
 from core.fitting.rgp import FitProblem, run_rgp
 from core.geometry import face_areas, sample_surface, triangulate
@@ -45,6 +47,28 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
                   progress=None, penalty=1e5, step_fraction=0.05, surface="limit",
                   start="best-fit", rounds=10, tol=2e-3, patience=5, seed=0):
     """Move the base-mesh vertices so the subdivision surface fills or fits the target.
+
+    The fit runs in phases, each returning a record of :mod:`core.fitting.records`:
+
+    1. :func:`_prepare`: the subdivision hierarchy, the limit map and the target;
+    2. a cage with creases (``base.creases``) has its crease curves placed on the target's
+       feature lines (:func:`core.fitting.crease_curves.fit_crease_curves`); in both fitting
+       modes that cage is the fit's start, the reference of the smoothness term and of the
+       hold-backs (the ``initial`` figures stay the cage's as given);
+    3. :func:`_least_squares`: the two-sided least-squares fit (best-fit mode, and inside
+       mode from ``start='best-fit'`` without creases), untangled where it crosses itself;
+    4. :func:`_inside_start` (inside mode from ``start='best-fit'``): that fit, or the
+       creased cage (``CREASED_START``), pulled just inside the target and held back where
+       it crosses itself;
+    5. :func:`_inside_fit` (inside mode): the relaxed gradient projection from there, held
+       back where it crosses itself, further passes around those vertices and a nudge of
+       the held-back vertices inwards;
+    6. :func:`_measure`: distances and containment of the result and of the cage.
+
+    The returned level-``levels`` limit surface does not cross itself when the cage's does
+    not, and never where the start did not. The fit runs with one BLAS thread
+    (:func:`core.threads.single_threaded`): the result does not depend on the machine's
+    core count.
 
     Parameters
     ----------
@@ -80,45 +104,8 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     Returns
     -------
     fitted : PolyMesh, the base mesh with moved vertices (same faces).
-    info : dict with ``mode``, ``rounds`` (least-squares rounds run), ``rms`` (their
-        two-sided RMS distances, model units), ``iterations`` (RGP), ``stopped``
-        ('iterations', 'stalled', 'converged' or 'none'),
-        ``best_iteration``, ``objective`` (list per iteration), ``volume`` (list),
-        ``mean_distance`` / ``max_distance`` (distance of the fine limit points to the
-        target over the target's bounding-box diagonal), ``target_mean_distance`` /
-        ``target_max_distance`` (the target to the limit surface, :func:`_distances`) and
-        their ``initial_`` counterparts (the cage's), ``outside_volume_fraction`` and
-        ``uncovered_volume_fraction`` (triangulated fine limit mesh minus target and
-        target minus it, over the target volume; of the result only), ``t_min``,
-        ``step`` (model units), ``seconds`` (all of it) and ``measure_seconds`` (the
-        part spent on those figures: one manifold3d boolean and the distance queries);
-        with a least-squares fit (best-fit mode, inside mode from ``start='best-fit'``)
-        ``self_intersections``
-        (intersecting triangle pairs of the fine limit mesh, ``surface='limit'``),
-        ``cage_self_intersections`` (the cage's, when the result still crosses), ``refits``,
-        ``refit_crossings``, ``cold_refit_crossings`` (when the short refits left a few
-        crossings), ``stiffened`` (:func:`_untangled`) and ``held_back`` (base vertices held
-        back towards the cage or, inside mode, the least-squares start), of which the
-        creased inside start (``CREASED_START``) has ``self_intersections`` and
-        ``held_back``; inside mode also
-        ``start_margin`` (depth of the start below the target, model units) and
-        ``rgp_held_back`` (base vertices whose RGP move was cut back because the
-        limit surface crossed itself there), then ``rgp_passes`` (iterations and base
-        vertices held back of each further pass, :func:`_passes_around_crossings`;
-        ``iterations`` counts them too), ``pull_crossings`` (:func:`_pulled_inside`) and,
-        when the RGP's result was held back, ``nudged`` (base vertices moved in each round
-        of :func:`core.fitting.contain.nudge_inside`, which moves the held-back ones under
-        the points left outside inwards); ``rgp_retried`` when the RGP ran again with a
-        shorter step (:func:`_rgp`).
-        A cage with creases (``base.creases``) has ``crease_curves`` (``matched``,
-        ``creases``, ``held_back`` of :func:`core.fitting.crease_curves.fit_crease_curves`):
-        in both fitting modes the fit starts from the cage with its crease curves fitted to
-        the target's feature lines, which is also the reference of the smoothness term and
-        of the hold-backs (the ``initial_`` figures stay the cage's).
-        The returned level-``levels`` limit surface does not cross itself when the cage's
-        does not, and never where the start did not. The fit runs with one BLAS thread
-        (:func:`core.threads.single_threaded`): the result does not depend on the
-        machine's core count.
+    record : core.fitting.records.FitRecord, the records of the phases that ran and the
+        figures of the result.
 
     Raises
     ------
@@ -130,13 +117,45 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     """
     started = time.perf_counter()
     progress = NO_PROGRESS if progress is None else progress
-    _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface, start,
-                      rounds)
-    if not (np.isfinite(tol) and tol >= 0) or not (isinstance(patience, (int, np.integer))
-                                                   and patience >= 1):
-        raise ParameterError(f"tol must be >= 0 and patience an integer >= 1, got {tol!r}, "
-                             f"{patience!r}")
+    _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction)
+    _check_choices(surface, start, rounds, tol, patience)
     V0 = _check_base(base)
+    setup = _prepare(base, target, levels, surface)
+    creased = None
+    if mode != "none" and base.n_creases:
+        creased = fit_crease_curves(base, setup.hierarchy.meshes[levels], setup.limit_map,
+                                    setup.triangles, setup.target.vertices,
+                                    setup.target.faces)
+        base = replace(base, vertices=creased.vertices)
+    least_squares = inside_start = inside = None
+    if mode == "best-fit" or (mode == "inside" and start == "best-fit" and not base.n_creases):
+        progress.report("fit", 0.0, "least-squares fit")
+        least_squares = _least_squares(base, setup, rounds, seed, refit_local=mode != "inside")
+    if mode == "inside" and start == "best-fit":
+        inside_start = _inside_start(base, setup, least_squares, start)
+    vertices, crossings = _latest(base.vertices, least_squares, inside_start)
+    if mode == "inside":
+        inside = _inside_fit(base, setup, vertices, crossings, iterations, t_min, penalty,
+                             step_fraction, dict(stall_tol=tol, patience=patience,
+                                                 progress=progress))
+        vertices, crossings = inside.vertices, inside.crossings
+    self_intersections, cage_self_intersections = _crossing_counts(setup, V0, crossings,
+                                                                   least_squares)
+    figures = _measure(setup, vertices, V0, seed)
+    label = inside_start.label if inside_start else (start if least_squares else None)
+    return replace(base, vertices=vertices), FitRecord(
+        mode, levels, surface, label, figures, time.perf_counter() - started,
+        crease_curves=creased, least_squares=least_squares, inside_start=inside_start,
+        inside=inside, self_intersections=self_intersections,
+        cage_self_intersections=cage_self_intersections)
+
+
+def _prepare(base, target, levels, surface):
+    """The :class:`core.fitting.records.FitSetup` of a fit of ``base`` to ``target``.
+
+    Raises InvalidMeshError when the target encloses a non-positive volume (its faces are
+    not counter-clockwise seen from outside).
+    """
     # the fit's many closest-point queries search pieces of the target's long triangles
     target_surface = TargetSurface(target.vertices, target.faces, split=True)
     target_volume, _ = volume(target_surface.vertices, target_surface.faces)
@@ -149,94 +168,150 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     S = hierarchy.composite(levels - 1)
     L, _, _ = limit_matrices(fine)
     limit_map = (L @ S).tocsr()
-    mapping = limit_map if surface == "limit" else S
-    T = triangulate(fine.face_vertices, fine.face_offsets)
-    info = {"mode": mode, "levels": levels, "surface": surface, "rounds": 0, "rms": [],
-            "iterations": 0, "stopped": "none", "objective": [], "volume": []}
-    if mode != "none" and base.n_creases:
-        # the fit starts from crease curves on the target's feature lines; the cage so
-        # placed is also the reference of its smoothness term and its hold-backs
-        creased = fit_crease_curves(base, fine, limit_map, T, target_surface.vertices,
-                                    target_surface.faces)
-        info["crease_curves"] = {"matched": creased.matched, "creases": creased.creases,
-                                 "held_back": creased.held}
-        base = replace(base, vertices=creased.vertices)
-    vertices = base.vertices
+    return FitSetup(target_surface, target_volume, hierarchy, limit_map,
+                    limit_map if surface == "limit" else S,
+                    triangulate(fine.face_vertices, fine.face_offsets), surface)
+
+
+def _latest(vertices, *phases):
+    """Base vertices and crossing pairs of the last phase that ran (``None``: not run);
+    ``vertices`` and ``None`` (crossings not known) when none did."""
     crossings = None
-    prepared_start = mode == "inside" and start == "best-fit"
-    creased_start = prepared_start and base.n_creases > 0
-    if mode == "best-fit" or (prepared_start and not creased_start):
-        progress.report("fit", 0.0, "least-squares fit")
-        fitted, coarse = _two_level_best_fit(base, hierarchy, limit_map, T, target_surface,
-                                             rounds, seed=seed)
-        info.update(rounds=fitted.rounds + coarse.rounds, rms=fitted.rms,
-                    coarse_rms=coarse.rms, stopped=fitted.stopped, start=start)
-        vertices, crossings, stiffness = _untangled(base, hierarchy, limit_map, T,
-                                                    target_surface, fitted.vertices, rounds,
-                                                    seed, info, refit_local=mode != "inside")
-    elif creased_start:
-        # its crease curves lie on the target's feature lines already (CREASED_START)
-        info["start"] = CREASED_START
-        crossings, stiffness = count_crossings(limit_map, T, vertices), None
-    if prepared_start:
-        # the RGP starts just inside the target, and nowhere crossing itself
-        pulled, info["start_margin"], info["pull_crossings"] = _pulled_inside(
-            base, limit_map, T, target_surface, vertices, stiffness)
-        vertices, crossings, held = _held_back(vertices, crossings, pulled.vertices,
-                                               limit_map, T, pulled.pairs)
-        info["held_back"] = info.get("held_back", 0) + held
-        if info["held_back"]:
-            info["start"] = (f"{info['start']}, held back at {info['held_back']} base "
-                             "vertices (it crossed itself)")
-    if mode == "inside":
-        edge = _mean_edge_length(base)
-        step = step_fraction * edge
-        X_start = mapping @ vertices
-        if t_min is None:
-            t_min = _default_t_min(X_start, T, edge)
-        problem = FitProblem(mapping, T, target_surface, penalty, "inside", t_min,
-                             _area(X_start, T))
-        result, rgp_step = _rgp(problem, vertices, step, iterations,
-                                dict(stall_tol=tol, patience=patience, progress=progress),
-                                target_volume)
-        if surface == "limit" and crossings is not None \
-                and np.array_equal(result.vertices, vertices):
-            held = 0  # the RGP's best is its start, checked above
-        else:
-            known = crossings if surface == "limit" else None
-            vertices, crossings, held = _held_back(vertices, known, result.vertices, mapping, T)
-        info["rgp_held_back"] = held
-        if rgp_step != step:
-            info["rgp_retried"] = True
-        fixed = (vertices != result.vertices).any(axis=1)
-        used = result.iterations
-        if held and surface == "limit" and crossings == 0:
-            vertices, info["rgp_passes"], used, fixed = _passes_around_crossings(
-                problem, vertices, result.vertices, T, rgp_step, iterations - used,
-                dict(stall_tol=tol, patience=patience, progress=progress))
-            used += result.iterations
-        if surface == "limit" and crossings == 0 and held:
-            # the held-back vertices sit where the start was, partly outside
-            vertices, info["nudged"] = nudge_inside(vertices, limit_map, T, target_surface,
-                                                    movable=fixed)
-        info.update(iterations=used, stopped=result.stopped,
-                    best_iteration=result.best_iteration,
-                    objective=result.history["objective"], volume=result.history["volume"],
-                    t_min=float(t_min), step=float(step))
-    if surface == "limit" and crossings is not None:
-        info["self_intersections"] = crossings
-        if crossings and "cage_self_intersections" not in info:
-            info["cage_self_intersections"] = count_crossings(limit_map, T, V0)
+    for phase in phases:
+        if phase is not None:
+            vertices, crossings = phase.vertices, phase.crossings
+    return vertices, crossings
+
+
+def _least_squares(base, setup, rounds, seed, refit_local):
+    """The least-squares fit (:func:`_two_level_best_fit`), untangled (:func:`_untangled`).
+
+    Returns
+    -------
+    core.fitting.records.LeastSquaresFit
+    """
+    fitted, coarse = _two_level_best_fit(base, setup.hierarchy, setup.limit_map,
+                                         setup.triangles, setup.target, rounds, seed=seed)
+    untangled = _untangled(base, setup, fitted.vertices, rounds, seed, refit_local)
+    return LeastSquaresFit(fitted.rounds + coarse.rounds, fitted.rms, coarse.rms,
+                           fitted.stopped, untangled)
+
+
+def _inside_start(base, setup, least_squares, start):
+    """The inside fit's start: the least-squares fit, or without one the creased cage
+    (``CREASED_START``, its crease curves on the target's feature lines already), pulled
+    just inside the target (:func:`_pulled_inside`) and held back where the pull crosses
+    itself, so that the RGP starts nowhere crossing itself.
+
+    Returns
+    -------
+    core.fitting.records.InsideStart
+    """
+    if least_squares is None:
+        vertices, label, held = base.vertices, CREASED_START, 0
+        crossings = count_crossings(setup.limit_map, setup.triangles, vertices)
+        stiffness = None
+    else:
+        vertices, crossings, label = least_squares.vertices, least_squares.crossings, start
+        held, stiffness = least_squares.untangled.held_back, least_squares.untangled.stiffness
+    pulled, margin, pull_crossings = _pulled_inside(base, setup.limit_map, setup.triangles,
+                                                    setup.target, vertices, stiffness)
+    vertices, crossings, pull_held = _held_back(vertices, crossings, pulled.vertices,
+                                                setup.limit_map, setup.triangles, pulled.pairs)
+    held += pull_held
+    if held:
+        label = f"{label}, held back at {held} base vertices (it crossed itself)"
+    return InsideStart(vertices, crossings, label, margin, pull_crossings, held)
+
+
+def _inside_fit(base, setup, vertices, crossings, iterations, t_min, penalty, step_fraction,
+                options):
+    """The relaxed gradient projection from ``vertices`` (paper Sect. 2.5, :func:`_rgp`),
+    held back where its limit surface crosses itself (:func:`_rgp_held_back`); where it was
+    held back on a clean surface, further passes with the held-back vertices fixed
+    (:func:`_passes_around_crossings`), then those vertices nudged inwards under the points
+    left outside (:func:`core.fitting.contain.nudge_inside`).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64 the start; crossings : int or None, its crossing pairs.
+    iterations, t_min, penalty, step_fraction : see :func:`fit_base_mesh`.
+    options : dict of further :func:`core.fitting.rgp.run_rgp` arguments.
+
+    Returns
+    -------
+    core.fitting.records.InsideFit
+    """
+    T = setup.triangles
+    edge = _mean_edge_length(base)
+    step = step_fraction * edge
+    X_start = setup.mapping @ vertices
+    if t_min is None:
+        t_min = _default_t_min(X_start, T, edge)
+    problem = FitProblem(setup.mapping, T, setup.target, penalty, "inside", t_min,
+                         _area(X_start, T))
+    result, rgp_step = _rgp(problem, vertices, step, iterations, options, setup.target_volume)
+    vertices, crossings, held = _rgp_held_back(setup, vertices, crossings, result.vertices)
+    used, passes, nudged = result.iterations, None, None
+    if held and setup.surface == "limit" and crossings == 0:
+        vertices, passes, used, fixed = _passes_around_crossings(
+            problem, vertices, result.vertices, T, rgp_step, iterations - used, options)
+        used += result.iterations
+        # the held-back vertices sit where the start was, partly outside
+        vertices, nudged = nudge_inside(vertices, setup.limit_map, T, setup.target,
+                                        movable=fixed)
+    return InsideFit(vertices, crossings, used, result.stopped, result.best_iteration,
+                     result.history["objective"], result.history["volume"], float(t_min),
+                     float(step), held, rgp_step != step, passes, nudged)
+
+
+def _rgp_held_back(setup, start, crossings, moved):
+    """The RGP's result ``moved`` held back towards its ``start`` where it crosses itself
+    (:func:`_held_back`; on the control points with ``surface='control'``).
+
+    Returns
+    -------
+    vertices : (n, 3) float64; crossings : int, crossing pairs of their fine mesh;
+    held : int, base vertices held back.
+    """
+    limit = setup.surface == "limit"
+    if limit and crossings is not None and np.array_equal(moved, start):
+        return start, crossings, 0  # the RGP's best is its start, checked before
+    return _held_back(start, crossings if limit else None, moved, setup.mapping,
+                      setup.triangles)
+
+
+def _crossing_counts(setup, V0, crossings, least_squares):
+    """``self_intersections`` and ``cage_self_intersections`` of the record: the result's
+    crossing pairs when counted on its limit surface, and, when it still crosses, the
+    cage's (counted by the least-squares fit, else here from ``V0``)."""
+    if setup.surface != "limit" or crossings is None:
+        crossings = None
+    cage = None if least_squares is None else least_squares.untangled.cage_self_intersections
+    if crossings and cage is None:
+        cage = count_crossings(setup.limit_map, setup.triangles, V0)
+    return crossings, cage
+
+
+def _measure(setup, vertices, V0, seed):
+    """Distances and containment of the result (:func:`_distances`,
+    :func:`core.quality.containment`) and the distances of the cage ``V0``.
+
+    Returns
+    -------
+    core.fitting.records.FitFigures
+    """
     measuring = time.perf_counter()
+    target, T = setup.target, setup.triangles
     # the points of target.samples without the pseudo-normals it also finds (not needed here)
-    points = sample_surface(target_surface.vertices, target_surface.faces, DISTANCE_SAMPLES,
+    points = sample_surface(target.vertices, target.faces, DISTANCE_SAMPLES,
                             np.random.default_rng(seed))
-    info.update(_figures(limit_map @ vertices, T, target_surface, points))
-    initial = _distances(limit_map @ V0, T, target_surface, points)
-    info.update({"initial_" + k: v for k, v in initial.items()})
-    info["seconds"] = time.perf_counter() - started
-    info["measure_seconds"] = time.perf_counter() - measuring
-    return replace(base, vertices=vertices), info
+    X = setup.limit_map @ vertices
+    report = containment(X, T, target.vertices, target.faces)
+    distances = _distances(X, T, target, points)
+    initial = _distances(setup.limit_map @ V0, T, target, points)
+    return FitFigures(distances, initial, report["outside_volume_fraction"],
+                      report["uncovered_volume_fraction"], time.perf_counter() - measuring)
 
 
 RETRY_STEP = 0.4
@@ -356,8 +431,7 @@ the long way usually clears what was left; where it left more, the crossings are
 cage cannot follow the part, and the long way does not have fewer but costs seconds."""
 
 
-def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, info,
-               refit_local=True):
+def _untangled(base, setup, vertices, rounds, seed, refit_local=True):
     """The least-squares fit made not to cross itself where a refit or the cage allows.
 
     Refits with a stiffer smoothness term under the crossings
@@ -376,23 +450,25 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, in
     still crosses and the cage's limit surface does not, the fit is held back towards the
     cage there (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses
     itself is no reference to hold back to (nearly every base vertex would go back).
-    Records ``refits``, ``refit_crossings`` (crossing pairs after the first fit and each
-    refit), ``stiffened`` (base vertices with a stiffer smoothness term), ``held_back`` and,
-    when the fit still crosses, ``cage_self_intersections`` in ``info``.
+
+    Parameters
+    ----------
+    base : PolyMesh, the cage (its crease curves fitted); setup : FitSetup;
+    vertices : (n, 3) float64 the least-squares fit; rounds, seed : of the least-squares fit.
 
     Returns
     -------
-    vertices : (n, 3) float64 base vertices.
-    crossings : int, crossing triangle pairs of their limit surface.
-    stiffness : (n,) float64 smoothness weights of the fit (for the inside pull).
+    core.fitting.records.Untangling
     """
+    limit_map, T, target = setup.limit_map, setup.triangles, setup.target
+
     def refit(stiffness, previous):
         return best_fit(base, limit_map, T, target, rounds=min(rounds, FINE_ROUNDS),
                         seed=seed, start=previous, stiffness=stiffness, refit=True).vertices
 
     def cold_refit(stiffness, previous):
-        return _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness,
-                                   seed)[0].vertices
+        return _two_level_best_fit(base, setup.hierarchy, limit_map, T, target, rounds,
+                                   stiffness, seed)[0].vertices
 
     first = crossing_pairs(limit_map, T, vertices)
     refitted = refit_local or (len(influencing(first, limit_map, T))
@@ -400,21 +476,22 @@ def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, in
     tries = STIFFEN_TRIES if refitted else 0
     untangled = stiffen_until_clean(vertices, refit, limit_map, T, tries=tries, pairs=first,
                                     progress=UNTANGLE_PROGRESS)
+    cold_counts = None
     if tries and 0 < untangled.crossings <= LONG_WAY_LEFT * untangled.counts[0]:
         cold = stiffen_until_clean(vertices, cold_refit, limit_map, T, pairs=first,
                                    progress=UNTANGLE_PROGRESS)
-        info["cold_refit_crossings"] = cold.counts
+        cold_counts = cold.counts
         if cold.crossings < untangled.crossings:
             untangled = cold
-    vertices, crossings, held = untangled.vertices, untangled.crossings, 0
+    vertices, crossings, held, cage = untangled.vertices, untangled.crossings, 0, None
     if crossings:
-        info["cage_self_intersections"] = count_crossings(limit_map, T, base.vertices)
-        if info["cage_self_intersections"] == 0:
+        cage = count_crossings(limit_map, T, base.vertices)
+        if cage == 0:
             vertices, crossings, held = _held_back(base.vertices, 0, vertices, limit_map, T,
                                                    untangled.pairs)
-    info.update(refits=untangled.refits, refit_crossings=untangled.counts,
-                stiffened=int((untangled.stiffness > 1).sum()), held_back=held)
-    return vertices, crossings, untangled.stiffness
+    return Untangling(vertices, crossings, untangled.stiffness, untangled.refits,
+                      untangled.counts, cold_counts, int((untangled.stiffness > 1).sum()),
+                      held, cage)
 
 
 def _held_back(reference, crossings, moved, mapping, T, moved_pairs=None):
@@ -491,14 +568,6 @@ def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness
     return fine, coarse
 
 
-def _figures(X, T, target, points):
-    """Distance and containment figures of the fine limit surface against the target."""
-    report = containment(X, T, target.vertices, target.faces)
-    return {**_distances(X, T, target, points),
-            "outside_volume_fraction": report["outside_volume_fraction"],
-            "uncovered_volume_fraction": report["uncovered_volume_fraction"]}
-
-
 DISTANCE_SAMPLES = 20000
 """Target samples of the target-to-surface figures (:func:`_distances`)."""
 
@@ -514,11 +583,12 @@ def _distances(X, T, target, points):
 
     Returns
     -------
-    dict of fractions of the target's bounding-box diagonal: ``mean_distance`` /
-    ``max_distance``, the fine limit points to the target; ``target_mean_distance`` /
-    ``target_max_distance``, :data:`DISTANCE_SAMPLES` area-weighted target samples (the
-    maximum also over the target's vertices) to the triangulated limit surface: what the
-    surface misses, such as a thin horn's tip the limit surface stops short of.
+    core.fitting.records.Distances, fractions of the target's bounding-box diagonal:
+    ``mean_distance`` / ``max_distance``, the fine limit points to the target;
+    ``target_mean_distance`` / ``target_max_distance``, :data:`DISTANCE_SAMPLES`
+    area-weighted target samples (the maximum also over the target's vertices) to the
+    triangulated limit surface: what the surface misses, such as a thin horn's tip the
+    limit surface stops short of.
     """
     forward = target.nearest(X).distance / target.diagonal
     fitted = TargetSurface(X, T, "fitted surface")
@@ -530,8 +600,8 @@ def _distances(X, T, target, points):
     if len(vertices):
         largest = max(largest, float((fitted.nearest(vertices).distance
                                       / target.diagonal).max()))
-    return {"mean_distance": float(forward.mean()), "max_distance": float(forward.max()),
-            "target_mean_distance": float(backward.mean()), "target_max_distance": largest}
+    return Distances(float(forward.mean()), float(forward.max()), float(backward.mean()),
+                     largest)
 
 
 def _may_be_farther(points, on_surface, distance, diagonal):
@@ -548,8 +618,8 @@ def _may_be_farther(points, on_surface, distance, diagonal):
     return bound > distance - 1e-9 * diagonal
 
 
-def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface, start,
-                      rounds):
+def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction):
+    """Raise ParameterError naming the first of these parameters out of range."""
     if not isinstance(levels, (int, np.integer)) or not 1 <= levels <= 4:
         raise ParameterError(f"levels must be an integer in 1..4, got {levels!r}")
     if not isinstance(iterations, (int, np.integer)) or iterations < 0:
@@ -562,12 +632,20 @@ def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, s
         raise ParameterError(f"penalty must be a finite number > 0, got {penalty!r}")
     if not (np.isfinite(step_fraction) and 0 < step_fraction <= 1):
         raise ParameterError(f"step_fraction must be in (0, 1], got {step_fraction!r}")
+
+
+def _check_choices(surface, start, rounds, tol, patience):
+    """Raise ParameterError naming the first of these parameters out of range."""
     if surface not in SURFACES:
         raise ParameterError(f"surface must be one of {SURFACES}, got {surface!r}")
     if start not in STARTS:
         raise ParameterError(f"start must be one of {STARTS}, got {start!r}")
     if not isinstance(rounds, (int, np.integer)) or rounds < 0:
         raise ParameterError(f"rounds must be an integer >= 0, got {rounds!r}")
+    if not (np.isfinite(tol) and tol >= 0) or not (isinstance(patience, (int, np.integer))
+                                                   and patience >= 1):
+        raise ParameterError(f"tol must be >= 0 and patience an integer >= 1, got {tol!r}, "
+                             f"{patience!r}")
 
 
 def _check_base(base):

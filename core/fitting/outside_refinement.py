@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from core.fitting.deviation import fine_limit_points
+from core.fitting.records import FitRecord
 from core.fitting.refine import refined_without_crossings
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
@@ -42,7 +43,7 @@ class OutsideRefinement:
     """Outcome of :func:`fit_with_outside_refinement`.
 
     mesh : PolyMesh, the fitted cage leaving the least volume outside.
-    info : dict, its fit's info.
+    info : core.fitting.records.FitRecord, its fit's record.
     rounds : list of dict, per fit: ``faces``, ``outside_volume_fraction``,
         ``refined_faces`` (base faces with outside points, whose strips the next cage
         splits; 0 for the last fit).
@@ -50,7 +51,7 @@ class OutsideRefinement:
     """
 
     mesh: PolyMesh
-    info: dict
+    info: FitRecord
     rounds: list = field(default_factory=list)
     reason: str = ""
 
@@ -63,8 +64,7 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
     ----------
     base : PolyMesh, the cage to fit (closed, quad-dominant, unfitted).
     target : TriMesh, closed, outward oriented.
-    fit : callable ``fit(cage) -> (fitted PolyMesh, info dict)``, the configured inside fit
-        (its info has ``levels`` and ``outside_volume_fraction``).
+    fit : callable ``fit(cage) -> (fitted PolyMesh, FitRecord)``, the configured inside fit.
     goal : float >= 0, fraction of the target's volume allowed outside; 0: no refinement.
     max_faces : int, no cage with more faces is fitted.
     crossing_faces : None or callable ``crossing_faces(cage) -> (k, 2) int``, the base faces
@@ -81,10 +81,10 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
     result = OutsideRefinement(fitted, info)
     cage, surface = base, None
     for done in range(rounds + 1):
-        outside = float(info["outside_volume_fraction"])
+        outside = float(info.figures.outside_volume_fraction)
         result.rounds.append({"faces": int(fitted.n_faces), "outside_volume_fraction": outside,
                               "refined_faces": 0})
-        if outside < result.info["outside_volume_fraction"]:
+        if outside < result.info.figures.outside_volume_fraction:
             result.mesh, result.info = fitted, info
         if not goal or outside <= goal:
             result.reason = "" if done == 0 else (f"{outside:.3%} of the volume outside after "
@@ -96,7 +96,7 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
             return result
         if surface is None:
             surface = TargetSurface(target.vertices, target.faces)
-        marked = faces_outside(fitted, info["levels"], surface, OUTSIDE_DEPTH)
+        marked = faces_outside(fitted, info.levels, surface, OUTSIDE_DEPTH)
         result.rounds[-1]["refined_faces"] = int(marked.sum())
         refined, why_not = (None, "no point lies deeper outside than "
                             f"{OUTSIDE_DEPTH:g} of the diagonal") if not marked.any() else \
@@ -120,7 +120,7 @@ def _kept(result, reason):
     if result.mesh.n_faces == result.rounds[-1]["faces"]:
         return reason
     return (f"{reason}; the fit of the {result.mesh.n_faces}-face cage is kept "
-            f"({result.info['outside_volume_fraction']:.3%} outside)")
+            f"({result.info.figures.outside_volume_fraction:.3%} outside)")
 
 
 def faces_outside(cage, levels, surface, depth):

@@ -34,6 +34,7 @@ import numpy as np
 
 from core.errors import ParameterError
 from core.fitting.deviation import face_deviation
+from core.fitting.records import FitRecord
 from core.subdivision.catmull_clark import mesh_topology
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
@@ -55,7 +56,7 @@ class RefinementResult:
 
     mesh : PolyMesh, the fitted cage that met the tolerance, else the closest one (the
         smallest largest deviation of all fits).
-    info : dict, its fit's info.
+    info : core.fitting.records.FitRecord or None, its fit's record (None: no fit yet).
     rounds : list of dict, per fit: ``faces``, ``max_deviation`` and ``mean_deviation``
         (fractions of the target's bounding-box diagonal), ``offending_faces`` and, when a
         refinement was tried after it, ``split``: which cage's strips were split (``'fitted
@@ -65,7 +66,7 @@ class RefinementResult:
     """
 
     mesh: PolyMesh
-    info: dict
+    info: FitRecord | None
     rounds: list = field(default_factory=list)
     met: bool = False
     reason: str = ""
@@ -81,8 +82,8 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
     target : TriMesh
     tolerance : float > 0, fraction of the target's bounding-box diagonal.
     max_faces : int, no refinement beyond this many faces.
-    fit : callable ``fit(cage) -> (fitted PolyMesh, info dict)`` (the configured fit;
-        its ``info["levels"]`` says the subdivision level of the fine limit points).
+    fit : callable ``fit(cage) -> (fitted PolyMesh, FitRecord)`` (the configured fit;
+        the record's ``levels`` is the subdivision level of the fine limit points).
     crossing_faces : None, or callable ``crossing_faces(cage) -> (k, 2) int`` the base faces
         of the triangle pairs where the cage's limit surface crosses itself (at the fit's
         level). Given, a refined cage that crosses itself more than the fitted one is not
@@ -110,7 +111,7 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
                              f"diagonal, got {tolerance!r}")
     surface = TargetSurface(target.vertices, target.faces)
     cage = base
-    result = RefinementResult(base, {})
+    result = RefinementResult(base, None)
     closest = None  # (largest deviation, fitted cage, info) of the closest fit so far
     for done in range(max_rounds):
         fitted, info = fit(cage)
@@ -119,7 +120,7 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
         offending = np.flatnonzero(per_face > tolerance)
         result.rounds.append({"faces": int(fitted.n_faces),
                               "max_deviation": float(per_face.max()),
-                              "mean_deviation": float(info["mean_distance"]),
+                              "mean_deviation": float(info.figures.distances.mean_distance),
                               "offending_faces": int(len(offending)),
                               "unproven_area": deviation.unproven_area})
         if closest is None or per_face.max() < closest[0]:

@@ -170,9 +170,9 @@ def test_the_inside_fit_of_a_creased_cage_starts_from_its_fitted_crease_curves()
     target = load_dev_mesh("octagonal_pocket.stl")
     cage = _tagged_cage(target, 300)
     fitted, info = fit_base_mesh(cage, target, mode="inside", seed=0)
-    assert info["start"].startswith(CREASED_START) and info["rounds"] == 0
-    assert info["self_intersections"] == 0
-    assert info["outside_volume_fraction"] <= 0.01
-    assert info["mean_distance"] <= 0.85 * info["initial_mean_distance"]
+    assert info.start.startswith(CREASED_START) and info.rounds == 0
+    assert info.self_intersections == 0
+    assert info.figures.outside_volume_fraction <= 0.01
+    assert info.figures.distances.mean_distance <= 0.85 * info.figures.initial.mean_distance
     again, _ = fit_base_mesh(cage, target, mode="inside", seed=1)
     np.testing.assert_array_equal(again.vertices, fitted.vertices)

@@ -288,16 +288,16 @@ def test_fit_of_a_decimation_cage_on_a_thin_part_does_not_cross_itself(idler, mo
     target, cage = idler
     fitted, info = fit_base_mesh(cage, target, mode=mode)
     # the plain least-squares fit pulls thin walls through each other here
-    assert info["refit_crossings"][0] > 0
-    assert info["self_intersections"] == 0
+    assert info.least_squares.untangled.refit_crossings[0] > 0
+    assert info.self_intersections == 0
     assert export_limit_crossings(fitted).count == 0      # the export's own check agrees
     # closeness is kept: best-fit at most half the unfitted mean distance (inside mode, one
     # sided, 0.7), the largest distance no worse than the cage's
-    assert info["mean_distance"] <= (0.5 if mode == "best-fit" else 0.7) * \
-        info["initial_mean_distance"]
-    assert info["max_distance"] <= info["initial_max_distance"]
+    assert info.figures.distances.mean_distance <= (0.5 if mode == "best-fit" else 0.7) * \
+        info.figures.initial.mean_distance
+    assert info.figures.distances.max_distance <= info.figures.initial.max_distance
     if mode == "inside":
-        assert info["outside_volume_fraction"] <= 0.01
+        assert info.figures.outside_volume_fraction <= 0.01
 
 
 @pytest.mark.slow
@@ -311,12 +311,13 @@ def test_the_inside_fit_ends_clean_and_inside_whether_crossings_count_as_local_o
 
     target, cage = idler
     _, info = fit_base_mesh(cage, target, mode="inside", seed=1)
-    assert info["refit_crossings"][0] > 0  # the least-squares start crosses itself
-    assert info["self_intersections"] == 0 and info["outside_volume_fraction"] <= 0.01
+    # the least-squares start crosses itself
+    assert info.least_squares.untangled.refit_crossings[0] > 0
+    assert info.self_intersections == 0 and info.figures.outside_volume_fraction <= 0.01
     monkeypatch.setattr(fit_module, "SPREAD_CROSSINGS", 0.0)
     fitted, spread = fit_base_mesh(cage, target, mode="inside", seed=1)
-    assert spread["self_intersections"] == 0 and export_limit_crossings(fitted).count == 0
-    assert spread["outside_volume_fraction"] <= 0.01
+    assert spread.self_intersections == 0 and export_limit_crossings(fitted).count == 0
+    assert spread.figures.outside_volume_fraction <= 0.01
 
 
 @pytest.mark.slow
@@ -345,8 +346,8 @@ def test_the_long_refits_run_only_after_the_short_ones_took_most_crossings_off(
     _, info = fit_base_mesh(cage, target, mode="best-fit")
     assert refits[0] == "refit"
     assert ("cold_refit" in refits) == long_way
-    assert ("cold_refit_crossings" in info) == long_way
-    assert info["self_intersections"] == 0
+    assert (info.least_squares.untangled.cold_refit_crossings is not None) == long_way
+    assert info.self_intersections == 0
 
 
 @pytest.mark.slow
@@ -360,11 +361,11 @@ def test_the_rgp_retry_with_a_shorter_step_ends_clean_and_inside(idler_290, monk
 
     target, cage = idler_290
     fitted, kept = fit_base_mesh(cage, target)
-    assert kept["self_intersections"] == 0 and kept["outside_volume_fraction"] <= 0.01
+    assert kept.self_intersections == 0 and kept.figures.outside_volume_fraction <= 0.01
     monkeypatch.setattr(fit_module, "RETRY_OUTSIDE", 0.0)
     _, again = fit_base_mesh(cage, target)
-    assert again["self_intersections"] == 0 and again["outside_volume_fraction"] <= 0.01
-    assert again["mean_distance"] <= again["initial_mean_distance"]
+    assert again.self_intersections == 0 and again.figures.outside_volume_fraction <= 0.01
+    assert again.figures.distances.mean_distance <= again.figures.initial.mean_distance
 
 
 def spindle_torus():
@@ -475,6 +476,6 @@ def test_inside_fit_of_a_thin_plate_stays_inside_and_clean(gripper):
     0.5 % rule; the fit alone is held to twice that)."""
     target, cage = gripper
     fitted, info = fit_base_mesh(cage, target, mode="inside")
-    assert info["self_intersections"] == 0 and export_limit_crossings(fitted).count == 0
-    assert info["outside_volume_fraction"] <= 0.01
-    assert info["held_back"] < 0.5 * len(cage.vertices)
+    assert info.self_intersections == 0 and export_limit_crossings(fitted).count == 0
+    assert info.figures.outside_volume_fraction <= 0.01
+    assert info.held_back < 0.5 * len(cage.vertices)

@@ -8,6 +8,7 @@ from core.errors import ParameterError
 from core.fitting.outside_refinement import (OUTSIDE_DEPTH, faces_outside,
                                              fit_with_outside_refinement)
 from core.fitting.deviation import fine_limit_points
+from core.fitting.records import Distances, FitFigures, FitRecord
 from core.params import ReconstructionParams
 from core.polymesh_checks import check_polymesh
 from core.subdivision.sample_cages import grid_sphere
@@ -45,7 +46,9 @@ def stub_fit(outside_by_faces, log):
     ``outside_by_faces(n_faces)``; every cage it is given is appended to ``log``."""
     def fit(cage):
         log.append(cage)
-        return cage, {"levels": 2, "outside_volume_fraction": outside_by_faces(cage.n_faces)}
+        nothing = Distances(0.0, 0.0, 0.0, 0.0)
+        figures = FitFigures(nothing, nothing, outside_by_faces(cage.n_faces), 0.0, 0.0)
+        return cage, FitRecord("inside", 2, "limit", None, figures, 0.0)
     return fit
 
 
