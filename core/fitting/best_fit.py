@@ -35,9 +35,10 @@ import scipy.linalg
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-from core.fitting.responses import INSIDE_SLACK, InsideBounds, vertex_normals
+from core.fitting.responses import InsideBounds, vertex_normals
 from core.geometry import scatter_add
 from core.subdivision.catmull_clark import mesh_topology
+from core.tolerances import CONTACT
 from core.types import PolyMesh
 
 _DENSE_UNKNOWNS = 3000
@@ -168,7 +169,7 @@ def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
     V = np.array(start, dtype=np.float64)
     system = NormalEquations(PolyMesh(V, base.face_vertices, base.face_offsets), mapping,
                              smoothness, damping, stiffness)
-    known = InsideBounds(INSIDE_SLACK * target.diagonal, margin)
+    known = InsideBounds(CONTACT * target.diagonal, margin)
     for done in range(rounds):
         X = mapping @ V
         query = known.undecided(X)

@@ -10,7 +10,7 @@ that is fitted is the one exported later; ``surface='control'`` uses the level-i
 control points ``S_i V0`` as in the paper's Eq. 10.
 """
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -19,9 +19,8 @@ from core.errors import InvalidMeshError, ParameterError
 from core.fitting.best_fit import BestFitResult, best_fit, pull_inside
 from core.fitting.contain import nudge_inside
 from core.fitting.crease_curves import fit_crease_curves
-from core.fitting.crossings import (STIFFEN_TRIES, UNTANGLE_PROGRESS, count_crossings,
-                                     crossing_pairs, hold_back_crossings, influencing,
-                                     stiffen_until_clean)
+from core.fitting.crossings import (UNTANGLE, count_crossings, crossing_pairs,
+                                     hold_back_crossings, influencing, stiffen_until_clean)
 from core.fitting.records import (Distances, FitFigures, FitRecord, FitSetup, InsideFit,
                                     InsideStart, LeastSquaresFit, Untangling)
 from core.fitting.responses import thickness, volume
@@ -34,12 +33,61 @@ from core.subdivision.catmull_clark import build_hierarchy
 from core.subdivision.limit import limit_matrices
 from core.target_surface import TargetSurface
 from core.threads import single_threaded
+from core.tolerances import CONTACT
 from core.types import PolyMesh
 
 MODES = ("inside", "best-fit", "none")
-FINE_ROUNDS = 2
 STARTS = ("best-fit", "cage")
 SURFACES = ("limit", "control")
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """Tuned constants of :func:`fit_base_mesh`, one per choice the fit makes."""
+
+    fine_rounds: int = 2
+    """Least-squares rounds on the fit's level after the level-1 rounds
+    (:func:`_two_level_best_fit`), and of each untangling refit (:func:`_untangled`)."""
+    retry_step: float = 0.4
+    """Step of the RGP's second run, times the first's, when the first kept its start
+    (:func:`_rgp`)."""
+    retry_outside: float = 1e-3
+    """Fraction of the target's volume the start's outside points must stand for before the
+    RGP runs again with ``retry_step`` (a fifth of the 0.5 % containment goal): a start with
+    only a little outside is kept, since a second run raises its mean distance; one with
+    much outside runs again."""
+    rgp_passes: int = 3
+    """Most further RGP passes of :func:`_passes_around_crossings`."""
+    inside_margin: float = 0.25
+    """Depth the inside start pulls the outside limit points to, times the RMS signed distance
+    of the least-squares fit's limit points (a quarter gives a lower mean distance after the
+    RGP than none or a half)."""
+    inside_rounds: int = 2
+    """Rounds of the pull inside (:func:`core.fitting.best_fit.pull_inside`)."""
+    spread_crossings: float = 2.0 / 3.0
+    """Fraction of the base vertices influencing the least-squares fit's crossing triangles
+    above which the inside fit's start is refitted stiffer (:func:`_untangled`): a thin plate
+    pulled through itself over most of its area. Where the crossings are local (at most
+    about half of the base vertices), the fit is held back towards the cage there instead.
+    The refits stiffen the smoothness term at every vertex influencing a crossing, and the
+    inside fit that starts from them is worse than the one that starts from the unstiffened
+    fit held back (a larger mean distance, at twice the CPU time); a thin plate held back
+    without refits leaves more of its volume outside."""
+    long_way_left: float = 0.15
+    """Fraction of the first fit's crossing pairs the short untangling refits may leave for
+    the refits to be made again the long way (:func:`_untangled`). Where they left less, the
+    long way usually clears what was left; where they left more, the crossings are where
+    the cage cannot follow the part, and the long way does not have fewer but costs
+    seconds."""
+    distance_samples: int = 20000
+    """Target samples of the target-to-surface figures (:func:`_distances`)."""
+    near_touch: float = 0.01
+    """Thinnest wall of the inside start, times the mean base edge, below which the default
+    ``t_min`` is 0 (the thickness constraint left off, :func:`_default_t_min`)."""
+
+
+FIT = FitSettings()
+"""The settings this module runs with."""
 
 
 @single_threaded()
@@ -304,7 +352,7 @@ def _measure(setup, vertices, V0, seed):
     measuring = time.perf_counter()
     target, T = setup.target, setup.triangles
     # the points of target.samples without the pseudo-normals it also finds (not needed here)
-    points = sample_surface(target.vertices, target.faces, DISTANCE_SAMPLES,
+    points = sample_surface(target.vertices, target.faces, FIT.distance_samples,
                             np.random.default_rng(seed))
     X = setup.limit_map @ vertices
     report = containment(X, T, target.vertices, target.faces)
@@ -314,18 +362,9 @@ def _measure(setup, vertices, V0, seed):
                       report["uncovered_volume_fraction"], time.perf_counter() - measuring)
 
 
-RETRY_STEP = 0.4
-"""Step of the RGP's second run, times the first's, when the first kept its start
-(:func:`_rgp`)."""
-RETRY_OUTSIDE = 1e-3
-"""... and the start's outside points stand for more than this fraction of the target's
-volume (a fifth of the 0.5 % containment goal): a start with only a little outside is
-kept, since a second run raises its mean distance; one with much outside runs again."""
-
-
 def _rgp(problem, vertices, step, iterations, options, target_volume):
-    """The RGP from ``vertices``; run again with ``RETRY_STEP`` times the step when no
-    iterate after the start was feasible and the start leaves more than ``RETRY_OUTSIDE``
+    """The RGP from ``vertices``; run again with ``FIT.retry_step`` times the step when no
+    iterate after the start was feasible and the start leaves more than ``FIT.retry_outside``
     of ``target_volume`` (model units cubed) outside, estimated as the summed depth of its
     outside fine points times the mean area per fine point.
 
@@ -344,16 +383,12 @@ def _rgp(problem, vertices, step, iterations, options, target_volume):
     result = run_rgp(problem, vertices, step, iterations=iterations, **options)
     outside = result.history["packaging"][0] * problem.area / problem.mapping.shape[0]
     if result.iterations and result.best_iteration == 0 and problem.t_min > 0 \
-            and result.iterations < iterations and outside > RETRY_OUTSIDE * target_volume:
+            and result.iterations < iterations and outside > FIT.retry_outside * target_volume:
         first = result.iterations
-        step = RETRY_STEP * step
+        step = FIT.retry_step * step
         result = run_rgp(problem, vertices, step, iterations=iterations - first, **options)
         result.iterations += first
     return result, step
-
-
-RGP_PASSES = 3
-"""Most further RGP passes of :func:`_passes_around_crossings`."""
 
 
 def _passes_around_crossings(problem, held, moved, T, step, budget, options):
@@ -366,7 +401,7 @@ def _passes_around_crossings(problem, held, moved, T, step, budget, options):
     towards the start, which lies partly outside. From the held-back result the RGP runs
     again with those vertices fixed, so the others can still move in; its result is held
     back the same way, and the vertices cut then are fixed too, until a pass holds nothing
-    back, ``RGP_PASSES`` passes ran or the iteration budget is spent (on a thin plate the
+    back, ``FIT.rgp_passes`` passes ran or the iteration budget is spent (on a thin plate the
     later passes bring in part of what the first left outside).
 
     Parameters
@@ -385,7 +420,7 @@ def _passes_around_crossings(problem, held, moved, T, step, budget, options):
     """
     fixed = (held != moved).any(axis=1)
     passes, used = [], 0
-    while len(passes) < RGP_PASSES and used < budget:
+    while len(passes) < FIT.rgp_passes and used < budget:
         again = run_rgp(problem, held, step, iterations=budget - used, fixed=fixed, **options)
         used += again.iterations
         vertices, _, count = _held_back(held, 0, again.vertices, problem.mapping, T)
@@ -395,13 +430,6 @@ def _passes_around_crossings(problem, held, moved, T, step, budget, options):
         if not count:
             break
     return held, passes, used, fixed
-
-
-INSIDE_MARGIN = 0.25
-"""Depth the inside start pulls the outside limit points to, times the RMS signed distance
-of the least-squares fit's limit points (a quarter gives a lower mean distance after the
-RGP than none or a half)."""
-INSIDE_ROUNDS = 2
 
 
 CREASED_START = "crease-fitted cage"
@@ -414,39 +442,22 @@ pulls do not untangle it either. The crease-curve start reaches a comparable fit
 time, and without samples of the target it does not depend on the seed."""
 
 
-SPREAD_CROSSINGS = 2.0 / 3.0
-"""In inside mode the least-squares fit is refitted stiffer (:func:`_untangled`) only when
-more than this fraction of the base vertices influence its crossing triangles: a thin plate
-pulled through itself over most of its area. Where the crossings are local (at most about
-half of the base vertices), the fit is held back towards the cage there instead. The refits stiffen the smoothness term at every vertex
-influencing a crossing, and the inside fit that starts from them is worse than the one that
-starts from the unstiffened fit held back (a larger mean distance, at twice the CPU time);
-a thin plate held back without refits leaves more of its volume outside."""
-
-
-LONG_WAY_LEFT = 0.15
-"""The untangling refits are made again the long way (:func:`_untangled`) only when the
-short way left at most this fraction of the first fit's crossing pairs. Where it left less,
-the long way usually clears what was left; where it left more, the crossings are where the
-cage cannot follow the part, and the long way does not have fewer but costs seconds."""
-
-
 def _untangled(base, setup, vertices, rounds, seed, refit_local=True):
     """The least-squares fit made not to cross itself where a refit or the cage allows.
 
     Refits with a stiffer smoothness term under the crossings
     (:func:`core.fitting.crossings.stiffen_until_clean`), each from the fit before it and on
-    the fit's level only (``FINE_ROUNDS`` rounds: the stiffer term changes the fit only
+    the fit's level only (``FIT.fine_rounds`` rounds: the stiffer term changes the fit only
     near the crossings, so the coarse rounds' large moves need not be made again). If they
     do not reach a clean fit, the refits are made again the long way, each a whole
     two-level fit from the cage (``cold_refit_crossings``), and the fit with fewer
     crossings is kept: stiffening from a crossing fit can bring its crossings back.
     The long way is taken only when the short way took most crossings off
-    (``LONG_WAY_LEFT``). Either way the refits stop once one takes less than
-    ``UNTANGLE_PROGRESS`` off the fewest crossings of a fit still far from clean (the
+    (``FIT.long_way_left``). Either way the refits stop once one takes less than
+    ``UNTANGLE.progress`` off the fewest crossings of a fit still far from clean (the
     creased cages' fits cross in a hundred pairs or more, and stiffening does not untangle
     them). With ``refit_local=False`` (the inside fit) there are no refits when at most
-    ``SPREAD_CROSSINGS`` of the base vertices influence the first fit's crossings. If the fit
+    ``FIT.spread_crossings`` of the base vertices influence the first fit's crossings. If the fit
     still crosses and the cage's limit surface does not, the fit is held back towards the
     cage there (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses
     itself is no reference to hold back to (nearly every base vertex would go back).
@@ -463,7 +474,7 @@ def _untangled(base, setup, vertices, rounds, seed, refit_local=True):
     limit_map, T, target = setup.limit_map, setup.triangles, setup.target
 
     def refit(stiffness, previous):
-        return best_fit(base, limit_map, T, target, rounds=min(rounds, FINE_ROUNDS),
+        return best_fit(base, limit_map, T, target, rounds=min(rounds, FIT.fine_rounds),
                         seed=seed, start=previous, stiffness=stiffness, refit=True).vertices
 
     def cold_refit(stiffness, previous):
@@ -472,14 +483,14 @@ def _untangled(base, setup, vertices, rounds, seed, refit_local=True):
 
     first = crossing_pairs(limit_map, T, vertices)
     refitted = refit_local or (len(influencing(first, limit_map, T))
-                               > SPREAD_CROSSINGS * len(vertices))
-    tries = STIFFEN_TRIES if refitted else 0
+                               > FIT.spread_crossings * len(vertices))
+    tries = UNTANGLE.stiffen_tries if refitted else 0
     untangled = stiffen_until_clean(vertices, refit, limit_map, T, tries=tries, pairs=first,
-                                    progress=UNTANGLE_PROGRESS)
+                                    progress=UNTANGLE.progress)
     cold_counts = None
-    if tries and 0 < untangled.crossings <= LONG_WAY_LEFT * untangled.counts[0]:
+    if tries and 0 < untangled.crossings <= FIT.long_way_left * untangled.counts[0]:
         cold = stiffen_until_clean(vertices, cold_refit, limit_map, T, pairs=first,
-                                   progress=UNTANGLE_PROGRESS)
+                                   progress=UNTANGLE.progress)
         cold_counts = cold.counts
         if cold.crossings < untangled.crossings:
             untangled = cold
@@ -530,31 +541,31 @@ def _pulled_inside(base, limit_map, T, target, vertices, stiffness):
     crossings : list of int, crossing pairs of the pull and of each stiffer pull.
     """
     start = target.closest(limit_map @ vertices)
-    margin = INSIDE_MARGIN * float(np.sqrt(np.mean(start.signed ** 2)))
+    margin = FIT.inside_margin * float(np.sqrt(np.mean(start.signed ** 2)))
     weights = np.ones(len(vertices)) if stiffness is None else stiffness
 
     def pull(extra, previous=None):
-        return pull_inside(base, limit_map, target, vertices, margin, INSIDE_ROUNDS,
+        return pull_inside(base, limit_map, target, vertices, margin, FIT.inside_rounds,
                            stiffness=weights * extra, start_closest=start)
 
     pulled = stiffen_until_clean(pull(np.ones(len(vertices))), pull, limit_map, T,
-                                 tries=0 if stiffness is None else STIFFEN_TRIES)
+                                 tries=0 if stiffness is None else UNTANGLE.stiffen_tries)
     return pulled, margin, pulled.counts
 
 
 def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness=None, seed=0):
-    """Least-squares fit: ``rounds - FINE_ROUNDS`` rounds on the level-1 limit points
-    (a quarter of the points; the large moves), then up to ``FINE_ROUNDS`` on the fit's
+    """Least-squares fit: ``rounds - FIT.fine_rounds`` rounds on the level-1 limit points
+    (a quarter of the points; the large moves), then up to ``FIT.fine_rounds`` on the fit's
     level: 8 + 2 rounds reach a lower mean distance than 10 level-2 rounds in about half
     the time.
 
     Returns
     -------
     fine, coarse : BestFitResult of the two stages (``coarse`` has 0 rounds when the fit
-        itself is on level 1 or ``rounds <= FINE_ROUNDS``).
+        itself is on level 1 or ``rounds <= FIT.fine_rounds``).
     """
     levels = len(hierarchy.meshes) - 1
-    coarse_rounds = rounds - FINE_ROUNDS if levels > 1 else 0
+    coarse_rounds = rounds - FIT.fine_rounds if levels > 1 else 0
     if coarse_rounds > 0:
         coarse_mesh = hierarchy.meshes[1]
         coarse_map = (limit_matrices(coarse_mesh)[0] @ hierarchy.composite(0)).tocsr()
@@ -568,24 +579,20 @@ def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness
     return fine, coarse
 
 
-DISTANCE_SAMPLES = 20000
-"""Target samples of the target-to-surface figures (:func:`_distances`)."""
-
-
 def _distances(X, T, target, points):
     """Both one-sided distances between the fine limit surface and the target.
 
     Parameters
     ----------
     X : (n, 3) float64 fine limit points; T : (t, 3) int64 their triangles.
-    target : TargetSurface; points : (DISTANCE_SAMPLES, 3) float64 area-weighted samples of
+    target : TargetSurface; points : (FIT.distance_samples, 3) float64 area-weighted samples of
         it (drawn once per fit, for the result's figures and the cage's).
 
     Returns
     -------
     core.fitting.records.Distances, fractions of the target's bounding-box diagonal:
     ``mean_distance`` / ``max_distance``, the fine limit points to the target;
-    ``target_mean_distance`` / ``target_max_distance``, :data:`DISTANCE_SAMPLES`
+    ``target_mean_distance`` / ``target_max_distance``, ``FIT.distance_samples``
     area-weighted target samples (the maximum also over the target's vertices) to the
     triangulated limit surface: what the surface misses, such as a thin horn's tip the
     limit surface stops short of.
@@ -609,13 +616,13 @@ def _may_be_farther(points, on_surface, distance, diagonal):
     ``distance`` (model units).
 
     A point of the surface (``on_surface``, (s, 3), such as the fine limit points and the
-    closest points of the samples) bounds the distance from above, so a target vertex
-    nearer than ``distance`` to one of them cannot raise the maximum and is not queried
-    (``1e-9 * diagonal`` of slack for the rounding of those points): on a fine target the
-    query of the rest costs a fraction of the query of all.
+    closest points of the samples) bounds the distance from above, so a target vertex nearer
+    than ``distance`` to one of them cannot raise the maximum and is not queried
+    (``core.tolerances.CONTACT * diagonal`` of slack for the rounding of those points): on a
+    fine target the query of the rest costs a fraction of the query of all.
     """
     bound, _ = cKDTree(on_surface).query(points)
-    return bound > distance - 1e-9 * diagonal
+    return bound > distance - CONTACT * diagonal
 
 
 def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction):
@@ -674,14 +681,9 @@ def _area(X, T):
     return float(face_areas(X, T).sum())
 
 
-NEAR_TOUCH = 0.01
-"""Thinnest wall of the inside start, times the mean base edge, below which the default
-``t_min`` is 0 (the thickness constraint left off)."""
-
-
 def _default_t_min(X, T, edge):
     """``min(0.1 * edge, 0.5 * thinnest wall)``, walls measured up to ``0.2 * edge``; 0 where
-    the thinnest wall is below ``NEAR_TOUCH * edge``.
+    the thinnest wall is below ``FIT.near_touch * edge``.
 
     A start whose walls nearly touch (where a crossing was held back just far enough,
     :func:`core.fitting.crossings.hold_back_crossings`) cannot keep a constraint that thin:
@@ -691,6 +693,6 @@ def _default_t_min(X, T, edge):
     """
     cap = 0.1 * edge
     found = thickness(X, T, 2.0 * cap).thickness.min()
-    if found < NEAR_TOUCH * edge:
+    if found < FIT.near_touch * edge:
         return 0.0
     return float(min(cap, 0.5 * found))

@@ -1,12 +1,13 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Refine the cage where an inside fit leaves volume outside the target.
 
-The inside fit (:func:`core.fitting.fit.fit_base_mesh`) holds its moves back where the
-limit surface would cross itself. On a thin plate that a coarse cage spans with wide
-stencils (a plate many times thinner than the cage's edges) the relaxed gradient
-projection pulls the plate's two walls through each other, the hold-back returns those
-base vertices towards the start, and the start lies partly outside, so a visible share of
-the target's volume stays outside, varying with the last bits of the cage. A finer cage there has narrower stencils and fills the plate from inside.
+The inside fit (:func:`core.fitting.fit.fit_base_mesh`) holds its moves back where the limit
+surface would cross itself. On a thin plate that a coarse cage spans with wide stencils (a
+plate many times thinner than the cage's edges) the relaxed gradient projection pulls the
+plate's two walls through each other, the hold-back returns those base vertices towards the
+start, and the start lies partly outside, so a visible share of the target's volume stays
+outside, varying with the last bits of the cage. A finer cage there has narrower stencils
+and fills the plate from inside.
 
 :func:`fit_with_outside_refinement` fits, and while more than ``goal`` of the target's volume
 lies outside, splits the quad strips of the **unfitted** cage through the base faces whose
@@ -31,11 +32,20 @@ from core.fitting.refine import refined_without_crossings
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
-OUTSIDE_DEPTH = 1e-3
-"""A base face is refined when one of its fine limit points lies deeper outside the target
-than this fraction of the target's bounding-box diagonal."""
-OUTSIDE_ROUNDS = 2
-"""Most refinements (a second round seldom leaves less outside than the first)."""
+
+@dataclass(frozen=True)
+class OutsideRefinementSettings:
+    """Tuned constants of :func:`fit_with_outside_refinement`."""
+
+    depth: float = 1e-3
+    """Depth outside the target, a fraction of its bounding-box diagonal, beyond which a fine
+    limit point has its base face refined."""
+    rounds: int = 2
+    """Most refinements (a second round seldom leaves less outside than the first)."""
+
+
+OUTSIDE = OutsideRefinementSettings()
+"""The settings this module runs with."""
 
 
 @dataclass
@@ -57,7 +67,7 @@ class OutsideRefinement:
 
 
 def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_faces=None,
-                                rounds=OUTSIDE_ROUNDS, progress=None):
+                                rounds=OUTSIDE.rounds, progress=None):
     """Fit ``base``; while too much volume is outside, refine the cage there and fit again.
 
     Parameters
@@ -96,10 +106,10 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
             return result
         if surface is None:
             surface = TargetSurface(target.vertices, target.faces)
-        marked = faces_outside(fitted, info.levels, surface, OUTSIDE_DEPTH)
+        marked = faces_outside(fitted, info.levels, surface, OUTSIDE.depth)
         result.rounds[-1]["refined_faces"] = int(marked.sum())
         refined, why_not = (None, "no point lies deeper outside than "
-                            f"{OUTSIDE_DEPTH:g} of the diagonal") if not marked.any() else \
+                            f"{OUTSIDE.depth:g} of the diagonal") if not marked.any() else \
             refined_without_crossings(cage, marked, crossing_faces)
         if refined is not None and refined.n_faces > max_faces:
             why_not = (f"the refined cage would have {refined.n_faces} faces, more than "

@@ -15,13 +15,17 @@ The fit is a sequence of phases, each returning one record:
 :class:`FitRecord` holds them all; the fit stage builds its report section from it
 (:func:`core.stages.fit.fit_section`).
 """
+from __future__ import annotations
+
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import numpy as np
-from scipy import sparse
+if TYPE_CHECKING:  # annotations only: the records import nothing of the fit
+    import numpy as np
+    from scipy import sparse
 
-from core.fitting.crease_curves import CreaseFit
-from core.target_surface import TargetSurface
+    from core.fitting.crease_curves import CreaseFit
+    from core.target_surface import TargetSurface
 
 
 @dataclass(frozen=True)

@@ -91,12 +91,6 @@ def packaging(X, target, mode="inside", known=None):
     return value, gradient, signed
 
 
-INSIDE_SLACK = 1e-9
-"""Depth below the target, times its bounding-box diagonal, within which a fine point whose
-inside bound (:class:`InsideBounds`) does not prove it inside is
-queried again."""
-
-
 class InsideBounds:
     """Points proven inside a target since their last closest-point query, and the answers
     of the points that have not moved since.

@@ -40,9 +40,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.fitting.responses import (INSIDE_SLACK, InsideBounds, packaging, thickness_constraint,
+from core.fitting.responses import (InsideBounds, packaging, thickness_constraint,
                                     volume)
 from core.progress import NO_PROGRESS
+from core.tolerances import CONTACT
 
 P_REF = 1e3
 
@@ -76,7 +77,7 @@ class FitProblem:
         self.t_min = float(t_min)
         self.area = float(area)
         # queries of the points proven still inside are skipped (exact, see InsideBounds)
-        self.known = InsideBounds(INSIDE_SLACK * target.diagonal) if mode == "inside" else None
+        self.known = InsideBounds(CONTACT * target.diagonal) if mode == "inside" else None
 
     def fine(self, V0):
         """(n_fine, 3) float64 fine positions ``M V0`` (Eq. 10)."""

@@ -118,7 +118,7 @@ def test_outside_refinement_is_reported_and_keeps_the_fit_leaving_least_outside(
     goal below that, the report's section lists the fits (the first on the base mesh), the
     cage kept leaves the least outside, and the stage warns while it is above the goal; at
     the default goal (0.003) there is no section and the fit is the same as the first. (Its
-    outside points lie about 0.9e-3 of the diagonal deep, just under ``OUTSIDE_DEPTH``, so
+    outside points lie about 0.9e-3 of the diagonal deep, just under ``OutsideRefinementSettings.depth``, so
     here it is usually not refined; the refinement itself is tested in
     ``test_outside_refinement.py``.)"""
     goal = 1e-6

@@ -526,7 +526,7 @@ def test_a_nudge_round_with_loose_bounds_carries_the_far_walls_as_with_exact_one
 
 def test_nudge_inside_stops_a_kind_of_rounds_that_no_longer_takes_depth_off(monkeypatch):
     """When a round leaves the summed outside depth where it was (less than
-    ``NUDGE_PROGRESS`` off), no further round of that kind runs: with a depth that never
+    ``NudgeSettings.progress`` off), no further round of that kind runs: with a depth that never
     falls, one round of each kind, not ``rounds`` of each (the moves themselves are real and
     clean: a small outward shift of every base vertex of a grid sphere)."""
     from core.fitting import contain

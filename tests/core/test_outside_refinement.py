@@ -5,7 +5,7 @@ import pytest
 import trimesh
 
 from core.errors import ParameterError
-from core.fitting.outside_refinement import (OUTSIDE_DEPTH, faces_outside,
+from core.fitting.outside_refinement import (OUTSIDE, faces_outside,
                                              fit_with_outside_refinement)
 from core.fitting.deviation import fine_limit_points
 from core.fitting.records import Distances, FitFigures, FitRecord
@@ -71,7 +71,7 @@ def test_refinement_splits_the_unfitted_cage_under_the_outside_points():
     assert len(log) == 2
     refined = log[1]
     check_polymesh(refined)  # closed, 2-manifold, consistently oriented
-    marked = faces_outside(cage, 2, TargetSurface(target.vertices, target.faces), OUTSIDE_DEPTH)
+    marked = faces_outside(cage, 2, TargetSurface(target.vertices, target.faces), OUTSIDE.depth)
     assert result.rounds[0]["refined_faces"] == marked.sum() > 0
     assert refined.n_faces > cage.n_faces
     # the refined cage keeps the unfitted cage's limit surface (the strips are split on it)
