@@ -5,10 +5,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from core.fitting.records import OutsideRefinementSummary
 from core.subdivision.limit_crossings import (count_limit_self_intersections, fit_levels,
                                               limit_self_intersections)
 from core.types import FitResult
+
 
 def run_fit(intake, basemesh, params, progress):
     """Fit the base mesh's cage to the target (``params.fit_mode``), to a tolerance if asked.
@@ -53,6 +53,7 @@ def run_fit(intake, basemesh, params, progress):
         if params.fit_mode != "inside" or not params.outside_refinement:
             return fit_once(cage)
         from core.fitting.outside_refinement import fit_with_outside_refinement
+        from core.fitting.records import OutsideRefinementSummary
 
         refined = fit_with_outside_refinement(cage, target, fit_once, params.outside_refinement,
                                               params.max_base_faces, crossing_faces,
