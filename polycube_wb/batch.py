@@ -240,7 +240,7 @@ def row_from_report(job, report, skipped=False):
     source = report.get("input", {})
     ok = [name for name, entry in stages.items() if entry.get("status") == "ok"]
     failed = next(((name, entry) for name, entry in stages.items()
-                   if entry.get("status") in ("failed", "not_available")), None)
+                   if entry.get("status") == "failed"), None)
     batch = report.get("batch", {})
     fit, brep = report.get("fit", {}), report.get("brep", {})
     has_step = bool(report.get("outputs", {}).get("step"))
