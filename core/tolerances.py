@@ -24,8 +24,9 @@ positions: triangles meeting only that closely are not self-intersecting, a patc
 that near an extraordinary vertex is at it, samples of neighbouring patches that close are
 welded into one vertex of the tessellation, a cage vertex that near a target vertex sits on
 it, a fine point that shallow below the target is queried again when its inside bound does
-not prove it inside, and the fit's box and distance bounds are widened by it (relative to
-the largest coordinate where no diagonal is at hand)."""
+not prove it inside, a ray's exit that near its start (times the ray's length) does not
+count, and the fit's box and distance bounds are widened by it (relative to the largest
+coordinate where no diagonal is at hand)."""
 
 BREP_MM = 1e-7
 """Tolerance of the B-rep's vertices, edges and faces, in millimetres (absolute: OpenCascade's

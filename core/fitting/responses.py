@@ -198,7 +198,7 @@ def thickness(X, T, max_length):
 
     A ray leaves each vertex along ``-n_j`` (area-weighted vertex normal); the first
     triangle it exits through (hit with ``d . m > 0``, ``m`` the triangle's outward
-    normal, at a distance ``> 1e-9 * max_length``) ends it. The triangles of the
+    normal, at a distance ``> core.tolerances.CONTACT * max_length``) ends it. The triangles of the
     vertex's own one-ring are entered, not exited, so they never count. The rays are
     cast by :meth:`core.target_surface.TargetSurface.first_exit` (compiled, with an
     exact float64 check and a tolerant re-cast of rays through edges and vertices).
