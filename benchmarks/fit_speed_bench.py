@@ -100,6 +100,9 @@ def worker(tree, path):
         fitted, info = fit_base_mesh(perturbed(cage, k), target, levels=2, mode="inside",
                                      seed=seed)
         cpu = time.process_time() - started
+        if not isinstance(info, dict):  # a tree whose fit returns its phase records
+            from core.stages.fit import fit_section
+            info = {**fit_section(info), "self_intersections": info.self_intersections}
         print(json.dumps({
             "seed": seed, "perturbation": k, "cpu": cpu, "load": load,
             "triangles": len(target.faces),

@@ -101,7 +101,7 @@ def main(argv=None):
 
 def _stage(report):
     stages = report.get("stages", {})
-    failed = [n for n, e in stages.items() if e.get("status") in ("failed", "not_available")]
+    failed = [n for n, e in stages.items() if e.get("status") == "failed"]
     ok = [n for n, e in stages.items() if e.get("status") == "ok"]
     return f"failed at {failed[0]}" if failed else (ok[-1] if ok else "")
 

@@ -54,10 +54,6 @@ class FaceLimitError(ParameterError):
     """
 
 
-class StageNotAvailableError(PolycubeError, NotImplementedError):
-    """A pipeline stage is not implemented yet; the message names the stage."""
-
-
 class LabelingError(PolycubeError):
     """Polycube labeling could not produce a usable result."""
 

@@ -184,3 +184,31 @@ def polymesh_genus(mesh):
     components, _ = connected_components(graph @ graph.T, directed=False)
     euler = len(mesh.vertices) - len(edges) + mesh.n_faces
     return int((2 * components - euler) // 2)
+
+
+def polymesh_summary(mesh):
+    """Counts of a closed polygon mesh (``core.types.PolyMesh``): the report's ``base_mesh``
+    section and the cage object's figures.
+
+    Returns
+    -------
+    dict of int: ``faces``, ``quads``, ``triangles``, ``other`` (faces of more than four
+    corners), ``vertices``, ``extraordinary_vertices`` (valence other than 4) and ``genus``
+    (from the Euler characteristic, one component).
+    """
+    fv, fo = mesh.face_vertices, mesh.face_offsets
+    sizes = np.diff(fo)
+    n = np.int64(len(mesh.vertices))
+    a, b = fv, fv[next_corners(fo)]
+    edges = np.unique(np.minimum(a, b) * n + np.maximum(a, b))
+    valence = np.bincount(np.concatenate([edges // n, edges % n]), minlength=n)
+    chi = int(n) - len(edges) + mesh.n_faces
+    return {
+        "faces": int(mesh.n_faces),
+        "quads": int((sizes == 4).sum()),
+        "triangles": int((sizes == 3).sum()),
+        "other": int((sizes > 4).sum()),
+        "vertices": int(n),
+        "extraordinary_vertices": int((valence != 4).sum()),
+        "genus": int(round((2 - chi) / 2)),
+    }

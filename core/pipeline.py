@@ -5,10 +5,8 @@
 ``core.types.PipelineState``) and its report key. The runner calls each stage with those
 results, the parameters and the stage's share of the progress, stores the typed result it
 returns under the stage's name, and puts the result's report section in the run report.
-A stage that is not built yet raises ``StageNotAvailableError``; the runner records it as
-``not_available`` and marks the later stages ``skipped``. User errors
-(``PolycubeInputError``) propagate unchanged; any other exception is recorded as ``failed``
-and the run stops there.
+User errors (``PolycubeInputError``) propagate unchanged; any other exception is recorded as
+``failed``, the later stages are marked ``skipped`` and the run stops there.
 """
 import resource
 import sys
@@ -17,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.errors import ParameterError, PolycubeInputError, StageNotAvailableError
+from core.errors import ParameterError, PolycubeInputError
 from core.params import ReconstructionParams
 from core.progress import NO_PROGRESS, SubProgress
 from core.stages.basemesh import run_basemesh
@@ -158,9 +156,6 @@ def run_stages(state, stages, params, progress=NO_PROGRESS, report=None):
         start, cpu_start = time.perf_counter(), time.process_time()
         try:
             result = stage.run(*(getattr(state, field) for field in stage.inputs), params, share)
-        except StageNotAvailableError as exc:
-            entry = {"status": "not_available", "message": str(exc)}
-            blocked_by = name
         except PolycubeInputError:
             raise
         except Exception as exc:  # recorded, then reported as an internal failure

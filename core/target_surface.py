@@ -31,6 +31,7 @@ import numpy as np
 from core.box_tree import closest_on_triangles, first_exits, nearest_triangles, triangle_tree
 from core.geometry import (bisect_long_triangles, morton_codes, sample_surface, scatter_add,
                            unit_face_normals, validate_triangles)
+from core.tolerances import CONTACT
 
 EDGE_TOL = 1e-9
 """Barycentric tolerance of the exact ray-triangle test (dimensionless)."""
@@ -226,9 +227,10 @@ class TargetSurface:
         """Where rays starting inside (or on) the surface first leave the solid.
 
         A hit counts if the ray crosses a triangle from inside to outside (``d . m > 0``,
-        ``m`` its outward normal) at ``1e-9 * max_length < t <= max_length``, so the
-        triangles around a ray's own start vertex, which it enters, never count
-        (:func:`core.box_tree.first_exits`, barycentric tolerance ``EDGE_TOL``).
+        ``m`` its outward normal) at ``CONTACT * max_length < t <= max_length``
+        (:data:`core.tolerances.CONTACT`), so the triangles around a ray's own start vertex,
+        which it enters, never count (:func:`core.box_tree.first_exits`, barycentric
+        tolerance ``EDGE_TOL``).
 
         Parameters
         ----------
@@ -243,7 +245,7 @@ class TargetSurface:
         origins = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
         directions = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
         t, face, uv = first_exits(self._ray_tree, self.face_normals, origins, directions,
-                                  max_length, 1e-9 * max_length, EDGE_TOL)
+                                  max_length, CONTACT * max_length, EDGE_TOL)
         found = face >= 0
         bary = np.zeros((len(origins), 3))
         bary[found] = np.stack([1.0 - uv[found].sum(axis=1), uv[found, 0], uv[found, 1]], axis=1)

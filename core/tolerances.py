@@ -19,9 +19,14 @@ most ``ZERO_AREA * diagonal^2`` has no area: intake rejects it, the labeling ref
 take its normal, the cage check rejects it."""
 
 CONTACT = 1e-9
-"""Points closer than ``CONTACT * diagonal`` touch: triangles meeting only that closely are
-not self-intersecting, a patch corner that near an extraordinary vertex is at it, samples of
-neighbouring patches that close are welded into one vertex of the tessellation."""
+"""Points closer than ``CONTACT * diagonal`` touch, the slack for the rounding of computed
+positions: triangles meeting only that closely are not self-intersecting, a patch corner
+that near an extraordinary vertex is at it, samples of neighbouring patches that close are
+welded into one vertex of the tessellation, a cage vertex that near a target vertex sits on
+it, a fine point that shallow below the target is queried again when its inside bound does
+not prove it inside, a ray's exit that near its start (times the ray's length) does not
+count, and the fit's box and distance bounds are widened by it (relative to the largest
+coordinate where no diagonal is at hand)."""
 
 BREP_MM = 1e-7
 """Tolerance of the B-rep's vertices, edges and faces, in millimetres (absolute: OpenCascade's

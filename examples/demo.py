@@ -12,7 +12,6 @@ import sys
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from core.errors import StageNotAvailableError  # noqa: E402
 from polycube_wb.api import check, reconstruct_to_step, subd_to_solid  # noqa: E402
 
 
@@ -23,15 +22,8 @@ def main(out_dir):
     paths = {name: os.path.join(out_dir, "cantilever" + suffix) for name, suffix in
              (("step", ".step"), ("base", "_base.obj"), ("report", "_report.json"),
               ("labels", "_labels.ply"))}
-    try:
-        report = reconstruct_to_step(target, paths["step"], paths["base"], paths["report"],
-                                     paths["labels"])
-    except StageNotAvailableError as exc:
-        print(f"   STEP not written: {exc}")
-        import json
-
-        with open(paths["report"], encoding="utf-8") as handle:
-            report = json.load(handle)
+    report = reconstruct_to_step(target, paths["step"], paths["base"], paths["report"],
+                                 paths["labels"])
     for name, entry in report["stages"].items():
         note = f"  ({entry['message']})" if entry["message"] else ""
         print(f"   {name:<9} {entry['status']:<14}{entry['seconds']:7.2f} s{note}")

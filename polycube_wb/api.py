@@ -10,12 +10,11 @@ import time
 
 import numpy as np
 
-from core.errors import StageNotAvailableError
+from core.mesh_topology import polymesh_summary
 from core.output_files import check_output_path, output_transaction, write_json_atomic
 from core.params import (DEFAULT_EXPORT_FORM, EXPORT_DEPTH, check_export_depth,
                          check_export_form)
-from core.pipeline import (LAST_CORE_STAGE, STOP_AFTER_CHOICES, peak_memory_mb,
-                           reconstruct as run_pipeline)
+from core.pipeline import STOP_AFTER_CHOICES, peak_memory_mb, reconstruct as run_pipeline
 from core.progress import NO_PROGRESS
 from polycube_wb.stage_jobs import read_target_file
 from polycube_wb.view_hook import attach_view_provider
@@ -45,8 +44,7 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
     PolycubeInputError for bad input (nothing is written): a bad file or parameter, an
     output over an input (the mesh or the parts file), two outputs on one path, or an
     output that no stage up to ``stop_after`` makes;
-    StageNotAvailableError when an output needs a stage that is not built yet (the report
-    and the outputs that exist are written first; the exception's ``report`` holds it).
+    the exception of a stage that failed (the report is written first).
     """
     inputs = (mesh_path,) + ((params["parts_file"],) if params.get("parts_file") else ())
     _check_outputs(((step_path, "STEP file", "solid"), (base_mesh_path, "base mesh", "basemesh"),
@@ -55,7 +53,6 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
     result = run_pipeline(mesh_path, params, progress, stop_after)
     report, state = result.report, result.state
     outputs = {}
-    missing = []
     with output_transaction():  # every output or none (an error, Ctrl-C)
         progress.report("writing", 1.0)
         if labels_path is not None:
@@ -67,16 +64,12 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
                                  state.labeling.face_label, state.frames.frame_field.face_frame,
                                  protect=inputs)
                 outputs["labels"] = os.path.abspath(labels_path)
-            else:
-                missing.append(("labels file", "labeling"))
         if base_mesh_path is not None:
             if state.cage is not None:
                 from core.polymesh_io import write_polymesh
 
                 write_polymesh(base_mesh_path, state.cage, inputs)
                 outputs["base_mesh"] = os.path.abspath(base_mesh_path)
-            else:
-                missing.append(("base mesh", "basemesh"))
         if stop_after == "solid":
             if state.patches is not None:
                 progress.report("solid", 1.0)
@@ -90,12 +83,7 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
             else:
                 report["stages"]["solid"] = {"status": "skipped", "seconds": 0.0, "message":
                                              "needs B-spline patches of the fitted base mesh"}
-                if step_path is not None:
-                    missing.append(("STEP file", _first_unavailable(report)))
         progress.report("writing", 1.0)
-        last_stage = LAST_CORE_STAGE[stop_after]
-        if stop_after != "solid" and report["stages"].get(last_stage, {}).get("status") != "ok":
-            missing.insert(0, (f"result of --stop-after {stop_after}", _first_unavailable(report)))
         report["outputs"] = outputs
         report["peak_memory_mb"] = round(peak_memory_mb(), 1)
         if report_path is not None:
@@ -103,14 +91,6 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
             outputs["report"] = os.path.abspath(report_path)
     if result.failed is not None:
         raise result.failed
-    if missing:
-        what, stage = missing[-1]
-        error = StageNotAvailableError(
-            f"cannot write the {what}: the '{stage}' stage is not available yet "
-            f"({report['stages'].get(stage, {}).get('message', 'see the report')}); "
-            f"use --stop-after with one of {', '.join(_available_stops(report))} for what exists")
-        error.report = report
-        raise error
     return report
 
 
@@ -135,18 +115,6 @@ def _check_outputs(outputs, inputs, stop_after):
             if same_file(path, other):
                 raise ParameterError(f"the {other_what} and the {what} are the same file "
                                      f"{os.fspath(path)}; give each output its own path")
-
-
-def _first_unavailable(report):
-    for name, entry in report["stages"].items():
-        if entry["status"] in ("not_available", "failed"):
-            return name
-    return "solid"
-
-
-def _available_stops(report):
-    done = {name for name, entry in report["stages"].items() if entry["status"] == "ok"}
-    return [stop for stop in STOP_AFTER_CHOICES if LAST_CORE_STAGE[stop] in done]
 
 
 def _solid_and_step(patches, step_path, inputs):
@@ -245,7 +213,7 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT
         brep["max_normal_jump_deg"] = patches.info.get("normal_jump_max_deg")
         report = {
             "input": {"file": os.path.abspath(base_mesh_path)},
-            "base_mesh": base_mesh_summary(base),
+            "base_mesh": polymesh_summary(base),
             "patches": _plain(patches.info),
             "brep": brep,
             "stages": stages,
@@ -288,26 +256,6 @@ def _ok(clock):
 
 def _plain(info):
     return {k: (v.item() if isinstance(v, np.generic) else v) for k, v in info.items()}
-
-
-def base_mesh_summary(mesh):
-    """The report's ``base_mesh`` section for a closed polygon mesh."""
-    from core.subdivision.catmull_clark import mesh_topology
-
-    sizes = mesh.face_sizes
-    topology = mesh_topology(mesh.face_vertices, mesh.face_offsets, len(mesh.vertices))
-    n_edges = len(topology.edges)
-    valence = np.bincount(topology.edges.reshape(-1), minlength=len(mesh.vertices))
-    chi = len(mesh.vertices) - n_edges + mesh.n_faces
-    return {
-        "faces": int(mesh.n_faces),
-        "quads": int((sizes == 4).sum()),
-        "triangles": int((sizes == 3).sum()),
-        "other": int((sizes > 4).sum()),
-        "vertices": int(len(mesh.vertices)),
-        "extraordinary_vertices": int((valence != 4).sum()),
-        "genus": int(round((2 - chi) / 2)),
-    }
 
 
 def check(target_path, result_path, components="largest"):
@@ -356,8 +304,8 @@ def reconstruct(doc, mesh_path, progress=NO_PROGRESS, **params):
 
     Raises
     ------
-    PolycubeInputError for bad input (nothing is added);
-    StageNotAvailableError while a stage the solid needs is not built yet.
+    PolycubeInputError for bad input (nothing is added); the exception of a stage that
+    failed (the target mesh is added first).
     """
     from polycube_wb.document import add_solid, add_target_mesh
 
@@ -366,11 +314,6 @@ def reconstruct(doc, mesh_path, progress=NO_PROGRESS, **params):
     add_target_mesh(doc, result.state.intake.target, name + "_target")
     if result.failed is not None:
         raise result.failed
-    if result.state.patches is None:
-        stage = _first_unavailable(result.report)
-        raise StageNotAvailableError(
-            f"the solid needs the '{stage}' stage, which is not available yet: "
-            f"{result.report['stages'][stage]['message']}")
     from polycube_wb.brep import patches_to_solid
 
     return add_solid(doc, patches_to_solid(result.state.patches.patches), name + "_solid")

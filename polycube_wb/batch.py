@@ -239,8 +239,7 @@ def row_from_report(job, report, skipped=False):
     stages = report.get("stages", {})
     source = report.get("input", {})
     ok = [name for name, entry in stages.items() if entry.get("status") == "ok"]
-    failed = next(((name, entry) for name, entry in stages.items()
-                   if entry.get("status") in ("failed", "not_available")), None)
+    failed = _first_failed(stages)
     batch = report.get("batch", {})
     fit, brep = report.get("fit", {}), report.get("brep", {})
     has_step = bool(report.get("outputs", {}).get("step"))
@@ -258,6 +257,12 @@ def row_from_report(job, report, skipped=False):
                    seconds=batch.get("seconds"), peak_memory_mb=report.get("peak_memory_mb"),
                    message=message, thumbnail=os.path.basename(thumbnail) if thumbnail else "",
                    skipped=skipped)
+
+
+def _first_failed(stages):
+    """``(name, entry)`` of the first failed stage of a report's ``stages``, or None."""
+    return next(((name, entry) for name, entry in stages.items()
+                 if entry.get("status") == "failed"), None)
 
 
 def _larger(a, b):

@@ -32,7 +32,7 @@ def run_job(job, stages=None):
     job : polycube_wb.batch.MeshJob
     stages : StageLines announcing the stages, or None for none.
     """
-    from core.errors import PolycubeInputError, StageNotAvailableError
+    from core.errors import PolycubeInputError
     from core.output_files import write_json_atomic
     from core.pipeline import peak_memory_mb
     from polycube_wb.api import reconstruct_to_step
@@ -45,8 +45,6 @@ def run_job(job, stages=None):
         report = reconstruct_to_step(job.source, paths["step"], paths["base_mesh"],
                                      paths["report"], paths["labels"], "solid",
                                      progress=stages or NO_PROGRESS, **job.params)
-    except StageNotAvailableError as exc:
-        report = getattr(exc, "report", None)
     except PolycubeInputError as exc:
         report = {"input": {"file": job.source},
                   "stages": {"intake": {"status": "failed", "seconds": 0.0, "message": str(exc)}}}
@@ -89,7 +87,7 @@ def _read_report(path, not_before):
 
 def _first_failed(report):
     return next((name for name, entry in report.get("stages", {}).items()
-                 if entry.get("status") in ("failed", "not_available")), None)
+                 if entry.get("status") == "failed"), None)
 
 
 def main():

@@ -2,7 +2,7 @@
 """Command line: ``python -m polycube_wb {reconstruct, batch, subd-to-step, check} ...``.
 
 Exit codes: 0 success; 2 bad input (one line on stderr starting ``error:``);
-1 internal failure or a stage that is not available yet (message; the traceback
+1 internal failure (message; the traceback
 only with ``--debug``); 130 cancelled with Ctrl-C (one line ``cancelled at stage S``;
 no output is written, an existing output is unchanged).
 """
@@ -174,20 +174,13 @@ _CANCELLED = {
 
 
 def _reconstruct(args, stages):
-    from core.errors import StageNotAvailableError
     from polycube_wb.api import reconstruct_to_step
 
     params = pipeline_params(args)
     if args.stop_after == "solid" and args.output is None:
         raise PolycubeInputError("reconstruct needs -o OUT.step (or --stop-after an earlier stage)")
-    try:
-        report = reconstruct_to_step(args.target, args.output, args.base_mesh, args.report,
-                                     args.labels, args.stop_after, progress=stages, **params)
-    except StageNotAvailableError as exc:
-        if getattr(exc, "report", None):
-            _print_summary(exc.report)
-        sys.stderr.write(f"failed: {exc}\n")
-        return EXIT_INTERNAL
+    report = reconstruct_to_step(args.target, args.output, args.base_mesh, args.report,
+                                 args.labels, args.stop_after, progress=stages, **params)
     _print_summary(report)
     return EXIT_OK
 

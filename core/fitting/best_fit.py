@@ -35,19 +35,30 @@ import scipy.linalg
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-from core.fitting.responses import INSIDE_SLACK, InsideBounds, vertex_normals
+from core.fitting.responses import InsideBounds, vertex_normals
 from core.geometry import scatter_add
 from core.subdivision.catmull_clark import mesh_topology
+from core.tolerances import CONTACT
 from core.types import PolyMesh
 
-_DENSE_UNKNOWNS = 3000
-"""Most unknowns solved by dense Cholesky (the Catmull-Clark limit stencils make the normal
-matrix about 15 % full); above, sparse LU with a symmetric minimum-degree ordering."""
-COMPATIBLE = 0.5
-"""Pairs whose two unit normals have a dot product below ``COMPATIBLE - COMPATIBLE_RAMP``
-do not count, above ``COMPATIBLE + COMPATIBLE_RAMP`` they count fully (:func:`compatibility`)."""
-COMPATIBLE_RAMP = 0.15
-"""Half width of the dot products over which a pair's weight ramps from 0 to 1."""
+
+@dataclass(frozen=True)
+class BestFitSettings:
+    """Tuned constants of the least-squares fit (:func:`best_fit`)."""
+
+    dense_unknowns: int = 3000
+    """Most unknowns solved by dense Cholesky (the Catmull-Clark limit stencils make the
+    normal matrix about 15 % full); above, sparse LU with a symmetric minimum-degree
+    ordering."""
+    compatible: float = 0.5
+    """Dot product of a closest-point pair's two unit normals at which the pair counts half
+    (:func:`compatibility`)."""
+    compatible_ramp: float = 0.15
+    """Half width of the dot products over which a pair's weight ramps from 0 to 1."""
+
+
+BEST_FIT = BestFitSettings()
+"""The settings this module runs with."""
 
 
 @dataclass
@@ -168,7 +179,7 @@ def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
     V = np.array(start, dtype=np.float64)
     system = NormalEquations(PolyMesh(V, base.face_vertices, base.face_offsets), mapping,
                              smoothness, damping, stiffness)
-    known = InsideBounds(INSIDE_SLACK * target.diagonal, margin)
+    known = InsideBounds(CONTACT * target.diagonal, margin)
     for done in range(rounds):
         X = mapping @ V
         query = known.undecided(X)
@@ -241,7 +252,7 @@ class NormalEquations:
         scale = float(np.mean([piece[a, a].diagonal().mean() for a in range(3)]))
         rhs = (rhs + (self.smoothness * scale) * self.smooth_init
                + (self.damping * scale) * V.T.reshape(-1))
-        if 3 * n <= _DENSE_UNKNOWNS:
+        if 3 * n <= BEST_FIT.dense_unknowns:
             system = (self.smoothness * scale) * self._smooth_dense
             system.flat[::3 * n + 1] += self.damping * scale
             for (a, c), block in piece.items():
@@ -334,10 +345,11 @@ def _complex(matrix):
 
 def compatibility(dots):
     """(k,) float64 in [0, 1]: the weight of pairs whose unit normals have the dot products
-    ``dots`` ((k,) float64), 0 below ``COMPATIBLE - COMPATIBLE_RAMP``, 1 above
-    ``COMPATIBLE + COMPATIBLE_RAMP``, linear between (a continuous weight, so that a dot
-    product moved by rounding moves the fit by as little)."""
-    return np.clip((dots - (COMPATIBLE - COMPATIBLE_RAMP)) / (2.0 * COMPATIBLE_RAMP), 0.0, 1.0)
+    ``dots`` ((k,) float64), 0 below ``compatible - compatible_ramp``, 1 above ``compatible
+    + compatible_ramp`` (:class:`BestFitSettings`), linear between (a continuous weight, so
+    that a dot product moved by rounding moves the fit by as little)."""
+    low, ramp = BEST_FIT.compatible - BEST_FIT.compatible_ramp, BEST_FIT.compatible_ramp
+    return np.clip((dots - low) / (2.0 * ramp), 0.0, 1.0)
 
 
 def _interpolated(normals, corners, bary):

@@ -16,34 +16,46 @@ Where the wall behind an outside point is near (a thin plate's other side), movi
 near wall alone crosses it: the later rounds move that far wall's base vertices along
 too, where it has room inside the target, so the thin section moves inwards as a whole.
 """
+from dataclasses import dataclass
+
 import numpy as np
 
 from core.fitting.crossings import hold_back_crossings
-from core.fitting.responses import INSIDE_SLACK, InsideBounds, vertex_normals
+from core.fitting.responses import InsideBounds, vertex_normals
 from core.target_surface import TargetSurface
-
-NUDGE_ROUNDS = 4
-"""Rounds of each kind of :func:`nudge_inside`: near walls alone, then with far walls
-(the owner moves stall after about four rounds)."""
-NUDGE_HALVINGS = 2
-"""Halvings of each kind in a round's hold-back (:func:`core.fitting.crossings.
-hold_back_crossings`): a round moves by a point's depth, and what a quarter of that does
-not bring in, the next round tries again (more halvings bring in hardly more volume, at
-twice the nudge's CPU time)."""
-NUDGE_PROGRESS = 0.01
-"""Least fraction of the summed outside depth a round must take off for another round of
-its kind (the third and later rounds of a kind take off a negligible share of the target's
-volume, so stopping then costs almost nothing and saves half the rounds)."""
-CARRY_REACH = 8.0
-"""A far wall moves along when it is hit within this many depths of the outside point
-along its inward normal (a shorter reach leaves more of the target's volume outside)."""
-CARRY_ROOM = 0.5
-"""... and when every corner of the hit triangle lies deeper inside the target than this
-fraction of the depth (so carrying it does not push the far wall out of the target's
-other side)."""
+from core.tolerances import CONTACT
 
 
-def nudge_inside(vertices, mapping, triangles, target, movable=None, rounds=NUDGE_ROUNDS):
+@dataclass(frozen=True)
+class NudgeSettings:
+    """Tuned constants of :func:`nudge_inside`."""
+
+    rounds: int = 4
+    """Rounds of each kind of :func:`nudge_inside`: near walls alone, then with far walls
+    (the owner moves stall after about four rounds)."""
+    halvings: int = 2
+    """Halvings of each kind in a round's hold-back
+    (:func:`core.fitting.crossings.hold_back_crossings`): a round moves by a point's depth, and
+    what a quarter of that does not bring in, the next round tries again (more halvings
+    bring in hardly more volume, at twice the nudge's CPU time)."""
+    progress: float = 0.01
+    """Least fraction of the summed outside depth a round must take off for another round of
+    its kind (the third and later rounds of a kind take off a negligible share of the
+    target's volume, so stopping then costs almost nothing and saves half the rounds)."""
+    carry_reach: float = 8.0
+    """Depths of the outside point along its inward normal within which a far wall it hits
+    moves along (a shorter reach leaves more of the target's volume outside)."""
+    carry_room: float = 0.5
+    """Fraction of the depth every corner of the hit triangle must lie inside the target for
+    the far wall to move along (so carrying it does not push the far wall out of the
+    target's other side)."""
+
+
+NUDGE = NudgeSettings()
+"""The settings this module runs with."""
+
+
+def nudge_inside(vertices, mapping, triangles, target, movable=None, rounds=NUDGE.rounds):
     """Move the base vertices that carry fine limit points outside the target inwards.
 
     Parameters
@@ -56,7 +68,7 @@ def nudge_inside(vertices, mapping, triangles, target, movable=None, rounds=NUDG
     movable : (n,) bool or None, the base vertices that may move (None: all); an outside
         point whose largest weight is on another vertex is left where it is.
     rounds : int >= 0, most rounds of each kind (near walls, then near and far walls); a
-        kind stops early when its last round took less than ``NUDGE_PROGRESS`` off the
+        kind stops early when its last round took less than ``NUDGE.progress`` off the
         summed depth of the outside points.
 
     Returns
@@ -66,7 +78,7 @@ def nudge_inside(vertices, mapping, triangles, target, movable=None, rounds=NUDG
     """
     V = np.array(vertices, dtype=np.float64)
     # the points a round's move left provably inside are not queried again
-    known = InsideBounds(INSIDE_SLACK * target.diagonal)
+    known = InsideBounds(CONTACT * target.diagonal)
     moved = []
     for carry in (False, True):
         before = np.inf
@@ -74,11 +86,11 @@ def nudge_inside(vertices, mapping, triangles, target, movable=None, rounds=NUDG
             shift, depth = _shift(V, mapping, triangles, target, movable, carry, known)
             if shift is None:
                 return V, moved
-            if depth > (1.0 - NUDGE_PROGRESS) * before:
+            if depth > (1.0 - NUDGE.progress) * before:
                 break
             before = depth
             nudged, _, _ = hold_back_crossings(V, V + shift, mapping, triangles,
-                                               halvings=NUDGE_HALVINGS)
+                                               halvings=NUDGE.halvings)
             changed = (nudged != V).any(axis=1)
             moved.append(int(changed.sum()))
             if not changed.any():
@@ -112,17 +124,17 @@ def _shift(V, mapping, triangles, target, movable, carry, known):
     if carry and len(outside):
         direction = -vertex_normals(X, triangles)[outside]
         hits = TargetSurface(X, triangles, "fitted surface").first_exit(
-            X[outside], direction, CARRY_REACH * float(depth.max()))
+            X[outside], direction, NUDGE.carry_reach * float(depth.max()))
         found = hits.face >= 0
         corners = triangles[hits.face[found]]
-        room = -CARRY_ROOM * depth[found]
+        room = -NUDGE.carry_room * depth[found]
         # the corners' bounds decide the room where they are below it; the corners of the
         # other walls that were not queried this round are queried now
         undecided = (known.bound(X)[corners] >= room[:, None]).any(axis=1)
         unsure = np.setdiff1d(corners[undecided], query)
         known.closest(target, X, unsure)
         roomy = known.bound(X)[corners].max(axis=1) < room
-        far = np.flatnonzero(found)[roomy & (hits.t[found] < CARRY_REACH * depth[found])]
+        far = np.flatnonzero(found)[roomy & (hits.t[found] < NUDGE.carry_reach * depth[found])]
         owner = np.concatenate([owner, _owner(mapping, triangles[hits.face[far]].reshape(-1))])
         wanted = np.concatenate([wanted, np.repeat(wanted[far], 3, axis=0)])
     if movable is not None:

@@ -23,7 +23,7 @@ chain's point at the same arc-length fraction (so the points do not bunch up whe
 line leaves them free) and a small pull towards the cage (vertices without a chain stay).
 A point-to-point fit at the arc-length fractions alone bends the curve far off next to a
 kink between a long and a short edge, and raises the fit's largest distance. A vertex moves at most
-``MAX_MOVE`` times its shortest crease edge, and the move is then held back where the
+``CREASE.max_move`` times its shortest crease edge, and the move is then held back where the
 limit surface would cross itself (:func:`core.fitting.crossings.hold_back_crossings`).
 
 The inside fit that starts from it leaves much less of the target's volume outside and comes
@@ -44,24 +44,35 @@ from scipy.spatial import cKDTree
 from core.fitting.crossings import hold_back_crossings
 from core.geometry import shortest_edges_at
 from core.quadmesh.creases import CREASE_ANGLE, closed_network, feature_edges
+from core.tolerances import CONTACT
 
-CREASE_DAMPING = 1e-3
-"""Weight of ``|V - V_cage|^2`` per crease vertex against the unit-weight limit-point rows."""
-ALONG_WEIGHT = 0.1
-"""Weight of a limit point's pull to its arc-length point against its pull onto the line."""
-CREASE_ROUNDS = 4
-"""Gauss-Newton rounds (closest points on the lines found again each round)."""
-MAX_MOVE = 1.0
-"""Farthest a crease vertex moves, times its shortest crease edge. A five-vertex hole rim
-moves out by about a quarter of its edges; a vertex at a kink between a long and a short
-straight edge can otherwise be carried out by many times its short edge, the curve still on
-the lines but the faces round it dragged off the target."""
-MATCH_TOLERANCE = 1e-9
-"""A cage vertex sits on a target vertex when nearer than this times the target's
-bounding-box diagonal (the decimation copies the target's coordinates)."""
-PATH_REACH = 4.0
-"""A crease edge's feature chain is searched up to this many times the edge's length
-(a chain between two rim vertices of a five-vertex hole is 1.07 times the chord)."""
+
+@dataclass(frozen=True)
+class CreaseCurveSettings:
+    """Tuned constants of :func:`fit_crease_curves`."""
+
+    damping: float = 1e-3
+    """Weight of ``|V - V_cage|^2`` per crease vertex against the unit-weight limit-point
+    rows."""
+    along_weight: float = 0.1
+    """Weight of a limit point's pull to its arc-length point against its pull onto the
+    line."""
+    rounds: int = 4
+    """Gauss-Newton rounds (closest points on the lines found again each round)."""
+    max_move: float = 1.0
+    """Farthest a crease vertex moves, times its shortest crease edge. A five-vertex hole rim
+    moves out by about a quarter of its edges; a vertex at a kink between a long and a short
+    straight edge can otherwise be carried out by many times its short edge, the curve still
+    on the lines but the faces round it dragged off the target."""
+    path_reach: float = 4.0
+    """A crease edge's feature chain is searched up to this many times the edge's length
+    (a chain between two rim vertices of a five-vertex hole is 1.07 times the chord)."""
+
+
+CREASE = CreaseCurveSettings()
+"""The settings this module runs with."""
+
+
 
 
 @dataclass
@@ -123,7 +134,7 @@ def fit_crease_curves(base, fine, limit_map, triangles, target_vertices, target_
         return CreaseFit(V0, len(chains), len(creases), 0)
     moved = _fitted(limit_map, np.asarray(rows), np.concatenate(along),
                     np.concatenate(chains), _Polylines(polylines), V0, free,
-                    MAX_MOVE * shortest_edges_at(V0, creases)[free])
+                    CREASE.max_move * shortest_edges_at(V0, creases)[free])
     vertices, held, _ = hold_back_crossings(V0, moved, limit_map, triangles, clean=False)
     return CreaseFit(vertices, len(chains), len(creases), held)
 
@@ -133,8 +144,8 @@ def _fitted(limit_map, rows, along, chain, curves, V0, free, reach):
 
     Each limit point ``limit_map[rows] @ V`` ((r,) fine vertices) is pulled onto its chain's
     feature polyline (point-to-line: the residual's part across the line at its closest
-    point, weight 1) and, weakly (``ALONG_WEIGHT``), to the point at its arc-length
-    fraction (``along``, (r, 3)), which keeps the parametrisation even; ``CREASE_DAMPING``
+    point, weight 1) and, weakly (``CREASE.along_weight``), to the point at its arc-length
+    fraction (``along``, (r, 3)), which keeps the parametrisation even; ``CREASE.damping``
     pulls towards the cage. A vertex moves at most ``reach`` ((f,) model units) from the
     cage each round (the move is shortened, not dropped).
     """
@@ -143,18 +154,18 @@ def _fitted(limit_map, rows, along, chain, curves, V0, free, reach):
     A_free_t = sp.block_diag([A_free.T] * 3, format="csr")  # x, y, z blocks
     fixed = A @ V0 - A_free @ V0[free]
     V = V0.copy()
-    for _ in range(CREASE_ROUNDS):
+    for _ in range(CREASE.rounds):
         X = A @ V
         foot, tangent = curves.closest(X, chain)
         across = np.eye(3)[None] - tangent[:, :, None] * tangent[:, None, :]  # (r, 3, 3)
-        weight = across + ALONG_WEIGHT * np.eye(3)[None]
-        target = np.einsum("rab,rb->ra", across, foot) + ALONG_WEIGHT * along
+        weight = across + CREASE.along_weight * np.eye(3)[None]
+        target = np.einsum("rab,rb->ra", across, foot) + CREASE.along_weight * along
         blocks = [[sp.diags(weight[:, a, b]) @ A_free for b in range(3)] for a in range(3)]
         system = sp.bmat(blocks, format="csr")
         # minimise sum_j (X_j - foot_j)^T across_j (X_j - foot_j) + w |X_j - along_j|^2
-        lhs = A_free_t @ system + CREASE_DAMPING * sp.identity(3 * len(free))
+        lhs = A_free_t @ system + CREASE.damping * sp.identity(3 * len(free))
         rhs = (A_free_t @ (target - np.einsum("rab,rb->ra", weight, fixed)).T.reshape(-1)
-               + CREASE_DAMPING * V0[free].T.reshape(-1))
+               + CREASE.damping * V0[free].T.reshape(-1))
         move = spsolve(lhs.tocsc(), rhs).reshape(3, -1).T - V0[free]
         length = np.linalg.norm(move, axis=1)
         move *= np.minimum(1.0, reach / np.maximum(length, 1e-300))[:, None]
@@ -214,10 +225,12 @@ def _fine_chains(fine, n, creases):
 
 
 def _target_vertex_of(V, target_vertices):
-    """(n,) int64 the target vertex each of ``V`` sits on, -1 where none."""
+    """(n,) int64 the target vertex each of ``V`` sits on (nearer than
+    ``core.tolerances.CONTACT`` times the target's bounding-box diagonal: the decimation
+    copies the target's coordinates), -1 where none."""
     diagonal = float(np.linalg.norm(np.ptp(target_vertices, axis=0)))
     distance, index = cKDTree(target_vertices).query(V)
-    return np.where(distance <= MATCH_TOLERANCE * diagonal, index, -1)
+    return np.where(distance <= CONTACT * diagonal, index, -1)
 
 
 class _FeatureGraph:
@@ -237,7 +250,7 @@ class _FeatureGraph:
     def paths(self, pairs, ends):
         """For each target vertex pair ``(a, b)`` of ``pairs`` ((p, 2) int64), the target
         vertices of the shortest feature chain from ``a`` to ``b``, or None when ``a`` or
-        ``b`` is -1 or not on the network, when no chain is within ``PATH_REACH`` times their
+        ``b`` is -1 or not on the network, when no chain is within ``CREASE.path_reach`` times their
         distance, or when the shortest passes through another vertex of ``ends`` (set).
         One Dijkstra search per distinct start, as far as the farthest pair's reach."""
         found = [None] * len(pairs)
@@ -246,7 +259,7 @@ class _FeatureGraph:
         local = np.minimum(np.searchsorted(self.nodes, pairs), len(self.nodes) - 1)
         usable = ((pairs >= 0).all(axis=1) & (pairs[:, 0] != pairs[:, 1])
                   & (self.nodes[local] == pairs).all(axis=1))
-        reach = PATH_REACH * np.linalg.norm(self.vertices[pairs[:, 0]]
+        reach = CREASE.path_reach * np.linalg.norm(self.vertices[pairs[:, 0]]
                                             - self.vertices[pairs[:, 1]], axis=1)
         if not usable.any():
             return found

@@ -5,9 +5,9 @@ A least-squares fit of a coarse cage to a thin member pulls its two walls throug
 other, and on paired-decimation cages some limit surfaces cross before any fit (quads
 folded onto themselves at thin struts). Two remedies, both local:
 
-* :func:`stiffen_until_clean` refits with the cage's smoothness term made ``STIFFEN``
+* :func:`stiffen_until_clean` refits with the cage's smoothness term made ``UNTANGLE.stiffen``
   times stiffer at every base vertex that influences a crossing triangle, until the
-  limit surface is clean (or ``STIFFEN_TRIES`` refits): the displacement field there
+  limit surface is clean (or ``UNTANGLE.stiffen_tries`` refits): the displacement field there
   follows its neighbours instead of the far wall. Where the plain fit pulled the cage's
   few crossings into many, the first or second refit is usually clean.
 * :func:`hold_back_crossings` undoes a move towards its reference, only where the moved
@@ -22,30 +22,41 @@ import numpy as np
 
 from core.box_tree import face_boxes
 from core.self_intersection import box_pairs, find_self_intersections, shared_corners
+from core.tolerances import CONTACT
 
-STIFFEN = 10.0
-"""Factor on the smoothness weight of the base vertices under a crossing, per refit."""
-STIFFEN_TRIES = 4
-"""Most refits of :func:`stiffen_until_clean` (later refits do not lower the crossings
-further)."""
-UNTANGLE_PROGRESS = 0.05
-"""Least fraction of the fewest crossing pairs so far that an untangling refit must take off
-for another while those fewest are more than ``TANGLED`` times the first fit's and more
-than ``FEW_CROSSINGS`` (:func:`stiffen_until_clean` from
-:func:`core.fitting.fit._untangled`). On creased cages of machined parts the refits do not
-untangle (the crossing pairs stay level or grow), so they stop after one to three refits
-with the fit kept so far; on a SIMP result whose crossings fall unevenly they go on."""
-TANGLED = 0.5
-"""... the fewest crossings so far, times the first fit's, at or below which the refits
-go on whatever they take off (a refit that removed most crossings may need one more to
-remove the rest)."""
-FEW_CROSSINGS = 20
-"""... and the fewest crossing pairs at or below which they go on too (a handful of
-crossings often goes with the next refit)."""
-HALVINGS = 6
-"""Rounds of halving the moves of the base vertices owning a crossing's corners, then as
-many of halving the moves of every base vertex influencing it, before those are held back
-completely (:func:`hold_back_crossings`)."""
+
+@dataclass(frozen=True)
+class UntangleSettings:
+    """Tuned constants of the crossing hold-back and the untangling refits."""
+
+    stiffen: float = 10.0
+    """Factor on the smoothness weight of the base vertices under a crossing, per refit."""
+    stiffen_tries: int = 4
+    """Most refits of :func:`stiffen_until_clean` (later refits do not lower the crossings
+    further)."""
+    progress: float = 0.05
+    """Least fraction of the fewest crossing pairs so far that an untangling refit must take
+    off for another while those fewest are more than ``tangled`` times the first fit's and
+    more than ``few_crossings`` (:func:`stiffen_until_clean` from
+    :func:`core.fitting.fit._untangled`). On creased cages of machined parts the refits do
+    not untangle (the crossing pairs stay level or grow), so they stop after one to three
+    refits with the fit kept so far; on a SIMP result whose crossings fall unevenly they go
+    on."""
+    tangled: float = 0.5
+    """Fewest crossings so far, times the first fit's, at or below which the refits go on
+    whatever they take off (a refit that removed most crossings may need one more to remove
+    the rest)."""
+    few_crossings: int = 20
+    """Fewest crossing pairs at or below which the refits go on whatever they take off (a
+    handful of crossings often goes with the next refit)."""
+    halvings: int = 6
+    """Rounds of halving the moves of the base vertices owning a crossing's corners, then as
+    many of halving the moves of every base vertex influencing it, before those are held
+    back completely (:func:`hold_back_crossings`)."""
+
+
+UNTANGLE = UntangleSettings()
+"""The settings this module runs with."""
 
 
 @dataclass
@@ -88,8 +99,8 @@ def influencing(pairs, mapping, triangles):
     return np.unique(mapping[np.unique(triangles[pairs].reshape(-1))].indices)
 
 
-def stiffen_until_clean(vertices, refit, mapping, triangles, tries=STIFFEN_TRIES, pairs=None,
-                        progress=0.0):
+def stiffen_until_clean(vertices, refit, mapping, triangles, tries=UNTANGLE.stiffen_tries,
+                        pairs=None, progress=0.0):
     """Refit with a stiffer smoothness term under the crossings until nothing crosses.
 
     Parameters
@@ -106,7 +117,7 @@ def stiffen_until_clean(vertices, refit, mapping, triangles, tries=STIFFEN_TRIES
         are known (:func:`crossing_pairs`).
     progress : float in [0, 1), the refits stop when one leaves more than ``1 - progress``
         times the fewest crossing pairs before it while those fewest are more than
-        ``TANGLED`` times the first fit's and more than ``FEW_CROSSINGS`` (0: only
+        ``UNTANGLE.tangled`` times the first fit's and more than ``UNTANGLE.few_crossings`` (0: only
         ``tries``, a clean fit or a refit crossing at the same pairs as the one before stop
         them).
 
@@ -122,7 +133,7 @@ def stiffen_until_clean(vertices, refit, mapping, triangles, tries=STIFFEN_TRIES
     for refit_number in range(1, tries + 1):
         if not len(pairs):
             break
-        stiffness[influencing(pairs, mapping, triangles)] *= STIFFEN
+        stiffness[influencing(pairs, mapping, triangles)] *= UNTANGLE.stiffen
         vertices = refit(stiffness, vertices)
         previous, pairs = pairs, crossing_pairs(mapping, triangles, vertices)
         counts.append(int(len(pairs)))
@@ -131,7 +142,7 @@ def stiffen_until_clean(vertices, refit, mapping, triangles, tries=STIFFEN_TRIES
             best = Untangled(vertices, int(len(pairs)), stiffness.copy(), 0, counts, pairs)
         if np.array_equal(pairs, previous):
             break  # stiffer there, the same triangles cross: no untangling left to find
-        tangled = max(counts[0] * TANGLED, FEW_CROSSINGS)
+        tangled = max(counts[0] * UNTANGLE.tangled, UNTANGLE.few_crossings)
         if progress and tangled < fewest < len(pairs) / (1.0 - progress):
             break  # far from clean, and stiffening no longer takes crossings off
     best.refits = len(counts) - 1
@@ -139,7 +150,7 @@ def stiffen_until_clean(vertices, refit, mapping, triangles, tries=STIFFEN_TRIES
 
 
 def hold_back_crossings(reference, moved, mapping, triangles, clean=True, moved_pairs=None,
-                        halvings=HALVINGS):
+                        halvings=UNTANGLE.halvings):
     """Undo a move where it makes the limit surface cross itself, and only there.
 
     While the fine mesh ``mapping @ W`` of ``W = reference + t (moved - reference)`` has
@@ -252,14 +263,15 @@ def _swept_pairs(reference, moved, mapping, triangles):
 
     A fine point ``sum_v w_v (r_v + t_v d_v)`` stays within ``sum_v min(0, w_v d_v)`` and
     ``sum_v max(0, w_v d_v)`` of its reference position, axis by axis; the boxes of those
-    ranges are widened by ``1e-9`` of the largest coordinate for the rounding of the points
-    as the fit computes them, so the pairs include every pair that overlaps at any ``t``
-    (:func:`core.self_intersection.box_pairs`). The terms are summed from ``mapping``'s
-    arrays, not by scipy's ``maximum``, which sorts the rows of the matrix it is called on
-    in place (every later product with it would round differently). A pair of triangles
-    that no moving vertex influences keeps its answer (:func:`_crossings_after`), and one
-    sharing an edge is never a crossing (:mod:`core.self_intersection`), so neither is
-    kept: a hold-back's rounds test each of its pairs again.
+    ranges are widened by ``core.tolerances.CONTACT`` of the largest coordinate for the
+    rounding of the points as the fit computes them, so the pairs include every pair that
+    overlaps at any ``t`` (:func:`core.self_intersection.box_pairs`). The terms are summed
+    from ``mapping``'s arrays, not by scipy's ``maximum``, which sorts the rows of the
+    matrix it is called on in place (every later product with it would round differently). A
+    pair of triangles that no moving vertex influences keeps its answer
+    (:func:`_crossings_after`), and one sharing an edge is never a crossing
+    (:mod:`core.self_intersection`), so neither is kept: a hold-back's rounds test each of
+    its pairs again.
     """
     moving = (moved != reference).any(axis=1)
     rows = np.repeat(np.arange(mapping.shape[0]), np.diff(mapping.indptr))
@@ -269,7 +281,7 @@ def _swept_pairs(reference, moved, mapping, triangles):
     for axis in range(3):
         low[:, axis] += np.bincount(rows, np.minimum(terms[:, axis], 0.0), len(X))
         high[:, axis] += np.bincount(rows, np.maximum(terms[:, axis], 0.0), len(X))
-    slack = 1e-9 * max(float(np.abs(low).max()), float(np.abs(high).max()), 1e-300)
+    slack = CONTACT * max(float(np.abs(low).max()), float(np.abs(high).max()), 1e-300)
     # from the matrix's arrays too (abs would sort it in place, see _crossings_after)
     moving_fine = np.bincount(rows, moving[mapping.indices] & (mapping.data != 0), len(X)) > 0
     pairs = box_pairs(face_boxes(low[triangles])[0] - slack,

@@ -5,13 +5,13 @@
 Both ways:
 
 - **forward**, the limit surface to the target: the distance of the limit points of a fine
-  subdivision level (:func:`deviation_level`, about :data:`DEVIATION_QUADS` quads, so the
+  subdivision level (:func:`deviation_level`, about ``DEVIATION.fine_quads`` quads, so the
   points are much closer together than any tolerance asked for) to the target;
 - **backward**, the target to the limit surface, over the **whole** target, not samples of
   it (:func:`core.farthest.farthest_pieces`): every target triangle is bounded, and cut into
-  smaller pieces where the bound straddles the tolerance or passes the largest distance found,
-  down to ``RESOLUTION * tolerance``. So no part of the target farther than the tolerance goes
-  unseen, however small.
+  smaller pieces where the bound straddles the tolerance or passes the largest distance
+  found, down to ``DEVIATION.resolution * tolerance``. So no part of the target farther than
+  the tolerance goes unseen, however small.
 
 The limit surface is measured as its fine level triangulated. A coarse level with random
 target samples can call a tolerance met that the exported solid misses: coarse triangles cut
@@ -28,18 +28,26 @@ from core.subdivision.catmull_clark import build_hierarchy, fine_face_owner
 from core.subdivision.limit import limit_matrices
 from core.target_surface import TargetSurface
 
-DEVIATION_QUADS = 150_000
-"""Most quads of the fine level the deviation is measured on (:func:`deviation_level`)."""
 
-RESOLUTION = 0.02
-"""Smallest target triangle looked at, as its centroid's distance to its farthest corner, a
-fraction of the tolerance: the largest backward deviation is found to within that."""
+@dataclass(frozen=True)
+class DeviationSettings:
+    """Tuned constants of :func:`face_deviation`."""
+
+    fine_quads: int = 150_000
+    """Most quads of the fine level the deviation is measured on (:func:`deviation_level`)."""
+    resolution: float = 0.02
+    """Smallest target triangle looked at, as its centroid's distance to its farthest corner,
+    a fraction of the tolerance: the largest backward deviation is found to within that."""
+
+
+DEVIATION = DeviationSettings()
+"""The settings this module runs with."""
 
 
 def deviation_level(n_faces):
-    """The finest subdivision level whose mesh has at most :data:`DEVIATION_QUADS` quads
+    """The finest subdivision level whose mesh has at most ``DEVIATION.fine_quads`` quads
     (at least 1) for a cage of ``n_faces`` faces."""
-    return int(max(1, np.floor(np.log(DEVIATION_QUADS / max(n_faces, 1)) / np.log(4.0))))
+    return int(max(1, np.floor(np.log(DEVIATION.fine_quads / max(n_faces, 1)) / np.log(4.0))))
 
 
 def fine_limit_points(cage, levels):
@@ -81,7 +89,7 @@ def face_deviation(cage, surface, tolerance):
     cage : PolyMesh, closed; faces of any size.
     surface : TargetSurface of the target.
     tolerance : float > 0, fraction of ``surface.diagonal``: the backward search is exact to
-        ``RESOLUTION * tolerance`` around it and around the largest deviation.
+        ``DEVIATION.resolution * tolerance`` around it and around the largest deviation.
 
     Returns
     -------
@@ -94,7 +102,7 @@ def face_deviation(cage, surface, tolerance):
     threshold = tolerance * surface.diagonal
     backward = farthest_pieces(surface.vertices, surface.faces,
                                TargetSurface(X, T, "fitted surface"), threshold,
-                               RESOLUTION * threshold)
+                               DEVIATION.resolution * threshold)
     per_face = np.maximum(forward, _largest_per_owner(backward.distance, owner[backward.face // 2],
                                                       cage.n_faces))
     return FaceDeviation(per_face / surface.diagonal, backward.unproven_area)

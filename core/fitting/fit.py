@@ -10,7 +10,7 @@ that is fitted is the one exported later; ``surface='control'`` uses the level-i
 control points ``S_i V0`` as in the paper's Eq. 10.
 """
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -19,9 +19,10 @@ from core.errors import InvalidMeshError, ParameterError
 from core.fitting.best_fit import BestFitResult, best_fit, pull_inside
 from core.fitting.contain import nudge_inside
 from core.fitting.crease_curves import fit_crease_curves
-from core.fitting.crossings import (STIFFEN_TRIES, UNTANGLE_PROGRESS, count_crossings,
-                                     crossing_pairs, hold_back_crossings, influencing,
-                                     stiffen_until_clean)
+from core.fitting.crossings import (UNTANGLE, count_crossings, crossing_pairs,
+                                     hold_back_crossings, influencing, stiffen_until_clean)
+from core.fitting.records import (Distances, FitFigures, FitRecord, FitSetup, InsideFit,
+                                    InsideStart, LeastSquaresFit, Untangling)
 from core.fitting.responses import thickness, volume
 from core.fitting.rgp import FitProblem, run_rgp
 from core.geometry import face_areas, sample_surface, triangulate
@@ -32,12 +33,61 @@ from core.subdivision.catmull_clark import build_hierarchy
 from core.subdivision.limit import limit_matrices
 from core.target_surface import TargetSurface
 from core.threads import single_threaded
+from core.tolerances import CONTACT
 from core.types import PolyMesh
 
 MODES = ("inside", "best-fit", "none")
-FINE_ROUNDS = 2
 STARTS = ("best-fit", "cage")
 SURFACES = ("limit", "control")
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """Tuned constants of :func:`fit_base_mesh`, one per choice the fit makes."""
+
+    fine_rounds: int = 2
+    """Least-squares rounds on the fit's level after the level-1 rounds
+    (:func:`_two_level_best_fit`), and of each untangling refit (:func:`_untangled`)."""
+    retry_step: float = 0.4
+    """Step of the RGP's second run, times the first's, when the first kept its start
+    (:func:`_rgp`)."""
+    retry_outside: float = 1e-3
+    """Fraction of the target's volume the start's outside points must stand for before the
+    RGP runs again with ``retry_step`` (a fifth of the 0.5 % containment goal): a start with
+    only a little outside is kept, since a second run raises its mean distance; one with
+    much outside runs again."""
+    rgp_passes: int = 3
+    """Most further RGP passes of :func:`_passes_around_crossings`."""
+    inside_margin: float = 0.25
+    """Depth the inside start pulls the outside limit points to, times the RMS signed distance
+    of the least-squares fit's limit points (a quarter gives a lower mean distance after the
+    RGP than none or a half)."""
+    inside_rounds: int = 2
+    """Rounds of the pull inside (:func:`core.fitting.best_fit.pull_inside`)."""
+    spread_crossings: float = 2.0 / 3.0
+    """Fraction of the base vertices influencing the least-squares fit's crossing triangles
+    above which the inside fit's start is refitted stiffer (:func:`_untangled`): a thin plate
+    pulled through itself over most of its area. Where the crossings are local (at most
+    about half of the base vertices), the fit is held back towards the cage there instead.
+    The refits stiffen the smoothness term at every vertex influencing a crossing, and the
+    inside fit that starts from them is worse than the one that starts from the unstiffened
+    fit held back (a larger mean distance, at twice the CPU time); a thin plate held back
+    without refits leaves more of its volume outside."""
+    long_way_left: float = 0.15
+    """Fraction of the first fit's crossing pairs the short untangling refits may leave for
+    the refits to be made again the long way (:func:`_untangled`). Where they left less, the
+    long way usually clears what was left; where they left more, the crossings are where
+    the cage cannot follow the part, and the long way does not have fewer but costs
+    seconds."""
+    distance_samples: int = 20000
+    """Target samples of the target-to-surface figures (:func:`_distances`)."""
+    near_touch: float = 0.01
+    """Thinnest wall of the inside start, times the mean base edge, below which the default
+    ``t_min`` is 0 (the thickness constraint left off, :func:`_default_t_min`)."""
+
+
+FIT = FitSettings()
+"""The settings this module runs with."""
 
 
 @single_threaded()
@@ -45,6 +95,28 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
                   progress=None, penalty=1e5, step_fraction=0.05, surface="limit",
                   start="best-fit", rounds=10, tol=2e-3, patience=5, seed=0):
     """Move the base-mesh vertices so the subdivision surface fills or fits the target.
+
+    The fit runs in phases, each returning a record of :mod:`core.fitting.records`:
+
+    1. :func:`_prepare`: the subdivision hierarchy, the limit map and the target;
+    2. a cage with creases (``base.creases``) has its crease curves placed on the target's
+       feature lines (:func:`core.fitting.crease_curves.fit_crease_curves`); in both fitting
+       modes that cage is the fit's start, the reference of the smoothness term and of the
+       hold-backs (the ``initial`` figures stay the cage's as given);
+    3. :func:`_least_squares`: the two-sided least-squares fit (best-fit mode, and inside
+       mode from ``start='best-fit'`` without creases), untangled where it crosses itself;
+    4. :func:`_inside_start` (inside mode from ``start='best-fit'``): that fit, or the
+       creased cage (``CREASED_START``), pulled just inside the target and held back where
+       it crosses itself;
+    5. :func:`_inside_fit` (inside mode): the relaxed gradient projection from there, held
+       back where it crosses itself, further passes around those vertices and a nudge of
+       the held-back vertices inwards;
+    6. :func:`_measure`: distances and containment of the result and of the cage.
+
+    The returned level-``levels`` limit surface does not cross itself when the cage's does
+    not, and never where the start did not. The fit runs with one BLAS thread
+    (:func:`core.threads.single_threaded`): the result does not depend on the machine's
+    core count.
 
     Parameters
     ----------
@@ -80,45 +152,8 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     Returns
     -------
     fitted : PolyMesh, the base mesh with moved vertices (same faces).
-    info : dict with ``mode``, ``rounds`` (least-squares rounds run), ``rms`` (their
-        two-sided RMS distances, model units), ``iterations`` (RGP), ``stopped``
-        ('iterations', 'stalled', 'converged' or 'none'),
-        ``best_iteration``, ``objective`` (list per iteration), ``volume`` (list),
-        ``mean_distance`` / ``max_distance`` (distance of the fine limit points to the
-        target over the target's bounding-box diagonal), ``target_mean_distance`` /
-        ``target_max_distance`` (the target to the limit surface, :func:`_distances`) and
-        their ``initial_`` counterparts (the cage's), ``outside_volume_fraction`` and
-        ``uncovered_volume_fraction`` (triangulated fine limit mesh minus target and
-        target minus it, over the target volume; of the result only), ``t_min``,
-        ``step`` (model units), ``seconds`` (all of it) and ``measure_seconds`` (the
-        part spent on those figures: one manifold3d boolean and the distance queries);
-        with a least-squares fit (best-fit mode, inside mode from ``start='best-fit'``)
-        ``self_intersections``
-        (intersecting triangle pairs of the fine limit mesh, ``surface='limit'``),
-        ``cage_self_intersections`` (the cage's, when the result still crosses), ``refits``,
-        ``refit_crossings``, ``cold_refit_crossings`` (when the short refits left a few
-        crossings), ``stiffened`` (:func:`_untangled`) and ``held_back`` (base vertices held
-        back towards the cage or, inside mode, the least-squares start), of which the
-        creased inside start (``CREASED_START``) has ``self_intersections`` and
-        ``held_back``; inside mode also
-        ``start_margin`` (depth of the start below the target, model units) and
-        ``rgp_held_back`` (base vertices whose RGP move was cut back because the
-        limit surface crossed itself there), then ``rgp_passes`` (iterations and base
-        vertices held back of each further pass, :func:`_passes_around_crossings`;
-        ``iterations`` counts them too), ``pull_crossings`` (:func:`_pulled_inside`) and,
-        when the RGP's result was held back, ``nudged`` (base vertices moved in each round
-        of :func:`core.fitting.contain.nudge_inside`, which moves the held-back ones under
-        the points left outside inwards); ``rgp_retried`` when the RGP ran again with a
-        shorter step (:func:`_rgp`).
-        A cage with creases (``base.creases``) has ``crease_curves`` (``matched``,
-        ``creases``, ``held_back`` of :func:`core.fitting.crease_curves.fit_crease_curves`):
-        in both fitting modes the fit starts from the cage with its crease curves fitted to
-        the target's feature lines, which is also the reference of the smoothness term and
-        of the hold-backs (the ``initial_`` figures stay the cage's).
-        The returned level-``levels`` limit surface does not cross itself when the cage's
-        does not, and never where the start did not. The fit runs with one BLAS thread
-        (:func:`core.threads.single_threaded`): the result does not depend on the
-        machine's core count.
+    record : core.fitting.records.FitRecord, the records of the phases that ran and the
+        figures of the result.
 
     Raises
     ------
@@ -130,13 +165,45 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     """
     started = time.perf_counter()
     progress = NO_PROGRESS if progress is None else progress
-    _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface, start,
-                      rounds)
-    if not (np.isfinite(tol) and tol >= 0) or not (isinstance(patience, (int, np.integer))
-                                                   and patience >= 1):
-        raise ParameterError(f"tol must be >= 0 and patience an integer >= 1, got {tol!r}, "
-                             f"{patience!r}")
+    _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction)
+    _check_choices(surface, start, rounds, tol, patience)
     V0 = _check_base(base)
+    setup = _prepare(base, target, levels, surface)
+    creased = None
+    if mode != "none" and base.n_creases:
+        creased = fit_crease_curves(base, setup.hierarchy.meshes[levels], setup.limit_map,
+                                    setup.triangles, setup.target.vertices,
+                                    setup.target.faces)
+        base = replace(base, vertices=creased.vertices)
+    least_squares = inside_start = inside = None
+    if mode == "best-fit" or (mode == "inside" and start == "best-fit" and not base.n_creases):
+        progress.report("fit", 0.0, "least-squares fit")
+        least_squares = _least_squares(base, setup, rounds, seed, refit_local=mode != "inside")
+    if mode == "inside" and start == "best-fit":
+        inside_start = _inside_start(base, setup, least_squares, start)
+    vertices, crossings = _latest(base.vertices, least_squares, inside_start)
+    if mode == "inside":
+        inside = _inside_fit(base, setup, vertices, crossings, iterations, t_min, penalty,
+                             step_fraction, dict(stall_tol=tol, patience=patience,
+                                                 progress=progress))
+        vertices, crossings = inside.vertices, inside.crossings
+    self_intersections, cage_self_intersections = _crossing_counts(setup, V0, crossings,
+                                                                   least_squares)
+    figures = _measure(setup, vertices, V0, seed)
+    label = inside_start.label if inside_start else (start if least_squares else None)
+    return replace(base, vertices=vertices), FitRecord(
+        mode, levels, surface, label, figures, time.perf_counter() - started,
+        crease_curves=creased, least_squares=least_squares, inside_start=inside_start,
+        inside=inside, self_intersections=self_intersections,
+        cage_self_intersections=cage_self_intersections)
+
+
+def _prepare(base, target, levels, surface):
+    """The :class:`core.fitting.records.FitSetup` of a fit of ``base`` to ``target``.
+
+    Raises InvalidMeshError when the target encloses a non-positive volume (its faces are
+    not counter-clockwise seen from outside).
+    """
     # the fit's many closest-point queries search pieces of the target's long triangles
     target_surface = TargetSurface(target.vertices, target.faces, split=True)
     target_volume, _ = volume(target_surface.vertices, target_surface.faces)
@@ -149,108 +216,155 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     S = hierarchy.composite(levels - 1)
     L, _, _ = limit_matrices(fine)
     limit_map = (L @ S).tocsr()
-    mapping = limit_map if surface == "limit" else S
-    T = triangulate(fine.face_vertices, fine.face_offsets)
-    info = {"mode": mode, "levels": levels, "surface": surface, "rounds": 0, "rms": [],
-            "iterations": 0, "stopped": "none", "objective": [], "volume": []}
-    if mode != "none" and base.n_creases:
-        # the fit starts from crease curves on the target's feature lines; the cage so
-        # placed is also the reference of its smoothness term and its hold-backs
-        creased = fit_crease_curves(base, fine, limit_map, T, target_surface.vertices,
-                                    target_surface.faces)
-        info["crease_curves"] = {"matched": creased.matched, "creases": creased.creases,
-                                 "held_back": creased.held}
-        base = replace(base, vertices=creased.vertices)
-    vertices = base.vertices
+    return FitSetup(target_surface, target_volume, hierarchy, limit_map,
+                    limit_map if surface == "limit" else S,
+                    triangulate(fine.face_vertices, fine.face_offsets), surface)
+
+
+def _latest(vertices, *phases):
+    """Base vertices and crossing pairs of the last phase that ran (``None``: not run);
+    ``vertices`` and ``None`` (crossings not known) when none did."""
     crossings = None
-    prepared_start = mode == "inside" and start == "best-fit"
-    creased_start = prepared_start and base.n_creases > 0
-    if mode == "best-fit" or (prepared_start and not creased_start):
-        progress.report("fit", 0.0, "least-squares fit")
-        fitted, coarse = _two_level_best_fit(base, hierarchy, limit_map, T, target_surface,
-                                             rounds, seed=seed)
-        info.update(rounds=fitted.rounds + coarse.rounds, rms=fitted.rms,
-                    coarse_rms=coarse.rms, stopped=fitted.stopped, start=start)
-        vertices, crossings, stiffness = _untangled(base, hierarchy, limit_map, T,
-                                                    target_surface, fitted.vertices, rounds,
-                                                    seed, info, refit_local=mode != "inside")
-    elif creased_start:
-        # its crease curves lie on the target's feature lines already (CREASED_START)
-        info["start"] = CREASED_START
-        crossings, stiffness = count_crossings(limit_map, T, vertices), None
-    if prepared_start:
-        # the RGP starts just inside the target, and nowhere crossing itself
-        pulled, info["start_margin"], info["pull_crossings"] = _pulled_inside(
-            base, limit_map, T, target_surface, vertices, stiffness)
-        vertices, crossings, held = _held_back(vertices, crossings, pulled.vertices,
-                                               limit_map, T, pulled.pairs)
-        info["held_back"] = info.get("held_back", 0) + held
-        if info["held_back"]:
-            info["start"] = (f"{info['start']}, held back at {info['held_back']} base "
-                             "vertices (it crossed itself)")
-    if mode == "inside":
-        edge = _mean_edge_length(base)
-        step = step_fraction * edge
-        X_start = mapping @ vertices
-        if t_min is None:
-            t_min = _default_t_min(X_start, T, edge)
-        problem = FitProblem(mapping, T, target_surface, penalty, "inside", t_min,
-                             _area(X_start, T))
-        result, rgp_step = _rgp(problem, vertices, step, iterations,
-                                dict(stall_tol=tol, patience=patience, progress=progress),
-                                target_volume)
-        if surface == "limit" and crossings is not None \
-                and np.array_equal(result.vertices, vertices):
-            held = 0  # the RGP's best is its start, checked above
-        else:
-            known = crossings if surface == "limit" else None
-            vertices, crossings, held = _held_back(vertices, known, result.vertices, mapping, T)
-        info["rgp_held_back"] = held
-        if rgp_step != step:
-            info["rgp_retried"] = True
-        fixed = (vertices != result.vertices).any(axis=1)
-        used = result.iterations
-        if held and surface == "limit" and crossings == 0:
-            vertices, info["rgp_passes"], used, fixed = _passes_around_crossings(
-                problem, vertices, result.vertices, T, rgp_step, iterations - used,
-                dict(stall_tol=tol, patience=patience, progress=progress))
-            used += result.iterations
-        if surface == "limit" and crossings == 0 and held:
-            # the held-back vertices sit where the start was, partly outside
-            vertices, info["nudged"] = nudge_inside(vertices, limit_map, T, target_surface,
-                                                    movable=fixed)
-        info.update(iterations=used, stopped=result.stopped,
-                    best_iteration=result.best_iteration,
-                    objective=result.history["objective"], volume=result.history["volume"],
-                    t_min=float(t_min), step=float(step))
-    if surface == "limit" and crossings is not None:
-        info["self_intersections"] = crossings
-        if crossings and "cage_self_intersections" not in info:
-            info["cage_self_intersections"] = count_crossings(limit_map, T, V0)
+    for phase in phases:
+        if phase is not None:
+            vertices, crossings = phase.vertices, phase.crossings
+    return vertices, crossings
+
+
+def _least_squares(base, setup, rounds, seed, refit_local):
+    """The least-squares fit (:func:`_two_level_best_fit`), untangled (:func:`_untangled`).
+
+    Returns
+    -------
+    core.fitting.records.LeastSquaresFit
+    """
+    fitted, coarse = _two_level_best_fit(base, setup.hierarchy, setup.limit_map,
+                                         setup.triangles, setup.target, rounds, seed=seed)
+    untangled = _untangled(base, setup, fitted.vertices, rounds, seed, refit_local)
+    return LeastSquaresFit(fitted.rounds + coarse.rounds, fitted.rms, coarse.rms,
+                           fitted.stopped, untangled)
+
+
+def _inside_start(base, setup, least_squares, start):
+    """The inside fit's start: the least-squares fit, or without one the creased cage
+    (``CREASED_START``, its crease curves on the target's feature lines already), pulled
+    just inside the target (:func:`_pulled_inside`) and held back where the pull crosses
+    itself, so that the RGP starts nowhere crossing itself.
+
+    Returns
+    -------
+    core.fitting.records.InsideStart
+    """
+    if least_squares is None:
+        vertices, label, held = base.vertices, CREASED_START, 0
+        crossings = count_crossings(setup.limit_map, setup.triangles, vertices)
+        stiffness = None
+    else:
+        vertices, crossings, label = least_squares.vertices, least_squares.crossings, start
+        held, stiffness = least_squares.untangled.held_back, least_squares.untangled.stiffness
+    pulled, margin, pull_crossings = _pulled_inside(base, setup.limit_map, setup.triangles,
+                                                    setup.target, vertices, stiffness)
+    vertices, crossings, pull_held = _held_back(vertices, crossings, pulled.vertices,
+                                                setup.limit_map, setup.triangles, pulled.pairs)
+    held += pull_held
+    if held:
+        label = f"{label}, held back at {held} base vertices (it crossed itself)"
+    return InsideStart(vertices, crossings, label, margin, pull_crossings, held)
+
+
+def _inside_fit(base, setup, vertices, crossings, iterations, t_min, penalty, step_fraction,
+                options):
+    """The relaxed gradient projection from ``vertices`` (paper Sect. 2.5, :func:`_rgp`),
+    held back where its limit surface crosses itself (:func:`_rgp_held_back`); where it was
+    held back on a clean surface, further passes with the held-back vertices fixed
+    (:func:`_passes_around_crossings`), then those vertices nudged inwards under the points
+    left outside (:func:`core.fitting.contain.nudge_inside`).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64 the start; crossings : int or None, its crossing pairs.
+    iterations, t_min, penalty, step_fraction : see :func:`fit_base_mesh`.
+    options : dict of further :func:`core.fitting.rgp.run_rgp` arguments.
+
+    Returns
+    -------
+    core.fitting.records.InsideFit
+    """
+    T = setup.triangles
+    edge = _mean_edge_length(base)
+    step = step_fraction * edge
+    X_start = setup.mapping @ vertices
+    if t_min is None:
+        t_min = _default_t_min(X_start, T, edge)
+    problem = FitProblem(setup.mapping, T, setup.target, penalty, "inside", t_min,
+                         _area(X_start, T))
+    result, rgp_step = _rgp(problem, vertices, step, iterations, options, setup.target_volume)
+    vertices, crossings, held = _rgp_held_back(setup, vertices, crossings, result.vertices)
+    used, passes, nudged = result.iterations, None, None
+    if held and setup.surface == "limit" and crossings == 0:
+        vertices, passes, used, fixed = _passes_around_crossings(
+            problem, vertices, result.vertices, T, rgp_step, iterations - used, options)
+        used += result.iterations
+        # the held-back vertices sit where the start was, partly outside
+        vertices, nudged = nudge_inside(vertices, setup.limit_map, T, setup.target,
+                                        movable=fixed)
+    return InsideFit(vertices, crossings, used, result.stopped, result.best_iteration,
+                     result.history["objective"], result.history["volume"], float(t_min),
+                     float(step), held, rgp_step != step, passes, nudged)
+
+
+def _rgp_held_back(setup, start, crossings, moved):
+    """The RGP's result ``moved`` held back towards its ``start`` where it crosses itself
+    (:func:`_held_back`; on the control points with ``surface='control'``).
+
+    Returns
+    -------
+    vertices : (n, 3) float64; crossings : int, crossing pairs of their fine mesh;
+    held : int, base vertices held back.
+    """
+    limit = setup.surface == "limit"
+    if limit and crossings is not None and np.array_equal(moved, start):
+        return start, crossings, 0  # the RGP's best is its start, checked before
+    return _held_back(start, crossings if limit else None, moved, setup.mapping,
+                      setup.triangles)
+
+
+def _crossing_counts(setup, V0, crossings, least_squares):
+    """``self_intersections`` and ``cage_self_intersections`` of the record: the result's
+    crossing pairs when counted on its limit surface, and, when it still crosses, the
+    cage's (counted by the least-squares fit, else here from ``V0``)."""
+    if setup.surface != "limit" or crossings is None:
+        crossings = None
+    cage = None if least_squares is None else least_squares.untangled.cage_self_intersections
+    if crossings and cage is None:
+        cage = count_crossings(setup.limit_map, setup.triangles, V0)
+    return crossings, cage
+
+
+def _measure(setup, vertices, V0, seed):
+    """Distances and containment of the result (:func:`_distances`,
+    :func:`core.quality.containment`) and the distances of the cage ``V0``.
+
+    Returns
+    -------
+    core.fitting.records.FitFigures
+    """
     measuring = time.perf_counter()
+    target, T = setup.target, setup.triangles
     # the points of target.samples without the pseudo-normals it also finds (not needed here)
-    points = sample_surface(target_surface.vertices, target_surface.faces, DISTANCE_SAMPLES,
+    points = sample_surface(target.vertices, target.faces, FIT.distance_samples,
                             np.random.default_rng(seed))
-    info.update(_figures(limit_map @ vertices, T, target_surface, points))
-    initial = _distances(limit_map @ V0, T, target_surface, points)
-    info.update({"initial_" + k: v for k, v in initial.items()})
-    info["seconds"] = time.perf_counter() - started
-    info["measure_seconds"] = time.perf_counter() - measuring
-    return replace(base, vertices=vertices), info
-
-
-RETRY_STEP = 0.4
-"""Step of the RGP's second run, times the first's, when the first kept its start
-(:func:`_rgp`)."""
-RETRY_OUTSIDE = 1e-3
-"""... and the start's outside points stand for more than this fraction of the target's
-volume (a fifth of the 0.5 % containment goal): a start with only a little outside is
-kept, since a second run raises its mean distance; one with much outside runs again."""
+    X = setup.limit_map @ vertices
+    report = containment(X, T, target.vertices, target.faces)
+    distances = _distances(X, T, target, points)
+    initial = _distances(setup.limit_map @ V0, T, target, points)
+    return FitFigures(distances, initial, report["outside_volume_fraction"],
+                      report["uncovered_volume_fraction"], time.perf_counter() - measuring)
 
 
 def _rgp(problem, vertices, step, iterations, options, target_volume):
-    """The RGP from ``vertices``; run again with ``RETRY_STEP`` times the step when no
-    iterate after the start was feasible and the start leaves more than ``RETRY_OUTSIDE``
+    """The RGP from ``vertices``; run again with ``FIT.retry_step`` times the step when no
+    iterate after the start was feasible and the start leaves more than ``FIT.retry_outside``
     of ``target_volume`` (model units cubed) outside, estimated as the summed depth of its
     outside fine points times the mean area per fine point.
 
@@ -269,16 +383,12 @@ def _rgp(problem, vertices, step, iterations, options, target_volume):
     result = run_rgp(problem, vertices, step, iterations=iterations, **options)
     outside = result.history["packaging"][0] * problem.area / problem.mapping.shape[0]
     if result.iterations and result.best_iteration == 0 and problem.t_min > 0 \
-            and result.iterations < iterations and outside > RETRY_OUTSIDE * target_volume:
+            and result.iterations < iterations and outside > FIT.retry_outside * target_volume:
         first = result.iterations
-        step = RETRY_STEP * step
+        step = FIT.retry_step * step
         result = run_rgp(problem, vertices, step, iterations=iterations - first, **options)
         result.iterations += first
     return result, step
-
-
-RGP_PASSES = 3
-"""Most further RGP passes of :func:`_passes_around_crossings`."""
 
 
 def _passes_around_crossings(problem, held, moved, T, step, budget, options):
@@ -291,7 +401,7 @@ def _passes_around_crossings(problem, held, moved, T, step, budget, options):
     towards the start, which lies partly outside. From the held-back result the RGP runs
     again with those vertices fixed, so the others can still move in; its result is held
     back the same way, and the vertices cut then are fixed too, until a pass holds nothing
-    back, ``RGP_PASSES`` passes ran or the iteration budget is spent (on a thin plate the
+    back, ``FIT.rgp_passes`` passes ran or the iteration budget is spent (on a thin plate the
     later passes bring in part of what the first left outside).
 
     Parameters
@@ -310,7 +420,7 @@ def _passes_around_crossings(problem, held, moved, T, step, budget, options):
     """
     fixed = (held != moved).any(axis=1)
     passes, used = [], 0
-    while len(passes) < RGP_PASSES and used < budget:
+    while len(passes) < FIT.rgp_passes and used < budget:
         again = run_rgp(problem, held, step, iterations=budget - used, fixed=fixed, **options)
         used += again.iterations
         vertices, _, count = _held_back(held, 0, again.vertices, problem.mapping, T)
@@ -320,13 +430,6 @@ def _passes_around_crossings(problem, held, moved, T, step, budget, options):
         if not count:
             break
     return held, passes, used, fixed
-
-
-INSIDE_MARGIN = 0.25
-"""Depth the inside start pulls the outside limit points to, times the RMS signed distance
-of the least-squares fit's limit points (a quarter gives a lower mean distance after the
-RGP than none or a half)."""
-INSIDE_ROUNDS = 2
 
 
 CREASED_START = "crease-fitted cage"
@@ -339,82 +442,67 @@ pulls do not untangle it either. The crease-curve start reaches a comparable fit
 time, and without samples of the target it does not depend on the seed."""
 
 
-SPREAD_CROSSINGS = 2.0 / 3.0
-"""In inside mode the least-squares fit is refitted stiffer (:func:`_untangled`) only when
-more than this fraction of the base vertices influence its crossing triangles: a thin plate
-pulled through itself over most of its area. Where the crossings are local (at most about
-half of the base vertices), the fit is held back towards the cage there instead. The refits stiffen the smoothness term at every vertex
-influencing a crossing, and the inside fit that starts from them is worse than the one that
-starts from the unstiffened fit held back (a larger mean distance, at twice the CPU time);
-a thin plate held back without refits leaves more of its volume outside."""
-
-
-LONG_WAY_LEFT = 0.15
-"""The untangling refits are made again the long way (:func:`_untangled`) only when the
-short way left at most this fraction of the first fit's crossing pairs. Where it left less,
-the long way usually clears what was left; where it left more, the crossings are where the
-cage cannot follow the part, and the long way does not have fewer but costs seconds."""
-
-
-def _untangled(base, hierarchy, limit_map, T, target, vertices, rounds, seed, info,
-               refit_local=True):
+def _untangled(base, setup, vertices, rounds, seed, refit_local=True):
     """The least-squares fit made not to cross itself where a refit or the cage allows.
 
     Refits with a stiffer smoothness term under the crossings
     (:func:`core.fitting.crossings.stiffen_until_clean`), each from the fit before it and on
-    the fit's level only (``FINE_ROUNDS`` rounds: the stiffer term changes the fit only
+    the fit's level only (``FIT.fine_rounds`` rounds: the stiffer term changes the fit only
     near the crossings, so the coarse rounds' large moves need not be made again). If they
     do not reach a clean fit, the refits are made again the long way, each a whole
     two-level fit from the cage (``cold_refit_crossings``), and the fit with fewer
     crossings is kept: stiffening from a crossing fit can bring its crossings back.
     The long way is taken only when the short way took most crossings off
-    (``LONG_WAY_LEFT``). Either way the refits stop once one takes less than
-    ``UNTANGLE_PROGRESS`` off the fewest crossings of a fit still far from clean (the
+    (``FIT.long_way_left``). Either way the refits stop once one takes less than
+    ``UNTANGLE.progress`` off the fewest crossings of a fit still far from clean (the
     creased cages' fits cross in a hundred pairs or more, and stiffening does not untangle
     them). With ``refit_local=False`` (the inside fit) there are no refits when at most
-    ``SPREAD_CROSSINGS`` of the base vertices influence the first fit's crossings. If the fit
+    ``FIT.spread_crossings`` of the base vertices influence the first fit's crossings. If the fit
     still crosses and the cage's limit surface does not, the fit is held back towards the
     cage there (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses
     itself is no reference to hold back to (nearly every base vertex would go back).
-    Records ``refits``, ``refit_crossings`` (crossing pairs after the first fit and each
-    refit), ``stiffened`` (base vertices with a stiffer smoothness term), ``held_back`` and,
-    when the fit still crosses, ``cage_self_intersections`` in ``info``.
+
+    Parameters
+    ----------
+    base : PolyMesh, the cage (its crease curves fitted); setup : FitSetup;
+    vertices : (n, 3) float64 the least-squares fit; rounds, seed : of the least-squares fit.
 
     Returns
     -------
-    vertices : (n, 3) float64 base vertices.
-    crossings : int, crossing triangle pairs of their limit surface.
-    stiffness : (n,) float64 smoothness weights of the fit (for the inside pull).
+    core.fitting.records.Untangling
     """
+    limit_map, T, target = setup.limit_map, setup.triangles, setup.target
+
     def refit(stiffness, previous):
-        return best_fit(base, limit_map, T, target, rounds=min(rounds, FINE_ROUNDS),
+        return best_fit(base, limit_map, T, target, rounds=min(rounds, FIT.fine_rounds),
                         seed=seed, start=previous, stiffness=stiffness, refit=True).vertices
 
     def cold_refit(stiffness, previous):
-        return _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness,
-                                   seed)[0].vertices
+        return _two_level_best_fit(base, setup.hierarchy, limit_map, T, target, rounds,
+                                   stiffness, seed)[0].vertices
 
     first = crossing_pairs(limit_map, T, vertices)
     refitted = refit_local or (len(influencing(first, limit_map, T))
-                               > SPREAD_CROSSINGS * len(vertices))
-    tries = STIFFEN_TRIES if refitted else 0
+                               > FIT.spread_crossings * len(vertices))
+    tries = UNTANGLE.stiffen_tries if refitted else 0
     untangled = stiffen_until_clean(vertices, refit, limit_map, T, tries=tries, pairs=first,
-                                    progress=UNTANGLE_PROGRESS)
-    if tries and 0 < untangled.crossings <= LONG_WAY_LEFT * untangled.counts[0]:
+                                    progress=UNTANGLE.progress)
+    cold_counts = None
+    if tries and 0 < untangled.crossings <= FIT.long_way_left * untangled.counts[0]:
         cold = stiffen_until_clean(vertices, cold_refit, limit_map, T, pairs=first,
-                                   progress=UNTANGLE_PROGRESS)
-        info["cold_refit_crossings"] = cold.counts
+                                   progress=UNTANGLE.progress)
+        cold_counts = cold.counts
         if cold.crossings < untangled.crossings:
             untangled = cold
-    vertices, crossings, held = untangled.vertices, untangled.crossings, 0
+    vertices, crossings, held, cage = untangled.vertices, untangled.crossings, 0, None
     if crossings:
-        info["cage_self_intersections"] = count_crossings(limit_map, T, base.vertices)
-        if info["cage_self_intersections"] == 0:
+        cage = count_crossings(limit_map, T, base.vertices)
+        if cage == 0:
             vertices, crossings, held = _held_back(base.vertices, 0, vertices, limit_map, T,
                                                    untangled.pairs)
-    info.update(refits=untangled.refits, refit_crossings=untangled.counts,
-                stiffened=int((untangled.stiffness > 1).sum()), held_back=held)
-    return vertices, crossings, untangled.stiffness
+    return Untangling(vertices, crossings, untangled.stiffness, untangled.refits,
+                      untangled.counts, cold_counts, int((untangled.stiffness > 1).sum()),
+                      held, cage)
 
 
 def _held_back(reference, crossings, moved, mapping, T, moved_pairs=None):
@@ -453,31 +541,31 @@ def _pulled_inside(base, limit_map, T, target, vertices, stiffness):
     crossings : list of int, crossing pairs of the pull and of each stiffer pull.
     """
     start = target.closest(limit_map @ vertices)
-    margin = INSIDE_MARGIN * float(np.sqrt(np.mean(start.signed ** 2)))
+    margin = FIT.inside_margin * float(np.sqrt(np.mean(start.signed ** 2)))
     weights = np.ones(len(vertices)) if stiffness is None else stiffness
 
     def pull(extra, previous=None):
-        return pull_inside(base, limit_map, target, vertices, margin, INSIDE_ROUNDS,
+        return pull_inside(base, limit_map, target, vertices, margin, FIT.inside_rounds,
                            stiffness=weights * extra, start_closest=start)
 
     pulled = stiffen_until_clean(pull(np.ones(len(vertices))), pull, limit_map, T,
-                                 tries=0 if stiffness is None else STIFFEN_TRIES)
+                                 tries=0 if stiffness is None else UNTANGLE.stiffen_tries)
     return pulled, margin, pulled.counts
 
 
 def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness=None, seed=0):
-    """Least-squares fit: ``rounds - FINE_ROUNDS`` rounds on the level-1 limit points
-    (a quarter of the points; the large moves), then up to ``FINE_ROUNDS`` on the fit's
+    """Least-squares fit: ``rounds - FIT.fine_rounds`` rounds on the level-1 limit points
+    (a quarter of the points; the large moves), then up to ``FIT.fine_rounds`` on the fit's
     level: 8 + 2 rounds reach a lower mean distance than 10 level-2 rounds in about half
     the time.
 
     Returns
     -------
     fine, coarse : BestFitResult of the two stages (``coarse`` has 0 rounds when the fit
-        itself is on level 1 or ``rounds <= FINE_ROUNDS``).
+        itself is on level 1 or ``rounds <= FIT.fine_rounds``).
     """
     levels = len(hierarchy.meshes) - 1
-    coarse_rounds = rounds - FINE_ROUNDS if levels > 1 else 0
+    coarse_rounds = rounds - FIT.fine_rounds if levels > 1 else 0
     if coarse_rounds > 0:
         coarse_mesh = hierarchy.meshes[1]
         coarse_map = (limit_matrices(coarse_mesh)[0] @ hierarchy.composite(0)).tocsr()
@@ -491,34 +579,23 @@ def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness
     return fine, coarse
 
 
-def _figures(X, T, target, points):
-    """Distance and containment figures of the fine limit surface against the target."""
-    report = containment(X, T, target.vertices, target.faces)
-    return {**_distances(X, T, target, points),
-            "outside_volume_fraction": report["outside_volume_fraction"],
-            "uncovered_volume_fraction": report["uncovered_volume_fraction"]}
-
-
-DISTANCE_SAMPLES = 20000
-"""Target samples of the target-to-surface figures (:func:`_distances`)."""
-
-
 def _distances(X, T, target, points):
     """Both one-sided distances between the fine limit surface and the target.
 
     Parameters
     ----------
     X : (n, 3) float64 fine limit points; T : (t, 3) int64 their triangles.
-    target : TargetSurface; points : (DISTANCE_SAMPLES, 3) float64 area-weighted samples of
+    target : TargetSurface; points : (FIT.distance_samples, 3) float64 area-weighted samples of
         it (drawn once per fit, for the result's figures and the cage's).
 
     Returns
     -------
-    dict of fractions of the target's bounding-box diagonal: ``mean_distance`` /
-    ``max_distance``, the fine limit points to the target; ``target_mean_distance`` /
-    ``target_max_distance``, :data:`DISTANCE_SAMPLES` area-weighted target samples (the
-    maximum also over the target's vertices) to the triangulated limit surface: what the
-    surface misses, such as a thin horn's tip the limit surface stops short of.
+    core.fitting.records.Distances, fractions of the target's bounding-box diagonal:
+    ``mean_distance`` / ``max_distance``, the fine limit points to the target;
+    ``target_mean_distance`` / ``target_max_distance``, ``FIT.distance_samples``
+    area-weighted target samples (the maximum also over the target's vertices) to the
+    triangulated limit surface: what the surface misses, such as a thin horn's tip the
+    limit surface stops short of.
     """
     forward = target.nearest(X).distance / target.diagonal
     fitted = TargetSurface(X, T, "fitted surface")
@@ -530,8 +607,8 @@ def _distances(X, T, target, points):
     if len(vertices):
         largest = max(largest, float((fitted.nearest(vertices).distance
                                       / target.diagonal).max()))
-    return {"mean_distance": float(forward.mean()), "max_distance": float(forward.max()),
-            "target_mean_distance": float(backward.mean()), "target_max_distance": largest}
+    return Distances(float(forward.mean()), float(forward.max()), float(backward.mean()),
+                     largest)
 
 
 def _may_be_farther(points, on_surface, distance, diagonal):
@@ -539,17 +616,17 @@ def _may_be_farther(points, on_surface, distance, diagonal):
     ``distance`` (model units).
 
     A point of the surface (``on_surface``, (s, 3), such as the fine limit points and the
-    closest points of the samples) bounds the distance from above, so a target vertex
-    nearer than ``distance`` to one of them cannot raise the maximum and is not queried
-    (``1e-9 * diagonal`` of slack for the rounding of those points): on a fine target the
-    query of the rest costs a fraction of the query of all.
+    closest points of the samples) bounds the distance from above, so a target vertex nearer
+    than ``distance`` to one of them cannot raise the maximum and is not queried
+    (``core.tolerances.CONTACT * diagonal`` of slack for the rounding of those points): on a
+    fine target the query of the rest costs a fraction of the query of all.
     """
     bound, _ = cKDTree(on_surface).query(points)
-    return bound > distance - 1e-9 * diagonal
+    return bound > distance - CONTACT * diagonal
 
 
-def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, surface, start,
-                      rounds):
+def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction):
+    """Raise ParameterError naming the first of these parameters out of range."""
     if not isinstance(levels, (int, np.integer)) or not 1 <= levels <= 4:
         raise ParameterError(f"levels must be an integer in 1..4, got {levels!r}")
     if not isinstance(iterations, (int, np.integer)) or iterations < 0:
@@ -562,12 +639,20 @@ def _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction, s
         raise ParameterError(f"penalty must be a finite number > 0, got {penalty!r}")
     if not (np.isfinite(step_fraction) and 0 < step_fraction <= 1):
         raise ParameterError(f"step_fraction must be in (0, 1], got {step_fraction!r}")
+
+
+def _check_choices(surface, start, rounds, tol, patience):
+    """Raise ParameterError naming the first of these parameters out of range."""
     if surface not in SURFACES:
         raise ParameterError(f"surface must be one of {SURFACES}, got {surface!r}")
     if start not in STARTS:
         raise ParameterError(f"start must be one of {STARTS}, got {start!r}")
     if not isinstance(rounds, (int, np.integer)) or rounds < 0:
         raise ParameterError(f"rounds must be an integer >= 0, got {rounds!r}")
+    if not (np.isfinite(tol) and tol >= 0) or not (isinstance(patience, (int, np.integer))
+                                                   and patience >= 1):
+        raise ParameterError(f"tol must be >= 0 and patience an integer >= 1, got {tol!r}, "
+                             f"{patience!r}")
 
 
 def _check_base(base):
@@ -596,14 +681,9 @@ def _area(X, T):
     return float(face_areas(X, T).sum())
 
 
-NEAR_TOUCH = 0.01
-"""Thinnest wall of the inside start, times the mean base edge, below which the default
-``t_min`` is 0 (the thickness constraint left off)."""
-
-
 def _default_t_min(X, T, edge):
     """``min(0.1 * edge, 0.5 * thinnest wall)``, walls measured up to ``0.2 * edge``; 0 where
-    the thinnest wall is below ``NEAR_TOUCH * edge``.
+    the thinnest wall is below ``FIT.near_touch * edge``.
 
     A start whose walls nearly touch (where a crossing was held back just far enough,
     :func:`core.fitting.crossings.hold_back_crossings`) cannot keep a constraint that thin:
@@ -613,6 +693,6 @@ def _default_t_min(X, T, edge):
     """
     cap = 0.1 * edge
     found = thickness(X, T, 2.0 * cap).thickness.min()
-    if found < NEAR_TOUCH * edge:
+    if found < FIT.near_touch * edge:
         return 0.0
     return float(min(cap, 0.5 * found))

@@ -1,12 +1,13 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Refine the cage where an inside fit leaves volume outside the target.
 
-The inside fit (:func:`core.fitting.fit.fit_base_mesh`) holds its moves back where the
-limit surface would cross itself. On a thin plate that a coarse cage spans with wide
-stencils (a plate many times thinner than the cage's edges) the relaxed gradient
-projection pulls the plate's two walls through each other, the hold-back returns those
-base vertices towards the start, and the start lies partly outside, so a visible share of
-the target's volume stays outside, varying with the last bits of the cage. A finer cage there has narrower stencils and fills the plate from inside.
+The inside fit (:func:`core.fitting.fit.fit_base_mesh`) holds its moves back where the limit
+surface would cross itself. On a thin plate that a coarse cage spans with wide stencils (a
+plate many times thinner than the cage's edges) the relaxed gradient projection pulls the
+plate's two walls through each other, the hold-back returns those base vertices towards the
+start, and the start lies partly outside, so a visible share of the target's volume stays
+outside, varying with the last bits of the cage. A finer cage there has narrower stencils
+and fills the plate from inside.
 
 :func:`fit_with_outside_refinement` fits, and while more than ``goal`` of the target's volume
 lies outside, splits the quad strips of the **unfitted** cage through the base faces whose
@@ -26,15 +27,25 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from core.fitting.deviation import fine_limit_points
+from core.fitting.records import FitRecord
 from core.fitting.refine import refined_without_crossings
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
-OUTSIDE_DEPTH = 1e-3
-"""A base face is refined when one of its fine limit points lies deeper outside the target
-than this fraction of the target's bounding-box diagonal."""
-OUTSIDE_ROUNDS = 2
-"""Most refinements (a second round seldom leaves less outside than the first)."""
+
+@dataclass(frozen=True)
+class OutsideRefinementSettings:
+    """Tuned constants of :func:`fit_with_outside_refinement`."""
+
+    depth: float = 1e-3
+    """Depth outside the target, a fraction of its bounding-box diagonal, beyond which a fine
+    limit point has its base face refined."""
+    rounds: int = 2
+    """Most refinements (a second round seldom leaves less outside than the first)."""
+
+
+OUTSIDE = OutsideRefinementSettings()
+"""The settings this module runs with."""
 
 
 @dataclass
@@ -42,7 +53,7 @@ class OutsideRefinement:
     """Outcome of :func:`fit_with_outside_refinement`.
 
     mesh : PolyMesh, the fitted cage leaving the least volume outside.
-    info : dict, its fit's info.
+    info : core.fitting.records.FitRecord, its fit's record.
     rounds : list of dict, per fit: ``faces``, ``outside_volume_fraction``,
         ``refined_faces`` (base faces with outside points, whose strips the next cage
         splits; 0 for the last fit).
@@ -50,21 +61,20 @@ class OutsideRefinement:
     """
 
     mesh: PolyMesh
-    info: dict
+    info: FitRecord
     rounds: list = field(default_factory=list)
     reason: str = ""
 
 
 def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_faces=None,
-                                rounds=OUTSIDE_ROUNDS, progress=None):
+                                rounds=OUTSIDE.rounds, progress=None):
     """Fit ``base``; while too much volume is outside, refine the cage there and fit again.
 
     Parameters
     ----------
     base : PolyMesh, the cage to fit (closed, quad-dominant, unfitted).
     target : TriMesh, closed, outward oriented.
-    fit : callable ``fit(cage) -> (fitted PolyMesh, info dict)``, the configured inside fit
-        (its info has ``levels`` and ``outside_volume_fraction``).
+    fit : callable ``fit(cage) -> (fitted PolyMesh, FitRecord)``, the configured inside fit.
     goal : float >= 0, fraction of the target's volume allowed outside; 0: no refinement.
     max_faces : int, no cage with more faces is fitted.
     crossing_faces : None or callable ``crossing_faces(cage) -> (k, 2) int``, the base faces
@@ -81,10 +91,10 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
     result = OutsideRefinement(fitted, info)
     cage, surface = base, None
     for done in range(rounds + 1):
-        outside = float(info["outside_volume_fraction"])
+        outside = float(info.figures.outside_volume_fraction)
         result.rounds.append({"faces": int(fitted.n_faces), "outside_volume_fraction": outside,
                               "refined_faces": 0})
-        if outside < result.info["outside_volume_fraction"]:
+        if outside < result.info.figures.outside_volume_fraction:
             result.mesh, result.info = fitted, info
         if not goal or outside <= goal:
             result.reason = "" if done == 0 else (f"{outside:.3%} of the volume outside after "
@@ -96,10 +106,10 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
             return result
         if surface is None:
             surface = TargetSurface(target.vertices, target.faces)
-        marked = faces_outside(fitted, info["levels"], surface, OUTSIDE_DEPTH)
+        marked = faces_outside(fitted, info.levels, surface, OUTSIDE.depth)
         result.rounds[-1]["refined_faces"] = int(marked.sum())
         refined, why_not = (None, "no point lies deeper outside than "
-                            f"{OUTSIDE_DEPTH:g} of the diagonal") if not marked.any() else \
+                            f"{OUTSIDE.depth:g} of the diagonal") if not marked.any() else \
             refined_without_crossings(cage, marked, crossing_faces)
         if refined is not None and refined.n_faces > max_faces:
             why_not = (f"the refined cage would have {refined.n_faces} faces, more than "
@@ -120,7 +130,7 @@ def _kept(result, reason):
     if result.mesh.n_faces == result.rounds[-1]["faces"]:
         return reason
     return (f"{reason}; the fit of the {result.mesh.n_faces}-face cage is kept "
-            f"({result.info['outside_volume_fraction']:.3%} outside)")
+            f"({result.info.figures.outside_volume_fraction:.3%} outside)")
 
 
 def faces_outside(cage, levels, surface, depth):

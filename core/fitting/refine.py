@@ -2,14 +2,15 @@
 """Tolerance-driven refinement of a quad-dominant cage (``--tolerance``).
 
 After a fit, every base face gets the largest deviation between its part of the limit
-surface and the target, both ways: the distance of its fine limit points to the target,
-and the distance of every part of the target whose closest point on the limit surface lies
-in it (:func:`core.fitting.deviation.face_deviation`). Each face deviating more than the tolerance has the quad strip through it split (for a
-quad, the strip through its two longer opposite edges; for another face, the strip across
-its longest edge). The strip runs through quads across opposite edges, both ways from its
-seed, **only through the deviating faces**: every quad of it is cut in two through the
-midpoints of its two crossed edges, and it ends in the first face that deviates less or is
-not a quad. There the mesh is closed conformingly, without T-junctions:
+surface and the target, both ways: the distance of its fine limit points to the target, and
+the distance of every part of the target whose closest point on the limit surface lies in it
+(:func:`core.fitting.deviation.face_deviation`). Each face deviating more than the tolerance
+has the quad strip through it split (for a quad, the strip through its two longer opposite
+edges; for another face, the strip across its longest edge). The strip runs through quads
+across opposite edges, both ways from its seed, **only through the deviating faces**: every
+quad of it is cut in two through the midpoints of its two crossed edges, and it ends in the
+first face that deviates less or is not a quad. There the mesh is closed conformingly,
+without T-junctions:
 
 - a quad entered on one edge keeps its four corners and the midpoint as a fifth (a pentagon,
   which Catmull-Clark subdivides like any face; it is not split, so a strip adds faces only
@@ -21,12 +22,12 @@ not a quad. There the mesh is closed conformingly, without T-junctions:
   its centre.
 
 Strips that ran round the whole part would triple the cage in every round, most of the new
-faces where the surface is already within the tolerance, so strips end where they can. The refined cage is placed so that
-its limit surface passes through the fitted one at every vertex (a sparse linear system of the
-limit masks), then fitted again, until the largest deviation is at most the tolerance or the next
-refinement would exceed the face budget. Where every split of the fitted cage crosses itself
-(an inside fit held a thin wall back, so its walls nearly touch), the cage the fit started
-from is split instead.
+faces where the surface is already within the tolerance, so strips end where they can. The
+refined cage is placed so that its limit surface passes through the fitted one at every
+vertex (a sparse linear system of the limit masks), then fitted again, until the largest
+deviation is at most the tolerance or the next refinement would exceed the face budget.
+Where every split of the fitted cage crosses itself (an inside fit held a thin wall back, so
+its walls nearly touch), the cage the fit started from is split instead.
 """
 from dataclasses import dataclass, field
 
@@ -34,19 +35,29 @@ import numpy as np
 
 from core.errors import ParameterError
 from core.fitting.deviation import face_deviation
+from core.fitting.records import FitRecord
 from core.subdivision.catmull_clark import mesh_topology
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
-CROSSING_RINGS = 3
-"""How many rings of faces away from a crossing the deviating faces to turn or leave whole
-are looked for: the refined cage is placed on the limit surface as a whole, so a split can
-move the surface a ring or two beyond the faces it changed, so a crossing need not lie in or
-next to a deviating face."""
-UNCROSS_TRIES = 20
-"""Most refinements tried per round with the deviating faces under new crossings cut the
-other way, then left whole (each try costs a crossing search of the refined limit surface;
-a tight tolerance can need more than a few)."""
+
+@dataclass(frozen=True)
+class RefineSettings:
+    """Tuned constants of :func:`fit_to_tolerance`."""
+
+    crossing_rings: int = 3
+    """Rings of faces around a crossing in which the deviating faces to turn or leave whole
+    are looked for: the refined cage is placed on the limit surface as a whole, so a split
+    can move the surface a ring or two beyond the faces it changed, and a crossing need not
+    lie in or next to a deviating face."""
+    uncross_tries: int = 20
+    """Most refinements tried per round with the deviating faces under new crossings cut the
+    other way, then left whole (each try costs a crossing search of the refined limit
+    surface; a tight tolerance can need more than a few)."""
+
+
+REFINE = RefineSettings()
+"""The settings this module runs with."""
 
 
 @dataclass
@@ -55,7 +66,7 @@ class RefinementResult:
 
     mesh : PolyMesh, the fitted cage that met the tolerance, else the closest one (the
         smallest largest deviation of all fits).
-    info : dict, its fit's info.
+    info : core.fitting.records.FitRecord or None, its fit's record (None: no fit yet).
     rounds : list of dict, per fit: ``faces``, ``max_deviation`` and ``mean_deviation``
         (fractions of the target's bounding-box diagonal), ``offending_faces`` and, when a
         refinement was tried after it, ``split``: which cage's strips were split (``'fitted
@@ -65,7 +76,7 @@ class RefinementResult:
     """
 
     mesh: PolyMesh
-    info: dict
+    info: FitRecord | None
     rounds: list = field(default_factory=list)
     met: bool = False
     reason: str = ""
@@ -81,13 +92,13 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
     target : TriMesh
     tolerance : float > 0, fraction of the target's bounding-box diagonal.
     max_faces : int, no refinement beyond this many faces.
-    fit : callable ``fit(cage) -> (fitted PolyMesh, info dict)`` (the configured fit;
-        its ``info["levels"]`` says the subdivision level of the fine limit points).
+    fit : callable ``fit(cage) -> (fitted PolyMesh, FitRecord)`` (the configured fit;
+        the record's ``levels`` is the subdivision level of the fine limit points).
     crossing_faces : None, or callable ``crossing_faces(cage) -> (k, 2) int`` the base faces
         of the triangle pairs where the cage's limit surface crosses itself (at the fit's
         level). Given, a refined cage that crosses itself more than the fitted one is not
         fitted: the deviating faces under its crossings are cut the other way, then left
-        whole, and the split tried again (at most :data:`UNCROSS_TRIES` times,
+        whole, and the split tried again (at most ``REFINE.uncross_tries`` times,
         :func:`refined_without_crossings`), since the fit keeps the crossings it starts from.
         When no split of the fitted cage is left, the same faces of the cage it was fitted
         from are split instead (when the fit kept its faces): where an inside fit held a
@@ -110,7 +121,7 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
                              f"diagonal, got {tolerance!r}")
     surface = TargetSurface(target.vertices, target.faces)
     cage = base
-    result = RefinementResult(base, {})
+    result = RefinementResult(base, None)
     closest = None  # (largest deviation, fitted cage, info) of the closest fit so far
     for done in range(max_rounds):
         fitted, info = fit(cage)
@@ -119,7 +130,7 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
         offending = np.flatnonzero(per_face > tolerance)
         result.rounds.append({"faces": int(fitted.n_faces),
                               "max_deviation": float(per_face.max()),
-                              "mean_deviation": float(info["mean_distance"]),
+                              "mean_deviation": float(info.figures.distances.mean_distance),
                               "offending_faces": int(len(offending)),
                               "unproven_area": deviation.unproven_area})
         if closest is None or per_face.max() < closest[0]:
@@ -165,7 +176,7 @@ def refined_without_crossings(fitted, deviating, crossing_faces):
 
     The deviating faces under the crossings (or, where every crossing lies in faces that
     do not deviate, such as those where strips ended, the deviating faces nearest to them,
-    up to :data:`CROSSING_RINGS` rings of faces away) are cut the other way next time (a
+    up to ``REFINE.crossing_rings`` rings of faces away) are cut the other way next time (a
     quad across its shorter edges, another face across its second-longest edge); those
     already turned are left whole: a strip that crosses itself cut one way often does not
     cut the other.
@@ -177,7 +188,7 @@ def refined_without_crossings(fitted, deviating, crossing_faces):
     turned = np.zeros(len(within), dtype=bool)
     topology = mesh_topology(fitted.face_vertices, fitted.face_offsets, len(fitted.vertices))
     allowed = None
-    for tries in range(UNCROSS_TRIES + 1):
+    for tries in range(REFINE.uncross_tries + 1):
         if not within.any():
             return None, ("splitting the deviating faces makes the refined limit surface cross "
                           "itself (thin or sharp features under them need other faces)")
@@ -194,7 +205,7 @@ def refined_without_crossings(fitted, deviating, crossing_faces):
         under = np.zeros(len(within), dtype=bool)
         under[parent[np.unique(crossing)]] = True
         hit = under & within
-        for _ in range(CROSSING_RINGS):  # crossings where strips ended, or a ring further
+        for _ in range(REFINE.crossing_rings):  # crossings where strips ended, or a ring further
             if hit.any():
                 break
             under[topology.face_of_corner[topology.twin[np.flatnonzero(

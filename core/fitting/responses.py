@@ -91,12 +91,6 @@ def packaging(X, target, mode="inside", known=None):
     return value, gradient, signed
 
 
-INSIDE_SLACK = 1e-9
-"""Depth below the target, times its bounding-box diagonal, within which a fine point whose
-inside bound (:class:`InsideBounds`) does not prove it inside is
-queried again."""
-
-
 class InsideBounds:
     """Points proven inside a target since their last closest-point query, and the answers
     of the points that have not moved since.
@@ -204,7 +198,7 @@ def thickness(X, T, max_length):
 
     A ray leaves each vertex along ``-n_j`` (area-weighted vertex normal); the first
     triangle it exits through (hit with ``d . m > 0``, ``m`` the triangle's outward
-    normal, at a distance ``> 1e-9 * max_length``) ends it. The triangles of the
+    normal, at a distance ``> core.tolerances.CONTACT * max_length``) ends it. The triangles of the
     vertex's own one-ring are entered, not exited, so they never count. The rays are
     cast by :meth:`core.target_surface.TargetSurface.first_exit` (compiled, with an
     exact float64 check and a tolerant re-cast of rays through edges and vertices).

@@ -8,15 +8,15 @@ fine-mesh gradient mapped back by ``M^T`` (Eq. 11).
 
 Normalisation: the objective is evaluated as
 
-    J = -f_volume / A_0 + (p / P_REF) * f_packaging / n_fine,
+    J = -f_volume / A_0 + (p / p_ref) * f_packaging / n_fine,
 
 with ``A_0`` the initial fine-mesh area and ``n_fine`` the number of fine vertices, so
 both terms are lengths (volume per area, mean penetration) and their gradients per
 fine vertex are comparable: about ``a_j / A_0 ~ 1 / n_fine`` for the volume and
-``(p / P_REF) / n_fine`` for a vertex outside the target. The paper's ``p = 1e5``
+``(p / p_ref) / n_fine`` for a vertex outside the target. The paper's ``p = 1e5``
 multiplies a length against a volume in its model units, so it has no unit-free
-meaning; with ``P_REF = 1e3`` it becomes a pull-back 100 times the volume push, well
-above the exact-penalty threshold (about 1) of this L1 penalty. Much larger ratios
+meaning; with ``p_ref = 1e3`` (:class:`RGPSettings`) it becomes a pull-back 100 times the
+volume push, well above the exact-penalty threshold (about 1) of this L1 penalty. Much larger ratios
 make the far, small entries of ``S_i^T`` carry the penalty of a few outside vertices
 to the whole base mesh, and every vertex then oscillates (measured on a 3x3x3 grid
 sphere: ratio 1e1 or 1e2 reaches 0.06 % of the bbox diagonal mean distance within
@@ -24,8 +24,8 @@ sphere: ratio 1e1 or 1e2 reaches 0.06 % of the bbox diagonal mean distance withi
 
 Step rule: the search direction is divided by the largest base-vertex length of the
 volume term's gradient and every vertex's row is clipped to length 1, then scaled
-by ``step`` (model units) and a per-vertex damping factor that shrinks by 0.7 when
-the vertex's move reverses (zig-zag) and grows by 1.5 (up to 1) otherwise.
+by ``step`` (model units) and a per-vertex damping factor that shrinks (``shrink``) when
+the vertex's move reverses (zig-zag) and grows (``grow``, up to 1) otherwise.
 
 :func:`run_rgp` is the optimiser of Antonau, Hojjat and Bletzinger (2021) as we read
 it: per constraint a buffer zone around a moving centre; a constraint inside or above
@@ -40,16 +40,32 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.fitting.responses import (INSIDE_SLACK, InsideBounds, packaging, thickness_constraint,
+from core.fitting.responses import (InsideBounds, packaging, thickness_constraint,
                                     volume)
 from core.progress import NO_PROGRESS
+from core.tolerances import CONTACT
 
-P_REF = 1e3
 
-_MOVING = 0.05
-_MIN_DAMPING = 1e-3
-_SHRINK = 0.7
-_GROW = 1.5
+@dataclass(frozen=True)
+class RGPSettings:
+    """Tuned constants of the relaxed gradient projection (:func:`run_rgp`)."""
+
+    p_ref: float = 1e3
+    """Penalty ``p`` at which the packaging pull-back equals the volume push per fine vertex
+    (the objective's normalisation, see the module docstring)."""
+    moving: float = 0.05
+    """Length of a search-direction row (at most 1) above which a vertex counts as moving,
+    for the zig-zag test of its damping."""
+    shrink: float = 0.7
+    """Factor on a vertex's damping when its move reverses (zig-zag)."""
+    grow: float = 1.5
+    """Factor on a vertex's damping when its move does not reverse (up to 1)."""
+    min_damping: float = 1e-3
+    """Smallest damping factor of a vertex."""
+
+
+RGP = RGPSettings()
+"""The settings this module runs with."""
 
 
 class FitProblem:
@@ -71,12 +87,12 @@ class FitProblem:
         self.mapping_t = self.mapping.T.tocsr()
         self.triangles = triangles
         self.target = target
-        self.weight = float(penalty) / P_REF
+        self.weight = float(penalty) / RGP.p_ref
         self.mode = mode
         self.t_min = float(t_min)
         self.area = float(area)
         # queries of the points proven still inside are skipped (exact, see InsideBounds)
-        self.known = InsideBounds(INSIDE_SLACK * target.diagonal) if mode == "inside" else None
+        self.known = InsideBounds(CONTACT * target.diagonal) if mode == "inside" else None
 
     def fine(self, V0):
         """(n_fine, 3) float64 fine positions ``M V0`` (Eq. 10)."""
@@ -234,21 +250,12 @@ def run_rgp(problem, V0, step, iterations=100, stall_tol=1e-4, patience=10,
         if it == iterations or _stalled(history["objective"], step, stall_tol, patience):
             stopped = "iterations" if it == iterations else "stalled"
             break
-        weights = {}
-        for c in ev.constraints:
-            zone = zones.setdefault(c.name, BufferZone(size=initial_buffer))
-            w = zone.assess(c.value)
-            if w > 0 and np.abs(c.gradient).max() > 0:
-                weights[c.name] = w
+        weights = _buffer_weights(ev.constraints, zones, initial_buffer)
         active = [c for c in ev.constraints if c.name in weights]
         direction = _search_direction(ev, active, weights, damping, step, max_inner)
         if fixed is not None:
             direction[fixed] = 0.0
-        moving = (np.linalg.norm(direction, axis=1) > _MOVING) & (
-            np.linalg.norm(previous, axis=1) > _MOVING)
-        reversed_ = moving & (np.einsum("ij,ij->i", direction, previous) < 0)
-        damping = np.where(reversed_, np.maximum(_SHRINK * damping, _MIN_DAMPING),
-                           np.minimum(_GROW * damping, 1.0))
+        damping = _damped(damping, direction, previous)
         update = direction * (step * damping)[:, None]
         V = V + update
         previous = direction
@@ -261,6 +268,29 @@ def run_rgp(problem, V0, step, iterations=100, stall_tol=1e-4, patience=10,
     if best[1] is None:
         best = (history["objective"][-1], V, len(history["objective"]) - 1)
     return RGPResult(best[1], done, history, stopped, best[2])
+
+
+def _buffer_weights(constraints, zones, initial_buffer):
+    """Buffer value ``w`` in (0, 2] of each active constraint (name -> float): those inside
+    or above their buffer zone (``zones``, created with ``initial_buffer``) with a nonzero
+    gradient."""
+    weights = {}
+    for c in constraints:
+        zone = zones.setdefault(c.name, BufferZone(size=initial_buffer))
+        w = zone.assess(c.value)
+        if w > 0 and np.abs(c.gradient).max() > 0:
+            weights[c.name] = w
+    return weights
+
+
+def _damped(damping, direction, previous):
+    """(n,) float64 damping factors after a move along ``direction`` ((n, 3)) that followed
+    ``previous``: shrunk where a moving vertex reverses, grown (up to 1) elsewhere."""
+    moving = (np.linalg.norm(direction, axis=1) > RGP.moving) & (
+        np.linalg.norm(previous, axis=1) > RGP.moving)
+    reversed_ = moving & (np.einsum("ij,ij->i", direction, previous) < 0)
+    return np.where(reversed_, np.maximum(RGP.shrink * damping, RGP.min_damping),
+                    np.minimum(RGP.grow * damping, 1.0))
 
 
 def _record(history, ev):

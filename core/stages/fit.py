@@ -1,21 +1,13 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Fit stage: move the cage so its limit surface fits the target (paper Sect. 2.4-2.5,
 Eqs. 4-11), refining quad strips until a tolerance is met when one is asked for."""
+from dataclasses import replace
+
 import numpy as np
 
 from core.subdivision.limit_crossings import (count_limit_self_intersections, fit_levels,
                                               limit_self_intersections)
 from core.types import FitResult
-
-FIT_REPORT_KEYS = ("start", "rounds", "iterations", "stopped", "mean_distance", "max_distance",
-                   "target_mean_distance", "target_max_distance",
-                   "outside_volume_fraction", "uncovered_volume_fraction", "initial_mean_distance",
-                   "initial_max_distance", "initial_target_mean_distance",
-                   "initial_target_max_distance", "t_min", "seconds", "measure_seconds", "refits",
-                   "refit_crossings", "cold_refit_crossings", "stiffened", "held_back",
-                   "rgp_held_back", "rgp_retried", "rgp_passes", "nudged", "pull_crossings",
-                   "cage_self_intersections", "crease_curves", "outside_refinement")
-"""Figures of ``core.fitting.fit_base_mesh``'s info copied into the report, when present."""
 
 
 def run_fit(intake, basemesh, params, progress):
@@ -61,16 +53,17 @@ def run_fit(intake, basemesh, params, progress):
         if params.fit_mode != "inside" or not params.outside_refinement:
             return fit_once(cage)
         from core.fitting.outside_refinement import fit_with_outside_refinement
+        from core.fitting.records import OutsideRefinementSummary
 
         refined = fit_with_outside_refinement(cage, target, fit_once, params.outside_refinement,
                                               params.max_base_faces, crossing_faces,
                                               progress=progress)
-        info = dict(refined.info)
+        record = refined.info
         if refined.reason:  # the first fit left more than the goal outside
-            info["outside_refinement"] = {"goal": params.outside_refinement,
-                                          "reason": refined.reason, "rounds": refined.rounds,
-                                          "faces": int(refined.mesh.n_faces)}
-        return refined.mesh, info
+            record = replace(record, outside_refinement=OutsideRefinementSummary(
+                params.outside_refinement, refined.reason, refined.rounds,
+                int(refined.mesh.n_faces)))
+        return refined.mesh, record
 
     diagonal_mm = float(np.linalg.norm(np.ptp(target.vertices, axis=0)))
     tolerance = params.tolerance or params.tolerance_mm / diagonal_mm
@@ -80,13 +73,13 @@ def run_fit(intake, basemesh, params, progress):
 
         refinement = fit_to_tolerance(base, target, tolerance, params.max_base_faces, fit,
                                       crossing_faces=crossing_faces)
-        fitted, info = refinement.mesh, refinement.info
+        fitted, record = refinement.mesh, refinement.info
     else:
-        fitted, info = fit(base)
-    levels = info["levels"]
-    report = {"mode": params.fit_mode, "levels": levels,
-              **{key: info[key] for key in FIT_REPORT_KEYS if key in info}}
-    report["self_intersections"] = (info["self_intersections"] if "self_intersections" in info
+        fitted, record = fit(base)
+    levels = record.levels
+    report = {"mode": params.fit_mode, "levels": levels, **fit_section(record)}
+    report["self_intersections"] = (record.self_intersections
+                                    if record.self_intersections is not None
                                     else count_limit_self_intersections(fitted, levels))
     warnings = [] if report["self_intersections"] == 0 else [
         f"warning: the fitted limit surface intersects itself "
@@ -101,4 +94,76 @@ def run_fit(intake, basemesh, params, progress):
         if not refinement.met:
             warnings.append(f"warning: {refinement.reason}")
     return FitResult(fitted, report, "; ".join(warnings), levels=levels,
-                     cage_self_intersections=info.get("cage_self_intersections"))
+                     cage_self_intersections=record.cage_self_intersections)
+
+
+def fit_section(record):
+    """The fit's figures in the report (docs/REFERENCE.md, "The report"), from its records.
+
+    Parameters
+    ----------
+    record : core.fitting.records.FitRecord
+
+    Returns
+    -------
+    dict: ``start`` (when the fit started from more than the cage), ``rounds``,
+    ``iterations``, ``stopped``, the distances and volume fractions of the result and the
+    ``initial_`` distances of the cage, ``t_min`` (inside mode), ``seconds``,
+    ``measure_seconds``, then what the phases that ran did (:func:`_phase_section`).
+    """
+    section = {} if record.start is None else {"start": record.start}
+    section.update(rounds=record.rounds, iterations=record.iterations, stopped=record.stopped)
+    figures = record.figures
+    section.update(vars(figures.distances))
+    section.update(outside_volume_fraction=figures.outside_volume_fraction,
+                   uncovered_volume_fraction=figures.uncovered_volume_fraction)
+    section.update({"initial_" + key: value for key, value in vars(figures.initial).items()})
+    if record.inside is not None:
+        section["t_min"] = record.inside.t_min
+    section.update(seconds=record.seconds, measure_seconds=figures.seconds)
+    section.update(_phase_section(record))
+    return section
+
+
+def _phase_section(record):
+    """What the phases of a fit did: the least-squares fit's refits (``refits``,
+    ``refit_crossings``, ``cold_refit_crossings``, ``stiffened``), the base vertices
+    ``held_back`` at the start, the RGP's (``rgp_held_back``, ``rgp_retried``,
+    ``rgp_passes``, ``nudged``), the inside start's ``pull_crossings``, the cage's
+    ``cage_self_intersections``, the ``crease_curves`` and the ``outside_refinement``;
+    each only when that phase ran or that happened."""
+    section = {}
+    untangled = None if record.least_squares is None else record.least_squares.untangled
+    if untangled is not None:
+        section.update(refits=untangled.refits, refit_crossings=untangled.refit_crossings)
+        if untangled.cold_refit_crossings is not None:
+            section["cold_refit_crossings"] = untangled.cold_refit_crossings
+        section["stiffened"] = untangled.stiffened
+    if record.held_back is not None:
+        section["held_back"] = record.held_back
+    section.update(_inside_section(record.inside))
+    if record.inside_start is not None:
+        section["pull_crossings"] = record.inside_start.pull_crossings
+    if record.cage_self_intersections is not None:
+        section["cage_self_intersections"] = record.cage_self_intersections
+    if record.crease_curves is not None:
+        creased = record.crease_curves
+        section["crease_curves"] = {"matched": creased.matched, "creases": creased.creases,
+                                    "held_back": creased.held}
+    if record.outside_refinement is not None:
+        section["outside_refinement"] = dict(vars(record.outside_refinement))
+    return section
+
+
+def _inside_section(inside):
+    """The RGP's hold-backs, retry, passes and nudges (none without an inside fit)."""
+    if inside is None:
+        return {}
+    section = {"rgp_held_back": inside.held_back}
+    if inside.retried:
+        section["rgp_retried"] = True
+    if inside.passes is not None:
+        section["rgp_passes"] = inside.passes
+    if inside.nudged is not None:
+        section["nudged"] = inside.nudged
+    return section

@@ -7,9 +7,8 @@ change objects go through ``FreeCADGui.doCommand``, so the Python console shows 
 that replays them, and the recompute that follows runs the stages (Esc cancels: the
 stages that finished keep their results, the one that was running is marked cancelled and
 runs again at the next recompute; Undo removes the whole step). Success is reported in the Report view and the status bar;
-failures also in a message box: bad input (``PolycubeInputError``) a warning, a stage
-that is not built yet an information box naming it, anything else an error box plus the
-traceback in the Report view.
+failures also in a message box: bad input (``PolycubeInputError``) a warning, anything
+else an error box plus the traceback in the Report view.
 
 Each stage command works on the selected object's chain (or the last target): it reuses
 the stage objects that exist, creates the missing ones, and hides the displays the new
@@ -27,7 +26,6 @@ from polycube_wb.gui.batch_command import ReconstructFolderCommand
 MESH_FILTER = "Triangle meshes (*.stl *.obj *.ply *.off);;All files (*)"
 CAGE_FILTER = "Polygon meshes (*.obj);;All files (*)"
 STEP_FILTER = "STEP files (*.step *.stp)"
-NOT_AVAILABLE = "not available yet"
 SUPERSEDES = {"Segmentation": ("Target",), "BaseMesh": ("Segmentation",),
               "Fit": ("BaseMesh",), "Solid": ("Fit", "BaseMesh"), "Deviation": ("Solid",)}
 """Displays hidden when a stage's result is shown."""
@@ -82,16 +80,13 @@ def run_guarded(title, work, with_progress=False):
 def _report_failure(title, exc):
     """Write a failure of ``title`` to the Report view (a cancel also to the status bar);
     returns the message box to show, ``(kind, title, text)``, or None."""
-    from core.errors import Cancelled, PolycubeInputError, StageNotAvailableError
+    from core.errors import Cancelled, PolycubeInputError
     from polycube_wb.panel_fields import in_gui_words
 
     if isinstance(exc, Cancelled):
         FreeCAD.Console.PrintWarning(f"Polycube: {exc}\n")
         FreeCADGui.getMainWindow().statusBar().showMessage(f"Polycube: {exc}", 15000)
         return None
-    if isinstance(exc, StageNotAvailableError):
-        FreeCAD.Console.PrintWarning(f"Polycube: {title}: {NOT_AVAILABLE}: {exc}\n")
-        return ("information", title, f"Stage {NOT_AVAILABLE}:\n\n{exc}")
     if isinstance(exc, PolycubeInputError):
         text = in_gui_words(str(exc))
         FreeCAD.Console.PrintError(f"Polycube: {title}: {text}\n")

@@ -37,14 +37,14 @@ def add_cage_properties(obj):
 
 def store_cage(obj, mesh):
     """Write a PolyMesh into the cage properties (the vertices last: they are watched)."""
-    from polycube_wb.api import base_mesh_summary
+    from core.mesh_topology import polymesh_summary
     from polycube_wb.convert import arrays_to_vectors
 
     obj.CageFaceVertices = np.asarray(mesh.face_vertices, dtype=int).tolist()
     obj.CageFaceOffsets = np.asarray(mesh.face_offsets, dtype=int).tolist()
     obj.CageCreases = (np.asarray(mesh.creases, dtype=int).reshape(-1).tolist()
                        if mesh.n_creases else [])
-    summary = base_mesh_summary(mesh)
+    summary = polymesh_summary(mesh)
     obj.Faces, obj.Vertices = summary["faces"], summary["vertices"]
     obj.ExtraordinaryVertices, obj.Genus = summary["extraordinary_vertices"], summary["genus"]
     obj.CageVertices = arrays_to_vectors(mesh.vertices)

@@ -4,7 +4,7 @@
 import numpy as np
 import pytest
 
-from core.fitting.crease_curves import MAX_MOVE, fit_crease_curves
+from core.fitting.crease_curves import CREASE, fit_crease_curves
 from core.fitting.crossings import count_crossings
 from core.geometry import shortest_edges_at, triangulate
 from core.quality import containment
@@ -120,7 +120,7 @@ def test_machined_part_holes_open_up():
 def test_pocket_plate_moves_stay_within_reach():
     """A pocketed plate's creased cage: more than 6 % of the target's volume outside its
     limit solid, under 2 % with the crease curves fitted, and no crease vertex moved farther
-    than ``MAX_MOVE`` times its shortest crease edge (next to kinks between long and short
+    than ``CreaseCurveSettings.max_move`` times its shortest crease edge (next to kinks between long and short
     edges the line fit alone would carry vertices far off)."""
     target = load_dev_mesh("octagonal_pocket.stl")
     cage = _tagged_cage(target, 300)
@@ -131,7 +131,7 @@ def test_pocket_plate_moves_stay_within_reach():
     assert before["outside_volume_fraction"] > 0.06
     assert after["outside_volume_fraction"] < 0.02
     creases = np.sort(np.asarray(cage.creases), axis=1)
-    reach = MAX_MOVE * shortest_edges_at(cage.vertices, creases)
+    reach = CREASE.max_move * shortest_edges_at(cage.vertices, creases)
     moved = np.linalg.norm(fitted.vertices - cage.vertices, axis=1)
     assert (moved <= reach * (1 + 1e-9)).all()
     assert (moved > 0.99 * reach).sum() > 10  # the reach is what stops them
@@ -170,9 +170,9 @@ def test_the_inside_fit_of_a_creased_cage_starts_from_its_fitted_crease_curves()
     target = load_dev_mesh("octagonal_pocket.stl")
     cage = _tagged_cage(target, 300)
     fitted, info = fit_base_mesh(cage, target, mode="inside", seed=0)
-    assert info["start"].startswith(CREASED_START) and info["rounds"] == 0
-    assert info["self_intersections"] == 0
-    assert info["outside_volume_fraction"] <= 0.01
-    assert info["mean_distance"] <= 0.85 * info["initial_mean_distance"]
+    assert info.start.startswith(CREASED_START) and info.rounds == 0
+    assert info.self_intersections == 0
+    assert info.figures.outside_volume_fraction <= 0.01
+    assert info.figures.distances.mean_distance <= 0.85 * info.figures.initial.mean_distance
     again, _ = fit_base_mesh(cage, target, mode="inside", seed=1)
     np.testing.assert_array_equal(again.vertices, fitted.vertices)

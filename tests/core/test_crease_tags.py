@@ -70,7 +70,7 @@ def test_the_fit_and_the_strip_split_keep_the_creases():
     V, F = _fine_box()
     fitted, info = fit_base_mesh(cage, TriMesh(V, F), levels=2, iterations=3)
     assert np.array_equal(fitted.creases, cage.creases)
-    assert info["initial_mean_distance"] < 1e-9
+    assert info.figures.initial.mean_distance < 1e-9
     split = split_quad_strips(cage, np.array([[0, 0]]))
     assert split.n_creases == cage.n_creases + 4  # a closed strip round the cube: 4 edges cut
     fine_topo = mesh_topology(split.face_vertices, split.face_offsets, len(split.vertices))

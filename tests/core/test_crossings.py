@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """A fitted limit surface never crosses itself: refits, hold-back, and the solid's refusal."""
 import os
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -9,8 +10,8 @@ import trimesh
 
 from core.errors import ExportError
 from core.fitting import crossings, fit_base_mesh
-from core.fitting.crossings import (FEW_CROSSINGS, STIFFEN, TANGLED, UNTANGLE_PROGRESS,
-                                    hold_back_crossings, influencing, stiffen_until_clean)
+from core.fitting.crossings import (UNTANGLE, hold_back_crossings, influencing,
+                                    stiffen_until_clean)
 from core.geometry import triangulate
 from core.params import ReconstructionParams
 from core.pipeline import reconstruct, run_stages
@@ -195,7 +196,7 @@ def test_stiffen_until_clean_stiffens_only_under_the_crossings():
     assert untangled.crossings == 0 and untangled.refits == 1 == len(calls)
     assert untangled.counts[0] > 0 and untangled.counts[-1] == 0
     assert np.array_equal(np.flatnonzero(calls[0][0] > 1), under)
-    assert np.all(calls[0][0][under] == STIFFEN)
+    assert np.all(calls[0][0][under] == UNTANGLE.stiffen)
     np.testing.assert_array_equal(calls[0][1], crossing)   # started from the crossing fit
     np.testing.assert_array_equal(untangled.vertices, V)
 
@@ -235,21 +236,21 @@ def test_stiffen_until_clean_stops_when_a_refit_of_a_tangled_fit_takes_too_littl
     spikes = [pushed_through(pushed_through(V, a), b)        # 38 pairs each
               for a, b in ((5, 120), (7, 80), (0, 80), (7, 120))]
     counts = [len(find_self_intersections(W, T)) for W in spikes]
-    assert len(set(counts)) == 1 and counts[0] > FEW_CROSSINGS
+    assert len(set(counts)) == 1 and counts[0] > UNTANGLE.few_crossings
 
     def refits(fits):
         fits = iter(fits)                       # each refit crosses elsewhere, as much
         return lambda stiffness, previous: next(fits)
 
     stalled = stiffen_until_clean(spikes[0], refits(spikes[1:]), M, T, tries=3,
-                                  progress=UNTANGLE_PROGRESS)
+                                  progress=UNTANGLE.progress)
     assert stalled.refits == 1 and stalled.counts == counts[:2]
     np.testing.assert_array_equal(stalled.vertices, spikes[0])
     assert stiffen_until_clean(spikes[0], refits(spikes[1:]), M, T, tries=3).refits == 3
     # a few crossings (one spike, 10 pairs) are worth every refit, progress or not
     few = [pushed_through(V, vertex) for vertex in (5, 7, 9, 80)]
     assert stiffen_until_clean(few[0], refits(few[1:]), M, T, tries=3,
-                               progress=UNTANGLE_PROGRESS).refits == 3
+                               progress=UNTANGLE.progress).refits == 3
 
 
 def test_stiffen_until_clean_goes_on_without_progress_once_the_fit_is_near_clean():
@@ -258,9 +259,10 @@ def test_stiffen_until_clean_goes_on_without_progress_once_the_fit_is_near_clean
     two = pushed_through(pushed_through(V, 5), 120)
     fits = iter([pushed_through(V, 5), pushed_through(V, 7), V])
     untangled = stiffen_until_clean(two, lambda stiffness, previous: next(fits), M, T,
-                                    tries=3, progress=UNTANGLE_PROGRESS)
+                                    tries=3, progress=UNTANGLE.progress)
     counts = untangled.counts
-    assert counts[1] == counts[2] <= TANGLED * counts[0]   # the second refit took nothing off
+    # the second refit took nothing off
+    assert counts[1] == counts[2] <= UNTANGLE.tangled * counts[0]
     assert untangled.refits == 3 and untangled.crossings == 0
     np.testing.assert_array_equal(untangled.vertices, V)
 
@@ -288,48 +290,51 @@ def test_fit_of_a_decimation_cage_on_a_thin_part_does_not_cross_itself(idler, mo
     target, cage = idler
     fitted, info = fit_base_mesh(cage, target, mode=mode)
     # the plain least-squares fit pulls thin walls through each other here
-    assert info["refit_crossings"][0] > 0
-    assert info["self_intersections"] == 0
+    assert info.least_squares.untangled.refit_crossings[0] > 0
+    assert info.self_intersections == 0
     assert export_limit_crossings(fitted).count == 0      # the export's own check agrees
     # closeness is kept: best-fit at most half the unfitted mean distance (inside mode, one
     # sided, 0.7), the largest distance no worse than the cage's
-    assert info["mean_distance"] <= (0.5 if mode == "best-fit" else 0.7) * \
-        info["initial_mean_distance"]
-    assert info["max_distance"] <= info["initial_max_distance"]
+    assert info.figures.distances.mean_distance <= (0.5 if mode == "best-fit" else 0.7) * \
+        info.figures.initial.mean_distance
+    assert info.figures.distances.max_distance <= info.figures.initial.max_distance
     if mode == "inside":
-        assert info["outside_volume_fraction"] <= 0.01
+        assert info.figures.outside_volume_fraction <= 0.01
 
 
 @pytest.mark.slow
 def test_the_inside_fit_ends_clean_and_inside_whether_crossings_count_as_local_or_spread(
         idler, monkeypatch):
-    """idler_riser's least-squares fit crosses itself. Local crossings are held back towards
-    the cage, spread ones refitted stiffer first (``SPREAD_CROSSINGS`` decides which); with
-    the fraction at its default and at 0 (every crossing spread) the inside fit ends with a
-    limit surface that does not cross itself and little of the volume outside."""
+    """idler_riser's least-squares fit crosses itself. Local crossings are held back towards the
+    cage, spread ones refitted stiffer first (``FitSettings.spread_crossings`` decides
+    which); with the fraction at its default and at 0 (every crossing spread) the inside fit
+    ends with a limit surface that does not cross itself and little of the volume
+    outside."""
     import core.fitting.fit as fit_module
 
     target, cage = idler
     _, info = fit_base_mesh(cage, target, mode="inside", seed=1)
-    assert info["refit_crossings"][0] > 0  # the least-squares start crosses itself
-    assert info["self_intersections"] == 0 and info["outside_volume_fraction"] <= 0.01
-    monkeypatch.setattr(fit_module, "SPREAD_CROSSINGS", 0.0)
+    # the least-squares start crosses itself
+    assert info.least_squares.untangled.refit_crossings[0] > 0
+    assert info.self_intersections == 0 and info.figures.outside_volume_fraction <= 0.01
+    monkeypatch.setattr(fit_module, "FIT", replace(fit_module.FIT, spread_crossings=0.0))
     fitted, spread = fit_base_mesh(cage, target, mode="inside", seed=1)
-    assert spread["self_intersections"] == 0 and export_limit_crossings(fitted).count == 0
-    assert spread["outside_volume_fraction"] <= 0.01
+    assert spread.self_intersections == 0 and export_limit_crossings(fitted).count == 0
+    assert spread.figures.outside_volume_fraction <= 0.01
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("left, long_way", [(10, True), (40, False)])
 def test_the_long_refits_run_only_after_the_short_ones_took_most_crossings_off(
         idler, monkeypatch, left, long_way):
-    """The short untangling refits are made to report ``left`` of 100 crossing pairs: the
-    long way (whole two-level refits from the cage) runs at 10 (within ``LONG_WAY_LEFT`` of
-    the first fit's pairs, where it cleared the rest on the dev meshes) and not at 40 (where
-    it never had fewer); either way the result does not cross itself."""
+    """The short untangling refits are made to report ``left`` of 100 crossing pairs: the long
+    way (whole two-level refits from the cage) runs at 10 (within
+    ``FitSettings.long_way_left`` of the first fit's pairs, where it cleared the rest on the
+    dev meshes) and not at 40 (where it never had fewer); either way the result does not
+    cross itself."""
     import core.fitting.fit as fit_module
 
-    assert 10 <= fit_module.LONG_WAY_LEFT * 100 < 40
+    assert 10 <= fit_module.FIT.long_way_left * 100 < 40
     real = fit_module.stiffen_until_clean
     refits = []
 
@@ -345,26 +350,26 @@ def test_the_long_refits_run_only_after_the_short_ones_took_most_crossings_off(
     _, info = fit_base_mesh(cage, target, mode="best-fit")
     assert refits[0] == "refit"
     assert ("cold_refit" in refits) == long_way
-    assert ("cold_refit_crossings" in info) == long_way
-    assert info["self_intersections"] == 0
+    assert (info.least_squares.untangled.cold_refit_crossings is not None) == long_way
+    assert info.self_intersections == 0
 
 
 @pytest.mark.slow
 def test_the_rgp_retry_with_a_shorter_step_ends_clean_and_inside(idler_290, monkeypatch):
     """Where the RGP's first run keeps its start and that start leaves more than
-    ``RETRY_OUTSIDE`` of the volume outside, the RGP runs again with a shorter step. With the
-    threshold at its default and at 0 (every kept start retried) the fit of idler_riser's
-    decimation cage ends clean and with little of the volume outside, and the retry never
-    leaves more outside than the start it replaces."""
+    ``FitSettings.retry_outside`` of the volume outside, the RGP runs again with a shorter
+    step. With the threshold at its default and at 0 (every kept start retried) the fit of
+    idler_riser's decimation cage ends clean and with little of the volume outside, and the
+    retry never leaves more outside than the start it replaces."""
     import core.fitting.fit as fit_module
 
     target, cage = idler_290
     fitted, kept = fit_base_mesh(cage, target)
-    assert kept["self_intersections"] == 0 and kept["outside_volume_fraction"] <= 0.01
-    monkeypatch.setattr(fit_module, "RETRY_OUTSIDE", 0.0)
+    assert kept.self_intersections == 0 and kept.figures.outside_volume_fraction <= 0.01
+    monkeypatch.setattr(fit_module, "FIT", replace(fit_module.FIT, retry_outside=0.0))
     _, again = fit_base_mesh(cage, target)
-    assert again["self_intersections"] == 0 and again["outside_volume_fraction"] <= 0.01
-    assert again["mean_distance"] <= again["initial_mean_distance"]
+    assert again.self_intersections == 0 and again.figures.outside_volume_fraction <= 0.01
+    assert again.figures.distances.mean_distance <= again.figures.initial.mean_distance
 
 
 def spindle_torus():
@@ -475,6 +480,6 @@ def test_inside_fit_of_a_thin_plate_stays_inside_and_clean(gripper):
     0.5 % rule; the fit alone is held to twice that)."""
     target, cage = gripper
     fitted, info = fit_base_mesh(cage, target, mode="inside")
-    assert info["self_intersections"] == 0 and export_limit_crossings(fitted).count == 0
-    assert info["outside_volume_fraction"] <= 0.01
-    assert info["held_back"] < 0.5 * len(cage.vertices)
+    assert info.self_intersections == 0 and export_limit_crossings(fitted).count == 0
+    assert info.figures.outside_volume_fraction <= 0.01
+    assert info.held_back < 0.5 * len(cage.vertices)

@@ -40,4 +40,4 @@ def test_face_deviation_of_a_scaled_limit_surface():
 @pytest.mark.parametrize("faces, level", [(6, 7), (300, 4), (600, 3), (1500, 3), (40000, 1)])
 def test_deviation_level_keeps_the_fine_mesh_within_its_budget(faces, level):
     assert deviation_level(faces) == level
-    assert level == 1 or faces * 4 ** level <= deviation.DEVIATION_QUADS
+    assert level == 1 or faces * 4 ** level <= deviation.DEVIATION.fine_quads

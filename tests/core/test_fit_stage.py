@@ -118,7 +118,7 @@ def test_outside_refinement_is_reported_and_keeps_the_fit_leaving_least_outside(
     goal below that, the report's section lists the fits (the first on the base mesh), the
     cage kept leaves the least outside, and the stage warns while it is above the goal; at
     the default goal (0.003) there is no section and the fit is the same as the first. (Its
-    outside points lie about 0.9e-3 of the diagonal deep, just under ``OUTSIDE_DEPTH``, so
+    outside points lie about 0.9e-3 of the diagonal deep, just under ``OutsideRefinementSettings.depth``, so
     here it is usually not refined; the refinement itself is tested in
     ``test_outside_refinement.py``.)"""
     goal = 1e-6
@@ -139,3 +139,46 @@ def test_outside_refinement_is_reported_and_keeps_the_fit_leaving_least_outside(
     default = reconstruct(TINY, stop_after="fit").report["fit"]
     assert "outside_refinement" not in default
     assert default["outside_volume_fraction"] == rounds[0]["outside_volume_fraction"]
+
+
+def test_the_fit_section_holds_what_each_phase_did_and_only_that():
+    """The report's fit section is built from the fit's phase records: the figures every
+    fit has, then one key per thing a phase did, absent when the phase did not run."""
+    from core.fitting.crease_curves import CreaseFit
+    from core.fitting.records import (Distances, FitFigures, FitRecord, InsideFit, InsideStart,
+                                      LeastSquaresFit, OutsideRefinementSummary, Untangling)
+    from core.stages.fit import fit_section
+
+    none = np.zeros((0, 3))
+    figures = FitFigures(Distances(0.1, 0.2, 0.3, 0.4), Distances(1.0, 2.0, 3.0, 4.0),
+                         0.01, 0.02, 0.5)
+    bare = fit_section(FitRecord("none", 2, "limit", None, figures, 1.5))
+    assert bare == {"rounds": 0, "iterations": 0, "stopped": "none", "mean_distance": 0.1,
+                    "max_distance": 0.2, "target_mean_distance": 0.3,
+                    "target_max_distance": 0.4, "outside_volume_fraction": 0.01,
+                    "uncovered_volume_fraction": 0.02, "initial_mean_distance": 1.0,
+                    "initial_max_distance": 2.0, "initial_target_mean_distance": 3.0,
+                    "initial_target_max_distance": 4.0, "seconds": 1.5,
+                    "measure_seconds": 0.5}
+    untangled = Untangling(none, 0, np.ones(0), 2, [5, 1, 0], [5, 0], 7, 3, 9)
+    least_squares = LeastSquaresFit(10, [1.0], [2.0], "rounds", untangled)
+    start = InsideStart(none, 0, "best-fit, held back at 4 base vertices (it crossed itself)",
+                        0.1, [2, 0], 4)
+    inside = InsideFit(none, 0, 40, "stalled", 30, [0.0], [1.0], 0.25, 0.5, 6, True,
+                       [[3, 1]], [2, 0])
+    full = fit_section(FitRecord(
+        "inside", 2, "limit", start.label, figures, 1.5, crease_curves=CreaseFit(none, 5, 6, 1),
+        least_squares=least_squares, inside_start=start, inside=inside,
+        self_intersections=0, cage_self_intersections=9,
+        outside_refinement=OutsideRefinementSummary(0.003, "why", [{"faces": 8}], 8)))
+    added = {key: value for key, value in full.items() if key not in bare}
+    assert list(full)[:4] == ["start", "rounds", "iterations", "stopped"]
+    assert (full["rounds"], full["iterations"], full["stopped"]) == (10, 40, "stalled")
+    assert added == {"start": start.label, "t_min": 0.25, "refits": 2,
+                     "refit_crossings": [5, 1, 0], "cold_refit_crossings": [5, 0],
+                     "stiffened": 7, "held_back": 4, "rgp_held_back": 6, "rgp_retried": True,
+                     "rgp_passes": [[3, 1]], "nudged": [2, 0], "pull_crossings": [2, 0],
+                     "cage_self_intersections": 9,
+                     "crease_curves": {"matched": 5, "creases": 6, "held_back": 1},
+                     "outside_refinement": {"goal": 0.003, "reason": "why",
+                                            "rounds": [{"faces": 8}], "faces": 8}}

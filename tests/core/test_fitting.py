@@ -153,18 +153,18 @@ def test_cube_cage_fills_a_sphere_from_inside():
     base = centred_cube(1.0)
     # the paper's start (the cage as given): the volume grows, nothing leaves the target
     fitted, info = fit_base_mesh(base, target, levels=2, iterations=60, start="cage")
-    assert info["rounds"] == 0
-    assert info["volume"][info["best_iteration"]] > 2.0 * info["volume"][0]
-    assert info["outside_volume_fraction"] <= 1e-3
-    assert info["mean_distance"] < 0.1 * info["initial_mean_distance"]
+    assert info.rounds == 0
+    assert info.inside.volume[info.inside.best_iteration] > 2.0 * info.inside.volume[0]
+    assert info.figures.outside_volume_fraction <= 1e-3
+    assert info.figures.distances.mean_distance < 0.1 * info.figures.initial.mean_distance
     assert np.array_equal(fitted.face_vertices, base.face_vertices)
     again, info2 = fit_base_mesh(base, target, levels=2, iterations=60, start="cage")
     assert np.array_equal(again.vertices, fitted.vertices)
-    assert info2["objective"] == info["objective"]
+    assert info2.inside.objective == info.inside.objective
     # from the least-squares start (the default) it holds as well
     _, lsq = fit_base_mesh(base, target, levels=2, iterations=60)
-    assert lsq["rounds"] >= 1 and lsq["outside_volume_fraction"] <= 1e-3
-    assert lsq["mean_distance"] < 0.1 * lsq["initial_mean_distance"]
+    assert lsq.rounds >= 1 and lsq.figures.outside_volume_fraction <= 1e-3
+    assert lsq.figures.distances.mean_distance < 0.1 * lsq.figures.initial.mean_distance
 
 
 @pytest.mark.slow
@@ -177,10 +177,12 @@ def test_best_fit_recovers_a_scaled_limit_surface():
     X = limit_matrices(fine)[0] @ h.composite(3) @ (1.2 * base.vertices)
     target = TriMesh(X, T)
     fitted, info = fit_base_mesh(base, target, levels=2, mode="best-fit", rounds=15)
-    assert info["initial_mean_distance"] > 0.03
-    assert info["mean_distance"] < 1e-3 and info["max_distance"] < 2e-3
-    assert info["rms"][-1] < 0.02 * info["coarse_rms"][0]
-    assert info["outside_volume_fraction"] < 5e-3 and info["uncovered_volume_fraction"] < 5e-3
+    assert info.figures.initial.mean_distance > 0.03
+    fitted_distances = info.figures.distances
+    assert fitted_distances.mean_distance < 1e-3 and fitted_distances.max_distance < 2e-3
+    assert info.least_squares.rms[-1] < 0.02 * info.least_squares.coarse_rms[0]
+    assert info.figures.outside_volume_fraction < 5e-3
+    assert info.figures.uncovered_volume_fraction < 5e-3
     again, _ = fit_base_mesh(base, target, levels=2, mode="best-fit", rounds=15)
     assert np.array_equal(again.vertices, fitted.vertices)
 
@@ -190,10 +192,9 @@ def test_mode_none_keeps_the_cage_and_reports_its_figures():
     base = centred_cube(1.0)
     fitted, info = fit_base_mesh(base, target, mode="none")
     assert np.array_equal(fitted.vertices, base.vertices)
-    assert info["rounds"] == 0 and info["iterations"] == 0
-    assert info["mean_distance"] == info["initial_mean_distance"] > 0.05
-    assert info["max_distance"] == info["initial_max_distance"]
-    assert "initial_outside_volume_fraction" not in info   # the result's volumes only
+    assert info.rounds == 0 and info.iterations == 0
+    assert info.figures.distances.mean_distance == info.figures.initial.mean_distance > 0.05
+    assert info.figures.distances.max_distance == info.figures.initial.max_distance
 
 
 def test_the_target_to_surface_figure_sees_the_corners_the_limit_surface_misses():
@@ -204,10 +205,11 @@ def test_the_target_to_surface_figure_sees_the_corners_the_limit_surface_misses(
     box = trimesh.creation.box(extents=(2.0, 2.0, 2.0))
     target = TriMesh(np.asarray(box.vertices), np.asarray(box.faces, dtype=np.int64))
     _, info = fit_base_mesh(centred_cube(2.0), target, mode="none")
-    assert info["target_max_distance"] == pytest.approx(0.25, abs=1e-3)
-    assert info["max_distance"] == pytest.approx(0.5 / (2 * np.sqrt(3)), abs=1e-3)
-    assert info["initial_target_max_distance"] == info["target_max_distance"]
-    assert 0 < info["target_mean_distance"] < info["target_max_distance"]
+    distances = info.figures.distances
+    assert distances.target_max_distance == pytest.approx(0.25, abs=1e-3)
+    assert distances.max_distance == pytest.approx(0.5 / (2 * np.sqrt(3)), abs=1e-3)
+    assert info.figures.initial.target_max_distance == distances.target_max_distance
+    assert 0 < distances.target_mean_distance < distances.target_max_distance
 
 
 def test_grid_sphere_converges_into_a_slightly_larger_sphere():
@@ -215,10 +217,10 @@ def test_grid_sphere_converges_into_a_slightly_larger_sphere():
     X, _ = limit_points(base, 2)
     target = sphere_target(1.1 * np.linalg.norm(X, axis=1).max())
     _, info = fit_base_mesh(base, target, levels=2, iterations=100)
-    assert info["initial_mean_distance"] > 0.04
-    assert info["mean_distance"] < 2e-3
-    assert info["max_distance"] < 5e-3
-    assert info["outside_volume_fraction"] <= 1e-3
+    assert info.figures.initial.mean_distance > 0.04
+    assert info.figures.distances.mean_distance < 2e-3
+    assert info.figures.distances.max_distance < 5e-3
+    assert info.figures.outside_volume_fraction <= 1e-3
 
 
 def test_thickness_constraint_holds_when_the_target_is_thin():
@@ -524,7 +526,7 @@ def test_a_nudge_round_with_loose_bounds_carries_the_far_walls_as_with_exact_one
 
 def test_nudge_inside_stops_a_kind_of_rounds_that_no_longer_takes_depth_off(monkeypatch):
     """When a round leaves the summed outside depth where it was (less than
-    ``NUDGE_PROGRESS`` off), no further round of that kind runs: with a depth that never
+    ``NudgeSettings.progress`` off), no further round of that kind runs: with a depth that never
     falls, one round of each kind, not ``rounds`` of each (the moves themselves are real and
     clean: a small outward shift of every base vertex of a grid sphere)."""
     from core.fitting import contain

@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Import direction: ``core`` never imports the FreeCAD layer; only the GUI imports the GUI;
-no two modules of ``core``, nor of ``polycube_wb``, import each other, directly or around a
-cycle.
+"""Import direction: ``core`` never imports the FreeCAD layer; inside ``core`` no import runs
+up the layers (kernel, algorithms, stages, runner: ``CORE_LAYERS``); the document objects
+never import the API; only the GUI imports the GUI; no two modules of ``core``, nor of
+``polycube_wb``, import each other, directly or around a cycle.
 
 Every ``import`` statement of the sources (also those inside functions) is read with
 ``ast``, relative imports resolved to their absolute module; a subprocess that imports
@@ -118,18 +119,96 @@ def import_cycles(files):
                   for c in np.flatnonzero(sizes > 1))
 
 
-CORE_LAYERS = (("core.stages", "core.pipeline"),)
-"""Packages of ``core`` above the algorithms: the stages and their runner call the algorithm
-packages (``core.quadmesh``, ``core.fitting``, ``core.subdivision``, ``core.export``, ...),
-never the other way round."""
+KERNEL = "core"
+"""The layer of ``core``'s top-level modules (types, errors, tolerances, geometry, meshes,
+target surface, I/O): the kernel every algorithm uses."""
+CORE_LAYERS = {
+    KERNEL: set(),
+    "core.subdivision": {KERNEL},
+    "core.segmentation": {KERNEL},
+    "core.quadmesh": {KERNEL, "core.segmentation", "core.subdivision"},
+    "core.fitting": {KERNEL, "core.quadmesh", "core.subdivision"},
+    "core.export": {KERNEL, "core.subdivision"},
+    "core.stages": {KERNEL, "core.subdivision", "core.segmentation", "core.quadmesh",
+                    "core.fitting", "core.export"},
+    "core.pipeline": {KERNEL, "core.stages"},
+}
+"""Which layers of ``core`` each layer may import (besides itself): a package of ``core``
+is a layer of its own, the runner ``core.pipeline`` one above the stages, every other
+top-level module of ``core`` belongs to the kernel. The kernel imports no algorithm, an
+algorithm package only those below it, only the stages and the runner import the stages."""
 
 
-def test_the_algorithms_never_import_the_stages_or_the_runner():
-    upper = CORE_LAYERS[0]
-    offending = sorted(
-        (path, name) for path in _python_files("core")
-        if not _module_of(path).startswith(upper)
-        for name in imported_modules(path) if any(_is_within(name, top) for top in upper))
+def core_layer(module):
+    """The layer (a key of ``CORE_LAYERS``) of a dotted ``core`` module name."""
+    parts = module.split(".")
+    if module == "core.pipeline" or _is_within(module, "core.pipeline"):
+        return "core.pipeline"
+    if len(parts) > 1 and os.path.isdir(os.path.join(REPO, "core", parts[1])):
+        return "core." + parts[1]
+    return KERNEL
+
+
+def _core_module(name):
+    """The ``core`` module an imported name lives in (``core.a.b.name`` -> ``core.a.b``),
+    or None for an import from outside ``core`` or of the package ``core`` itself."""
+    parts = name.split(".")
+    if parts[0] != "core":
+        return None
+    for n in range(len(parts), 1, -1):
+        path = os.path.join(REPO, *parts[:n])
+        if os.path.isfile(path + ".py") or os.path.isdir(path):
+            return ".".join(parts[:n])
+    return None
+
+
+def layer_violations(files):
+    """``(path, imported layer)`` pairs of ``files`` (``core`` sources) that import a layer
+    of ``core`` their own layer may not (``CORE_LAYERS``); a layer missing from
+    ``CORE_LAYERS`` is reported as ``(path, 'undeclared layer ...')``."""
+    offending = []
+    for path in files:
+        layer = core_layer(_module_of(path))
+        if layer not in CORE_LAYERS:
+            offending.append((path, f"undeclared layer {layer}"))
+            continue
+        for name in imported_modules(path):
+            module = _core_module(name)
+            if module is None or core_layer(module) == layer:
+                continue
+            if core_layer(module) not in CORE_LAYERS[layer]:
+                offending.append((path, core_layer(module)))
+    return sorted(set(offending))
+
+
+def test_no_import_runs_up_the_layers_of_core():
+    assert layer_violations(_python_files("core")) == []
+
+
+def test_the_layer_check_sees_an_import_up_the_layers(tmp_path, monkeypatch):
+    monkeypatch.setattr(sys.modules[__name__], "REPO", str(tmp_path))
+    for package in ("fitting", "quadmesh", "stages"):
+        (tmp_path / "core" / package).mkdir(parents=True)
+    (tmp_path / "core" / "geometry.py").write_text("def f():\n    from core.fitting import x\n")
+    (tmp_path / "core" / "quadmesh" / "a.py").write_text("from core.stages.fit import run_fit\n")
+    (tmp_path / "core" / "quadmesh" / "b.py").write_text("import core.geometry\n")
+    (tmp_path / "core" / "fitting" / "x.py").write_text("from core.quadmesh.b import y\n")
+    (tmp_path / "core" / "stages" / "fit.py").write_text("from core.fitting.x import y\n")
+    (tmp_path / "core" / "newpkg").mkdir()
+    (tmp_path / "core" / "newpkg" / "c.py").write_text("")
+    assert layer_violations(_python_files("core")) == [
+        (os.path.join("core", "geometry.py"), "core.fitting"),
+        (os.path.join("core", "newpkg", "c.py"), "undeclared layer core.newpkg"),
+        (os.path.join("core", "quadmesh", "a.py"), "core.stages")]
+
+
+def test_the_document_objects_never_import_the_api():
+    """``polycube_wb.api`` builds documents from the objects; the objects use ``core`` and
+    the FreeCAD layer's converters, never the API above them."""
+    offending = sorted((path, name) for path in _python_files(os.path.join("polycube_wb",
+                                                                           "objects"))
+                       for name in imported_modules(path)
+                       if _is_within(name, "polycube_wb.api"))
     assert offending == []
 
 

@@ -5,9 +5,10 @@ import pytest
 import trimesh
 
 from core.errors import ParameterError
-from core.fitting.outside_refinement import (OUTSIDE_DEPTH, faces_outside,
+from core.fitting.outside_refinement import (OUTSIDE, faces_outside,
                                              fit_with_outside_refinement)
 from core.fitting.deviation import fine_limit_points
+from core.fitting.records import Distances, FitFigures, FitRecord
 from core.params import ReconstructionParams
 from core.polymesh_checks import check_polymesh
 from core.subdivision.sample_cages import grid_sphere
@@ -45,7 +46,9 @@ def stub_fit(outside_by_faces, log):
     ``outside_by_faces(n_faces)``; every cage it is given is appended to ``log``."""
     def fit(cage):
         log.append(cage)
-        return cage, {"levels": 2, "outside_volume_fraction": outside_by_faces(cage.n_faces)}
+        nothing = Distances(0.0, 0.0, 0.0, 0.0)
+        figures = FitFigures(nothing, nothing, outside_by_faces(cage.n_faces), 0.0, 0.0)
+        return cage, FitRecord("inside", 2, "limit", None, figures, 0.0)
     return fit
 
 
@@ -68,7 +71,7 @@ def test_refinement_splits_the_unfitted_cage_under_the_outside_points():
     assert len(log) == 2
     refined = log[1]
     check_polymesh(refined)  # closed, 2-manifold, consistently oriented
-    marked = faces_outside(cage, 2, TargetSurface(target.vertices, target.faces), OUTSIDE_DEPTH)
+    marked = faces_outside(cage, 2, TargetSurface(target.vertices, target.faces), OUTSIDE.depth)
     assert result.rounds[0]["refined_faces"] == marked.sum() > 0
     assert refined.n_faces > cage.n_faces
     # the refined cage keeps the unfitted cage's limit surface (the strips are split on it)

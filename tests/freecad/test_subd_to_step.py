@@ -58,11 +58,11 @@ def test_creased_cage_reads_back_outward(tmp_path):
 
 
 def test_genus_is_reported(tmp_path):
-    from polycube_wb.api import base_mesh_summary
+    from core.mesh_topology import polymesh_summary
 
-    assert base_mesh_summary(sample_cages.torus())["genus"] == 1
-    assert base_mesh_summary(sample_cages.genus3_block())["genus"] == 3
-    summary = base_mesh_summary(sample_cages.mixed_prism())
+    assert polymesh_summary(sample_cages.torus())["genus"] == 1
+    assert polymesh_summary(sample_cages.genus3_block())["genus"] == 3
+    summary = polymesh_summary(sample_cages.mixed_prism())
     assert summary["triangles"] > 0 and summary["quads"] > 0 and summary["extraordinary_vertices"] > 0
 
 
