@@ -9,9 +9,9 @@ input. Above ``params.proxy_triangles`` triangles the target is therefore reduce
 quadric edge collapse (Garland & Heckbert; the compiled ``fast-simplification`` package)
 to about that many triangles. The proxy is accepted only when it is what the later stages
 need: a closed, consistently oriented 2-manifold without self-intersections and with the
-target's genus (the intake's own checks, without repairs). Otherwise the reduction is tried
-again with twice as many triangles, and the full target is used when no reduction keeps the
-shape; the report says which and why. The fit and every distance and containment figure
+target's genus and components (the intake's own checks and unambiguous repairs). Otherwise
+the reduction is tried again with twice as many triangles, and the full target is used when
+no reduction keeps the shape; the report says which and why. The fit and every distance and containment figure
 still use the full target.
 """
 from dataclasses import dataclass, field
@@ -68,14 +68,13 @@ def working_surface(target, genus, components, proxy_triangles, reason_to_keep="
     for _ in range(ATTEMPTS):
         if wanted >= n_faces:
             break
-        proxy = reduce_triangles(target, wanted)
-        problem = _shape_problem(proxy, genus, components)
+        proxy, problem = _checked(reduce_triangles(target, wanted), genus, components)
         if problem is None:
             return WorkingSurface(proxy, True, {
                 "triangles": int(len(proxy.faces)), "reduced": True,
                 "largest_distance_mm": round(_largest_distance(proxy, target), 6),
                 "reason": ""})
-        failures.append(f"{len(proxy.faces)} triangles: {problem}")
+        failures.append(f"{wanted} triangles: {problem}")
         wanted *= 2
     return _kept(target, "no reduction kept the shape (" + "; ".join(failures) + ")")
 
@@ -90,7 +89,8 @@ def reduce_triangles(mesh, triangles):
 
     Returns
     -------
-    TriMesh, unused vertices dropped; not checked (see :func:`working_surface`).
+    TriMesh, faces with a repeated corner and unused vertices dropped; not checked further
+    (see :func:`working_surface`).
     """
     simplification = optional_module("fast_simplification", "fast-simplification")
     vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float32)
@@ -99,26 +99,31 @@ def reduce_triangles(mesh, triangles):
     points, triangles_out = simplification.simplify(vertices, faces, target_reduction=reduction)
     points = np.asarray(points, dtype=np.float64)
     triangles_out = np.asarray(triangles_out, dtype=np.int64)
+    # the collapses leave the faces they removed behind with a repeated corner
+    collapsed = ((triangles_out[:, 0] == triangles_out[:, 1])
+                 | (triangles_out[:, 1] == triangles_out[:, 2])
+                 | (triangles_out[:, 2] == triangles_out[:, 0]))
+    triangles_out = triangles_out[~collapsed]
     used, compact = np.unique(triangles_out, return_inverse=True)
     return TriMesh(points[used], compact.reshape(-1, 3))
 
 
-def _shape_problem(proxy, genus, components):
-    """Why ``proxy`` cannot stand for the target (str), or None: it must pass the intake's
-    checks without repairs, with the target's ``genus`` and ``components``."""
+def _checked(proxy, genus, components):
+    """``(mesh, problem)``: the proxy after the intake's validation and its unambiguous
+    repairs (a reduction can leave coincident vertices and the zero-area faces between them),
+    and None; or ``(None, why)`` when it fails them or lacks the target's ``genus`` and
+    ``components``."""
     from core.validate import validate_target
 
     try:
-        checked, summary = validate_target(proxy.vertices, proxy.faces, components="all",
-                                           name="the proxy", repair=False)
+        mesh, summary = validate_target(proxy.vertices, proxy.faces, components="all",
+                                        name="the proxy")
     except InvalidMeshError as exc:
-        return str(exc)
+        return None, str(exc)
     if int(summary["genus"]) != genus or summary["components"] != components:
-        return (f"genus {summary['genus']} and {summary['components']} component(s) where the "
-                f"target has genus {genus} and {components}")
-    if len(checked.faces) != len(proxy.faces):
-        return "faces were dropped by its validation"
-    return None
+        return None, (f"genus {summary['genus']} and {summary['components']} component(s) "
+                      f"where the target has genus {genus} and {components}")
+    return mesh, None
 
 
 def _largest_distance(proxy, target):
