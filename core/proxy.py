@@ -10,8 +10,8 @@ quadric edge collapse (Garland & Heckbert; the compiled ``fast-simplification`` 
 to about that many triangles. The proxy is accepted only when it is what the later stages
 need: a closed, consistently oriented 2-manifold without self-intersections and with the
 target's genus and components (the intake's own checks and unambiguous repairs). Otherwise
-the reduction is tried again with twice as many triangles, and the full target is used when
-no reduction keeps the shape; the report says which and why. The fit and every distance and containment figure
+the reduction is tried again with more triangles, and the full target is used when no
+reduction keeps the shape; the report says which and why. The fit and every distance and containment figure
 still use the full target.
 """
 from dataclasses import dataclass, field
@@ -22,8 +22,10 @@ from core.errors import InvalidMeshError
 from core.optional_imports import optional_module
 from core.types import TriMesh
 
-ATTEMPTS = 3
-"""Reductions tried, each with twice the triangles of the one before."""
+ATTEMPT_SIZES = (1.0, 1.1, 1.25, 2.0, 4.0)
+"""Sizes of the reductions tried, in multiples of ``proxy_triangles``: a reduction whose one
+sliver the repairs cannot remove usually succeeds a little larger; one that loses a handle,
+only with more triangles."""
 
 
 @dataclass(frozen=True)
@@ -34,7 +36,8 @@ class WorkingSurface:
         kept its shape.
     reduced : bool, ``mesh`` is a reduction of the target.
     report : dict, JSON-serialisable: triangles, reduced, largest_distance_mm (of the proxy's
-        vertices to the target, 0 when not reduced), reason (why the target itself is used).
+        vertices to the target, 0 when not reduced), reason (why the target itself is used),
+        refused (the smaller reductions tried first and why each was refused).
     """
 
     mesh: TriMesh
@@ -64,8 +67,8 @@ def working_surface(target, genus, components, proxy_triangles, reason_to_keep="
                                     else "proxy off")
         return _kept(target, reason)
     failures = []
-    wanted = proxy_triangles
-    for _ in range(ATTEMPTS):
+    for size in ATTEMPT_SIZES:
+        wanted = int(round(size * proxy_triangles))
         if wanted >= n_faces:
             break
         proxy, problem = _checked(reduce_triangles(target, wanted), genus, components)
@@ -73,9 +76,8 @@ def working_surface(target, genus, components, proxy_triangles, reason_to_keep="
             return WorkingSurface(proxy, True, {
                 "triangles": int(len(proxy.faces)), "reduced": True,
                 "largest_distance_mm": round(_largest_distance(proxy, target), 6),
-                "reason": ""})
+                "reason": "", "refused": failures})
         failures.append(f"{wanted} triangles: {problem}")
-        wanted *= 2
     return _kept(target, "no reduction kept the shape (" + "; ".join(failures) + ")")
 
 
@@ -136,4 +138,5 @@ def _largest_distance(proxy, target):
 
 def _kept(target, reason):
     return WorkingSurface(target, False, {"triangles": int(len(target.faces)), "reduced": False,
-                                          "largest_distance_mm": 0.0, "reason": reason})
+                                          "largest_distance_mm": 0.0, "reason": reason,
+                                          "refused": []})
