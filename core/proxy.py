@@ -95,8 +95,8 @@ def reduce_triangles(mesh, triangles):
     (see :func:`working_surface`).
     """
     simplification = optional_module("fast_simplification", "fast-simplification")
-    vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float32)
-    faces = np.ascontiguousarray(mesh.faces, dtype=np.int32)
+    vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)  # float32 would merge
+    faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)            # a fine mesh's slivers
     reduction = 1.0 - triangles / len(faces)
     points, triangles_out = simplification.simplify(vertices, faces, target_reduction=reduction)
     points = np.asarray(points, dtype=np.float64)
