@@ -120,7 +120,7 @@ def mesh_case(spec):
     if "labeling" not in report:
         return out
     state = result.state
-    mesh, field, face_part = state.intake.target, state.frames.frame_field, state.parts.face_part
+    mesh, field, face_part = state.intake.surface, state.frames.frame_field, state.parts.face_part
     V, F = mesh.vertices, mesh.faces
     out["labeling"] = {k: v for k, v in report["labeling"].items() if k != "examples"}
 

@@ -113,8 +113,8 @@ TOPIC_RESULTS = (
      "benchmarks/batch_bench.py"),
     ("Batch memory: the summary's peak against GNU time, the per-mesh cap", "MEMORY_RESULTS.md",
      "benchmarks/memory_bench.py"),
-    ("Robustness: a million triangles, time and peak memory per stage", "ROBUSTNESS_RESULTS.md",
-     "benchmarks/robustness_bench.py"),
+    ("Scale: the same designs from 15 thousand to 2.4 million triangles, time and memory per "
+     "stage", "SCALE_RESULTS.md", "benchmarks/scale_bench.py"),
     ("Cancel: Ctrl-C in every stage, time to stop and what is left", "CANCEL_RESULTS.md",
      "benchmarks/cancel_bench.py"),
     ("Structure: typed stage results against the previous runner, same reports",

@@ -94,6 +94,10 @@ class ReconstructionParams:
     repair_mesh : repair, at intake, faces with coincident corners, duplicate and zero-area
         faces and a few intersecting faces (``core.mesh_repair``; each repair is listed in
         the report's ``input.repairs``); False refuses such a mesh.
+    proxy_triangles : a target with more triangles is reduced to about this many for the
+        parts, frames, labeling and base mesh (``core.proxy``), so that the cage does not
+        depend on how finely the shape is triangulated; the fit and every figure use the
+        whole target. 0 never reduces.
     parts : ``single`` (whole mesh one part), ``auto`` (curve-skeleton based) or ``file``
         (chosen by the user, read from ``parts_file``).
     parts_file : JSON file with one of ``{"face_part": [p_0, ..., p_m-1]}``, ``{"groups":
@@ -146,6 +150,10 @@ class ReconstructionParams:
     repair_mesh: bool = _param(
         True, "refuse a mesh with duplicate or zero-area faces or a few intersecting faces "
         "instead of repairing it", "--no-mesh-repair")
+    proxy_triangles: int = _param(
+        60_000, "targets with more triangles are reduced to about this many for the parts, "
+        "frames, labeling and base mesh (the fit uses the whole target; default %(default)s; "
+        "0: never)", _flag("proxy_triangles"), low=0, high=100_000_000)
     parts: str = _param("single", "part segmentation: whole mesh one part, or curve-skeleton "
                         "based", _flag("parts"), choices=PART_MODES)
     parts_file: str = _param("", "user parts: JSON with 'face_part' (per-face part ids), 'groups' "

@@ -130,7 +130,8 @@ def run_stages(state, stages, params, progress=NO_PROGRESS, report=None):
     Returns
     -------
     state : the same PipelineState, with the results of the stages that ran.
-    report : dict with ``stages`` (status, message, seconds and CPU seconds per stage) and
+    report : dict with ``stages`` (status, message, seconds, CPU seconds and the process's
+        peak memory so far in MiB, per stage) and
         each finished stage's section under its ``report_key``.
     failed : the unexpected exception a stage raised (also a ``Cancelled``), else None.
 
@@ -167,6 +168,7 @@ def run_stages(state, stages, params, progress=NO_PROGRESS, report=None):
             report[stage.report_key] = result.report
         entry["seconds"] = round(time.perf_counter() - start, 4)
         entry["cpu_seconds"] = round(time.process_time() - cpu_start, 4)  # what load does not add
+        entry["peak_memory_mb"] = round(peak_memory_mb(), 1)  # of the process, so far
         report["stages"][name] = entry
     progress.report("done", 1.0)
     return state, report, failed

@@ -131,19 +131,28 @@ class IntakeResult:
 
     target : TriMesh, watertight, 2-manifold, outward, scaled by ``report["unit_to_mm"]``.
     genus : int, genus of the target (every later stage keeps it).
+    working : TriMesh, the surface parts, frames, labeling and base mesh run on: a reduction
+        of ``target`` of bounded size with its genus (``core.proxy``), or ``target`` itself;
+        None stands for ``target``.
     """
 
     target: TriMesh
     genus: int
     report: dict = field(default_factory=dict)
     message: str = ""
+    working: TriMesh = None
+
+    @property
+    def surface(self):
+        """The TriMesh the segmentation and the base mesh run on (``working`` or ``target``)."""
+        return self.target if self.working is None else self.working
 
 
 @dataclass(frozen=True)
 class PartsResult:
     """The part of every target face (report key ``parts``).
 
-    face_part : (m,) int32, part 0 .. P-1 of each face of ``IntakeResult.target``.
+    face_part : (m,) int32, part 0 .. P-1 of each face of ``IntakeResult.surface``.
     """
 
     face_part: np.ndarray

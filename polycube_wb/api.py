@@ -59,7 +59,7 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
             if state.labeling is not None:
                 from core.segmentation.labels_file import write_labels_ply
 
-                mesh = state.intake.target
+                mesh = state.intake.surface  # the labeling's own faces
                 write_labels_ply(labels_path, mesh.vertices, mesh.faces, state.parts.face_part,
                                  state.labeling.face_label, state.frames.frame_field.face_frame,
                                  protect=inputs)

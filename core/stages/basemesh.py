@@ -52,7 +52,7 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     field = frames.frame_field
     interface_axis = field.face_interface_axis if len(field.interfaces) else None
     try:
-        cage, info = build_base_mesh(intake.target, parts.face_part, labeling.face_label,
+        cage, info = build_base_mesh(intake.surface, parts.face_part, labeling.face_label,
                                      field.face_frame, field.part_frames,
                                      target_faces=params.target_faces,
                                      max_base_faces=params.max_base_faces,

@@ -19,7 +19,7 @@ def run_frames(intake, parts, params, progress):
     """
     from core.segmentation.frames import compute_frames, mean_edge_length
 
-    mesh = intake.target
+    mesh = intake.surface
     blend = params.blend_factor * mean_edge_length(mesh.vertices, mesh.faces)
     frame_field = compute_frames(mesh, parts.face_part, blend_distance=blend, lam=params.lam)
     report = {"parts": int(len(frame_field.part_frames)), "interfaces": len(frame_field.interfaces),

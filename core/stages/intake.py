@@ -2,11 +2,13 @@
 """Intake stage: read and validate the target, scale it to millimetres (paper Sect. 2: the
 watertight surface mesh the method starts from)."""
 from core.params import UNIT_TO_MM
+from core.proxy import working_surface
 from core.types import IntakeResult, TriMesh
 
 
 def run_intake(source, params, progress):
-    """Read and validate the target; scale it from ``params.units`` to millimetres.
+    """Read and validate the target; scale it from ``params.units`` to millimetres; reduce
+    a fine target to the working surface of the later stages (``core.proxy``).
 
     Every later stage, the solid and the STEP file are in millimetres; the report's
     ``bbox_diagonal`` stays in the file's units, ``unit_to_mm`` is the factor applied.
@@ -15,7 +17,7 @@ def run_intake(source, params, progress):
     ----------
     source : core.types.MeshSource, the file, or arrays in memory.
     params : core.params.ReconstructionParams (``units``, ``components``,
-        ``check_self_intersections``, ``repair_mesh``).
+        ``check_self_intersections``, ``repair_mesh``, ``proxy_triangles``, ``parts``).
     progress : core.progress.Progress.
 
     Returns
@@ -40,7 +42,14 @@ def run_intake(source, params, progress):
                                     check_self_intersections=params.check_self_intersections,
                                     name=str(source.path), unit_to_mm=factor,
                                     repair=params.repair_mesh)
-    report = {"file": str(source.path), "units": params.units, "unit_to_mm": factor, **summary}
-    return IntakeResult(target=TriMesh(mesh.vertices * factor, mesh.faces),
-                        genus=int(summary["genus"]), report=report,
-                        message="; ".join(summary["warnings"]))
+    target, genus = TriMesh(mesh.vertices * factor, mesh.faces), int(summary["genus"])
+    progress.check_cancel()
+    components = summary["components"] if params.components == "all" else 1
+    working = working_surface(target, genus, components, params.proxy_triangles,
+                              "the parts file numbers the target's own faces"
+                              if params.parts == "file" else "")
+    report = {"file": str(source.path), "units": params.units, "unit_to_mm": factor, **summary,
+              "proxy": working.report}
+    return IntakeResult(target=target, genus=genus, report=report,
+                        message="; ".join(summary["warnings"]),
+                        working=working.mesh if working.reduced else None)

@@ -34,7 +34,7 @@ def run_labeling(intake, parts, frames, params, progress):
     from core.segmentation.repair import CandidateJudge, repair_labeling
     from core.segmentation.validity import check_validity
 
-    mesh, face_part, field = intake.target, parts.face_part, frames.frame_field
+    mesh, face_part, field = intake.surface, parts.face_part, frames.frame_field
     # one edge table, one colouring, one set of normals and one judge serve the sweeps, the
     # repair and the monotonicity pass
     topology = build_topology(mesh.faces, len(mesh.vertices))

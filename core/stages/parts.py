@@ -26,7 +26,7 @@ def run_parts(intake, params, progress):
     from core.segmentation.parts import single_part
     from core.segmentation.skeleton_parts import skeleton_segmentation
 
-    mesh = intake.target
+    mesh = intake.surface
     if params.parts == "single":
         face_part = connected_face_components(mesh.faces).astype(np.int32)
         if face_part.max() == 0:

@@ -94,7 +94,7 @@ class SegmentationProxy(StageProxy):
     def show(self, obj):
         from polycube_wb.convert import arrays_to_mesh
 
-        target = self.upstream_state(obj).intake.target
+        target = self.upstream_state(obj).intake.surface
         face_part, face_label = stored_arrays(obj, len(target.faces))
         obj.Mesh = arrays_to_mesh(target.vertices, target.faces)
         obj.FaceColors = face_colours(face_part, face_label, obj.ColourBy)
@@ -110,7 +110,7 @@ class SegmentationProxy(StageProxy):
         from core.types import LabelingResult, PartsResult
 
         state = self.upstream_state(obj)
-        mesh = state.intake.target
+        mesh = state.intake.surface
         face_part, face_label = stored_arrays(obj, len(mesh.faces))
         state.parts = PartsResult(face_part)
         state = core_stages(state, ["frames"], stage_params(**self.parameters(obj)),

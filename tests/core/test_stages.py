@@ -72,6 +72,7 @@ def test_a_run_holds_one_result_of_the_documented_type_per_stage(tmp_path):
         assert result.report["stages"][stage.name] == {
             "status": "ok", "message": value.message,
             "seconds": result.report["stages"][stage.name]["seconds"],
-            "cpu_seconds": result.report["stages"][stage.name]["cpu_seconds"]}
+            "cpu_seconds": result.report["stages"][stage.name]["cpu_seconds"],
+            "peak_memory_mb": result.report["stages"][stage.name]["peak_memory_mb"]}
     assert set(result.report) == {"parameters", "stages", "total_seconds", "peak_memory_mb"} | {
         stage.report_key for stage in STAGES}

@@ -1,0 +1,142 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""The working surface: a proxy of bounded size on which parts, frames, labeling and the
+base mesh run.
+
+A fine target (a topology-optimisation export of a million triangles) and a coarse one of
+the same shape should give the same labeling and the same cage, and the cost of those
+stages should follow the size of the answer (a few hundred cage faces), not the size of the
+input. Above ``params.proxy_triangles`` triangles the target is therefore reduced by
+quadric edge collapse (Garland & Heckbert; the compiled ``fast-simplification`` package)
+to about that many triangles. The proxy is accepted only when it is what the later stages
+need: a closed, consistently oriented 2-manifold without self-intersections and with the
+target's genus and components (the intake's own checks and unambiguous repairs). Otherwise
+the reduction is tried again with more triangles, and the full target is used when no
+reduction keeps the shape; the report says which and why. The fit and every distance and containment figure
+still use the full target.
+"""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from core.errors import InvalidMeshError
+from core.optional_imports import optional_module
+from core.types import TriMesh
+
+ATTEMPT_SIZES = (1.0, 1.1, 1.25, 2.0, 4.0)
+"""Sizes of the reductions tried, in multiples of ``proxy_triangles``: a reduction whose one
+sliver the repairs cannot remove usually succeeds a little larger; one that loses a handle,
+only with more triangles."""
+
+
+@dataclass(frozen=True)
+class WorkingSurface:
+    """The surface the segmentation and the base mesh run on.
+
+    mesh : TriMesh, the proxy, or the target itself when it is small enough or no reduction
+        kept its shape.
+    reduced : bool, ``mesh`` is a reduction of the target.
+    report : dict, JSON-serialisable: triangles, reduced, largest_distance_mm (of the proxy's
+        vertices to the target, 0 when not reduced), reason (why the target itself is used),
+        refused (the smaller reductions tried first and why each was refused).
+    """
+
+    mesh: TriMesh
+    reduced: bool
+    report: dict = field(default_factory=dict)
+
+
+def working_surface(target, genus, components, proxy_triangles, reason_to_keep=""):
+    """The proxy of ``target`` the segmentation and the base mesh run on.
+
+    Parameters
+    ----------
+    target : TriMesh, the validated target (closed, outward, 2-manifold), in mm.
+    genus, components : int, its genus and connected components; the proxy must keep them.
+    proxy_triangles : int, triangles above which the target is reduced, and about the size
+        of the proxy; 0 keeps the target.
+    reason_to_keep : str, non-empty when the caller needs the target's own faces (user parts
+        given per face); the target is then kept and this is the report's reason.
+
+    Returns
+    -------
+    WorkingSurface
+    """
+    n_faces = len(target.faces)
+    if reason_to_keep or not proxy_triangles or n_faces <= proxy_triangles:
+        reason = reason_to_keep or ("" if n_faces <= proxy_triangles or not proxy_triangles
+                                    else "proxy off")
+        return _kept(target, reason)
+    failures = []
+    for size in ATTEMPT_SIZES:
+        wanted = int(round(size * proxy_triangles))
+        if wanted >= n_faces:
+            break
+        proxy, problem = _checked(reduce_triangles(target, wanted), genus, components)
+        if problem is None:
+            return WorkingSurface(proxy, True, {
+                "triangles": int(len(proxy.faces)), "reduced": True,
+                "largest_distance_mm": round(_largest_distance(proxy, target), 6),
+                "reason": "", "refused": failures})
+        failures.append(f"{wanted} triangles: {problem}")
+    return _kept(target, "no reduction kept the shape (" + "; ".join(failures) + ")")
+
+
+def reduce_triangles(mesh, triangles):
+    """``mesh`` reduced to about ``triangles`` triangles by quadric edge collapse.
+
+    Parameters
+    ----------
+    mesh : TriMesh with m > ``triangles`` faces.
+    triangles : int, wanted triangle count.
+
+    Returns
+    -------
+    TriMesh, faces with a repeated corner and unused vertices dropped; not checked further
+    (see :func:`working_surface`).
+    """
+    simplification = optional_module("fast_simplification", "fast-simplification")
+    vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)  # float32 would merge
+    faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)            # a fine mesh's slivers
+    reduction = 1.0 - triangles / len(faces)
+    points, triangles_out = simplification.simplify(vertices, faces, target_reduction=reduction)
+    points = np.asarray(points, dtype=np.float64)
+    triangles_out = np.asarray(triangles_out, dtype=np.int64)
+    # the collapses leave the faces they removed behind with a repeated corner
+    collapsed = ((triangles_out[:, 0] == triangles_out[:, 1])
+                 | (triangles_out[:, 1] == triangles_out[:, 2])
+                 | (triangles_out[:, 2] == triangles_out[:, 0]))
+    triangles_out = triangles_out[~collapsed]
+    used, compact = np.unique(triangles_out, return_inverse=True)
+    return TriMesh(points[used], compact.reshape(-1, 3))
+
+
+def _checked(proxy, genus, components):
+    """``(mesh, problem)``: the proxy after the intake's validation and its unambiguous
+    repairs (a reduction can leave coincident vertices and the zero-area faces between them),
+    and None; or ``(None, why)`` when it fails them or lacks the target's ``genus`` and
+    ``components``."""
+    from core.validate import validate_target
+
+    try:
+        mesh, summary = validate_target(proxy.vertices, proxy.faces, components="all",
+                                        name="the proxy")
+    except InvalidMeshError as exc:
+        return None, str(exc)
+    if int(summary["genus"]) != genus or summary["components"] != components:
+        return None, (f"genus {summary['genus']} and {summary['components']} component(s) "
+                      f"where the target has genus {genus} and {components}")
+    return mesh, None
+
+
+def _largest_distance(proxy, target):
+    """Largest distance (mm) of the proxy's vertices to the target's surface."""
+    from core.target_surface import TargetSurface
+
+    return float(np.max(TargetSurface(target.vertices, target.faces)
+                        .nearest(proxy.vertices).distance))
+
+
+def _kept(target, reason):
+    return WorkingSurface(target, False, {"triangles": int(len(target.faces)), "reduced": False,
+                                          "largest_distance_mm": 0.0, "reason": reason,
+                                          "refused": []})

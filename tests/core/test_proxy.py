@@ -1,0 +1,70 @@
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""The working surface: a fine target is reduced to a proxy of bounded size that keeps its
+shape (closed, genus, components); the later stages run on it and the fit on the target."""
+import numpy as np
+import pytest
+import trimesh
+
+from core.params import ReconstructionParams
+from core.pipeline import run_stages
+from core.proxy import working_surface
+from core.types import MeshSource, PipelineState, TriMesh
+
+
+def fine_torus(sections=160):
+    """A torus of major radius 10 and minor radius 3 (mm), 2 * sections**2 triangles."""
+    mesh = trimesh.creation.torus(major_radius=10.0, minor_radius=3.0,
+                                  major_sections=sections, minor_sections=sections)
+    return TriMesh(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces))
+
+
+def test_a_fine_torus_becomes_a_closed_genus_one_proxy_near_it():
+    torus = fine_torus(100)
+    working = working_surface(torus, genus=1, components=1, proxy_triangles=3000)
+    assert working.reduced
+    assert working.report["reduced"] and working.report["reason"] == ""
+    assert len(working.mesh.faces) <= 2 * 3000 < len(torus.faces)
+    mesh = trimesh.Trimesh(working.mesh.vertices, working.mesh.faces, process=False)
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+    assert mesh.euler_number == 0  # genus 1
+    # the reduction moves no vertex far from the surface: well under the tube's radius
+    assert 0 <= working.report["largest_distance_mm"] < 0.3
+
+
+def test_a_target_at_or_under_the_size_is_its_own_working_surface():
+    torus = fine_torus(40)
+    working = working_surface(torus, genus=1, components=1, proxy_triangles=len(torus.faces))
+    assert working.mesh is torus and not working.reduced
+    assert working_surface(torus, 1, 1, proxy_triangles=0).mesh is torus
+
+
+def test_user_parts_keep_the_target_and_say_why():
+    torus = fine_torus(40)
+    working = working_surface(torus, 1, 1, proxy_triangles=100, reason_to_keep="parts file")
+    assert working.mesh is torus and working.report["reason"] == "parts file"
+
+
+def test_a_reduction_that_does_not_keep_the_shape_is_refused():
+    # told the target has two components, no reduction of the one torus matches: every
+    # attempt is refused and the target itself is the working surface, with the reasons
+    torus = fine_torus(60)
+    working = working_surface(torus, genus=1, components=2, proxy_triangles=1000)
+    assert working.mesh is torus and not working.reduced
+    assert "no reduction kept the shape" in working.report["reason"]
+    assert "target has genus 1 and 2" in working.report["reason"]
+
+
+@pytest.mark.slow
+def test_the_segmentation_and_base_mesh_run_on_the_proxy_and_keep_the_genus():
+    torus = fine_torus(120)
+    params = ReconstructionParams(proxy_triangles=4000, target_faces=64)
+    state = PipelineState(source=MeshSource(path="torus", arrays=(torus.vertices, torus.faces)))
+    state, report, failed = run_stages(state, ["intake", "parts", "frames", "labeling",
+                                               "basemesh"], params)
+    assert failed is None, report["stages"]
+    proxy = state.intake.surface
+    assert state.intake.working is not None and len(proxy.faces) < len(torus.faces)
+    assert len(state.intake.target.faces) == len(torus.faces)
+    assert len(state.labeling.face_label) == len(proxy.faces)
+    assert report["input"]["proxy"]["triangles"] == len(proxy.faces)
+    assert report["base_mesh"]["genus"] == 1
