@@ -26,6 +26,11 @@ ATTEMPT_SIZES = (1.0, 1.1, 1.25, 2.0, 4.0)
 """Sizes of the reductions tried, in multiples of ``proxy_triangles``: a reduction whose one
 sliver the repairs cannot remove usually succeeds a little larger; one that loses a handle,
 only with more triangles."""
+TIE_BREAK = 1e-6
+"""Vertices are moved by about this many mean edge lengths (seeded, so the same every run)
+before the reduction: on flat patches (a subdivided mesh has many) whole families of
+collapses cost exactly zero, and the order that breaks those ties leaves slivers the repairs
+cannot remove; a move far below any tolerance of the later stages breaks them."""
 
 
 @dataclass(frozen=True)
@@ -95,8 +100,12 @@ def reduce_triangles(mesh, triangles):
     (see :func:`working_surface`).
     """
     simplification = optional_module("fast_simplification", "fast-simplification")
-    vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)  # float32 would merge
-    faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)            # a fine mesh's slivers
+    faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
+    edge = float(np.linalg.norm(mesh.vertices[faces[:, 0]] - mesh.vertices[faces[:, 1]],
+                                axis=1).mean())
+    noise = np.random.default_rng(0).standard_normal(mesh.vertices.shape)
+    # double precision: single precision would merge a fine mesh's slivers
+    vertices = np.ascontiguousarray(mesh.vertices + TIE_BREAK * edge * noise, dtype=np.float64)
     reduction = 1.0 - triangles / len(faces)
     points, triangles_out = simplification.simplify(vertices, faces, target_reduction=reduction)
     points = np.asarray(points, dtype=np.float64)
