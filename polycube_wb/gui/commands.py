@@ -29,8 +29,10 @@ CAGE_FILTER = "Polygon meshes (*.obj);;All files (*)"
 STEP_FILTER = "STEP files (*.step *.stp)"
 NOT_AVAILABLE = "not available yet"
 SUPERSEDES = {"Segmentation": ("Target",), "BaseMesh": ("Segmentation",),
-              "Fit": ("BaseMesh",), "Solid": ("Fit", "BaseMesh"), "Deviation": ("Solid",)}
-"""Displays hidden when a stage's result is shown."""
+              "Fit": ("BaseMesh",), "Solid": ("Fit", "BaseMesh"),
+              "Deviation": ("Solid", "Fit", "BaseMesh", "Segmentation", "Target")}
+"""Displays hidden when a stage's result is shown (the deviation map is the solid, coloured:
+it is shown alone)."""
 
 
 # ----------------------------------------------------------------------------------------
