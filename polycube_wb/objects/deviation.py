@@ -106,7 +106,7 @@ class DeviationProxy(StageProxy):
         # a copy: the worker tessellates it while the 3D view may draw the original
         solid, tolerance = solids[0].copy(), float(obj.Tolerance)
         target_V, target_F = _mesh_arrays(obj.Target)
-        return StageJob(_deviation, (solid, target_V, target_F, tolerance), needs_freecad=True)
+        return StageJob(_deviation, (solid, target_V, target_F, tolerance))
 
     def store(self, obj, result):
         from polycube_wb.convert import arrays_to_mesh

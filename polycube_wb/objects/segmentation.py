@@ -149,7 +149,7 @@ def stored_arrays(obj, n_faces=None):
 def face_colours(face_part, face_label, colour_by="Labels"):
     """List of RGB tuples, one per face: its label's or its part's colour."""
     if colour_by == "Parts":
-        table, index = np.asarray(PART_COLOURS), face_part % len(PART_COLOURS)
+        table, index = PART_COLOURS, np.asarray(face_part) % len(PART_COLOURS)
     else:
-        table, index = np.asarray(LABEL_COLOURS), face_label
-    return [tuple(row) for row in table[index].tolist()]
+        table, index = LABEL_COLOURS, np.asarray(face_label)
+    return [table[k] for k in index.tolist()]  # shares the table's tuples: fast on big meshes
