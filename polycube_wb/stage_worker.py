@@ -25,6 +25,9 @@ from core.progress import Progress
 from polycube_wb.stage_jobs import portable_error, register_shape_pickling
 
 _HEADER = struct.Struct("<Q")
+NICENESS = 5
+"""Added to the process's niceness: when the stages keep every core busy, the scheduler
+serves FreeCAD's GUI thread first, so the window keeps answering."""
 
 
 def write_frame(stream, value):
@@ -57,6 +60,10 @@ class FrameProgress(Progress):
 
 
 def main():
+    try:
+        os.nice(NICENESS)
+    except (AttributeError, OSError):  # not on this platform: the same priority as FreeCAD
+        pass
     out = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
     os.dup2(sys.stderr.fileno(), sys.stdout.fileno())  # stray prints go to stderr
     jobs = sys.stdin.buffer

@@ -32,7 +32,7 @@ WINDOW_GRABS = ("polycube_fit_progress.png", "polycube_batch_progress.png",
 after Esc in the fit (the Fit marked in the tree), with the Fit's task panel open and
 during the torsion arm's fit, grabbed at the window's own size."""
 MIN_CASES = 10
-TIMEOUT = 600
+TIMEOUT = 1200
 """Guard against a hung GUI (FreeCAD under Xvfb without a window manager), not a timing
 check: the run takes about 1 min of CPU, longer in wall-clock on a loaded machine."""
 MIN_PNG_BYTES = 10_000
@@ -63,6 +63,7 @@ def _colour_figures(path):
     return len(set(pixels)), covered
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(XVFB_RUN is None or FREECAD is None,
                     reason="needs xvfb-run and the freecad GUI (apt install xvfb freecad)")
 def test_workbench_in_real_gui():
