@@ -93,6 +93,9 @@ def test_workbench_in_real_gui():
     passed = re.findall(r"^test_\w+ \(polycube_gui_cases\w*\.\w+\.test_\w+\) \.\.\. .*?ok$",
                         stdout, re.MULTILINE | re.DOTALL)
     assert len(passed) == int(ran.group(1)), log
+    for line in stdout.splitlines():  # the responsiveness figures, for pytest -s
+        if "event-loop gap" in line or line.startswith("Esc "):
+            print(line)
     for name in SCREENSHOTS:
         path = os.path.join(OUTPUT, name)
         assert os.path.isfile(path), f"screenshot {path} was not written\n{log}"
