@@ -192,14 +192,16 @@ def _pixel_callback(scale):
     being drawn (the 3D view, or an offscreen image of another size)."""
     from pivy import coin
 
+    size = []  # the viewport (width, height) the scale was set for
+
     def adjust(_data, action):
         if not action.isOfType(coin.SoGLRenderAction.getClassTypeId()):
             return
         region = coin.SoViewportRegionElement.get(action.getState())
         width, height = region.getViewportSizePixels().getValue()
-        wanted = (2.0 / max(width, 1), 2.0 / max(height, 1), 1.0)
-        if tuple(scale.scaleFactor.getValue()) != wanted:
-            scale.scaleFactor.setValue(*wanted)
+        if size != [width, height]:  # setting the field redraws: only when the size changed
+            size[:] = [width, height]
+            scale.scaleFactor.setValue(2.0 / max(width, 1), 2.0 / max(height, 1), 1.0)
 
     node = coin.SoCallback()
     node.setCallback(adjust)

@@ -189,9 +189,18 @@ class StageProcess:
                 return
 
     def send(self, job):
+        """Hand ``job`` to the process from a thread of its own: pickling a stage's inputs
+        and pushing them through the pipe (as fast as the process reads) would hold up the
+        event loop; a failure to send is a frame ``("ended", exception)``."""
         from polycube_wb.stage_worker import write_frame
 
-        write_frame(self.process.stdin, (job.function, job.args))
+        def write():
+            try:
+                write_frame(self.process.stdin, (job.function, job.args))
+            except Exception as exc:  # the process ended (or the job does not pickle)
+                self.frames.put(("ended", exc))
+
+        threading.Thread(target=write, name="polycube-stage-writer", daemon=True).start()
 
     def alive(self):
         return self.process.poll() is None
