@@ -320,6 +320,11 @@ class LargeMeshTest(unittest.TestCase):
         self.assertLess(answered, LARGE_ESC_ANSWERED)
         self.assertEqual(_one(self.doc, "Fit").Status, "cancelled by the user")
         self.assertEqual(self.stubs.boxes, [], "a cancel opens no message box")
+        self.assertTrue(_one(self.doc, "BaseMesh").ViewObject.Visibility,
+                        "the last result is shown")
+        for kind in ("Target", "Segmentation"):
+            self.assertFalse(_one(self.doc, kind).ViewObject.Visibility,
+                             f"the base mesh supersedes the {kind} after the cancel")
         self.assertEqual(self.doc.UndoCount, undo_count + 1, "one undo step")
         self.doc.undo()
         self.assertEqual([obj.Name for obj in self.doc.Objects], names,
