@@ -18,7 +18,8 @@ import FreeCADGui
 from polycube_wb.objects.segmentation import LABEL_COLOURS
 
 _LEGENDS = {}
-"""(document name, object name) -> (scene graph root, overlay node)."""
+"""(document name, object name) -> (scene graph root, overlay node, its render callback: a
+Python function the scene graph calls, kept alive here as long as the node is shown)."""
 SEGMENTS = 32
 BAR = (14, 34, -100, 100)
 """Bar corners (left, right, bottom, top) in pixels from the left edge, halfway up."""
@@ -72,7 +73,7 @@ def update_legend(obj):
     view = _view(obj)
     if view is None or obj.ScaleUsed <= 0 or not obj.ViewObject.Visibility:
         return
-    overlay, panel = _overlay()
+    overlay, panel, callback = _overlay()
     title, ticks, largest = legend_texts(obj)
     left, right, bottom, top = BAR
     width = right + 12 + CHAR_WIDTH * max(len(text) for _, text in ticks)
@@ -97,7 +98,7 @@ def update_legend(obj):
     group.addChild(overlay)
     group.addChild(_marker(obj))
     root.addChild(group)
-    _LEGENDS[(obj.Document.Name, obj.Name)] = (root, group)
+    _LEGENDS[(obj.Document.Name, obj.Name)] = (root, group, callback)
 
 
 def update_label_legend(obj):
@@ -107,7 +108,7 @@ def update_label_legend(obj):
     view = _view(obj)
     if view is None or not obj.ViewObject.Visibility:
         return
-    overlay, panel = _overlay()
+    overlay, panel, callback = _overlay()
     rows = len(LABEL_NAMES)
     top = rows * LINE / 2.0
     title = "polycube labels"
@@ -121,14 +122,14 @@ def update_label_legend(obj):
         _text(panel, (36, y + 4), name)
     root = view.getSceneGraph()
     root.addChild(overlay)
-    _LEGENDS[(obj.Document.Name, obj.Name)] = (root, overlay)
+    _LEGENDS[(obj.Document.Name, obj.Name)] = (root, overlay, callback)
 
 
 def remove_legend(obj):
     """Take the legend of ``obj`` out of the 3D view (idempotent)."""
     entry = _LEGENDS.pop((obj.Document.Name, obj.Name), None)
     if entry is not None:
-        root, node = entry
+        root, node, _ = entry
         root.removeChild(node)
 
 
@@ -148,7 +149,8 @@ def _view(obj):
 
 
 def _overlay():
-    """(overlay node for the scene graph, separator to add the legend to in pixels).
+    """(overlay node for the scene graph, separator to add the legend to in pixels, the
+    render callback to keep alive while the overlay is shown).
 
     The separator's origin is the left edge of the viewport, halfway up; x to the right and
     y up in pixels.
@@ -176,7 +178,8 @@ def _overlay():
     place.translation.setValue(-1.0, 0.0, 0.0)
     annotation.addChild(place)
     pixels = coin.SoScale()
-    annotation.addChild(_pixel_callback(pixels))
+    callback_node, callback = _pixel_callback(pixels)
+    annotation.addChild(callback_node)
     annotation.addChild(pixels)
     font = coin.SoFont()
     font.name.setValue("sans")
@@ -184,12 +187,12 @@ def _overlay():
     annotation.addChild(font)
     panel = coin.SoSeparator()
     annotation.addChild(panel)
-    return overlay, panel
+    return overlay, panel, callback
 
 
 def _pixel_callback(scale):
-    """A callback node keeping ``scale`` at two viewport units per pixel of the viewport
-    being drawn (the 3D view, or an offscreen image of another size)."""
+    """(callback node, its Python function) keeping ``scale`` at two viewport units per pixel
+    of the viewport being drawn (the 3D view, or an offscreen image of another size)."""
     from pivy import coin
 
     size = []  # the viewport (width, height) the scale was set for
@@ -205,8 +208,7 @@ def _pixel_callback(scale):
 
     node = coin.SoCallback()
     node.setCallback(adjust)
-    node._polycube_adjust = adjust  # keep the Python function alive with the node
-    return node
+    return node, adjust
 
 
 def _panel(parent, corners):
