@@ -31,7 +31,15 @@ def _cases_module(name, file_name):
 
 
 def load_tests(loader, standard_tests, pattern):
-    """unittest's load_tests protocol: the cases of every file in ``_CASES``."""
+    """unittest's load_tests protocol: the cases of every file in ``_CASES`` (of the classes
+    ``$POLYCUBE_GUI_CASES`` names, when set)."""
+    import unittest
+
+    wanted = {name for name in os.environ.get("POLYCUBE_GUI_CASES", "").split(",") if name}
     for name, file_name in _CASES:
-        standard_tests.addTests(loader.loadTestsFromModule(_cases_module(name, file_name)))
+        module = _cases_module(name, file_name)
+        for _, case in sorted(vars(module).items()):  # name order, as unittest loads
+            if isinstance(case, type) and issubclass(case, unittest.TestCase) and \
+                    case.__module__ == module.__name__ and (not wanted or case.__name__ in wanted):
+                standard_tests.addTests(loader.loadTestsFromTestCase(case))
     return standard_tests

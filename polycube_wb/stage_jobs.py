@@ -4,8 +4,9 @@
 A :class:`StageJob` is a module-level function and its arguments (plain data: numpy
 arrays, ``core.types`` results, parameters), so it can be pickled to the GUI's stage
 process (:mod:`polycube_wb.stage_worker`) or run in the calling thread. This module never
-imports FreeCAD, so that process starts without it; jobs whose function needs FreeCAD
-(OpenCascade shapes) say so and run in FreeCAD's own process.
+imports FreeCAD, so that process starts without it. A job that makes or reads OpenCascade
+shapes imports FreeCAD's ``Part`` there when it runs; its shapes cross the pipe as BREP text
+(:func:`register_shape_pickling`), so the B-rep work holds no lock FreeCAD's GUI waits for.
 """
 import os
 from dataclasses import dataclass
@@ -23,8 +24,8 @@ class StageJob:
 
     function : a module-level function (picklable by reference).
     args : tuple of plain data.
-    needs_freecad : the function makes or reads FreeCAD objects (``Part`` shapes), so it
-        runs in FreeCAD's own process.
+    needs_freecad : the function reads FreeCAD's document or GUI objects, so it runs in
+        FreeCAD's own process (``Part`` shapes alone do not need it: they pickle as BREP).
     """
 
     function: object
@@ -89,6 +90,30 @@ def read_mesh_file(path, progress):
     """The validated target mesh (``core.types.TriMesh``) of the mesh file ``path``."""
     progress.report("reading and validating the mesh", 0.0, os.path.basename(path))
     return read_target_file(path)
+
+
+def shape_from_brep(text):
+    """The ``Part.Shape`` a BREP text describes (how shapes unpickle)."""
+    import Part
+
+    shape = Part.Shape()
+    shape.importBrepFromString(text)
+    return shape
+
+
+def _reduce_shape(shape):
+    return shape_from_brep, (shape.exportBrepToString(),)
+
+
+def register_shape_pickling():
+    """Let ``Part`` shapes pickle as their BREP text (call where ``Part`` is imported: in
+    FreeCAD, and in the stage process once a job has imported it)."""
+    import copyreg
+
+    import Part
+
+    for kind in (Part.Shape, Part.Solid, Part.Shell, Part.Face, Part.Compound):
+        copyreg.pickle(kind, _reduce_shape)
 
 
 def portable_error(exc):

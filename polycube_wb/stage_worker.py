@@ -10,7 +10,9 @@ stdin and writes messages to its original stdout, each a pickled frame (:func:`w
 * out: ``("progress", stage, fraction, message)`` while the job runs, then
   ``("result", value)`` or ``("error", exception)``.
 
-Anything the stages print goes to stderr. The GUI cancels a job by ending the process
+Shapes a job returns (``Part``, once a job imported it) are pickled as BREP text
+(:func:`polycube_wb.stage_jobs.register_shape_pickling`). Anything the stages print goes to
+stderr. The GUI cancels a job by ending the process
 (it starts a new one for the next job), so a cancel never waits for the job.
 """
 import os
@@ -20,9 +22,12 @@ import sys
 
 import polycube_wb  # noqa: F401  (installs the guard that makes ``core`` ours)
 from core.progress import Progress
-from polycube_wb.stage_jobs import portable_error
+from polycube_wb.stage_jobs import portable_error, register_shape_pickling
 
 _HEADER = struct.Struct("<Q")
+NICENESS = 5
+"""Added to the process's niceness: when the stages keep every core busy, the scheduler
+serves FreeCAD's GUI thread first, so the window keeps answering."""
 
 
 def write_frame(stream, value):
@@ -55,6 +60,10 @@ class FrameProgress(Progress):
 
 
 def main():
+    try:
+        os.nice(NICENESS)
+    except (AttributeError, OSError):  # not on this platform: the same priority as FreeCAD
+        pass
     out = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
     os.dup2(sys.stderr.fileno(), sys.stdout.fileno())  # stray prints go to stderr
     jobs = sys.stdin.buffer
@@ -69,6 +78,8 @@ def main():
         except Exception as exc:  # handed to the GUI, which reports it
             write_frame(out, ("error", portable_error(exc)))
         else:
+            if "Part" in sys.modules:
+                register_shape_pickling()
             write_frame(out, ("result", value))
 
 

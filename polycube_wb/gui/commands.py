@@ -27,8 +27,10 @@ MESH_FILTER = "Triangle meshes (*.stl *.obj *.ply *.off);;All files (*)"
 CAGE_FILTER = "Polygon meshes (*.obj);;All files (*)"
 STEP_FILTER = "STEP files (*.step *.stp)"
 SUPERSEDES = {"Segmentation": ("Target",), "BaseMesh": ("Segmentation",),
-              "Fit": ("BaseMesh",), "Solid": ("Fit", "BaseMesh"), "Deviation": ("Solid",)}
-"""Displays hidden when a stage's result is shown."""
+              "Fit": ("BaseMesh",), "Solid": ("Fit", "BaseMesh"),
+              "Deviation": ("Solid", "Fit", "BaseMesh", "Segmentation", "Target")}
+"""Displays hidden when a stage's result is shown (the deviation map is the solid, coloured:
+it is shown alone)."""
 
 
 # ----------------------------------------------------------------------------------------

@@ -68,8 +68,10 @@ class StagePanel:
         buttons.addWidget(apply)
         form.addRow(buttons)
         layout.addWidget(box)
+        self.hidden_for_edit = {}
         if self.kind in CAGE_KINDS:
             layout.addWidget(self._cage_box())
+            self.hidden_for_edit = _show_cage_alone(obj)
         self.status = QtGui.QLabel()
         self.status.setWordWrap(True)
         layout.addWidget(self.status)
@@ -89,12 +91,17 @@ class StagePanel:
         self.apply()
         if self.outcome is None:
             return False
-        _close(self.obj)
+        self._close()
         return True
 
     def reject(self):
-        _close(self.obj)
+        self._close()
         return True
+
+    def _close(self):
+        _restore_visibility(self.hidden_for_edit)
+        self.hidden_for_edit = {}
+        _close(self.obj)
 
     # -- actions ----------------------------------------------------------------------------
 
@@ -208,6 +215,35 @@ def _reference(obj):
 def _replay_lines(obj, changed):
     """Console lines that set ``changed`` (property -> value) on ``obj``."""
     return [f"{_reference(obj)}.{prop} = {value!r}" for prop, value in changed.items()]
+
+
+def _show_cage_alone(obj):
+    """Show the cage ``obj`` (its vertices are picked in the view) and hide the document's
+    other stage displays but the Solid: the other cage and the meshes, which would hide it or
+    be confused with it (the solid stays, to show the edit's effect under the cage's lines);
+    returns ``{object: visibility}`` of the objects changed, for :func:`_restore_visibility`."""
+    from polycube_wb.objects.base import stage_kind
+
+    changed = {}
+    for other in obj.Document.Objects:
+        vobj, kind = other.ViewObject, stage_kind(other)
+        if vobj is None or kind is None or kind == "Solid":
+            continue
+        wanted = other is obj
+        if bool(vobj.Visibility) != wanted:
+            changed[other] = bool(vobj.Visibility)
+            vobj.Visibility = wanted
+    return changed
+
+
+def _restore_visibility(changed):
+    """Set back the visibilities :func:`_show_cage_alone` changed (of objects still there)."""
+    for obj, visible in changed.items():
+        try:
+            if obj.ViewObject is not None:
+                obj.ViewObject.Visibility = visible
+        except ReferenceError:  # deleted meanwhile
+            continue
 
 
 def _close(obj):

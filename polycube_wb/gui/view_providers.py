@@ -3,8 +3,9 @@
 
 A double-click opens the object's task panel (``polycube_wb.gui.task_panels``). The
 Segmentation and Deviation meshes are shown with per-face / per-vertex colours (the mesh
-view provider's ``Coloring`` uses the object's colour list of matching length). The
-Deviation also draws its colour legend in the 3D view (``polycube_wb.gui.legend``).
+view provider's ``Coloring`` uses the object's colour list of matching length). While shown,
+the Deviation draws its colour legend in the 3D view, and a Segmentation coloured by label the
+six label colours (``polycube_wb.gui.legend``).
 """
 import FreeCADGui
 
@@ -28,8 +29,9 @@ class StageViewProvider:
     def attach(self, vobj):
         self.Object = vobj.Object
         self.kind = _kind(vobj.Object)
-        if self.kind == "Deviation":
-            # A reopened map: draw its legend once the document and its view are loaded.
+        if self.kind in ("Deviation", "Segmentation"):
+            # A reopened map: colour it and draw its legend once the document and its view
+            # are loaded (the mesh view restores Coloring before the colour list is read).
             from PySide import QtCore
 
             QtCore.QTimer.singleShot(0, lambda: _legend_after_restore(vobj.Object))
@@ -63,22 +65,16 @@ class StageViewProvider:
         if prop in ("FaceColors", "VertexColors") and hasattr(obj.ViewObject, "Coloring"):
             obj.ViewObject.Coloring = False
             obj.ViewObject.Coloring = True
-        if prop == "ScaleUsed" and _kind(obj) == "Deviation":
-            from polycube_wb.gui.legend import update_legend
-
-            update_legend(obj)
+        if (prop in ("ScaleUsed", "MaxDeviationAt") and _kind(obj) == "Deviation") or \
+                (prop == "FaceColors" and _kind(obj) == "Segmentation"):
+            _update_legend(obj)
 
     def onChanged(self, vobj, prop):
-        if prop == "Visibility" and _kind(vobj.Object) == "Deviation":
-            from polycube_wb.gui.legend import remove_legend, update_legend
-
-            if vobj.Visibility:
-                update_legend(vobj.Object)
-            else:
-                remove_legend(vobj.Object)
+        if prop == "Visibility" and _kind(vobj.Object) in ("Deviation", "Segmentation"):
+            _update_legend(vobj.Object)
 
     def onDelete(self, vobj, subelements):
-        if _kind(vobj.Object) == "Deviation":
+        if _kind(vobj.Object) in ("Deviation", "Segmentation"):
             from polycube_wb.gui.legend import remove_legend
 
             remove_legend(vobj.Object)
@@ -92,13 +88,33 @@ class StageViewProvider:
 
 
 def _legend_after_restore(obj):
-    from polycube_wb.gui.legend import has_legend, update_legend
+    from polycube_wb.gui.legend import has_legend
 
     try:
-        if obj.ViewObject.Visibility and obj.ScaleUsed > 0 and not has_legend(obj):
-            update_legend(obj)
+        vobj = obj.ViewObject
+        if vobj is not None and getattr(vobj, "Coloring", False):
+            vobj.Coloring = False
+            vobj.Coloring = True
+        if not has_legend(obj):
+            _update_legend(obj)
     except ReferenceError:  # the document was closed before the event loop ran
         return
+
+
+def _update_legend(obj):
+    """Draw the legend of a shown Deviation map, or of a shown Segmentation coloured by
+    label; remove it otherwise."""
+    from polycube_wb.gui import legend
+
+    vobj = obj.ViewObject
+    if vobj is None or not vobj.Visibility:
+        legend.remove_legend(obj)
+    elif _kind(obj) == "Deviation":
+        legend.update_legend(obj)
+    elif getattr(obj, "ColourBy", "") == "Labels" and len(obj.FaceColors) > 0:
+        legend.update_label_legend(obj)
+    else:
+        legend.remove_legend(obj)
 
 
 def _kind(obj):

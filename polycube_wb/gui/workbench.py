@@ -44,15 +44,17 @@ class PolycubeWorkbench(FreeCADGui.Workbench):
 
 def _warm_up():
     """Load now what the first command would load while the user waits: the stage objects'
-    modules (FreeCAD's Mesh and MeshPart among them) and the stage process
-    (``polycube_wb.gui.worker``), which starts in the background."""
+    modules (FreeCAD's Mesh and MeshPart among them), the target's validation (scipy,
+    numba), the mesh view providers (MeshGui, loaded with the first mesh shown) and the
+    stage process (``polycube_wb.gui.worker``), which starts in the background."""
     import importlib
 
     from polycube_wb.gui.worker import stage_process
 
     for module in ("polycube_wb.api", "polycube_wb.convert", "polycube_wb.objects.target",
                    "polycube_wb.objects.segmentation", "polycube_wb.objects.fit",
-                   "polycube_wb.objects.solid", "polycube_wb.objects.deviation"):
+                   "polycube_wb.objects.solid", "polycube_wb.objects.deviation",
+                   "core.validate", "MeshGui"):
         importlib.import_module(module)
     try:
         stage_process()

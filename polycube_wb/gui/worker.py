@@ -3,8 +3,9 @@
 
 A job (:class:`polycube_wb.stage_jobs.StageJob`) runs in the GUI's stage process
 (:mod:`polycube_wb.stage_worker`, started at the first job and kept), so that no
-computation can hold up the event loop, whatever it does with Python's GIL; a job that
-makes FreeCAD shapes (``needs_freecad``) runs in a worker thread of FreeCAD itself. Either
+computation can hold up the event loop, whatever it does with Python's GIL (OpenCascade
+shapes go there and back as BREP text); a job that needs FreeCAD's own objects
+(``needs_freecad``) runs in a worker thread of FreeCAD itself. Either
 way the GUI thread waits in a nested ``QEventLoop`` (as a modal dialog does), which
 repaints the window, lets the user turn and zoom the 3D view and answers Esc, while a
 ``QTimer`` moves the progress bar from what the stage reports.
@@ -76,6 +77,9 @@ def run_job(job, progress):
         What the job raised, raised again in the GUI thread.
     """
     if not job.needs_freecad:
+        from polycube_wb.stage_jobs import register_shape_pickling
+
+        register_shape_pickling()
         try:
             stage_process()
         except RuntimeError as exc:  # no interpreter for the process: FreeCAD's own thread
@@ -185,9 +189,18 @@ class StageProcess:
                 return
 
     def send(self, job):
+        """Hand ``job`` to the process from a thread of its own: pickling a stage's inputs
+        and pushing them through the pipe (as fast as the process reads) would hold up the
+        event loop; a failure to send is a frame ``("ended", exception)``."""
         from polycube_wb.stage_worker import write_frame
 
-        write_frame(self.process.stdin, (job.function, job.args))
+        def write():
+            try:
+                write_frame(self.process.stdin, (job.function, job.args))
+            except Exception as exc:  # the process ended (or the job does not pickle)
+                self.frames.put(("ended", exc))
+
+        threading.Thread(target=write, name="polycube-stage-writer", daemon=True).start()
 
     def alive(self):
         return self.process.poll() is None

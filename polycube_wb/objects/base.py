@@ -194,6 +194,12 @@ def stage_kind(obj):
     return kind.split("::", 1)[1] if kind.startswith("Polycube::") else None
 
 
+FINE_FLOAT = "App::PropertyPrecision"
+"""Property type of a small fraction (e.g. 0.002): the property editor shows a plain
+``App::PropertyFloat`` with the user's unit decimals (2 by default: "0.00"), this one in full.
+Older documents keep the type their objects were made with."""
+
+
 def add_property(obj, kind, name, group, tooltip, default=None, read_only=False, hidden=False,
                  output=False, choice=None):
     """Add a property if ``obj`` lacks it (idempotent: new objects and old documents).

@@ -7,7 +7,7 @@ is any cage object (a BaseMesh, or another Fit to refine further). Editing the f
 """
 from core.params import FIT_MODES
 from polycube_wb.stage_jobs import StageJob, core_stages
-from polycube_wb.objects.base import add_property, stage_params
+from polycube_wb.objects.base import FINE_FLOAT, add_property, stage_params
 from polycube_wb.objects.base_mesh import CageProxy
 from polycube_wb.objects.cage import add_cage_properties, store_cage
 
@@ -41,7 +41,7 @@ class FitProxy(CageProxy):
                      "The cage to fit (a base mesh, possibly edited)")
         add_property(obj, "App::PropertyInteger", "Iterations", "Fit",
                      "Shape-optimisation iterations (paper: 100)", default("fit_iterations"))
-        add_property(obj, "App::PropertyFloat", "Convergence", "Fit",
+        add_property(obj, FINE_FLOAT, "Convergence", "Fit",
                      "The inside fit stops when its best objective improved by less than this "
                      "fraction over five iterations (0: run every iteration)",
                      default("fit_convergence"))
@@ -62,7 +62,7 @@ class FitProxy(CageProxy):
                      "(0: none). Where the surface deviates more, the quad strips there are "
                      "split and the cage fitted again (at most the base mesh's 'Most faces' "
                      "default)", 0.0)
-        add_property(obj, "App::PropertyFloat", "OutsideRefinement", "Fit",
+        add_property(obj, FINE_FLOAT, "OutsideRefinement", "Fit",
                      "Inside mode: where the fit leaves more than this fraction of the target's "
                      "volume outside, the quad strips there are split and the cage fitted again "
                      "(0: off)", default("outside_refinement"))

@@ -92,11 +92,9 @@ class SegmentationProxy(StageProxy):
         self._cache = {key: getattr(state, key) for key in STAGES}
 
     def show(self, obj):
-        from polycube_wb.convert import arrays_to_mesh
-
-        target = self.upstream_state(obj).intake.surface
+        target = self.upstream_state(obj).intake.surface  # the labeling's own faces
         face_part, face_label = stored_arrays(obj, len(target.faces))
-        obj.Mesh = arrays_to_mesh(target.vertices, target.faces)
+        obj.Mesh = _same_or_new_mesh(obj.Target, target.vertices, target.faces)
         obj.FaceColors = face_colours(face_part, face_label, obj.ColourBy)
         return fingerprint(face_part, face_label)
 
@@ -129,6 +127,20 @@ def _no_progress():
     return NO_PROGRESS
 
 
+def _same_or_new_mesh(target, V, F):
+    """A copy of the Target object's mesh when it is exactly ``(V, F)`` (no placement), which
+    costs a fraction of building a mesh; else a mesh built from the arrays."""
+    from polycube_wb.convert import arrays_to_mesh, mesh_to_arrays
+
+    mesh = getattr(target, "Mesh", None)
+    if mesh is not None and mesh.Placement.isIdentity() and mesh.CountPoints == len(V) and \
+            mesh.CountFacets == len(F):
+        own_V, own_F = mesh_to_arrays(mesh)
+        if np.array_equal(own_V, V) and np.array_equal(own_F, F):
+            return mesh.copy()
+    return arrays_to_mesh(V, F)
+
+
 def stored_arrays(obj, n_faces=None):
     """(face_part, face_label) int32 arrays stored on a Segmentation object.
 
@@ -149,7 +161,7 @@ def stored_arrays(obj, n_faces=None):
 def face_colours(face_part, face_label, colour_by="Labels"):
     """List of RGB tuples, one per face: its label's or its part's colour."""
     if colour_by == "Parts":
-        table, index = np.asarray(PART_COLOURS), face_part % len(PART_COLOURS)
+        table, index = PART_COLOURS, np.asarray(face_part) % len(PART_COLOURS)
     else:
-        table, index = np.asarray(LABEL_COLOURS), face_label
-    return [tuple(row) for row in table[index].tolist()]
+        table, index = LABEL_COLOURS, np.asarray(face_label)
+    return [table[k] for k in index.tolist()]  # shares the table's tuples: fast on big meshes

@@ -44,7 +44,7 @@ class SolidProxy(StageProxy):
         check_export_depth(obj.Depth, "Depth")
         base, depth = self.upstream_state(obj).cage, int(obj.Depth)
         what = f"{obj.Label}: the cage of {obj.Cage.Label}"
-        return StageJob(_limit_solid, (base, depth, what), needs_freecad=True)
+        return StageJob(_limit_solid, (base, depth, what))
 
     def store(self, obj, result):
         solid, brep = result

@@ -218,3 +218,51 @@ def test_stage_process_runs_jobs_and_hands_back_results_progress_and_errors(tmp_
         assert "broken.stl" in str(error)
     finally:
         worker.close()
+
+
+class ProcessRunner:
+    """Runs each job in the stage process (pickled there and back, shapes as BREP)."""
+
+    def __init__(self, worker):
+        from polycube_wb.stage_jobs import register_shape_pickling
+
+        register_shape_pickling()
+        self.worker = worker
+
+    def __call__(self, job, progress):
+        from polycube_wb.stage_jobs import RebuiltError
+
+        _, (kind, value) = self.worker.run(job)
+        if kind == "error":
+            raise value.rebuild() if isinstance(value, RebuiltError) else value
+        return value
+
+
+@pytest.mark.slow
+def test_stage_process_runs_the_chain_shapes_included():
+    """The solid made in the stage process comes back as a shape, and the deviation map
+    sends it there: the same results as the plain recompute."""
+    from polycube_wb import api
+
+    plain, moved = _fresh("PolycubePlainP"), _fresh("PolycubeProcess")
+    worker = StageProcess()
+    try:
+        _build(plain)
+        assert api.recompute(plain).ok
+        _build(moved)
+        ran = _record_runs(moved)
+        api.run_in_transaction(moved, "Chain", lambda: None, run_job=ProcessRunner(worker))
+        assert ran == [], "doc.recompute() found every stage up to date"
+        expected, got = _kinds(plain), _kinds(moved)
+        for kind in KINDS:
+            assert got[kind].Status == "ok" and got[kind].ResultId == expected[kind].ResultId
+        solid = got["Solid"].Shape
+        assert solid.isValid() and len(solid.Solids) == 1
+        assert len(solid.Faces) == len(expected["Solid"].Shape.Faces)
+        assert abs(solid.Volume - expected["Solid"].Shape.Volume) <= 1e-9 * solid.Volume
+        assert got["Deviation"].MaxDeviation == pytest.approx(
+            expected["Deviation"].MaxDeviation, rel=1e-9)
+    finally:
+        worker.close()
+        FreeCAD.closeDocument(plain.Name)
+        FreeCAD.closeDocument(moved.Name)

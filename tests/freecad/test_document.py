@@ -309,17 +309,33 @@ def test_deviation_map_colours_and_figures(chain_doc):
     signed = np.asarray(deviation.SignedDistance)
     colours = np.asarray(deviation.VertexColors)[:, :3]
     worst = int(np.argmax(np.abs(signed)))
-    assert deviation.ScaleUsed == pytest.approx(abs(signed[worst]))
-    # The vertex at the largest distance has the full end colour of its side.
-    end = (0.85, 0.13, 0.13) if signed[worst] > 0 else (0.13, 0.31, 0.85)
-    assert np.allclose(colours[worst], end, atol=0.01)
+    # The scale covers the largest distance, the vertices' and the one searched both ways.
+    assert deviation.ScaleUsed == pytest.approx(max(abs(signed[worst]), deviation.MaxDeviation))
+    # Its marked point lies on the tessellation's box, where the largest distance is.
+    box = deviation.Mesh.BoundBox
+    assert box.isInside(deviation.MaxDeviationAt)
     log = RunLog([deviation])
-    deviation.Scale = deviation.ScaleUsed / 4
+    deviation.Scale = abs(signed[worst])
     assert api.recompute(chain_doc).ok
     assert log.ran == [], "a new colour scale only recolours"
-    assert deviation.ScaleUsed == pytest.approx(abs(signed[worst]) / 4)
+    assert deviation.ScaleUsed == pytest.approx(abs(signed[worst]))
+    # The vertex at the largest distance has the full end colour of its side, one at a
+    # quarter of the scale is half-way from white.
+    colours = np.asarray(deviation.VertexColors)[:, :3]
+    end = (0.85, 0.13, 0.13) if signed[worst] > 0 else (0.13, 0.31, 0.85)
+    assert np.allclose(colours[worst], end, atol=0.01)
+    quarter = _deviation_colours(np.array([signed[worst] / 4]), abs(signed[worst]))[0]
+    assert np.allclose(quarter, (np.asarray(end) + 0.95) / 2, atol=0.01)
+    deviation.Scale = abs(signed[worst]) / 4
+    assert api.recompute(chain_doc).ok
     assert np.mean(np.all(np.isclose(np.asarray(deviation.VertexColors)[:, :3], end, atol=0.01),
                           axis=1)) > 0.0
+
+
+def _deviation_colours(signed, scale):
+    from polycube_wb.objects.deviation import deviation_colours
+
+    return deviation_colours(signed, scale)
 
 
 def test_the_largest_deviation_counts_what_the_solid_misses():

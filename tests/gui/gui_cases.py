@@ -48,6 +48,19 @@ def save_screenshot(doc, file_name):
     return path
 
 
+def save_view(doc, file_name, size):
+    """Screenshot of ``doc``'s 3D view at ``size`` (width, height) on FreeCAD's own
+    background, isometric and fitted; returns the path."""
+    os.makedirs(OUTPUT, exist_ok=True)
+    view = FreeCADGui.getDocument(doc.Name).ActiveView
+    view.viewIsometric()
+    view.fitAll()
+    FreeCADGui.updateGui()
+    path = os.path.join(OUTPUT, file_name)
+    view.saveImage(path, size[0], size[1], "Current")
+    return path
+
+
 def image_figures(path, columns=128, rows=96):
     """(width, height, distinct colours, covered fraction, colours) of a screenshot.
 
@@ -325,6 +338,10 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
         shot = save_screenshot(self.doc, "polycube_labels.png")
         self.assert_screenshot_shows_model(shot)
         self.assertGreater(image_figures(shot)[2], 40, "six label colours and shading")
+        from polycube_wb.gui import legend
+
+        self.assertTrue(legend.has_legend(labels[0]), "the labels view shows its colours")
+        self.assertFalse(legend.has_legend(parts), "a hidden view has no legend")
 
     def test_2_base_mesh_fit_and_solid(self):
         FreeCADGui.Selection.clearSelection()
@@ -458,18 +475,42 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
         self.assertEqual(deviation.Status, "ok")
         self.assertEqual(len(deviation.VertexColors), deviation.Mesh.CountPoints)
         self.assertTrue(deviation.ViewObject.Coloring)
-        self.assertFalse(self.one("Solid").ViewObject.Visibility)
+        shown = [obj.Label for obj in self.doc.Objects
+                 if obj.ViewObject.Visibility and obj is not deviation]
+        self.assertEqual(shown, [], "the map is shown alone")
         self.assertTrue(legend.has_legend(deviation))
-        texts = legend.legend_texts(deviation)
-        self.assertIn("mm", texts[-1])
-        self.assertIn("%", texts[-1])
+        title, ticks, largest = legend.legend_texts(deviation)
+        self.assertEqual(title, "distance to target, mm")
+        self.assertIn("outside", ticks[0][1])
+        self.assertIn("inside", ticks[-1][1])
+        self.assertIn(f"{deviation.MaxDeviation:.3g} mm", largest)
+        self.assertGreaterEqual(deviation.ScaleUsed, deviation.MaxDeviation)
         shot = save_screenshot(self.doc, "polycube_deviation.png")
         self.assert_screenshot_shows_model(shot)
         red, blue = _reddish_and_bluish(image_figures(shot)[4])
         self.assertGreater(red + blue, 20, f"no colour map visible ({red} red, {blue} blue)")
+        for name, size in (("polycube_deviation_16x9.png", (1600, 900)),
+                           ("polycube_deviation_21x9.png", (2100, 900))):
+            self.assert_legend_beside_the_model(save_view(self.doc, name, size))
         deviation.ViewObject.Visibility = False
         self.assertFalse(legend.has_legend(deviation), "the legend goes with the map")
         self.one("Solid").ViewObject.Visibility = True
+
+    def assert_legend_beside_the_model(self, path):
+        """On FreeCAD's default background, the left edge of the view holds the legend (a
+        light panel with the red and blue ends of the bar) and the model is to its right."""
+        columns, rows = 160, 60
+        width, height, _, _, colours = image_figures(path, columns, rows)
+        strip = [colours[y * columns + x] for y in range(rows) for x in range(columns // 10)]
+        light = sum(min(rgb >> 16, (rgb >> 8) & 0xFF, rgb & 0xFF) > 215 for rgb in strip)
+        red, blue = _reddish_and_bluish(strip)
+        self.assertGreater(light, len(strip) // 10, f"{path}: no light legend panel at the left")
+        self.assertGreater(red, 0, f"{path}: no red end of the bar at the left")
+        self.assertGreater(blue, 0, f"{path}: no blue end of the bar at the left")
+        middle = [colours[y * columns + x] for y in range(rows)
+                  for x in range(columns // 3, 2 * columns // 3)]
+        red, blue = _reddish_and_bluish(middle)
+        self.assertGreater(red + blue, 10, f"{path}: no coloured model in the middle")
 
     def test_6_edit_the_cage_and_undo(self):
         fit, solid = self.one("Fit"), self.one("Solid")
@@ -479,7 +520,12 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
         top = max(range(len(points)), key=lambda k: points[k].z)
         FreeCADGui.Selection.clearSelection()
         FreeCADGui.Selection.addSelection(self.doc.Name, fit.Name, f"Vertex{top + 1}")
+        shown_before = {obj.Name: obj.ViewObject.Visibility for obj in self.doc.Objects}
         panel = self.open_panel(fit)
+        self.assertTrue(fit.ViewObject.Visibility, "the cage being edited is shown")
+        self.assertTrue(solid.ViewObject.Visibility, "the solid shows the edit's effect")
+        self.assertEqual([obj.Label for obj in self.doc.Objects if obj.ViewObject.Visibility
+                          and obj not in (fit, solid)], [], "nothing else hides the cage")
         panel.use_selection()
         self.assertEqual(panel.vertex_field.text(), str(top))
         panel.move_fields[2].setValue(8.0)
@@ -491,6 +537,8 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
                            "the solid follows the moved vertex")
         self.assert_screenshot_shows_model(save_screenshot(self.doc, "polycube_edited_cage.png"))
         panel.reject()
+        self.assertEqual({obj.Name: obj.ViewObject.Visibility for obj in self.doc.Objects},
+                         shown_before, "closing the panel shows what was shown before")
         self.doc.undo()
         self.assertAlmostEqual(fit.CageVertices[top].z, points[top].z, places=9)
         # the solid is the one before the edit: same volume (its bounding box can differ by
