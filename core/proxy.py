@@ -26,7 +26,7 @@ ATTEMPT_SIZES = (1.0, 1.1, 1.25, 2.0, 4.0)
 """Sizes of the reductions tried, in multiples of ``proxy_triangles``: a reduction whose one
 sliver the repairs cannot remove usually succeeds a little larger; one that loses a handle,
 only with more triangles."""
-TIE_BREAK = 1e-6
+TIE_BREAK = 1e-4
 """Vertices are moved by about this many mean edge lengths (seeded, so the same every run)
 before the reduction: on flat patches (a subdivided mesh has many) whole families of
 collapses cost exactly zero, and the order that breaks those ties leaves slivers the repairs
