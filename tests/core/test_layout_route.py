@@ -155,3 +155,22 @@ def test_a_dev_mesh_with_thin_walls_takes_the_polycube_route_with_no_inverted_fa
     assert not inverted_faces(base, target.vertices, target.faces).any()
     assert count_limit_self_intersections(base, 2) == 0
     assert base.n_faces <= FALLBACK_OVER_BUDGET * 300
+
+
+# a frame whose right bar is a fifth as wide as the others (genus 1)
+THIN_BAR_FRAME = [[[0, 0, 0], [4, 1, 1]], [[0, 2, 0], [4, 3, 1]], [[0, 0, 0], [1, 3, 1]],
+                  [[3.8, 0, 0], [4, 3, 1]]]
+
+
+@pytest.mark.slow
+def test_a_thin_bar_gets_quads_that_face_the_target_before_any_repair():
+    V, F, base, info = auto_base_mesh(THIN_BAR_FRAME, 100)
+    assert info["method"] == "polycube"
+    check_polymesh(base)
+    assert (base.face_sizes == 4).all()
+    assert polymesh_genus(base) == euler_genus(V, F) == 1
+    # the quantized layout itself, not only its repair, has every limit normal facing out
+    assert info["layout_inverted_faces"] == 0 and info["edits"] == 0
+    assert not inverted_faces(base, V, F).any()
+    assert count_limit_self_intersections(base, 2) == 0
+    assert base.n_faces <= FALLBACK_OVER_BUDGET * 100
