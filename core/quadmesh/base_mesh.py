@@ -582,8 +582,8 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
     its quads face away from the target. Where the layout has inverted faces, the shortest
     sides of their charts (:func:`_narrowest_sides`) get one unit more than they had as their
     least length and the layout is quantized again (up to :data:`COARSE_CHART_ROUNDS` times,
-    while it stays within ``give_up_faces``); the layout with the fewest inverted faces is kept
-    (the first one on ties).
+    while it stays within ``give_up_faces`` and each round lowers the inverted faces); the
+    layout with the fewest inverted faces is kept.
 
     Raises
     ------
@@ -605,25 +605,24 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
     layout = _LayoutAttempts(V, F, complex_, part_frames, int(target_faces), max_base_faces,
                              give_up_faces, refinement_rounds, target_genus)
     best = layout.attempt(None)
-    best_inverted = int(inverted_faces(best[0], surface.vertices, surface.faces, surface).sum())
+    flipped_faces = inverted_faces(best[0], surface.vertices, surface.faces, surface)
     least = np.zeros(layout.complex_.n_sides, dtype=np.int64)
-    last, count = best, best_inverted
-    for _ in range(COARSE_CHART_ROUNDS if best_inverted else 0):
-        mesh, polycube, quad_chart = last[0], last[1], last[6]
-        flipped_faces = inverted_faces(mesh, surface.vertices, surface.faces, surface)
+    for _ in range(COARSE_CHART_ROUNDS if flipped_faces.any() else 0):
+        polycube, quad_chart = best[1], best[6]
         narrow = _narrowest_sides(layout.tables, polycube.side_length,
                                   np.unique(quad_chart[flipped_faces]))
         if not len(narrow):
             break
         least[narrow] = np.maximum(least[narrow], polycube.side_length[narrow] + 1)
         try:
-            last = layout.attempt(least)
+            candidate = layout.attempt(least)
         except (LabelingError, InvalidMeshError):
             break  # no finer layout of those charts within the limit
-        count = int(inverted_faces(last[0], surface.vertices, surface.faces, surface).sum())
-        if count < best_inverted:
-            best, best_inverted = last, count
-        if not count:
+        flipped = inverted_faces(candidate[0], surface.vertices, surface.faces, surface)
+        if flipped.sum() >= flipped_faces.sum():
+            break  # longer sides there did not help: the charts are not too narrow
+        best, flipped_faces = candidate, flipped
+        if not flipped.any():
             break
     mesh, polycube, rounds, refinement, folded, layout_complex, _ = best
     flipped = layout.flipped
