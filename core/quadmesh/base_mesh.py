@@ -504,14 +504,14 @@ class _LayoutAttempts:
     def __init__(self, V, F, complex_, part_frames, target_faces, max_base_faces,
                  give_up_faces, refinement_rounds, target_genus):
         self.V, self.F, self.part_frames = V, F, part_frames
-        self.args = (target_faces, max_base_faces)
+        self.budget = (target_faces, max_base_faces)
         self.give_up_faces, self.refinement_rounds = give_up_faces, refinement_rounds
         self.target_genus = target_genus
         self.original = complex_
         self.complex_, self.tables, self.collapsible, self.flipped = None, None, None, None
 
     def _run(self, least):
-        result = _layout_on_target(self.V, self.F, self.complex_, self.tables, *self.args,
+        result = _layout_on_target(self.V, self.F, self.complex_, self.tables, *self.budget,
                                    self.collapsible, self.give_up_faces,
                                    self.refinement_rounds, least)
         mesh, polycube, rounds, refinement, folded, quad_chart = result
@@ -528,7 +528,7 @@ class _LayoutAttempts:
                 raise LabelingError("the finer layout changed the genus")
             return result
         complex_ = self.original
-        collapsible = collapsible_sides(complex_, self.args[0])
+        collapsible = collapsible_sides(complex_, self.budget[0])
         # raised here, it ends the attempt: the retry below keeps every side at least one
         # unit long, a stricter program that no side directions can satisfy either
         self.complex_, self.flipped = make_loops_rectilinear(complex_, collapsible)
@@ -618,11 +618,11 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
             candidate = layout.attempt(least)
         except (LabelingError, InvalidMeshError):
             break  # no finer layout of those charts within the limit
-        flipped = inverted_faces(candidate[0], surface.vertices, surface.faces, surface)
-        if flipped.sum() >= flipped_faces.sum():
+        facing_away = inverted_faces(candidate[0], surface.vertices, surface.faces, surface)
+        if facing_away.sum() >= flipped_faces.sum():
             break  # longer sides there did not help: the charts are not too narrow
-        best, flipped_faces = candidate, flipped
-        if not flipped.any():
+        best, flipped_faces = candidate, facing_away
+        if not facing_away.any():
             break
     mesh, polycube, rounds, refinement, folded, layout_complex, _ = best
     flipped = layout.flipped
