@@ -10,7 +10,11 @@
 5. :mod:`embed`: quads placed on the target (corners, sides by arc length, interiors by a
    Tutte map of each chart region onto its polygon); :mod:`relax` evens them out, each point
    kept on its own chart or side.
-6. Faces whose limit surface faces away from the target are repaired as on the paired
+6. Where the limit surface of some quads faces away from the target (a chart one quad across
+   a thin wall, whose limit is pulled past the wall's middle), the shortest sides of their
+   charts get one unit more as their least length and the layout is quantized again
+   (:func:`_polycube_base_mesh`).
+7. Faces whose limit surface still faces away from the target are repaired as on the paired
    decimation's cages (:mod:`limit_interpolation` moves their vertices off the target until
    the limit reaches it; :mod:`local_repair` moves a corner or splits a quad), so a layout is
    not given up for a few folded quads that a local edit unfolds. The self-crossings of the
@@ -66,6 +70,9 @@ FALLBACK_OVER_BUDGET = 1.5
 (which meets the budget, but whose cages have far more extraordinary vertices); larger ones
 give way to it."""
 
+COARSE_CHART_ROUNDS = 3
+"""Quantizations tried with longer shortest sides on the charts of inverted faces
+(:func:`_polycube_base_mesh`)."""
 REFINEMENT_ROUNDS = 24
 """Rounds of quantization, each cutting the overlapping charts at more reflex corners."""
 FALLBACK_REFINEMENT_ROUNDS = 8
@@ -91,8 +98,9 @@ def refined_target(target):
 
 
 def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, collapsible,
-                      give_up_faces, refinement_rounds):
-    """Quantize, lay out and embed; returns ``(mesh, polycube, rounds, refinement, folded)``.
+                      give_up_faces, refinement_rounds, least=None):
+    """Quantize, lay out and embed; returns ``(mesh, polycube, rounds, refinement, folded,
+    quad_chart)`` (``quad_chart``: (f,) int64 chart of every face of ``mesh``).
 
     Charts whose integer polygon overlaps itself are cut at the reflex corners next to the
     overlap (:mod:`core.quadmesh.overlap_cuts`; only those charts, so the others keep their
@@ -125,9 +133,10 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
                 # the face budget is searched once without refinements and once at the end;
                 # refinement rounds in between keep that scale (one program each)
                 polycube, rounds = quantize_for_budget(complex_, tables, refinement,
-                                                       target_faces, collapsible, give_up_faces)
+                                                       target_faces, collapsible, give_up_faces,
+                                                       least)
             else:
-                polycube = quantize(complex_, tables, refinement, scale, collapsible)
+                polycube = quantize(complex_, tables, refinement, scale, collapsible, least)
         except MilpTimeLimitError:
             raise  # not infeasible: another refinement would only make it load-dependent
         except LabelingError:
@@ -198,7 +207,7 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
         mesh = PolyMesh(relaxed, mesh.face_vertices, mesh.face_offsets)
     except InvalidMeshError:
         pass  # smoothing degenerated a face somewhere: keep the Tutte placement
-    return mesh, polycube, rounds, refinement, folded
+    return mesh, polycube, rounds, refinement, folded, lattice.quad_chart
 
 
 def _cut_overlapping_chart(complex_, tables, polycube, charts, refine, cuts, unrefinable):
@@ -334,7 +343,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     if method == "polycube":
         mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames,
                                          int(target_faces), max_base_faces, face_interface_axis,
-                                         max_base_faces)
+                                         max_base_faces, surface=surface)
         mesh, info = _repaired_layout(mesh, info, surface)
     elif method == "auto":
         give_up = int(min(max_base_faces, FALLBACK_OVER_BUDGET * target_faces))
@@ -342,7 +351,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
             mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame,
                                              part_frames, int(target_faces), max_base_faces,
                                              face_interface_axis, give_up,
-                                             FALLBACK_REFINEMENT_ROUNDS)
+                                             FALLBACK_REFINEMENT_ROUNDS, surface=surface)
         except (LabelingError, InvalidMeshError) as exc:
             reason = f"the polycube layout failed: {exc}"
             polycube_candidate = {"built": False, "faces": getattr(exc, "faces", None),
@@ -482,15 +491,99 @@ def _paired_decimation_base_mesh(target_v, target_f, surface, target_faces, max_
     return mesh, info
 
 
+class _LayoutAttempts:
+    """Quantized layouts of one labeling, with and without collapsible slivers.
+
+    The first attempt lets sides measured shorter than half a unit collapse; where that fails
+    (or changes the genus), the sides keep at least one unit and the side directions are
+    chosen again. The side directions and loop tables of the first successful attempt are
+    kept (``complex_``, ``tables``, ``collapsible``), so later attempts with larger least
+    lengths quantize the same complex.
+    """
+
+    def __init__(self, V, F, complex_, part_frames, target_faces, max_base_faces,
+                 give_up_faces, refinement_rounds, target_genus):
+        self.V, self.F, self.part_frames = V, F, part_frames
+        self.budget = (target_faces, max_base_faces)
+        self.give_up_faces, self.refinement_rounds = give_up_faces, refinement_rounds
+        self.target_genus = target_genus
+        self.original = complex_
+        self.complex_, self.tables, self.collapsible, self.flipped = None, None, None, None
+
+    def _run(self, least):
+        result = _layout_on_target(self.V, self.F, self.complex_, self.tables, *self.budget,
+                                   self.collapsible, self.give_up_faces,
+                                   self.refinement_rounds, least)
+        mesh, polycube, rounds, refinement, folded, quad_chart = result
+        return mesh, polycube, rounds, refinement, folded, self.complex_, quad_chart
+
+    def attempt(self, least):
+        """``(mesh, polycube, rounds, refinement, folded, complex_, quad_chart)``.
+
+        Raises as :func:`_polycube_base_mesh`.
+        """
+        if self.complex_ is not None:
+            result = self._run(least)
+            if polymesh_genus(result[0]) != self.target_genus:
+                raise LabelingError("the finer layout changed the genus")
+            return result
+        complex_ = self.original
+        collapsible = collapsible_sides(complex_, self.budget[0])
+        # raised here, it ends the attempt: the retry below keeps every side at least one
+        # unit long, a stricter program that no side directions can satisfy either
+        self.complex_, self.flipped = make_loops_rectilinear(complex_, collapsible)
+        self.collapsible = collapsible
+        try:
+            self.tables = loop_tables(self.complex_, self.V, self.part_frames)
+            result = self._run(least)
+            if polymesh_genus(result[0]) != self.target_genus:
+                raise LabelingError("collapsing sliver charts changed the genus")
+            return result
+        except (LayoutTooLargeError, MilpTimeLimitError):
+            raise  # keeping the slivers would only make it larger (or slower)
+        except (LabelingError, InvalidMeshError):
+            # slivers that cannot vanish cleanly keep at least one unit
+            self.complex_, self.flipped = make_loops_rectilinear(
+                complex_, np.zeros(complex_.n_sides, dtype=bool),
+                feasible_collapsible=collapsible)
+            self.collapsible = np.zeros(complex_.n_sides, dtype=bool)
+            self.tables = loop_tables(self.complex_, self.V, self.part_frames)
+            try:
+                return self._run(least)
+            except InvalidMeshError as exc:
+                raise LabelingError(f"the quantized layout does not embed as a closed "
+                                    f"2-manifold: {exc}; try another labeling or --parts") from exc
+
+
+def _narrowest_sides(tables, side_length, charts):
+    """(k,) int64 the shortest sides (at least one unit) of each of ``charts``: across a
+    chart's narrowest part, where one more unit gives its quads room to follow the target."""
+    narrow = []
+    for chart in charts.tolist():
+        sides = np.unique(tables.ref_side[tables.ref_chart == chart])
+        sides = sides[side_length[sides] > 0]
+        if len(sides):
+            narrow.append(sides[side_length[sides] == side_length[sides].min()])
+    return np.unique(np.concatenate(narrow)) if narrow else np.zeros(0, dtype=np.int64)
+
+
 def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, target_faces,
                         max_base_faces, face_interface_axis, give_up_faces,
-                        refinement_rounds=REFINEMENT_ROUNDS):
+                        refinement_rounds=REFINEMENT_ROUNDS, surface=None):
     """Closed all-quad base mesh on the target from a valid polycube labeling.
 
     Parameters as :func:`build_base_mesh`; ``give_up_faces``: the budget search stops and
     raises once the layout needs more quads than this; ``refinement_rounds``: most
-    quantizations that split overlapping charts into rectangles. Returns ``(mesh, info)`` as there, without
+    quantizations that split overlapping charts into rectangles; ``surface``: TargetSurface of
+    the target (built here when None). Returns ``(mesh, info)`` as there, without
     ``inverted_faces`` and ``seconds``.
+
+    A chart one quad across a thin wall has a limit surface pulled past the wall's middle, so
+    its quads face away from the target. Where the layout has inverted faces, the shortest
+    sides of their charts (:func:`_narrowest_sides`) get one unit more than they had as their
+    least length and the layout is quantized again (up to :data:`COARSE_CHART_ROUNDS` times,
+    while it stays within ``give_up_faces`` and each round lowers the inverted faces); the
+    layout with the fewest inverted faces is kept.
 
     Raises
     ------
@@ -499,6 +592,9 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
     embed as a closed 2-manifold.
     """
     V, F, parent = refined_target(target)
+    if surface is None:
+        surface = TargetSurface(np.asarray(target.vertices, dtype=np.float64),
+                                np.asarray(target.faces, dtype=np.int64))
     part_frames = np.asarray(part_frames, dtype=np.float64).reshape(-1, 3, 3)
     interface_axis = (None if face_interface_axis is None
                       else np.asarray(face_interface_axis, dtype=np.float64)[parent])
@@ -506,32 +602,30 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
                                    np.asarray(face_label)[parent], np.asarray(face_frame)[parent],
                                    interface_axis)
     target_genus = genus_of(len(V), F, int(connected_face_components(F).max()) + 1)
-    collapsible = collapsible_sides(complex_, int(target_faces))
-    # raised here, it ends the attempt: the retry below keeps every side at least one unit
-    # long, a stricter program that no side directions can satisfy either
-    layout_complex, flipped = make_loops_rectilinear(complex_, collapsible)
-    try:
-        tables = loop_tables(layout_complex, V, part_frames)
-        mesh, polycube, rounds, refinement, folded = _layout_on_target(
-            V, F, layout_complex, tables, int(target_faces), max_base_faces, collapsible,
-            give_up_faces, refinement_rounds)
-        if polymesh_genus(mesh) != target_genus:
-            raise LabelingError("collapsing sliver charts changed the genus")
-    except (LayoutTooLargeError, MilpTimeLimitError):
-        raise  # keeping the slivers would only make it larger (or slower)
-    except (LabelingError, InvalidMeshError):
-        # slivers that cannot vanish cleanly keep at least one unit
-        layout_complex, flipped = make_loops_rectilinear(
-            complex_, np.zeros(complex_.n_sides, dtype=bool), feasible_collapsible=collapsible)
-        collapsible = np.zeros(complex_.n_sides, dtype=bool)
-        tables = loop_tables(layout_complex, V, part_frames)
+    layout = _LayoutAttempts(V, F, complex_, part_frames, int(target_faces), max_base_faces,
+                             give_up_faces, refinement_rounds, target_genus)
+    best = layout.attempt(None)
+    flipped_faces = inverted_faces(best[0], surface.vertices, surface.faces, surface)
+    least = np.zeros(layout.complex_.n_sides, dtype=np.int64)
+    for _ in range(COARSE_CHART_ROUNDS if flipped_faces.any() else 0):
+        polycube, quad_chart = best[1], best[6]
+        narrow = _narrowest_sides(layout.tables, polycube.side_length,
+                                  np.unique(quad_chart[flipped_faces]))
+        if not len(narrow):
+            break
+        least[narrow] = np.maximum(least[narrow], polycube.side_length[narrow] + 1)
         try:
-            mesh, polycube, rounds, refinement, folded = _layout_on_target(
-                V, F, layout_complex, tables, int(target_faces), max_base_faces, collapsible,
-                give_up_faces, refinement_rounds)
-        except InvalidMeshError as exc:
-            raise LabelingError(f"the quantized layout does not embed as a closed 2-manifold: "
-                                f"{exc}; try another labeling or --parts") from exc
+            candidate = layout.attempt(least)
+        except (LabelingError, InvalidMeshError):
+            break  # no finer layout of those charts within the limit
+        facing_away = inverted_faces(candidate[0], surface.vertices, surface.faces, surface)
+        if facing_away.sum() >= flipped_faces.sum():
+            break  # longer sides there did not help: the charts are not too narrow
+        best, flipped_faces = candidate, facing_away
+        if not facing_away.any():
+            break
+    mesh, polycube, rounds, refinement, folded, layout_complex, _ = best
+    flipped = layout.flipped
     complex_ = layout_complex
     within = abs(polycube.faces - target_faces) <= BUDGET_TOLERANCE * target_faces
     minimum_reason = None

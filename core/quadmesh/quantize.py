@@ -454,7 +454,7 @@ def _open_hole_rows(complex_, tables, n_columns):
     return LinearConstraint(matrix, 1.0, np.inf)
 
 
-def quantize(complex_, tables, refinement, scale, collapsible=None):
+def quantize(complex_, tables, refinement, scale, collapsible=None, least=None):
     """Integer side lengths closest to ``scale`` times the measured ones, every rectangle closed.
 
     Parameters
@@ -462,6 +462,8 @@ def quantize(complex_, tables, refinement, scale, collapsible=None):
     complex_ : ChartComplex; tables : LoopTables; refinement : Refinement.
     scale : float > 0, units per target length.
     collapsible : (s,) bool sides that may have length zero (slivers collapse), or None.
+    least : (s,) int64 least length of every side (units), or None; where it exceeds the
+        bound of ``collapsible`` (zero or one unit) it replaces it.
 
     Returns
     -------
@@ -489,6 +491,8 @@ def quantize(complex_, tables, refinement, scale, collapsible=None):
                            np.ones(n_sides)])
     integrality = np.concatenate([np.ones(n), np.zeros(n_sides)])
     side_lower = np.ones(n_sides) if collapsible is None else np.where(collapsible, 0.0, 1.0)
+    if least is not None:
+        side_lower = np.maximum(side_lower, least)
     lower = np.concatenate([side_lower, np.where(refinement.piece[n_sides:], 0.0, 1.0),
                             np.zeros(n_sides)])
     result = solve_milp("the side-length quantization", cost, integrality, Bounds(lower, np.inf),
@@ -576,7 +580,7 @@ def collapsible_sides(complex_, target_faces):
 
 
 def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=None,
-                        give_up_faces=None):
+                        give_up_faces=None, least=None):
     """The quantization whose face count is closest to ``target_faces``.
 
     Starts from the scale that gives the target area in unit squares; the face count grows
@@ -591,13 +595,13 @@ def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=
     -------
     best : IntegerPolycube (closest to the budget; the smallest one when none meets it).
     rounds : list of dicts with the scale and faces of every round (for the report).
-    ``collapsible`` is passed on to :func:`quantize`.
+    ``collapsible`` and ``least`` are passed on to :func:`quantize`.
     """
     scale = first_scale(complex_, target_faces)
     rounds, best = [], None
     low, high = None, None
     for _ in range(SCALE_ROUNDS):
-        result = quantize(complex_, tables, refinement, scale, collapsible)
+        result = quantize(complex_, tables, refinement, scale, collapsible, least)
         rounds.append({"scale": scale, "faces": result.faces})
         if best is None or abs(result.faces - target_faces) < abs(best.faces - target_faces):
             best = result

@@ -115,3 +115,62 @@ def test_a_layout_whose_limit_surface_crosses_itself_gives_way_to_a_clean_cage(m
         (c["limit_crossings"] > 0, c["inverted_faces"]) for c in (polycube, decimation))
     if kept == 0:
         assert info["method"] == "paired decimation" and "self-crossing" in info["fallback_reason"]
+
+
+def test_least_lengths_lengthen_the_sides_and_the_polygons_still_close():
+    from core.quadmesh.lattice import build_lattice
+    from core.quadmesh.quantize import quantize, rectangular_refinement
+    from tests.core.test_quadmesh import layout_problem
+
+    complex_, tables = layout_problem(FRAME)
+    # every chart split into rectangles: any lengths that close them draw simple polygons
+    refinement = rectangular_refinement(complex_, tables, range(complex_.n_charts))
+    coarse = quantize(complex_, tables, refinement, 1e-3)
+    least = np.zeros(complex_.n_sides, dtype=np.int64)
+    least[::3] = 3
+    finer = quantize(complex_, tables, refinement, 1e-3, least=least)
+    assert (finer.side_length >= np.maximum(least, 1)).all()
+    assert finer.faces > coarse.faces
+    lattice = build_lattice(complex_, tables, finer)  # every chart still a closed polygon
+    assert len(lattice.quads) == finer.faces
+
+
+@pytest.mark.slow
+def test_a_dev_mesh_with_thin_walls_takes_the_polycube_route_with_no_inverted_face():
+    import os
+
+    from core.pipeline import reconstruct
+    from tests.core.dev_meshes import MESHES
+
+    path = os.path.join(MESHES, "idler_riser.stl")
+    if not os.path.exists(path):
+        pytest.skip("dev mesh idler_riser.stl not available")
+    result = reconstruct(path, stop_after="basemesh")
+    info = result.report["base_mesh"]
+    base, target = result.state.basemesh.cage, result.state.intake.target
+    assert info["method"] == "polycube"
+    check_polymesh(base)
+    assert (base.face_sizes == 4).all()
+    assert polymesh_genus(base) == result.report["input"]["genus"] >= 1
+    assert not inverted_faces(base, target.vertices, target.faces).any()
+    assert count_limit_self_intersections(base, 2) == 0
+    assert base.n_faces <= FALLBACK_OVER_BUDGET * 300
+
+
+# a frame whose right bar is a fifth as wide as the others (genus 1)
+THIN_BAR_FRAME = [[[0, 0, 0], [4, 1, 1]], [[0, 2, 0], [4, 3, 1]], [[0, 0, 0], [1, 3, 1]],
+                  [[3.8, 0, 0], [4, 3, 1]]]
+
+
+@pytest.mark.slow
+def test_a_thin_bar_gets_quads_that_face_the_target_before_any_repair():
+    V, F, base, info = auto_base_mesh(THIN_BAR_FRAME, 100)
+    assert info["method"] == "polycube"
+    check_polymesh(base)
+    assert (base.face_sizes == 4).all()
+    assert polymesh_genus(base) == euler_genus(V, F) == 1
+    # the quantized layout itself, not only its repair, has every limit normal facing out
+    assert info["layout_inverted_faces"] == 0 and info["edits"] == 0
+    assert not inverted_faces(base, V, F).any()
+    assert count_limit_self_intersections(base, 2) == 0
+    assert base.n_faces <= FALLBACK_OVER_BUDGET * 100
