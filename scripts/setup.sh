@@ -11,6 +11,7 @@ SYSTEM_PYTHON=/usr/bin/python3
 missing=()
 command -v freecadcmd >/dev/null 2>&1 || missing+=(freecad-python3)
 command -v xvfb-run >/dev/null 2>&1 || missing+=(xvfb xauth)
+command -v xdotool >/dev/null 2>&1 || missing+=(xdotool)  # real key events in the GUI tests
 command -v chromium >/dev/null 2>&1 || missing+=(chromium)  # headless test of the batch summary page
 $SYSTEM_PYTHON -c "import ensurepip, venv" >/dev/null 2>&1 || missing+=(python3-venv)
 $SYSTEM_PYTHON -c "import numpy, scipy" >/dev/null 2>&1 || missing+=(python3-numpy python3-scipy)
