@@ -333,7 +333,7 @@ def test_automatic_parts_are_labelled_near_their_nearest_directions(name):
     state = PipelineState(source=MeshSource(path))
     state = run_stages(state, ["intake", "parts", "frames", "labeling"],
                        ReconstructionParams(parts="auto"))[0]
-    V, F = state.intake.target.vertices, state.intake.target.faces
+    V, F = state.intake.surface.vertices, state.intake.surface.faces
     part = state.parts.face_part
     assert part.max() >= 1 and state.labeling.validity.is_valid
     area, normal, _ = face_geometry(V, F)

@@ -442,7 +442,7 @@ def test_the_same_labelled_dev_mesh_gives_the_same_base_mesh_twice():
         pytest.skip("dev mesh polycube_bone.obj not available")
     state = reconstruct(path, stop_after="labeling").state
     field = state.frames.frame_field
-    builds = [build_base_mesh(state.intake.target, state.parts.face_part,
+    builds = [build_base_mesh(state.intake.surface, state.parts.face_part,
                               state.labeling.face_label, field.face_frame, field.part_frames,
                               300, method="polycube") for _ in range(2)]
     (first, info), (second, again) = builds
@@ -473,6 +473,6 @@ def test_side_directions_that_cannot_be_found_end_the_attempt_after_one_program(
 
     monkeypatch.setattr(base_mesh, "make_loops_rectilinear", counted)
     with pytest.raises(LabelingError, match="rectilinear polygon"):
-        build_base_mesh(state.intake.target, state.parts.face_part, state.labeling.face_label,
+        build_base_mesh(state.intake.surface, state.parts.face_part, state.labeling.face_label,
                         field.face_frame, field.part_frames, 300, method="polycube")
     assert len(programs) == 1 and programs[0].any()
