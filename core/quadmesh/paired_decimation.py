@@ -28,7 +28,13 @@ genus and orientation:
    only). Where it still crosses itself or faces away (thin struts with too few faces around
    them), larger budgets within the allowed range are tried; where they all cross themselves,
    budgets beyond it (a solid needs a surface that does not), until more faces stop helping.
-4. Where every budget's limit surface crosses itself (machined parts whose sharp steps the
+4. Where every budget's limit surface crosses itself, the ladder runs again on fold-free
+   decimations (:mod:`core.quadmesh.fold_free_decimation`: half-edge collapses that never
+   make a triangle facing across the target's normals at its corners, so no triangle spans
+   a thin strut or plate, the usual cause on topology-optimisation results of high genus,
+   raw marching-cubes staircases among them), and its cage is kept where it crosses itself
+   less.
+5. Where every budget's limit surface still crosses itself (machined parts whose sharp steps the
    smooth limit rounds over a face's length), the ladder runs again on feature-preserving
    decimations (:mod:`core.quadmesh.feature_decimation`), evened out inside their planar
    regions without touching a feature edge
@@ -56,6 +62,7 @@ from core.quadmesh.crossing_count import LimitCrossingCount
 from core.quadmesh.decimation import Decimation
 from core.quadmesh.even_triangulation import even_creased_triangulation, even_triangulation
 from core.quadmesh.feature_decimation import FeatureDecimation
+from core.quadmesh.fold_free_decimation import FoldFreeDecimation
 from core.quadmesh.limit_interpolation import unshrink_inverted
 from core.quadmesh.local_repair import repair_inverted
 from core.quadmesh.orientation import inverted_faces
@@ -223,7 +230,7 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     surface does not cross itself is kept: a solid needs it, the face budget does not. They
     stop after :data:`OVER_BUDGET_MISSES` in a row that are not less flawed than all before.
     When the cage kept still crosses itself and the target has feature lines, the whole
-    ladder runs again with crease tags (module docstring, step 4), and its cage is kept if it
+    ladder runs again with crease tags (module docstring, step 5), and its cage is kept if it
     crosses itself less.
 
     Parameters
@@ -256,6 +263,11 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     rounds = []
     best = _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces,
                           rounds)
+    if best[2] and over_budget_faces:
+        fold_free = _budget_ladder(FoldFreeDecimation(vertices, faces), surface, target_faces,
+                                   max_faces, over_budget_faces, rounds)
+        if fold_free[2] < best[2]:
+            best = fold_free
     if best[2] and over_budget_faces:
         feature_decimation = FeatureDecimation(vertices, faces, surface)
         if len(feature_decimation.target_features):
@@ -395,7 +407,12 @@ def _paired_mesh(decimation, count, surface, even=True):
     result (a Decimation) evened out first; a FeatureDecimation's feature edges become crease
     edges and are never paired across, its triangles evened out first unless ``even`` is
     False."""
-    if isinstance(decimation, FeatureDecimation) and not even:
+    if isinstance(decimation, FoldFreeDecimation):
+        # its triangles already agree with the target's normals: evening them out would
+        # move vertices off the target's vertices and can fold them again
+        decimated_v, decimated_f = decimation.triangles(count)
+        creases = None
+    elif isinstance(decimation, FeatureDecimation) and not even:
         decimated_v, decimated_f, creases = decimation.triangles(count)
     elif isinstance(decimation, FeatureDecimation):
         decimated_v, decimated_f, creases = even_creased_triangulation(decimation, count,
