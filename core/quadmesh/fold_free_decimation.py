@@ -51,6 +51,10 @@ QUALITY_KEPT = 0.9
 MAX_FACES = 24
 """Most triangles around one vertex: a collapse that gives its kept vertex more is refused
 (valences above a dozen give the paired cage pinched limit surfaces)."""
+TIGHTEN_STEP = 0.2
+"""Raise of the smallest normal cosine per :meth:`FoldFreeDecimation.tightened`."""
+MOST_NORMAL_COSINE = 0.8
+"""The smallest normal cosine is raised to at most this (about 37 degrees)."""
 NORMAL_SMOOTHING = 2
 """Rounds of averaging of the target's vertex normals with those of their neighbours: the
 normals of an unsmoothed marching-cubes surface point along the voxel axes; two rounds give
@@ -79,7 +83,39 @@ class FoldFreeDecimation:
         self._normals = smoothed_vertex_normals(self._vertices, self._faces, NORMAL_SMOOTHING)
         self._quadrics = plane_quadrics(self._vertices, self._faces)
         self._edges = edge_faces(self._faces)[0]
+        self.min_normal_cosine = np.full(len(self._vertices), MIN_NORMAL_COSINE)
         self._results = {}
+        self._results_detail = {}
+
+    def tightened(self, count, points):
+        """A decimation that keeps more triangles around ``points``.
+
+        The vertices of the decimation to ``count`` triangles closest to ``points`` ((k, 3)
+        float64, e.g. the corners of cage faces whose limit surface crosses itself), and
+        their neighbours there, are found; every target vertex collapsed into one of them
+        gets its smallest normal cosine raised by :data:`TIGHTEN_STEP` (at most
+        :data:`MOST_NORMAL_COSINE`), so the triangles there must agree more closely with
+        the target's normals and fewer collapses are allowed there. Returns a new
+        FoldFreeDecimation (None when no vertex there can be tightened further).
+        """
+        from scipy.spatial import cKDTree
+
+        vertices, faces = self.triangles(count)
+        used, cluster = self._results_detail[len(faces)]
+        hit = np.unique(cKDTree(vertices).query(np.asarray(points, dtype=np.float64))[1])
+        ring = np.zeros(len(vertices), dtype=bool)
+        ring[hit] = True
+        ring[faces[ring[faces].any(axis=1)].reshape(-1)] = True
+        region = ring[cluster]
+        raised = np.minimum(self.min_normal_cosine + TIGHTEN_STEP * region, MOST_NORMAL_COSINE)
+        if np.array_equal(raised, self.min_normal_cosine):
+            return None
+        other = object.__new__(FoldFreeDecimation)
+        other.__dict__.update(self.__dict__)
+        other.min_normal_cosine = raised
+        other._results = {}
+        other._results_detail = {}
+        return other
 
     def triangles(self, count):
         """The decimation to at most ``count`` triangles, or more where every collapse left is
@@ -101,10 +137,10 @@ class FoldFreeDecimation:
             # short (every collapse left refused) ends at the same refusals
             return floor
         if count not in self._results:
-            faces, alive = keeps_interrupts(_collapse)(self._vertices, self._faces.copy(), self._normals,
-                                     self._quadrics.copy(), self._edges, count,
-                                     MIN_NORMAL_COSINE, MIN_FLIP_COSINE, MIN_QUALITY,
-                                     QUALITY_KEPT, MAX_FACES)
+            faces, alive, parent = keeps_interrupts(_collapse)(
+                self._vertices, self._faces.copy(), self._normals, self._quadrics.copy(),
+                self._edges, count, self.min_normal_cosine, MIN_FLIP_COSINE, MIN_QUALITY,
+                QUALITY_KEPT, MAX_FACES)
             faces = faces[alive]
             used = np.unique(faces)
             renumber = np.full(len(self._vertices), -1, dtype=np.int64)
@@ -113,7 +149,13 @@ class FoldFreeDecimation:
             if genus_of(len(vertices), faces, self._components) != self._genus:
                 raise InvalidMeshError("the decimated target changed its genus; the input "
                                        "surface is not a clean 2-manifold")
+            while True:  # every target vertex's last representative, a vertex left
+                following = parent[parent]
+                if np.array_equal(following, parent):
+                    break
+                parent = following
             self._results[count] = (vertices, faces)
+            self._results_detail[len(faces)] = (used, renumber[parent])
         return self._results[count]
 
 
@@ -160,11 +202,15 @@ def _unit(x):
 
 
 @numba.njit(cache=True, nogil=True)
-def _quadric_error(q, p):
-    x, y, z = p[0], p[1], p[2]
-    return (q[0] * x * x + 2.0 * q[1] * x * y + 2.0 * q[2] * x * z + 2.0 * q[3] * x
-            + q[4] * y * y + 2.0 * q[5] * y * z + 2.0 * q[6] * y + q[7] * z * z
-            + 2.0 * q[8] * z + q[9])
+def _quadric_error(Q, a, b, V, p):
+    """Error of vertex ``p``'s position in the summed quadric of vertices ``a`` and ``b``."""
+    x, y, z = V[p, 0], V[p, 1], V[p, 2]
+    terms = (x * x, 2.0 * x * y, 2.0 * x * z, 2.0 * x, y * y, 2.0 * y * z, 2.0 * y, z * z,
+             2.0 * z, 1.0)
+    error = 0.0
+    for i in range(10):
+        error += (Q[a, i] + Q[b, i]) * terms[i]
+    return error
 
 
 @numba.njit(cache=True, nogil=True)
@@ -189,20 +235,20 @@ def _ring(v, F, vf, nvf, out):
 
 
 @numba.njit(cache=True, nogil=True)
-def _normal_quality(a, b, c):
-    """Unit normal (zeros when degenerate) and quality of triangle ``a b c``."""
-    u = b - a
-    w = c - a
-    n = np.empty(3)
-    n[0] = u[1] * w[2] - u[2] * w[1]
-    n[1] = u[2] * w[0] - u[0] * w[2]
-    n[2] = u[0] * w[1] - u[1] * w[0]
-    twice_area = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
-    squares = (u * u).sum() + (w * w).sum() + ((c - b) * (c - b)).sum()
+def _normal_quality(V, a, b, c):
+    """Unit normal ``(x, y, z)`` (zeros when degenerate) and quality of the triangle of
+    vertices ``a b c``."""
+    ux, uy, uz = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
+    wx, wy, wz = V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2]
+    vx, vy, vz = V[c, 0] - V[b, 0], V[c, 1] - V[b, 1], V[c, 2] - V[b, 2]
+    nx, ny, nz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+    twice_area = np.sqrt(nx * nx + ny * ny + nz * nz)
+    squares = (ux * ux + uy * uy + uz * uz + wx * wx + wy * wy + wz * wz
+               + vx * vx + vy * vy + vz * vz)
     quality = 2.0 * np.sqrt(3.0) * twice_area / max(squares, 1e-300)
     if twice_area > 0.0:
-        n /= twice_area
-    return n, quality
+        nx, ny, nz = nx / twice_area, ny / twice_area, nz / twice_area
+    return nx, ny, nz, quality
 
 
 @numba.njit(cache=True, nogil=True)
@@ -231,17 +277,21 @@ def _allowed(u, v, V, F, vf, nvf, N, ring_u, ring_v, min_normal, min_flip, min_q
         f = vf[u, i]
         if F[f, 0] == v or F[f, 1] == v or F[f, 2] == v:
             continue
-        old_n, old_q = _normal_quality(V[F[f, 0]], V[F[f, 1]], V[F[f, 2]])
-        corners = np.empty(3, dtype=np.int64)
-        for k in range(3):
-            corners[k] = v if F[f, k] == u else F[f, k]
-        new_n, new_q = _normal_quality(V[corners[0]], V[corners[1]], V[corners[2]])
-        if new_q <= 0.0 or (new_n * old_n).sum() < min_flip:
+        a, b, c = F[f, 0], F[f, 1], F[f, 2]
+        ox, oy, oz, old_q = _normal_quality(V, a, b, c)
+        if a == u:
+            a = v
+        elif b == u:
+            b = v
+        else:
+            c = v
+        nx, ny, nz, new_q = _normal_quality(V, a, b, c)
+        if new_q <= 0.0 or nx * ox + ny * oy + nz * oz < min_flip:
             return False
         if new_q < min_quality and new_q < quality_kept * old_q:
             return False
-        for k in range(3):
-            if (new_n * N[corners[k]]).sum() < min_normal:
+        for w in (a, b, c):
+            if nx * N[w, 0] + ny * N[w, 1] + nz * N[w, 2] < min_normal[w]:
                 return False
     return True
 
@@ -252,10 +302,9 @@ def _push_edges(w, F, vf, nvf, Q, V, stamp, heap, counter, ring):
     nw = _ring(w, F, vf, nvf, ring)
     for j in range(nw):
         x = ring[j]
-        q = Q[w] + Q[x]
-        heapq.heappush(heap, (_quadric_error(q, V[x]), counter, w, x, stamp[w], stamp[x]))
+        heapq.heappush(heap, (_quadric_error(Q, w, x, V, x), counter, w, x, stamp[w], stamp[x]))
         counter += 1
-        heapq.heappush(heap, (_quadric_error(q, V[w]), counter, x, w, stamp[x], stamp[w]))
+        heapq.heappush(heap, (_quadric_error(Q, w, x, V, w), counter, x, w, stamp[x], stamp[w]))
         counter += 1
     return counter
 
@@ -265,7 +314,8 @@ def _collapse(V, F, N, Q, edges, count, min_normal, min_flip, min_quality, quali
               max_faces):
     """Half-edge collapses in quadric-error order down to ``count`` triangles.
 
-    Returns ``(F, alive)``: the faces with collapsed vertices renamed, and which are left.
+    Returns ``(F, alive, parent)``: the faces with collapsed vertices renamed, which are
+    left, and the vertex each vertex was collapsed into (itself if it is left).
     """
     n, m = len(V), len(F)
     cap = 4 * max_faces
@@ -278,8 +328,9 @@ def _collapse(V, F, N, Q, edges, count, min_normal, min_flip, min_quality, quali
                 vf[v, nvf[v]] = f
             nvf[v] += 1
     alive = np.ones(m, dtype=np.bool_)
+    parent = np.arange(n)
     if nvf.max() > cap:
-        return F, alive  # a vertex of the target with too many triangles: left as it is
+        return F, alive, parent  # a vertex with too many triangles: left as it is
     stamp = np.zeros(n, dtype=np.int64)
     refused = np.zeros(n, dtype=np.bool_)
     ring_u = np.empty(cap, dtype=np.int64)
@@ -290,9 +341,8 @@ def _collapse(V, F, N, Q, edges, count, min_normal, min_flip, min_quality, quali
     counter = 0
     for e in range(len(edges)):
         a, b = edges[e, 0], edges[e, 1]
-        q = Q[a] + Q[b]
-        heap.append((_quadric_error(q, V[b]), counter, a, b, 0, 0))
-        heap.append((_quadric_error(q, V[a]), counter + 1, b, a, 0, 0))
+        heap.append((_quadric_error(Q, a, b, V, b), counter, a, b, 0, 0))
+        heap.append((_quadric_error(Q, a, b, V, a), counter + 1, b, a, 0, 0))
         counter += 2
     heapq.heapify(heap)
     faces_left = m
@@ -330,6 +380,7 @@ def _collapse(V, F, N, Q, edges, count, min_normal, min_flip, min_quality, quali
             vf[v, nvf[v]] = f
             nvf[v] += 1
         nvf[u] = 0
+        parent[u] = v
         Q[v] += Q[u]
         stamp[u] = -1
         stamp[v] += 1
@@ -340,4 +391,4 @@ def _collapse(V, F, N, Q, edges, count, min_normal, min_flip, min_quality, quali
             if refused[w]:
                 refused[w] = False
                 counter = _push_edges(w, F, vf, nvf, Q, V, stamp, heap, counter, ring)
-    return F, alive
+    return F, alive, parent

@@ -58,7 +58,7 @@ import numpy as np
 from core.errors import InvalidMeshError
 from core.mesh_topology import edge_faces
 from core.quadmesh.creases import closed_network
-from core.quadmesh.crossing_count import LimitCrossingCount
+from core.quadmesh.crossing_count import LEVELS as CROSSING_LEVELS, LimitCrossingCount
 from core.quadmesh.decimation import Decimation
 from core.quadmesh.even_triangulation import even_creased_triangulation, even_triangulation
 from core.quadmesh.feature_decimation import FeatureDecimation
@@ -89,6 +89,12 @@ that limit surface. The flaws fall unevenly on SIMP results (a budget with more 
 followed by a clean one), so one miss is not enough; on machined parts whose flaws grow with
 the budget two end the ladder after 2 of its 5 steps, where the limit surfaces of a machined part's sharp steps cross themselves (Catmull-Clark without
 crease rules rounds them)."""
+
+
+TIGHTEN_ROUNDS = 4
+"""Fold-free decimations tightened around the crossings of the cage kept, at most (each
+raises the normal agreement asked of the triangles there by one step,
+:data:`core.quadmesh.fold_free_decimation.TIGHTEN_STEP`)."""
 
 
 @dataclass(frozen=True)
@@ -264,8 +270,8 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     best = _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces,
                           rounds)
     if best[2] and over_budget_faces:
-        fold_free = _budget_ladder(FoldFreeDecimation(vertices, faces), surface, target_faces,
-                                   max_faces, over_budget_faces, rounds)
+        fold_free = _tightened_ladder(FoldFreeDecimation(vertices, faces), surface,
+                                      target_faces, max_faces, over_budget_faces, rounds)
         if fold_free[2] < best[2]:
             best = fold_free
     if best[2] and over_budget_faces:
@@ -281,8 +287,8 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
 def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces, rounds):
     """The budget ladder of :func:`paired_decimation_base_mesh`, of QSlim's decimations or
     with crease tags of the feature-preserving ones (a Decimation or FeatureDecimation);
-    appends its rounds and returns ``(flaws, PairedDecimation, crossings)`` of the cage
-    kept. A budget whose decimation is one an earlier budget got (a feature-preserving
+    appends its rounds and returns ``(flaws, PairedDecimation, crossings, budget)`` of the
+    cage kept. A budget whose decimation is one an earlier budget got (a feature-preserving
     decimation whose every collapse left was refused) would give the same cage again: it is
     not built, and beyond the budget rule it counts as a budget no less flawed."""
     best = None
@@ -292,7 +298,7 @@ def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_fac
             continue
         result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
         if best is None or crossings + inverted < best[0]:
-            best = (crossings + inverted, result, crossings)
+            best = (crossings + inverted, result, crossings, budget)
         if crossings + inverted == 0:
             break
     if best[2] and over_budget_faces:
@@ -306,11 +312,42 @@ def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_fac
                 continue
             result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
             if not crossings:
-                return (crossings + inverted, result, 0)
+                return (crossings + inverted, result, 0, budget)
             misses = 0 if crossings + inverted < fewest else misses + 1
             fewest = min(fewest, crossings + inverted)
             if misses == OVER_BUDGET_MISSES:
                 break
+    return best
+
+
+def _tightened_ladder(decimation, surface, target_faces, max_faces, over_budget_faces,
+                      rounds):
+    """The budget ladder on a FoldFreeDecimation, then, while the cage kept crosses itself,
+    decimations tightened around its crossings (:meth:`FoldFreeDecimation.tightened`: more
+    faces only where the limit surface crosses itself), up to :data:`TIGHTEN_ROUNDS` and
+    ``over_budget_faces`` faces; returns ``(flaws, PairedDecimation, crossings, budget)`` of
+    the least flawed cage (the first clean one)."""
+    from core.subdivision.limit_crossings import limit_self_intersections
+
+    best = _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces,
+                          rounds)
+    budget = best[3]
+    for _ in range(TIGHTEN_ROUNDS):
+        if not best[2]:
+            break
+        mesh = best[1].mesh
+        _, base_faces, _ = limit_self_intersections(mesh, CROSSING_LEVELS)
+        corners = np.concatenate([mesh.face_vertices[mesh.face_offsets[f]:
+                                                     mesh.face_offsets[f + 1]]
+                                  for f in np.unique(base_faces)])
+        decimation = decimation.tightened(2 * budget, mesh.vertices[corners])
+        if decimation is None:
+            break
+        result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
+        if result.mesh.n_faces > max(over_budget_faces, max_faces):
+            break
+        if crossings < best[2] or (crossings == best[2] and crossings + inverted < best[0]):
+            best = (crossings + inverted, result, crossings, budget)
     return best
 
 
