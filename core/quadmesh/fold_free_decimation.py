@@ -69,6 +69,11 @@ class FoldFreeDecimation:
     ----------
     vertices : (n, 3) float64; faces : (m, 3) int64 the target.
 
+    Attributes
+    ----------
+    min_normal_cosine : (n,) float64 the smallest cosine asked of every target vertex.
+    tightenings : int, the :meth:`tightened` calls this decimation comes of.
+
     Raises
     ------
     InvalidMeshError (from :meth:`triangles`) when a decimation changed the genus: collapses
@@ -84,6 +89,7 @@ class FoldFreeDecimation:
         self._quadrics = plane_quadrics(self._vertices, self._faces)
         self._edges = edge_faces(self._faces)[0]
         self.min_normal_cosine = np.full(len(self._vertices), MIN_NORMAL_COSINE)
+        self.tightenings = 0
         self._results = {}
         self._results_detail = {}
 
@@ -113,6 +119,7 @@ class FoldFreeDecimation:
         other = object.__new__(FoldFreeDecimation)
         other.__dict__.update(self.__dict__)
         other.min_normal_cosine = raised
+        other.tightenings = self.tightenings + 1
         other._results = {}
         other._results_detail = {}
         return other
@@ -157,6 +164,29 @@ class FoldFreeDecimation:
             self._results[count] = (vertices, faces)
             self._results_detail[len(faces)] = (used, renumber[parent])
         return self._results[count]
+
+
+def folded_share(vertices, faces, decimated_vertices, decimated_faces):
+    """Share of a decimation's triangles that face across the target: a cosine below 0 between
+    the triangle's normal and the smoothed target normal (:data:`NORMAL_SMOOTHING`) at the
+    target vertex closest to one of its corners (a float in [0, 1]).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64; faces : (m, 3) int64 the target.
+    decimated_vertices : (n', 3) float64; decimated_faces : (m', 3) int64 its decimation.
+    """
+    from scipy.spatial import cKDTree
+
+    if not len(decimated_faces):
+        return 0.0
+    normals = smoothed_vertex_normals(vertices, faces, NORMAL_SMOOTHING)
+    nearest = cKDTree(vertices).query(decimated_vertices)[1]
+    P = decimated_vertices
+    cross = _unit(np.cross(P[decimated_faces[:, 1]] - P[decimated_faces[:, 0]],
+                           P[decimated_faces[:, 2]] - P[decimated_faces[:, 0]]))
+    cosine = np.einsum("fkj,fj->fk", normals[nearest][decimated_faces], cross)
+    return float((cosine.min(axis=1) < 0.0).mean())
 
 
 def smoothed_vertex_normals(vertices, faces, rounds):

@@ -28,13 +28,7 @@ genus and orientation:
    only). Where it still crosses itself or faces away (thin struts with too few faces around
    them), larger budgets within the allowed range are tried; where they all cross themselves,
    budgets beyond it (a solid needs a surface that does not), until more faces stop helping.
-4. Where every budget's limit surface crosses itself, the ladder runs again on fold-free
-   decimations (:mod:`core.quadmesh.fold_free_decimation`: half-edge collapses that never
-   make a triangle facing across the target's normals at its corners, so no triangle spans
-   a thin strut or plate, the usual cause on topology-optimisation results of high genus,
-   raw marching-cubes staircases among them), and its cage is kept where it crosses itself
-   less.
-5. Where every budget's limit surface still crosses itself (machined parts whose sharp steps the
+4. Where every budget's limit surface crosses itself (machined parts whose sharp steps the
    smooth limit rounds over a face's length), the ladder runs again on feature-preserving
    decimations (:mod:`core.quadmesh.feature_decimation`), evened out inside their planar
    regions without touching a feature edge
@@ -50,6 +44,15 @@ genus and orientation:
    can have every creased cage within the budget rule cross itself, so tagging is not the
    default; the cages of every mesh whose smooth ladder ends clean stay
    bit-identical.
+5. Where the cage kept still crosses itself, the ladder runs on fold-free decimations
+   (:mod:`core.quadmesh.fold_free_decimation`: half-edge collapses that never make a
+   triangle facing across the target's normals at its corners, so no triangle spans a thin
+   strut or plate), and then, while its cage crosses itself, on decimations tightened
+   around the crossing faces (more faces only there, up to ``over_budget_faces``); its cage
+   is kept where it crosses itself less. Where QSlim folds most of its triangles at the
+   budget across the target (:data:`QSLIM_FOLDED_SHARE`: many thin members of a high-genus
+   TO result, a raw marching-cubes staircase among them), this ladder runs first and the
+   others only when its cage still crosses itself.
 """
 from dataclasses import dataclass, replace
 
@@ -62,7 +65,7 @@ from core.quadmesh.crossing_count import LEVELS as CROSSING_LEVELS, LimitCrossin
 from core.quadmesh.decimation import Decimation
 from core.quadmesh.even_triangulation import even_creased_triangulation, even_triangulation
 from core.quadmesh.feature_decimation import FeatureDecimation
-from core.quadmesh.fold_free_decimation import FoldFreeDecimation
+from core.quadmesh.fold_free_decimation import FoldFreeDecimation, folded_share
 from core.quadmesh.limit_interpolation import unshrink_inverted
 from core.quadmesh.local_repair import repair_inverted
 from core.quadmesh.orientation import inverted_faces
@@ -91,6 +94,12 @@ the budget two end the ladder after 2 of its 5 steps, where the limit surfaces o
 crease rules rounds them)."""
 
 
+QSLIM_FOLDED_SHARE = 0.5
+"""Where more than this share of QSlim's triangles at the budget face across the target
+(:func:`core.quadmesh.fold_free_decimation.folded_share`), the fold-free ladder is tried
+before QSlim's. Such a share comes of many thin members coarsely decimated (high-genus
+lattice-like TO results), whose QSlim cages cross themselves at every budget; the targets
+whose QSlim ladder ends clean fold well under half of them."""
 TIGHTEN_ROUNDS = 4
 """Fold-free decimations tightened around the crossings of the cage kept, at most (each
 raises the normal agreement asked of the triangles there by one step,
@@ -109,9 +118,12 @@ class PairedDecimation:
     rounds : tuple of dicts, one per budget tried (``faces``, ``limit_crossings``,
         ``inverted_faces``, ``moved_vertices``: after the moves, ``edits``: local edits kept,
         :mod:`core.quadmesh.local_repair`; ``crease_edges`` in the rounds of the creased
-        ladder); empty when only one budget was asked for.
+        ladder, ``fold_free`` and ``tightened`` in those of the fold-free one); empty when
+        only one budget was asked for.
     limit_crossings : int or None, self-crossing triangle pairs of the level-2 limit surface
         of ``mesh`` (None when only one budget was asked for: not counted).
+    fold_free : bool, ``mesh`` comes of a fold-free decimation (module docstring, step 5).
+    tightened : int, the rounds of tightening around crossing faces that decimation had.
     """
 
     mesh: PolyMesh
@@ -120,6 +132,8 @@ class PairedDecimation:
     triangles: int
     rounds: tuple = ()
     limit_crossings: int = None
+    fold_free: bool = False
+    tightened: int = 0
 
 
 def _candidate_quads(vertices, faces):
@@ -236,8 +250,8 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     surface does not cross itself is kept: a solid needs it, the face budget does not. They
     stop after :data:`OVER_BUDGET_MISSES` in a row that are not less flawed than all before.
     When the cage kept still crosses itself and the target has feature lines, the whole
-    ladder runs again with crease tags (module docstring, step 5), and its cage is kept if it
-    crosses itself less.
+    ladder runs again with crease tags (module docstring, step 4), and its cage is kept if it
+    crosses itself less; then, or first, the fold-free ladder (step 5).
 
     Parameters
     ----------
@@ -267,13 +281,18 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     if len(_ladder(target_faces, max_faces)) == 1 and not over_budget_faces:
         return _paired_mesh(decimation, 2 * target_faces, surface)
     rounds = []
-    best = _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces,
-                          rounds)
-    if best[2] and over_budget_faces:
-        fold_free = _tightened_ladder(FoldFreeDecimation(vertices, faces), surface,
-                                      target_faces, max_faces, over_budget_faces, rounds)
-        if fold_free[2] < best[2]:
-            best = fold_free
+    fold_free_first = bool(over_budget_faces) and folded_share(
+        vertices, faces, *decimation.triangles(2 * target_faces)) > QSLIM_FOLDED_SHARE
+    best = None
+    if fold_free_first:
+        # QSlim folds most of its triangles across the members: its ladder is tried only
+        # if this one's cage still crosses itself (each rung costs seconds on a fine target)
+        best = _tightened_ladder(FoldFreeDecimation(vertices, faces), surface, target_faces,
+                                 max_faces, over_budget_faces, rounds)
+    if best is None or best[2]:
+        qslim = _budget_ladder(decimation, surface, target_faces, max_faces,
+                               over_budget_faces, rounds)
+        best = qslim if best is None or qslim[2] < best[2] else best
     if best[2] and over_budget_faces:
         feature_decimation = FeatureDecimation(vertices, faces, surface)
         if len(feature_decimation.target_features):
@@ -281,6 +300,11 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
                                      over_budget_faces, rounds)
             if creased[2] < best[2]:
                 best = creased
+    if best[2] and over_budget_faces and not fold_free_first:
+        fold_free = _tightened_ladder(FoldFreeDecimation(vertices, faces), surface,
+                                      target_faces, max_faces, over_budget_faces, rounds)
+        if fold_free[2] < best[2]:
+            best = fold_free
     return replace(best[1], rounds=tuple(rounds), limit_crossings=int(best[2]))
 
 
@@ -382,7 +406,9 @@ def _flawed_mesh(decimation, budget, surface, rounds):
     rounds.append({"faces": int(result.mesh.n_faces), "limit_crossings": crossings,
                    "inverted_faces": inverted, "moved_vertices": moved, "edits": edits,
                    **({"crease_edges": int(result.mesh.n_creases), "evened": evened,
-                       "evened_flaws": int(evened_flaws)} if creased else {})})
+                       "evened_flaws": int(evened_flaws)} if creased else {}),
+                   **({"fold_free": True, "tightened": result.tightened}
+                      if result.fold_free else {})})
     return result, crossings, inverted
 
 
@@ -479,8 +505,10 @@ def _paired_mesh(decimation, count, surface, even=True):
         mesh = replace(mesh, creases=_kept_creases(mesh, renumber[creases]))
     mesh = _projected_on_target(mesh, surface)
     sizes = mesh.face_sizes
+    fold_free = isinstance(decimation, FoldFreeDecimation)
     return PairedDecimation(mesh, int(len(decimated_f)), int((sizes == 4).sum()),
-                            int((sizes == 3).sum()))
+                            int((sizes == 3).sum()), fold_free=fold_free,
+                            tightened=decimation.tightenings if fold_free else 0)
 
 
 def _rim_folds(vertices, quads, creases):

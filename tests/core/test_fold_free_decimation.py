@@ -8,7 +8,8 @@ import pytest
 from core.mesh_topology import connected_face_components, genus_of, polymesh_genus
 from core.polymesh_checks import check_polymesh
 from core.quadmesh.fold_free_decimation import (MIN_NORMAL_COSINE, NORMAL_SMOOTHING,
-                                                FoldFreeDecimation, smoothed_vertex_normals)
+                                                FoldFreeDecimation, folded_share,
+                                                smoothed_vertex_normals)
 
 pytestmark = pytest.mark.unit
 
@@ -78,6 +79,9 @@ def test_decimated_lattice_keeps_its_genus_and_no_triangle_spans_a_strut(voxel):
     cross = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
     unit = cross / np.linalg.norm(cross, axis=1)[:, None]
     assert np.einsum("fkj,fj->fk", corner_normal, unit).min() >= MIN_NORMAL_COSINE - 1e-9
+    assert folded_share(V, F, v, f) == 0.0
+    # turned inside out, every triangle faces across the target
+    assert folded_share(V, F, v, f[:, ::-1]) == 1.0
     # the same count gives the same arrays, and a smaller one no more triangles
     assert decimation.triangles(120)[1] is f
     assert len(decimation.triangles(60)[1]) <= len(f)
