@@ -40,9 +40,11 @@ from core.geometry import scatter_add
 from core.subdivision.catmull_clark import mesh_topology
 from core.types import PolyMesh
 
-_DENSE_UNKNOWNS = 3000
+_DENSE_UNKNOWNS = 4800
 """Most unknowns solved by dense Cholesky (the Catmull-Clark limit stencils make the normal
-matrix about 15 % full); above, sparse LU with a symmetric minimum-degree ordering."""
+matrix about 15 % full, and sparse LU fills it in: several times slower at a few thousand
+unknowns); above, sparse LU with a symmetric minimum-degree ordering. Two dense matrices of
+this size (the system and the smoothness term) take about 370 MB."""
 COMPATIBLE = 0.5
 """Pairs whose two unit normals have a dot product below ``COMPATIBLE - COMPATIBLE_RAMP``
 do not count, above ``COMPATIBLE + COMPATIBLE_RAMP`` they count fully (:func:`compatibility`)."""
