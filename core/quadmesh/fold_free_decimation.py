@@ -22,6 +22,10 @@ target with a known target normal, and it refuses a collapse that
   thinner than :data:`MIN_QUALITY` (or, when it was already, than :data:`QUALITY_KEPT` of that);
 * gives the kept vertex more than :data:`MAX_FACES` triangles.
 
+A cage paired of it can still cross itself where a member is thinner than its triangles are
+long: :meth:`FoldFreeDecimation.tightened` asks a closer normal agreement of the target
+vertices collapsed into the crossing faces, so the decimation keeps more triangles only there.
+
 A refused collapse is tried again when the neighbourhood of one of its ends changes. The
 collapses run compiled (numba), about a second for 50k triangles; where every collapse left is
 refused, the result keeps more triangles than asked for (the caller's face count grows and
