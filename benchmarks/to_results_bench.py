@@ -70,7 +70,12 @@ def run_mesh(repo, path, evaluate=False):
         if evaluate and done.returncode == 0 and os.path.exists(EVALUATE):
             checked = subprocess.run([sys.executable, EVALUATE, step, path], capture_output=True,
                                      text=True)
-            row["evaluate"] = (checked.stdout.strip().splitlines() or [""])[-1][:200]
+            try:
+                brep = json.loads(checked.stdout)["brep"]
+                row["evaluate"] = (f"evaluate.py: valid {brep['is_valid']}, closed "
+                                   f"{brep['all_shells_closed']}, {brep['solids']} solid(s)")
+            except (ValueError, KeyError, TypeError):
+                row["evaluate"] = (checked.stdout.strip().splitlines() or [""])[-1][:200]
     return row
 
 
