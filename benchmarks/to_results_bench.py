@@ -68,8 +68,8 @@ def run_mesh(repo, path, evaluate=False):
             row["fit"] = {key: fit.get(key) for key in ("self_intersections",
                                                         "outside_volume_fraction")}
         if evaluate and done.returncode == 0 and os.path.exists(EVALUATE):
-            checked = subprocess.run([sys.executable, EVALUATE, step, path], capture_output=True,
-                                     text=True)
+            checked = subprocess.run([sys.executable, EVALUATE, "--target", path, "--result",
+                                      step], capture_output=True, text=True)
             try:
                 brep = json.loads(checked.stdout)["brep"]
                 row["evaluate"] = (f"evaluate.py: valid {brep['is_valid']}, closed "
