@@ -20,6 +20,7 @@ The machine has 2 cores shared with other jobs: compare labels measured in one r
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -41,11 +42,16 @@ def run_mesh(repo, path, evaluate=False):
     with tempfile.TemporaryDirectory() as work:
         step, report_path = os.path.join(work, "out.step"), os.path.join(work, "out.json")
         started = time.perf_counter()
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
         done = subprocess.run([sys.executable, "-m", "polycube_wb", "reconstruct", path, "-o",
                                step, "--report", report_path], cwd=repo, capture_output=True,
                               text=True)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
         row = {"mesh": os.path.basename(path), "exit": done.returncode,
-               "wall": round(time.perf_counter() - started, 1)}
+               "wall": round(time.perf_counter() - started, 1),
+               "cpu": round(after.ru_utime + after.ru_stime - before.ru_utime
+                            - before.ru_stime, 1),
+               "load": round(os.getloadavg()[0], 1)}
         errors = [line for line in done.stderr.splitlines() + done.stdout.splitlines()
                   if line.startswith(("failed", "error"))]
         row["error"] = errors[0][:300] if errors else ""
@@ -62,9 +68,14 @@ def run_mesh(repo, path, evaluate=False):
             row["fit"] = {key: fit.get(key) for key in ("self_intersections",
                                                         "outside_volume_fraction")}
         if evaluate and done.returncode == 0 and os.path.exists(EVALUATE):
-            checked = subprocess.run([sys.executable, EVALUATE, step, path], capture_output=True,
-                                     text=True)
-            row["evaluate"] = (checked.stdout.strip().splitlines() or [""])[-1][:200]
+            checked = subprocess.run([sys.executable, EVALUATE, "--target", path, "--result",
+                                      step], capture_output=True, text=True)
+            try:
+                brep = json.loads(checked.stdout)["brep"]
+                row["evaluate"] = (f"evaluate.py: valid {brep['is_valid']}, closed "
+                                   f"{brep['all_shells_closed']}, {brep['solids']} solid(s)")
+            except (ValueError, KeyError, TypeError):
+                row["evaluate"] = (checked.stdout.strip().splitlines() or [""])[-1][:200]
     return row
 
 
@@ -77,8 +88,11 @@ def write_markdown(results):
              "level-2 limit surface, `fit x` the fitted limit surface's crossing pairs, "
              "`outside` the share of the target's volume outside it. The machine has 2 cores "
              "shared with other jobs: labels measured in one run compare; figures across runs "
-             "vary by a factor up to 2.", ""]
-    header = ["label", "mesh", *STAGES, "total", "exit", "cage", "fit x", "outside", "error"]
+             "vary by a factor up to 2; `cpu` is the CPU seconds of the whole process (user and "
+             "system), which the other jobs change less, `load` the machine's 1-minute load "
+             "average when the run ended.", ""]
+    header = ["label", "mesh", *STAGES, "total", "cpu", "load", "exit", "cage", "fit x",
+              "outside", "error"]
     lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for label, rows in results.items():
         for row in rows:
@@ -88,7 +102,9 @@ def write_markdown(results):
             cells = [label, row["mesh"],
                      *[("-" if stages.get(name) is None else f"{stages[name]:.1f}")
                        for name in STAGES],
-                     f"{row.get('total') or row['wall']:.1f}", str(row["exit"]),
+                     f"{row.get('total') or row['wall']:.1f}",
+                     "-" if row.get("cpu") is None else f"{row['cpu']:.1f}",
+                     "-" if row.get("load") is None else f"{row['load']:.1f}", str(row["exit"]),
                      f"{base.get('faces')} / {base.get('limit_crossings')}",
                      str(fit.get("self_intersections", "-")),
                      "-" if outside is None else f"{outside:.2%}",

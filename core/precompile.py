@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Compile every cached compiled function of the spatial queries now (``make setup``).
+"""Compile every cached compiled function of the spatial queries and the fold-free
+decimation now (``make setup``).
 
 numba compiles a function the first time it is called with new argument types, several
 seconds for all of them here, and keeps the result in its cache (:mod:`core.compiled`); run once at
@@ -10,6 +11,7 @@ import time
 import numpy as np
 
 from core.box_tree import box_pairs, face_boxes
+from core.quadmesh.fold_free_decimation import FoldFreeDecimation
 from core.self_intersection import find_self_intersections
 from core.target_surface import TargetSurface
 
@@ -29,4 +31,5 @@ def compile_now():
     candidates = box_pairs(*face_boxes(corners[faces]), marked)
     find_self_intersections(corners, faces)
     find_self_intersections(corners, faces, among=marked, candidates=candidates)
+    FoldFreeDecimation(corners, faces).triangles(8)
     return time.perf_counter() - started

@@ -46,10 +46,11 @@ from core.types import PolyMesh
 class BestFitSettings:
     """Tuned constants of the least-squares fit (:func:`best_fit`)."""
 
-    dense_unknowns: int = 3000
+    dense_unknowns: int = 4800
     """Most unknowns solved by dense Cholesky (the Catmull-Clark limit stencils make the
-    normal matrix about 15 % full); above, sparse LU with a symmetric minimum-degree
-    ordering."""
+    normal matrix about 15 % full, and sparse LU fills it in: several times slower at a few
+    thousand unknowns); above, sparse LU with a symmetric minimum-degree ordering. Two dense
+    matrices of this size (the system and the smoothness term) take about 370 MB."""
     compatible: float = 0.5
     """Dot product of a closest-point pair's two unit normals at which the pair counts half
     (:func:`compatibility`)."""

@@ -39,7 +39,7 @@ from core.quadmesh.local_repair import repair_inverted
 from core.quadmesh.milp_solve import MilpTimeLimitError
 from core.quadmesh.orientation import inverted_faces
 from core.quadmesh.overlap_cuts import corners_to_cut
-from core.quadmesh.paired_decimation import paired_decimation_base_mesh
+from core.quadmesh.paired_decimation import TIGHTEN_ROUNDS, paired_decimation_base_mesh
 from core.quadmesh.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapsible_sides,
                                     loop_tables, minimum_faces, quantize, quantize_for_budget,
                                     rectangular_refinement)
@@ -461,7 +461,9 @@ def _paired_decimation_base_mesh(target_v, target_f, surface, target_faces, max_
     mesh = result.mesh
     within = bool(abs(mesh.n_faces - target_faces) <= BUDGET_TOLERANCE * target_faces)
     minimum_reason = None
-    if not within and mesh.n_faces > target_faces:
+    if not within and mesh.n_faces > target_faces and result.fold_free:
+        minimum_reason = _fold_free_reason(result)
+    elif not within and mesh.n_faces > target_faces:
         fewest = min((r["limit_crossings"] for r in result.rounds if r["faces"] < mesh.n_faces),
                      default=0)
         minimum_reason = (f"the limit surfaces of the smaller cages tried cross themselves (the "
@@ -479,6 +481,8 @@ def _paired_decimation_base_mesh(target_v, target_f, surface, target_faces, max_
                                 f"steps and holes" if mesh.n_creases else
                                 "sharp creases, which Catmull-Clark subdivision rounds off, are "
                                 "the usual cause") + ")")
+        if result.fold_free:
+            crossing_reason += _fold_free_limit(mesh, max_base_faces)
     info = {
         "method": "paired decimation", "fallback_reason": reason,
         **_mesh_figures(mesh), "quads": result.quads, "triangles": result.triangles,
@@ -565,6 +569,31 @@ def _narrowest_sides(tables, side_length, charts):
         if len(sides):
             narrow.append(sides[side_length[sides] == side_length[sides].min()])
     return np.unique(np.concatenate(narrow)) if narrow else np.zeros(0, dtype=np.int64)
+
+
+def _fold_free_reason(result):
+    """Why a fold-free cage (``result``, a PairedDecimation) has more faces than the budget
+    (a str)."""
+    reason = (f"the cage comes of a fold-free decimation ({result.decimated_triangles} "
+              f"triangles paired): every further collapse would have made a triangle facing "
+              f"across the target's normals, i.e. spanning one of its thin members, whose "
+              f"cage faces fold the limit surface over itself")
+    if result.tightened:
+        reason += (f"; its limit surface crossed itself, so it was decimated less around the "
+                   f"crossing faces in {result.tightened} round(s)")
+    return reason
+
+
+def _fold_free_limit(mesh, max_base_faces):
+    """Where a fold-free cage still crosses itself and what to raise (a str)."""
+    from core.subdivision.limit_crossings import limit_self_intersections
+
+    _, base_faces, points = limit_self_intersections(mesh, 2)
+    x, y, z = points[0]
+    return (f"; the fold-free decimation's faces around the crossings, added in up to "
+            f"{TIGHTEN_ROUNDS} rounds within max_base_faces={max_base_faces}, did not remove "
+            f"them (base faces {base_faces[0, 0]} and {base_faces[0, 1]} cross near "
+            f"({x:.6g}, {y:.6g}, {z:.6g})): raise --max-base-faces")
 
 
 def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, target_faces,

@@ -44,6 +44,15 @@ genus and orientation:
    can have every creased cage within the budget rule cross itself, so tagging is not the
    default; the cages of every mesh whose smooth ladder ends clean stay
    bit-identical.
+5. Where the cage kept still crosses itself, the ladder runs on fold-free decimations
+   (:mod:`core.quadmesh.fold_free_decimation`: half-edge collapses that never make a
+   triangle facing across the target's normals at its corners, so no triangle spans a thin
+   strut or plate), and then, while its cage crosses itself, on decimations tightened
+   around the crossing faces (more faces only there, up to ``over_budget_faces``); its cage
+   is kept where it crosses itself less. Where QSlim folds most of its triangles at the
+   budget across the target (:data:`QSLIM_FOLDED_SHARE`: many thin members of a high-genus
+   TO result, a raw marching-cubes staircase among them), this ladder runs first and the
+   others only when its cage still crosses itself.
 """
 from dataclasses import dataclass, replace
 
@@ -52,10 +61,11 @@ import numpy as np
 from core.errors import InvalidMeshError
 from core.mesh_topology import edge_faces
 from core.quadmesh.creases import closed_network
-from core.quadmesh.crossing_count import LimitCrossingCount
+from core.quadmesh.crossing_count import LEVELS as CROSSING_LEVELS, LimitCrossingCount
 from core.quadmesh.decimation import Decimation
 from core.quadmesh.even_triangulation import even_creased_triangulation, even_triangulation
 from core.quadmesh.feature_decimation import FeatureDecimation
+from core.quadmesh.fold_free_decimation import FoldFreeDecimation, folded_share
 from core.quadmesh.limit_interpolation import unshrink_inverted
 from core.quadmesh.local_repair import repair_inverted
 from core.quadmesh.orientation import inverted_faces
@@ -84,6 +94,18 @@ the budget two end the ladder after 2 of its 5 steps, where the limit surfaces o
 crease rules rounds them)."""
 
 
+QSLIM_FOLDED_SHARE = 0.5
+"""Where more than this share of QSlim's triangles at the budget face across the target
+(:func:`core.quadmesh.fold_free_decimation.folded_share`), the fold-free ladder is tried
+before QSlim's. Such a share comes of many thin members coarsely decimated (high-genus
+lattice-like TO results), whose QSlim cages cross themselves at every budget; the targets
+whose QSlim ladder ends clean fold well under half of them."""
+TIGHTEN_ROUNDS = 4
+"""Fold-free decimations tightened around the crossings of the cage kept, at most (each
+raises the normal agreement asked of the triangles there by one step,
+:data:`core.quadmesh.fold_free_decimation.TIGHTEN_STEP`)."""
+
+
 @dataclass(frozen=True)
 class PairedDecimation:
     """Result of :func:`paired_decimation_base_mesh`.
@@ -96,9 +118,12 @@ class PairedDecimation:
     rounds : tuple of dicts, one per budget tried (``faces``, ``limit_crossings``,
         ``inverted_faces``, ``moved_vertices``: after the moves, ``edits``: local edits kept,
         :mod:`core.quadmesh.local_repair`; ``crease_edges`` in the rounds of the creased
-        ladder); empty when only one budget was asked for.
+        ladder, ``fold_free`` and ``tightened`` in those of the fold-free one); empty when
+        only one budget was asked for.
     limit_crossings : int or None, self-crossing triangle pairs of the level-2 limit surface
         of ``mesh`` (None when only one budget was asked for: not counted).
+    fold_free : bool, ``mesh`` comes of a fold-free decimation (module docstring, step 5).
+    tightened : int, the rounds of tightening around crossing faces that decimation had.
     """
 
     mesh: PolyMesh
@@ -107,6 +132,8 @@ class PairedDecimation:
     triangles: int
     rounds: tuple = ()
     limit_crossings: int = None
+    fold_free: bool = False
+    tightened: int = 0
 
 
 def _candidate_quads(vertices, faces):
@@ -224,7 +251,7 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     stop after :data:`OVER_BUDGET_MISSES` in a row that are not less flawed than all before.
     When the cage kept still crosses itself and the target has feature lines, the whole
     ladder runs again with crease tags (module docstring, step 4), and its cage is kept if it
-    crosses itself less.
+    crosses itself less; then, or first, the fold-free ladder (step 5).
 
     Parameters
     ----------
@@ -254,8 +281,18 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     if len(_ladder(target_faces, max_faces)) == 1 and not over_budget_faces:
         return _paired_mesh(decimation, 2 * target_faces, surface)
     rounds = []
-    best = _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces,
-                          rounds)
+    fold_free_first = bool(over_budget_faces) and folded_share(
+        vertices, faces, *decimation.triangles(2 * target_faces)) > QSLIM_FOLDED_SHARE
+    best = None
+    if fold_free_first:
+        # QSlim folds most of its triangles across the members: its ladder is tried only
+        # if this one's cage still crosses itself (each rung costs seconds on a fine target)
+        best = _tightened_ladder(FoldFreeDecimation(vertices, faces), surface, target_faces,
+                                 max_faces, over_budget_faces, rounds)
+    if best is None or best[2]:
+        qslim = _budget_ladder(decimation, surface, target_faces, max_faces,
+                               over_budget_faces, rounds)
+        best = qslim if best is None or qslim[2] < best[2] else best
     if best[2] and over_budget_faces:
         feature_decimation = FeatureDecimation(vertices, faces, surface)
         if len(feature_decimation.target_features):
@@ -263,14 +300,19 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
                                      over_budget_faces, rounds)
             if creased[2] < best[2]:
                 best = creased
+    if best[2] and over_budget_faces and not fold_free_first:
+        fold_free = _tightened_ladder(FoldFreeDecimation(vertices, faces), surface,
+                                      target_faces, max_faces, over_budget_faces, rounds)
+        if fold_free[2] < best[2]:
+            best = fold_free
     return replace(best[1], rounds=tuple(rounds), limit_crossings=int(best[2]))
 
 
 def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces, rounds):
     """The budget ladder of :func:`paired_decimation_base_mesh`, of QSlim's decimations or
     with crease tags of the feature-preserving ones (a Decimation or FeatureDecimation);
-    appends its rounds and returns ``(flaws, PairedDecimation, crossings)`` of the cage
-    kept. A budget whose decimation is one an earlier budget got (a feature-preserving
+    appends its rounds and returns ``(flaws, PairedDecimation, crossings, budget)`` of the
+    cage kept. A budget whose decimation is one an earlier budget got (a feature-preserving
     decimation whose every collapse left was refused) would give the same cage again: it is
     not built, and beyond the budget rule it counts as a budget no less flawed."""
     best = None
@@ -280,7 +322,7 @@ def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_fac
             continue
         result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
         if best is None or crossings + inverted < best[0]:
-            best = (crossings + inverted, result, crossings)
+            best = (crossings + inverted, result, crossings, budget)
         if crossings + inverted == 0:
             break
     if best[2] and over_budget_faces:
@@ -294,11 +336,42 @@ def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_fac
                 continue
             result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
             if not crossings:
-                return (crossings + inverted, result, 0)
+                return (crossings + inverted, result, 0, budget)
             misses = 0 if crossings + inverted < fewest else misses + 1
             fewest = min(fewest, crossings + inverted)
             if misses == OVER_BUDGET_MISSES:
                 break
+    return best
+
+
+def _tightened_ladder(decimation, surface, target_faces, max_faces, over_budget_faces,
+                      rounds):
+    """The budget ladder on a FoldFreeDecimation, then, while the cage kept crosses itself,
+    decimations tightened around its crossings (:meth:`FoldFreeDecimation.tightened`: more
+    faces only where the limit surface crosses itself), up to :data:`TIGHTEN_ROUNDS` and
+    ``over_budget_faces`` faces; returns ``(flaws, PairedDecimation, crossings, budget)`` of
+    the least flawed cage (the first clean one)."""
+    from core.subdivision.limit_crossings import limit_self_intersections
+
+    best = _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces,
+                          rounds)
+    budget = best[3]
+    for _ in range(TIGHTEN_ROUNDS):
+        if not best[2]:
+            break
+        mesh = best[1].mesh
+        _, base_faces, _ = limit_self_intersections(mesh, CROSSING_LEVELS)
+        corners = np.concatenate([mesh.face_vertices[mesh.face_offsets[f]:
+                                                     mesh.face_offsets[f + 1]]
+                                  for f in np.unique(base_faces)])
+        decimation = decimation.tightened(2 * budget, mesh.vertices[corners])
+        if decimation is None:
+            break
+        result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
+        if result.mesh.n_faces > max(over_budget_faces, max_faces):
+            break
+        if crossings < best[2] or (crossings == best[2] and crossings + inverted < best[0]):
+            best = (crossings + inverted, result, crossings, budget)
     return best
 
 
@@ -333,7 +406,9 @@ def _flawed_mesh(decimation, budget, surface, rounds):
     rounds.append({"faces": int(result.mesh.n_faces), "limit_crossings": crossings,
                    "inverted_faces": inverted, "moved_vertices": moved, "edits": edits,
                    **({"crease_edges": int(result.mesh.n_creases), "evened": evened,
-                       "evened_flaws": int(evened_flaws)} if creased else {})})
+                       "evened_flaws": int(evened_flaws)} if creased else {}),
+                   **({"fold_free": True, "tightened": result.tightened}
+                      if result.fold_free else {})})
     return result, crossings, inverted
 
 
@@ -395,7 +470,12 @@ def _paired_mesh(decimation, count, surface, even=True):
     result (a Decimation) evened out first; a FeatureDecimation's feature edges become crease
     edges and are never paired across, its triangles evened out first unless ``even`` is
     False."""
-    if isinstance(decimation, FeatureDecimation) and not even:
+    if isinstance(decimation, FoldFreeDecimation):
+        # its triangles already agree with the target's normals: evening them out would
+        # move vertices off the target's vertices and can fold them again
+        decimated_v, decimated_f = decimation.triangles(count)
+        creases = None
+    elif isinstance(decimation, FeatureDecimation) and not even:
         decimated_v, decimated_f, creases = decimation.triangles(count)
     elif isinstance(decimation, FeatureDecimation):
         decimated_v, decimated_f, creases = even_creased_triangulation(decimation, count,
@@ -425,8 +505,10 @@ def _paired_mesh(decimation, count, surface, even=True):
         mesh = replace(mesh, creases=_kept_creases(mesh, renumber[creases]))
     mesh = _projected_on_target(mesh, surface)
     sizes = mesh.face_sizes
+    fold_free = isinstance(decimation, FoldFreeDecimation)
     return PairedDecimation(mesh, int(len(decimated_f)), int((sizes == 4).sum()),
-                            int((sizes == 3).sum()))
+                            int((sizes == 3).sum()), fold_free=fold_free,
+                            tightened=decimation.tightenings if fold_free else 0)
 
 
 def _rim_folds(vertices, quads, creases):
