@@ -132,18 +132,22 @@ CORE_LAYERS = {
     "core.stages": {KERNEL, "core.subdivision", "core.segmentation", "core.quadmesh",
                     "core.fitting", "core.export"},
     "core.pipeline": {KERNEL, "core.stages"},
+    "core.precompile": {KERNEL, "core.subdivision", "core.segmentation", "core.quadmesh",
+                        "core.fitting", "core.export"},
 }
 """Which layers of ``core`` each layer may import (besides itself): a package of ``core``
-is a layer of its own, the runner ``core.pipeline`` one above the stages, every other
-top-level module of ``core`` belongs to the kernel. The kernel imports no algorithm, an
+is a layer of its own, the runner ``core.pipeline`` one above the stages, the set-up's
+``core.precompile`` (which compiles the algorithms' compiled functions) one above the
+algorithms, every other top-level module of ``core`` belongs to the kernel. The kernel imports no algorithm, an
 algorithm package only those below it, only the stages and the runner import the stages."""
 
 
 def core_layer(module):
     """The layer (a key of ``CORE_LAYERS``) of a dotted ``core`` module name."""
     parts = module.split(".")
-    if module == "core.pipeline" or _is_within(module, "core.pipeline"):
-        return "core.pipeline"
+    for top in ("core.pipeline", "core.precompile"):
+        if module == top or _is_within(module, top):
+            return top
     if len(parts) > 1 and os.path.isdir(os.path.join(REPO, "core", parts[1])):
         return "core." + parts[1]
     return KERNEL
