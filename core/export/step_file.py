@@ -18,6 +18,11 @@ from functools import lru_cache
 import numpy as np
 
 SCHEMA = "AUTOMOTIVE_DESIGN { 1 0 10303 214 1 1 1 1 }"
+POINT_DECIMALS = 9
+"""Decimals of the points' coordinates (millimetres; parameters in ``(u, v)``): a rounding of
+at most 5e-10 mm, far inside the B-rep tolerance :data:`core.tolerances.BREP_MM`, and the
+points that vertices, curves and surfaces share are one entity each, so the rounding opens no
+gap; short literals are most of what a reader parses."""
 
 
 def step_reals(values):
@@ -25,6 +30,14 @@ def step_reals(values):
     always with a decimal point (``%#.17G``). Returns a list of str."""
     flat = np.asarray(values, dtype=np.float64).reshape(-1).tolist()
     return (("%#.17G," * len(flat)) % tuple(flat)).split(",")[:-1]
+
+
+def step_fixed_reals(values, decimals=POINT_DECIMALS):
+    """STEP REAL literals of a float array rounded to ``decimals`` decimals, without trailing
+    zeros (``-1.25``, ``3.``, ``0.``). Returns a list of str."""
+    flat = np.round(np.asarray(values, dtype=np.float64).reshape(-1), decimals) + 0.0
+    text = ((f"%.{decimals}f," * len(flat)) % tuple(flat.tolist())).split(",")[:-1]
+    return [t.rstrip("0") for t in text]
 
 
 def step_real(value):
@@ -56,7 +69,7 @@ class _Entities:
         bit), so each is written and read once.
         """
         xyz = np.asarray(xyz, dtype=np.float64)
-        reals = step_reals(xyz)
+        reals = step_fixed_reals(xyz)
         d = xyz.shape[1]
         ids = []
         for i in range(0, len(reals), d):
