@@ -10,12 +10,16 @@ any OBJ cages given, each optionally with the target mesh it was fitted to (for 
 fitted cage ``reconstruct TARGET --stop-after fit --base-mesh cage.obj`` writes; the G1 form
 refuses creased cages, recorded as such). For each cage and export form, in one process,
 side by side: ``subd_to_solid`` writes the STEP file, ``Part.Shape().read`` reads it back
-(best of 3), and the patches are measured: the largest normal jump across edges (degrees),
+(CPU seconds, best of 3), gmsh imports it (its own OpenCascade, no healing: one volume of
+FreeCAD's volume?), and the patches are measured: the largest normal jump across edges (degrees),
 the largest distance from patch points (17 x 17 per patch) to a level-5 mesh (level 4 from
 1,000 faces) of exact limit points (fraction of the bounding-box diagonal). With a target,
 ``polycube_wb.api.check`` measures the STEP against it: the mean of both one-sided mean
 distances, the Hausdorff distance (fractions of the target's diagonal) and the volume
-outside the target (fraction of its volume).
+outside the target (fraction of its volume), and ``../shared/tools/evaluate.py`` measures it
+independently (distances, its own normal jumps across edges, validity). First, the 48-quad
+torus and a voxel plate with eight holes after two Catmull-Clark steps (2,144 quads) go
+through ``subd_to_solid`` in both forms (CPU and wall seconds).
 
 Writes ``benchmarks/G1_EXPORT_RESULTS.md`` and ``benchmarks/g1_export_results.json``.
 """
@@ -133,7 +137,32 @@ def run_case(name, cage, target, export, folder):
                     "target_max_distance": d["hausdorff"],
                     "target_outside_volume": checked["outside_volume_fraction"],
                     "target_watertight": checked["watertight"]})
+        row.update(_evaluate(target, step))
     return row
+
+
+EVALUATE = os.path.join(os.path.dirname(REPO), "shared", "tools", "evaluate.py")
+
+
+def _evaluate(target, step):
+    """The independent evaluator's figures (``../shared/tools/evaluate.py``, 100,000 samples
+    per side): symmetric mean and largest distance (fractions of the target's diagonal), its
+    own largest normal jump across B-rep edges (degrees) and its validity verdict. Empty when
+    the evaluator is not there."""
+    import subprocess
+
+    if not os.path.exists(EVALUATE):
+        return {}
+    out = subprocess.run([sys.executable, EVALUATE, "--target", target, "--result", step,
+                          "--samples", "100000"], capture_output=True, text=True)
+    if out.returncode != 0:
+        return {"evaluate_error": out.stderr.strip()[-200:]}
+    result = json.loads(out.stdout)
+    d = result["distance"]["symmetric"]
+    return {"evaluate_mean": d["mean_frac"], "evaluate_max": d["max_frac"],
+            "evaluate_normal_jump_max_deg": result["brep"]["g1"]["max_deg"],
+            "evaluate_valid": bool(result["brep"]["is_valid"]
+                                   and result["brep"]["all_shells_closed"])}
 
 
 def plate_with_holes():
@@ -172,9 +201,13 @@ def speed_rows(folder):
 
 def _target_cells(row):
     if "target_mean_distance" not in row:
-        return " | "
-    return (f"{row['target_mean_distance']:.2g} / {row['target_max_distance']:.2g} | "
-            f"{row['target_outside_volume']:.2g}")
+        return " | | | "
+    cells = (f"{row['target_mean_distance']:.2g} / {row['target_max_distance']:.2g} | "
+             f"{row['target_outside_volume']:.2g} | ")
+    if "evaluate_mean" not in row:
+        return cells + " | "
+    return cells + (f"{row['evaluate_mean']:.2g} / {row['evaluate_max']:.2g} | "
+                    f"{row['evaluate_normal_jump_max_deg']:.2g} ({row['evaluate_valid']})")
 
 
 def main(paths):
@@ -206,7 +239,8 @@ def write_table(rows, speed):
              "(the machine is shared: times are noisy, compare within a row pair). Rows after "
              "`grid_sphere` are the fitted cages `reconstruct TARGET --stop-after fit --base-mesh "
              "CAGE.obj` writes at default parameters; their target columns are `check`'s "
-             "(fractions of the target's diagonal and volume). Read times are CPU seconds, best "
+             "(fractions of the target's diagonal and volume) and the independent "
+             "`../shared/tools/evaluate.py`'s (symmetric distances, 100,000 samples per side). Read times are CPU seconds, best "
              "of 3 for FreeCAD (`Part.Shape().read`), one gmsh `occ.importShapes`; 'x faster' "
              "is the exact row's FreeCAD read time over the G1 row's. 'gmsh valid': one volume "
              f"whose mass is FreeCAD's volume within 1e-6. Load average {os.getloadavg()[0]:.1f} "
@@ -214,12 +248,13 @@ def write_table(rows, speed):
              "| cage | base faces | export | faces | poles | STEP KB | KB per 300 base faces | "
              "read s | x faster | gmsh read s | valid | gmsh valid | "
              "max normal jump deg | max distance to limit / diag | volume error | "
-             "target mean / max distance | outside target |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "target mean / max distance | outside target | evaluate.py mean / max distance | "
+             "evaluate.py max normal jump deg (valid) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if "error" in r:
             lines.append(f"| {r['cage']} | {r['base_faces']} | {r['export']} | refused: "
-                         f"{r['error']} | | | | | | | | | | | | | |")
+                         f"{r['error']} | | | | | | | | | | | | | | | |")
             continue
         lines.append(f"| {r['cage']} | {r['base_faces']} | {r['export']} | {r['faces']} | "
                      f"{r['poles']} | {r['step_bytes'] / 1024:.0f} | "

@@ -27,7 +27,7 @@ EXPORT_FORMS = ("exact", "g1")
 """The surface forms of ``subd-to-step``: ``exact``, the graded patches of
 ``core.export.bspline`` (the Catmull-Clark limit except in corner cells of size 2^-depth);
 ``g1``, the light tangent-continuous patches of ``core.export.g1_patches`` (one face per quad,
-at most 36 poles, close to the limit near extraordinary vertices)."""
+at most 64 poles, close to the limit near extraordinary vertices)."""
 DEFAULT_EXPORT_FORM = "exact"
 MAX_EXPORT_DEPTH = 12
 """Deeper grading adds (2 depth + 3)^2 poles per patch at an extraordinary vertex for no
