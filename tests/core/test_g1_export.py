@@ -113,3 +113,22 @@ def test_creased_cage_is_refused():
     creased = dataclasses.replace(cage, creases=np.array([[0, 1]]))
     with pytest.raises(ExportError, match="crease"):
         g1_surface_patches(creased)
+
+
+def test_pipeline_patches_stage_builds_the_g1_form_on_request():
+    """``reconstruct --export g1``: the patches stage exports the fitted cage in the G1 form;
+    an unknown form is refused by the parameters."""
+    from core.errors import ParameterError
+    from core.params import ReconstructionParams
+    from core.progress import NO_PROGRESS
+    from core.stages.patches import run_patches
+    from core.types import FitResult
+
+    cage = sample_cages.genus3_block()
+    result = run_patches(FitResult(cage, levels=2), ReconstructionParams(export="g1"), NO_PROGRESS)
+    ps = result.patches
+    assert result.report["export"] == "g1" and len(ps.patches) == cage.n_faces
+    assert max(p.poles.shape[0] * p.poles.shape[1] for p in ps.patches) <= 64
+    assert ps.info["normal_jump_max_deg"] <= 0.01
+    with pytest.raises(ParameterError, match="export"):
+        ReconstructionParams(export="light")
