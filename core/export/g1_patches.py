@@ -67,6 +67,9 @@ N_SPLIT = int(SPLIT_MULTS.sum()) - 4
 """Poles per direction of a free patch (cubic, double knots at h and 1 - h)."""
 G1_PENALTY = 1.0e4
 """Weight of the G1 and C1 conditions against the fit to limit points."""
+G1_RESIDUAL_MAX = 1.0e-6
+"""Largest residual of the G1 conditions accepted, as a fraction of the bounding-box diagonal
+(per unit parameter; solved conditions leave rounding, about 1e-11)."""
 
 BSPLINE_TO_BEZIER = np.array([[1.0, 4.0, 1.0, 0.0], [0.0, 4.0, 2.0, 0.0],
                               [0.0, 2.0, 4.0, 0.0], [0.0, 1.0, 4.0, 1.0]]) / 6.0
@@ -372,7 +375,9 @@ def g1_surface_patches(base, measure=True):
     Raises
     ------
     ExportError when ``base`` has crease edges (their limit surface has no tangent plane to
-        join G1; the graded export handles them).
+        join G1; the graded export handles them), or when the solved poles miss the G1
+        conditions by more than :data:`G1_RESIDUAL_MAX` of the cage's bounding-box diagonal
+        (conditions that contradict each other), rather than writing a surface with kinks.
     """
     if base.n_creases:
         raise ExportError(f"the G1 export does not support crease edges: the cage has "
@@ -395,6 +400,11 @@ def g1_surface_patches(base, measure=True):
         x = _solve(A_fit, y_fit, A_g1, y_g1)
         slots[layout.unknown >= 0] = x[layout.unknown[layout.unknown >= 0]]
         residual = float(np.abs(A_g1 @ x - y_g1).max()) if A_g1 is not None else 0.0
+        diagonal = float(np.linalg.norm(np.ptp(quads.vertices[np.unique(fv)], axis=0)))
+        if residual > G1_RESIDUAL_MAX * diagonal:
+            raise ExportError(f"the G1 conditions of this cage could not be met (residual "
+                              f"{residual / diagonal:.1e} of the bounding-box diagonal); use "
+                              "the exact (graded) export")
     n2 = N_SPLIT * N_SPLIT
     patches = []
     for f in range(quads.n_faces):
