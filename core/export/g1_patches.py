@@ -438,5 +438,6 @@ def g1_surface_patches(base, measure=True):
     result = PatchSet(patches, face_of_patch, info, topology)
     if measure:
         info.update(patch_deviation(result, quads, context=ctx))
-        info.update(normal_jumps(result, quads, context=ctx))
+        used = np.unique(fv)
+        info.update(normal_jumps(result, quads, context=ctx, ev_vertex=valence[used] != 4))
     return result
