@@ -27,7 +27,7 @@ EXPORT_FORMS = ("exact", "g1")
 """The surface forms of ``subd-to-step``: ``exact``, the graded patches of
 ``core.export.bspline`` (the Catmull-Clark limit except in corner cells of size 2^-depth);
 ``g1``, the light tangent-continuous patches of ``core.export.g1_patches`` (one face per quad,
-at most 36 poles, close to the limit near extraordinary vertices)."""
+at most 64 poles, close to the limit near extraordinary vertices)."""
 DEFAULT_EXPORT_FORM = "exact"
 MAX_EXPORT_DEPTH = 12
 """Deeper grading adds (2 depth + 3)^2 poles per patch at an extraordinary vertex for no
@@ -136,6 +136,9 @@ class ReconstructionParams:
         0 = off).
     fit_t_min : minimal wall thickness of the fit in model units; None picks it from the
         base mesh and the target (see ``core.fitting.fit_base_mesh``), 0 disables it.
+    export : surface form of the solid's patches, one of :data:`EXPORT_FORMS` (``exact``:
+        graded, the Catmull-Clark limit; ``g1``: one light tangent-continuous patch per quad,
+        cages without creases).
     """
 
     units: str = _param("mm", "length unit of the target's coordinates (default: mm); the "
@@ -200,6 +203,10 @@ class ReconstructionParams:
                               metavar="T")
     tolerance_mm: float = _param(0.0, "largest deviation wanted in millimetres (given as "
                                  "--tolerance with a unit)", low=0.0, high=1e9)
+    export: str = _param(DEFAULT_EXPORT_FORM, "surface form of the solid: exact: graded patches, "
+                         "the Catmull-Clark limit (large STEP); g1: one light tangent-continuous "
+                         "patch per quad, close to the limit (cages without creases) (default "
+                         "%(default)s)", _flag("export"), choices=EXPORT_FORMS)
     outside_refinement: float = _param(
         0.003, "inside mode: where the fit leaves more than this fraction of the target's "
         "volume outside, split the cage's quad strips there and fit again (default "

@@ -82,7 +82,7 @@ def patch_deviation(patchset, base, dense="ev", context=None):
     }
 
 
-def normal_jumps(patchset, base, samples=None, context=None):
+def normal_jumps(patchset, base, samples=None, context=None, ev_vertex=None):
     """Angles between the two patches' normals along every shared B-rep edge.
 
     Parameters
@@ -94,6 +94,9 @@ def normal_jumps(patchset, base, samples=None, context=None):
         measuring parameters of a graded knot vector (dense near both ends) on edges
         with an extraordinary end, 9 even ones elsewhere.
     context : the ``PatchContext`` of ``base``, or None (as :func:`patch_deviation`).
+    ev_vertex : optional (nv,) bool per B-rep vertex of the topology, True at an
+        extraordinary vertex; default: the B-rep vertices that lie on the exact limit point of
+        an extraordinary vertex (the graded export's vertices do; fitted ones need this).
 
     Returns
     -------
@@ -111,7 +114,9 @@ def normal_jumps(patchset, base, samples=None, context=None):
     ends = topo.vertices[topo.edge_vertices]
     ev_points = ctx.limit[ctx.is_ev]
     ev_edge = np.zeros(n_edges, dtype=bool)
-    if len(ev_points):
+    if ev_vertex is not None:
+        ev_edge = np.asarray(ev_vertex, dtype=bool)[topo.edge_vertices].any(axis=1)
+    elif len(ev_points):
         from scipy.spatial import cKDTree
 
         near = cKDTree(ev_points).query(ends.reshape(-1, 3))[0].reshape(n_edges, 2)

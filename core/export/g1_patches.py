@@ -3,16 +3,17 @@
 
 The light alternative to the graded export (:mod:`core.export.bspline`): one B-spline face
 per quad of the cage (the cage itself if it is all quads, else its first Catmull-Clark
-refinement), with at most one interior knot per direction.
+refinement), with two double interior knots per direction at most.
 
 Method
 ------
 * A *regular* quad (its four corners have valence 4) is exactly its limit surface: the
   bicubic Bezier patch of its 4 x 4 B-spline stencil (C2 with its regular neighbours).
 * A quad with an extraordinary corner (EV, valence ``n != 4``) becomes a *free* patch: a
-  bicubic B-spline with a double knot at 1/2 in each direction (6 x 6 poles, C1 inside).
-  Its poles are the solution of one sparse least-squares problem over all free patches:
-  they fit exact limit points (4 Gauss points per knot span and direction) subject to
+  bicubic B-spline with double knots at ``h`` and ``1 - h`` in each direction
+  (``h`` = :data:`EV_SPAN`; 8 x 8 poles, C1 inside). Its poles are the solution of one
+  sparse least-squares problem over all free patches: they fit exact limit points (the
+  squared distance integrated by 4 x 4 Gauss points per pair of knot spans) subject to
 
   - C0: neighbouring patches share their boundary poles (one unknown per shared pole; a
     free patch's side next to a regular quad takes the quad's side, its knot-inserted
@@ -21,13 +22,15 @@ Method
     Peters' G1 constructions: for the edge ``b(t)`` from vertex ``A`` to ``B`` and the
     inward cross-boundary derivatives ``L(t)``, ``R(t)`` of its two patches,
     ``L(t) + R(t) = alpha(t) b'(t)`` with
-    ``alpha(t) = 2 cos(2 pi / n_A) (1 - 2 t)`` on ``[0, 1/2]`` and
-    ``alpha(t) = -2 cos(2 pi / n_B) (2 t - 1)`` on ``[1/2, 1]``
-    (``n`` the valences; ``alpha = 0``, i.e. C1, at valence 4 and at the edge's middle).
-    Both sides are cubic on each knot span, so the condition holds identically once it
-    holds at four parameters per span. At an EV it forces the spoke tangents into one plane
-    (the relation ``x_{k-1} + x_{k+1} = 2 cos(2 pi / n) x_k`` of an affine image of a
-    regular ``n``-gon), so the patches share a normal there.
+    ``alpha(t) = 2 cos(2 pi / n_A) phi(t) - 2 cos(2 pi / n_B) phi(1 - t)``,
+    ``phi(t) = (1 - t / h)^2`` on ``[0, h]`` and 0 beyond (:func:`connection_alpha`):
+    C1 (``alpha = 0``) at valence 4 and on the middle span, where the limit surface is C2
+    across the edge like a regular B-spline, so the departure from the limit stays in the
+    corner spans. Both sides are cubic on each knot span (the edge curve is quadratic on
+    a corner span at an EV), so the condition holds identically once it holds at four
+    parameters per span. At an EV it forces the spoke tangents into one plane (the
+    relation ``x_{k-1} + x_{k+1} = 2 cos(2 pi / n) x_k`` of an affine image of a regular
+    ``n``-gon), so the patches share a normal there.
 
   The constraints enter as a penalty of weight :data:`G1_PENALTY` relative to the fit
   (their residual is about ``1 / G1_PENALTY^2`` of the fit's, far below rounding of the
@@ -37,7 +40,7 @@ Method
 
 The patches meet along whole sides; the shared vertices and edges are returned as a
 :class:`core.export.brep_topology.BRepTopology` (an edge next to a regular quad takes the
-quad's Bezier row, an edge between two free patches their shared 6-pole row).
+quad's Bezier row, an edge between two free patches their shared 8-pole row).
 """
 import numpy as np
 import scipy.sparse as sp
@@ -53,28 +56,59 @@ from core.subdivision.catmull_clark import mesh_topology
 from core.subdivision.limit import LimitEvaluator, quad_mesh_of, quad_stencils
 from core.types import BSplinePatch, PatchSet
 
-SPLIT_KNOTS = np.array([0.0, 0.5, 1.0])
-SPLIT_MULTS = np.array([4, 2, 4], dtype=np.int64)
+EV_SPAN = 0.125
+"""Length ``h`` of a free patch's corner knot spans: the part of an edge next to an
+extraordinary vertex on which the G1 connection departs from C1."""
+SPLIT_KNOTS = np.array([0.0, EV_SPAN, 1.0 - EV_SPAN, 1.0])
+SPLIT_MULTS = np.array([4, 2, 2, 4], dtype=np.int64)
 BEZIER_KNOTS = np.array([0.0, 1.0])
 BEZIER_MULTS = np.array([4, 4], dtype=np.int64)
-N_SPLIT = 6
-"""Poles per direction of a free patch (cubic, double knot at 1/2)."""
+N_SPLIT = int(SPLIT_MULTS.sum()) - 4
+"""Poles per direction of a free patch (cubic, double knots at h and 1 - h)."""
 G1_PENALTY = 1.0e4
 """Weight of the G1 and C1 conditions against the fit to limit points."""
+G1_RESIDUAL_MAX = 1.0e-6
+"""Largest residual of the G1 conditions accepted, as a fraction of the bounding-box diagonal
+(per unit parameter; solved conditions leave rounding, about 1e-11)."""
 
 BSPLINE_TO_BEZIER = np.array([[1.0, 4.0, 1.0, 0.0], [0.0, 4.0, 2.0, 0.0],
                               [0.0, 2.0, 4.0, 0.0], [0.0, 1.0, 4.0, 1.0]]) / 6.0
 """(4, 4) Bezier points of the middle span of a uniform cubic B-spline from its 4 poles."""
-BEZIER_TO_SPLIT = np.array([[1.0, 0.0, 0.0, 0.0], [0.5, 0.5, 0.0, 0.0],
-                            [0.25, 0.5, 0.25, 0.0], [0.0, 0.25, 0.5, 0.25],
-                            [0.0, 0.0, 0.5, 0.5], [0.0, 0.0, 0.0, 1.0]])
-"""(6, 4) poles on the knots :data:`SPLIT_KNOTS` of a cubic Bezier curve (knot insertion)."""
+
+
+def _bernstein(s):
+    """(len(s), 4) cubic Bernstein polynomials at ``s`` in [0, 1]."""
+    s = np.asarray(s, dtype=np.float64)[:, None]
+    k = np.arange(4)
+    return np.array([1.0, 3.0, 3.0, 1.0]) * s ** k * (1.0 - s) ** (3 - k)
+
+
+def _span_bezier(a, b):
+    """(4, N_SPLIT) Bezier points of the span [a, b] of a free curve from its poles."""
+    s = np.linspace(0.0, 1.0, 4)
+    return np.linalg.solve(_bernstein(s), basis_matrix(SPLIT_KNOTS, SPLIT_MULTS, a + (b - a) * s))
+
+
+def _bezier_to_split():
+    """(N_SPLIT, 4) poles on :data:`SPLIT_KNOTS` of a cubic Bezier curve (knot insertion,
+    exact: the Bezier space lies in the spline space)."""
+    s = np.linspace(0.0, 1.0, 2 * N_SPLIT)
+    return np.linalg.lstsq(basis_matrix(SPLIT_KNOTS, SPLIT_MULTS, s), _bernstein(s), rcond=None)[0]
+
+
+BEZIER_TO_SPLIT = _bezier_to_split()
+"""(N_SPLIT, 4) poles on the knots :data:`SPLIT_KNOTS` of a cubic Bezier curve."""
+THIRD_DIFFERENCE = np.array([[-1.0, 3.0, -3.0, 1.0]])
+"""(1, 4) third difference of 4 Bezier points: zero iff the span is quadratic."""
 
 
 def _gauss_params(per_span=4):
-    """(2 per_span,) Gauss-Legendre parameters in each half of [0, 1]."""
-    x = 0.5 * (np.polynomial.legendre.leggauss(per_span)[0] + 1.0)
-    return np.concatenate([0.5 * x, 0.5 + 0.5 * x])
+    """(spans per_span,) Gauss-Legendre parameters in each knot span of :data:`SPLIT_KNOTS` and
+    their quadrature weights (summing to 1)."""
+    x, w = np.polynomial.legendre.leggauss(per_span)
+    a, b = SPLIT_KNOTS[:-1], SPLIT_KNOTS[1:]
+    return ((a[:, None] + (b - a)[:, None] * 0.5 * (x[None, :] + 1.0)).reshape(-1),
+            (0.5 * (b - a)[:, None] * w[None, :]).reshape(-1))
 
 
 def _side_slots(n):
@@ -94,15 +128,15 @@ def _side_uv(side, s):
 
 
 def _tensor_rows(u, v, du, dv):
-    """(p, 36) weights of a free patch's poles for the point or derivative at (u, v)."""
+    """(p, N_SPLIT^2) weights of a free patch's poles for the point or derivative at (u, v)."""
     bu = basis_matrix(SPLIT_KNOTS, SPLIT_MULTS, u, du)
     bv = basis_matrix(SPLIT_KNOTS, SPLIT_MULTS, v, dv)
     return (bu[:, :, None] * bv[:, None, :]).reshape(len(u), -1)
 
 
 def _side_derivatives(side, s):
-    """Pole weights (p, 36) of the derivative along ``side`` (towards corner side + 1) and
-    of the inward cross-boundary derivative, at positions ``s`` (p,) along it."""
+    """Pole weights (p, N_SPLIT^2) of the derivative along ``side`` (towards corner side + 1)
+    and of the inward cross-boundary derivative, at positions ``s`` (p,) along it."""
     u, v = _side_uv(side, s)
     d_u = _tensor_rows(u, v, 1, 0)
     d_v = _tensor_rows(u, v, 0, 1)
@@ -115,20 +149,14 @@ def _side_derivatives(side, s):
 def connection_alpha(t, valence_start, valence_end):
     """The G1 connection function ``alpha(t)`` along edges (module docstring).
 
-    With ``c = cos(2 pi / n)`` of each end (0 at valence 4):
-
-    * both ends extraordinary: linear, ``2 c_start (1 - t) - 2 c_end t``;
-    * only the start: ``2 c (1 - 4 t / 3)`` on ``[0, 1/2]``, ``8 c (1 - t)^2 / 3`` on
-      ``[1/2, 1]`` (C1 at 1/2, value and slope 0 at the valence-4 end); mirrored for only
-      the end;
-    * neither: 0 (C1).
-
-    ``alpha`` reaches a valence-4 vertex with zero slope: there the G1 conditions of the
-    four edges are compatible only when opposite edges leave with equal slopes (the vertex
-    enclosure condition of an even valence), and zero slopes keep the regular edges beyond
-    it C1. It is C1 at the double knot 1/2: the patches are C1 there, so a kink of
-    ``alpha`` would force a kink of the edge curve's tangent length (or a zero tangent).
-    The quadratic half needs a quadratic edge curve on it (:func:`_g1_system`).
+    ``alpha(t) = 2 c_start phi(t) - 2 c_end phi(1 - t)`` with ``c = cos(2 pi / n)`` of each
+    end (0 at valence 4) and ``phi(t) = (1 - t / h)^2`` on ``[0, h]``, 0 beyond
+    (``h`` = :data:`EV_SPAN`). At an extraordinary vertex ``alpha = 2 c`` puts the spoke
+    tangents into one plane; ``phi`` reaches 0 at the double knot ``h`` with value and
+    slope, so ``alpha`` is C1 where the patches are, and the edge joins C1 beyond, like the
+    limit surface (``alpha`` reaches a valence-4 vertex identically 0, so the four C1
+    conditions there are compatible). ``alpha b'`` stays cubic on the corner span because
+    the edge curve is quadratic there (:func:`_g1_system`).
 
     Parameters
     ----------
@@ -139,16 +167,13 @@ def connection_alpha(t, valence_start, valence_end):
     -------
     (p,) float64
     """
-    ev_start, ev_end = valence_start != 4, valence_end != 4
-    c_start = np.where(ev_start, np.cos(2.0 * np.pi / valence_start), 0.0)
-    c_end = np.where(ev_end, np.cos(2.0 * np.pi / valence_end), 0.0)
-    both = 2.0 * c_start * (1.0 - t) - 2.0 * c_end * t
+    c_start = np.where(valence_start != 4, np.cos(2.0 * np.pi / valence_start), 0.0)
+    c_end = np.where(valence_end != 4, np.cos(2.0 * np.pi / valence_end), 0.0)
 
-    def one_end(c, s):
-        return np.where(s < 0.5, 2.0 * c * (1.0 - 4.0 * s / 3.0), 8.0 * c * (1.0 - s) ** 2 / 3.0)
+    def phi(s):
+        return np.clip(1.0 - s / EV_SPAN, 0.0, None) ** 2
 
-    return np.select([ev_start & ev_end, ev_start, ev_end],
-                     [both, one_end(c_start, t), -one_end(c_end, 1.0 - t)], 0.0)
+    return 2.0 * c_start * phi(t) - 2.0 * c_end * phi(1.0 - t)
 
 
 class _Layout:
@@ -212,15 +237,17 @@ def _regular_bezier(quads, topo):
 
 
 def _fit_system(layout, quads, evaluator, free_faces):
-    """Least-squares rows fitting free patches to exact limit points (4 per span each way)."""
-    s = _gauss_params()
-    U, V = np.meshgrid(s, s, indexing="ij")
-    U, V = U.reshape(-1), V.reshape(-1)
-    w = _tensor_rows(U, V, 0, 0)
+    """Least-squares rows fitting free patches to exact limit points: the squared distance
+    integrated over each patch's parameter square (4 x 4 Gauss points per pair of spans,
+    rows scaled by the square roots of their quadrature weights)."""
+    s, q = _gauss_params()
+    U, V = (a.reshape(-1) for a in np.meshgrid(s, s, indexing="ij"))
+    root = np.sqrt(np.outer(q, q).reshape(-1))
+    w = _tensor_rows(U, V, 0, 0) * root[:, None]
     faces = np.repeat(free_faces, len(U))
     A, c = layout.split_columns(np.tile(w, (len(free_faces), 1)), faces)
     target = evaluator.evaluate(faces, np.tile(U, len(free_faces)), np.tile(V, len(free_faces)))
-    return A, target - c
+    return A, target * np.tile(root, len(free_faces))[:, None] - c
 
 
 def _g1_system(layout, quads, topo, free, valence):
@@ -237,7 +264,7 @@ def _g1_system(layout, quads, topo, free, valence):
     rep = rep[free[face] | free[twin_face]]
     if not len(rep):
         return None, None
-    t = _gauss_params()
+    t = _gauss_params()[0]
     p = len(t)
     c_near = np.repeat(rep, p)
     c_far = np.repeat(topo.twin[rep], p)
@@ -252,16 +279,16 @@ def _g1_system(layout, quads, topo, free, valence):
     ev_start = valence[fv[rep]] != 4
     ev_end = valence[fv[topo.next_corner[rep]]] != 4
     sides = _side_slots(N_SPLIT)
-    for mask, weights in ((ev_start & ~ev_end, [0.0, 0.0, -0.5, 2.5, -3.0, 1.0]),
-                          (~ev_start & ev_end, [1.0, -3.0, 2.5, -0.5, 0.0, 0.0])):
+    first = THIRD_DIFFERENCE @ _span_bezier(SPLIT_KNOTS[0], SPLIT_KNOTS[1])
+    last = THIRD_DIFFERENCE @ _span_bezier(SPLIT_KNOTS[-2], SPLIT_KNOTS[-1])
+    for mask, weights in ((ev_start, first), (ev_end, last)):
         c = rep[mask]
-        if not len(c):
-            continue
-        w = np.zeros((len(c), N_SPLIT * N_SPLIT))
-        w[np.arange(len(c))[:, None], sides[c % 4]] = weights
-        A_q, c_q = layout.split_columns(w, c // 4)
-        A.append(A_q)
-        y.append(-c_q)
+        for row in weights:
+            w = np.zeros((len(c), N_SPLIT * N_SPLIT))
+            w[np.arange(len(c))[:, None], sides[c % 4]] = row
+            A_q, c_q = layout.split_columns(w, c // 4)
+            A.append(A_q)
+            y.append(-c_q)
     return sp.vstack(A).tocsr(), np.concatenate(y)
 
 
@@ -348,7 +375,9 @@ def g1_surface_patches(base, measure=True):
     Raises
     ------
     ExportError when ``base`` has crease edges (their limit surface has no tangent plane to
-        join G1; the graded export handles them).
+        join G1; the graded export handles them), or when the solved poles miss the G1
+        conditions by more than :data:`G1_RESIDUAL_MAX` of the cage's bounding-box diagonal
+        (conditions that contradict each other), rather than writing a surface with kinks.
     """
     if base.n_creases:
         raise ExportError(f"the G1 export does not support crease edges: the cage has "
@@ -371,6 +400,11 @@ def g1_surface_patches(base, measure=True):
         x = _solve(A_fit, y_fit, A_g1, y_g1)
         slots[layout.unknown >= 0] = x[layout.unknown[layout.unknown >= 0]]
         residual = float(np.abs(A_g1 @ x - y_g1).max()) if A_g1 is not None else 0.0
+        diagonal = float(np.linalg.norm(np.ptp(quads.vertices[np.unique(fv)], axis=0)))
+        if residual > G1_RESIDUAL_MAX * diagonal:
+            raise ExportError(f"the G1 conditions of this cage could not be met (residual "
+                              f"{residual / diagonal:.1e} of the bounding-box diagonal); use "
+                              "the exact (graded) export")
     n2 = N_SPLIT * N_SPLIT
     patches = []
     for f in range(quads.n_faces):
@@ -404,5 +438,6 @@ def g1_surface_patches(base, measure=True):
     result = PatchSet(patches, face_of_patch, info, topology)
     if measure:
         info.update(patch_deviation(result, quads, context=ctx))
-        info.update(normal_jumps(result, quads, context=ctx))
+        used = np.unique(fv)
+        info.update(normal_jumps(result, quads, context=ctx, ev_vertex=valence[used] != 4))
     return result

@@ -6,14 +6,23 @@ caller) whose shape is an ADVANCED_BREP_SHAPE_REPRESENTATION holding one
 MANIFOLD_SOLID_BREP; lengths in millimetres, distance uncertainty = the B-rep
 tolerance. Each B-rep vertex and edge is one entity (VERTEX_POINT, EDGE_CURVE with a
 B_SPLINE_CURVE_WITH_KNOTS) referenced by both faces; each face is an ADVANCED_FACE on
-a B_SPLINE_SURFACE_WITH_KNOTS bounded by one EDGE_LOOP. Edges carry no parameter
-curves; readers compute them from the 3-D curves, which lie on the patch boundaries.
+a B_SPLINE_SURFACE_WITH_KNOTS bounded by one EDGE_LOOP. Each edge's geometry is a
+SURFACE_CURVE: its 3-D B-spline and, on each of its two faces, its parameter curve (PCURVE),
+the straight segment in ``(u, v)`` that the topology gives, as a degree-1 B-spline with the
+3-D curve's parameter. A reader that finds no parameter curves projects the 3-D curves onto
+the surfaces (OpenCascade's ``ShapeFix_Edge::FixAddPCurve``), which costs more than reading
+the whole file; the segments are shared by every use with the same end points.
 """
 from functools import lru_cache
 
 import numpy as np
 
 SCHEMA = "AUTOMOTIVE_DESIGN { 1 0 10303 214 1 1 1 1 }"
+POINT_DECIMALS = 9
+"""Decimals of the points' coordinates (millimetres; parameters in ``(u, v)``): a rounding of
+at most 5e-10 mm, far inside the B-rep tolerance :data:`core.tolerances.BREP_MM`, and the
+points that vertices, curves and surfaces share are one entity each, so the rounding opens no
+gap; short literals are most of what a reader parses."""
 
 
 def step_reals(values):
@@ -21,6 +30,14 @@ def step_reals(values):
     always with a decimal point (``%#.17G``). Returns a list of str."""
     flat = np.asarray(values, dtype=np.float64).reshape(-1).tolist()
     return (("%#.17G," * len(flat)) % tuple(flat)).split(",")[:-1]
+
+
+def step_fixed_reals(values, decimals=POINT_DECIMALS):
+    """STEP REAL literals of a float array rounded to ``decimals`` decimals, without trailing
+    zeros (``-1.25``, ``3.``, ``0.``). Returns a list of str."""
+    flat = np.round(np.asarray(values, dtype=np.float64).reshape(-1), decimals) + 0.0
+    text = ((f"%.{decimals}f," * len(flat)) % tuple(flat.tolist())).split(",")[:-1]
+    return [t.rstrip("0") for t in text]
 
 
 def step_real(value):
@@ -46,14 +63,17 @@ class _Entities:
         return len(self.lines)
 
     def points(self, xyz):
-        """The CARTESIAN_POINT ids of the rows of ``xyz`` (n, 3): one entity per distinct
-        point, shared by every vertex, curve and surface that has a pole there (the poles
-        along a shared patch side are equal bit for bit), so each is written and read once.
+        """The CARTESIAN_POINT ids of the rows of ``xyz`` (n, d), d = 3 (model space) or 2
+        (parameter space): one entity per distinct point, shared by every vertex, curve and
+        surface that has a pole there (the poles along a shared patch side are equal bit for
+        bit), so each is written and read once.
         """
-        reals = step_reals(xyz)
+        xyz = np.asarray(xyz, dtype=np.float64)
+        reals = step_fixed_reals(xyz)
+        d = xyz.shape[1]
         ids = []
-        for i in range(0, len(reals), 3):
-            text = f"CARTESIAN_POINT('',({reals[i]},{reals[i + 1]},{reals[i + 2]}))"
+        for i in range(0, len(reals), d):
+            text = f"CARTESIAN_POINT('',({','.join(reals[i:i + d])}))"
             known = self.point_ids.get(text)
             if known is None:
                 known = self.point_ids[text] = self.add(text)
@@ -102,6 +122,20 @@ def _reals(values):
     return "(" + ",".join(step_reals(values)) + ")"
 
 
+def _segment(ent, segments, uv, context_2d):
+    """The DEFINITIONAL_REPRESENTATION of the ``(u, v)`` segment ``uv`` (2, 2) from its
+    start to its end point, linear in the parameter on [0, 1] (a degree-1 B-spline), made
+    once per distinct segment (``segments`` maps its end points to the entity id)."""
+    key = tuple(np.asarray(uv, dtype=np.float64).reshape(-1).tolist())
+    known = segments.get(key)
+    if known is None:
+        ends = ent.points(np.asarray(uv, dtype=np.float64).reshape(2, 2))
+        line = ent.add(f"B_SPLINE_CURVE_WITH_KNOTS('',1,{_refs(ends)},.POLYLINE_FORM.,.F.,.F.,"
+                       "(2,2),(0.,1.),.UNSPECIFIED.)")
+        known = segments[key] = ent.add(f"DEFINITIONAL_REPRESENTATION('',(#{line}),#{context_2d})")
+    return known
+
+
 def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970-01-01T00:00:00"):
     """AP214 STEP text of one solid bounded by ``patches``.
 
@@ -140,6 +174,24 @@ def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970
                       f"(#{uncertainty})) GLOBAL_UNIT_ASSIGNED_CONTEXT((#{mm},#{rad},#{sr})) "
                       "REPRESENTATION_CONTEXT('Context #1','3D Context with UNIT and UNCERTAINTY') )")
 
+    context_2d = ent.add("( GEOMETRIC_REPRESENTATION_CONTEXT(2) "
+                         "PARAMETRIC_REPRESENTATION_CONTEXT() REPRESENTATION_CONTEXT('2D SPACE','') )")
+    segments = {}
+    surface_ids = []
+    for patch in patches:
+        poles = np.asarray(patch.poles)
+        ids = np.asarray(ent.points(poles.reshape(-1, 3))).reshape(poles.shape[:2])
+        grid = "(" + ",".join(_refs(row) for row in ids.tolist()) + ")"
+        u_mults, u_knots = _knot_args(patch.u_knots, patch.u_mults)
+        v_mults, v_knots = _knot_args(patch.v_knots, patch.v_mults)
+        surface_ids.append(ent.add(f"B_SPLINE_SURFACE_WITH_KNOTS('',{int(patch.degree_u)},"
+                                   f"{int(patch.degree_v)},{grid},.UNSPECIFIED.,.F.,.F.,.F.,"
+                                   f"{u_mults},{v_mults},{u_knots},{v_knots},.UNSPECIFIED.)"))
+    edge_pcurves = [[] for _ in t.edge_curves]
+    for u in range(len(t.use_edge)):
+        segment = _segment(ent, segments, t.use_uv[u], context_2d)
+        edge_pcurves[t.use_edge[u]].append(
+            ent.add(f"PCURVE('',#{surface_ids[t.use_face[u]]},#{segment})"))
     vertex_ids = [ent.add(f"VERTEX_POINT('',#{p})") for p in ent.points(t.vertices)]
     edge_ids = []
     for e, curve in enumerate(t.edge_curves):
@@ -147,21 +199,14 @@ def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970
         mults, knots = _knot_args(curve.knots, curve.mults)
         bspline = ent.add(f"B_SPLINE_CURVE_WITH_KNOTS('',{int(curve.degree)},{_refs(poles)},"
                           f".UNSPECIFIED.,.F.,.F.,{mults},{knots},.UNSPECIFIED.)")
+        on_surfaces = ent.add(f"SURFACE_CURVE('',#{bspline},{_refs(edge_pcurves[e])},.CURVE_3D.)")
         start, end = t.edge_vertices[e]
         edge_ids.append(ent.add(f"EDGE_CURVE('',#{vertex_ids[start]},#{vertex_ids[end]},"
-                                f"#{bspline},.T.)"))
+                                f"#{on_surfaces},.T.)"))
     offsets = t.loop_offsets()
     sense = ".F." if reverse else ".T."
     face_ids = []
-    for f, patch in enumerate(patches):
-        poles = np.asarray(patch.poles)
-        ids = np.asarray(ent.points(poles.reshape(-1, 3))).reshape(poles.shape[:2])
-        grid = "(" + ",".join(_refs(row) for row in ids.tolist()) + ")"
-        u_mults, u_knots = _knot_args(patch.u_knots, patch.u_mults)
-        v_mults, v_knots = _knot_args(patch.v_knots, patch.v_mults)
-        surface = ent.add(f"B_SPLINE_SURFACE_WITH_KNOTS('',{int(patch.degree_u)},"
-                          f"{int(patch.degree_v)},{grid},.UNSPECIFIED.,.F.,.F.,.F.,"
-                          f"{u_mults},{v_mults},{u_knots},{v_knots},.UNSPECIFIED.)")
+    for f, surface in enumerate(surface_ids):
         oriented = [ent.add(f"ORIENTED_EDGE('',*,*,#{edge_ids[t.use_edge[u]]},"
                             f"{'.F.' if t.use_reversed[u] else '.T.'})")
                     for u in range(offsets[f], offsets[f + 1])]

@@ -6,13 +6,14 @@ from core.types import PatchesResult
 
 
 def run_patches(fit, params, progress):
-    """One B-spline patch per quad of the fitted cage (graded at extraordinary vertices).
+    """One B-spline patch per quad of the fitted cage: graded at extraordinary vertices
+    (``params.export == "exact"``, grading depth ``core.params.EXPORT_DEPTH``) or the light
+    G1 patches (``"g1"``, :mod:`core.export.g1_patches`).
 
     Parameters
     ----------
     fit : core.types.FitResult.
-    params : core.params.ReconstructionParams (unused: the grading depth is the
-        exporter's default, ``core.params.EXPORT_DEPTH``).
+    params : core.params.ReconstructionParams; ``export`` chooses the surface form.
     progress : core.progress.Progress; cancellable before the patches are built.
 
     Returns
@@ -23,9 +24,11 @@ def run_patches(fit, params, progress):
     ------
     ExportError
         The fitted cage's limit surface crosses itself (the check ``subd-to-step`` makes,
-        ``core.subdivision.limit_crossings.export_limit_crossings``): no solid is built of it.
+        ``core.subdivision.limit_crossings.export_limit_crossings``): no solid is built of it;
+        or ``export`` is ``g1`` and the cage has crease edges.
     """
     from core.export.bspline import limit_surface_patches
+    from core.export.g1_patches import g1_surface_patches
     from core.subdivision.limit_crossings import export_limit_crossings
 
     progress.check_cancel()
@@ -35,5 +38,8 @@ def run_patches(fit, params, progress):
         why = (f"; the unfitted base mesh's limit surface already crosses itself ({cage} "
                f"pairs at the fit's level {fit.levels})" if cage else "")
         raise ExportError(f"the fitted cage: {crossings.message()}{why}")
-    patches = limit_surface_patches(fit.cage)
+    if params.export == "g1":
+        patches = g1_surface_patches(fit.cage)
+    else:
+        patches = limit_surface_patches(fit.cage)
     return PatchesResult(patches, dict(patches.info))

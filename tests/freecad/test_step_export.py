@@ -56,6 +56,20 @@ def test_step_file_is_ap214_in_millimetres_with_the_input_name(exported, name):
 
 
 @pytest.mark.parametrize("name", ["mixed_prism", "genus3_block"])
+def test_every_edge_carries_its_parameter_lines_on_both_faces(exported, name):
+    """Each EDGE_CURVE lies on a SURFACE_CURVE with two PCURVEs (one per face), and the
+    solid read back has a parameter curve of every edge on each of its faces."""
+    solid, _, step = exported[name]
+    text = step.read_text()
+    n_edges = text.count("EDGE_CURVE(")
+    assert text.count("SURFACE_CURVE(") == n_edges == len(solid.Edges)
+    assert text.count("PCURVE(") == 2 * n_edges
+    for face in solid.Faces:
+        for edge in face.Edges:
+            assert face.curveOnSurface(edge)
+
+
+@pytest.mark.parametrize("name", ["mixed_prism", "genus3_block"])
 def test_each_point_is_written_once(exported, name):
     """Vertices, edge curves and neighbouring patches share their equal poles' entities."""
     import re

@@ -139,6 +139,7 @@ def test_g1_export_is_a_valid_light_solid(tmp_path, name):
     assert report["brep"]["volume_error_rel"] < 1e-2
     assert run("subd-to-step", cage, "-o", tmp_path / "exact.step").returncode == 0
     assert os.path.getsize(tmp_path / "g1.step") < 0.5 * os.path.getsize(tmp_path / "exact.step")
+    assert os.path.getsize(tmp_path / "g1.step") <= 6000 * report["patches"]["n_patches"]
 
 
 def test_unknown_export_form_is_refused(tmp_path):
