@@ -250,7 +250,7 @@ def test_stage_process_runs_the_chain_shapes_included():
         _build(plain)
         assert api.recompute(plain).ok
         _build(moved)
-        ran = _record_runs(moved)
+        ran = record_runs(moved.Objects)
         api.run_in_transaction(moved, "Chain", lambda: None, run_job=ProcessRunner(worker))
         assert ran == [], "doc.recompute() found every stage up to date"
         expected, got = _kinds(plain), _kinds(moved)
