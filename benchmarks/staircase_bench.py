@@ -8,11 +8,11 @@ Usage::
 Per dev mesh: its triangles, the edges of its closed feature network
 (:func:`core.quadmesh.creases.closed_network` of
 :func:`core.quadmesh.creases.feature_edges`), the share of the network's vertices that are
-corners (:func:`core.quadmesh.feature_decimation.corner_vertices`), the share of its edges in
-chains of at most three edges between corners, and whether the corner share exceeds
-:data:`STAIRCASE_CORNER_SHARE`: a criterion that tells a raw marching-cubes result's voxel
-staircase (zig-zag lines that turn or branch every one or two edges) from a machined part's
-feature lines (which turn only at their ends). Writes ``benchmarks/STAIRCASE_RESULTS.md``.
+corners (:func:`core.quadmesh.decimation.feature_decimation.corner_vertices`), the share of its
+edges in chains of at most three edges between corners, and whether the corner share exceeds
+:data:`STAIRCASE_CORNER_SHARE`: a criterion that tells a raw marching-cubes result's voxel staircase
+(zig-zag lines that turn or branch every one or two edges) from a machined part's feature lines
+(which turn only at their ends). Writes ``benchmarks/STAIRCASE_RESULTS.md``.
 
 The paired decimation does not use it. Skipping the creased ladder for such a staircase was
 measured end to end (``benchmarks/TO_RESULTS.md``, the rows labelled "variant, not kept"):
@@ -58,7 +58,7 @@ def measure(path):
     import trimesh
 
     from core.quadmesh.creases import closed_network, feature_edges
-    from core.quadmesh.feature_decimation import corner_vertices
+    from core.quadmesh.decimation.feature_decimation import corner_vertices
 
     mesh = trimesh.load(path, process=True)
     vertices = np.asarray(mesh.vertices, dtype=np.float64)

@@ -7,17 +7,16 @@ Usage::
 
 QSlim sizes its triangles by the quadric error, so thin plates and struts of a TO result get
 triangles many times longer than the wall is thick. This measures one remedy that the paired
-decimation (:mod:`core.quadmesh.paired_decimation`) does not use: before pairing, split the
-edges of the evened-out decimation longer than ``ratio`` times the local wall thickness (the
+decimation (:mod:`core.quadmesh.decimation.paired_decimation`) does not use: before pairing, split
+the edges of the evened-out decimation longer than ``ratio`` times the local wall thickness (the
 inward ray from the target point to where it leaves the solid,
 :meth:`core.target_surface.TargetSurface.first_exit`), optionally only those across which the
-decimation folds (the two triangles' normals at a cosine below ``fold``), longest first, no
-two in one triangle per pass, each new vertex at the closest target point among the target
-triangles facing the edge's way (so it does not snap to the far wall of a thin plate). Per
-mesh, budget and variant: the cage's faces, the self-crossing triangle pairs of its level-2
-limit surface and its inverted faces (after the ladder's unshrinking and edits,
-``paired_decimation._repaired``), against the cage without splits. Writes
-``benchmarks/THIN_SPLIT_RESULTS.md``.
+decimation folds (the two triangles' normals at a cosine below ``fold``), longest first, no two in
+one triangle per pass, each new vertex at the closest target point among the target triangles facing
+the edge's way (so it does not snap to the far wall of a thin plate). Per mesh, budget and variant:
+the cage's faces, the self-crossing triangle pairs of its level-2 limit surface and its inverted
+faces (after the ladder's unshrinking and edits, ``paired_decimation._repaired``), against the cage
+without splits. Writes ``benchmarks/THIN_SPLIT_RESULTS.md``.
 
 The crossing faces of these cages are faces folded over themselves around thin members (the
 normals at their corners disagree), not faces long against the wall: nearly every face of a
@@ -191,9 +190,9 @@ def measure(path, budgets):
     """Rows ``(mesh, budget, variant, faces, crossings, inverted, seconds)`` of one mesh."""
     import trimesh
 
-    import core.quadmesh.paired_decimation as paired
-    from core.quadmesh.decimation import Decimation
-    from core.quadmesh.even_triangulation import even_triangulation
+    import core.quadmesh.decimation.paired_decimation as paired
+    from core.quadmesh.decimation.decimation import Decimation
+    from core.quadmesh.decimation.even_triangulation import even_triangulation
     from core.target_surface import TargetSurface
 
     mesh = trimesh.load(path, process=True)

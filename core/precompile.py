@@ -11,7 +11,7 @@ import time
 import numpy as np
 
 from core.box_tree import box_pairs, face_boxes
-from core.quadmesh.fold_free_decimation import FoldFreeDecimation
+from core.quadmesh.decimation.fold_free_decimation import FoldFreeDecimation
 from core.self_intersection import find_self_intersections
 from core.target_surface import TargetSurface
 

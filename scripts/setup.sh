@@ -54,7 +54,7 @@ fi
   || { echo "setup: error: the packages do not import in .venv" >&2; exit 1; }
 (cd /tmp && freecadcmd -c "import trimesh, manifold3d, igl, threadpoolctl, numba, fast_simplification; print('setup: FreeCAD sees trimesh', trimesh.__version__)" 2>/dev/null | grep -q "setup: FreeCAD sees") \
   || { echo "setup: error: freecadcmd cannot import the runtime packages from $PACKAGES" >&2; exit 1; }
-# numba compiles the spatial queries once per machine (about 10 s) and caches them in core/__pycache__
+# numba compiles the spatial queries once per machine (about 10 s) and caches them in core's __pycache__ folders
 compiled=$(.venv/bin/python -c "from core.precompile import compile_now; print('%.1f' % compile_now())") \
   || { echo "setup: error: numba could not compile the spatial queries (core/precompile.py)" >&2; exit 1; }
 case "$compiled" in 0.*) ;; *) echo "setup: compiled the spatial queries with numba in $compiled s" ;; esac

@@ -4,7 +4,7 @@
 A crease of the cage is the uniform cubic B-spline curve of its crease polygon
 (:mod:`core.subdivision.catmull_clark`), so a crease polygon whose vertices lie on the
 target's feature line, as the feature-preserving decimation leaves them
-(:mod:`core.quadmesh.feature_decimation`), gives a curve that cuts inside every turn: a
+(:mod:`core.quadmesh.decimation.feature_decimation`), gives a curve that cuts inside every turn: a
 hole's rim of five crease vertices on a circle of radius ``r`` has a limit curve of radius
 about ``0.77 r``, and the material of the limit solid reaches into the hole. On a machined
 part with many such holes the cage's limit solid leaves a clear share of the target's
@@ -29,7 +29,7 @@ limit surface would cross itself (:func:`core.fitting.crossings.hold_back_crossi
 The inside fit that starts from it leaves much less of the target's volume outside and comes
 closer on average (``benchmarks/FIT_RESULTS.md``). What can stay outside is where moving a rim
 out would fold wide fan quads round it (held back; the base mesh does not make those quads,
-:func:`core.quadmesh.paired_decimation._rim_folds`) and where the crease polygons are too
+:func:`core.quadmesh.decimation.paired_decimation._rim_folds`) and where the crease polygons are too
 coarse for their outlines (a rounded octagon of a few crease vertices keeps some of its
 crease curve off the feature lines).
 """

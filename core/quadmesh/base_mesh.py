@@ -1,15 +1,17 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Coarse quad base mesh of a labelled target (paper Sect. 2.3).
 
-1. :mod:`chart_complex`: charts, sides and corners of the labeling, measured on the target.
-2. :mod:`side_signs`: side directions that make every chart a rectilinear polygon.
-3. :mod:`quantize`: integer side lengths (a mixed-integer program) closest to a scale times the
-   measured lengths, every chart polygon closed; the scale is searched for the face budget.
-4. :mod:`lattice`: the unit squares of every integer chart polygon are the quads; side points
-   are shared by both charts of a side, across part interfaces too (parts assembled).
-5. :mod:`embed`: quads placed on the target (corners, sides by arc length, interiors by a
-   Tutte map of each chart region onto its polygon); :mod:`relax` evens them out, each point
-   kept on its own chart or side.
+1. :mod:`.polycube.chart_complex`: charts, sides and corners of the labeling, measured on the
+   target.
+2. :mod:`.polycube.side_signs`: side directions that make every chart a rectilinear polygon.
+3. :mod:`.polycube.quantize`: integer side lengths (a mixed-integer program) closest to a scale
+   times the measured lengths, every chart polygon closed; the scale is searched for the face
+   budget.
+4. :mod:`.polycube.lattice`: the unit squares of every integer chart polygon are the quads; side
+   points are shared by both charts of a side, across part interfaces too (parts assembled).
+5. :mod:`.polycube.embed`: quads placed on the target (corners, sides by arc length, interiors by a
+   Tutte map of each chart region onto its polygon); :mod:`.polycube.relax` evens them out, each
+   point kept on its own chart or side.
 6. Where the limit surface of some quads faces away from the target (a chart one quad across
    a thin wall, whose limit is pulled past the wall's middle), the shortest sides of their
    charts get one unit more as their least length and the layout is quantized again
@@ -29,22 +31,22 @@ from core.errors import InvalidMeshError, LabelingError, OTHER_PARTS, ParameterE
 from core.mesh_topology import connected_face_components, genus_of, polymesh_genus
 from core.params import BASE_MESH_METHODS
 from core.polymesh_checks import check_polymesh
-from core.quadmesh.chart_complex import build_chart_complex
-from core.quadmesh.embed import (interior_point_positions, side_point_positions,
-                                 tutte_coordinates)
 from core.quadmesh.crossing_count import LimitCrossingCount
-from core.quadmesh.lattice import OverlappingChartsError, build_lattice, chart_orientation
 from core.quadmesh.limit_interpolation import unshrink_inverted
 from core.quadmesh.local_repair import repair_inverted
-from core.quadmesh.milp_solve import MilpTimeLimitError
 from core.quadmesh.orientation import inverted_faces
-from core.quadmesh.overlap_cuts import corners_to_cut
-from core.quadmesh.paired_decimation import TIGHTEN_ROUNDS, paired_decimation_base_mesh
-from core.quadmesh.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapsible_sides,
-                                    loop_tables, minimum_faces, quantize, quantize_for_budget,
-                                    rectangular_refinement)
-from core.quadmesh.relax import relax_on_target
-from core.quadmesh.side_signs import make_loops_rectilinear
+from core.quadmesh.decimation.paired_decimation import TIGHTEN_ROUNDS, paired_decimation_base_mesh
+from core.quadmesh.polycube.chart_complex import build_chart_complex
+from core.quadmesh.polycube.embed import (interior_point_positions, side_point_positions,
+                                          tutte_coordinates)
+from core.quadmesh.polycube.lattice import OverlappingChartsError, build_lattice, chart_orientation
+from core.quadmesh.polycube.milp_solve import MilpTimeLimitError
+from core.quadmesh.polycube.overlap_cuts import corners_to_cut
+from core.quadmesh.polycube.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapsible_sides,
+                                             loop_tables, minimum_faces, quantize,
+                                             quantize_for_budget, rectangular_refinement)
+from core.quadmesh.polycube.relax import relax_on_target
+from core.quadmesh.polycube.side_signs import make_loops_rectilinear
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
@@ -103,14 +105,14 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     quad_chart)`` (``quad_chart``: (f,) int64 chart of every face of ``mesh``).
 
     Charts whose integer polygon overlaps itself are cut at the reflex corners next to the
-    overlap (:mod:`core.quadmesh.overlap_cuts`; only those charts, so the others keep their
+    overlap (:mod:`core.quadmesh.polycube.overlap_cuts`; only those charts, so the others keep their
     freedom), and the quantization is repeated at the same scale; a chart that still overlaps
     is cut at more corners, up to its full rectangular refinement (a chart whose refinement
     makes the program infeasible stays whole). Where the cuts made the layout larger than
     ``give_up_faces``, the scale is searched again with them.
 
     Before a program is solved, a linear lower bound on the quads of every layout it could
-    lead to (:func:`core.quadmesh.quantize.minimum_faces`) ends an attempt that cannot stay
+    lead to (:func:`core.quadmesh.polycube.quantize.minimum_faces`) ends an attempt that cannot stay
     within ``give_up_faces``: without refinements always (every later refinement only adds
     constraints, and the retry without collapsible sides has a larger bound), with them only
     when no side is collapsible (then no retry follows, so the outcome is the same failure).
@@ -214,9 +216,9 @@ def _cut_overlapping_chart(complex_, tables, polycube, charts, refine, cuts, unr
     """Cut one more overlapping chart, or cut one further; returns it (None: none left).
 
     The first of ``charts`` that is not split into rectangles yet gets the reflex corners next
-    to its overlapping cells cut (:func:`core.quadmesh.overlap_cuts.corners_to_cut`), added to
-    those it has in ``cuts``; where none is left to cut, all of them (``cuts`` loses the
-    chart). ``refine`` and ``cuts`` are updated in place.
+    to its overlapping cells cut (:func:`core.quadmesh.polycube.overlap_cuts.corners_to_cut`), added
+    to those it has in ``cuts``; where none is left to cut, all of them (``cuts`` loses the chart).
+    ``refine`` and ``cuts`` are updated in place.
     """
     orientation = chart_orientation(complex_, tables, polycube.corner_uv)
     for chart in charts:
@@ -271,16 +273,16 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     With ``method="auto"`` the quantized polycube layout of the labeling (this module's
     docstring) is built first. Where it cannot be built, exceeds ``max_base_faces`` or needs
     more than ``FALLBACK_OVER_BUDGET`` times the budget, the stage falls back to
-    :mod:`core.quadmesh.paired_decimation`, which needs no labeling, and the report says why
-    (``method``, ``fallback_reason``); a layout within that limit is kept even where the
+    :mod:`core.quadmesh.decimation.paired_decimation`, which needs no labeling, and the report says
+    why (``method``, ``fallback_reason``); a layout within that limit is kept even where the
     decimation would meet the budget more closely. Inverted faces
     (:func:`core.quadmesh.orientation.inverted_faces`) of the layout are repaired
-    (:func:`_repaired_layout`) and the self-crossings of its limit surface counted; where
-    inverted faces or crossings remain, the paired decimation is built too and the one with
-    fewer flaws is kept (:func:`_flaw_rank`: a limit surface that crosses itself never wins
-    over one that does not). ``method="polycube"`` never falls back (its
-    errors are raised; layouts up to ``max_base_faces`` are kept, repaired as in ``auto``);
-    ``method="decimation"`` skips the polycube layout.
+    (:func:`_repaired_layout`) and the self-crossings of its limit surface counted; where inverted
+    faces or crossings remain, the paired decimation is built too and the one with fewer flaws is
+    kept (:func:`_flaw_rank`: a limit surface that crosses itself never wins over one that does
+    not). ``method="polycube"`` never falls back (its errors are raised; layouts up to
+    ``max_base_faces`` are kept, repaired as in ``auto``); ``method="decimation"`` skips the
+    polycube layout.
 
     Parameters
     ----------

@@ -7,7 +7,7 @@ limit over a face's length, which makes the limit of a coarse cage fold there
 (``PolyMesh.creases``, :mod:`core.subdivision.catmull_clark`) keep the step. The target's
 feature lines are its edges whose dihedral angle exceeds :data:`CREASE_ANGLE`
 (:func:`feature_edges`); the feature-preserving decimation
-(:mod:`core.quadmesh.feature_decimation`) keeps them as chains of edges of the cage.
+(:mod:`core.quadmesh.decimation.feature_decimation`) keeps them as chains of edges of the cage.
 
 Chains of crease edges that end inside a face region (at a dart: a vertex with one crease
 edge) are cut back until every crease vertex has two or more crease edges
@@ -17,7 +17,7 @@ a chain ends inside only where the cage lost part of its line.
 Tagging only the edges of a QSlim decimation that happen to lie along the feature lines is
 not enough: QSlim crosses many steps diagonally with cage edges, which cannot be creased, and
 the limit surface then crosses itself there. The feature-preserving decimation
-(:mod:`core.quadmesh.feature_decimation`) keeps every line a chain of cage edges.
+(:mod:`core.quadmesh.decimation.feature_decimation`) keeps every line a chain of cage edges.
 """
 import numpy as np
 

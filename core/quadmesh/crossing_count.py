@@ -2,15 +2,15 @@
 """Self-crossings of the limit surfaces of cages that differ from one cage in vertex positions
 only, counted again only where the limit surface moved.
 
-The repairs of the budget ladder of :mod:`core.quadmesh.paired_decimation` judge every trial
-cage by the self-crossing triangle pairs of its level-2 limit surface (as
-``core.subdivision.limit_crossings.count_limit_self_intersections``). Their trials move a few vertices of one
-cage, which moves a part of the limit mesh's triangles; the pairs of two unmoved triangles are
-those of the first cage. So the limit mesh is built once as a matrix of the base vertices, and
-each count tests only the pairs with a moved triangle
-(``core.self_intersection.find_self_intersections(..., among=moved)``), which is faster
-than a whole search when only a few vertices moved. A cage's crease tags (``PolyMesh.creases``) are part of its limit surface
-here as everywhere (the limit mesh is built with the crease rules and masks).
+The repairs of the budget ladder of :mod:`core.quadmesh.decimation.paired_decimation` judge every
+trial cage by the self-crossing triangle pairs of its level-2 limit surface (as
+``core.subdivision.limit_crossings.count_limit_self_intersections``). Their trials move a few
+vertices of one cage, which moves a part of the limit mesh's triangles; the pairs of two unmoved
+triangles are those of the first cage. So the limit mesh is built once as a matrix of the base
+vertices, and each count tests only the pairs with a moved triangle
+(``core.self_intersection.find_self_intersections(..., among=moved)``), which is faster than a whole
+search when only a few vertices moved. A cage's crease tags (``PolyMesh.creases``) are part of its
+limit surface here as everywhere (the limit mesh is built with the crease rules and masks).
 """
 import numpy as np
 
@@ -20,7 +20,8 @@ from core.subdivision.catmull_clark import build_hierarchy
 from core.subdivision.limit import limit_matrices
 
 LEVELS = 2
-"""Subdivision level of the limit mesh checked (as ``core.quadmesh.paired_decimation``)."""
+"""Subdivision level of the limit mesh checked (as
+``core.quadmesh.decimation.paired_decimation``)."""
 
 
 class LimitCrossingCount:

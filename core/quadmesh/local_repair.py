@@ -9,8 +9,8 @@ thin feature. Two other causes of inverted faces were found on paired-decimation
   needs it). Two triangles over the edge of a thin wall can be nearly opposite; the quad's
   limit surface then runs across the wall, not round it;
 - a quad folded over its neighbours: QSlim can leave long sliver triangles facing away from a
-  nearly flat top (:mod:`core.quadmesh.even_triangulation` untangles only planar regions),
-  so a quad there is clockwise seen from outside.
+  nearly flat top (:mod:`core.quadmesh.decimation.even_triangulation` untangles only planar
+  regions), so a quad there is clockwise seen from outside.
 
 Two edits act on such a face: moving one of its corners to the target point nearest the mean
 of the corner's neighbours (which unfolds a folded quad and evens out a pair over a fold), and

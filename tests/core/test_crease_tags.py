@@ -5,8 +5,8 @@ import pytest
 import trimesh
 
 from core.quadmesh.creases import closed_network
-from core.quadmesh.feature_decimation import FeatureDecimation
-from core.quadmesh.paired_decimation import _paired_mesh, paired_decimation_base_mesh
+from core.quadmesh.decimation.feature_decimation import FeatureDecimation
+from core.quadmesh.decimation.paired_decimation import _paired_mesh, paired_decimation_base_mesh
 from core.subdivision import sample_cages as sc
 from core.subdivision.catmull_clark import mesh_topology
 from core.target_surface import TargetSurface

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from core.quadmesh.crossing_count import LimitCrossingCount
-from core.quadmesh.paired_decimation import paired_decimation_base_mesh
+from core.quadmesh.decimation.paired_decimation import paired_decimation_base_mesh
 from core.subdivision.limit_crossings import count_limit_self_intersections
 from core.target_surface import TargetSurface
 from core.types import PolyMesh

@@ -16,7 +16,7 @@ from core.geometry import triangulate
 from core.params import ReconstructionParams
 from core.pipeline import reconstruct, run_stages
 from core.progress import NO_PROGRESS
-from core.quadmesh.paired_decimation import paired_decimation_base_mesh
+from core.quadmesh.decimation.paired_decimation import paired_decimation_base_mesh
 from core.self_intersection import box_pairs, face_boxes, find_self_intersections
 from core.subdivision.limit_crossings import export_limit_crossings
 from core.stages.patches import run_patches

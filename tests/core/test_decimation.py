@@ -1,13 +1,13 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Decimations of one target (core.quadmesh.decimation): from the coarse decimation up to its
-size (which folds small machined features), from the target above it (which does not);
-cached; genus kept."""
+"""Decimations of one target (core.quadmesh.decimation.decimation): from the coarse decimation up to
+its size (which folds small machined features), from the target above it (which does not); cached;
+genus kept."""
 
 import numpy as np
 import pytest
 
 from core.mesh_topology import genus_of
-from core.quadmesh.decimation import REDUCE_ABOVE, SOURCE_TRIANGLES, Decimation
+from core.quadmesh.decimation.decimation import REDUCE_ABOVE, SOURCE_TRIANGLES, Decimation
 from core.self_intersection import find_self_intersections
 from dev_meshes import load_dev_mesh
 

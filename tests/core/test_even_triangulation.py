@@ -1,14 +1,14 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Even triangulation before the pairing (core.quadmesh.even_triangulation): planar fans get
-interior vertices with the count and topology kept, QSlim's folded triangles on a real
-CAD-like mesh mostly go, and a SIMP iso-surface is left almost as QSlim made it."""
+"""Even triangulation before the pairing (core.quadmesh.decimation.even_triangulation): planar fans
+get interior vertices with the count and topology kept, QSlim's folded triangles on a real CAD-like
+mesh mostly go, and a SIMP iso-surface is left almost as QSlim made it."""
 import igl
 import numpy as np
 import trimesh
 
 from core.geometry import unit_face_normals
 from core.mesh_topology import genus_of, unique_edges
-from core.quadmesh.even_triangulation import even_triangulation
+from core.quadmesh.decimation.even_triangulation import even_triangulation
 from core.target_surface import TargetSurface
 from dev_meshes import load_dev_mesh
 
@@ -79,7 +79,7 @@ def test_a_simp_iso_surface_is_left_almost_as_qslim_made_it():
 
 
 def test_flips_on_a_machined_part_end_in_a_triangulation_no_flip_changes():
-    from core.quadmesh.even_triangulation import _flip_pass
+    from core.quadmesh.decimation.even_triangulation import _flip_pass
 
     target = load_dev_mesh("featuretype.stl")  # counterbores and notches, genus 9
     surface = TargetSurface(target.vertices, target.faces)

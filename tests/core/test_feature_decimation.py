@@ -1,14 +1,14 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Feature-preserving decimation (core.quadmesh.feature_decimation) and the creased cages of
-the paired decimation built on it."""
+"""Feature-preserving decimation (core.quadmesh.decimation.feature_decimation) and the creased cages
+of the paired decimation built on it."""
 import numpy as np
 import pytest
 import trimesh
 
 from core.mesh_topology import genus_of, unique_edges
 from core.quadmesh.creases import feature_edges
-from core.quadmesh.even_triangulation import even_creased_triangulation
-from core.quadmesh.feature_decimation import FeatureDecimation, corner_vertices
+from core.quadmesh.decimation.even_triangulation import even_creased_triangulation
+from core.quadmesh.decimation.feature_decimation import FeatureDecimation, corner_vertices
 from dev_meshes import load_dev_mesh
 
 BORE_RADIUS = 1.1
@@ -110,7 +110,7 @@ def test_evening_a_feature_decimation_keeps_its_feature_lines_and_fattens_its_fa
 
 @pytest.mark.slow
 def test_pairing_never_merges_triangles_across_a_feature_edge():
-    from core.quadmesh.paired_decimation import _paired_mesh, _rim_folds
+    from core.quadmesh.decimation.paired_decimation import _paired_mesh, _rim_folds
     from core.subdivision.catmull_clark import mesh_topology
     from core.target_surface import TargetSurface
 
@@ -137,7 +137,7 @@ def test_creased_cage_of_a_machined_part_is_clean_at_the_default_budget(name):
     """The creased ladder's first cage (300 faces wanted) of two machined parts: no
     inverted face, no crossing of its level-2 limit surface, within the face budget rule
     (with QSlim's edges tagged instead, both cross themselves)."""
-    from core.quadmesh.paired_decimation import _flawed_mesh
+    from core.quadmesh.decimation.paired_decimation import _flawed_mesh
     from core.target_surface import TargetSurface
 
     target = load_dev_mesh(name)

@@ -1,15 +1,15 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Fold-free decimation (core.quadmesh.fold_free_decimation) and the paired cages of thin-strut
-lattices built here: closed, the target's genus, no triangle across a strut, and a limit
+"""Fold-free decimation (core.quadmesh.decimation.fold_free_decimation) and the paired cages of
+thin-strut lattices built here: closed, the target's genus, no triangle across a strut, and a limit
 surface that does not cross itself."""
 import numpy as np
 import pytest
 
 from core.mesh_topology import connected_face_components, genus_of, polymesh_genus
 from core.polymesh_checks import check_polymesh
-from core.quadmesh.fold_free_decimation import (MIN_NORMAL_COSINE, NORMAL_SMOOTHING,
-                                                FoldFreeDecimation, folded_share,
-                                                smoothed_vertex_normals)
+from core.quadmesh.decimation.fold_free_decimation import (MIN_NORMAL_COSINE, NORMAL_SMOOTHING,
+                                                           FoldFreeDecimation, folded_share,
+                                                           smoothed_vertex_normals)
 
 pytestmark = pytest.mark.unit
 
@@ -91,7 +91,7 @@ def test_decimated_lattice_keeps_its_genus_and_no_triangle_spans_a_strut(voxel):
 @pytest.mark.parametrize("voxel", [False, True])
 def test_paired_cage_of_a_thin_strut_lattice_has_a_limit_surface_that_does_not_cross(voxel):
     from core.quadmesh.orientation import inverted_faces
-    from core.quadmesh.paired_decimation import paired_decimation_base_mesh
+    from core.quadmesh.decimation.paired_decimation import paired_decimation_base_mesh
     from core.subdivision.limit_crossings import count_limit_self_intersections
     from core.target_surface import TargetSurface
 

@@ -122,32 +122,47 @@ def import_cycles(files):
 KERNEL = "core"
 """The layer of ``core``'s top-level modules (types, errors, tolerances, geometry, meshes,
 target surface, I/O): the kernel every algorithm uses."""
+QUADMESH_ROUTE = "core.quadmesh.base_mesh"
+"""The base mesh's choice of route (and the package ``core.quadmesh``, which re-exports it):
+above both routes and the modules they share."""
 CORE_LAYERS = {
     KERNEL: set(),
     "core.subdivision": {KERNEL},
     "core.segmentation": {KERNEL},
-    "core.quadmesh": {KERNEL, "core.segmentation", "core.subdivision"},
+    "core.quadmesh": {KERNEL, "core.subdivision"},
+    "core.quadmesh.polycube": {KERNEL, "core.segmentation", "core.subdivision", "core.quadmesh"},
+    "core.quadmesh.decimation": {KERNEL, "core.subdivision", "core.quadmesh"},
+    QUADMESH_ROUTE: {KERNEL, "core.segmentation", "core.subdivision", "core.quadmesh",
+                     "core.quadmesh.polycube", "core.quadmesh.decimation"},
     "core.fitting": {KERNEL, "core.quadmesh", "core.subdivision"},
     "core.export": {KERNEL, "core.subdivision"},
     "core.stages": {KERNEL, "core.subdivision", "core.segmentation", "core.quadmesh",
-                    "core.fitting", "core.export"},
+                    QUADMESH_ROUTE, "core.fitting", "core.export"},
     "core.pipeline": {KERNEL, "core.stages"},
     "core.precompile": {KERNEL, "core.subdivision", "core.segmentation", "core.quadmesh",
+                        "core.quadmesh.polycube", "core.quadmesh.decimation", QUADMESH_ROUTE,
                         "core.fitting", "core.export"},
 }
 """Which layers of ``core`` each layer may import (besides itself): a package of ``core``
 is a layer of its own, the runner ``core.pipeline`` one above the stages, the set-up's
 ``core.precompile`` (which compiles the algorithms' compiled functions) one above the
 algorithms, every other top-level module of ``core`` belongs to the kernel. The kernel imports no algorithm, an
-algorithm package only those below it, only the stages and the runner import the stages."""
+algorithm package only those below it, only the stages and the runner import the stages.
+Inside ``core.quadmesh`` the two routes (``polycube``, ``decimation``) are layers that never
+import each other, both above the modules they share and below the route choice."""
+SUBLAYERS = ("core.pipeline", "core.precompile", "core.quadmesh.polycube",
+             "core.quadmesh.decimation", QUADMESH_ROUTE)
+"""Layers that are a module or a subpackage rather than a package of ``core``."""
 
 
 def core_layer(module):
     """The layer (a key of ``CORE_LAYERS``) of a dotted ``core`` module name."""
-    parts = module.split(".")
-    for top in ("core.pipeline", "core.precompile"):
-        if module == top or _is_within(module, top):
+    if module == "core.quadmesh":
+        return QUADMESH_ROUTE
+    for top in SUBLAYERS:
+        if _is_within(module, top):
             return top
+    parts = module.split(".")
     if len(parts) > 1 and os.path.isdir(os.path.join(REPO, "core", parts[1])):
         return "core." + parts[1]
     return KERNEL
@@ -195,15 +210,24 @@ def test_the_layer_check_sees_an_import_up_the_layers(tmp_path, monkeypatch):
         (tmp_path / "core" / package).mkdir(parents=True)
     (tmp_path / "core" / "geometry.py").write_text("def f():\n    from core.fitting import x\n")
     (tmp_path / "core" / "quadmesh" / "a.py").write_text("from core.stages.fit import run_fit\n")
-    (tmp_path / "core" / "quadmesh" / "b.py").write_text("import core.geometry\n")
     (tmp_path / "core" / "fitting" / "x.py").write_text("from core.quadmesh.b import y\n")
     (tmp_path / "core" / "stages" / "fit.py").write_text("from core.fitting.x import y\n")
+    for route in ("polycube", "decimation"):
+        (tmp_path / "core" / "quadmesh" / route).mkdir()
+    (tmp_path / "core" / "quadmesh" / "polycube" / "p.py").write_text(
+        "from core.quadmesh.decimation.d import z\nfrom core.quadmesh.b import y\n")
+    (tmp_path / "core" / "quadmesh" / "decimation" / "d.py").write_text(
+        "import core.quadmesh.b\n")
+    (tmp_path / "core" / "quadmesh" / "b.py").write_text(
+        "import core.geometry\nfrom core.quadmesh.decimation import d\n")
     (tmp_path / "core" / "newpkg").mkdir()
     (tmp_path / "core" / "newpkg" / "c.py").write_text("")
     assert layer_violations(_python_files("core")) == [
         (os.path.join("core", "geometry.py"), "core.fitting"),
         (os.path.join("core", "newpkg", "c.py"), "undeclared layer core.newpkg"),
-        (os.path.join("core", "quadmesh", "a.py"), "core.stages")]
+        (os.path.join("core", "quadmesh", "a.py"), "core.stages"),
+        (os.path.join("core", "quadmesh", "b.py"), "core.quadmesh.decimation"),
+        (os.path.join("core", "quadmesh", "polycube", "p.py"), "core.quadmesh.decimation")]
 
 
 def test_the_document_objects_never_import_the_api():

@@ -5,11 +5,11 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from core.quadmesh.overlap_cuts import chart_walk, corners_to_cut, reflex_references
-from core.quadmesh.quantize import (LoopTables, first_scale, loop_tables, quantize,
-                                    rectangular_refinement)
-from core.quadmesh.side_signs import make_loops_rectilinear
-from core.quadmesh.chart_complex import build_chart_complex
+from core.quadmesh.polycube.overlap_cuts import chart_walk, corners_to_cut, reflex_references
+from core.quadmesh.polycube.quantize import (LoopTables, first_scale, loop_tables, quantize,
+                                             rectangular_refinement)
+from core.quadmesh.polycube.side_signs import make_loops_rectilinear
+from core.quadmesh.polycube.chart_complex import build_chart_complex
 from tests.core.test_quadmesh import _solve, identity_frames, nearest_labels, union_of_boxes
 
 # a 12 x 12 plate with a 0.5 x 0.5 through-hole in its middle (genus 1)

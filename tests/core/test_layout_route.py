@@ -118,8 +118,8 @@ def test_a_layout_whose_limit_surface_crosses_itself_gives_way_to_a_clean_cage(m
 
 
 def test_least_lengths_lengthen_the_sides_and_the_polygons_still_close():
-    from core.quadmesh.lattice import build_lattice
-    from core.quadmesh.quantize import quantize, rectangular_refinement
+    from core.quadmesh.polycube.lattice import build_lattice
+    from core.quadmesh.polycube.quantize import quantize, rectangular_refinement
     from tests.core.test_quadmesh import layout_problem
 
     complex_, tables = layout_problem(FRAME)

@@ -9,7 +9,7 @@ from core.polymesh_checks import check_polymesh
 from core.quadmesh.limit_interpolation import (MOVE_SHARE, shortest_edges, unshrink_inverted,
                                                vertex_limit_positions)
 from core.quadmesh.orientation import inverted_faces
-from core.quadmesh.paired_decimation import limit_flaws, paired_decimation_base_mesh
+from core.quadmesh.decimation.paired_decimation import limit_flaws, paired_decimation_base_mesh
 from core.subdivision.limit_crossings import count_limit_self_intersections
 from dev_meshes import load_dev_mesh
 

@@ -13,7 +13,7 @@ from core.polymesh_checks import check_polymesh
 from core.quadmesh.crossing_count import LimitCrossingCount
 from core.quadmesh.local_repair import MAX_TRIANGLE_SHARE, repair_inverted
 from core.quadmesh.orientation import inverted_faces
-from core.quadmesh.paired_decimation import limit_flaws, paired_decimation_base_mesh
+from core.quadmesh.decimation.paired_decimation import limit_flaws, paired_decimation_base_mesh
 from core.subdivision.sample_cages import voxel_cage
 from core.target_surface import TargetSurface
 from core.types import PolyMesh

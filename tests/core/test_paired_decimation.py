@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Paired-decimation base mesh (core.quadmesh.paired_decimation): closed, the target's genus,
-quads, on budget, near the target; on a torus built here and on a real SIMP result."""
+"""Paired-decimation base mesh (core.quadmesh.decimation.paired_decimation): closed, the target's
+genus, quads, on budget, near the target; on a torus built here and on a real SIMP result."""
 import os
 
 import numpy as np
@@ -9,7 +9,8 @@ import pytest
 from core.geometry import triangle_mesh_volume
 from core.polymesh_checks import check_polymesh
 from core.mesh_topology import polymesh_genus
-from core.quadmesh.paired_decimation import MIN_WEIGHT, _candidate_quads, paired_decimation_base_mesh
+from core.quadmesh.decimation.paired_decimation import (MIN_WEIGHT, _candidate_quads,
+                                                        paired_decimation_base_mesh)
 from core.quality import point_surface_distance
 from dev_meshes import MESHES, load_dev_mesh
 
@@ -82,7 +83,7 @@ def test_real_simp_result_with_handles():
 
 
 def test_augmenting_path_completes_a_greedy_matching():
-    from core.quadmesh.paired_decimation import _match_pairs
+    from core.quadmesh.decimation.paired_decimation import _match_pairs
 
     # a chain 0-1-2-3 whose heaviest pair (1, 2) would strand 0 and 3
     pairs = np.array([[0, 1], [1, 2], [2, 3]])
@@ -97,7 +98,7 @@ def test_augmenting_path_completes_a_greedy_matching():
 
 @pytest.mark.slow
 def test_larger_budgets_are_tried_while_the_limit_surface_of_thin_struts_is_flawed():
-    from core.quadmesh.paired_decimation import limit_flaws
+    from core.quadmesh.decimation.paired_decimation import limit_flaws
     from core.target_surface import TargetSurface
 
     target = load_dev_mesh("to_simp_torsion_arm.stl")
@@ -144,7 +145,7 @@ def test_budgets_beyond_the_rule_are_tried_while_every_cage_crosses_itself():
 @pytest.mark.slow
 def test_budgets_beyond_the_rule_stop_where_more_faces_do_not_unfold_the_limit_surface():
     from core.pipeline import reconstruct
-    from core.quadmesh.paired_decimation import OVER_BUDGET_MISSES
+    from core.quadmesh.decimation.paired_decimation import OVER_BUDGET_MISSES
     from core.subdivision.limit_crossings import count_limit_self_intersections
     from core.target_surface import TargetSurface
 

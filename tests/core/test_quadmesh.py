@@ -14,14 +14,15 @@ from core.errors import InternalError, LabelingError, ParameterError
 from core.polymesh_checks import check_polymesh
 from core.quality import point_surface_distance
 from core.quadmesh import build_base_mesh
-from core.quadmesh.chart_complex import build_chart_complex
+from core.quadmesh.polycube.chart_complex import build_chart_complex
 from core.quadmesh.orientation import inverted_faces
 from core.quadmesh.base_mesh import LayoutTooLargeError
-from core.quadmesh.lattice import OverlappingChartsError, build_lattice
-from core.quadmesh.milp_solve import MilpTimeLimitError, solve_milp
-from core.quadmesh.quantize import (LoopTables, closeness_rows, loop_tables, minimum_faces,
-                                    quantize, rectangular_refinement)
-from core.quadmesh.side_signs import charts_close, loops_are_rectilinear, make_loops_rectilinear
+from core.quadmesh.polycube.lattice import OverlappingChartsError, build_lattice
+from core.quadmesh.polycube.milp_solve import MilpTimeLimitError, solve_milp
+from core.quadmesh.polycube.quantize import (LoopTables, closeness_rows, loop_tables, minimum_faces,
+                                             quantize, rectangular_refinement)
+from core.quadmesh.polycube.side_signs import (charts_close, loops_are_rectilinear,
+                                               make_loops_rectilinear)
 from core.types import TriMesh
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
@@ -157,7 +158,7 @@ def test_a_chart_that_cannot_turn_by_four_is_found_in_its_neighbourhood():
     """A box chart whose loop runs x, x, x, y after one side is measured along the wrong axis
     admits no directions: the whole program is infeasible, and so is the neighbourhood program
     of the smallest ring holding that chart, which names it; the intact box has none."""
-    from core.quadmesh.side_signs import _direction_program, _local_contradiction
+    from core.quadmesh.polycube.side_signs import _direction_program, _local_contradiction
 
     V, F = union_of_boxes([[[0, 0, 0], [2, 1, 1]]])
     frames, _ = identity_frames(len(F))
@@ -184,7 +185,7 @@ def test_an_undecided_root_goes_through_the_neighbourhoods_to_the_same_answer(mo
     """With no root node allowed (HiGHS stops before deciding), a repairable box is checked
     neighbourhood by neighbourhood (each has a solution) and then gets the flips of the full
     search."""
-    import core.quadmesh.side_signs as side_signs
+    import core.quadmesh.polycube.side_signs as side_signs
 
     V, F = union_of_boxes([[[0, 0, 0], [2, 1, 1]]])
     frames, _ = identity_frames(len(F))
@@ -212,7 +213,7 @@ def test_a_stricter_copy_of_a_feasible_program_is_searched_where_it_is_stricter(
     first), the others never; with no such side nothing is solved before the root, and the
     answer is that of the plain call. A collapsible side missing from the feasible set is an
     error."""
-    import core.quadmesh.side_signs as side_signs
+    import core.quadmesh.polycube.side_signs as side_signs
 
     V, F = union_of_boxes([[[0, 0, 0], [5, 1, 1]], [[0, 0, 0], [1, 2, 1]], [[4, 0, 0], [5, 2, 1]]],
                           max_edge=0.5)
@@ -391,7 +392,7 @@ def test_the_quantization_program_is_solved_by_its_linear_relaxation(monkeypatch
         programs.append((cost, bounds, constraints, result))
         return result
 
-    monkeypatch.setattr("core.quadmesh.quantize.solve_milp", recorded)
+    monkeypatch.setattr("core.quadmesh.polycube.quantize.solve_milp", recorded)
     quantize(complex_, tables, refinement, scale)
     (cost, bounds, constraints, result), = programs
     relaxed = milp(cost, bounds=bounds, constraints=constraints)
@@ -419,13 +420,13 @@ def test_an_attempt_over_the_bound_ends_before_any_program(monkeypatch):
     def no_program(*args, **kwargs):
         raise AssertionError("a mixed-integer program was solved")
 
-    monkeypatch.setattr("core.quadmesh.quantize.solve_milp", no_program)
+    monkeypatch.setattr("core.quadmesh.polycube.quantize.solve_milp", no_program)
     with pytest.raises(LayoutTooLargeError, match=f"at least {least} quads"):
         base_of(L_SHAPE, target_faces=300, max_base_faces=least - 1)
 
 
 def test_the_hang_guard_is_an_error_not_another_answer(monkeypatch):
-    monkeypatch.setattr("core.quadmesh.milp_solve.HANG_GUARD_SECONDS", 0.0)
+    monkeypatch.setattr("core.quadmesh.polycube.milp_solve.HANG_GUARD_SECONDS", 0.0)
     with pytest.raises(MilpTimeLimitError, match="depend on the machine's load"):
         solve_milp("a test program", np.ones(3), np.ones(3), Bounds(1, 10),
                    [LinearConstraint(np.ones((1, 3)), 4.5, np.inf)])

@@ -17,7 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from core.quadmesh.locate import locate_points
+from core.quadmesh.polycube.locate import locate_points
 
 LOCATE_TOLERANCE = 1e-9
 """Barycentric slack for a lattice point on a mapped triangle's edge to count as inside."""

@@ -1,15 +1,14 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Quadric-error decimation that keeps the target's sharp feature lines as chains of edges.
 
-QSlim (:mod:`core.quadmesh.decimation`) places its edges wherever the quadric error is least,
-so on a machined part many cage edges cross a sharp step diagonally and cannot be tagged as
-creases. This decimation (Garland & Heckbert, "Surface simplification using quadric
-error metrics", SIGGRAPH 1997: edge collapses in the order of their quadric error, each
-collapsed pair placed where the sum of its quadrics is least) keeps the whole feature network
-(target edges whose dihedral angle exceeds :data:`core.quadmesh.creases.CREASE_ANGLE`,
-:func:`core.quadmesh.creases.feature_edges`, without the chains that end inside a face region,
-:func:`core.quadmesh.creases.closed_network`: the isolated sharp edges of a SIMP result's
-iso-surface are no feature lines) as edges of the result:
+QSlim (:mod:`core.quadmesh.decimation.decimation`) places its edges wherever the quadric error is
+least, so on a machined part many cage edges cross a sharp step diagonally and cannot be tagged as
+creases. This decimation (Garland & Heckbert, "Surface simplification using quadric error metrics",
+SIGGRAPH 1997: edge collapses in the order of their quadric error, each collapsed pair placed where
+the sum of its quadrics is least) keeps the whole feature network (target edges whose dihedral angle
+exceeds :data:`core.quadmesh.creases.CREASE_ANGLE`, :func:`core.quadmesh.creases.feature_edges`,
+without the chains that end inside a face region, :func:`core.quadmesh.creases.closed_network`: the
+isolated sharp edges of a SIMP result's iso-surface are no feature lines) as edges of the result:
 
 * every vertex is *free* (no feature edge), on a *line* (two feature edges turning by at most
   :data:`TURN_ANGLE`) or a *corner* (three or more feature edges, or a sharp turn of the
@@ -38,7 +37,7 @@ iso-surface are no feature lines) as edges of the result:
 
 Each feature edge of the result is the union of a chain of feature edges of the target, so
 pairing triangles into quads never across them keeps them cage edges, which become the
-cage's crease edges (:mod:`core.quadmesh.paired_decimation`).
+cage's crease edges (:mod:`core.quadmesh.decimation.paired_decimation`).
 """
 import heapq
 
@@ -47,7 +46,7 @@ import numpy as np
 from core.errors import InvalidMeshError
 from core.mesh_topology import connected_face_components, edge_faces, genus_of
 from core.quadmesh.creases import CREASE_ANGLE, closed_network, feature_edges
-from core.quadmesh.decimation import SOURCE_TRIANGLES
+from core.quadmesh.decimation.decimation import SOURCE_TRIANGLES
 from core.target_surface import TargetSurface
 
 TURN_ANGLE = 40.0
@@ -95,7 +94,7 @@ class FeatureDecimation:
     surface : TargetSurface of the target already built, or None (built here).
     angle : float, degrees: the smallest dihedral angle of a feature edge.
 
-    Targets of more than :data:`core.quadmesh.decimation.SOURCE_TRIANGLES` triangles are
+    Targets of more than :data:`core.quadmesh.decimation.decimation.SOURCE_TRIANGLES` triangles are
     decimated to that many once, on first use, and every count starts from that (pure
     Python, so its time grows with the triangles collapsed: about a second for a few
     thousand, a minute for 150k).

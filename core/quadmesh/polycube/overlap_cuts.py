@@ -1,12 +1,13 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Reflex corners to cut where an integer chart polygon overlaps itself.
 
-A chart polygon drawn from integer side lengths can overlap itself (:mod:`core.quadmesh.lattice`
-finds cells covered twice or with the wrong orientation). Splitting the whole chart into
-rectangles (:func:`core.quadmesh.quantize.rectangular_refinement`) rules that out for every
-length, but every rectangle then needs a width and a height of at least one unit: a plate
-around several holes, cut open by slits, has dozens of reflex corners, and its rectangles make
-the layout several times larger than its features need.
+A chart polygon drawn from integer side lengths can overlap itself
+(:mod:`core.quadmesh.polycube.lattice` finds cells covered twice or with the wrong orientation).
+Splitting the whole chart into rectangles
+(:func:`core.quadmesh.polycube.quantize.rectangular_refinement`) rules that out for every length,
+but every rectangle then needs a width and a height of at least one unit: a plate around several
+holes, cut open by slits, has dozens of reflex corners, and its rectangles make the layout several
+times larger than its features need.
 
 A partial refinement extends only a few reflex corners: those next to the cells that overlap.
 Each extension is a cut across the chart to the side ahead of the corner; the pieces on either
@@ -18,8 +19,8 @@ escalation ends at the full refinement.
 """
 import numpy as np
 
-from core.quadmesh.locate import winding_numbers
-from core.quadmesh.quantize import _turn
+from core.quadmesh.polycube.locate import winding_numbers
+from core.quadmesh.polycube.quantize import _turn
 
 NEAR_CELLS = 1.5
 """A reflex corner is next to an overlapping cell when it lies within this many units of the
@@ -68,7 +69,7 @@ def corners_to_cut(tables, corner_uv, chart, orientation, already_cut):
     ----------
     tables : LoopTables; corner_uv : (j, 2) int64 the quantization's integer corners.
     chart : int, a chart whose polygon overlaps itself; orientation : +1 or -1 its loop's
-        turning sense in ``(u, v)`` (:func:`core.quadmesh.lattice.chart_orientation`).
+        turning sense in ``(u, v)`` (:func:`core.quadmesh.polycube.lattice.chart_orientation`).
     already_cut : set of references cut already.
 
     Returns

@@ -2,7 +2,7 @@
 """Integer chart polygons: every side of the chart complex gets an integer length.
 
 Each chart is a rectilinear polygon in its label plane, walked with the chart on the left
-(slits make every chart a disk, :mod:`core.quadmesh.chart_complex`). Its sides have integer
+(slits make every chart a disk, :mod:`core.quadmesh.polycube.chart_complex`). Its sides have integer
 lengths ``l_s >= 1``, one unknown per side shared by the two charts (or the two banks of a
 slit) it bounds, so the unit lattices of neighbouring charts meet with the same splits: the
 layout is conforming with no T-junctions, inside a part and across part interfaces alike (parts
@@ -20,7 +20,7 @@ Splitting every chart that way makes a layout several times larger than its feat
 where a chart has many reflex corners (a plate around holes), so the base-mesh stage splits only
 the charts whose integer polygon overlaps itself, and those only at the reflex corners next to
 the overlap at first (``cuts`` of :func:`rectangular_refinement`, chosen by
-:mod:`core.quadmesh.overlap_cuts`): the pieces then close as polygons of their own.
+:mod:`core.quadmesh.polycube.overlap_cuts`): the pieces then close as polygons of their own.
 
 Where short sides may collapse to length zero, the walk around every hole that a slit reaches
 keeps a width of at least one unit along both axes (:func:`_open_hole_rows`), so a narrow hole
@@ -59,7 +59,7 @@ import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint
 
 from core.errors import LabelingError, OTHER_PARTS
-from core.quadmesh.milp_solve import solve_milp
+from core.quadmesh.polycube.milp_solve import solve_milp
 
 MILP_GAP = 0.01
 """Relative optimality gap accepted from HiGHS (the objective is a soft closeness measure)."""
@@ -513,7 +513,7 @@ def minimum_faces(complex_, tables, refinement, collapsible=None):
     """A lower bound on the unit squares of every layout that :func:`quantize` can return.
 
     Any lengths that close every rectangle of ``refinement`` and draw every chart as a polygon
-    that :func:`core.quadmesh.lattice.build_lattice` accepts (a disk with integer corners)
+    that :func:`core.quadmesh.polycube.lattice.build_lattice` accepts (a disk with integer corners)
     obey two linear bounds on each chart's area ``A``, so a linear program over real lengths
     (with the quantization's own constraints) gives a bound on their sum:
 

@@ -6,10 +6,12 @@ libigl's ``igl.qslim``) collapses edges in quadric-error order and refuses colla
 change the topology. Its quadrics are those of the mesh it is given, which matters twice:
 
 - decimated again, a coarse result gives more even triangles, and the paired cages of them fit
-  SIMP results closer than when each budget is decimated from the target. So budgets up to ``coarse_triangles``
-  start from one coarse decimation, as the budget ladder of the pairing always did;
+  SIMP results closer than when each budget is decimated from the target. So budgets up to
+  ``coarse_triangles`` start from one coarse decimation, as the budget ladder of the pairing always
+  did;
 - but a coarse result has lost the small features: QSlim of a coarse result of a machined
-  part folds stepped holes into their walls, where QSlim of the target does not. Larger budgets therefore start from the target, or for large targets
+  part folds stepped holes into their walls, where QSlim of the target does not. Larger budgets
+  therefore start from the target, or for large targets
   from one fine decimation of it (:data:`SOURCE_TRIANGLES`), which keeps each one quick.
 
 The coarse decimation of a very large target (:data:`REDUCE_ABOVE`) starts from a reduction by

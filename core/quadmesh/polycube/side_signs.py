@@ -28,7 +28,7 @@ import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint
 
 from core.errors import InternalError, LabelingError, OTHER_PARTS
-from core.quadmesh.milp_solve import NODE_LIMIT, solve_milp
+from core.quadmesh.polycube.milp_solve import NODE_LIMIT, solve_milp
 
 AXES = np.eye(3)
 DISAGREEMENT_WEIGHT = 2.0

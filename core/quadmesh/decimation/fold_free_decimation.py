@@ -1,16 +1,16 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Quadric-error decimation whose triangles never fold against the target.
 
-QSlim (:mod:`core.quadmesh.decimation`, libigl's ``igl.qslim``) refuses only the collapses that
-change the topology. On a topology-optimisation result of high genus, decimated to a few
-hundred or thousand triangles, many of its triangles then span a thin strut or plate: their
-corners lie on opposite sides of the member, their normal is across the target's, and the
-quads paired of them fold over themselves, so the Catmull-Clark limit surface of the cage
-crosses itself next to them however it is fitted. This decimation collapses edges in the same
-quadric-error order (Garland & Heckbert, "Surface simplification using quadric error
-metrics", SIGGRAPH 1997; area-weighted plane quadrics, the cost of a collapse the summed
-quadric at the kept vertex) but as half-edge collapses, so every vertex left is a vertex of the
-target with a known target normal, and it refuses a collapse that
+QSlim (:mod:`core.quadmesh.decimation.decimation`, libigl's ``igl.qslim``) refuses only the
+collapses that change the topology. On a topology-optimisation result of high genus, decimated to a
+few hundred or thousand triangles, many of its triangles then span a thin strut or plate: their
+corners lie on opposite sides of the member, their normal is across the target's, and the quads
+paired of them fold over themselves, so the Catmull-Clark limit surface of the cage crosses itself
+next to them however it is fitted. This decimation collapses edges in the same quadric-error order
+(Garland & Heckbert, "Surface simplification using quadric error metrics", SIGGRAPH 1997;
+area-weighted plane quadrics, the cost of a collapse the summed quadric at the kept vertex) but as
+half-edge collapses, so every vertex left is a vertex of the target with a known target normal, and
+it refuses a collapse that
 
 * breaks the link condition (the two ends share exactly the two opposite vertices), so the
   topology and genus stay the target's;

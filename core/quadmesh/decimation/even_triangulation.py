@@ -86,14 +86,13 @@ def even_creased_triangulation(decimation, count, surface):
     """Steps 2 and 3 of :func:`even_triangulation` on a feature-preserving decimation.
 
     The decimation to ``count`` triangles (a
-    :class:`core.quadmesh.feature_decimation.FeatureDecimation`) gets rounds of flips (never
-    of a feature edge) and planar smoothing (never of a vertex on one). Feature edges join
-    triangles bent by more than the planar angle on the target, so these flips and moves,
-    inside planar regions only, keep the shape and the feature lines. Step 1 (QSlim's second
-    pass, then splits) is left out: QSlim would cut across the feature lines, and a
-    feature-preserving decimation to fewer triangles before the splits drops line vertices
-    (fewer crease edges, a fitted solid farther from the target, and crossings of the
-    limit surface).
+    :class:`core.quadmesh.decimation.feature_decimation.FeatureDecimation`) gets rounds of flips
+    (never of a feature edge) and planar smoothing (never of a vertex on one). Feature edges join
+    triangles bent by more than the planar angle on the target, so these flips and moves, inside
+    planar regions only, keep the shape and the feature lines. Step 1 (QSlim's second pass, then
+    splits) is left out: QSlim would cut across the feature lines, and a feature-preserving
+    decimation to fewer triangles before the splits drops line vertices (fewer crease edges, a
+    fitted solid farther from the target, and crossings of the limit surface).
 
     Parameters
     ----------

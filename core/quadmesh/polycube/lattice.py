@@ -1,19 +1,19 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Unit-lattice quads of the integer chart polygons.
 
-Every chart of the integer polycube (:mod:`core.quadmesh.quantize`) is a rectilinear polygon
-with integer corners; its unit squares are the base-mesh quads of that chart. A lattice point
-on a side is named by the side and its distance from the side's start corner, so the two charts
-of a side share its points (both see the same integer length): the quads are conforming with no
-T-junctions, inside a part and across part interfaces alike. Lattice points inside a chart
-belong to that chart only.
+Every chart of the integer polycube (:mod:`core.quadmesh.polycube.quantize`) is a rectilinear
+polygon with integer corners; its unit squares are the base-mesh quads of that chart. A lattice
+point on a side is named by the side and its distance from the side's start corner, so the two
+charts of a side share its points (both see the same integer length): the quads are conforming with
+no T-junctions, inside a part and across part interfaces alike. Lattice points inside a chart belong
+to that chart only.
 """
 from dataclasses import dataclass
 
 import numpy as np
 
 from core.errors import LabelingError, OTHER_PARTS
-from core.quadmesh.locate import winding_numbers
+from core.quadmesh.polycube.locate import winding_numbers
 
 
 class OverlappingChartsError(LabelingError):
@@ -58,7 +58,8 @@ class Lattice:
 
 
 def chart_orientation(complex_, tables, corner_uv):
-    """(c,) int64 +1 where a chart's loops run counter-clockwise in its ``(u, v)`` plane, else -1."""
+    """(c,) int64 +1 where a chart's loops run counter-clockwise in its ``(u, v)`` plane, else
+    -1."""
     u, v = corner_uv[:, 0].astype(np.float64), corner_uv[:, 1].astype(np.float64)
     nxt = tables.ref_next
     cross = u * v[nxt] - u[nxt] * v

@@ -13,7 +13,7 @@ import numpy as np
 
 from core.mesh_topology import neighbour_mean
 from core.target_surface import TargetSurface
-from core.quadmesh.embed import arc_fractions, point_on_chain
+from core.quadmesh.polycube.embed import arc_fractions, point_on_chain
 
 RELAX_ROUNDS = 8
 """Rounds of constrained smoothing."""

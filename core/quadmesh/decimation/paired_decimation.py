@@ -8,10 +8,9 @@ genus and orientation:
 
 1. QSlim (Garland & Heckbert, "Surface simplification using quadric error metrics", SIGGRAPH
    1997; libigl's ``igl.qslim``) collapses edges of the target, in quadric-error order, down to
-   twice the face budget in triangles (:mod:`core.quadmesh.decimation`). Collapses that would
-   change the topology are refused.
-   :mod:`core.quadmesh.even_triangulation` then gives planar fans interior vertices and
-   untangles folded triangles.
+   twice the face budget in triangles (:mod:`core.quadmesh.decimation.decimation`). Collapses that
+   would change the topology are refused. :mod:`core.quadmesh.decimation.even_triangulation` then
+   gives planar fans interior vertices and untangles folded triangles.
 2. Blossom-Quad (Remacle et al., "Blossom-Quad: a non-uniform quadrilateral mesh generator using
    a minimum-cost perfect matching algorithm", IJNME 2012): every pair of triangles sharing an
    edge is a candidate quad, weighted by its corner angles and its flatness; a matching on the
@@ -30,22 +29,21 @@ genus and orientation:
    budgets beyond it (a solid needs a surface that does not), until more faces stop helping.
 4. Where every budget's limit surface crosses itself (machined parts whose sharp steps the
    smooth limit rounds over a face's length), the ladder runs again on feature-preserving
-   decimations (:mod:`core.quadmesh.feature_decimation`), evened out inside their planar
+   decimations (:mod:`core.quadmesh.decimation.feature_decimation`), evened out inside their planar
    regions without touching a feature edge
-   (:func:`core.quadmesh.even_triangulation.even_creased_triangulation`; where that cage is
-   flawed and the one of the decimation as it is is less so, the latter is kept, since evening
-   out can itself make a cage cross): the target's sharp
-   feature lines (:mod:`core.quadmesh.creases`) stay chains of their edges, which are never
-   paired across, stay cage edges and are tagged as creases (``PolyMesh.creases``), and the
-   cage with fewer crossings of the two ladders is kept. A target without a closed network
-   of feature lines (a SIMP result's iso-surface) has nothing to crease and keeps its smooth
-   cage (and its large targets are spared the pure-Python decimation, which takes about a
-   minute on 150k triangles). Only there: a thin plate with holes that is clean without tags
-   can have every creased cage within the budget rule cross itself, so tagging is not the
-   default; the cages of every mesh whose smooth ladder ends clean stay
-   bit-identical.
+   (:func:`core.quadmesh.decimation.even_triangulation.even_creased_triangulation`; where that cage
+   is flawed and the one of the decimation as it is is less so, the latter is kept, since evening
+   out can itself make a cage cross): the target's sharp feature lines
+   (:mod:`core.quadmesh.creases`) stay chains of their edges, which are never paired across, stay
+   cage edges and are tagged as creases (``PolyMesh.creases``), and the cage with fewer crossings of
+   the two ladders is kept. A target without a closed network of feature lines (a SIMP result's
+   iso-surface) has nothing to crease and keeps its smooth cage (and its large targets are spared
+   the pure-Python decimation, which takes about a minute on 150k triangles). Only there: a thin
+   plate with holes that is clean without tags can have every creased cage within the budget rule
+   cross itself, so tagging is not the default; the cages of every mesh whose smooth ladder ends
+   clean stay bit-identical.
 5. Where the cage kept still crosses itself, the ladder runs on fold-free decimations
-   (:mod:`core.quadmesh.fold_free_decimation`: half-edge collapses that never make a
+   (:mod:`core.quadmesh.decimation.fold_free_decimation`: half-edge collapses that never make a
    triangle facing across the target's normals at its corners, so no triangle spans a thin
    strut or plate), and then, while its cage crosses itself, on decimations tightened
    around the crossing faces (more faces only there, up to ``over_budget_faces``); its cage
@@ -62,10 +60,11 @@ from core.errors import InvalidMeshError
 from core.mesh_topology import edge_faces
 from core.quadmesh.creases import closed_network
 from core.quadmesh.crossing_count import LEVELS as CROSSING_LEVELS, LimitCrossingCount
-from core.quadmesh.decimation import Decimation
-from core.quadmesh.even_triangulation import even_creased_triangulation, even_triangulation
-from core.quadmesh.feature_decimation import FeatureDecimation
-from core.quadmesh.fold_free_decimation import FoldFreeDecimation, folded_share
+from core.quadmesh.decimation.decimation import Decimation
+from core.quadmesh.decimation.even_triangulation import (even_creased_triangulation,
+                                                         even_triangulation)
+from core.quadmesh.decimation.feature_decimation import FeatureDecimation
+from core.quadmesh.decimation.fold_free_decimation import FoldFreeDecimation, folded_share
 from core.quadmesh.limit_interpolation import unshrink_inverted
 from core.quadmesh.local_repair import repair_inverted
 from core.quadmesh.orientation import inverted_faces
@@ -90,20 +89,20 @@ OVER_BUDGET_MISSES = 2
 flawed (crossing pairs plus inverted faces) than every smaller one: more faces do not unfold
 that limit surface. The flaws fall unevenly on SIMP results (a budget with more flaws can be
 followed by a clean one), so one miss is not enough; on machined parts whose flaws grow with
-the budget two end the ladder after 2 of its 5 steps, where the limit surfaces of a machined part's sharp steps cross themselves (Catmull-Clark without
-crease rules rounds them)."""
+the budget two end the ladder after 2 of its 5 steps, where the limit surfaces of a machined part's
+sharp steps cross themselves (Catmull-Clark without crease rules rounds them)."""
 
 
 QSLIM_FOLDED_SHARE = 0.5
 """Where more than this share of QSlim's triangles at the budget face across the target
-(:func:`core.quadmesh.fold_free_decimation.folded_share`), the fold-free ladder is tried
+(:func:`core.quadmesh.decimation.fold_free_decimation.folded_share`), the fold-free ladder is tried
 before QSlim's. Such a share comes of many thin members coarsely decimated (high-genus
 lattice-like TO results), whose QSlim cages cross themselves at every budget; the targets
 whose QSlim ladder ends clean fold well under half of them."""
 TIGHTEN_ROUNDS = 4
 """Fold-free decimations tightened around the crossings of the cage kept, at most (each
 raises the normal agreement asked of the triangles there by one step,
-:data:`core.quadmesh.fold_free_decimation.TIGHTEN_STEP`)."""
+:data:`core.quadmesh.decimation.fold_free_decimation.TIGHTEN_STEP`)."""
 
 
 @dataclass(frozen=True)

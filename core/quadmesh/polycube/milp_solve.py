@@ -8,7 +8,7 @@ the load). HiGHS 1.2 (Debian's scipy 1.10) has no deterministic bound on the wor
 node, so a wall-clock limit stays only as a guard against a hang (``HANG_GUARD_SECONDS``); a
 program that reaches it raises :class:`MilpTimeLimitError` instead of using a load-dependent
 incumbent. The programs met in practice close at their root node, the side-length
-quantization's at once (its linear relaxation is integral, :mod:`core.quadmesh.quantize`),
+quantization's at once (its linear relaxation is integral, :mod:`core.quadmesh.polycube.quantize`),
 far from both limits (``benchmarks/BASEMESH_SPEED_RESULTS.md``).
 """
 from scipy.optimize import milp
@@ -16,7 +16,8 @@ from scipy.optimize import milp
 from core.errors import LabelingError, OTHER_PARTS
 
 NODE_LIMIT = 5000
-"""Branch-and-bound nodes HiGHS may explore (the programs met in practice close at their root node)."""
+"""Branch-and-bound nodes HiGHS may explore (the programs met in practice close at their root
+node)."""
 HANG_GUARD_SECONDS = 600.0
 """Wall-clock seconds after which a program is abandoned (an error, never another answer)."""
 TIME_LIMIT_MESSAGE = "Time limit reached"
