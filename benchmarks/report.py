@@ -121,6 +121,22 @@ TOPIC_RESULTS = (
      "STRUCTURE_RESULTS.md", "benchmarks/structure_bench.py"),
     ("Unseen SIMP results: new load cases generated here, judged by the independent checks",
      "UNSEEN_RESULTS.md", "benchmarks/unseen_bench.py"),
+    ("Topology-optimisation results of others: seconds per stage, cages, crossings, outside",
+     "TO_RESULTS.md", "benchmarks/to_results_bench.py"),
+    ("Crossings: self-crossing limit surfaces of the cages and the fits", "CROSSINGS_RESULTS.md",
+     "benchmarks/crossings_bench.py"),
+    ("Thickness-aware splits before pairing: limit-surface crossings", "THIN_SPLIT_RESULTS.md",
+     "benchmarks/thin_split_bench.py"),
+    ("Feature networks: machined lines or a voxel staircase", "STAIRCASE_RESULTS.md",
+     "benchmarks/staircase_bench.py"),
+    ("Tolerance-driven refinement: the deviation asked for against the one measured",
+     "TOLERANCE_RESULTS.md", "benchmarks/tolerance_bench.py"),
+    ("Stability of the fit under rounding: 8 perturbed copies of every cage",
+     "STABILITY_RESULTS.md", "benchmarks/stability_bench.py"),
+    ("Exact (graded) against G1 export: size, read time, normal jumps, distance to the limit",
+     "G1_EXPORT_RESULTS.md", "benchmarks/g1_export_bench.py"),
+    ("GUI responsiveness on a large mesh: event-loop gaps, Esc", "GUI_RESULTS.md",
+     "benchmarks/gui_bench.py"),
 )
 """Topic result files beside RESULTS.md: (title, file name, script)."""
 

@@ -204,7 +204,17 @@ def main(argv=None):
     parser.add_argument("--timeout", type=float, default=900.0,
                         help="seconds per case before it is stopped and recorded (default 900)")
     parser.add_argument("--no-images", action="store_true", help="skip the PNG renderings")
+    parser.add_argument("--render", action="store_true",
+                        help="only write RESULTS.md again from the results.json in --out (the "
+                             "topic index and the current pipeline table follow their files)")
     args = parser.parse_args(argv)
+    if args.render:
+        out = os.path.abspath(args.out or HERE)
+        with open(os.path.join(out, "results.json"), encoding="utf-8") as fh:
+            results = json.load(fh)
+        with open(os.path.join(out, "RESULTS.md"), "w", encoding="utf-8") as fh:
+            fh.write(markdown(results))
+        return 0
     full = not args.quick and not args.only
     args.out = os.path.abspath(args.out or (HERE if full else os.path.join(REPO, "out", "benchmarks")))
     folders = [os.path.abspath(d) for d in (args.meshes or [DEFAULT_MESH_DIR])]
