@@ -255,14 +255,14 @@ def _check_minimum(complex_, tables, refinement, collapsible, give_up_faces, max
 def chart_minimum_faces(complex_, collapsible):
     """A lower bound on the quads of every layout of ``complex_``, whatever its side directions.
 
-    A chart with no collapsible side becomes a simple polygon with integer corners whose sides
-    are each at least one unit long (:func:`core.quadmesh.lattice.build_lattice` accepts no
-    other), so its boundary has at least as many lattice points as its loop has side
-    references, ``P``, and Pick's theorem (``A = I + B / 2 - 1``) gives it at least
-    ``ceil(P / 2 - 1)`` unit squares. Charts with a collapsible side (which may vanish) and
-    charts that are not disks (no layout exists then) count zero. Side directions, refinements
-    and larger least lengths only add constraints, so no layout that
-    :func:`_layout_on_target` can return is smaller.
+    A chart with no collapsible side becomes a disk with integer corners whose sides are each
+    at least one unit long (:func:`core.quadmesh.lattice.build_lattice` accepts no other), so
+    the walk around it passes at least as many lattice points as its loop has side references,
+    ``P`` (slit banks counted twice, as in :func:`core.quadmesh.quantize.minimum_faces`), and
+    Pick's theorem (``A = I + B / 2 - 1``) gives it at least ``ceil(P / 2 - 1)`` unit squares.
+    Charts with a collapsible side (which may vanish) and charts that are not disks (no layout
+    exists then) count zero. Side directions, refinements and larger least lengths only add
+    constraints, so no layout that :func:`_layout_on_target` can return is smaller.
 
     Parameters
     ----------
@@ -293,8 +293,8 @@ def _check_chart_minimum(complex_, collapsible, give_up_faces, max_base_faces):
     least = chart_minimum_faces(complex_, collapsible)
     if least > give_up_faces:
         raise LayoutTooLargeError(
-            f"every quantized layout of this labeling has at least {least} quads (one per "
-            f"chart at least, more around longer boundaries: Pick's theorem), more than "
+            f"every quantized layout of this labeling has at least {least} quads (Pick's "
+            f"theorem on the charts without a side shorter than half a unit), more than "
             f"{_give_up_limit(give_up_faces, max_base_faces)} ({complex_.n_charts} charts, "
             f"{complex_.n_sides} sides, each at least one unit long or collapsible)", least)
 
