@@ -163,7 +163,7 @@ def profile_stage(state, params):
 
 def write_markdown(results):
     """BASEMESH_SPEED_RESULTS.md from every label in ``results`` (label -> mesh -> row): one
-    table per face budget, its labels side by side."""
+    table per face budget, its labels side by side, and its last two labels compared."""
     lines = ["# Base-mesh stage: CPU seconds and determinism", "",
              "Written by `benchmarks/basemesh_speed_bench.py` (one process per mesh; default "
              "parameters, the face budget and parts mode of the table; the labeling is not in "
@@ -174,7 +174,7 @@ def write_markdown(results):
              "nodes of one), `same` whether a second run in the same process gave the same base "
              "mesh (vertices and faces bit for bit), `hash` a digest of the base mesh. The "
              "machine has 2 cores shared with other jobs, so CPU seconds vary by about 10%.",
-             "", "Every program that has a solution closes at its root node, so a node limit "
+             "", "Every program that has a solution closes within a few nodes, so a node limit "
              "changes none of them. Before the chord rows of `quantize.closeness_rows`, a "
              "quantization program's CPU time was HiGHS 1.2's root processing (cuts and "
              "heuristics, up to 3.8 s) because its linear relaxation let every side sit at its "
@@ -189,13 +189,15 @@ def write_markdown(results):
              "side-direction program (`side_signs.make_loops_rectilinear`): the retry without "
              "collapsible sides after the first layout failed, which HiGHS proves infeasible "
              "only after branch and bound (1,000 nodes; 3.8 s for its root alone). The program "
-             "is now solved at its root first (`side_signs.ROOT_NODES`; every program with a "
-             "solution closes there, with the same answer); where the root does not decide "
-             "it, the programs of one chart with its neighbours, each a relaxation of the "
-             "whole, are solved smallest first, and an infeasible one proves the whole "
-             "program infeasible (there: chart 7 and its 27 neighbours, 3 s; the smallest "
-             "infeasible set found by deleting charts has 6, all neighbours of chart 7). The "
-             "parts stage's threshold dynamics (`skeleton_parts.smooth_boundaries`, 153 "
+             "is now solved within `side_signs.ROOT_NODES` nodes first (every program with a "
+             "solution closes within them, with the same answer: the one of "
+             "`simjeb76_ge_bracket_to`'s 353 charts is not decided at its root but within 10 "
+             "nodes, where checking its 353 neighbourhoods first cost 15.6 CPU s); where "
+             "those do not decide it, the programs of one chart with its neighbours, each a "
+             "relaxation of the whole, are solved smallest first, and an infeasible one proves "
+             "the whole program infeasible (there: chart 7 and its 27 neighbours, 3 s; the "
+             "smallest infeasible set found by deleting charts has 6, all neighbours of chart "
+             "7). The parts stage's threshold dynamics (`skeleton_parts.smooth_boundaries`, 153 "
              "pieces on fine3) solves after its first heat step only the columns of the parts "
              "that gained or lost faces (about 15 per step). `parts s` is the CPU seconds of "
              "`skeleton_segmentation`, `face_part` a digest of the parts. The list of fallback "
@@ -253,12 +255,12 @@ def write_markdown(results):
                          f"{'yes' if row['same_twice'] else 'NO'} |")
             lines.append(line)
         if len(labels) >= 2:
-            first, last = results[labels[0]], results[labels[-1]]
+            first, last = results[labels[-2]], results[labels[-1]]  # the latest pair
             both = [m for m in meshes if "hash" in first.get(m, {}) and "hash" in last.get(m, {})]
             same = [m for m in both if first[m]["hash"] == last[m]["hash"]
                     and first[m]["method"] == last[m]["method"]]
             total = [sum(rows[m]["stage_cpu"] for m in both) for rows in (first, last)]
-            lines += ["", f"Same method and bit-identical base mesh in `{labels[0]}` and "
+            lines += ["", f"Same method and bit-identical base mesh in `{labels[-2]}` and "
                           f"`{labels[-1]}`: {len(same)} of {len(both)} meshes; stage CPU "
                           f"seconds summed over them {total[0]:.1f} and {total[1]:.1f}."]
             if auto:

@@ -254,6 +254,53 @@ def _check_minimum(complex_, tables, refinement, collapsible, give_up_faces, max
             f"{refinement.rectangles} rectangles)", least)
 
 
+def chart_minimum_faces(complex_, collapsible):
+    """A lower bound on the quads of every layout of ``complex_``, whatever its side directions.
+
+    A chart with no collapsible side becomes a disk with integer corners whose sides are each
+    at least one unit long (:func:`core.quadmesh.polycube.lattice.build_lattice` accepts no
+    other), so the walk around it passes at least as many lattice points as its loop has side
+    references, ``P`` (slit banks counted twice, as in
+    :func:`core.quadmesh.polycube.quantize.minimum_faces`), and Pick's theorem (``A = I + B / 2 - 1``) gives it at least ``ceil(P / 2 - 1)`` unit squares.
+    Charts with a collapsible side (which may vanish) and charts that are not disks (no layout
+    exists then) count zero. Side directions, refinements and larger least lengths only add
+    constraints, so no layout that :func:`_layout_on_target` can return is smaller.
+
+    Parameters
+    ----------
+    complex_ : ChartComplex.
+    collapsible : (s,) bool sides that may have length zero.
+
+    Returns
+    -------
+    int, the bound (>= 0).
+    """
+    n_charts = complex_.n_charts
+    sizes = np.diff(complex_.loop_offsets)
+    ref_chart = np.repeat(complex_.loop_chart, sizes)
+    refs = complex_.loop_sides
+    sides = np.where(refs >= 0, refs, ~refs)
+    perimeter = np.bincount(ref_chart, minlength=n_charts)
+    vanishing = np.bincount(ref_chart, weights=np.asarray(collapsible, dtype=np.float64)[sides],
+                            minlength=n_charts) > 0
+    disk = np.bincount(complex_.loop_chart, minlength=n_charts) == 1
+    squares = -(-(perimeter - 2) // 2)  # ceil(P / 2 - 1)
+    return int(np.maximum(squares, 0)[disk & ~vanishing].sum())
+
+
+def _check_chart_minimum(complex_, collapsible, give_up_faces, max_base_faces):
+    """Raise LayoutTooLargeError when :func:`chart_minimum_faces` exceeds ``give_up_faces``:
+    the side directions and the quantization, the costly part of a layout, are then not
+    solved at all."""
+    least = chart_minimum_faces(complex_, collapsible)
+    if least > give_up_faces:
+        raise LayoutTooLargeError(
+            f"every quantized layout of this labeling has at least {least} quads (Pick's "
+            f"theorem on the charts without a side shorter than half a unit), more than "
+            f"{_give_up_limit(give_up_faces, max_base_faces)} ({complex_.n_charts} charts, "
+            f"{complex_.n_sides} sides, each at least one unit long or collapsible)", least)
+
+
 def _merge_points(n, pairs):
     """(n,) int64 representative (lowest index) of every point under the identified pairs."""
     import scipy.sparse as sp
@@ -535,6 +582,7 @@ class _LayoutAttempts:
             return result
         complex_ = self.original
         collapsible = collapsible_sides(complex_, self.budget[0])
+        _check_chart_minimum(complex_, collapsible, self.give_up_faces, self.budget[1])
         # raised here, it ends the attempt: the retry below keeps every side at least one
         # unit long, a stricter program that no side directions can satisfy either
         self.complex_, self.flipped = make_loops_rectilinear(complex_, collapsible)

@@ -16,11 +16,12 @@ from core.quality import point_surface_distance
 from core.quadmesh import build_base_mesh
 from core.quadmesh.polycube.chart_complex import build_chart_complex
 from core.quadmesh.orientation import inverted_faces
-from core.quadmesh.base_mesh import LayoutTooLargeError
+from core.quadmesh.base_mesh import LayoutTooLargeError, chart_minimum_faces
 from core.quadmesh.polycube.lattice import OverlappingChartsError, build_lattice
 from core.quadmesh.polycube.milp_solve import MilpTimeLimitError, solve_milp
-from core.quadmesh.polycube.quantize import (LoopTables, closeness_rows, loop_tables, minimum_faces,
-                                             quantize, rectangular_refinement)
+from core.quadmesh.polycube.quantize import (LoopTables, closeness_rows, collapsible_sides,
+                                             loop_tables, minimum_faces, quantize,
+                                             rectangular_refinement)
 from core.quadmesh.polycube.side_signs import (charts_close, loops_are_rectilinear,
                                                make_loops_rectilinear)
 from core.types import TriMesh
@@ -423,6 +424,48 @@ def test_an_attempt_over_the_bound_ends_before_any_program(monkeypatch):
     monkeypatch.setattr("core.quadmesh.polycube.quantize.solve_milp", no_program)
     with pytest.raises(LayoutTooLargeError, match=f"at least {least} quads"):
         base_of(L_SHAPE, target_faces=300, max_base_faces=least - 1)
+
+
+@pytest.mark.parametrize("boxes", [[[[0, 0, 0], [2, 1, 1]]], L_SHAPE, FRAME],
+                         ids=["box", "l-shape", "frame"])
+def test_the_chart_bound_needs_no_side_directions_and_is_below_every_layout(boxes):
+    """Pick's theorem on the charts as measured bounds the linear bound of the directed charts
+    and every layout the lattice accepts; charts with a collapsible side count zero."""
+    V, F = union_of_boxes(boxes)
+    frames, _ = identity_frames(len(F))
+    measured = build_chart_complex(V, F, np.zeros(len(F)), nearest_labels(V, F), frames)
+    none = np.zeros(measured.n_sides, dtype=bool)
+    bound = chart_minimum_faces(measured, none)
+    assert bound >= measured.n_charts  # every chart is a disk of at least one square
+    complex_, tables = layout_problem(boxes)
+    refinement = rectangular_refinement(complex_, tables)
+    assert bound <= minimum_faces(complex_, tables, refinement)
+    for scale in (0.05, 1.0, 4.0):
+        polycube = quantize(complex_, tables, refinement, scale)
+        try:
+            build_lattice(complex_, tables, polycube)
+        except OverlappingChartsError:
+            continue
+        assert polycube.faces >= bound
+    one_side = none.copy()
+    one_side[0] = True
+    assert chart_minimum_faces(measured, one_side) < bound
+    assert chart_minimum_faces(measured, ~none) == 0
+
+
+def test_an_attempt_over_the_chart_bound_ends_before_the_side_directions(monkeypatch):
+    V, F = union_of_boxes(FRAME)
+    frames, _ = identity_frames(len(F))
+    measured = build_chart_complex(V, F, np.zeros(len(F)), nearest_labels(V, F), frames)
+    bound = chart_minimum_faces(measured, collapsible_sides(measured, 300))
+    assert bound >= measured.n_charts
+
+    def no_directions(*args, **kwargs):
+        raise AssertionError("the side directions were solved")
+
+    monkeypatch.setattr("core.quadmesh.base_mesh.make_loops_rectilinear", no_directions)
+    with pytest.raises(LayoutTooLargeError, match=f"at least {bound} quads .*Pick"):
+        base_of(FRAME, target_faces=300, max_base_faces=bound - 1)
 
 
 def test_the_hang_guard_is_an_error_not_another_answer(monkeypatch):

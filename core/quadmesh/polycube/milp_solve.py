@@ -7,8 +7,9 @@ programs here are therefore bounded by a node limit (``NODE_LIMIT``, the same an
 the load). HiGHS 1.2 (Debian's scipy 1.10) has no deterministic bound on the work of its root
 node, so a wall-clock limit stays only as a guard against a hang (``HANG_GUARD_SECONDS``); a
 program that reaches it raises :class:`MilpTimeLimitError` instead of using a load-dependent
-incumbent. The programs met in practice close at their root node, the side-length
-quantization's at once (its linear relaxation is integral, :mod:`core.quadmesh.polycube.quantize`),
+incumbent. The programs met in practice close within a few nodes, the side-length
+quantization's at its root (its linear relaxation is integral,
+:mod:`core.quadmesh.polycube.quantize`),
 far from both limits (``benchmarks/BASEMESH_SPEED_RESULTS.md``).
 """
 from scipy.optimize import milp
@@ -16,8 +17,7 @@ from scipy.optimize import milp
 from core.errors import LabelingError, OTHER_PARTS
 
 NODE_LIMIT = 5000
-"""Branch-and-bound nodes HiGHS may explore (the programs met in practice close at their root
-node)."""
+"""Branch-and-bound nodes HiGHS may explore (the programs met in practice close within a few)."""
 HANG_GUARD_SECONDS = 600.0
 """Wall-clock seconds after which a program is abandoned (an error, never another answer)."""
 TIME_LIMIT_MESSAGE = "Time limit reached"

@@ -12,14 +12,14 @@ the rule: a small mixed-integer program (one binary per side direction, one per 
 consecutive sides for the product of their flips, one per loop for outer/hole).
 
 Proving that program infeasible can take HiGHS many branch-and-bound nodes where deciding a
-feasible one takes none beyond the root. The program is therefore solved at its root first;
+feasible one takes a few at most. The program is therefore solved within a few nodes first;
 when that does not decide it, the programs of single charts with their neighbours, each a
 relaxation of the whole, are tried for a contradiction before the full search
 (:func:`_local_contradiction`). Both steps are deterministic and change no answer: a feasible
-program closed at its root has the optimum of the full search, and an infeasible relaxation
-proves what the full search would. When the program is a stricter copy of one known to have a
-solution (fewer collapsible sides), only the neighbourhoods holding a side that lost its
-freedom can contradict, and they are tried first, before the root solve.
+program closed within those nodes has the optimum of the full search, and an infeasible
+relaxation proves what the full search would. When the program is a stricter copy of one known
+to have a solution (fewer collapsible sides), only the neighbourhoods holding a side that lost
+its freedom can contradict, and they are tried first, before the first solve.
 """
 from dataclasses import dataclass, replace
 
@@ -37,11 +37,13 @@ extent (flipping it in both charts costs the extent once): the charts still clos
 but the layout stops being a polycube there."""
 CLOSURE_BOUND = 1000.0
 """Largest side length (relative to the shortest, 1) in the closure check."""
-ROOT_NODES = 1
+ROOT_NODES = 16
 """Nodes of the first solve of the whole program. The programs met in practice that have a
-solution close at their root node; one that does not is first checked for a neighbourhood that
-cannot close (:func:`_local_contradiction`), which proves it infeasible in a fraction of the
-time a full branch and bound takes to prove it."""
+solution close within a few nodes (those of labelings with hundreds of charts seldom at the
+root itself, and checking every neighbourhood instead costs several times the search); one
+that does not is first checked for a neighbourhood that cannot close
+(:func:`_local_contradiction`), which proves it infeasible in a fraction of the time a full
+branch and bound takes to prove it."""
 LIMIT_REACHED, INFEASIBLE = 1, 2
 """``scipy.optimize.milp`` statuses: a node (or other) limit reached; infeasible."""
 
@@ -105,7 +107,7 @@ def make_loops_rectilinear(complex_, collapsible=None, feasible_collapsible=None
     feasible_collapsible : (s,) bool, a superset of ``collapsible`` with which this program is
         known to have a solution, or None. Every neighbourhood holding no side of the
         difference then has a solution, so the search for a contradiction
-        (:func:`_local_contradiction`) tries only the others, and before the root solve
+        (:func:`_local_contradiction`) tries only the others, and before the first solve
         (a retry with fewer collapsible sides is then much quicker).
 
     Returns
@@ -132,8 +134,8 @@ def make_loops_rectilinear(complex_, collapsible=None, feasible_collapsible=None
                                 np.flatnonzero(feasible_collapsible & ~collapsible))
     result = _solve(program, ROOT_NODES)
     if result.status == LIMIT_REACHED:
-        # not decided at the root: a neighbourhood that cannot close is a quick proof that the
-        # whole program is infeasible; without one, the full search
+        # not decided within ROOT_NODES: a neighbourhood that cannot close is a quick proof
+        # that the whole program is infeasible; without one, the full search
         if not searched:
             _raise_on_contradiction(complex_, collapsible)
         result = _solve(program, NODE_LIMIT)
