@@ -181,10 +181,7 @@ def _overlay():
     callback_node, callback = _pixel_callback(pixels)
     annotation.addChild(callback_node)
     annotation.addChild(pixels)
-    font = coin.SoFont()
-    font.name.setValue("sans")
-    font.size.setValue(FONT_SIZE)
-    annotation.addChild(font)
+    _font(annotation)
     panel = coin.SoSeparator()
     annotation.addChild(panel)
     return overlay, panel, callback
@@ -347,11 +344,18 @@ def _marker(obj):
         markers = coin.SoMarkerSet()
         markers.markerIndex.setValue(marker)
         annotation.addChild(markers)
-    font = coin.SoFont()
-    font.name.setValue("sans")
-    font.size.setValue(FONT_SIZE)
-    annotation.addChild(font)
+    _font(annotation)
     label = coin.SoText2()
     label.string.setValue(f"  largest {obj.MaxDeviation:.3g} mm")
     annotation.addChild(label)
     return annotation
+
+
+def _font(node):
+    """Add the legends' font (sans, ``FONT_SIZE`` points) to ``node``."""
+    from pivy import coin
+
+    font = coin.SoFont()
+    font.name.setValue("sans")
+    font.size.setValue(FONT_SIZE)
+    node.addChild(font)

@@ -38,26 +38,19 @@ def _commands():
 
 def save_screenshot(doc, file_name):
     """Isometric, fit-all screenshot of ``doc``'s 3D view on white; returns the path."""
+    return save_view(doc, file_name, SCREENSHOT_SIZE, "White")
+
+
+def save_view(doc, file_name, size, background="Current"):
+    """Screenshot of ``doc``'s 3D view at ``size`` (width, height), isometric and fitted, on
+    ``background`` (FreeCAD's own by default); returns the path."""
     os.makedirs(OUTPUT, exist_ok=True)
     view = FreeCADGui.getDocument(doc.Name).ActiveView
     view.viewIsometric()
     view.fitAll()
     FreeCADGui.updateGui()
     path = os.path.join(OUTPUT, file_name)
-    view.saveImage(path, SCREENSHOT_SIZE[0], SCREENSHOT_SIZE[1], "White")
-    return path
-
-
-def save_view(doc, file_name, size):
-    """Screenshot of ``doc``'s 3D view at ``size`` (width, height) on FreeCAD's own
-    background, isometric and fitted; returns the path."""
-    os.makedirs(OUTPUT, exist_ok=True)
-    view = FreeCADGui.getDocument(doc.Name).ActiveView
-    view.viewIsometric()
-    view.fitAll()
-    FreeCADGui.updateGui()
-    path = os.path.join(OUTPUT, file_name)
-    view.saveImage(path, size[0], size[1], "Current")
+    view.saveImage(path, size[0], size[1], background)
     return path
 
 

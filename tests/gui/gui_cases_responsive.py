@@ -115,16 +115,20 @@ def _one(doc, kind):
     return found[0]
 
 
-class ResponsiveTest(unittest.TestCase):
-    """Import, base mesh and fit of the torsion arm with the event loop timed; Esc in a fit."""
+class _MeshDocumentCase(unittest.TestCase):
+    """A document of its own with the file dialogs stubbed to ``MESH_FILE`` and three fit
+    iterations, for the cases of one class."""
+
+    MESH_FILE = MESH
+    DOCUMENT = "PolycubeResponsive"
 
     @classmethod
     def setUpClass(cls):
         from polycube_wb.preferences import set_default
 
         FreeCADGui.activateWorkbench(WORKBENCH)
-        cls.stubs = _Stubs(MESH)
-        cls.doc = FreeCAD.newDocument("PolycubeResponsive")
+        cls.stubs = _Stubs(cls.MESH_FILE)
+        cls.doc = FreeCAD.newDocument(cls.DOCUMENT)
         set_default("fit_iterations", 3)
 
     @classmethod
@@ -134,6 +138,10 @@ class ResponsiveTest(unittest.TestCase):
         reset_defaults()
         cls.stubs.restore()
         FreeCAD.closeDocument(cls.doc.Name)
+
+
+class ResponsiveTest(_MeshDocumentCase):
+    """Import, base mesh and fit of the torsion arm with the event loop timed; Esc in a fit."""
 
     def run_timed(self, command):
         """Run ``command`` with the gap recorder; returns the longest gap, seconds."""
@@ -259,26 +267,12 @@ class EscapeIntoTheFit:
         self.timer.stop()
 
 
-class LargeMeshTest(unittest.TestCase):
+class LargeMeshTest(_MeshDocumentCase):
     """Import and *Reconstruct all* of a 151,000-triangle mesh with the event loop timed;
     a real Esc one second into the fit."""
 
-    @classmethod
-    def setUpClass(cls):
-        from polycube_wb.preferences import set_default
-
-        FreeCADGui.activateWorkbench(WORKBENCH)
-        cls.stubs = _Stubs(LARGE_MESH)
-        cls.doc = FreeCAD.newDocument("PolycubeLarge")
-        set_default("fit_iterations", 3)
-
-    @classmethod
-    def tearDownClass(cls):
-        from polycube_wb.preferences import reset_defaults
-
-        reset_defaults()
-        cls.stubs.restore()
-        FreeCAD.closeDocument(cls.doc.Name)
+    MESH_FILE = LARGE_MESH
+    DOCUMENT = "PolycubeLarge"
 
     def run_timed(self, command, what):
         recorder = GapRecorder()
