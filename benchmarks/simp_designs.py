@@ -221,6 +221,76 @@ def designs():
         (nx, ny, nz), 0.4, ITERATIONS,
         fixed=_union(_box((0, 0, 0), (0, ny, nz)), _box((nx, 0, 0), (nx, ny, nz))),
         load_cases=[[Load(_box((28, 8, nz), (34, 14, nz)), (0.0, 0.0, -1.0))]]))
+    nx, ny, nz = 48, 48, 8
+    out.append(Design(
+        "simp_wheel_hub",
+        "wheel: hub bore clamped, passive-solid rim ring loaded tangentially at four points "
+        "(torque, case 1) and downward at the rim's lowest point (case 2); spokes in between",
+        (nx, ny, nz), 0.15, ITERATIONS,
+        fixed=_cylinder(2, (24, 24), 3.9, 4.1),
+        load_cases=[[Load(_box((24, 46, 0), (24, 46, nz)), (1.0, 0.0, 0.0)),
+                     Load(_box((46, 24, 0), (46, 24, nz)), (0.0, -1.0, 0.0)),
+                     Load(_box((24, 2, 0), (24, 2, nz)), (-1.0, 0.0, 0.0)),
+                     Load(_box((2, 24, 0), (2, 24, nz)), (0.0, 1.0, 0.0))],
+                    [Load(_box((22, 2, 0), (26, 2, nz)), (0.0, -1.0, 0.0))]],
+        solid=_union(_cylinder(2, (24, 24), 21.0, 23.0), _cylinder(2, (24, 24), 4.0, 6.0)),
+        void=_union(_cylinder(2, (24, 24), 0.0, 4.0), _cylinder(2, (24, 24), 23.0, 99.0))))
+    nx, ny, nz = 28, 28, 28
+    out.append(Design(
+        "simp_space_frame",
+        "cube-shaped frame: four bottom corner pads clamped, the top centre pad loaded down, "
+        "along x and along y (three cases), low volume fraction",
+        (nx, ny, nz), 0.08, ITERATIONS,
+        fixed=_union(*[_box((x0, y0, 0), (x0 + 4, y0 + 4, 0))
+                       for x0 in (0, nx - 4) for y0 in (0, ny - 4)]),
+        load_cases=[[Load(_box((11, 11, nz), (17, 17, nz)), (0.0, 0.0, -1.0))],
+                    [Load(_box((11, 11, nz), (17, 17, nz)), (1.0, 0.0, 0.0))],
+                    [Load(_box((11, 11, nz), (17, 17, nz)), (0.0, 1.0, 0.0))]]))
+    nx, ny, nz = 96, 10, 16
+    out.append(Design(
+        "simp_long_truss",
+        "long simply supported girder (slender 96 x 16 elements), three point loads on the top "
+        "face at quarter, half and three-quarter span",
+        (nx, ny, nz), 0.12, ITERATIONS,
+        fixed=_union(_box((0, 0, 0), (1, ny, 0)), _box((nx - 1, 0, 0), (nx, ny, 0))),
+        load_cases=[[Load(_box((x - 1, 0, nz), (x + 1, ny, nz)), (0.0, 0.0, -1.0))
+                     for x in (24, 48, 72)]]))
+    nx, ny, nz = 48, 48, 6
+    out.append(Design(
+        "simp_multi_pad_plate",
+        "plate clamped along its whole rim, five load cases each pressing one pad of the top "
+        "face (centre and four off-centre pads)",
+        (nx, ny, nz), 0.3, ITERATIONS,
+        fixed=_union(_box((0, 0, 0), (0, ny, 0)), _box((nx, 0, 0), (nx, ny, 0)),
+                     _box((0, 0, 0), (nx, 0, 0)), _box((0, ny, 0), (nx, ny, 0))),
+        load_cases=[[Load(_box((x0, y0, nz), (x0 + 4, y0 + 4, nz)), (0.0, 0.0, -1.0))]
+                    for x0, y0 in ((22, 22), (10, 10), (34, 10), (10, 34), (34, 34))]))
+    nx, ny, nz = 40, 24, 24
+    out.append(Design(
+        "simp_engine_mount",
+        "engine mount: four bolt pads clamped on the bottom face, a passive-solid boss at the "
+        "top centre loaded down, along x and along y (three cases)",
+        (nx, ny, nz), 0.1, ITERATIONS,
+        fixed=_union(*[_box((x0, y0, 0), (x0 + 4, y0 + 4, 0))
+                       for x0 in (1, nx - 5) for y0 in (1, ny - 5)]),
+        load_cases=[[Load(_box((17, 9, nz), (23, 15, nz)), (0.0, 0.0, -1.0))],
+                    [Load(_box((17, 9, nz), (23, 15, nz)), (1.0, 0.0, 0.0))],
+                    [Load(_box((17, 9, nz), (23, 15, nz)), (0.0, 1.0, 0.0))]],
+        solid=_box((16, 8, nz - 3), (24, 16, nz))))
+    nx, ny, nz = 24, 24, 24
+    out.append(Design(
+        "simp_lattice_block",
+        "block clamped on its bottom face, six load cases on the top face (each corner pad "
+        "sideways and the centre down and twisted): a lattice of thin struts",
+        (nx, ny, nz), 0.08, ITERATIONS,
+        fixed=_box((0, 0, 0), (nx, ny, 0)),
+        load_cases=[[Load(_box((0, 0, nz), (4, 4, nz)), (1.0, 1.0, 0.0))],
+                    [Load(_box((nx - 4, 0, nz), (nx, 4, nz)), (-1.0, 1.0, 0.0))],
+                    [Load(_box((0, ny - 4, nz), (4, ny, nz)), (1.0, -1.0, 0.0))],
+                    [Load(_box((nx - 4, ny - 4, nz), (nx, ny, nz)), (-1.0, -1.0, 0.0))],
+                    [Load(_box((10, 10, nz), (14, 14, nz)), (0.0, 0.0, -1.0))],
+                    [Load(_box((0, 0, nz), (nx, 0, nz)), (1.0, 0.0, 0.0)),
+                     Load(_box((0, ny, nz), (nx, ny, nz)), (-1.0, 0.0, 0.0))]]))
     return out
 
 
