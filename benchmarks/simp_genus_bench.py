@@ -72,12 +72,16 @@ def main():
     names = args.only or sorted(name for name in os.listdir(args.meshes)
                                 if name.endswith(".stl"))
     genus = manifest_genus(args.meshes)
-    rows = []
+    kept = {}
+    if args.only and os.path.exists(RESULTS_JSON):  # rows of meshes not re-run stay
+        with open(RESULTS_JSON) as handle:
+            kept = {row["mesh"]: row for row in json.load(handle)}
     for name in names:
         row = run_mesh(REPO, os.path.abspath(os.path.join(args.meshes, name)), evaluate=True)
         row["genus"] = genus.get(name, (row.get("base_mesh") or {}).get("genus"))
         print(json.dumps(row), flush=True)
-        rows.append(row)
+        kept[row["mesh"]] = row
+        rows = [kept[key] for key in sorted(kept)]
         with open(RESULTS_JSON, "w") as handle:
             json.dump(rows, handle, indent=1)
         write_markdown(rows)

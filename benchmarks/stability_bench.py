@@ -127,11 +127,17 @@ def main():
     parser.add_argument("--out", default=HERE)
     args = parser.parse_args()
     cache_states(args.only, args.cache)
+    os.makedirs(args.out, exist_ok=True)
+    saved = os.path.join(args.out, "stability_results.json")
     results = {}
+    if os.path.exists(saved):  # rows of meshes not re-run stay as they were measured
+        with open(saved) as handle:
+            results = {name: records for name, records in json.load(handle).items()
+                       if name in CASES}
     for name in args.only:
         results[name] = fit_copies(name, args.cache, args.copies)
         print(name, json.dumps(results[name][-1]), flush=True)
-    with open(os.path.join(args.out, "stability_results.json"), "w") as handle:
+    with open(saved, "w") as handle:
         json.dump(results, handle, indent=1)
     with open(os.path.join(args.out, "STABILITY_RESULTS.md"), "w") as handle:
         handle.write(markdown(results, args.copies))
