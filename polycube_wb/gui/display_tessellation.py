@@ -12,7 +12,8 @@ chunk of faces at a time with the event loop answering between chunks. Each chun
 compound of its faces and two vertices at the corners of the whole shape's bounding box: the
 view provider's deflection is a fraction of the box it is given, so every chunk gets the
 deflection the whole shape will get. The triangulations stay on the faces, which the shape
-shares, and the view provider of the object the shape is then set on keeps them.
+shares, and the view provider of the object the shape is then set on keeps them. The helper
+document keeps no undo, so the command's undo step stays the user's document's alone.
 """
 import time
 
@@ -54,6 +55,9 @@ def triangulate_for_display(shape, progress):
     active = FreeCAD.ActiveDocument
     helper_document = FreeCAD.newDocument(HELPER_DOCUMENT, hidden=True)
     try:
+        # no undo: its changes must not join the command's transaction (FreeCAD's transactions
+        # span every document changed while one is open, and Undo would reach this one)
+        helper_document.UndoMode = 0
         _restore_active(active)
         helper = helper_document.addObject("Part::Feature", "Tessellation")
         start, size = 0, FIRST_CHUNK

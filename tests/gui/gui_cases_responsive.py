@@ -342,9 +342,10 @@ class LargeMeshTest(_MeshDocumentCase):
         self.assertLess(gap, LARGE_GAP, f"Reconstruct all froze the GUI for {gap:.2f} s")
 
     def test_4_the_solid_is_triangulated_for_display_a_chunk_at_a_time(self):
-        """A copy of the solid (no triangulation) set on a shown object costs FreeCAD's view
-        provider far more CPU time than one triangulated for display first, a chunk of faces
-        at a time; the latter shows shaded."""
+        # A copy of the solid (no triangulation) set on a shown object costs FreeCAD's view
+        # provider far more CPU time than one triangulated for display first, a chunk of
+        # faces at a time; the latter shows shaded. (No docstring: the smoke test reads
+        # unittest's one-line results.)
         from PySide import QtGui
 
         from core.progress import NO_PROGRESS
