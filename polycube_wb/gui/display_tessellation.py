@@ -30,9 +30,13 @@ HELPER_DOCUMENT = "PolycubeDisplayTessellation"
 
 
 def triangulate_for_display(shape, progress):
-    """Give the faces of ``shape`` the triangulation FreeCAD's Part view provider (default
-    deviation and angular deflection) will show them with, a chunk at a time with the event
-    loop answering between chunks. The shape itself is not changed otherwise.
+    """Give the faces of ``shape`` the triangulation FreeCAD's Part view provider will show
+    them with, a chunk at a time with the event loop answering between chunks. The shape
+    itself is not changed otherwise.
+
+    The triangulation is that of a new Part object's view provider (the deviation and angular
+    deflection of FreeCAD's preferences); a view provider set otherwise may triangulate the
+    shape again, in one call, as without this function.
 
     Parameters
     ----------
