@@ -5,10 +5,12 @@ A :class:`StageJob` is a module-level function and its arguments (plain data: nu
 arrays, ``core.types`` results, parameters), so it can be pickled to the GUI's stage
 process (:mod:`polycube_wb.stage_worker`) or run in the calling thread. This module never
 imports FreeCAD, so that process starts without it. A job that makes or reads OpenCascade
-shapes imports FreeCAD's ``Part`` there when it runs; its shapes cross the pipe as BREP text
-(:func:`register_shape_pickling`), so the B-rep work holds no lock FreeCAD's GUI waits for.
+shapes imports FreeCAD's ``Part`` there when it runs; its shapes cross the pipe in OpenCascade's
+binary shape format (:func:`register_shape_pickling`), so the B-rep work holds no lock FreeCAD's
+GUI waits for.
 """
 import os
+import tempfile
 from dataclasses import dataclass
 
 from core.errors import Cancelled, PolycubeError
@@ -25,7 +27,8 @@ class StageJob:
     function : a module-level function (picklable by reference).
     args : tuple of plain data.
     needs_freecad : the function reads FreeCAD's document or GUI objects, so it runs in
-        FreeCAD's own process (``Part`` shapes alone do not need it: they pickle as BREP).
+        FreeCAD's own process (``Part`` shapes alone do not need it: they pickle, see
+        :func:`register_shape_pickling`).
     """
 
     function: object
@@ -92,22 +95,35 @@ def read_mesh_file(path, progress):
     return read_target_file(path)
 
 
-def shape_from_brep(text):
-    """The ``Part.Shape`` a BREP text describes (how shapes unpickle)."""
+def shape_from_binary(data):
+    """The ``Part.Shape`` of OpenCascade's binary shape format ``data`` (bytes; how shapes
+    unpickle)."""
     import Part
 
-    shape = Part.Shape()
-    shape.importBrepFromString(text)
+    with tempfile.TemporaryDirectory(prefix="polycube-shape-") as folder:
+        path = os.path.join(folder, "shape.bin")
+        with open(path, "wb") as handle:
+            handle.write(data)
+        shape = Part.Shape()
+        shape.importBinary(path)
     return shape
 
 
 def _reduce_shape(shape):
-    return shape_from_brep, (shape.exportBrepToString(),)
+    with tempfile.TemporaryDirectory(prefix="polycube-shape-") as folder:
+        path = os.path.join(folder, "shape.bin")
+        shape.exportBinary(path)
+        with open(path, "rb") as handle:
+            return shape_from_binary, (handle.read(),)
 
 
 def register_shape_pickling():
-    """Let ``Part`` shapes pickle as their BREP text (call where ``Part`` is imported: in
-    FreeCAD, and in the stage process once a job has imported it)."""
+    """Let ``Part`` shapes pickle in OpenCascade's binary shape format (call where ``Part`` is
+    imported: in FreeCAD, and in the stage process once a job has imported it).
+
+    The binary format is exact, as BREP text is, and reading it takes a fraction of the time:
+    the GUI's thread that reads a stage's result holds Python's lock meanwhile, so the event
+    loop waits for it."""
     import copyreg
 
     import Part

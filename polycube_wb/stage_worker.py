@@ -10,7 +10,7 @@ stdin and writes messages to its original stdout, each a pickled frame (:func:`w
 * out: ``("progress", stage, fraction, message)`` while the job runs, then
   ``("result", value)`` or ``("error", exception)``.
 
-Shapes a job returns (``Part``, once a job imported it) are pickled as BREP text
+Shapes a job returns (``Part``, once a job imported it) are pickled in OpenCascade's binary format
 (:func:`polycube_wb.stage_jobs.register_shape_pickling`). Anything the stages print goes to
 stderr. The GUI cancels a job by ending the process
 (it starts a new one for the next job), so a cancel never waits for the job.

@@ -138,7 +138,8 @@ def run_stage_command(title, doc, build, read_ahead=None):
             mesh = run_job(StageJob(read_mesh_file, (read_ahead,)),
                            SubProgress(progress, 0.0, 0.0))
             api.read_ahead_target(read_ahead, mesh=mesh)
-        return api.run_in_transaction(doc, title, build, progress, run_job)
+        return api.run_in_transaction(doc, title, lambda: _built_then_drawn(build), progress,
+                                      lambda job, share: _latest_shown(doc, run_job, job, share))
 
     first = not _has_results(doc)
     done = run_guarded(title, work, with_progress=True)
@@ -160,6 +161,24 @@ def run_stage_command(title, doc, build, read_ahead=None):
     elif not outcome.failures:
         report_success(f"{title}: done")
     return outcome
+
+
+def _built_then_drawn(build):
+    """``build()``, then one turn of the event loop (the new objects drawn), so that making
+    the objects and reading the first stage's inputs do not hold the GUI in one stretch."""
+    from PySide import QtCore
+
+    built = build()
+    QtCore.QCoreApplication.processEvents()
+    return built
+
+
+def _latest_shown(doc, run_job, job, progress):
+    """``run_job(job, progress)`` after hiding the displays that the results stored so far
+    supersede: while a stage runs, the 3D view draws the last result alone (drawing the
+    target mesh under its labeling doubles the cost of each redraw of a large mesh)."""
+    _hide_superseded(doc)
+    return run_job(job, progress)
 
 
 def _supersede(obj):

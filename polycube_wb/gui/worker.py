@@ -4,7 +4,7 @@
 A job (:class:`polycube_wb.stage_jobs.StageJob`) runs in the GUI's stage process
 (:mod:`polycube_wb.stage_worker`, started at the first job and kept), so that no
 computation can hold up the event loop, whatever it does with Python's GIL (OpenCascade
-shapes go there and back as BREP text); a job that needs FreeCAD's own objects
+shapes go there and back in OpenCascade's binary format); a job that needs FreeCAD's own objects
 (``needs_freecad``) runs in a worker thread of FreeCAD itself. Either
 way the GUI thread waits in a nested ``QEventLoop`` (as a modal dialog does), which
 repaints the window, lets the user turn and zoom the 3D view and answers Esc, while a
@@ -67,7 +67,10 @@ class WorkerProgress(Progress):
 
 def run_job(job, progress):
     """Run ``job`` (a ``StageJob``) in the stage process, or in a worker thread when it needs
-    FreeCAD; the GUI stays live meanwhile. Returns what the job returned.
+    FreeCAD; the GUI stays live meanwhile. Returns what the job returned; the shapes it
+    returned (alone or in a tuple) are triangulated for the 3D view first
+    (:func:`polycube_wb.gui.display_tessellation.triangulate_for_display`), so that setting
+    them on a shown object does not hold up the event loop.
 
     Raises
     ------
@@ -85,8 +88,22 @@ def run_job(job, progress):
         except RuntimeError as exc:  # no interpreter for the process: FreeCAD's own thread
             FreeCAD.Console.PrintLog(f"Polycube: {exc}; the stage runs in a thread\n")
         else:
-            return run_in_process(job, progress)
-    return run_in_thread(job, progress)
+            return _triangulated(run_in_process(job, progress), progress)
+    return _triangulated(run_in_thread(job, progress), progress)
+
+
+def _triangulated(result, progress):
+    """``result``, its shapes (``result`` itself or the items of a tuple) triangulated for
+    display."""
+    import Part
+
+    from polycube_wb.gui.display_tessellation import triangulate_for_display
+
+    for item in result if isinstance(result, tuple) else (result,):
+        if isinstance(item, Part.Shape) and not item.isNull():
+            progress.report("preparing the display", 1.0)
+            triangulate_for_display(item, progress)
+    return result
 
 
 def run_in_thread(compute, progress):

@@ -221,7 +221,7 @@ def test_stage_process_runs_jobs_and_hands_back_results_progress_and_errors(tmp_
 
 
 class ProcessRunner:
-    """Runs each job in the stage process (pickled there and back, shapes as BREP)."""
+    """Runs each job in the stage process (pickled there and back, shapes in binary form)."""
 
     def __init__(self, worker):
         from polycube_wb.stage_jobs import register_shape_pickling

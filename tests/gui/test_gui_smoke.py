@@ -22,7 +22,8 @@ REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 OUTPUT = os.environ.get("POLYCUBE_GUI_OUTPUT") or os.path.join(REPO, "tests", "gui", "output")
 SCREENSHOTS = ("polycube_torus_solid.png", "polycube_target_mesh.png", "polycube_parts.png",
                "polycube_labels.png", "polycube_base_mesh.png", "polycube_solid.png",
-               "polycube_deviation.png", "polycube_edited_cage.png", "polycube_reconstructed.png")
+               "polycube_deviation.png", "polycube_edited_cage.png", "polycube_reconstructed.png",
+               "polycube_large_solid.png")
 CAGE_SCREENSHOTS = ("polycube_base_mesh.png",)
 WINDOW_GRABS = ("polycube_fit_progress.png", "polycube_batch_progress.png",
                 "polycube_cancelled.png", "polycube_fit_panel.png",
