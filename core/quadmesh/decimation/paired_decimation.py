@@ -342,7 +342,7 @@ def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_fac
         if crossings + inverted == 0:
             break
         if local is not None and budget == ladder[0]:
-            tightened = _locally_tightened(*local, surface, budget, rounds)
+            tightened = _locally_tightened(*local, surface, budget, ladder[-1], rounds)
             if tightened[0] < best[0]:
                 best = tightened
             if best[0] == 0:
@@ -397,23 +397,32 @@ def _tightened_ladder(decimation, surface, target_faces, max_faces, over_budget_
     return best
 
 
-def _locally_tightened(vertices, faces, surface, budget, rounds):
+def _locally_tightened(vertices, faces, surface, budget, max_faces, rounds):
     """Cages of ``budget`` from half-edge QSlim decimations of the target (``vertices``,
     ``faces``) without a normal rule, tightened around the faces whose limit surface crosses
     itself (:meth:`FoldFreeDecimation.tightened`), up to :data:`TIGHTEN_ROUNDS` times while
-    it does; appends their rounds and returns
-    ``(flaws, PairedDecimation, crossings, budget)`` of the least flawed one (the first clean
-    one)."""
+    it does; appends their rounds and returns ``(flaws, PairedDecimation, crossings,
+    budget)`` of the least flawed one (the first clean one).
+
+    The rounds end early where the cage has more than ``max_faces`` faces (the tightened
+    regions refuse so many collapses that the decimation stops short of the budget: the
+    crossings are everywhere, as on a machined part's sharp steps) or after
+    :data:`OVER_BUDGET_MISSES` rounds in a row without fewer crossings than every round
+    before."""
     from core.subdivision.limit_crossings import limit_self_intersections
 
     decimation = FoldFreeDecimation(vertices, faces, min_normal_cosine=NO_NORMAL_RULE)
-    best = None
+    best, fewest, misses = None, None, 0
     for _ in range(TIGHTEN_ROUNDS + 1):
         result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
         if best is None or crossings + inverted < best[0]:
             best = (crossings + inverted, result, crossings, budget)
         if not crossings:
-            break  # inverted faces left: the repairs of each round did what they could
+            break  # clean, or inverted faces left that the repairs of the round could not fix
+        misses = 0 if fewest is None or crossings < fewest else misses + 1
+        fewest = crossings if fewest is None else min(fewest, crossings)
+        if result.mesh.n_faces > max_faces or misses == OVER_BUDGET_MISSES:
+            break
         mesh = result.mesh
         _, base_faces, _ = limit_self_intersections(mesh, CROSSING_LEVELS)
         corners = np.concatenate([mesh.face_vertices[mesh.face_offsets[f]:
