@@ -29,11 +29,11 @@ genus and orientation:
    quadric-error order (:mod:`core.quadmesh.decimation.fold_free_decimation` without its
    normal rule), tightened around the faces whose limit surface crosses itself (the normal
    rule brought in there, one step more each round, :data:`TIGHTEN_ROUNDS`): more faces only
-   where it crosses, so the cage keeps about the budget wherever the flaws are, and how many faces it
-   gets follows the shape, not whether QSlim of one triangulation happened to leave the strut
-   thick enough. Where that cage is flawed too, larger budgets within the allowed range are
-   tried; where they all cross themselves, budgets beyond it (a solid needs a surface that does
-   not), until more faces stop helping.
+   where it crosses, so the cage keeps about the budget wherever the crossings are, and its
+   face count follows the shape, not whether QSlim of one triangulation happened to leave the
+   strut thick enough. Where that cage is flawed too, larger budgets within the allowed range
+   are tried; where they all cross themselves, budgets beyond it (a solid needs a surface that
+   does not), until more faces stop helping.
 4. Where every budget's limit surface crosses itself (machined parts whose sharp steps the
    smooth limit rounds over a face's length), the ladder runs again on feature-preserving
    decimations (:mod:`core.quadmesh.decimation.feature_decimation`), evened out inside their planar
@@ -133,7 +133,7 @@ class PairedDecimation:
     limit_crossings : int or None, self-crossing triangle pairs of the level-2 limit surface
         of ``mesh`` (None when only one budget was asked for: not counted).
     fold_free : bool, ``mesh`` comes of a fold-free decimation (module docstring, step 5).
-    tightened : int, the rounds of tightening around flawed faces that decimation had (a
+    tightened : int, the rounds of tightening around crossing faces that decimation had (a
         fold-free or a locally tightened one, steps 5 and 3).
     """
 
