@@ -5,21 +5,31 @@ base mesh run.
 A fine target (a topology-optimisation export of a million triangles) and a coarse one of
 the same shape should give the same labeling and the same cage, and the cost of those
 stages should follow the size of the answer (a few hundred cage faces), not the size of the
-input. Above ``params.proxy_triangles`` triangles the target is therefore reduced by
-quadric edge collapse (Garland & Heckbert; the compiled ``fast-simplification`` package)
-to about that many triangles. The proxy is accepted only when it is what the later stages
-need: a closed, consistently oriented 2-manifold without self-intersections and with the
-target's genus and components (the intake's own checks and unambiguous repairs). Otherwise
-the reduction is tried again with more triangles, and the full target is used when no
-reduction keeps the shape; the report says which and why. The fit and every distance and containment figure
-still use the full target.
+input. Above ``params.proxy_triangles`` triangles the target is therefore reduced to about
+that many by shortest-edge collapses (libigl's ``decimate``: the shortest edge left becomes
+its midpoint; collapses that would change the topology are refused), and the proxy's
+vertices are then moved to their closest points on the target (a midpoint of a curved
+surface's edge lies off it). Collapsing the shortest edges first leaves triangles of about
+one size wherever the target's are smaller, so proxies of one shape triangulated at
+different resolutions are alike, and alike to a target of about the proxy's size from the
+same design. A quadric reduction (Garland & Heckbert) would keep the shape closer with the
+same count, but it keeps small triangles where the surface curves and a few large ones on
+flat regions, in a pattern that differs from one triangulation of the shape to another: the
+boundaries between charts then follow different triangle edges, and the labeling and the
+cage differ with the resolution of the input.
+
+The proxy is accepted only when it is what the later stages need: a closed, consistently
+oriented 2-manifold without self-intersections and with the target's genus and components
+(the intake's own checks and unambiguous repairs). Otherwise the reduction is tried again
+with more triangles, and the full target is used when no reduction keeps the shape; the
+report says which and why. The fit and every distance and containment figure still use the
+full target.
 """
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from core.errors import InvalidMeshError
-from core.optional_imports import optional_module
 from core.types import TriMesh
 
 ATTEMPT_SIZES = (1.0, 1.1, 1.25, 2.0, 4.0)
@@ -28,9 +38,10 @@ sliver the repairs cannot remove usually succeeds a little larger; one that lose
 only with more triangles."""
 TIE_BREAK = 1e-4
 """Vertices are moved by about this many mean edge lengths (seeded, so the same every run)
-before the reduction: on flat patches (a subdivided mesh has many) whole families of
-collapses cost exactly zero, and the order that breaks those ties leaves slivers the repairs
-cannot remove; a move far below any tolerance of the later stages breaks them."""
+before the reduction: a subdivided mesh has whole families of edges of exactly one length,
+and the order that breaks those ties leaves slivers the repairs cannot remove; a move far
+below any tolerance of the later stages breaks them (and the projection onto the target
+undoes it)."""
 
 
 @dataclass(frozen=True)
@@ -40,9 +51,10 @@ class WorkingSurface:
     mesh : TriMesh, the proxy, or the target itself when it is small enough or no reduction
         kept its shape.
     reduced : bool, ``mesh`` is a reduction of the target.
-    report : dict, JSON-serialisable: triangles, reduced, largest_distance_mm (of the proxy's
-        vertices to the target, 0 when not reduced), reason (why the target itself is used),
-        refused (the smaller reductions tried first and why each was refused).
+    report : dict, JSON-serialisable: triangles, reduced, largest_move_mm (the largest
+        distance by which a vertex of the reduction was moved onto the target, 0 when not
+        reduced), reason (why the target itself is used), refused (the smaller reductions
+        tried first and why each was refused).
     """
 
     mesh: TriMesh
@@ -71,46 +83,50 @@ def working_surface(target, genus, components, proxy_triangles, reason_to_keep="
         reason = reason_to_keep or ("" if n_faces <= proxy_triangles or not proxy_triangles
                                     else "proxy off")
         return _kept(target, reason)
+    from core.target_surface import TargetSurface
+
+    surface = TargetSurface(target.vertices, target.faces)
     failures = []
     for size in ATTEMPT_SIZES:
         wanted = int(round(size * proxy_triangles))
         if wanted >= n_faces:
             break
-        proxy, problem = _checked(reduce_triangles(target, wanted), genus, components)
+        reduced = reduce_triangles(target, wanted)
+        onto = surface.nearest(reduced.vertices)
+        proxy, problem = _checked(TriMesh(onto.point, reduced.faces), genus, components)
         if problem is None:
             return WorkingSurface(proxy, True, {
                 "triangles": int(len(proxy.faces)), "reduced": True,
-                "largest_distance_mm": round(_largest_distance(proxy, target), 6),
+                "largest_move_mm": round(float(onto.distance.max()), 6),
                 "reason": "", "refused": failures})
         failures.append(f"{wanted} triangles: {problem}")
     return _kept(target, "no reduction kept the shape (" + "; ".join(failures) + ")")
 
 
 def reduce_triangles(mesh, triangles):
-    """``mesh`` reduced to about ``triangles`` triangles by quadric edge collapse.
+    """``mesh`` reduced to about ``triangles`` triangles by shortest-edge collapses.
 
     Parameters
     ----------
-    mesh : TriMesh with m > ``triangles`` faces.
+    mesh : TriMesh (n vertices, m > ``triangles`` faces), a closed 2-manifold.
     triangles : int, wanted triangle count.
 
     Returns
     -------
-    TriMesh, faces with a repeated corner and unused vertices dropped; not checked further
-    (see :func:`working_surface`).
+    TriMesh, its vertices the midpoints of collapsed edges (off a curved target by a
+    fraction of an edge length) or the target's own; faces with a repeated corner and unused
+    vertices dropped; not checked further (see :func:`working_surface`).
     """
-    simplification = optional_module("fast_simplification", "fast-simplification")
-    faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
+    import igl
+
+    faces = np.asfortranarray(mesh.faces, dtype=np.int32)
     edge = float(np.linalg.norm(mesh.vertices[faces[:, 0]] - mesh.vertices[faces[:, 1]],
                                 axis=1).mean())
     noise = np.random.default_rng(0).standard_normal(mesh.vertices.shape)
-    # double precision: single precision would merge a fine mesh's slivers
-    vertices = np.ascontiguousarray(mesh.vertices + TIE_BREAK * edge * noise, dtype=np.float64)
-    reduction = 1.0 - triangles / len(faces)
-    points, triangles_out = simplification.simplify(vertices, faces, target_reduction=reduction)
+    vertices = np.asfortranarray(mesh.vertices + TIE_BREAK * edge * noise, dtype=np.float64)
+    points, triangles_out = igl.decimate(vertices, faces, int(triangles))[:2]
     points = np.asarray(points, dtype=np.float64)
     triangles_out = np.asarray(triangles_out, dtype=np.int64)
-    # the collapses leave the faces they removed behind with a repeated corner
     collapsed = ((triangles_out[:, 0] == triangles_out[:, 1])
                  | (triangles_out[:, 1] == triangles_out[:, 2])
                  | (triangles_out[:, 2] == triangles_out[:, 0]))
@@ -137,15 +153,7 @@ def _checked(proxy, genus, components):
     return mesh, None
 
 
-def _largest_distance(proxy, target):
-    """Largest distance (mm) of the proxy's vertices to the target's surface."""
-    from core.target_surface import TargetSurface
-
-    return float(np.max(TargetSurface(target.vertices, target.faces)
-                        .nearest(proxy.vertices).distance))
-
-
 def _kept(target, reason):
     return WorkingSurface(target, False, {"triangles": int(len(target.faces)), "reduced": False,
-                                          "largest_distance_mm": 0.0, "reason": reason,
+                                          "largest_move_mm": 0.0, "reason": reason,
                                           "refused": []})

@@ -4,20 +4,30 @@
 For face ``i`` and label ``l`` (0..5 = +X, -X, +Y, -Y, +Z, -Z of the face's frame, direction
 ``c_l``) Eq. 3 reads
 
-    d(i, l)^2 = ||n_i - c_l||^2 + lambda * #{j in N(i): l_j != l}
+    d(i, l)^2 = ||n_i - c_l||^2 + lambda * sum_{j in N(i): l_j != l} e_ij
                 + p * (#{j in N(i): l_j = opposite(l)} + [i next to an interface and c_l
                 parallel to the interface x-axis])
 
 with ``lambda = 0.5``, ``p = 1e5`` and ``N(i)`` the edge-adjacent faces of the same part (labels of
-other parts live in other frames). Eq. 2's harmonic mean ``L / sum_l d^-1`` is the energy the
-method is named after; the update gives each face the label of smallest ``d``, which is the same
-as smallest ``d^2``. Starting from the nearest-direction labels, sweeps update all faces until no
-label changes or the sweep cap. A sweep visits the colour classes of a deterministic greedy colouring
-of the face adjacency graph one after the other (at most four classes on a triangle mesh); faces of
-one class have no common edge, so updating a class at once is exact coordinate descent on
-``sum_i ||n_i - c_{l_i}||^2 + lambda * #different-label edges + p * #opposite-label edges`` and
-cannot oscillate (updating all faces at once can flip pairs of neighbours forever). Ties keep the
-current label.
+other parts live in other frames). The paper counts the neighbours of another label
+(``e_ij = 1``); here each counts with the length of the edge between ``i`` and ``j`` over the mean
+edge length of the mesh (:func:`edge_weights`), so a chart boundary costs its length, not the
+number of triangle edges it happens to follow: on a mesh of equal triangles ``e_ij`` is about 1
+and Eq. 3 is the paper's, so lambda keeps its meaning. The data term stays per face, as in the
+paper: the working surface of a fine target has triangles of about one size
+(:mod:`core.proxy`), where an area weight would be about 1 too, and on a coarse target a face's
+label is its own decision whatever its size. The penalty terms are hard constraints and stay
+counts.
+
+Eq. 2's harmonic mean ``L / sum_l d^-1`` is the energy the method is named after; the update
+gives each face the label of smallest ``d``, which is the same as smallest ``d^2``. Starting
+from the nearest-direction labels, sweeps update all faces until no label changes or the sweep
+cap. A sweep visits the colour classes of a deterministic greedy colouring of the face adjacency
+graph one after the other (at most four classes on a triangle mesh); faces of one class have no
+common edge, so updating a class at once is exact coordinate descent on
+``sum_i ||n_i - c_{l_i}||^2 + lambda * sum_{different-label edges} e_ij
++ p * #opposite-label edges`` and cannot oscillate (updating all faces at once can flip pairs of
+neighbours forever). Ties keep the current label.
 
 With ``p = 1e5`` a face with an opposite-labelled neighbour effectively cannot take that label
 (unless every label is blocked), so the sweeps never create +X/-X neighbours; labels that already
@@ -174,8 +184,22 @@ def interface_penalty(face_frame, face_interface_axis):
     return pen
 
 
+def edge_weights(V, topology):
+    """(m, 3) float64 Eq. 3 weight ``e_ij`` of each face's neighbour across its edge ``k``
+    (``topology.neighbours[:, k]``): the edge's length over the mean edge length of the mesh.
+
+    Parameters
+    ----------
+    V : (n, 3) float64 vertices.
+    topology : MeshTopology (``edges``, ``face_edges``).
+    """
+    V = np.asarray(V, dtype=np.float64)
+    length = np.linalg.norm(V[topology.edges[:, 0]] - V[topology.edges[:, 1]], axis=1)
+    return length[topology.face_edges] / length.mean()
+
+
 def hbecvt_sweeps(unary, neighbours, labels, colour, lam=LAMBDA, penalty=PENALTY,
-                  max_sweeps=MAX_SWEEPS, active=None):
+                  max_sweeps=MAX_SWEEPS, active=None, edge_weight=None):
     """Minimise Eq. 3 face by face with coloured sweeps (in place on a copy).
 
     Parameters
@@ -187,6 +211,8 @@ def hbecvt_sweeps(unary, neighbours, labels, colour, lam=LAMBDA, penalty=PENALTY
     lam, penalty : float, lambda and p of Eq. 3.
     max_sweeps : int, cap on full sweeps.
     active : (m,) bool, optional; only these faces may change.
+    edge_weight : (m, k) float64, optional weight ``e_ij`` of each neighbour in the lambda
+        term (:func:`edge_weights`); 1 for every neighbour when omitted.
 
     Returns
     -------
@@ -202,7 +228,8 @@ def hbecvt_sweeps(unary, neighbours, labels, colour, lam=LAMBDA, penalty=PENALTY
     labels = np.asarray(labels, dtype=np.int64).copy()
     has = neighbours >= 0
     nb = np.where(has, neighbours, 0)
-    deg = has.sum(axis=1)
+    weight = has.astype(np.float64) if edge_weight is None else np.where(has, edge_weight, 0.0)
+    deg = weight.sum(axis=1)
     classes = [np.flatnonzero((colour == c) & (True if active is None else active))
                for c in range(int(colour.max()) + 1)]
     # only faces with a neighbour that moved since their last visit can move (see Notes)
@@ -215,12 +242,15 @@ def hbecvt_sweeps(unary, neighbours, labels, colour, lam=LAMBDA, penalty=PENALTY
             if len(faces) == 0:
                 continue
             stale[faces] = False
-            nl, hf = labels[nb[faces]], has[faces]
+            nl, hf, wf = labels[nb[faces]], has[faces], weight[faces]
             rows = np.arange(len(faces))
+            # per label: neighbours holding it (counted, for the penalty) and their weight
             cnt = np.zeros((len(faces), 6))
+            same = np.zeros((len(faces), 6))
             for j in range(nb.shape[1]):
                 cnt[rows, nl[:, j]] += hf[:, j]
-            d2 = (unary[faces] + lam * (deg[faces][:, None] - cnt)
+                same[rows, nl[:, j]] += wf[:, j]
+            d2 = (unary[faces] + lam * (deg[faces][:, None] - same)
                   + penalty * cnt[:, OPPOSITE])
             cur = labels[faces]
             d2[rows, cur] -= 1e-9
@@ -237,7 +267,8 @@ def hbecvt_sweeps(unary, neighbours, labels, colour, lam=LAMBDA, penalty=PENALTY
 def hbecvt_labeling(V, F, face_part, face_frame, face_interface_axis=None, lam=LAMBDA,
                     penalty=PENALTY, max_sweeps=MAX_SWEEPS, topology=None, colour=None,
                     normals=None):
-    """HBECVT labels of every face (Eqs. 2-3; see the module docstring).
+    """HBECVT labels of every face (Eqs. 2-3, the neighbours weighted by edge length as in
+    the module docstring).
 
     Parameters
     ----------
@@ -283,7 +314,8 @@ def hbecvt_labeling(V, F, face_part, face_frame, face_interface_axis=None, lam=L
     if colour is None:
         colour = face_colouring(nb)
     start = np.argmin(unary, axis=1)
-    labels, sweeps = hbecvt_sweeps(unary, nb, start, colour, lam, penalty, max_sweeps)
+    labels, sweeps = hbecvt_sweeps(unary, nb, start, colour, lam, penalty, max_sweeps,
+                                   edge_weight=edge_weights(V, topology))
     info = {"sweeps": int(sweeps), "converged": bool(sweeps < max_sweeps),
             "changed_from_nearest": int((labels != start).sum())}
     return labels, info

@@ -104,3 +104,22 @@ def test_paired_cage_of_a_thin_strut_lattice_has_a_limit_surface_that_does_not_c
     assert result.limit_crossings == 0
     assert not inverted_faces(result.mesh, V, F, surface).any()
     assert result.mesh.n_faces <= 6 * 100
+
+
+@pytest.mark.slow
+def test_without_the_normal_rule_it_reaches_the_count_and_tightening_brings_the_rule_in_there():
+    V, F, genus = strut_lattice()
+    relaxed = FoldFreeDecimation(V, F, min_normal_cosine=-1.0)
+    fold_free = FoldFreeDecimation(V, F)
+    assert not relaxed.fold_free and fold_free.fold_free
+    v, f = relaxed.triangles(80)
+    # fewer refusals: no more triangles than the fold-free decimation keeps
+    assert len(f) <= len(fold_free.triangles(80)[1]) and _genus(v, f) == genus
+    # tightened around one corner of the lattice: the normal rule holds for the target
+    # vertices collapsed there, nowhere else
+    tight = relaxed.tightened(80, V[[np.argmin(V.sum(axis=1))]])
+    raised = tight.min_normal_cosine > relaxed.min_normal_cosine
+    assert 0 < raised.sum() < len(V) / 2
+    assert (tight.min_normal_cosine[raised] >= MIN_NORMAL_COSINE).all()
+    assert (tight.min_normal_cosine[~raised] == -1.0).all()
+    assert tight.tightenings == 1 and not tight.fold_free

@@ -352,3 +352,37 @@ def test_automatic_parts_are_labelled_near_their_nearest_directions(name):
         sel = part == p
         mean = [np.average(a[sel], weights=area[sel]) for a in (got, in_world, in_pca)]
         assert mean[0] <= min(mean[1:]) + 3.0, (p, mean)
+
+
+def test_a_label_boundary_costs_its_length_not_its_edge_count():
+    # face 0 between two neighbours of label +X across short edges and one of +Y across a long
+    # edge, both labels equally near its normal: counted per neighbour (the paper's Eq. 3,
+    # every weight 1) it joins the two, weighted by edge length it joins the long edge's side
+    neighbours = np.array([[1, 2, 3], [0, -1, -1], [0, -1, -1], [0, -1, -1]])
+    unary = np.full((4, 6), 4.0)
+    unary[:, 0] = unary[:, 2] = 0.0  # +X and +Y cost nothing anywhere
+    labels = np.array([4, 0, 0, 2])  # face 0 starts at +Z
+    active = np.array([True, False, False, False])
+    colour = np.array([0, 1, 1, 1])
+    by_count, _ = hbecvt_sweeps(unary, neighbours, labels, colour, active=active)
+    ones, _ = hbecvt_sweeps(unary, neighbours, labels, colour, active=active,
+                            edge_weight=np.ones((4, 3)))
+    weight = np.ones((4, 3))
+    weight[0] = [0.5, 0.5, 3.0]
+    by_length, _ = hbecvt_sweeps(unary, neighbours, labels, colour, active=active,
+                                 edge_weight=weight)
+    assert by_count[0] == ones[0] == 0
+    assert by_length[0] == 2
+
+
+def test_edge_weights_do_not_depend_on_the_size_or_the_resolution_of_the_mesh():
+    from core.segmentation.labeling import edge_weights
+
+    V, F = cube(2)
+    weights = edge_weights(V, build_topology(F))
+    assert weights.shape == (len(F), 3) and (weights > 0).all()
+    assert np.allclose(edge_weights(10.0 * V, build_topology(F)), weights)
+    # a uniform midpoint subdivision halves every edge: the weights are the same values
+    V4, F4 = cube(3)
+    assert np.allclose(np.sort(np.unique(np.round(edge_weights(V4, build_topology(F4)), 9))),
+                       np.sort(np.unique(np.round(weights, 9))))

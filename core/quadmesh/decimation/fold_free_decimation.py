@@ -26,6 +26,11 @@ A cage paired of it can still cross itself where a member is thinner than its tr
 long: :meth:`FoldFreeDecimation.tightened` asks a closer normal agreement of the target
 vertices collapsed into the crossing faces, so the decimation keeps more triangles only there.
 
+Started with a smallest normal cosine of -1 (no normal rule), the same collapses make a
+half-edge QSlim that reaches any count; :meth:`FoldFreeDecimation.tightened` then brings in the
+normal rule only around the crossings of its cage, so the cage gets more faces only there
+(:mod:`core.quadmesh.decimation.paired_decimation`, step 3).
+
 A refused collapse is tried again when the neighbourhood of one of its ends changes. The
 collapses run compiled (numba), about a second for 50k triangles; where every collapse left is
 refused, the result keeps more triangles than asked for (the caller's face count grows and
@@ -72,11 +77,14 @@ class FoldFreeDecimation:
     Parameters
     ----------
     vertices : (n, 3) float64; faces : (m, 3) int64 the target.
+    min_normal_cosine : float, the smallest cosine asked of every target vertex at first:
+        :data:`MIN_NORMAL_COSINE`, or -1 for no normal rule until :meth:`tightened`.
 
     Attributes
     ----------
     min_normal_cosine : (n,) float64 the smallest cosine asked of every target vertex.
     tightenings : int, the :meth:`tightened` calls this decimation comes of.
+    fold_free : bool, every vertex asks at least :data:`MIN_NORMAL_COSINE` (the start did).
 
     Raises
     ------
@@ -84,7 +92,7 @@ class FoldFreeDecimation:
     that would are refused, so this means a defect in the input the intake did not catch.
     """
 
-    def __init__(self, vertices, faces):
+    def __init__(self, vertices, faces, min_normal_cosine=MIN_NORMAL_COSINE):
         self._vertices = np.ascontiguousarray(vertices, dtype=np.float64)
         self._faces = np.ascontiguousarray(faces, dtype=np.int64)
         self._components = int(connected_face_components(self._faces).max()) + 1
@@ -92,7 +100,8 @@ class FoldFreeDecimation:
         self._normals = smoothed_vertex_normals(self._vertices, self._faces, NORMAL_SMOOTHING)
         self._quadrics = plane_quadrics(self._vertices, self._faces)
         self._edges = edge_faces(self._faces)[0]
-        self.min_normal_cosine = np.full(len(self._vertices), MIN_NORMAL_COSINE)
+        self.min_normal_cosine = np.full(len(self._vertices), float(min_normal_cosine))
+        self.fold_free = bool(min_normal_cosine >= MIN_NORMAL_COSINE)
         self.tightenings = 0
         self._results = {}
         self._results_detail = {}
@@ -103,9 +112,10 @@ class FoldFreeDecimation:
         The vertices of the decimation to ``count`` triangles closest to ``points`` ((k, 3)
         float64, e.g. the corners of cage faces whose limit surface crosses itself), and
         their neighbours there, are found; every target vertex collapsed into one of them
-        gets its smallest normal cosine raised by :data:`TIGHTEN_STEP` (at most
-        :data:`MOST_NORMAL_COSINE`), so the triangles there must agree more closely with
-        the target's normals and fewer collapses are allowed there. Returns a new
+        gets its smallest normal cosine raised by :data:`TIGHTEN_STEP`, and to at least
+        :data:`MIN_NORMAL_COSINE` (at most :data:`MOST_NORMAL_COSINE`), so the triangles
+        there must agree more closely with the target's normals and fewer collapses are
+        allowed there. Returns a new
         FoldFreeDecimation (None when no vertex there can be tightened further).
         """
         from scipy.spatial import cKDTree
@@ -117,7 +127,9 @@ class FoldFreeDecimation:
         ring[hit] = True
         ring[faces[ring[faces].any(axis=1)].reshape(-1)] = True
         region = ring[cluster]
-        raised = np.minimum(self.min_normal_cosine + TIGHTEN_STEP * region, MOST_NORMAL_COSINE)
+        raised = np.where(region, np.minimum(np.maximum(self.min_normal_cosine + TIGHTEN_STEP,
+                                                        MIN_NORMAL_COSINE), MOST_NORMAL_COSINE),
+                          self.min_normal_cosine)
         if np.array_equal(raised, self.min_normal_cosine):
             return None
         other = object.__new__(FoldFreeDecimation)

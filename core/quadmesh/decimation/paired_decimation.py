@@ -24,9 +24,16 @@ genus and orientation:
    moved off the target, towards a limit surface through their on-target positions
    (:mod:`core.quadmesh.limit_interpolation`), and faces still inverted are edited: a corner
    relaxed or a quad split (:mod:`core.quadmesh.local_repair`; both in the budget ladder
-   only). Where it still crosses itself or faces away (thin struts with too few faces around
-   them), larger budgets within the allowed range are tried; where they all cross themselves,
-   budgets beyond it (a solid needs a surface that does not), until more faces stop helping.
+   only). Where the cage of the face budget still crosses itself or faces away (a thin strut
+   with too few faces around it), the budget is decimated again by half-edge collapses in
+   quadric-error order (:mod:`core.quadmesh.decimation.fold_free_decimation` without its
+   normal rule), tightened around the faces whose limit surface crosses itself (the normal
+   rule brought in there, one step more each round, :data:`TIGHTEN_ROUNDS`): more faces only
+   where it crosses, so the cage keeps about the budget wherever the crossings are, and its
+   face count follows the shape, not whether QSlim of one triangulation happened to leave the
+   strut thick enough. Where that cage is flawed too, larger budgets within the allowed range
+   are tried; where they all cross themselves, budgets beyond it (a solid needs a surface that
+   does not), until more faces stop helping.
 4. Where every budget's limit surface crosses itself (machined parts whose sharp steps the
    smooth limit rounds over a face's length), the ladder runs again on feature-preserving
    decimations (:mod:`core.quadmesh.decimation.feature_decimation`), evened out inside their planar
@@ -102,7 +109,11 @@ whose QSlim ladder ends clean fold well under half of them."""
 TIGHTEN_ROUNDS = 4
 """Fold-free decimations tightened around the crossings of the cage kept, at most (each
 raises the normal agreement asked of the triangles there by one step,
-:data:`core.quadmesh.decimation.fold_free_decimation.TIGHTEN_STEP`)."""
+:data:`core.quadmesh.decimation.fold_free_decimation.TIGHTEN_STEP`); and the locally tightened
+decimations of the face budget (module docstring, step 3)."""
+NO_NORMAL_RULE = -1.0
+"""Smallest normal cosine of the locally tightened decimation before it is tightened: no
+collapse is refused for its normal (a half-edge QSlim)."""
 
 
 @dataclass(frozen=True)
@@ -122,7 +133,8 @@ class PairedDecimation:
     limit_crossings : int or None, self-crossing triangle pairs of the level-2 limit surface
         of ``mesh`` (None when only one budget was asked for: not counted).
     fold_free : bool, ``mesh`` comes of a fold-free decimation (module docstring, step 5).
-    tightened : int, the rounds of tightening around crossing faces that decimation had.
+    tightened : int, the rounds of tightening around crossing faces that decimation had (a
+        fold-free or a locally tightened one, steps 5 and 3).
     """
 
     mesh: PolyMesh
@@ -290,7 +302,8 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
                                  max_faces, over_budget_faces, rounds)
     if best is None or best[2]:
         qslim = _budget_ladder(decimation, surface, target_faces, max_faces,
-                               over_budget_faces, rounds)
+                               over_budget_faces, rounds,
+                               local=(vertices, faces) if over_budget_faces else None)
         best = qslim if best is None or qslim[2] < best[2] else best
     if best[2] and over_budget_faces:
         feature_decimation = FeatureDecimation(vertices, faces, surface)
@@ -307,13 +320,17 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     return replace(best[1], rounds=tuple(rounds), limit_crossings=int(best[2]))
 
 
-def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces, rounds):
+def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces, rounds,
+                   local=None):
     """The budget ladder of :func:`paired_decimation_base_mesh`, of QSlim's decimations or
     with crease tags of the feature-preserving ones (a Decimation or FeatureDecimation);
     appends its rounds and returns ``(flaws, PairedDecimation, crossings, budget)`` of the
     cage kept. A budget whose decimation is one an earlier budget got (a feature-preserving
     decimation whose every collapse left was refused) would give the same cage again: it is
-    not built, and beyond the budget rule it counts as a budget no less flawed."""
+    not built, and beyond the budget rule it counts as a budget no less flawed. With
+    ``local`` (the target's ``(vertices, faces)``), a flawed cage of the face budget is
+    followed by the locally tightened decimations of that budget (:func:`_locally_tightened`)
+    before any larger budget."""
     best = None
     ladder = _ladder(target_faces, max_faces)
     for budget, new in _repeats_marked(decimation, ladder):
@@ -324,6 +341,12 @@ def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_fac
             best = (crossings + inverted, result, crossings, budget)
         if crossings + inverted == 0:
             break
+        if local is not None and budget == ladder[0]:
+            tightened = _locally_tightened(*local, surface, budget, ladder[-1], rounds)
+            if tightened[0] < best[0]:
+                best = tightened
+            if best[0] == 0:
+                break
     if best[2] and over_budget_faces:
         fewest, misses = best[0], 0
         for budget, new in _repeats_marked(decimation, _over_budgets(
@@ -374,6 +397,43 @@ def _tightened_ladder(decimation, surface, target_faces, max_faces, over_budget_
     return best
 
 
+def _locally_tightened(vertices, faces, surface, budget, max_faces, rounds):
+    """Cages of ``budget`` from half-edge QSlim decimations of the target (``vertices``,
+    ``faces``) without a normal rule, tightened around the faces whose limit surface crosses
+    itself (:meth:`FoldFreeDecimation.tightened`), up to :data:`TIGHTEN_ROUNDS` times while
+    it does; appends their rounds and returns ``(flaws, PairedDecimation, crossings,
+    budget)`` of the least flawed one (the first clean one).
+
+    The rounds end early where the cage has more than ``max_faces`` faces (the tightened
+    regions refuse so many collapses that the decimation stops short of the budget: the
+    crossings are everywhere, as on a machined part's sharp steps) or after
+    :data:`OVER_BUDGET_MISSES` rounds in a row without fewer crossings than every round
+    before."""
+    from core.subdivision.limit_crossings import limit_self_intersections
+
+    decimation = FoldFreeDecimation(vertices, faces, min_normal_cosine=NO_NORMAL_RULE)
+    best, fewest, misses = None, None, 0
+    for _ in range(TIGHTEN_ROUNDS + 1):
+        result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
+        if best is None or crossings + inverted < best[0]:
+            best = (crossings + inverted, result, crossings, budget)
+        if not crossings:
+            break  # clean, or inverted faces left that the repairs of the round could not fix
+        misses = 0 if fewest is None or crossings < fewest else misses + 1
+        fewest = crossings if fewest is None else min(fewest, crossings)
+        if result.mesh.n_faces > max_faces or misses == OVER_BUDGET_MISSES:
+            break
+        mesh = result.mesh
+        _, base_faces, _ = limit_self_intersections(mesh, CROSSING_LEVELS)
+        corners = np.concatenate([mesh.face_vertices[mesh.face_offsets[f]:
+                                                     mesh.face_offsets[f + 1]]
+                                  for f in np.unique(base_faces)])
+        decimation = decimation.tightened(2 * budget, mesh.vertices[corners])
+        if decimation is None:
+            break
+    return best
+
+
 def _repeats_marked(decimation, budgets, tried=()):
     """``(budget, new)`` for each of ``budgets``: ``new`` is False when its decimation (to
     twice as many triangles) is the cached result of an earlier one or of a budget in
@@ -406,8 +466,8 @@ def _flawed_mesh(decimation, budget, surface, rounds):
                    "inverted_faces": inverted, "moved_vertices": moved, "edits": edits,
                    **({"crease_edges": int(result.mesh.n_creases), "evened": evened,
                        "evened_flaws": int(evened_flaws)} if creased else {}),
-                   **({"fold_free": True, "tightened": result.tightened}
-                      if result.fold_free else {})})
+                   **({"fold_free": result.fold_free, "tightened": result.tightened}
+                      if isinstance(decimation, FoldFreeDecimation) else {})})
     return result, crossings, inverted
 
 
@@ -504,10 +564,10 @@ def _paired_mesh(decimation, count, surface, even=True):
         mesh = replace(mesh, creases=_kept_creases(mesh, renumber[creases]))
     mesh = _projected_on_target(mesh, surface)
     sizes = mesh.face_sizes
-    fold_free = isinstance(decimation, FoldFreeDecimation)
+    half_edge = isinstance(decimation, FoldFreeDecimation)
     return PairedDecimation(mesh, int(len(decimated_f)), int((sizes == 4).sum()),
-                            int((sizes == 3).sum()), fold_free=fold_free,
-                            tightened=decimation.tightenings if fold_free else 0)
+                            int((sizes == 3).sum()), fold_free=half_edge and decimation.fold_free,
+                            tightened=decimation.tightenings if half_edge else 0)
 
 
 def _rim_folds(vertices, quads, creases):
