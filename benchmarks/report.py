@@ -105,6 +105,8 @@ TOPIC_RESULTS = (
      "LABELING_RESULTS.md", "benchmarks/labeling_bench.py"),
     ("Fit: compiled queries, modes, the QuadriFlow peer", "FIT_RESULTS.md",
      "benchmarks/fit_bench.py"),
+    ("Layout peer: extraordinary vertices of our base mesh against QuadriFlow's at the same "
+     "face count, genus kept", "LAYOUT_PEER_RESULTS.md", "benchmarks/layout_peer_bench.py"),
     ("Export: shared-edge solids, mixed cages, STEP speed", "EXPORT_RESULTS.md",
      "benchmarks/export_bench.py"),
     ("Workbench: recompute, cancel, reopen", "workbench_RESULTS.md",
@@ -121,6 +123,8 @@ TOPIC_RESULTS = (
      "STRUCTURE_RESULTS.md", "benchmarks/structure_bench.py"),
     ("Unseen SIMP results: new load cases generated here, judged by the independent checks",
      "UNSEEN_RESULTS.md", "benchmarks/unseen_bench.py"),
+    ("SIMP designs of genus 0 to 60 with default parameters: valid closed STEP solids",
+     "SIMP_GENUS_RESULTS.md", "benchmarks/simp_genus_bench.py"),
     ("Topology-optimisation results of others: seconds per stage, cages, crossings, outside",
      "TO_RESULTS.md", "benchmarks/to_results_bench.py"),
     ("Crossings: self-crossing limit surfaces of the cages and the fits", "CROSSINGS_RESULTS.md",
