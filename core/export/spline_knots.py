@@ -92,10 +92,79 @@ def join(pieces):
     return np.concatenate(poles), np.array(knots), np.array(mults, dtype=np.int64)
 
 
+def _smoothness(poles, knots, mults, tolerance):
+    """(k,) int64 multiplicity each knot needs: 3 - (order of continuity within ``tolerance``).
+
+    The spline is refined to multiplicity 3 at every interior knot (its Bezier segments);
+    across a knot, the jump of the ``r``-th derivative of the two segments times
+    ``h^r / r!`` (``h`` the shorter span, so a length) measures how far the spline is from
+    being C^r there. Ends keep 4; no knot gets more than it has.
+    """
+    knots = np.asarray(knots, dtype=np.float64)
+    full = np.where(np.arange(len(knots)) % (len(knots) - 1) == 0, DEGREE + 1, DEGREE)
+    bez = refine(poles, knots, mults, knots, full)
+    h = np.diff(knots)
+    need = np.asarray(mults, dtype=np.int64).copy()
+    for i in range(1, len(knots) - 1):
+        left, right = bez[3 * i - 3:3 * i + 1], bez[3 * i:3 * i + 4]
+        hl, hr = h[i - 1], h[i]
+        scale = min(hl, hr)
+        m = DEGREE
+        for r, coefficient, factorial in ((1, 3.0, 1.0), (2, 6.0, 2.0), (3, 6.0, 6.0)):
+            dl = np.diff(left, r, axis=0)[-1] * coefficient / hl ** r
+            dr = np.diff(right, r, axis=0)[0] * coefficient / hr ** r
+            jump = float(np.linalg.norm(dl - dr, axis=-1).max()) * scale ** r / factorial
+            if jump > tolerance:
+                break
+            m = DEGREE - r
+        need[i] = min(need[i], m)
+    return need
+
+
 def remove_knots(poles, knots, mults, tolerance):
     """Lower interior knot multiplicities where the spline allows it within ``tolerance``.
 
-    Each interior knot in turn is tried at multiplicity 1, then 2, ... up to its current one;
+    First every knot gets the multiplicity its continuity needs (:func:`_smoothness`, with a
+    tenth of the tolerance) and the result is checked once; if that misses the tolerance, the
+    knots are reduced one at a time (:func:`_remove_knots_one_by_one`).
+
+    Parameters
+    ----------
+    poles : (n, ..., d) float64, the last axis the coordinates.
+    knots, mults : the knot vector (distinct knots, multiplicities; clamped cubic).
+    tolerance : float, model units.
+
+    Returns
+    -------
+    poles (n', ..., d), knots, mults, error (float, the bound reached, model units).
+    """
+    p0 = np.asarray(poles, dtype=np.float64)
+    knots = np.asarray(knots, dtype=np.float64)
+    need = _smoothness(p0, knots, mults, 0.1 * tolerance)
+    fit = _project(p0, knots, mults, need)
+    if fit[1] <= tolerance:
+        keep = need > 0
+        return fit[0], knots[keep], need[keep], fit[1]
+    return _remove_knots_one_by_one(p0, knots, mults, tolerance)
+
+
+def _project(p0, knots, mults, reduced):
+    """Poles on the knot vector with multiplicities ``reduced`` (a knot of 0 left out) closest
+    to ``p0`` through knot insertion, and the largest pole distance (a bound of the distance
+    between the two splines)."""
+    keep = reduced > 0
+    T = insertion_matrix(knots[keep], reduced[keep], knots, mults)
+    flat = p0.reshape(len(p0), -1)
+    q = np.linalg.lstsq(T, flat, rcond=None)[0]
+    gap = (T @ q - flat).reshape(p0.shape)
+    return q.reshape((len(q),) + p0.shape[1:]), float(np.linalg.norm(gap, axis=-1).max())
+
+
+def _remove_knots_one_by_one(poles, knots, mults, tolerance):
+    """Lower interior knot multiplicities where the spline allows it within ``tolerance``.
+
+    Knot removal one knot at a time: each interior knot in turn is tried at multiplicity 0
+    (removed), then 1, ... up to its current one;
     the first that keeps the spline within ``tolerance`` of the input is kept. The poles on a
     candidate knot vector are the least-squares projection of the input's poles through knot
     insertion ``T`` (``min |T q - p|``), and the distance checked is the largest pole distance
@@ -121,15 +190,9 @@ def remove_knots(poles, knots, mults, tolerance):
         for m in range(0, int(current[i])):
             trial = current.copy()
             trial[i] = m
-            keep = trial > 0
-            T = insertion_matrix(knots[keep], trial[keep], knots, mults)
-            flat = p0.reshape(len(p0), -1)
-            q = np.linalg.lstsq(T, flat, rcond=None)[0]
-            gap = (T @ q - flat).reshape(p0.shape)
-            err = float(np.linalg.norm(gap, axis=-1).max())
+            q, err = _project(p0, knots, mults, trial)
             if err <= tolerance:
-                current, error = trial, err
-                best = q.reshape((len(q),) + p0.shape[1:])
+                current, error, best = trial, err, q
                 break
     keep = current > 0
     return best, knots[keep], current[keep], error
