@@ -254,8 +254,10 @@ def _subd_to_step(args, stages):
           f"{base['other']} other), {base['extraordinary_vertices']} extraordinary vertices, genus {base['genus']}")
     reference = ("" if brep["limit_volume"] is None else
                  f" (limit surface {brep['limit_volume']:.6g}, rel. error {brep['volume_error_rel']:.1e})")
-    per_face = ", ".join(f"{n}-gon {k:g}" for n, k in patches["patches_per_base_face"].items())
-    print(f"solid: {brep['faces']} B-spline faces (per base face: {per_face}), valid={brep['valid']} "
+    per_face = ("one per rectangular block of quads" if patches.get("faces") == "chart" else
+                "per base face: " + ", ".join(f"{n}-gon {k:g}" for n, k
+                                               in patches["patches_per_base_face"].items()))
+    print(f"solid: {brep['faces']} B-spline faces ({per_face}), valid={brep['valid']} "
           f"closed={brep['closed']} volume={brep['volume']:.6g}{reference}, built from "
           f"{brep['construction'].replace('_', ' ')}")
     if brep["construction_note"]:

@@ -3,13 +3,15 @@
 
 Method
 ------
-Every extraordinary vertex (valence ``!= 4``) sends a "motorcycle" along each of its edges.
-Motorcycles advance one edge per round, all together, and go straight through valence-4
-vertices (to the edge opposite the one they arrived by); one stops on reaching a vertex that
-a trail already passes through, or an extraordinary vertex, or an edge another one has taken
-(Eppstein et al., "Motorcycle graphs: canonical quad mesh partitioning"). The trails cut the
-mesh into regions whose interiors hold valence-4 vertices only, so each region is a grid of
-quads; with at least one extraordinary vertex nearby it is a rectangle. A region that is not
+Every extraordinary vertex (valence ``n != 4``) sends a "motorcycle" along every other edge
+around it (``ceil(n / 2)`` of them; Eppstein et al., "Motorcycle graphs: canonical quad mesh
+partitioning", send one along each): between two of its trails lie one quad (the vertex is a
+block corner) or two (it lies on a straight block side). Motorcycles advance one edge per
+round, all together, and go straight through valence-4 vertices (to the edge opposite the one
+they arrived by); one stops on reaching a vertex that a trail already passes through, or an
+extraordinary vertex, or an edge another one has taken. The trails cut the mesh into regions
+whose interiors hold valence-4 vertices only, so each region is a grid of quads; with
+extraordinary vertices around it it is a rectangle. A region that is not
 a plain rectangle (an annulus or a torus of regular quads with no extraordinary vertex to cut
 it, or a rectangle whose sides touch each other) gets a *seed*: its interior vertex farthest
 from every trail starts four motorcycles of its own, and the graph is traced again. A region
@@ -72,9 +74,8 @@ def _straight(topo, corner):
 def _source_corners(topo, fv, sources, every_edge=False):
     """(k,) int64 outgoing half-edges (corners) on which the vertices ``sources`` start
     motorcycles: every other edge around each (valence ``n >= 3``), so that between two
-    trails lie one or two quads: the vertex is a block corner or lies on a straight block
-    side, and ``ceil(n / 2)`` trails leave it instead of ``n``; all edges at valence <= 2."""
-    first = np.full(len(topo.twin) and int(fv.max()) + 1, -1, dtype=np.int64)
+    trails lie one or two quads; every edge at valence <= 2 or with ``every_edge`` (seeds)."""
+    first = np.full(int(fv.max()) + 1, -1, dtype=np.int64)
     first[fv[::-1]] = np.arange(len(fv))[::-1]
     out = []
     for v in np.asarray(sources).tolist():
@@ -89,8 +90,9 @@ def _source_corners(topo, fv, sources, every_edge=False):
 
 
 def _trace(topo, fv, sources, seeds, n_vertices):
-    """(n_edges,) bool edges on the motorcycle trails started at ``sources`` (every outgoing
-    edge of each source vertex), all advancing one edge per round."""
+    """(n_edges,) bool edges on the motorcycle trails started at the extraordinary vertices
+    ``sources`` (every other edge) and the valence-4 ``seeds`` (every edge), all advancing one
+    edge per round."""
     cut = np.zeros(len(topo.edges), dtype=bool)
     on_trail = np.zeros(n_vertices, dtype=bool)
     on_trail[sources] = True
