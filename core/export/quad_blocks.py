@@ -122,9 +122,9 @@ def _regions(topo, n_quads, cut):
     return connected_components(graph, directed=False)[1]
 
 
-def _grid_of(topo, fv, cut, quads):
+def _grid_of(topo, fv, valence, cut, quads):
     """The :class:`QuadBlock` of a region of quads, or None when it is not a plain rectangle
-    with distinct grid vertices and no trail inside.
+    with distinct grid vertices, valence 4 inside and no trail inside.
 
     Quads are laid out from the first by walking across uncut edges: a quad's neighbour
     across its side ``k`` sits one cell towards ``STEP_OF_SIDE[k - rotation]``.
@@ -168,7 +168,7 @@ def _grid_of(topo, fv, cut, quads):
         if ((old >= 0) & (old != v)).any():
             return None
         verts[i + di, j + dj] = v
-    if len(np.unique(verts)) != verts.size:
+    if len(np.unique(verts)) != verts.size or (valence[verts[1:-1, 1:-1]] != 4).any():
         return None
     inner = np.concatenate([4 * grid[1:, :] + (rotation[1:, :] + 3) % 4,
                             4 * grid[:, 1:] + rotation[:, 1:] % 4], axis=None)
@@ -220,7 +220,7 @@ def quad_blocks(quads):
         blocks, added = [], False
         for r in range(int(region.max()) + 1):
             members = np.flatnonzero(region == r)
-            block = _grid_of(topo, fv, cut, members)
+            block = _grid_of(topo, fv, valence, cut, members)
             if block is not None:
                 blocks.append(block)
                 continue
