@@ -13,7 +13,7 @@ quad; G1 with one face per block of quads, ``--faces chart``), in one process,
 side by side: ``subd_to_solid`` writes the STEP file, ``Part.Shape().read`` reads it back
 (CPU seconds, best of 3), gmsh imports it (its own OpenCascade, no healing: one volume of
 FreeCAD's volume?), and the patches are measured: the largest normal jump across edges (degrees),
-the largest distance from patch points (17 x 17 per patch) to a level-5 mesh (level 4 from
+the largest distance from patch points (17 x 17 per quad) to a level-5 mesh (level 4 from
 1,000 faces) of exact limit points (fraction of the bounding-box diagonal). With a target,
 ``polycube_wb.api.check`` measures the STEP against it: the mean of both one-sided mean
 distances, the Hausdorff distance (fractions of the target's diagonal) and the volume
@@ -66,9 +66,8 @@ def _distance_to_limit(cage, patchset):
     surface = TargetSurface(limit_matrices(fine)[0] @ fine.vertices,
                             triangulate(fine.face_vertices, fine.face_offsets))
     faces, us, vs = [], [], []
-    for f, patch in enumerate(patchset.patches):
-        su, sv = _samples(patch.u_knots), _samples(patch.v_knots)
-        u, v = (a.reshape(-1) for a in np.meshgrid(su, sv, indexing="ij"))
+    for f, (W, H) in enumerate(_quads_per_face(cage, patchset)):
+        u, v = (a.reshape(-1) for a in np.meshgrid(_samples(W), _samples(H), indexing="ij"))
         faces.append(np.full(len(u), f))
         us.append(u)
         vs.append(v)
@@ -77,10 +76,21 @@ def _distance_to_limit(cage, patchset):
     return float(surface.nearest(points).distance.max() / patchset.info["bbox_diagonal"])
 
 
-def _samples(knots):
-    """At least 17 parameters on [0, 1], 4 per knot span of a merged face."""
-    k = np.unique(np.concatenate([knots, np.linspace(0.0, 1.0, 5)]))
-    return np.unique(np.concatenate([np.linspace(a, b, 5) for a, b in zip(k[:-1], k[1:])]))
+def _quads_per_face(cage, patchset):
+    """(W, H) quads along each face's u and v: (1, 1) per quad patch, a block's shape for
+    chart faces (``core.export.quad_blocks``, the partition the export used)."""
+    from core.export.quad_blocks import quad_blocks
+    from core.subdivision.limit import quad_mesh_of
+
+    if patchset.info.get("faces") != "chart":
+        return [(1, 1)] * len(patchset.patches)
+    return [block.quads.shape for block in quad_blocks(quad_mesh_of(cage)).blocks]
+
+
+def _samples(n):
+    """17 parameters per quad along a face of ``n`` quads (the same points on every form)."""
+    s = np.linspace(0.0, 1.0, 17)
+    return np.unique(((np.arange(n)[:, None] + s[None, :]) / n).reshape(-1))
 
 
 def _gmsh_read(step, volume):
