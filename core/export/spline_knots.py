@@ -9,8 +9,9 @@ The tools that merge patches into multi-span faces (:mod:`core.export.chart_face
   knot of full multiplicity (degree) at each join, which represents any chain of pieces
   that meet with C0;
 * :func:`remove_knots` lowers the multiplicity of interior knots where the spline is
-  smooth enough there (Tiller's knot removal, as a least-squares projection): a knot
-  stays only where removing it would move the spline by more than a tolerance.
+  smooth enough there (knot removal in the sense of Tiller, as a least-squares projection
+  through knot insertion, checked against the input): a knot stays only where removing it
+  would move the spline by more than a tolerance.
 
 Poles are arrays whose first axis runs along the spline; the other axes (a second pole
 index of a surface, the coordinates) are carried along, so a tensor-product surface is
@@ -26,12 +27,16 @@ DEGREE = 3
 
 
 def _key(knots, mults):
-    return (np.asarray(knots, dtype=np.float64).tobytes(), np.asarray(mults, dtype=np.int64).tobytes())
+    """Hashable form of a knot vector (for the cache of insertion matrices)."""
+    return (np.asarray(knots, dtype=np.float64).tobytes(),
+            np.asarray(mults, dtype=np.int64).tobytes())
 
 
 @lru_cache(maxsize=1024)
 def _insertion(coarse_key, fine_key):
-    """(n_fine, n_coarse) matrix of knot insertion (coarse poles -> fine poles)."""
+    """(n_fine, n_coarse) matrix of knot insertion (coarse poles -> fine poles): the fine basis
+    reproduces every coarse basis function, so least squares on ``DEGREE + 2`` points in each
+    fine span (unisolvent for cubics) gives it exactly up to rounding, which is cleared."""
     ck = np.frombuffer(coarse_key[0], dtype=np.float64)
     cm = np.frombuffer(coarse_key[1], dtype=np.int64)
     fk = np.frombuffer(fine_key[0], dtype=np.float64)
@@ -54,7 +59,8 @@ def insertion_matrix(coarse_knots, coarse_mults, fine_knots, fine_mults):
 
 def _apply(matrix, poles):
     """``matrix`` (a, b) applied along the first axis of ``poles`` (b, ...)."""
-    return (matrix @ poles.reshape(poles.shape[0], -1)).reshape((matrix.shape[0],) + poles.shape[1:])
+    flat = matrix @ poles.reshape(poles.shape[0], -1)
+    return flat.reshape((matrix.shape[0],) + poles.shape[1:])
 
 
 def refine(poles, knots, mults, fine_knots, fine_mults):
