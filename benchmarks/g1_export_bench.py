@@ -8,18 +8,19 @@ Usage::
 Cages: ``examples/genus3_cage.obj``, sample cages of ``core.subdivision.sample_cages`` and
 any OBJ cages given, each optionally with the target mesh it was fitted to (for example the
 fitted cage ``reconstruct TARGET --stop-after fit --base-mesh cage.obj`` writes; the G1 form
-refuses creased cages, recorded as such). For each cage and export form, in one process,
+refuses creased cages, recorded as such). For each cage and form (exact; G1 with one face per
+quad; G1 with one face per block of quads, ``--faces chart``), in one process,
 side by side: ``subd_to_solid`` writes the STEP file, ``Part.Shape().read`` reads it back
 (CPU seconds, best of 3), gmsh imports it (its own OpenCascade, no healing: one volume of
 FreeCAD's volume?), and the patches are measured: the largest normal jump across edges (degrees),
-the largest distance from patch points (17 x 17 per patch) to a level-5 mesh (level 4 from
+the largest distance from patch points (17 x 17 per quad) to a level-5 mesh (level 4 from
 1,000 faces) of exact limit points (fraction of the bounding-box diagonal). With a target,
 ``polycube_wb.api.check`` measures the STEP against it: the mean of both one-sided mean
 distances, the Hausdorff distance (fractions of the target's diagonal) and the volume
 outside the target (fraction of its volume), and ``../shared/tools/evaluate.py`` measures it
 independently (distances, its own normal jumps across edges, validity). First, the 48-quad
 torus and a voxel plate with eight holes after two Catmull-Clark steps (2,144 quads) go
-through ``subd_to_solid`` in both forms (CPU and wall seconds).
+through ``subd_to_solid`` in every form (CPU and wall seconds).
 
 Writes ``benchmarks/G1_EXPORT_RESULTS.md`` and ``benchmarks/g1_export_results.json``.
 """
@@ -64,12 +65,32 @@ def _distance_to_limit(cage, patchset):
     fine = build_hierarchy(cage, 5 if cage.n_faces < 1000 else 4).meshes[-1]
     surface = TargetSurface(limit_matrices(fine)[0] @ fine.vertices,
                             triangulate(fine.face_vertices, fine.face_offsets))
-    s = np.linspace(0.0, 1.0, 17)
-    u, v = (a.reshape(-1) for a in np.meshgrid(s, s, indexing="ij"))
-    k = len(patchset.patches)
-    points = evaluate_patch_points(patchset.patches, np.repeat(np.arange(k), len(u)),
-                                   np.tile(u, k), np.tile(v, k))
+    faces, us, vs = [], [], []
+    for f, (W, H) in enumerate(_quads_per_face(cage, patchset)):
+        u, v = (a.reshape(-1) for a in np.meshgrid(_samples(W), _samples(H), indexing="ij"))
+        faces.append(np.full(len(u), f))
+        us.append(u)
+        vs.append(v)
+    points = evaluate_patch_points(patchset.patches, np.concatenate(faces), np.concatenate(us),
+                                   np.concatenate(vs))
     return float(surface.nearest(points).distance.max() / patchset.info["bbox_diagonal"])
+
+
+def _quads_per_face(cage, patchset):
+    """(W, H) quads along each face's u and v: (1, 1) per quad patch, a block's shape for
+    chart faces (``core.export.quad_blocks``, the partition the export used)."""
+    from core.export.quad_blocks import quad_blocks
+    from core.subdivision.limit import quad_mesh_of
+
+    if patchset.info.get("faces") != "chart":
+        return [(1, 1)] * len(patchset.patches)
+    return [block.quads.shape for block in quad_blocks(quad_mesh_of(cage)).blocks]
+
+
+def _samples(n):
+    """17 parameters per quad along a face of ``n`` quads (the same points on every form)."""
+    s = np.linspace(0.0, 1.0, 17)
+    return np.unique(((np.arange(n)[:, None] + s[None, :]) / n).reshape(-1))
 
 
 def _gmsh_read(step, volume):
@@ -94,19 +115,28 @@ def _gmsh_read(step, volume):
         gmsh.finalize()
 
 
-def run_case(name, cage, target, export, folder):
+FORMS = (("exact", "quad"), ("g1", "quad"), ("g1", "chart"))
+"""(export, faces) per row: the exact graded form, the G1 form with one face per quad and with
+one face per block of quads."""
+
+
+def _label(export, faces):
+    return export if faces == "quad" else f"{export} {faces}"
+
+
+def run_case(name, cage, target, export, folder, faces="quad"):
     from core.export.bspline import limit_surface_patches
     from core.export.g1_patches import g1_surface_patches
     from core.polymesh_io import write_polymesh
     from polycube_wb.api import check, subd_to_solid
 
     obj = os.path.join(folder, name + ".obj")
-    step = os.path.join(folder, f"{name}_{export}.step")
+    step = os.path.join(folder, f"{name}_{export}_{faces}.step")
     write_polymesh(obj, cage)
-    row = {"cage": name, "export": export, "base_faces": int(cage.n_faces)}
+    row = {"cage": name, "export": _label(export, faces), "base_faces": int(cage.n_faces)}
     try:
         clock = time.process_time()
-        solid, report = subd_to_solid(obj, step, export=export)
+        solid, report = subd_to_solid(obj, step, export=export, faces=faces)
         row["export_seconds"] = time.process_time() - clock
     except Exception as exc:  # recorded, e.g. the G1 form refusing creases
         row["error"] = str(exc)
@@ -118,7 +148,7 @@ def run_case(name, cage, target, export, folder):
         shape.read(step)
         reads.append(time.process_time() - clock)
     row.update(_gmsh_read(step, shape.Volume))
-    patchset = (g1_surface_patches(cage, measure=False) if export == "g1"
+    patchset = (g1_surface_patches(cage, measure=False, faces=faces) if export == "g1"
                 else limit_surface_patches(cage, measure=False))
     row.update({
         "faces": len(solid.Faces), "valid": bool(solid.isValid()),
@@ -187,11 +217,12 @@ def speed_rows(folder):
     for name, cage in (("torus", torus()), ("plate_8_holes", plate_with_holes())):
         obj = os.path.join(folder, name + ".obj")
         write_polymesh(obj, cage)
-        for export in ("exact", "g1"):
-            step = os.path.join(folder, f"{name}_{export}_speed.step")
+        for export, faces in FORMS:
+            step = os.path.join(folder, f"{name}_{export}_{faces}_speed.step")
             clock, wall = time.process_time(), time.perf_counter()
-            solid, _ = subd_to_solid(obj, step, export=export)
-            rows.append({"cage": name, "quads": int(cage.n_faces), "export": export,
+            solid, _ = subd_to_solid(obj, step, export=export, faces=faces)
+            rows.append({"cage": name, "quads": int(cage.n_faces),
+                         "export": _label(export, faces),
                          "cpu_seconds": time.process_time() - clock,
                          "wall_seconds": time.perf_counter() - wall,
                          "valid": bool(solid.isValid()), "step_bytes": os.path.getsize(step)})
@@ -215,8 +246,8 @@ def main(paths):
     with tempfile.TemporaryDirectory() as folder:
         speed = speed_rows(folder)
         for name, cage, target in _cages(paths):
-            for export in ("exact", "g1"):
-                rows.append(run_case(name, cage, target, export, folder))
+            for export, faces in FORMS:
+                rows.append(run_case(name, cage, target, export, folder, faces))
                 print(json.dumps(rows[-1]), flush=True)
     with open(os.path.join(HERE, "g1_export_results.json"), "w") as f:
         json.dump({"load": os.getloadavg()[0], "rows": rows, "speed": speed}, f, indent=1)
@@ -224,10 +255,10 @@ def main(paths):
 
 
 def _read_ratio(rows, row):
-    """How many times faster FreeCAD read the G1 file than the exact one of the same cage."""
+    """How many times faster FreeCAD read this row's file than the exact one of the same cage."""
     exact = [r for r in rows if r["cage"] == row["cage"] and r["export"] == "exact"
              and "read_seconds" in r]
-    if row["export"] != "g1" or not exact:
+    if row["export"] == "exact" or not exact:
         return ""
     return f"{exact[0]['read_seconds'] / max(row['read_seconds'], 1e-9):.1f}"
 
@@ -235,14 +266,17 @@ def _read_ratio(rows, row):
 def write_table(rows, speed):
     """Write ``G1_EXPORT_RESULTS.md`` from the result rows and the speed rows."""
     lines = ["# Exact (graded) against G1 export", "",
-             "Generated by `benchmarks/g1_export_bench.py`; both forms of each cage in one process "
+             "Generated by `benchmarks/g1_export_bench.py`; every form of each cage in one process "
+             "(`g1 chart`: the G1 patches merged into one face per rectangular block of quads, "
+             "`--faces chart`; its normal jump is that of the per-quad patches it equals within "
+             "1e-8 mm) "
              "(the machine is shared: times are noisy, compare within a row pair). Rows after "
              "`grid_sphere` are the fitted cages `reconstruct TARGET --stop-after fit --base-mesh "
              "CAGE.obj` writes at default parameters; their target columns are `check`'s "
              "(fractions of the target's diagonal and volume) and the independent "
              "`../shared/tools/evaluate.py`'s (symmetric distances, 100,000 samples per side). Read times are CPU seconds, best "
              "of 3 for FreeCAD (`Part.Shape().read`), one gmsh `occ.importShapes`; 'x faster' "
-             "is the exact row's FreeCAD read time over the G1 row's. 'gmsh valid': one volume "
+             "is the exact row's FreeCAD read time over this row's. 'gmsh valid': one volume "
              f"whose mass is FreeCAD's volume within 1e-6. Load average {os.getloadavg()[0]:.1f} "
              "on 2 cores.", "",
              "| cage | base faces | export | faces | poles | STEP KB | KB per 300 base faces | "

@@ -29,6 +29,10 @@ EXPORT_FORMS = ("exact", "g1")
 ``g1``, the light tangent-continuous patches of ``core.export.g1_patches`` (one face per quad,
 at most 64 poles, close to the limit near extraordinary vertices)."""
 DEFAULT_EXPORT_FORM = "exact"
+FACE_FORMS = ("quad", "chart")
+"""The B-rep faces of the G1 export: ``quad``, one face per quad of the cage; ``chart``, one
+multi-span face per rectangular block of quads (``core.export.chart_faces``)."""
+DEFAULT_FACE_FORM = "quad"
 MAX_EXPORT_DEPTH = 12
 """Deeper grading adds (2 depth + 3)^2 poles per patch at an extraordinary vertex for no
 visible gain (the error is already ~1e-6 of the diagonal at depth 8)."""
@@ -80,6 +84,15 @@ def check_export_form(form, name="export"):
     """Raise ParameterError unless ``form`` is one of :data:`EXPORT_FORMS`."""
     if form not in EXPORT_FORMS:
         raise ParameterError(f"{name} must be one of {', '.join(EXPORT_FORMS)}, got {form!r}")
+
+
+def check_face_form(faces, export, name="faces"):
+    """Raise ParameterError unless ``faces`` is one of :data:`FACE_FORMS` and fits ``export``
+    (merged faces are made of the G1 export's patches only)."""
+    if faces not in FACE_FORMS:
+        raise ParameterError(f"{name} must be one of {', '.join(FACE_FORMS)}, got {faces!r}")
+    if faces != "quad" and export != "g1":
+        raise ParameterError(f"{name} '{faces}' needs the g1 export (got export {export!r})")
 
 
 @dataclass(frozen=True)
@@ -139,6 +152,8 @@ class ReconstructionParams:
     export : surface form of the solid's patches, one of :data:`EXPORT_FORMS` (``exact``:
         graded, the Catmull-Clark limit; ``g1``: one light tangent-continuous patch per quad,
         cages without creases).
+    faces : B-rep faces of the ``g1`` export, one of :data:`FACE_FORMS` (``quad``: one per
+        quad; ``chart``: one multi-span face per rectangular block of quads).
     """
 
     units: str = _param("mm", "length unit of the target's coordinates (default: mm); the "
@@ -207,6 +222,10 @@ class ReconstructionParams:
                          "the Catmull-Clark limit (large STEP); g1: one light tangent-continuous "
                          "patch per quad, close to the limit (cages without creases) (default "
                          "%(default)s)", _flag("export"), choices=EXPORT_FORMS)
+    faces: str = _param(DEFAULT_FACE_FORM, "B-rep faces of the g1 export: quad: one face per "
+                        "quad of the cage; chart: one multi-span face per rectangular block of "
+                        "quads (fewer faces, faster to read) (default %(default)s)",
+                        _flag("faces"), choices=FACE_FORMS)
     outside_refinement: float = _param(
         0.003, "inside mode: where the fit leaves more than this fraction of the target's "
         "volume outside, split the cage's quad strips there and fit again (default "
@@ -225,6 +244,7 @@ class ReconstructionParams:
         if self.tolerance > 0 and self.tolerance_mm > 0:
             raise ParameterError("give the tolerance once: as a fraction of the bounding-box "
                                  "diagonal (tolerance) or in millimetres (tolerance_mm)")
+        check_face_form(self.faces, self.export)
         if (self.tolerance > 0 or self.tolerance_mm > 0) and self.fit_mode == "none":
             raise ParameterError("a tolerance needs a fit: fit_mode 'none' cannot refine")
 

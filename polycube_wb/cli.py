@@ -14,7 +14,8 @@ import traceback
 
 from core.errors import PolycubeInputError
 from core.output_files import committed_count
-from core.params import (DEFAULT_EXPORT_FORM, EXPORT_DEPTH, EXPORT_FORMS, MAX_EXPORT_DEPTH,
+from core.params import (DEFAULT_EXPORT_FORM, DEFAULT_FACE_FORM, EXPORT_DEPTH, EXPORT_FORMS,
+                         FACE_FORMS, MAX_EXPORT_DEPTH,
                          UNIT_TO_MM, ReconstructionParams,
                          parameter_options)
 from core.pipeline import STOP_AFTER_CHOICES
@@ -120,6 +121,10 @@ def build_parser():
                           "tangent-continuous patch per quad, close to the limit near "
                           "extraordinary vertices (cages without creases) "
                           f"(default {DEFAULT_EXPORT_FORM})")
+    sub.add_argument("--faces", choices=FACE_FORMS, default=DEFAULT_FACE_FORM,
+                     help="B-rep faces of the g1 export: quad: one face per quad; chart: one "
+                          "multi-span face per rectangular block of quads (fewer faces, faster "
+                          f"to read) (default {DEFAULT_FACE_FORM})")
     sub.add_argument("--no-measure", action="store_true",
                      help="skip measuring approximation error and continuity (faster)")
     sub.add_argument("--progress", action="store_true",
@@ -242,14 +247,17 @@ def _subd_to_step(args, stages):
     from polycube_wb.api import subd_to_solid
 
     _, report = subd_to_solid(args.base_mesh, args.output, args.report, depth=args.depth,
-                              measure=not args.no_measure, progress=stages, export=args.export)
+                              measure=not args.no_measure, progress=stages, export=args.export,
+                              faces=args.faces)
     base, brep, patches = report["base_mesh"], report["brep"], report["patches"]
     print(f"base mesh: {base['faces']} faces ({base['quads']} quads, {base['triangles']} triangles, "
           f"{base['other']} other), {base['extraordinary_vertices']} extraordinary vertices, genus {base['genus']}")
     reference = ("" if brep["limit_volume"] is None else
                  f" (limit surface {brep['limit_volume']:.6g}, rel. error {brep['volume_error_rel']:.1e})")
-    per_face = ", ".join(f"{n}-gon {k:g}" for n, k in patches["patches_per_base_face"].items())
-    print(f"solid: {brep['faces']} B-spline faces (per base face: {per_face}), valid={brep['valid']} "
+    per_face = ("one per rectangular block of quads" if patches.get("faces") == "chart" else
+                "per base face: " + ", ".join(f"{n}-gon {k:g}" for n, k
+                                               in patches["patches_per_base_face"].items()))
+    print(f"solid: {brep['faces']} B-spline faces ({per_face}), valid={brep['valid']} "
           f"closed={brep['closed']} volume={brep['volume']:.6g}{reference}, built from "
           f"{brep['construction'].replace('_', ' ')}")
     if brep["construction_note"]:

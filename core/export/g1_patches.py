@@ -49,11 +49,13 @@ from scipy.sparse.linalg import splu
 
 from core.errors import ExportError
 from core.export.brep_topology import CORNER_UV, BRepTopology, EdgeCurve
+from core.export.chart_faces import chart_patches
 from core.export.bspline_basis import basis_matrix
 from core.export.bspline_measure import normal_jumps, patch_deviation
 from core.export.patch_context import PatchContext
 from core.subdivision.catmull_clark import mesh_topology
 from core.subdivision.limit import LimitEvaluator, quad_mesh_of, quad_stencils
+from core.params import check_face_form
 from core.types import BSplinePatch, PatchSet
 
 EV_SPAN = 0.125
@@ -349,7 +351,7 @@ def _topology(quads, topo, patches, free):
                         topo.corner_edge.astype(np.int64), reversed_use, uv)
 
 
-def g1_surface_patches(base, measure=True):
+def g1_surface_patches(base, measure=True, faces="quad"):
     """G1 bicubic B-spline patches close to the Catmull-Clark limit surface of ``base``.
 
     Parameters
@@ -357,15 +359,21 @@ def g1_surface_patches(base, measure=True):
     base : PolyMesh, closed 2-manifold polygon mesh without crease edges (validated by the
         caller).
     measure : bool, if True fill ``info`` with the deviation from the exact limit surface
-        and the normal jumps across edges.
+        and the normal jumps across edges (of the per-quad patches).
+    faces : ``"quad"`` (one face per quad) or ``"chart"`` (the quads' patches merged into
+        one multi-span face per rectangular block of quads,
+        :func:`core.export.chart_faces.chart_patches`, within
+        :data:`core.export.chart_faces.MERGE_TOLERANCE` of them).
 
     Returns
     -------
     PatchSet
         One patch per quad of ``base`` if it is all quads, else per quad of its first
-        Catmull-Clark refinement (``patch_level`` 1); ``face_of_patch`` is the base face;
+        Catmull-Clark refinement (``patch_level`` 1), or per block of them with ``faces``
+        ``"chart"`` (see :func:`core.export.chart_faces.chart_patches` for what it adds to
+        ``info``); ``face_of_patch`` is the base face (of a block's first quad);
         ``topology`` the shared vertices and edges; ``d/du x d/dv`` points outward.
-        ``info`` holds ``export`` ("g1"), ``patch_level``, ``n_patches``,
+        ``info`` holds ``export`` ("g1"), ``faces``, ``n_faces``, ``patch_level``, ``n_patches``,
         ``patches_per_base_face``, ``n_extraordinary_vertices``, ``n_g1_patches`` (free
         patches), ``n_poles``, ``g1_residual`` (largest residual of the G1 conditions,
         model units per unit parameter), ``bbox_diagonal`` and, if ``measure``, the figures
@@ -379,6 +387,7 @@ def g1_surface_patches(base, measure=True):
         conditions by more than :data:`G1_RESIDUAL_MAX` of the cage's bounding-box diagonal
         (conditions that contradict each other), rather than writing a surface with kinks.
     """
+    check_face_form(faces, "g1")
     if base.n_creases:
         raise ExportError(f"the G1 export does not support crease edges: the cage has "
                           f"{base.n_creases}; use the exact (graded) export")
@@ -425,6 +434,8 @@ def g1_surface_patches(base, measure=True):
     ctx = PatchContext(quads, 1)
     info = {
         "export": "g1",
+        "faces": "quad",
+        "n_faces": len(patches),
         "patch_level": level,
         "n_patches": len(patches),
         "patches_per_base_face": {str(n): float(per_face[sizes == n].mean())
@@ -440,4 +451,6 @@ def g1_surface_patches(base, measure=True):
         info.update(patch_deviation(result, quads, context=ctx))
         used = np.unique(fv)
         info.update(normal_jumps(result, quads, context=ctx, ev_vertex=valence[used] != 4))
+    if faces == "chart":
+        return chart_patches(result, quads)
     return result

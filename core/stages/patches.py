@@ -13,7 +13,8 @@ def run_patches(fit, params, progress):
     Parameters
     ----------
     fit : core.types.FitResult.
-    params : core.params.ReconstructionParams; ``export`` chooses the surface form.
+    params : core.params.ReconstructionParams; ``export`` chooses the surface form, ``faces``
+        one face per quad or per block of quads (g1 only).
     progress : core.progress.Progress; cancellable before the patches are built.
 
     Returns
@@ -39,7 +40,7 @@ def run_patches(fit, params, progress):
                f"pairs at the fit's level {fit.levels})" if cage else "")
         raise ExportError(f"the fitted cage: {crossings.message()}{why}")
     if params.export == "g1":
-        patches = g1_surface_patches(fit.cage)
+        patches = g1_surface_patches(fit.cage, faces=params.faces)
     else:
         patches = limit_surface_patches(fit.cage)
     return PatchesResult(patches, dict(patches.info))

@@ -12,8 +12,8 @@ import numpy as np
 
 from core.mesh_topology import polymesh_summary
 from core.output_files import check_output_path, output_transaction, write_json_atomic
-from core.params import (DEFAULT_EXPORT_FORM, EXPORT_DEPTH, check_export_depth,
-                         check_export_form)
+from core.params import (DEFAULT_EXPORT_FORM, DEFAULT_FACE_FORM, EXPORT_DEPTH,
+                         check_export_depth, check_export_form, check_face_form)
 from core.pipeline import STOP_AFTER_CHOICES, peak_memory_mb, reconstruct as run_pipeline
 from core.progress import NO_PROGRESS
 
@@ -136,7 +136,8 @@ def _input_name(path):
 
 
 def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT_DEPTH,
-                  measure=True, progress=NO_PROGRESS, export=DEFAULT_EXPORT_FORM):
+                  measure=True, progress=NO_PROGRESS, export=DEFAULT_EXPORT_FORM,
+                  faces=DEFAULT_FACE_FORM):
     """Turn a closed polygon base mesh (a SubD cage, OBJ) into a FreeCAD solid.
 
     The solid's faces are bicubic B-spline patches of the Catmull-Clark limit surface.
@@ -152,6 +153,8 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT
     export : ``"exact"`` (graded patches, ``depth`` applies) or ``"g1"`` (one light
         tangent-continuous patch per quad, :mod:`core.export.g1_patches`; cages without
         creases).
+    faces : ``"quad"`` (one B-rep face per quad) or ``"chart"`` (one multi-span face per
+        rectangular block of quads, :mod:`core.export.chart_faces`; ``g1`` export only).
 
     Returns
     -------
@@ -167,6 +170,7 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT
 
     check_export_depth(depth)
     check_export_form(export)
+    check_face_form(faces, export)
     inputs = (base_mesh_path,)
     for path, what in ((step_path, "STEP file"), (report_path, "report")):
         if path is not None:
@@ -183,7 +187,7 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT
     progress.report("patches", 0.1)
     clock = time.perf_counter()
     if export == "g1":
-        patches = g1_surface_patches(base, measure=measure)
+        patches = g1_surface_patches(base, measure=measure, faces=faces)
     else:
         patches = limit_surface_patches(base, depth=depth, measure=measure)
     stages["patches"] = _ok(clock)

@@ -31,20 +31,39 @@ class SolidProxy(StageProxy):
                      f"depth, 1..{MAX_EXPORT_DEPTH}; the solid is the exact limit surface "
                      "except in a cell of size 2^-depth around them",
                      default(EXPORT_DEPTH_KEY))
+        from core.params import DEFAULT_EXPORT_FORM, DEFAULT_FACE_FORM, EXPORT_FORMS, FACE_FORMS
+
+        add_property(obj, "App::PropertyEnumeration", "Export", "Solid",
+                     "Surface form: exact (graded patches, the Catmull-Clark limit; large) or "
+                     "g1 (one light tangent-continuous patch per quad, close to the limit; "
+                     "cages without creases)", list(EXPORT_FORMS), choice=DEFAULT_EXPORT_FORM)
+        add_property(obj, "App::PropertyEnumeration", "Faces", "Solid",
+                     "B-rep faces of the g1 form: quad (one per quad of the cage) or chart "
+                     "(one multi-span face per rectangular block of quads)",
+                     list(FACE_FORMS), choice=DEFAULT_FACE_FORM)
         for name, _, kind, tooltip in FIGURES:
             add_property(obj, kind, name, "Result", tooltip, read_only=True, output=True)
 
     def parameters(self, obj):
-        return {"depth": int(obj.Depth)}
+        """The depth, and the surface form and faces where they are not the defaults (so a
+        solid of a document saved before they existed keeps its parameter id)."""
+        from core.params import DEFAULT_EXPORT_FORM, DEFAULT_FACE_FORM
+
+        params = {"depth": int(obj.Depth)}
+        if (str(obj.Export), str(obj.Faces)) != (DEFAULT_EXPORT_FORM, DEFAULT_FACE_FORM):
+            params.update(export=str(obj.Export), faces=str(obj.Faces))
+        return params
 
     def prepare(self, obj):
-        from core.params import check_export_depth
+        from core.params import check_export_depth, check_export_form, check_face_form
         from polycube_wb.stage_jobs import StageJob
 
         check_export_depth(obj.Depth, "Depth")
+        check_export_form(obj.Export, "Export")
+        check_face_form(obj.Faces, obj.Export, "Faces")
         base, depth = self.upstream_state(obj).cage, int(obj.Depth)
         what = f"{obj.Label}: the cage of {obj.Cage.Label}"
-        return StageJob(_limit_solid, (base, depth, what))
+        return StageJob(_limit_solid, (base, depth, what, str(obj.Export), str(obj.Faces)))
 
     def store(self, obj, result):
         solid, brep = result
@@ -65,9 +84,10 @@ class SolidProxy(StageProxy):
         return {}
 
 
-def _limit_solid(base, depth, what, progress):
-    """(Part.Solid, its figures) of the limit surface of the cage ``base`` (B-spline faces,
-    grading ``depth``); ``what`` names the cage in the error when the surface crosses itself.
+def _limit_solid(base, depth, what, export, faces, progress):
+    """(Part.Solid, its figures) of the limit surface of the cage ``base`` (B-spline faces:
+    ``export`` "exact" graded to ``depth``, or "g1" with one face per quad or per block of
+    quads, ``faces``); ``what`` names the cage in the error when the surface crosses itself.
 
     Raises
     ------
@@ -76,6 +96,7 @@ def _limit_solid(base, depth, what, progress):
     """
     from core.errors import ExportError
     from core.export.bspline import limit_surface_patches
+    from core.export.g1_patches import g1_surface_patches
     from core.progress import SubProgress
     from core.subdivision.limit_crossings import export_limit_crossings
     from polycube_wb.brep import build_solid
@@ -84,7 +105,10 @@ def _limit_solid(base, depth, what, progress):
     crossings = export_limit_crossings(base)
     if crossings.count:
         raise ExportError(f"{what}: {crossings.message()}")
-    patches = limit_surface_patches(base, depth=depth, measure=False)
+    if export == "g1":
+        patches = g1_surface_patches(base, measure=False, faces=faces)
+    else:
+        patches = limit_surface_patches(base, depth=depth, measure=False)
     progress.check_cancel()
     solid, brep = build_solid(patches, SubProgress(progress, 0.5, 1.0))
     jump = patches.info.get("normal_jump_max_deg")

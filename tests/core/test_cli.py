@@ -146,6 +146,10 @@ def _other_value(item, option):
     return [option.flag, str(value)], value
 
 
+COMPANION_OPTIONS = {"faces": ["--export", "g1"]}
+"""Options a parameter's other value needs (merged faces are made of the G1 export only)."""
+
+
 def test_every_parameter_option_reaches_the_parameters_and_the_help():
     """The options are made from ``core.params`` alone: each flagged field, set on the
     command line to a value other than its default, arrives in ``pipeline_params`` (and
@@ -162,6 +166,7 @@ def test_every_parameter_option_reaches_the_parameters_and_the_help():
         if item.name in ("parts_file", "tolerance"):
             continue  # text options, below
         words, expected = _other_value(item, option)
+        words += COMPANION_OPTIONS.get(item.name, [])
         values = pipeline_params(parser.parse_args(["reconstruct", "t.stl", *words]))
         assert values[item.name] == expected, (item.name, values[item.name], expected)
         assert getattr(ReconstructionParams(**values), item.name) == expected

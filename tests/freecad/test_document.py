@@ -587,3 +587,24 @@ def test_a_damaged_mesh_is_repaired_as_on_the_command_line(tmp_path):
         assert np.allclose(points[facets], mesh.vertices[mesh.faces], atol=1e-6)
     finally:
         FreeCAD.closeDocument(doc.Name)
+
+
+def test_solid_faces_property_merges_blocks_of_quads(chain_doc):
+    """Export g1 with Faces chart: one face per block of quads, fewer than the quads, the same
+    solid (FreeCAD's volume integration is coarser on multi-span faces, hence 1e-3); Faces
+    chart with the exact form is refused with a one-line status naming g1."""
+    from polycube_wb import api
+
+    objects = _objects(chain_doc)
+    solid = objects["Solid"]
+    solid.Export = "g1"
+    assert api.recompute(chain_doc).ok
+    per_quad = (len(solid.Shape.Faces), solid.Shape.Volume)
+    solid.Faces = "chart"
+    assert api.recompute(chain_doc).ok
+    assert solid.isValid() and solid.Shape.isValid() and solid.BrepFaces == len(solid.Shape.Faces)
+    assert len(solid.Shape.Faces) < per_quad[0]
+    assert solid.Shape.Volume == pytest.approx(per_quad[1], rel=1e-3)
+    solid.Export = "exact"
+    assert list(api.recompute(chain_doc).failures) == [solid.Name]
+    assert "g1" in solid.Status and "\n" not in solid.Status
