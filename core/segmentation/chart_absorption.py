@@ -41,7 +41,7 @@ import scipy.sparse as sp
 from core.errors import ParameterError
 from core.geometry import face_areas
 from core.segmentation.repair_operators import joint_merges
-from core.segmentation.charts import extract_layout
+from core.segmentation.charts import OPPOSITE, extract_layout
 from core.segmentation.validity import boundaries_at, sub_topology
 
 SMALL_AREA = 1.0
@@ -183,7 +183,7 @@ def _trials(topology, face_part, labels, layout, chart, cost, small):
     return out
 
 
-def absorb_charts(V, F, face_part, face_label, judge, unit_area, max_rounds=12,
+def absorb_charts(V, F, face_part, face_label, judge, unit_area, max_rounds=40,
                   max_angle_increase=4.0, small_area=SMALL_AREA, thin_width=THIN_WIDTH,
                   tau=None):
     """Absorb the small and thin charts of a labeling into their neighbours (module docstring).
@@ -297,6 +297,8 @@ def _best_trial(judge, val, labels, trials, tau, budget):
             continue
         if ang[faces, cand[faces]].sum() > MAX_MEAN_ANGLE * judge.area[faces].sum():
             continue  # the faces would be labelled across their normals: a wall, not noise
+        if _meets_opposite(judge.topology, judge.part, cand, faces):
+            continue  # an opposite-label boundary: invalid, no need to judge it
         zkey = faces.tobytes()
         if zkey not in zones:
             vmask = np.zeros(judge.topology.n_vertices, dtype=bool)
@@ -311,6 +313,14 @@ def _best_trial(judge, val, labels, trials, tau, budget):
                 and _loops_near(sub[0], judge.part[zone], cand[zone], vmask) <= loops0):
             best = (name, changed, cand, d_angle)
     return best
+
+
+def _meets_opposite(topology, face_part, labels, faces):
+    """Whether any of ``faces`` shares an edge with a face of its part of the opposite label."""
+    nb = topology.neighbours[faces]
+    other = np.maximum(nb, 0)
+    return bool(((nb >= 0) & (face_part[other] == face_part[faces][:, None])
+                 & (labels[other] == OPPOSITE[labels[faces]][:, None])).any())
 
 
 def closed_boundaries(topology, layout):
