@@ -6,11 +6,13 @@ import pytest
 import trimesh
 
 from core.errors import ParameterError
-from core.segmentation.chart_absorption import absorb_charts, dissolved_labels
+from core.segmentation.chart_absorption import (SMALL_AREA, THIN_WIDTH, absorb_charts,
+                                               chart_measures, dissolved_labels)
 from core.segmentation.charts import build_topology, extract_layout
 from core.segmentation.labeling import face_normals, label_cost, nearest_direction_labels
 from core.segmentation.repair import CandidateJudge
 from core.segmentation.validity import check_validity
+from tests.core.dev_meshes import load_dev_mesh
 
 
 def cube(levels=4):
@@ -114,3 +116,34 @@ def test_bad_unit_area_is_refused():
     V, F, parts, frames, labels = cube(2)
     with pytest.raises(ParameterError):
         absorb(V, F, parts, frames, labels, unit_area=0.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["idler_riser.stl", "to_simp_mbb.stl"])
+def test_dev_mesh_loses_noise_charts_and_stays_valid(name):
+    """On a real design the pass keeps a valid labeling valid, adds no turning point and never
+    adds a chart; what it takes are charts below one quad of the budget."""
+    from core.geometry import face_areas
+    from core.segmentation.frames import compute_frames
+    from core.segmentation.labeling import hbecvt_labeling
+    from core.segmentation.repair import repair_labeling
+
+    mesh = load_dev_mesh(name)
+    V, F = mesh.vertices, mesh.faces
+    parts = np.zeros(len(F), dtype=np.int64)
+    field = compute_frames(mesh, parts)
+    labels, _ = hbecvt_labeling(V, F, parts, field.face_frame, field.face_interface_axis)
+    labels, _ = repair_labeling(V, F, parts, labels, field.face_frame)
+    labels = labels.astype(np.int64)
+    before = check_validity(V, F, parts, labels, field.face_frame)
+    assert before.is_valid
+    unit_area = face_areas(V, F).sum() / 300
+    done = absorb(V, F, parts, field.face_frame, labels, unit_area)
+    after = check_validity(V, F, parts, done.labels, field.face_frame)
+    assert after.is_valid
+    assert len(after.turning_points) <= len(before.turning_points)
+    assert after.layout.n_charts <= before.layout.n_charts
+    changed = np.unique(before.layout.face_chart[done.labels != labels])
+    area, width = chart_measures(V, build_topology(F, len(V)), before.layout, face_areas(V, F))
+    small = (area < SMALL_AREA * unit_area) | (width < THIN_WIDTH * np.sqrt(unit_area))
+    assert small[changed].all(), "only charts below a quad in area or width are touched"
