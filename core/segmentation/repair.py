@@ -398,7 +398,8 @@ class RepairRun:
                                                  judge.cost, self.unary, self.nb, self.colour,
                                                  self.penalty, (1.0, 2.0, 4.0, 8.0)), None)
             if best is None or best.invalid >= val.n_invalid:
-                best = self.best_of(joint_merges(lay, labels, c, self.small_chart), best)
+                best = self.best_of(joint_merges(lay, labels, c,
+                                                 lay.chart_size <= self.small_chart), best)
             if best is not None:
                 best = self.smoothed_local(best, lay)
                 if best.invalid < val.n_invalid:

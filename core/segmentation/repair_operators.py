@@ -364,12 +364,13 @@ def chart_candidates(F, face_part, val, labels, c, cost, unary, nb, colour, pena
     return out
 
 
-def joint_merges(lay, labels, c, small_chart):
-    """Candidates that merge invalid chart ``c`` together with its small neighbouring charts of
-    its part (at most ``small_chart`` faces) into each label around that group: where a small
-    chart of the opposite label sits between ``c`` and a large neighbour, merging either alone
-    leaves an opposite-label boundary (tried when no candidate of :func:`chart_candidates`
-    helps).
+def joint_merges(lay, labels, c, small):
+    """Candidates that merge chart ``c`` together with its small neighbouring charts of its
+    part (``small``: (c,) bool, the charts counted small) into each label around that group:
+    where a small chart of the opposite label sits between ``c`` and a large neighbour, merging
+    either alone leaves an opposite-label boundary (the repair tries them for an invalid chart
+    when no candidate of :func:`chart_candidates` helps; the chart absorption for a small
+    chart that no merge of its own can take).
 
     Returns
     -------
@@ -378,7 +379,7 @@ def joint_merges(lay, labels, c, small_chart):
     part = lay.chart_part[c]
     nbrs = lay.chart_neighbours[c].indices
     nbrs = nbrs[lay.chart_part[nbrs] == part]
-    small = nbrs[lay.chart_size[nbrs] <= small_chart]
+    small = nbrs[small[nbrs]]
     if not len(small):
         return []
     group = np.concatenate([[c], small])

@@ -9,16 +9,18 @@ VALIDITY_COUNTS = ("invalid_charts", "invalid_boundaries", "invalid_corners", "t
 def run_labeling(intake, parts, frames, params, progress):
     """Label every face with one of six directions of its frame, repair, check validity.
 
-    HBECVT (Eqs. 2-3), then, with ``params.repair``, the repair loop and the straightening
-    of boundary hooks (which returns the validity it ends with); otherwise the validity of
-    the HBECVT labels (the corner rules are the independent check).
+    HBECVT (Eqs. 2-3), then, with ``params.repair``, the repair loop, the absorption of charts
+    smaller or thinner than a quad of the face budget (``params.target_faces``) into their
+    neighbours where validity allows (:mod:`core.segmentation.chart_absorption`) and the
+    straightening of boundary hooks (which returns the validity it ends with); otherwise the
+    validity of the HBECVT labels (the corner rules are the independent check).
 
     Parameters
     ----------
     intake : core.types.IntakeResult; parts : core.types.PartsResult;
     frames : core.types.FramesResult.
     params : core.params.ReconstructionParams (``lam``, ``penalty``, ``max_sweeps``,
-        ``repair``).
+        ``repair``, ``target_faces``).
     progress : core.progress.Progress; reported after each step, cancellable between them.
 
     Returns
@@ -26,6 +28,8 @@ def run_labeling(intake, parts, frames, params, progress):
     core.types.LabelingResult; an invalid labeling is a result too (its report says what
     is invalid), the base-mesh stage refuses it.
     """
+    from core.geometry import face_areas
+    from core.segmentation.chart_absorption import absorb_charts
     from core.segmentation.charts import build_topology
     from core.segmentation.labeling import (face_colouring, face_normals, hbecvt_labeling,
                                             mean_label_angle, nearest_direction_labels,
@@ -46,7 +50,7 @@ def run_labeling(intake, parts, frames, params, progress):
                                    topology=topology, colour=colour, normals=normals)
     progress.report("labeling", 0.5)
     progress.check_cancel()
-    repair_report = straighten_report = None
+    repair_report = straighten_report = absorb_report = None
     if params.repair:
         judge = CandidateJudge.of_mesh(mesh.vertices, mesh.faces, face_part, field.face_frame,
                                        topology, normals)
@@ -54,6 +58,14 @@ def run_labeling(intake, parts, frames, params, progress):
                                                 field.face_frame, field.face_interface_axis,
                                                 lam=params.lam, penalty=params.penalty,
                                                 topology=topology, colour=colour, judge=judge)
+        progress.report("labeling", 0.7)
+        progress.check_cancel()
+        # charts smaller or thinner than the base mesh's quads are noise for its layout
+        unit_area = float(face_areas(mesh.vertices, mesh.faces).sum()) / params.target_faces
+        absorption = absorb_charts(mesh.vertices, mesh.faces, face_part, labels, judge,
+                                   unit_area)
+        labels = absorption.labels
+        absorb_report = absorption.report
         progress.report("labeling", 0.8)
         progress.check_cancel()
         labels, straighten_report, validity = straighten_boundaries(
@@ -79,6 +91,7 @@ def run_labeling(intake, parts, frames, params, progress):
         "nearest_direction_mean_angle_deg": float(mean_label_angle(normals, nearest, field.face_frame)),
         "hbecvt": info,
         "unfixed": repair_report["unfixed"] if repair_report else None,
+        "absorbed": absorb_report,
         "straightened": straighten_report,
         "examples": {k: v[k]["examples"] for k in VALIDITY_COUNTS},
     }
