@@ -139,7 +139,8 @@ def run_stage_command(title, doc, build, read_ahead=None):
                            SubProgress(progress, 0.0, 0.0))
             api.read_ahead_target(read_ahead, mesh=mesh)
         return api.run_in_transaction(doc, title, lambda: _built_then_drawn(build), progress,
-                                      lambda job, share: _latest_shown(doc, run_job, job, share))
+                                      lambda job, share: _latest_shown(doc, run_job, job, share),
+                                      _event_loop_turn)
 
     first = not _has_results(doc)
     done = run_guarded(title, work, with_progress=True)
@@ -166,11 +167,16 @@ def run_stage_command(title, doc, build, read_ahead=None):
 def _built_then_drawn(build):
     """``build()``, then one turn of the event loop (the new objects drawn), so that making
     the objects and reading the first stage's inputs do not hold the GUI in one stretch."""
+    built = build()
+    _event_loop_turn()
+    return built
+
+
+def _event_loop_turn():
+    """One turn of FreeCAD's event loop (pending redraws, timers and input)."""
     from PySide import QtCore
 
-    built = build()
     QtCore.QCoreApplication.processEvents()
-    return built
 
 
 def _latest_shown(doc, run_job, job, progress):

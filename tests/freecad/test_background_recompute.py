@@ -87,10 +87,19 @@ def test_runner_gives_the_results_of_the_plain_recompute_each_stage_computed_onc
         _build(threaded)
         ran = record_runs(threaded.Objects)
         runner = ThreadRunner()
-        api.run_in_transaction(threaded, "Chain", lambda: None, run_job=runner)
+        turns = []  # (jobs run, stages stored) at each call between stages
+
+        def between_stages():
+            stored = [obj for obj in threaded.Objects if obj.Status == "ok"]
+            turns.append((len(runner.functions), len(stored)))
+
+        api.run_in_transaction(threaded, "Chain", lambda: None, run_job=runner,
+                               between_stages=between_stages)
         assert ran == [], "doc.recompute() found every stage up to date"
         assert runner.functions == ["intake", "core_stages", "core_stages", "core_stages",
                                     "_limit_solid", "_deviation"]
+        # one call after each stored result that another stage follows, before its job
+        assert turns == [(count, count) for count in range(1, len(runner.functions))]
         expected, got = _kinds(plain), _kinds(threaded)
         for kind in KINDS:
             obj = got[kind]
