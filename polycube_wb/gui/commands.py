@@ -135,9 +135,9 @@ def run_stage_command(title, doc, build, read_ahead=None):
 
     def work(progress):
         if read_ahead is not None:
-            mesh = run_job(StageJob(read_mesh_file, (read_ahead,)),
+            read = run_job(StageJob(read_mesh_file, (read_ahead,)),
                            SubProgress(progress, 0.0, 0.0))
-            api.read_ahead_target(read_ahead, mesh=mesh)
+            api.read_ahead_target(read_ahead, mesh=read.mesh, binary=read.binary)
         return api.run_in_transaction(doc, title, lambda: _built_then_drawn(build), progress,
                                       lambda job, share: _latest_shown(doc, run_job, job, share),
                                       _event_loop_turn)

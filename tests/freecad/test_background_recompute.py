@@ -195,12 +195,17 @@ def test_stage_process_runs_jobs_and_hands_back_results_progress_and_errors(tmp_
 
     worker = StageProcess()
     try:
-        frames, (kind, mesh) = worker.run(StageJob(read_mesh_file, (TINY,)))
+        frames, (kind, read) = worker.run(StageJob(read_mesh_file, (TINY,)))
         assert kind == "result"
         assert [frame[1] for frame in frames] == ["reading and validating the mesh"]
-        here = api.read_target_file(TINY)
+        here, mesh = api.read_target_file(TINY), read.mesh
         assert np.array_equal(mesh.vertices, here.vertices)
         assert np.array_equal(mesh.faces, here.faces)
+        from polycube_wb.convert import arrays_to_mesh, mesh_to_arrays
+
+        made = arrays_to_mesh(mesh.vertices, mesh.faces, read.binary)
+        assert made.isSolid() and not made.hasInvalidNeighbourhood()
+        assert np.array_equal(mesh_to_arrays(made)[1], here.faces)
 
         from core.params import ReconstructionParams
         from core.types import MeshSource, PipelineState
