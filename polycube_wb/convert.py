@@ -6,7 +6,8 @@ there can crash the process instead of raising (``Mesh.Mesh`` given tuples of po
 segfaults in FreeCAD 0.20.2; it is safe with ``FreeCAD.Vector`` points).
 
 Large meshes cross the bridge as FreeCAD's own binary mesh file (``.bms``, the kernel's
-points and facets with their neighbours) written and parsed with numpy: building a
+points and facets with their neighbours) written and parsed with numpy
+(``polycube_wb.mesh_binary``): building a
 ``Mesh.Mesh`` from Python lists, or reading its ``Topology``, holds the GUI thread for about a
 second on a mesh of 150,000 triangles, reading or writing the binary file a few hundredths.
 """
@@ -22,6 +23,7 @@ import MeshPart
 
 from core.errors import InvalidMeshError, ParameterError
 from core.geometry import validate_triangles
+from polycube_wb.mesh_binary import binary_mesh, binary_mesh_arrays
 
 
 def arrays_to_vectors(points):
@@ -38,13 +40,15 @@ def vectors_to_array(vectors):
     return np.fromiter(chain.from_iterable(vectors), np.float64, count).reshape(-1, 3)
 
 
-def arrays_to_mesh(V, F):
+def arrays_to_mesh(V, F, binary=None):
     """``Mesh.Mesh`` with exactly the given vertices and triangles.
 
     Parameters
     ----------
     V : (n, 3) float
     F : (m, 3) int
+    binary : bytes, optional: ``polycube_wb.mesh_binary.binary_mesh(V, F)``, made beforehand
+        (by the GUI's stage process, which reads the mesh file); made here when None.
 
     Returns
     -------
@@ -63,7 +67,7 @@ def arrays_to_mesh(V, F):
         raise InvalidMeshError(f"mesh: {len(repeated)} triangles repeat a vertex index, "
                                f"e.g. faces {repeated[:5].tolist()}", "degenerate_faces",
                                len(repeated), repeated[:5])
-    data = _binary_mesh(V, F)
+    data = binary_mesh(V, F) if binary is None else binary
     if data is not None:
         mesh = _read_binary_mesh(data)
     else:
@@ -85,50 +89,7 @@ def mesh_to_arrays(mesh):
         mesh.write(path)
         with open(path, "rb") as handle:
             data = handle.read()
-    n, m = np.frombuffer(data, np.uint32, 2, _BMS_COUNTS)
-    points = np.frombuffer(data, np.float32, 3 * n, _BMS_COUNTS + 8).reshape(-1, 3)
-    facets = np.frombuffer(data, np.uint32, 6 * m, _BMS_COUNTS + 8 + 12 * int(n))
-    # + 0.0: Topology gives +0.0 for a -0.0 coordinate (it applies the identity placement)
-    V = points.astype(np.float64) + 0.0
-    return V, facets.reshape(-1, 6)[:, :3].astype(np.int64)
-
-
-_BMS_HEADER = (np.array([0xA0B0C0D0, 0x00010000], np.uint32).tobytes()
-               + b"MESH-" * 51 + b"\n")
-"""Start of FreeCAD's binary mesh file (``MeshCore::MeshKernel::Write``): magic number,
-version and a 256-byte comment; the point and facet counts follow."""
-_BMS_COUNTS = len(_BMS_HEADER)
-_NO_NEIGHBOUR = 0xFFFFFFFF
-
-
-def _binary_mesh(V, F):
-    """FreeCAD's binary mesh file (bytes) of a mesh whose every edge joins two triangles, or
-    None for any other mesh (its neighbours are left to FreeCAD's own builder).
-
-    The file holds the points (float32, as FreeCAD keeps them), each facet's vertex indices
-    and its neighbours across the edges (i, i + 1) (uint32), and the bounding box.
-    """
-    n, m = len(V), len(F)
-    if m == 0 or n >= _NO_NEIGHBOUR or m >= _NO_NEIGHBOUR:
-        return None
-    start = F.reshape(-1)
-    end = np.roll(F, -1, axis=1).reshape(-1)
-    key = np.minimum(start, end).astype(np.int64) * n + np.maximum(start, end)
-    order = np.argsort(key, kind="stable")
-    ordered = key[order]
-    first, second = order[0::2], order[1::2]
-    if len(first) != len(second) or np.any(ordered[0::2] != ordered[1::2]) or \
-            np.any(ordered[2::2] == ordered[1:-1:2]):
-        return None  # an open or a non-manifold edge
-    neighbours = np.empty(3 * m, np.uint32)
-    neighbours[first] = second // 3
-    neighbours[second] = first // 3
-    points = np.asarray(V, np.float32)
-    low, high = points.min(axis=0), points.max(axis=0)
-    box = np.array([low[0], high[0], low[1], high[1], low[2], high[2]], np.float32)
-    facets = np.hstack([F.astype(np.uint32), neighbours.reshape(-1, 3)])
-    return b"".join((_BMS_HEADER, np.array([n, m], np.uint32).tobytes(), points.tobytes(),
-                     facets.tobytes(), box.tobytes()))
+    return binary_mesh_arrays(data)
 
 
 def _read_binary_mesh(data):

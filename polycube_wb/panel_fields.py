@@ -29,6 +29,10 @@ class PanelField:
         ``"bool"``.
     key : the ``ReconstructionParams`` field (or :data:`EXPORT_DEPTH_KEY`) whose default and
         preference the field shows, or None (a property of the object only).
+    words : the texts the form shows for the ``"choice"`` values ``limits``, in their order, or
+        None (the values themselves).
+    needs : (prop, value): the field is enabled only while the field of ``prop`` holds
+        ``value`` (a disabled ``"choice"`` field holds its first choice); or None (always).
     """
 
     prop: str
@@ -36,15 +40,18 @@ class PanelField:
     kind: str
     limits: tuple = None
     key: str = None
+    words: tuple = None
+    needs: tuple = None
 
 
-def parameter_field(prop, label, name, choices=None):
+def parameter_field(prop, label, name, choices=None, words=None, needs=None):
     """The field of the ``ReconstructionParams`` parameter ``name``: kind, range or choices
     from ``core.params``.
 
     Parameters
     ----------
-    prop, label : see :class:`PanelField`.
+    prop, label, words, needs : see :class:`PanelField`; ``words`` maps each offered choice
+        to its text (dict), for a parameter with choices.
     name : str, the parameter (a ``ReconstructionParams`` field).
     choices : tuple of str, optional: the subset of the parameter's choices the panel offers
         (the segmentation object has no ``file`` part mode: its parts come from its target).
@@ -56,7 +63,8 @@ def parameter_field(prop, label, name, choices=None):
     Raises
     ------
     core.errors.ParameterError
-        ``name`` is not a parameter, or ``choices`` are not among the parameter's.
+        ``name`` is not a parameter, ``choices`` are not among the parameter's, or ``words``
+        does not name every offered choice.
     """
     from core.errors import ParameterError
 
@@ -66,7 +74,11 @@ def parameter_field(prop, label, name, choices=None):
         if not set(offered) <= set(option.choices):
             raise ParameterError(f"{name}: the panel offers {offered}, the parameter allows only "
                                  f"{option.choices}")
-        return PanelField(prop, label, "choice", offered, name)
+        if words is not None and set(words) != set(offered):
+            raise ParameterError(f"{name}: the panel's words are for {tuple(words)}, it offers "
+                                 f"{offered}")
+        texts = None if words is None else tuple(words[choice] for choice in offered)
+        return PanelField(prop, label, "choice", offered, name, texts, needs)
     kind = KIND_OF_TYPE[item.type]
     return PanelField(prop, label, kind, None if kind == "bool" else parameter_range(name), name)
 
@@ -103,8 +115,16 @@ FIELDS = {
                    parameter_range("tolerance_mm")),
         parameter_field("OutsideRefinement", "Most volume outside, fraction (0: off)",
                         "outside_refinement")),
-    "Solid": (PanelField("Depth", "Patch refinement at irregular vertices", "int",
-                         (1, MAX_EXPORT_DEPTH), EXPORT_DEPTH_KEY),),
+    "Solid": (
+        parameter_field("Export", "Surface form", "export",
+                        words={"exact": "exact limit surface", "g1": "light G1 patches"}),
+        # the G1 patches have no grading
+        PanelField("Depth", "Patch refinement at irregular vertices", "int",
+                   (1, MAX_EXPORT_DEPTH), EXPORT_DEPTH_KEY, needs=("Export", "exact")),
+        # one face per block is made of the G1 patches only (core.params.check_face_form)
+        parameter_field("Faces", "CAD faces", "faces",
+                        words={"quad": "one per quad", "chart": "one per rectangular block"},
+                        needs=("Export", "g1"))),
     "Deviation": (
         PanelField("Tolerance", "Tessellation tolerance, fraction of the size", "float",
                    (1e-6, 0.1)),
@@ -113,9 +133,13 @@ FIELDS = {
 """Stage kind -> its task panel's fields, in form order."""
 PREFERENCE_KINDS = ("Segmentation", "BaseMesh", "Fit", "Solid")
 """Stage kinds whose parameter fields the preferences page offers."""
+OBJECT_ONLY_KEYS = ("export", "faces")
+"""Parameters a panel offers that the preferences page does not: a new Solid takes the paper's
+surface form and faces, a choice made per solid."""
 PAGE_FIELDS = tuple(field for kind in PREFERENCE_KINDS for field in FIELDS[kind]
-                    if field.key is not None)
-"""The preferences page's fields: every panel field with a default (``key``)."""
+                    if field.key is not None and field.key not in OBJECT_ONLY_KEYS)
+"""The preferences page's fields: every panel field with a default (``key``) but those of
+:data:`OBJECT_ONLY_KEYS`."""
 
 
 _OBJECT_OF_KIND = {"Segmentation": "the Segmentation's", "BaseMesh": "the BaseMesh's",

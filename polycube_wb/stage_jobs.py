@@ -90,9 +90,13 @@ def read_target_file(path, components="largest", check_self_intersections=True, 
 
 
 def read_mesh_file(path, progress):
-    """The validated target mesh (``core.types.TriMesh``) of the mesh file ``path``."""
+    """The validated target mesh of the mesh file ``path`` with FreeCAD's binary mesh file of
+    it (``polycube_wb.mesh_binary.MeshWithBinary``), which FreeCAD then only reads."""
+    from polycube_wb.mesh_binary import MeshWithBinary, binary_mesh
+
     progress.report("reading and validating the mesh", 0.0, os.path.basename(path))
-    return read_target_file(path)
+    mesh = read_target_file(path)
+    return MeshWithBinary(mesh, binary_mesh(mesh.vertices, mesh.faces))
 
 
 def shape_from_binary(data):

@@ -69,7 +69,7 @@ def make_target(doc, source, name="Target", components="largest",
 
     options = {"components": components, "check_self_intersections": check_self_intersections,
                "repair": repair}
-    source_file = ""
+    source_file, binary = "", None
     if isinstance(source, TriMesh):
         mesh, _ = validate_target(source.vertices, source.faces, name=name, **options)
     elif hasattr(source, "Mesh"):
@@ -78,37 +78,45 @@ def make_target(doc, source, name="Target", components="largest",
                                   **options)
     else:
         source_file = os.path.abspath(os.fspath(source))
-        mesh = _READ_AHEAD.pop(_read_ahead_key(source_file, **options), None) \
-            or read_target_file(source_file, **options)
+        read = _READ_AHEAD.pop(_read_ahead_key(source_file, **options), None)
+        if read is None:
+            mesh = read_target_file(source_file, **options)
+        else:
+            mesh, binary = read.mesh, read.binary
     obj = _make(doc, "Target", name, {}, {"CheckSelfIntersections": check_self_intersections})
-    obj.Mesh = arrays_to_mesh(mesh.vertices, mesh.faces)
+    obj.Mesh = arrays_to_mesh(mesh.vertices, mesh.faces, binary)
     obj.SourceFile = source_file
     return obj
 
 
 _READ_AHEAD = {}
-"""At most one mesh read by :func:`read_ahead_target`, by :func:`_read_ahead_key`."""
+"""At most one ``polycube_wb.mesh_binary.MeshWithBinary`` read by :func:`read_ahead_target`,
+by :func:`_read_ahead_key`."""
 
 
 def read_ahead_target(path, components="largest", check_self_intersections=True, repair=True,
-                      mesh=None):
+                      mesh=None, binary=None):
     """Read and validate a mesh file for the next :func:`make_target` of the same file.
 
     The GUI reads a file in its stage process (:func:`read_target_file`) and hands the mesh
-    here as ``mesh``, then calls ``make_target`` (through the Python console, which shows
-    the line to replay), which takes this mesh instead of reading the file again. A file
-    changed since is read again.
+    here as ``mesh``, with FreeCAD's binary mesh file of it written there as ``binary``
+    (``polycube_wb.mesh_binary.binary_mesh``; FreeCAD's process then only reads it), then
+    calls ``make_target`` (through the Python console, which shows the line to replay), which
+    takes this mesh instead of reading the file again. A file changed since is read again.
 
     Raises
     ------
     InvalidMeshError
         As :func:`read_target_file` (when ``mesh`` is None).
     """
+    from polycube_wb.mesh_binary import MeshWithBinary
+
     path = os.path.abspath(os.fspath(path))
     if mesh is None:
-        mesh = read_target_file(path, components, check_self_intersections, repair)
+        mesh, binary = read_target_file(path, components, check_self_intersections, repair), None
     _READ_AHEAD.clear()
-    _READ_AHEAD[_read_ahead_key(path, components, check_self_intersections, repair)] = mesh
+    _READ_AHEAD[_read_ahead_key(path, components, check_self_intersections, repair)] = \
+        MeshWithBinary(mesh, binary)
 
 
 def _read_ahead_key(path, components, check_self_intersections, repair):

@@ -138,13 +138,14 @@ class RecomputeOutcome:
         return not self.failures and not self.cancelled
 
 
-def recompute(doc, progress=NO_PROGRESS, run_job=None):
+def recompute(doc, progress=NO_PROGRESS, run_job=None, between_stages=None):
     """``doc.recompute()`` with ``progress`` reaching the stage objects; returns the outcome.
 
     With ``run_job`` (``run_job(job, progress) -> result``, e.g. the GUI's stage process,
     :mod:`polycube_wb.gui.worker`), the stale stage objects' computations are run by it and
-    their results stored before the recompute (:func:`polycube_wb.objects.base.run_pending_stages`);
-    the outcome is the same as without it.
+    their results stored before the recompute (:func:`polycube_wb.objects.base.run_pending_stages`,
+    which calls ``between_stages()``, if given, between storing one result and reading the
+    next stage's inputs); the outcome is the same as without it.
 
     FreeCAD does not propagate errors from ``execute``; the outcome lists them. An object
     whose stage failed is marked invalid (``obj.isValid()`` is False) with the reason in its
@@ -157,7 +158,7 @@ def recompute(doc, progress=NO_PROGRESS, run_job=None):
 
     with recompute_session(doc, progress) as session:
         if run_job is not None:
-            run_pending_stages(doc, session, run_job)
+            run_pending_stages(doc, session, run_job, between_stages)
         doc.recompute()
     if session.cancelled:
         for name in list(session.failures) + session.skipped:
@@ -165,10 +166,12 @@ def recompute(doc, progress=NO_PROGRESS, run_job=None):
     return RecomputeOutcome(dict(session.failures), session.cancelled)
 
 
-def run_in_transaction(doc, title, build, progress=NO_PROGRESS, run_job=None):
+def run_in_transaction(doc, title, build, progress=NO_PROGRESS, run_job=None,
+                       between_stages=None):
     """Run ``build()`` (adds or changes objects), then recompute, as one undo step.
 
-    ``run_job`` runs the stages' computations (see :func:`recompute`).
+    ``run_job`` runs the stages' computations, ``between_stages`` runs between one stage's
+    stored result and the next stage's inputs (see :func:`recompute`).
 
     When ``build`` raises, the document is rolled back to what it was before. When the user
     cancels during the recompute, the stages that finished keep their results, the stage
@@ -192,7 +195,7 @@ def run_in_transaction(doc, title, build, progress=NO_PROGRESS, run_job=None):
     doc.openTransaction(title)
     try:
         built = build()
-        outcome = recompute(doc, progress, run_job)
+        outcome = recompute(doc, progress, run_job, between_stages)
     except BaseException:
         doc.abortTransaction()
         raise

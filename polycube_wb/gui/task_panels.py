@@ -41,21 +41,27 @@ class StagePanel:
         self.widgets = {}
         self.outcome = None
         self.form = QtGui.QWidget()
-        self.form.setWindowTitle(f"Polycube {self.kind}: {obj.Label}")
+        self.form.setWindowTitle(_panel_title(f"{self.kind}: {obj.Label}"))
         self.form.setWindowIcon(QtGui.QIcon(icon_path("PolycubeWorkbench")))
         layout = QtGui.QVBoxLayout(self.form)
+        # the task box has margins of its own: the form's would push the panel past the
+        # Combo View's default width
+        layout.setContentsMargins(0, 0, 0, 0)
         box = QtGui.QGroupBox("Parameters")
         form = QtGui.QFormLayout(box)
         # the Combo View is narrow: each label goes above its field, which keeps its width
         # (side by side, the number fields were squeezed out of sight by the long labels)
         form.setRowWrapPolicy(QtGui.QFormLayout.WrapAllRows)
         for field in FIELDS.get(self.kind, ()):
-            widget = make_widget(field.kind, field.limits)
+            widget = make_widget(field.kind, field.limits, field.words)
             set_widget_value(widget, field.kind, getattr(obj, field.prop))
             widget.setToolTip(obj.getDocumentationOfProperty(field.prop))
             widget.setMinimumWidth(FIELD_WIDTH)  # not as wide as its largest number
             form.addRow(_wrapping_label(field.label), widget)
             self.widgets[field.prop] = (widget, field.kind)
+        for field in FIELDS.get(self.kind, ()):
+            if field.needs is not None:
+                self._follow(field)
         defaults = QtGui.QPushButton("Paper defaults")
         defaults.clicked.connect(self.paper_defaults)
         # Apply sits here, not beside OK and Cancel: three buttons there are wider than
@@ -77,6 +83,22 @@ class StagePanel:
         layout.addWidget(self.status)
         layout.addStretch(1)
         self.show_status()
+
+    def _follow(self, field):
+        """Enable ``field`` only while the field it needs holds the value it needs; a choice
+        field disabled goes back to its first choice (the only one the stage then accepts)."""
+        widget, kind = self.widgets[field.prop]
+        other, wanted = field.needs
+        source, source_kind = self.widgets[other]
+
+        def update(*_):
+            enabled = widget_value(source, source_kind) == wanted
+            widget.setEnabled(enabled)
+            if not enabled and kind == "choice":
+                widget.setCurrentIndex(0)
+
+        source.currentIndexChanged.connect(update)
+        update()
 
     # -- task dialog protocol ---------------------------------------------------------------
 
@@ -259,6 +281,25 @@ FIELD_WIDTH = 100
 number (``1e9`` with six decimals), which made the panel wider than the Combo View."""
 
 
+COMBO_CHARACTERS = 8
+"""Characters a choice field is sized for: it widens to what the panel gives, but never
+widens the panel."""
+
+
+TITLE_WIDTH = 170
+"""Widest panel title, pixels: FreeCAD's task box does not shorten its title, whose width
+then widens the panel past the Combo View."""
+
+
+def _panel_title(text):
+    """``text`` shortened with an ellipsis to :data:`TITLE_WIDTH` in the task box's bold font."""
+    from PySide import QtCore
+
+    font = QtGui.QApplication.font()
+    font.setBold(True)
+    return QtGui.QFontMetrics(font).elidedText(text, QtCore.Qt.ElideRight, TITLE_WIDTH)
+
+
 def _wrapping_label(text):
     """A form label that wraps rather than widen the panel past the Combo View."""
     label = QtGui.QLabel(text)
@@ -266,7 +307,9 @@ def _wrapping_label(text):
     return label
 
 
-def make_widget(kind, limits):
+def make_widget(kind, limits, words=None):
+    """The widget of a field of ``kind`` with ``limits`` (range or choices) and ``words``
+    (the texts of the choices, else the choices themselves); see ``PanelField``."""
     if kind == "int":
         widget = QtGui.QSpinBox()
         widget.setRange(*limits)
@@ -276,7 +319,11 @@ def make_widget(kind, limits):
         widget.setDecimals(6)
     elif kind == "choice":
         widget = QtGui.QComboBox()
-        widget.addItems(list(limits))
+        for value, text in zip(limits, words or limits):
+            widget.addItem(text, value)
+        # as wide as the panel gives, not as its longest text (the list shows it whole)
+        widget.setSizeAdjustPolicy(QtGui.QComboBox.AdjustToMinimumContentsLengthWithIcon)
+        widget.setMinimumContentsLength(COMBO_CHARACTERS)
     else:
         widget = QtGui.QCheckBox()
     return widget
@@ -286,7 +333,7 @@ def set_widget_value(widget, kind, value):
     if kind in ("int", "float"):
         widget.setValue(value)
     elif kind == "choice":
-        widget.setCurrentIndex(max(widget.findText(str(value)), 0))
+        widget.setCurrentIndex(max(widget.findData(str(value)), 0))
     else:
         widget.setChecked(bool(value))
 
@@ -297,5 +344,5 @@ def widget_value(widget, kind):
     if kind == "float":
         return float(widget.value())
     if kind == "choice":
-        return widget.currentText()
+        return widget.itemData(widget.currentIndex())
     return bool(widget.isChecked())

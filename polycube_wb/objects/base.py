@@ -122,7 +122,7 @@ def pending_objects(doc):
     return list(pending.values())
 
 
-def run_pending_stages(doc, session, run_job):
+def run_pending_stages(doc, session, run_job, between_stages=None):
     """Bring the stale stage objects of ``doc`` up to date, each computation run by
     ``run_job``, before the ``doc.recompute()`` of ``session`` (which then only marks them).
 
@@ -140,12 +140,19 @@ def run_pending_stages(doc, session, run_job):
     run_job : callable ``run_job(job, progress) -> result`` running the ``StageJob``
         ``job(progress)`` (in the GUI: in another process or thread while FreeCAD stays
         live); ``progress`` is the object's share of the session's bar.
+    between_stages : callable ``between_stages()``, optional, called after a stage's result
+        is stored and before the next stage's inputs are read (in the GUI: one turn of the
+        event loop, so that storing one result and reading the next inputs do not hold it in
+        one stretch).
     """
-    blocked = set()
+    blocked, stored_one = set(), False
     for obj in _dependency_order(pending_objects(doc)):
         kind = stage_kind(obj)
         if kind is None or getattr(obj, "Proxy", None) is None:
             continue
+        if stored_one and between_stages is not None:
+            between_stages()
+            stored_one = False
         if session.cancelled:
             return
         if blocked & {upstream.Name for upstream in obj.OutListRecursive}:
@@ -168,6 +175,7 @@ def run_pending_stages(doc, session, run_job):
         progress.report(kind, 1.0)
         obj.Status = "ok"
         session.stored.add(obj.Name)
+        stored_one = True
 
 
 def _dependency_order(objects):

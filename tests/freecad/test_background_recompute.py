@@ -87,10 +87,19 @@ def test_runner_gives_the_results_of_the_plain_recompute_each_stage_computed_onc
         _build(threaded)
         ran = record_runs(threaded.Objects)
         runner = ThreadRunner()
-        api.run_in_transaction(threaded, "Chain", lambda: None, run_job=runner)
+        turns = []  # (jobs run, stages stored) at each call between stages
+
+        def between_stages():
+            stored = [obj for obj in threaded.Objects if obj.Status == "ok"]
+            turns.append((len(runner.functions), len(stored)))
+
+        api.run_in_transaction(threaded, "Chain", lambda: None, run_job=runner,
+                               between_stages=between_stages)
         assert ran == [], "doc.recompute() found every stage up to date"
         assert runner.functions == ["intake", "core_stages", "core_stages", "core_stages",
                                     "_limit_solid", "_deviation"]
+        # one call after each stored result that another stage follows, before its job
+        assert turns == [(count, count) for count in range(1, len(runner.functions))]
         expected, got = _kinds(plain), _kinds(threaded)
         for kind in KINDS:
             obj = got[kind]
@@ -186,12 +195,17 @@ def test_stage_process_runs_jobs_and_hands_back_results_progress_and_errors(tmp_
 
     worker = StageProcess()
     try:
-        frames, (kind, mesh) = worker.run(StageJob(read_mesh_file, (TINY,)))
+        frames, (kind, read) = worker.run(StageJob(read_mesh_file, (TINY,)))
         assert kind == "result"
         assert [frame[1] for frame in frames] == ["reading and validating the mesh"]
-        here = api.read_target_file(TINY)
+        here, mesh = api.read_target_file(TINY), read.mesh
         assert np.array_equal(mesh.vertices, here.vertices)
         assert np.array_equal(mesh.faces, here.faces)
+        from polycube_wb.convert import arrays_to_mesh, mesh_to_arrays
+
+        made = arrays_to_mesh(mesh.vertices, mesh.faces, read.binary)
+        assert made.isSolid() and not made.hasInvalidNeighbourhood()
+        assert np.array_equal(mesh_to_arrays(made)[1], here.faces)
 
         from core.params import ReconstructionParams
         from core.types import MeshSource, PipelineState

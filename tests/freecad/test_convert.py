@@ -10,6 +10,7 @@ import FreeCAD
 import Mesh
 
 from polycube_wb import convert
+from polycube_wb.mesh_binary import binary_mesh
 
 
 def _sphere(levels=2):
@@ -77,7 +78,7 @@ def test_arrays_equal_topology_with_and_without_placement():
 def test_open_and_non_manifold_meshes_take_freecads_builder():
     V, F = _sphere(1)
     open_F = F[1:]
-    assert convert._binary_mesh(V, open_F) is None
+    assert binary_mesh(V, open_F) is None
     assert convert.arrays_to_mesh(V, open_F).Topology == _list_built(V, open_F).Topology
     doubled = np.vstack([F, F[:1]])  # one triangle twice: its edges join three triangles
-    assert convert._binary_mesh(V, doubled) is None
+    assert binary_mesh(V, doubled) is None

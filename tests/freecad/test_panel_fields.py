@@ -14,20 +14,21 @@ import pytest
 
 from core.errors import ParameterError
 from core.params import (EXPORT_DEPTH, MAX_EXPORT_DEPTH, ReconstructionParams,
-                         check_export_depth, parameter_option)
-from polycube_wb.panel_fields import (EXPORT_DEPTH_KEY, FIELDS, PAGE_FIELDS, PanelField,
-                                      parameter_field)
+                         check_export_depth, check_face_form, parameter_option)
+from polycube_wb.panel_fields import (EXPORT_DEPTH_KEY, FIELDS, OBJECT_ONLY_KEYS, PAGE_FIELDS,
+                                      PanelField, in_gui_words, parameter_field)
 
 PARAMETER_FIELDS = [field for fields in FIELDS.values() for field in fields
                     if field.key not in (None, EXPORT_DEPTH_KEY)]
 
 
 def test_every_pipeline_parameter_a_panel_offers_has_its_declared_range_or_choices():
-    assert len(PARAMETER_FIELDS) == 14
+    assert len(PARAMETER_FIELDS) == 16
     for field in PARAMETER_FIELDS:
         item, option = parameter_option(field.key)
         if option.choices is not None:
             assert field.kind == "choice" and set(field.limits) <= set(option.choices), field
+            assert field.words is None or len(field.words) == len(field.limits), field
         elif item.type is bool:
             assert field.kind == "bool" and field.limits is None, field
         else:
@@ -48,7 +49,7 @@ def test_a_panel_range_is_exactly_what_the_parameters_accept(field):
 
 
 def test_the_depth_field_is_the_exporters_range():
-    (depth,) = FIELDS["Solid"]
+    (depth,) = [field for field in FIELDS["Solid"] if field.prop == "Depth"]
     assert depth.key == EXPORT_DEPTH_KEY and depth.limits == (1, MAX_EXPORT_DEPTH)
     for value in depth.limits:
         check_export_depth(value)
@@ -62,11 +63,27 @@ def test_the_preferences_page_offers_every_parameter_field_once():
 
     keys = [field.key for field in PAGE_FIELDS]
     assert len(keys) == len(set(keys)) == 15
-    assert set(keys) == {f.key for f in PARAMETER_FIELDS} | {EXPORT_DEPTH_KEY}
-    assert set(PREFERENCE_FIELDS) == {f.key for f in PARAMETER_FIELDS}
+    offered = {f.key for f in PARAMETER_FIELDS} - set(OBJECT_ONLY_KEYS)
+    assert set(keys) == offered | {EXPORT_DEPTH_KEY}
+    assert set(PREFERENCE_FIELDS) == offered
     defaults = paper_defaults()
     assert defaults[EXPORT_DEPTH_KEY] == EXPORT_DEPTH
     assert all(defaults[key] == getattr(ReconstructionParams(), key) for key in PREFERENCE_FIELDS)
+
+
+def test_the_solid_panel_offers_only_surface_forms_and_faces_the_exporter_accepts():
+    fields = {field.prop: field for field in FIELDS["Solid"]}
+    export, faces = fields["Export"], fields["Faces"]
+    assert export.words and faces.words and "one per quad" in faces.words
+    other, wanted = faces.needs
+    assert fields[other] is export
+    for form in export.limits:  # a disabled choice field holds its first choice
+        offered = faces.limits if form == wanted else faces.limits[:1]
+        for choice in offered:
+            check_face_form(choice, form)
+    with pytest.raises(ParameterError):
+        check_face_form("chart", "exact")
+    assert "'CAD faces' (Faces)" in in_gui_words("--faces chart needs --export g1")
 
 
 def test_a_field_refuses_a_parameter_or_choice_that_does_not_exist():
@@ -74,6 +91,8 @@ def test_a_field_refuses_a_parameter_or_choice_that_does_not_exist():
         parameter_field("Lambda", "λ", "lambda")
     with pytest.raises(ParameterError, match="fit_mode"):
         parameter_field("Mode", "Mode", "fit_mode", choices=("inside", "outside"))
+    with pytest.raises(ParameterError, match="faces"):
+        parameter_field("Faces", "Faces", "faces", words={"quad": "one per quad"})
     assert parameter_field("Lambda", "λ", "lam") == PanelField("Lambda", "λ", "float",
                                                                (0.0, 1e3), "lam")
 

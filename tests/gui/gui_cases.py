@@ -362,6 +362,22 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
         self.assertIn("Make solid", self.doc.UndoNames)
         self.assert_screenshot_shows_model(save_screenshot(self.doc, "polycube_solid.png"))
 
+    def assert_panel_fits(self, panel, kind):
+        """No control of the panel is cut off at the Combo View's default width: the task
+        view around it has nothing to scroll sideways."""
+        from PySide import QtGui
+
+        settled = time.monotonic() + 1.0  # the task box unfolds in an animation
+        while time.monotonic() < settled:
+            FreeCADGui.updateGui()
+            time.sleep(0.05)
+        view = panel.form.parentWidget()
+        while view is not None and not isinstance(view, QtGui.QScrollArea):
+            view = view.parentWidget()
+        self.assertIsNotNone(view, f"{kind}: the panel is not in the task view")
+        self.assertEqual(view.horizontalScrollBar().maximum(), 0,
+                         f"{kind}: the panel is wider than the Combo View")
+
     def test_3_task_panels_open_and_accept(self):
         from PySide import QtGui
 
@@ -369,6 +385,9 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
             obj = [o for o in _objects(self.doc, kind) if getattr(o, "PartMode", "") != "auto"][0]
             panel = self.open_panel(obj)
             self.assertTrue(panel.widgets)
+            self.assert_panel_fits(panel, kind)
+            if kind == "Solid":
+                self.check_solid_panel_forms(panel)
             panel.accept()
             FreeCADGui.updateGui()
             self.assertFalse(FreeCADGui.Control.activeDialog(), kind)
@@ -376,10 +395,7 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
         fit, solid = self.one("Fit"), self.one("Solid")
         volume = solid.Shape.Volume
         panel = self.open_panel(fit)
-        settled = time.monotonic() + 1.0  # the task box unfolds in an animation
-        while time.monotonic() < settled:
-            FreeCADGui.updateGui()
-            time.sleep(0.05)
+        self.assert_panel_fits(panel, "Fit")
         FreeCADGui.getMainWindow().grab().save(os.path.join(OUTPUT, "polycube_fit_panel.png"))
         widget, _ = panel.widgets["Iterations"]
         self.assertIsInstance(widget, QtGui.QSpinBox)
@@ -396,6 +412,25 @@ class WorkflowTest(unittest.TestCase, _ScreenshotAssertions):
         self.assertNotAlmostEqual(solid.Shape.Volume, volume, places=3,
                                   msg="the solid follows the refit")
         self.assertIn(f"Edit {fit.Label}", self.doc.UndoNames)
+
+    def check_solid_panel_forms(self, panel):
+        """One face per block of quads is offered with the G1 patches only (the exporter
+        refuses it with the exact form), the grading depth with the exact form only; the
+        fields give the property values, whatever the words they show."""
+        export, faces = panel.widgets["Export"][0], panel.widgets["Faces"][0]
+        depth = panel.widgets["Depth"][0]
+        export.setCurrentIndex(export.findData("g1"))
+        self.assertTrue(faces.isEnabled())
+        self.assertFalse(depth.isEnabled())
+        faces.setCurrentIndex(faces.findData("chart"))
+        self.assertEqual(faces.currentText(), "one per rectangular block")
+        self.assertEqual((panel.values()["Export"], panel.values()["Faces"]), ("g1", "chart"))
+        self.assert_panel_fits(panel, "Solid")
+        FreeCADGui.getMainWindow().grab().save(os.path.join(OUTPUT, "polycube_solid_panel.png"))
+        export.setCurrentIndex(export.findData("exact"))
+        self.assertFalse(faces.isEnabled())
+        self.assertTrue(depth.isEnabled())
+        self.assertEqual((panel.values()["Export"], panel.values()["Faces"]), ("exact", "quad"))
 
     def test_4_escape_during_the_fit_marks_it_cancelled_and_undo_restores(self):
         fit, solid = self.one("Fit"), self.one("Solid")

@@ -26,12 +26,12 @@ SCREENSHOTS = ("polycube_torus_solid.png", "polycube_target_mesh.png", "polycube
                "polycube_large_solid.png")
 CAGE_SCREENSHOTS = ("polycube_base_mesh.png",)
 WINDOW_GRABS = ("polycube_fit_progress.png", "polycube_batch_progress.png",
-                "polycube_cancelled.png", "polycube_fit_panel.png",
+                "polycube_cancelled.png", "polycube_fit_panel.png", "polycube_solid_panel.png",
                 "polycube_responsive_fit.png", "polycube_deviation_16x9.png",
                 "polycube_deviation_21x9.png")
 """The main window during the fit (progress bar), during Reconstruct folder (its dialog),
-after Esc in the fit (the Fit marked in the tree), with the Fit's task panel open and
-during the torsion arm's fit, grabbed at the window's own size."""
+after Esc in the fit (the Fit marked in the tree), with the Fit's and the Solid's task panels
+open and during the torsion arm's fit, grabbed at the window's own size."""
 MIN_CASES = 10
 TIMEOUT = 1200
 """Guard against a hung GUI (FreeCAD under Xvfb without a window manager), not a timing
