@@ -3,7 +3,6 @@
 labeling stays valid; a small chart that the polycube needs is left alone."""
 import numpy as np
 import pytest
-import trimesh
 
 from core.errors import ParameterError
 from core.segmentation.chart_absorption import (SMALL_AREA, THIN_WIDTH, absorb_charts,
@@ -13,18 +12,12 @@ from core.segmentation.labeling import face_normals, label_cost, nearest_directi
 from core.segmentation.repair import CandidateJudge
 from core.segmentation.validity import check_validity
 from tests.core.dev_meshes import load_dev_mesh
+from tests.core.test_repair_operators import labelled_cube
 
 
 def cube(levels=4):
     """(V, F, parts, frames, nearest-direction labels) of a subdivided unit cube [0, 1]^3."""
-    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
-    V, F = np.asarray(box.vertices) + 0.5, np.asarray(box.faces)
-    for _ in range(levels):
-        V, F = trimesh.remesh.subdivide(V, F)
-    V, F = np.asarray(V, dtype=np.float64), np.asarray(F, dtype=np.int64)
-    frames = np.broadcast_to(np.eye(3), (len(F), 3, 3)).copy()
-    labels = nearest_direction_labels(face_normals(V, F), frames).astype(np.int64)
-    return V, F, np.zeros(len(F), dtype=np.int64), frames, labels
+    return labelled_cube(levels)
 
 
 def absorb(V, F, parts, frames, labels, unit_area, **kw):

@@ -373,8 +373,6 @@ def _tightened_ladder(decimation, surface, target_faces, max_faces, over_budget_
     faces only where the limit surface crosses itself), up to :data:`TIGHTEN_ROUNDS` and
     ``over_budget_faces`` faces; returns ``(flaws, PairedDecimation, crossings, budget)`` of
     the least flawed cage (the first clean one)."""
-    from core.subdivision.limit_crossings import limit_self_intersections
-
     best = _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces,
                           rounds)
     budget = best[3]
@@ -382,11 +380,7 @@ def _tightened_ladder(decimation, surface, target_faces, max_faces, over_budget_
         if not best[2]:
             break
         mesh = best[1].mesh
-        _, base_faces, _ = limit_self_intersections(mesh, CROSSING_LEVELS)
-        corners = np.concatenate([mesh.face_vertices[mesh.face_offsets[f]:
-                                                     mesh.face_offsets[f + 1]]
-                                  for f in np.unique(base_faces)])
-        decimation = decimation.tightened(2 * budget, mesh.vertices[corners])
+        decimation = decimation.tightened(2 * budget, _crossing_corners(mesh))
         if decimation is None:
             break
         result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
@@ -409,8 +403,6 @@ def _locally_tightened(vertices, faces, surface, budget, max_faces, rounds):
     crossings are everywhere, as on a machined part's sharp steps) or after
     :data:`OVER_BUDGET_MISSES` rounds in a row without fewer crossings than every round
     before."""
-    from core.subdivision.limit_crossings import limit_self_intersections
-
     decimation = FoldFreeDecimation(vertices, faces, min_normal_cosine=NO_NORMAL_RULE)
     best, fewest, misses = None, None, 0
     for _ in range(TIGHTEN_ROUNDS + 1):
@@ -424,14 +416,21 @@ def _locally_tightened(vertices, faces, surface, budget, max_faces, rounds):
         if result.mesh.n_faces > max_faces or misses == OVER_BUDGET_MISSES:
             break
         mesh = result.mesh
-        _, base_faces, _ = limit_self_intersections(mesh, CROSSING_LEVELS)
-        corners = np.concatenate([mesh.face_vertices[mesh.face_offsets[f]:
-                                                     mesh.face_offsets[f + 1]]
-                                  for f in np.unique(base_faces)])
-        decimation = decimation.tightened(2 * budget, mesh.vertices[corners])
+        decimation = decimation.tightened(2 * budget, _crossing_corners(mesh))
         if decimation is None:
             break
     return best
+
+
+def _crossing_corners(mesh):
+    """(k, 3) float64 the corners of the base faces of ``mesh`` whose level-``CROSSING_LEVELS``
+    limit surface crosses itself (a corner once per face holding it)."""
+    from core.subdivision.limit_crossings import limit_self_intersections
+
+    _, base_faces, _ = limit_self_intersections(mesh, CROSSING_LEVELS)
+    corners = np.concatenate([mesh.face_vertices[mesh.face_offsets[f]:mesh.face_offsets[f + 1]]
+                              for f in np.unique(base_faces)])
+    return mesh.vertices[corners]
 
 
 def _repeats_marked(decimation, budgets, tried=()):
