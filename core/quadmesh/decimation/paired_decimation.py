@@ -19,9 +19,7 @@ genus and orientation:
    The dual graph of a closed triangle surface is cubic and bridgeless, so a perfect matching
    exists (Petersen) and the result is all quads in practice; unmatched triangles stay
    triangles (Catmull-Clark and the export take mixed cages). Vertices with only two faces are
-   merged away, edge rotations and diagonal collapses lower the number of extraordinary
-   vertices (:mod:`core.quadmesh.valence_regularity`), and the vertices are moved onto the
-   target.
+   merged away, and the vertices are moved onto the target.
 3. Where the cage's limit surface faces away from the target, the vertices of those faces are
    moved off the target, towards a limit surface through their on-target positions
    (:mod:`core.quadmesh.limit_interpolation`), and faces still inverted are edited: a corner
@@ -33,9 +31,7 @@ genus and orientation:
    rule brought in there, one step more each round, :data:`TIGHTEN_ROUNDS`): more faces only
    where it crosses, so the cage keeps about the budget wherever the crossings are, and its
    face count follows the shape, not whether QSlim of one triangulation happened to leave the
-   strut thick enough. Where the regularised cages of this ladder stay flawed or end beyond
-   the budget rule, the ladder runs again on the pairings as they are (valence edits can
-   fold a thin rim's limit surface), and the better of the two is kept. Where that cage is flawed too, larger budgets within the allowed range
+   strut thick enough. Where that cage is flawed too, larger budgets within the allowed range
    are tried; where they all cross themselves, budgets beyond it (a solid needs a surface that
    does not), until more faces stop helping.
 4. Where every budget's limit surface crosses itself (machined parts whose sharp steps the
@@ -79,7 +75,6 @@ from core.quadmesh.decimation.fold_free_decimation import FoldFreeDecimation, fo
 from core.quadmesh.limit_interpolation import unshrink_inverted
 from core.quadmesh.local_repair import repair_inverted
 from core.quadmesh.orientation import inverted_faces
-from core.quadmesh.valence_regularity import regularise_valences
 from core.polymesh_checks import check_polymesh
 from core.subdivision.catmull_clark import mesh_topology
 from core.target_surface import TargetSurface
@@ -306,15 +301,9 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
         best = _tightened_ladder(FoldFreeDecimation(vertices, faces), surface, target_faces,
                                  max_faces, over_budget_faces, rounds)
     if best is None or best[2]:
-        local = (vertices, faces) if over_budget_faces else None
         qslim = _budget_ladder(decimation, surface, target_faces, max_faces,
-                               over_budget_faces, rounds, local=local)
-        if qslim[0] or qslim[3] > max_faces:
-            # the valence edits can fold a rim's limit surface: the pairing as it is may
-            # give a clean cage within the budget rule where the regularised one does not
-            plain = _budget_ladder(decimation, surface, target_faces, max_faces,
-                                   over_budget_faces, rounds, local=local, regular=False)
-            qslim = min(qslim, plain, key=_ladder_rank)
+                               over_budget_faces, rounds,
+                               local=(vertices, faces) if over_budget_faces else None)
         best = qslim if best is None or qslim[2] < best[2] else best
     if best[2] and over_budget_faces:
         feature_decimation = FeatureDecimation(vertices, faces, surface)
@@ -332,7 +321,7 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
 
 
 def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces, rounds,
-                   local=None, regular=True):
+                   local=None):
     """The budget ladder of :func:`paired_decimation_base_mesh`, of QSlim's decimations or
     with crease tags of the feature-preserving ones (a Decimation or FeatureDecimation);
     appends its rounds and returns ``(flaws, PairedDecimation, crossings, budget)`` of the
@@ -341,21 +330,19 @@ def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_fac
     not built, and beyond the budget rule it counts as a budget no less flawed. With
     ``local`` (the target's ``(vertices, faces)``), a flawed cage of the face budget is
     followed by the locally tightened decimations of that budget (:func:`_locally_tightened`)
-    before any larger budget. ``regular``: whether the cages' valences are regularised."""
+    before any larger budget."""
     best = None
     ladder = _ladder(target_faces, max_faces)
     for budget, new in _repeats_marked(decimation, ladder):
         if not new:
             continue
-        result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds,
-                                                         regular)
+        result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
         if best is None or crossings + inverted < best[0]:
             best = (crossings + inverted, result, crossings, budget)
         if crossings + inverted == 0:
             break
         if local is not None and budget == ladder[0]:
-            tightened = _locally_tightened(*local, surface, budget, ladder[-1], rounds,
-                                           regular)
+            tightened = _locally_tightened(*local, surface, budget, ladder[-1], rounds)
             if tightened[0] < best[0]:
                 best = tightened
             if best[0] == 0:
@@ -369,8 +356,7 @@ def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_fac
                 if misses == OVER_BUDGET_MISSES:
                     break
                 continue
-            result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds,
-                                                         regular)
+            result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
             if not crossings:
                 return (crossings + inverted, result, 0, budget)
             misses = 0 if crossings + inverted < fewest else misses + 1
@@ -378,13 +364,6 @@ def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_fac
             if misses == OVER_BUDGET_MISSES:
                 break
     return best
-
-
-def _ladder_rank(kept):
-    """Sort key of a ladder's kept cage ``(flaws, PairedDecimation, crossings, budget)``:
-    fewer crossings, then fewer flaws, then the smaller budget."""
-    flaws, _, crossings, budget = kept
-    return crossings, flaws, budget
 
 
 def _tightened_ladder(decimation, surface, target_faces, max_faces, over_budget_faces,
@@ -412,7 +391,7 @@ def _tightened_ladder(decimation, surface, target_faces, max_faces, over_budget_
     return best
 
 
-def _locally_tightened(vertices, faces, surface, budget, max_faces, rounds, regular=True):
+def _locally_tightened(vertices, faces, surface, budget, max_faces, rounds):
     """Cages of ``budget`` from half-edge QSlim decimations of the target (``vertices``,
     ``faces``) without a normal rule, tightened around the faces whose limit surface crosses
     itself (:meth:`FoldFreeDecimation.tightened`), up to :data:`TIGHTEN_ROUNDS` times while
@@ -423,12 +402,11 @@ def _locally_tightened(vertices, faces, surface, budget, max_faces, rounds, regu
     regions refuse so many collapses that the decimation stops short of the budget: the
     crossings are everywhere, as on a machined part's sharp steps) or after
     :data:`OVER_BUDGET_MISSES` rounds in a row without fewer crossings than every round
-    before. ``regular``: whether the cages' valences are regularised."""
+    before."""
     decimation = FoldFreeDecimation(vertices, faces, min_normal_cosine=NO_NORMAL_RULE)
     best, fewest, misses = None, None, 0
     for _ in range(TIGHTEN_ROUNDS + 1):
-        result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds,
-                                                   regular)
+        result, crossings, inverted = _flawed_mesh(decimation, budget, surface, rounds)
         if best is None or crossings + inverted < best[0]:
             best = (crossings + inverted, result, crossings, budget)
         if not crossings:
@@ -466,27 +444,25 @@ def _repeats_marked(decimation, budgets, tried=()):
         seen.add(id(faces))
 
 
-def _flawed_mesh(decimation, budget, surface, rounds, regular=True):
-    """The paired mesh of one budget (with crease tags from a FeatureDecimation; its valences
-    regularised unless ``regular`` is False), its inverted faces unshrunk
-    (:func:`core.quadmesh.limit_interpolation.unshrink_inverted`), those left edited where its
-    limit surface does not cross itself (:func:`core.quadmesh.local_repair.repair_inverted`),
-    and its :func:`limit_flaws`; appends its round (with ``regular``, and ``crease_edges`` and
-    ``evened`` when tagged). A FeatureDecimation's triangles are evened out first
-    (:func:`even_creased_triangulation`); where that cage is flawed, the cage of the decimation
-    as it is is built too, and the less flawed one kept (the evened one on a tie)."""
+def _flawed_mesh(decimation, budget, surface, rounds):
+    """The paired mesh of one budget (with crease tags from a FeatureDecimation), its inverted faces
+    unshrunk (:func:`core.quadmesh.limit_interpolation.unshrink_inverted`), those left edited
+    where its limit surface does not cross itself
+    (:func:`core.quadmesh.local_repair.repair_inverted`), and its :func:`limit_flaws`; appends
+    its round (with ``crease_edges`` and ``evened`` when tagged). A FeatureDecimation's
+    triangles are evened out first (:func:`even_creased_triangulation`); where that cage is
+    flawed, the cage of the decimation as it is is built too, and the less flawed one kept
+    (the evened one on a tie)."""
     creased = isinstance(decimation, FeatureDecimation)
     result, crossings, inverted, moved, edits = _repaired(
-        _paired_mesh(decimation, 2 * budget, surface, regular=regular), surface)
+        _paired_mesh(decimation, 2 * budget, surface), surface)
     evened, evened_flaws = creased, crossings + inverted
     if creased and evened_flaws:
-        plain = _repaired(_paired_mesh(decimation, 2 * budget, surface, even=False,
-                                       regular=regular), surface)
+        plain = _repaired(_paired_mesh(decimation, 2 * budget, surface, even=False), surface)
         if plain[1] + plain[2] < evened_flaws:
             (result, crossings, inverted, moved, edits), evened = plain, False
     rounds.append({"faces": int(result.mesh.n_faces), "limit_crossings": crossings,
                    "inverted_faces": inverted, "moved_vertices": moved, "edits": edits,
-                   "regular": regular,
                    **({"crease_edges": int(result.mesh.n_creases), "evened": evened,
                        "evened_flaws": int(evened_flaws)} if creased else {}),
                    **({"fold_free": result.fold_free, "tightened": result.tightened}
@@ -547,11 +523,11 @@ def limit_flaws(mesh, surface):
             int(inverted_faces(mesh, surface.vertices, surface.faces, surface).sum()))
 
 
-def _paired_mesh(decimation, count, surface, even=True, regular=True):
-    """Decimate to ``count`` triangles, pair, merge, regularise the valences unless
-    ``regular`` is False, and project (module docstring): QSlim's result (a Decimation)
-    evened out first; a FeatureDecimation's feature edges become crease edges and are never paired across, its
-    triangles evened out first unless ``even`` is False."""
+def _paired_mesh(decimation, count, surface, even=True):
+    """Decimate to ``count`` triangles, pair, merge and project (module docstring): QSlim's
+    result (a Decimation) evened out first; a FeatureDecimation's feature edges become crease
+    edges and are never paired across, its triangles evened out first unless ``even`` is
+    False."""
     if isinstance(decimation, FoldFreeDecimation):
         # its triangles already agree with the target's normals: evening them out would
         # move vertices off the target's vertices and can fold them again
@@ -577,12 +553,8 @@ def _paired_mesh(decimation, count, surface, even=True, regular=True):
     paired = np.zeros(len(decimated_f), dtype=bool)
     paired[pairs[chosen].reshape(-1)] = True
     kept = decimated_f[~paired]
-    crease_vertices = () if creases is None else set(creases.reshape(-1).tolist())
     face_list = _merge_valence_two([list(q) for q in quads[chosen]] + [list(t) for t in kept],
-                                   crease_vertices)
-    if regular:
-        regularised = regularise_valences(decimated_v, face_list, crease_vertices)
-        decimated_v, face_list = regularised.vertices, regularised.faces
+                                   () if creases is None else set(creases.reshape(-1).tolist()))
     used = np.unique(np.concatenate(face_list))
     renumber = np.full(len(decimated_v), -1, dtype=np.int64)
     renumber[used] = np.arange(len(used))
