@@ -594,10 +594,10 @@ def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=
     until the band's nearer edge is crossed, then bisected (in log scale) between the scales on
     either side of that edge until they differ by at most ``SCALE_PRECISION`` and a layout in
     the band is found (or ``SCALE_ROUNDS`` are spent); the layout in the band at the scale
-    nearest the first one is taken. The outcome then depends on the
-    first count continuously: a first count just inside the band is kept, one just outside
-    becomes the first step of the staircase inside it, not a layout near the budget (which
-    would make two nearly equal targets give cages of very different sizes).
+    nearest the first one is taken. The outcome then follows the first count: a first count
+    just inside the band is kept, one just outside becomes the first step of the staircase
+    inside it, not a layout near the budget (which would make two nearly equal targets, one
+    design at two resolutions, give cages of very different sizes).
 
     When no scale gives a count in the band (a step of the staircase jumps over it), the layout
     closest to the budget is taken; when even a tiny scale gives too many faces, that is the
