@@ -37,11 +37,14 @@ ATTEMPT_SIZES = (1.0, 1.1, 1.25, 2.0, 4.0)
 sliver the repairs cannot remove usually succeeds a little larger; one that loses a handle,
 only with more triangles."""
 TIE_BREAK = 1e-4
-"""Vertices are moved by about this many mean edge lengths (seeded, so the same every run)
-before the reduction: a subdivided mesh has whole families of edges of exactly one length,
-and the order that breaks those ties leaves slivers the repairs cannot remove; a move far
-below any tolerance of the later stages breaks them (and the projection onto the target
-undoes it)."""
+"""Vertices are moved by about this many mean edge lengths before the reduction: a subdivided
+mesh has whole families of edges of exactly one length, and the order that breaks those ties
+leaves slivers the repairs cannot remove; a move far below any tolerance of the later stages
+breaks them (and the projection onto the target undoes it). The move is a fixed function of
+the vertex's position (:func:`tie_break`), so the proxy does not depend on the order in
+which the file lists the vertices."""
+TIE_BREAK_WAVES = 8
+"""Plane waves summed by :func:`tie_break` along every axis."""
 
 
 @dataclass(frozen=True)
@@ -122,8 +125,8 @@ def reduce_triangles(mesh, triangles):
     faces = np.asfortranarray(mesh.faces, dtype=np.int32)
     edge = float(np.linalg.norm(mesh.vertices[faces[:, 0]] - mesh.vertices[faces[:, 1]],
                                 axis=1).mean())
-    noise = np.random.default_rng(0).standard_normal(mesh.vertices.shape)
-    vertices = np.asfortranarray(mesh.vertices + TIE_BREAK * edge * noise, dtype=np.float64)
+    vertices = np.asfortranarray(mesh.vertices + TIE_BREAK * edge * tie_break(mesh.vertices, edge),
+                                 dtype=np.float64)
     points, triangles_out = igl.decimate(vertices, faces, int(triangles))[:2]
     points = np.asarray(points, dtype=np.float64)
     triangles_out = np.asarray(triangles_out, dtype=np.int64)
@@ -133,6 +136,25 @@ def reduce_triangles(mesh, triangles):
     triangles_out = triangles_out[~collapsed]
     used, compact = np.unique(triangles_out, return_inverse=True)
     return TriMesh(points[used], compact.reshape(-1, 3))
+
+
+def tie_break(points, wavelength):
+    """(n, 3) float64 in about [-1, 1]: a fixed function of each point's position.
+
+    Every coordinate is a sum of ``TIE_BREAK_WAVES`` plane waves of about ``wavelength``
+    (model units) in seeded random directions and phases, so neighbouring vertices move
+    differently and a point moves the same whatever its index.
+    """
+    rng = np.random.default_rng(0)
+    directions = rng.standard_normal((3, TIE_BREAK_WAVES, 3))
+    directions /= np.linalg.norm(directions, axis=2, keepdims=True)
+    frequency = 2.0 * np.pi / (wavelength * rng.uniform(0.5, 1.5, (3, TIE_BREAK_WAVES, 1)))
+    phase = rng.uniform(0.0, 2.0 * np.pi, (3, TIE_BREAK_WAVES))
+    wave_vectors = directions * frequency
+    move = np.empty((len(points), 3))
+    for axis in range(3):  # one axis at a time: n x waves values, not n x 3 x waves
+        move[:, axis] = np.sin(np.asarray(points) @ wave_vectors[axis].T + phase[axis]).sum(axis=1)
+    return move / np.sqrt(0.5 * TIE_BREAK_WAVES)
 
 
 def _checked(proxy, genus, components):

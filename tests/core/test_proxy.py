@@ -78,6 +78,23 @@ def test_a_graded_target_gives_a_proxy_of_about_even_triangles():
     assert tube_distance(working.mesh.vertices).max() < 0.02
 
 
+def test_the_proxy_does_not_depend_on_the_order_of_the_vertices():
+    # a midpoint-subdivided torus: its edges come in families of exactly one length, whose
+    # collapse order the tie-break decides; listing the vertices in another order gives the
+    # same proxy (the same vertex positions and the same triangles)
+    torus = fine_torus(30)
+    vertices, faces = trimesh.remesh.subdivide(torus.vertices, torus.faces)
+    order = np.random.default_rng(1).permutation(len(vertices))
+    shuffled = TriMesh(vertices[order], np.argsort(order)[faces])
+    proxies = [working_surface(mesh, genus=1, components=1, proxy_triangles=1500).mesh
+               for mesh in (TriMesh(vertices, faces), shuffled)]
+    assert all(len(p.faces) < len(faces) for p in proxies)
+    for points in (lambda p: p.vertices, lambda p: p.vertices[p.faces].mean(axis=1)):
+        first, second = (np.array(sorted(map(tuple, np.round(points(p), 6)))) for p in proxies)
+        assert first.shape == second.shape
+        assert np.abs(first - second).max() < 1e-6
+
+
 def test_a_target_at_or_under_the_size_is_its_own_working_surface():
     torus = fine_torus(40)
     working = working_surface(torus, genus=1, components=1, proxy_triangles=len(torus.faces))

@@ -19,8 +19,9 @@ from core.quadmesh.orientation import inverted_faces
 from core.quadmesh.base_mesh import LayoutTooLargeError, chart_minimum_faces
 from core.quadmesh.polycube.lattice import OverlappingChartsError, build_lattice
 from core.quadmesh.polycube.milp_solve import MilpTimeLimitError, solve_milp
-from core.quadmesh.polycube.quantize import (LoopTables, closeness_rows, collapsible_sides,
-                                             loop_tables, minimum_faces, quantize,
+from core.quadmesh.polycube.quantize import (BUDGET_TOLERANCE, LoopTables, closeness_rows,
+                                             collapsible_sides, loop_tables, minimum_faces,
+                                             quantize, quantize_for_budget,
                                              rectangular_refinement)
 from core.quadmesh.polycube.side_signs import (charts_close, loops_are_rectilinear,
                                                make_loops_rectilinear)
@@ -336,6 +337,26 @@ def layout_problem(boxes):
     complex_ = build_chart_complex(V, F, np.zeros(len(F)), nearest_labels(V, F), frames)
     complex_, _ = make_loops_rectilinear(complex_)
     return complex_, loop_tables(complex_, V, part_frames)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("boxes", [L_SHAPE, FRAME], ids=["l-shape", "frame"])
+def test_a_larger_budget_never_gives_a_smaller_layout(boxes):
+    """The budget search moves the scale only as far as the band needs, so the face count
+    follows the budget: a first layout inside the band is kept, one just outside becomes the
+    nearest layout inside it (not one near the budget, nor one that leaves the band)."""
+    complex_, tables = layout_problem(boxes)
+    refinement = rectangular_refinement(complex_, tables)
+    counts = []
+    for budget in range(20, 130):
+        polycube, rounds = quantize_for_budget(complex_, tables, refinement, budget)
+        first = rounds[0]["faces"]
+        if abs(first - budget) <= BUDGET_TOLERANCE * budget:
+            assert polycube.faces == first, (budget, rounds)
+        if any(abs(r["faces"] - budget) <= BUDGET_TOLERANCE * budget for r in rounds):
+            assert abs(polycube.faces - budget) <= BUDGET_TOLERANCE * budget, (budget, rounds)
+        counts.append(polycube.faces)
+    assert counts == sorted(counts)
 
 
 @pytest.mark.parametrize("boxes", [L_SHAPE, FRAME], ids=["l-shape", "frame"])

@@ -75,6 +75,10 @@ LENGTH_COST = 1e-5
 (module docstring), the shorter ones, whatever path the solver takes."""
 SCALE_ROUNDS = 10
 """Most scales tried by :func:`quantize_for_budget`."""
+SCALE_PRECISION = 0.02
+"""Relative width down to which :func:`quantize_for_budget` bisects the scale around the edge
+of the face budget's band (about twice that in faces, less than one step of the layout's
+staircase on cages of a few hundred faces)."""
 
 
 @dataclass(frozen=True)
@@ -581,45 +585,74 @@ def collapsible_sides(complex_, target_faces):
 
 def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=None,
                         give_up_faces=None, least=None):
-    """The quantization whose face count is closest to ``target_faces``.
+    """The quantization at the scale nearest the first one whose face count meets the budget.
 
-    Starts from the scale that gives the target area in unit squares; the face count grows
-    roughly with the square of the scale but in steps, so the scale is then bisected (in log
-    scale) between the largest one giving too few faces and the smallest giving too many.
-    Stops when the count is within ``BUDGET_TOLERANCE`` of the budget; when even a tiny scale
-    gives too many faces, that is the minimum the constraints allow. With ``give_up_faces``, the
-    search also stops once a scale of at most a quarter of the first one still gives more faces
-    than that (the caller will not use so large a layout).
+    Starts from the scale that gives the target area in unit squares (:func:`first_scale`) and
+    keeps that layout when its face count is within ``BUDGET_TOLERANCE`` of ``target_faces``.
+    Otherwise the scale moves only as far as the band needs: the face count grows roughly with
+    the square of the scale but in steps, so the scale is first extrapolated towards the budget
+    until the band's nearer edge is crossed, then bisected (in log scale) between the scales on
+    either side of that edge until they differ by at most ``SCALE_PRECISION`` and a layout in
+    the band is found (or ``SCALE_ROUNDS`` are spent); the layout in the band at the scale
+    nearest the first one is taken. The outcome then follows the first count: a first count
+    just inside the band is kept, one just outside becomes the first step of the staircase
+    inside it, not a layout near the budget (which would make two nearly equal targets, one
+    design at two resolutions, give cages of very different sizes).
+
+    When no scale gives a count in the band (a step of the staircase jumps over it), the layout
+    closest to the budget is taken; when even a tiny scale gives too many faces, that is the
+    minimum the constraints allow. With ``give_up_faces``, the search also stops once a scale of
+    at most a quarter of the first one still gives more faces than that (the caller will not
+    use so large a layout).
 
     Returns
     -------
-    best : IntegerPolycube (closest to the budget; the smallest one when none meets it).
+    best : IntegerPolycube, the layout chosen as above.
     rounds : list of dicts with the scale and faces of every round (for the report).
     ``collapsible`` and ``least`` are passed on to :func:`quantize`.
     """
+    low_edge = (1.0 - BUDGET_TOLERANCE) * target_faces
+    high_edge = (1.0 + BUDGET_TOLERANCE) * target_faces
     scale = first_scale(complex_, target_faces)
-    rounds, best = [], None
-    low, high = None, None
+    rounds, closest, in_band = [], None, None
+    below = None  # the first count is below the band (the scale grows), or above it
+    outside, inside = None, None  # scales on the far and near side of the band's nearer edge
     for _ in range(SCALE_ROUNDS):
         result = quantize(complex_, tables, refinement, scale, collapsible, least)
         rounds.append({"scale": scale, "faces": result.faces})
-        if best is None or abs(result.faces - target_faces) < abs(best.faces - target_faces):
-            best = result
-        if abs(result.faces - target_faces) <= BUDGET_TOLERANCE * target_faces:
-            break
+        if closest is None or abs(result.faces - target_faces) < abs(closest.faces - target_faces):
+            closest = result
+        if low_edge <= result.faces <= high_edge and (
+                in_band is None or _log_distance(scale, rounds[0]["scale"])
+                < _log_distance(in_band.scale, rounds[0]["scale"])):
+            in_band = result
+        if len(rounds) == 1:
+            if in_band is not None:
+                break
+            below = result.faces < low_edge
+        crossed = result.faces >= low_edge if below else result.faces <= high_edge
+        if crossed:
+            inside = scale if inside is None else (min if below else max)(inside, scale)
+        else:
+            outside = scale if outside is None else (max if below else min)(outside, scale)
+        if inside is not None and outside is not None:
+            if in_band is not None and _log_distance(inside, outside) <= np.log1p(
+                    SCALE_PRECISION):
+                break
+            scale = float(np.sqrt(inside * outside))
+            continue
         if len(rounds) >= 3 and len({r["faces"] for r in rounds[-3:]}) == 1:
             break  # the constraints' minimum: smaller scales give the same layout
         if (give_up_faces is not None and result.faces > give_up_faces
                 and scale <= 0.25 * rounds[0]["scale"]):
             break
-        if result.faces < target_faces:
-            low = scale if low is None else max(low, scale)
+        if len(rounds) > 1:
+            scale *= 2.0 if below else 0.5
         else:
-            high = scale if high is None else min(high, scale)
-        if low is not None and high is not None:
-            scale = float(np.sqrt(low * high))
-        elif low is None:
-            scale *= 0.5 if len(rounds) > 1 else float(np.sqrt(target_faces / result.faces))
-        else:
-            scale *= 2.0 if len(rounds) > 1 else float(np.sqrt(target_faces / max(result.faces, 1)))
-    return best, rounds
+            scale *= float(np.sqrt(target_faces / max(result.faces, 1)))
+    return (in_band if in_band is not None else closest), rounds
+
+
+def _log_distance(a, b):
+    """``|log(a / b)|`` of two positive scales."""
+    return abs(float(np.log(a / b)))
