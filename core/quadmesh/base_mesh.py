@@ -471,11 +471,9 @@ def _repaired_layout(mesh, info, surface):
     if inverted:
         mesh, crossings, inverted, moved = unshrink_inverted(mesh, surface, crossings, inverted,
                                                              count_crossings)
-        if not crossings:
-            # as on the decimation's cages: edits are judged by the crossings they add, which
-            # a limit surface that already crosses itself cannot show (and they cost time)
-            mesh, crossings, inverted, edits = repair_inverted(mesh, surface, crossings,
-                                                               inverted, count_crossings)
+    if inverted or crossings:
+        mesh, crossings, inverted, edits = repair_inverted(mesh, surface, crossings,
+                                                           inverted, count_crossings)
     sizes = mesh.face_sizes
     info = {**info, **_mesh_figures(mesh), "quads": int((sizes == 4).sum()),
             "triangles": int((sizes == 3).sum()), "inverted_faces": inverted,
