@@ -325,11 +325,11 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     decimation would meet the budget more closely. Inverted faces
     (:func:`core.quadmesh.orientation.inverted_faces`) of the layout and faces where its limit
     surface crosses itself are repaired (:func:`_repaired_layout`) and the flaws counted
-    again; where inverted faces or crossings remain, the paired decimation is built too and the one with fewer flaws is
-    kept (:func:`_flaw_rank`: a limit surface that crosses itself never wins over one that does
-    not). ``method="polycube"`` never falls back (its errors are raised; layouts up to
-    ``max_base_faces`` are kept, repaired as in ``auto``); ``method="decimation"`` skips the
-    polycube layout.
+    again; where inverted faces or crossings remain, the paired decimation is built too and
+    the one with fewer flaws is kept (:func:`_flaw_rank`: a limit surface that crosses itself
+    never wins over one that does not). ``method="polycube"`` never falls back (its errors are
+    raised; layouts up to ``max_base_faces`` are kept, repaired as in ``auto``);
+    ``method="decimation"`` skips the polycube layout.
 
     Parameters
     ----------
@@ -393,6 +393,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames,
                                          int(target_faces), max_base_faces, face_interface_axis,
                                          max_base_faces, surface=surface)
+        mesh, info = _repaired_layout(mesh, info, surface)
     elif method == "auto":
         give_up = int(min(max_base_faces, FALLBACK_OVER_BUDGET * target_faces))
         try:
@@ -405,6 +406,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
             polycube_candidate = {"built": False, "faces": getattr(exc, "faces", None),
                                   "reason": str(exc)}
         else:
+            mesh, info = _repaired_layout(mesh, info, surface)
             polycube_candidate = _candidate(info)
             if info["inverted_faces"] or info["limit_crossings"]:
                 other_mesh, other_info = _paired_decimation_base_mesh(
@@ -446,7 +448,7 @@ def _flaws(info):
             f"self-crossing triangle pairs of its limit surface (level 2)")
 
 
-def _repaired_layout(mesh, surface):
+def _repaired_layout(mesh, info, surface):
     """The polycube layout with its inverted faces, and the faces where its limit surface
     crosses itself, repaired where that helps, and its report.
 
@@ -460,8 +462,8 @@ def _repaired_layout(mesh, surface):
     charts' shapes, over a few faces or many; the edits mend the few, and a layout left
     crossing itself gives way to the paired decimation (:func:`build_base_mesh`).
 
-    Returns ``(mesh, figures)``: the repaired mesh and a dict of its figures
-    (:func:`_mesh_figures`, ``quads``, ``triangles``), ``inverted_faces`` (after the repair), ``layout_inverted_faces`` (before it),
+    Returns ``(mesh, info)``: ``info`` updated with the figures of the repaired mesh,
+    ``inverted_faces`` (after the repair), ``layout_inverted_faces`` (before it),
     ``limit_crossings`` (self-crossing triangle pairs of the repaired cage's level-2 limit
     surface, :class:`core.quadmesh.crossing_count.LimitCrossingCount`), ``moved_vertices`` and
     ``edits``.
@@ -477,10 +479,11 @@ def _repaired_layout(mesh, surface):
         mesh, crossings, inverted, edits = repair_inverted(mesh, surface, crossings,
                                                            inverted, count_crossings)
     sizes = mesh.face_sizes
-    return mesh, {**_mesh_figures(mesh), "quads": int((sizes == 4).sum()),
-                  "triangles": int((sizes == 3).sum()), "inverted_faces": inverted,
-                  "layout_inverted_faces": layout_inverted, "limit_crossings": crossings,
-                  "moved_vertices": moved, "edits": edits}
+    info = {**info, **_mesh_figures(mesh), "quads": int((sizes == 4).sum()),
+            "triangles": int((sizes == 3).sum()), "inverted_faces": inverted,
+            "layout_inverted_faces": layout_inverted, "limit_crossings": crossings,
+            "moved_vertices": moved, "edits": edits}
+    return mesh, info
 
 
 def _mesh_figures(mesh):
@@ -653,17 +656,15 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
     Parameters as :func:`build_base_mesh`; ``give_up_faces``: the budget search stops and
     raises once the layout needs more quads than this; ``refinement_rounds``: most
     quantizations that split overlapping charts into rectangles; ``surface``: TargetSurface of
-    the target (built here when None). Returns ``(mesh, info)`` as there (the layout
-    repaired, :func:`_repaired_layout`), without ``seconds``.
+    the target (built here when None). Returns ``(mesh, info)`` as there, without
+    ``inverted_faces`` and ``seconds``.
 
     A chart one quad across a thin wall has a limit surface pulled past the wall's middle, so
     its quads face away from the target. Where the layout has inverted faces, the shortest
     sides of their charts (:func:`_narrowest_sides`) get one unit more than they had as their
     least length and the layout is quantized again (up to :data:`COARSE_CHART_ROUNDS` times,
-    while it stays within ``give_up_faces`` and each round lowers the inverted faces). Every
-    layout built is repaired and the least flawed after its repair kept (:func:`_flaw_rank`;
-    on a tie the one with the fewest inverted faces before it): a finer layout is not always
-    the one the local edits mend best.
+    while it stays within ``give_up_faces`` and each round lowers the inverted faces); the
+    layout with the fewest inverted faces is kept.
 
     Raises
     ------
@@ -685,7 +686,6 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
     layout = _LayoutAttempts(V, F, complex_, part_frames, int(target_faces), max_base_faces,
                              give_up_faces, refinement_rounds, target_genus)
     best = layout.attempt(None)
-    tried = [best]
     flipped_faces = inverted_faces(best[0], surface.vertices, surface.faces, surface)
     least = np.zeros(layout.complex_.n_sides, dtype=np.int64)
     for _ in range(COARSE_CHART_ROUNDS if flipped_faces.any() else 0):
@@ -699,20 +699,13 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
             candidate = layout.attempt(least)
         except (LabelingError, InvalidMeshError):
             break  # no finer layout of those charts within the limit
-        tried.append(candidate)
         facing_away = inverted_faces(candidate[0], surface.vertices, surface.faces, surface)
         if facing_away.sum() >= flipped_faces.sum():
             break  # longer sides there did not help: the charts are not too narrow
         best, flipped_faces = candidate, facing_away
         if not facing_away.any():
             break
-    # the local repair mends some layouts more than others: the least flawed after it is
-    # kept, the one with the fewest inverted faces before it on a tie
-    repaired = [_repaired_layout(attempt[0], surface) for attempt in tried]
-    chosen = min(range(len(tried)),
-                 key=lambda k: (_flaw_rank(repaired[k][1]), tried[k] is not best, k))
-    _, polycube, rounds, refinement, folded, layout_complex, _ = tried[chosen]
-    mesh, repair = repaired[chosen]
+    mesh, polycube, rounds, refinement, folded, layout_complex, _ = best
     flipped = layout.flipped
     complex_ = layout_complex
     within = abs(polycube.faces - target_faces) <= BUDGET_TOLERANCE * target_faces
@@ -721,7 +714,8 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
         minimum_reason = (f"{complex_.n_sides} sides of at least one unit each around "
                           f"{complex_.n_charts} charts need at least about {polycube.faces} quads")
     info = {
-        "method": "polycube", "fallback_reason": None, **repair, "other": 0,
+        "method": "polycube", "fallback_reason": None,
+        **_mesh_figures(mesh), "quads": int(mesh.n_faces), "triangles": 0, "other": 0,
         "target_faces": int(target_faces), "within_budget": bool(within),
         "minimum_reason": minimum_reason,
         "scale": polycube.scale, "solver_status": polycube.status, "scale_rounds": rounds,

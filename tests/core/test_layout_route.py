@@ -83,7 +83,7 @@ def test_a_folded_layout_vertex_is_repaired():
     folded_base = replace(base, vertices=folded)
     before = int(inverted_faces(folded_base, V, F, surface).sum())
     assert before > 0
-    repaired, repaired_info = _repaired_layout(folded_base, surface)
+    repaired, repaired_info = _repaired_layout(folded_base, info, surface)
     check_polymesh(repaired)
     assert repaired_info["layout_inverted_faces"] == before
     assert repaired_info["inverted_faces"] == int(inverted_faces(repaired, V, F, surface).sum())
@@ -101,7 +101,7 @@ def test_a_layout_pierced_at_one_vertex_is_mended():
     pierced[top[0], 2] = -3.0
     pierced_base = replace(base, vertices=pierced)
     assert count_limit_self_intersections(pierced_base, 2) > 0
-    repaired, repaired_info = _repaired_layout(pierced_base, surface)
+    repaired, repaired_info = _repaired_layout(pierced_base, info, surface)
     check_polymesh(repaired)
     assert count_limit_self_intersections(repaired, 2) == repaired_info["limit_crossings"] == 0
     assert not inverted_faces(repaired, V, F, surface).any()
@@ -109,19 +109,19 @@ def test_a_layout_pierced_at_one_vertex_is_mended():
 
 
 def test_a_layout_whose_limit_surface_crosses_itself_gives_way_to_a_clean_cage(monkeypatch):
-    layout = base_mesh_module._layout_on_target
+    layout = base_mesh_module._polycube_base_mesh
 
     def pierced_layout(*args, **kwargs):
         # a whole strip of the top face pierced: more flawed faces than local edits can mend
-        mesh, *rest = layout(*args, **kwargs)
+        mesh, info = layout(*args, **kwargs)
         top = np.flatnonzero((np.abs(mesh.vertices[:, 2] - 1.0) < 1e-9)
                              & (mesh.vertices[:, 1] > 0.9) & (mesh.vertices[:, 1] < 2.1))
         assert len(top) > MAX_EDITS
         pierced = mesh.vertices.copy()
         pierced[top, 2] = -3.0
-        return (replace(mesh, vertices=pierced), *rest)
+        return replace(mesh, vertices=pierced), info
 
-    monkeypatch.setattr(base_mesh_module, "_layout_on_target", pierced_layout)
+    monkeypatch.setattr(base_mesh_module, "_polycube_base_mesh", pierced_layout)
     V, F, base, info = auto_base_mesh(FRAME, 300)
     polycube = info["candidates"]["polycube"]
     decimation = info["candidates"]["paired decimation"]
