@@ -35,7 +35,7 @@ def run_labeling(intake, parts, frames, params, progress):
                                             mean_label_angle, nearest_direction_labels,
                                             part_neighbours)
     from core.segmentation.monotone import straighten_boundaries
-    from core.segmentation.repair import CandidateJudge, repair_labeling
+    from core.segmentation.repair import MAX_ANGLE_INCREASE, CandidateJudge, repair_labeling
     from core.segmentation.validity import check_validity
 
     mesh, face_part, field = intake.surface, parts.face_part, frames.frame_field
@@ -66,6 +66,19 @@ def run_labeling(intake, parts, frames, params, progress):
                                    unit_area)
         labels = absorption.labels
         absorb_report = absorption.report
+        if not absorption.validity.is_valid:
+            # an absorbed chart changes the neighbourhoods in which a repair's merge had to
+            # add an invalid item: the repair runs again on what is left, within what remains
+            # of the first run's angle budget
+            spent = judge.angle(labels) - repair_report["angle_before"]
+            labels, again = repair_labeling(mesh.vertices, mesh.faces, face_part, labels,
+                                            field.face_frame, field.face_interface_axis,
+                                            max_angle_increase=max(MAX_ANGLE_INCREASE - spent,
+                                                                   0.0),
+                                            lam=params.lam, penalty=params.penalty,
+                                            topology=topology, colour=colour, judge=judge)
+            repair_report = {**again, "angle_before": repair_report["angle_before"],
+                             "rounds": repair_report["rounds"] + again["rounds"]}
         progress.report("labeling", 0.8)
         progress.check_cancel()
         labels, straighten_report, validity = straighten_boundaries(
