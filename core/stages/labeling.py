@@ -11,8 +11,9 @@ def run_labeling(intake, parts, frames, params, progress):
 
     HBECVT (Eqs. 2-3), then, with ``params.repair``, the repair loop, the absorption of charts
     smaller or thinner than a quad of the face budget (``params.target_faces``) into their
-    neighbours where validity allows (:mod:`core.segmentation.chart_absorption`) and the
-    straightening of boundary hooks (which returns the validity it ends with); otherwise the
+    neighbours where validity allows (:mod:`core.segmentation.chart_absorption`), the repair
+    loop again where the absorbed labeling is still invalid, and the straightening of boundary
+    hooks (which returns the validity it ends with); otherwise the
     validity of the HBECVT labels (the corner rules are the independent check).
 
     Parameters
