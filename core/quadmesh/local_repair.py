@@ -45,8 +45,8 @@ from core.types import PolyMesh
 MAX_TRIANGLE_SHARE = 0.1
 """Splits keep at least 90% of the faces quads (the base mesh's quad-dominance rule)."""
 MAX_EDITS = 12
-"""Edits kept at most (each one lowers the inverted faces, so a cage has at most as many
-as it has inverted faces; this bounds the time on cages with many)."""
+"""Edits kept at most (each one lowers the inverted faces or the crossings; this bounds the
+time on cages with many flawed faces)."""
 
 
 def repair_inverted(mesh, surface, crossings, inverted, count_crossings):
