@@ -11,9 +11,9 @@ def run_labeling(intake, parts, frames, params, progress):
 
     HBECVT (Eqs. 2-3), then, with ``params.repair``, the repair loop, the absorption of charts
     smaller or thinner than a quad of the face budget (``params.target_faces``) into their
-    neighbours where validity allows (:mod:`core.segmentation.chart_absorption`), the repair
-    loop again where the absorbed labeling is still invalid, and the straightening of boundary
-    hooks (which returns the validity it ends with); otherwise the
+    neighbours where validity allows (:mod:`core.segmentation.chart_absorption`) and the
+    straightening of boundary hooks (which returns the validity it ends with), the repair and
+    the straightening once more where the labeling is still invalid then; otherwise the
     validity of the HBECVT labels (the corner rules are the independent check).
 
     Parameters
@@ -67,10 +67,15 @@ def run_labeling(intake, parts, frames, params, progress):
                                    unit_area)
         labels = absorption.labels
         absorb_report = absorption.report
-        if not absorption.validity.is_valid:
-            # an absorbed chart changes the neighbourhoods in which a repair's merge had to
-            # add an invalid item: the repair runs again on what is left, within what remains
-            # of the first run's angle budget
+        progress.report("labeling", 0.8)
+        progress.check_cancel()
+        labels, straighten_report, validity = straighten_boundaries(
+            mesh.vertices, mesh.faces, face_part, labels, field.face_frame, topology=topology,
+            judge=judge)
+        if not validity.is_valid:
+            # absorbed charts change the neighbourhoods in which a repair's merge had to add
+            # an invalid item: the repair runs again on what is left, within what remains of
+            # the first run's angle budget, and the boundaries are straightened again
             spent = judge.angle(labels) - repair_report["angle_before"]
             labels, again = repair_labeling(mesh.vertices, mesh.faces, face_part, labels,
                                             field.face_frame, field.face_interface_axis,
@@ -80,11 +85,9 @@ def run_labeling(intake, parts, frames, params, progress):
                                             topology=topology, colour=colour, judge=judge)
             repair_report = {**again, "angle_before": repair_report["angle_before"],
                              "rounds": repair_report["rounds"] + again["rounds"]}
-        progress.report("labeling", 0.8)
-        progress.check_cancel()
-        labels, straighten_report, validity = straighten_boundaries(
-            mesh.vertices, mesh.faces, face_part, labels, field.face_frame, topology=topology,
-            judge=judge)
+            labels, straighten_report, validity = straighten_boundaries(
+                mesh.vertices, mesh.faces, face_part, labels, field.face_frame,
+                topology=topology, judge=judge)
     else:
         validity = check_validity(mesh.vertices, mesh.faces, face_part, labels, field.face_frame,
                                   topology)

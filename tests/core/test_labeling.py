@@ -389,11 +389,11 @@ def test_edge_weights_do_not_depend_on_the_size_or_the_resolution_of_the_mesh():
 
 
 @pytest.mark.parametrize("name,parts", [("simp_gripper_jaw.stl", "single"),
-                                        ("simp_shelf_bracket.stl", "single")])
+                                        ("simp_bolt_plate.stl", "single")])
 @pytest.mark.slow
 def test_a_chart_the_first_repair_left_is_mended_once_absorption_has_run(name, parts):
-    # thin-walled SIMP designs: a small chart whose merge added an invalid item before the
-    # charts around it were absorbed
+    # SIMP designs with small charts whose merge added an invalid item before the charts
+    # around them were absorbed
     from core.pipeline import reconstruct
 
     path = os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks", "simp_unseen", name)
@@ -403,4 +403,4 @@ def test_a_chart_the_first_repair_left_is_mended_once_absorption_has_run(name, p
     surface, field = state.intake.surface, state.frames.frame_field
     assert check_validity(surface.vertices, surface.faces, state.parts.face_part,
                           state.labeling.face_label, field.face_frame).is_valid
-    assert report["mean_angle_deg"] <= report["nearest_direction_mean_angle_deg"] + 8.0
+    assert report["mean_angle_deg"] <= report["nearest_direction_mean_angle_deg"] + 5.0
