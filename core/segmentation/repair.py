@@ -64,10 +64,6 @@ from core.segmentation.validity import (check_validity, counts_near, edge_interf
                                         local_counts, local_invalid_count, with_turning_points)
 from core.types import TriMesh
 
-MAX_ANGLE_INCREASE = 4.0
-"""Degrees: no chart operation may raise the area-weighted mean angle between normals and label
-directions above the input's plus this."""
-
 
 class CandidateJudge:
     """Validity and mean-angle bookkeeping for candidate labelings.
@@ -449,8 +445,7 @@ class RepairRun:
 
 
 def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis=None,
-                    max_rounds=60, smooth=True, max_angle_increase=MAX_ANGLE_INCREASE,
-                    small_chart=None,
+                    max_rounds=60, smooth=True, max_angle_increase=4.0, small_chart=None,
                     lam=LAMBDA, penalty=PENALTY, topology=None, max_trials=None,
                     max_sideways=4, colour=None, judge=None):
     """Drive the invalid charts, boundaries and corners of a labeling towards zero.

@@ -12,8 +12,7 @@ def run_labeling(intake, parts, frames, params, progress):
     HBECVT (Eqs. 2-3), then, with ``params.repair``, the repair loop, the absorption of charts
     smaller or thinner than a quad of the face budget (``params.target_faces``) into their
     neighbours where validity allows (:mod:`core.segmentation.chart_absorption`) and the
-    straightening of boundary hooks (which returns the validity it ends with), the repair and
-    the straightening once more where the labeling is still invalid then; otherwise the
+    straightening of boundary hooks (which returns the validity it ends with); otherwise the
     validity of the HBECVT labels (the corner rules are the independent check).
 
     Parameters
@@ -36,7 +35,7 @@ def run_labeling(intake, parts, frames, params, progress):
                                             mean_label_angle, nearest_direction_labels,
                                             part_neighbours)
     from core.segmentation.monotone import straighten_boundaries
-    from core.segmentation.repair import MAX_ANGLE_INCREASE, CandidateJudge, repair_labeling
+    from core.segmentation.repair import CandidateJudge, repair_labeling
     from core.segmentation.validity import check_validity
 
     mesh, face_part, field = intake.surface, parts.face_part, frames.frame_field
@@ -72,22 +71,6 @@ def run_labeling(intake, parts, frames, params, progress):
         labels, straighten_report, validity = straighten_boundaries(
             mesh.vertices, mesh.faces, face_part, labels, field.face_frame, topology=topology,
             judge=judge)
-        if not validity.is_valid:
-            # absorbed charts change the neighbourhoods in which a repair's merge had to add
-            # an invalid item: the repair runs again on what is left, within what remains of
-            # the first run's angle budget, and the boundaries are straightened again
-            spent = judge.angle(labels) - repair_report["angle_before"]
-            labels, again = repair_labeling(mesh.vertices, mesh.faces, face_part, labels,
-                                            field.face_frame, field.face_interface_axis,
-                                            max_angle_increase=max(MAX_ANGLE_INCREASE - spent,
-                                                                   0.0),
-                                            lam=params.lam, penalty=params.penalty,
-                                            topology=topology, colour=colour, judge=judge)
-            repair_report = {**again, "angle_before": repair_report["angle_before"],
-                             "rounds": repair_report["rounds"] + again["rounds"]}
-            labels, straighten_report, validity = straighten_boundaries(
-                mesh.vertices, mesh.faces, face_part, labels, field.face_frame,
-                topology=topology, judge=judge)
     else:
         validity = check_validity(mesh.vertices, mesh.faces, face_part, labels, field.face_frame,
                                   topology)

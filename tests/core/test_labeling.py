@@ -386,21 +386,3 @@ def test_edge_weights_do_not_depend_on_the_size_or_the_resolution_of_the_mesh():
     V4, F4 = cube(3)
     assert np.allclose(np.sort(np.unique(np.round(edge_weights(V4, build_topology(F4)), 9))),
                        np.sort(np.unique(np.round(weights, 9))))
-
-
-@pytest.mark.parametrize("name,parts", [("simp_gripper_jaw.stl", "single"),
-                                        ("simp_bolt_plate.stl", "single")])
-@pytest.mark.slow
-def test_a_chart_the_first_repair_left_is_mended_once_absorption_has_run(name, parts):
-    # SIMP designs with small charts whose merge added an invalid item before the charts
-    # around them were absorbed
-    from core.pipeline import reconstruct
-
-    path = os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks", "simp_unseen", name)
-    result = reconstruct(path, {"parts": parts}, stop_after="labeling")
-    state, report = result.state, result.report["labeling"]
-    assert report["valid"] and report["invalid_charts"] == 0
-    surface, field = state.intake.surface, state.frames.frame_field
-    assert check_validity(surface.vertices, surface.faces, state.parts.face_part,
-                          state.labeling.face_label, field.face_frame).is_valid
-    assert report["mean_angle_deg"] <= report["nearest_direction_mean_angle_deg"] + 5.0
