@@ -323,13 +323,13 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     :mod:`core.quadmesh.decimation.paired_decimation`, which needs no labeling, and the report says
     why (``method``, ``fallback_reason``); a layout within that limit is kept even where the
     decimation would meet the budget more closely. Inverted faces
-    (:func:`core.quadmesh.orientation.inverted_faces`) of the layout are repaired
-    (:func:`_repaired_layout`) and the self-crossings of its limit surface counted; where inverted
-    faces or crossings remain, the paired decimation is built too and the one with fewer flaws is
-    kept (:func:`_flaw_rank`: a limit surface that crosses itself never wins over one that does
-    not). ``method="polycube"`` never falls back (its errors are raised; layouts up to
-    ``max_base_faces`` are kept, repaired as in ``auto``); ``method="decimation"`` skips the
-    polycube layout.
+    (:func:`core.quadmesh.orientation.inverted_faces`) of the layout and faces where its limit
+    surface crosses itself are repaired (:func:`_repaired_layout`) and the flaws counted
+    again; where inverted faces or crossings remain, the paired decimation is built too and
+    the one with fewer flaws is kept (:func:`_flaw_rank`: a limit surface that crosses itself
+    never wins over one that does not). ``method="polycube"`` never falls back (its errors are
+    raised; layouts up to ``max_base_faces`` are kept, repaired as in ``auto``);
+    ``method="decimation"`` skips the polycube layout.
 
     Parameters
     ----------
@@ -449,14 +449,18 @@ def _flaws(info):
 
 
 def _repaired_layout(mesh, info, surface):
-    """The polycube layout with its inverted faces repaired where that helps, and its report.
+    """The polycube layout with its inverted faces, and the faces where its limit surface
+    crosses itself, repaired where that helps, and its report.
 
     The repairs of the paired decimation's cages: vertices of inverted faces moved off the
     target towards a limit surface through their on-target positions
-    (:func:`core.quadmesh.limit_interpolation.unshrink_inverted`), then, where the limit surface
-    does not cross itself, a corner moved or a quad split
-    (:func:`core.quadmesh.local_repair.repair_inverted`); each is kept only where it lowers the
-    inverted faces without adding self-crossings of the limit surface.
+    (:func:`core.quadmesh.limit_interpolation.unshrink_inverted`, kept only where it lowers the
+    inverted faces without adding self-crossings of the limit surface), then a corner moved or
+    a quad split at the faces still inverted or crossing
+    (:func:`core.quadmesh.local_repair.repair_inverted`, kept where it lowers one flaw and
+    raises neither). A quantized layout folds where its integer polygons differ much from the
+    charts' shapes, over a few faces or many; the edits mend the few, and a layout left
+    crossing itself gives way to the paired decimation (:func:`build_base_mesh`).
 
     Returns ``(mesh, info)``: ``info`` updated with the figures of the repaired mesh,
     ``inverted_faces`` (after the repair), ``layout_inverted_faces`` (before it),
@@ -471,11 +475,9 @@ def _repaired_layout(mesh, info, surface):
     if inverted:
         mesh, crossings, inverted, moved = unshrink_inverted(mesh, surface, crossings, inverted,
                                                              count_crossings)
-        if not crossings:
-            # as on the decimation's cages: edits are judged by the crossings they add, which
-            # a limit surface that already crosses itself cannot show (and they cost time)
-            mesh, crossings, inverted, edits = repair_inverted(mesh, surface, crossings,
-                                                               inverted, count_crossings)
+    if inverted or crossings:
+        mesh, crossings, inverted, edits = repair_inverted(mesh, surface, crossings,
+                                                           inverted, count_crossings)
     sizes = mesh.face_sizes
     info = {**info, **_mesh_figures(mesh), "quads": int((sizes == 4).sum()),
             "triangles": int((sizes == 3).sum()), "inverted_faces": inverted,

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Local edits of a cage at the faces still inverted after unshrinking.
+"""Local edits of a cage at the faces still inverted after unshrinking, and where its limit
+surface crosses itself.
 
 :mod:`core.quadmesh.limit_interpolation` repairs faces whose limit surface is pulled past a
 thin feature. Two other causes of inverted faces were found on paired-decimation cages:
@@ -18,11 +19,16 @@ splitting the quad into two triangles along either diagonal (each sheet of a fol
 own face). Most such faces go with one corner moved; a few need several edits, some of them
 splits.
 
-For each inverted face the edits are tried in this order: each corner moved (the faces stay
-quads), then the split along each diagonal (while the triangles stay within
-:data:`MAX_TRIANGLE_SHARE` of the faces). An edit is kept when it lowers the cage's inverted
-faces without raising the self-crossings of its limit surface; the search then starts again
-on the edited cage, until no face is inverted or no edit helps.
+The same folds make the limit surfaces of neighbouring faces cross each other (a polycube
+layout whose quads fold over a strongly curved chart), so the faces holding a crossing of the
+level-2 limit surface are edited the same way.
+
+For each flawed face (inverted ones first, then those holding a crossing) the edits are tried
+in this order: each corner moved (the faces stay quads), then the split along each diagonal
+(while the triangles stay within :data:`MAX_TRIANGLE_SHARE` of the faces). An edit is kept
+when it lowers the cage's inverted faces or the self-crossings of its limit surface and raises
+neither; the search then starts again on the edited cage, until no face is flawed or no edit
+helps.
 """
 from dataclasses import replace
 
@@ -31,18 +37,27 @@ import numpy as np
 from core.errors import InvalidMeshError
 from core.mesh_topology import neighbour_mean
 from core.polymesh_checks import check_polymesh
+from core.quadmesh.crossing_count import LEVELS
 from core.quadmesh.orientation import inverted_faces
+from core.subdivision.limit_crossings import limit_self_intersections
 from core.types import PolyMesh
 
 MAX_TRIANGLE_SHARE = 0.1
 """Splits keep at least 90% of the faces quads (the base mesh's quad-dominance rule)."""
 MAX_EDITS = 12
-"""Edits kept at most (each one lowers the inverted faces, so a cage has at most as many
-as it has inverted faces; this bounds the time on cages with many)."""
+"""Edits kept at most (each one lowers the inverted faces or the crossings; this bounds the
+time on cages with many flawed faces)."""
 
 
 def repair_inverted(mesh, surface, crossings, inverted, count_crossings):
-    """The cage with its inverted faces relaxed or split where that helps (module docstring).
+    """The cage with its inverted faces, and the faces where its limit surface crosses
+    itself, relaxed or split where that helps (module docstring).
+
+    An edit is kept when it lowers the inverted faces or the crossing pairs and raises
+    neither. A limit surface that crosses itself gives no solid, so the edits are tried on a
+    crossing cage only while its flawed faces (inverted, or holding a crossing) are no more
+    than the edits left: each edit mends about one face, and a cage left crossing is
+    outranked by any cage that does not (the time would be lost).
 
     Parameters
     ----------
@@ -60,15 +75,22 @@ def repair_inverted(mesh, surface, crossings, inverted, count_crossings):
     edits : int, edits kept.
     """
     edits = 0
-    while inverted and edits < MAX_EDITS:
-        flipped = inverted_faces(mesh, surface.vertices, surface.faces, surface)
-        for candidate in _candidates(mesh, np.flatnonzero(flipped), surface):
+    while (inverted or crossings) and edits < MAX_EDITS:
+        flawed = np.flatnonzero(inverted_faces(mesh, surface.vertices, surface.faces, surface))
+        if crossings:
+            _, base_faces, _ = limit_self_intersections(mesh, LEVELS)
+            crossing = np.unique(base_faces)
+            flawed = np.concatenate([flawed, crossing[~np.isin(crossing, flawed)]])
+            if len(flawed) > MAX_EDITS - edits:
+                break  # more faces than edits left: the limit surface would still cross
+        for candidate in _candidates(mesh, flawed, surface):
             count = int(inverted_faces(candidate, surface.vertices, surface.faces,
                                        surface).sum())
-            if count >= inverted:
+            if count > inverted or (count == inverted and not crossings):
                 continue
             candidate_crossings = count_crossings(candidate)
-            if candidate_crossings <= crossings:
+            if candidate_crossings <= crossings and (count, candidate_crossings) != (
+                    inverted, crossings):
                 mesh, crossings, inverted = candidate, candidate_crossings, count
                 edits += 1
                 break

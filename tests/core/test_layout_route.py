@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """The route policy of the base-mesh stage on shapes with holes: the polycube layout is kept
-within 1.5 times the budget, its inverted faces are repaired, a layout whose limit surface
-crosses itself gives way to a clean decimation cage, and the report names both candidates."""
+within 1.5 times the budget, its inverted faces and a few faces where its limit surface
+crosses itself are repaired, a layout whose limit surface still crosses itself gives way to a
+clean decimation cage, and the report names both candidates."""
 from dataclasses import replace
 
 import numpy as np
@@ -12,6 +13,7 @@ from core.polymesh_checks import check_polymesh
 from core.quadmesh import base_mesh as base_mesh_module
 from core.quadmesh import build_base_mesh
 from core.quadmesh.base_mesh import FALLBACK_OVER_BUDGET, _repaired_layout
+from core.quadmesh.local_repair import MAX_EDITS
 from core.quadmesh.orientation import inverted_faces
 from core.subdivision.limit_crossings import count_limit_self_intersections
 from core.target_surface import TargetSurface
@@ -89,17 +91,34 @@ def test_a_folded_layout_vertex_is_repaired():
     assert polymesh_genus(repaired) == euler_genus(V, F)
 
 
+def test_a_layout_pierced_at_one_vertex_is_mended():
+    V, F, base, info = auto_base_mesh(FRAME, 300)
+    surface = TargetSurface(V, F)
+    top = np.flatnonzero((np.abs(base.vertices[:, 2] - 1.0) < 1e-9)
+                         & (np.abs(base.vertices[:, 0] - 0.5) < 0.3)
+                         & (base.vertices[:, 1] > 1.2) & (base.vertices[:, 1] < 1.8))
+    pierced = base.vertices.copy()
+    pierced[top[0], 2] = -3.0
+    pierced_base = replace(base, vertices=pierced)
+    assert count_limit_self_intersections(pierced_base, 2) > 0
+    repaired, repaired_info = _repaired_layout(pierced_base, info, surface)
+    check_polymesh(repaired)
+    assert count_limit_self_intersections(repaired, 2) == repaired_info["limit_crossings"] == 0
+    assert not inverted_faces(repaired, V, F, surface).any()
+    assert polymesh_genus(repaired) == euler_genus(V, F)
+
+
 def test_a_layout_whose_limit_surface_crosses_itself_gives_way_to_a_clean_cage(monkeypatch):
     layout = base_mesh_module._polycube_base_mesh
 
     def pierced_layout(*args, **kwargs):
-        # one vertex of the frame's top face pushed far down through its bottom face
+        # a whole strip of the top face pierced: more flawed faces than local edits can mend
         mesh, info = layout(*args, **kwargs)
         top = np.flatnonzero((np.abs(mesh.vertices[:, 2] - 1.0) < 1e-9)
-                             & (np.abs(mesh.vertices[:, 0] - 0.5) < 0.3)
-                             & (mesh.vertices[:, 1] > 1.2) & (mesh.vertices[:, 1] < 1.8))
+                             & (mesh.vertices[:, 1] > 0.9) & (mesh.vertices[:, 1] < 2.1))
+        assert len(top) > MAX_EDITS
         pierced = mesh.vertices.copy()
-        pierced[top[0], 2] = -3.0
+        pierced[top, 2] = -3.0
         return replace(mesh, vertices=pierced), info
 
     monkeypatch.setattr(base_mesh_module, "_polycube_base_mesh", pierced_layout)

@@ -51,6 +51,22 @@ def test_a_corner_folded_over_its_neighbours_goes_back_to_the_mean_of_them(box):
     assert np.array_equal(repaired.face_vertices, cage.face_vertices)
 
 
+def test_a_limit_surface_crossing_itself_without_an_inverted_face_is_mended(box):
+    cage, surface = box
+    side = int(np.flatnonzero(np.all(cage.vertices == [0.0, 3.0, 1.0], axis=1))[0])
+    vertices = cage.vertices.copy()
+    vertices[side] = [0.3, 3.0, -1.4]  # a side-wall vertex pulled under the bottom
+    folded = PolyMesh(vertices, cage.face_vertices, cage.face_offsets)
+    count = LimitCrossingCount(folded)
+    inverted = int(inverted_faces(folded, surface.vertices, surface.faces, surface).sum())
+    assert inverted == 0 and count.crossings > 0
+    repaired, crossings, left, edits = repair_inverted(folded, surface, count.crossings,
+                                                       inverted, count)
+    assert (crossings, left) == (0, 0) and 1 <= edits <= 2
+    assert LimitCrossingCount(repaired).crossings == 0
+    assert np.array_equal(repaired.face_vertices, cage.face_vertices)
+
+
 def test_an_unflawed_cage_is_returned_as_it_is(box):
     cage, surface = box
     assert repair_inverted(cage, surface, 0, 0, LimitCrossingCount(cage)) == (cage, 0, 0, 0)
