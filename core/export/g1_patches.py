@@ -45,6 +45,7 @@ quad's Bezier row, an edge between two free patches their shared 8-pole row).
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
+from scipy.linalg import null_space
 from scipy.sparse.linalg import splu
 
 from core.errors import ExportError
@@ -52,6 +53,7 @@ from core.export.brep_topology import CORNER_UV, BRepTopology, EdgeCurve
 from core.export.chart_faces import chart_patches
 from core.export.bspline_basis import basis_matrix
 from core.export.bspline_measure import normal_jumps, patch_deviation
+from core.export.spline_knots import insertion_matrix
 from core.export.patch_context import PatchContext
 from core.subdivision.catmull_clark import mesh_topology
 from core.subdivision.limit import LimitEvaluator, quad_mesh_of, quad_stencils
@@ -102,6 +104,28 @@ BEZIER_TO_SPLIT = _bezier_to_split()
 """(N_SPLIT, 4) poles on the knots :data:`SPLIT_KNOTS` of a cubic Bezier curve."""
 THIRD_DIFFERENCE = np.array([[-1.0, 3.0, -3.0, 1.0]])
 """(1, 4) third difference of 4 Bezier points: zero iff the span is quadratic."""
+
+
+def _reduced_knots(keep_start, keep_end):
+    """Knots and multiplicities of :data:`SPLIT_KNOTS` without the double knot at ``h``
+    (``keep_start`` False) and/or at ``1 - h`` (``keep_end`` False)."""
+    keep = np.array([True, keep_start, keep_end, True])
+    return SPLIT_KNOTS[keep], SPLIT_MULTS[keep]
+
+
+def _knot_free_rows(end):
+    """(2, N_SPLIT) weights whose products with a pole row of :data:`SPLIT_KNOTS` vanish iff
+    the curve is one cubic across the double knot at ``h`` (``end`` 0) or ``1 - h``
+    (``end`` 1): the left null space of the insertion from the knot vector without it."""
+    knots, mults = _reduced_knots(end == 1, end == 0)
+    return null_space(insertion_matrix(knots, mults, SPLIT_KNOTS, SPLIT_MULTS).T).T
+
+
+KNOT_FREE_ROWS = (_knot_free_rows(0), _knot_free_rows(1))
+"""Rows of :func:`_knot_free_rows` for the knot at ``h`` and at ``1 - h``."""
+END_CORNERS = ((np.array([0, 3]), np.array([1, 2])), (np.array([0, 1]), np.array([3, 2])))
+"""Patch corners at the start (``h``) and the end (``1 - h``) of the ``u`` and the ``v``
+direction (corner ``k`` at :data:`core.export.brep_topology.CORNER_UV` ``[k]``)."""
 
 
 def _gauss_params(per_span=4):
@@ -294,6 +318,50 @@ def _g1_system(layout, quads, topo, free, valence):
     return sp.vstack(A).tocsr(), np.concatenate(y)
 
 
+def _kept_knots(quads, free, valence):
+    """(m, 2, 2) bool: free patch ``f`` keeps its double knot in direction ``d`` (0: ``u``,
+    1: ``v``) at end ``e`` (0: ``h``, 1: ``1 - h``) iff a corner at that end of that direction
+    is an extraordinary vertex; elsewhere the G1 connection is C1 and the patch need not
+    depart from one cubic there."""
+    ev = valence[quads.face_vertices].reshape(-1, 4) != 4
+    keep = np.array([[ev[:, ends].any(axis=1) for ends in pair] for pair in END_CORNERS])
+    return keep.transpose(2, 0, 1) & free[:, None, None]
+
+
+def _knot_free_system(layout, free, keep):
+    """Rows making every free patch one cubic across each double knot it does not keep
+    (:func:`_kept_knots`): :data:`KNOT_FREE_ROWS` on every pole row across that knot, so the
+    knot can be removed exactly from the solved patch (:func:`_reduced_patch`)."""
+    n = N_SPLIT
+    weights, faces = [], []
+    for d in (0, 1):
+        for e in (0, 1):
+            f = np.flatnonzero(free & ~keep[:, d, e])
+            for row in KNOT_FREE_ROWS[e]:
+                for j in range(n):
+                    w = np.zeros((n, n))
+                    if d == 0:
+                        w[:, j] = row
+                    else:
+                        w[j, :] = row
+                    weights.append(np.broadcast_to(w.reshape(-1), (len(f), n * n)))
+                    faces.append(f)
+    A, c = layout.split_columns(np.vstack(weights), np.concatenate(faces))
+    return A, -c
+
+
+def _reduced_patch(poles, keep):
+    """The free patch of ``poles`` (N_SPLIT, N_SPLIT, 3) on its kept knots only (``keep``
+    (2, 2) bool of :func:`_kept_knots`): the least-squares poles on the coarser knot vectors,
+    the same surface up to rounding once :func:`_knot_free_system` holds."""
+    u_knots, u_mults = _reduced_knots(*keep[0])
+    v_knots, v_mults = _reduced_knots(*keep[1])
+    Tu = np.linalg.pinv(insertion_matrix(u_knots, u_mults, SPLIT_KNOTS, SPLIT_MULTS))
+    Tv = np.linalg.pinv(insertion_matrix(v_knots, v_mults, SPLIT_KNOTS, SPLIT_MULTS))
+    P = np.einsum("ia,abk,jb->ijk", Tu, poles, Tv)
+    return BSplinePatch(P, u_knots, u_mults, v_knots, v_mults)
+
+
 def _solve(A_fit, y_fit, A_g1, y_g1):
     """(n_unknowns, 3) least-squares fit ``A_fit x ~ y_fit`` subject to ``A_g1 x = y_g1``.
 
@@ -320,6 +388,16 @@ def _side_row(poles, side):
     return (poles[:, 0], poles[-1, :], poles[::-1, -1], poles[0, ::-1])[side]
 
 
+def _side_knots(patch, side):
+    """Knots and multiplicities of a patch's boundary row from corner ``side`` to ``side + 1``."""
+    knots, mults = ((patch.u_knots, patch.u_mults) if side % 2 == 0
+                    else (patch.v_knots, patch.v_mults))
+    knots, mults = np.asarray(knots, dtype=np.float64), np.asarray(mults, dtype=np.int64)
+    if side >= 2:
+        return 1.0 - knots[::-1], mults[::-1]
+    return knots, mults
+
+
 def _topology(quads, topo, patches, free):
     """The BRepTopology of quad patches that meet along whole sides: one vertex per used cage
     vertex, one edge per cage edge (a regular patch's Bezier row where it has one)."""
@@ -338,7 +416,11 @@ def _topology(quads, topo, patches, free):
             row = _side_row(patches[c // 4].poles, c % 4)
         else:
             row = _side_row(patches[t // 4].poles, t % 4)[::-1]
-        knots, mults = (BEZIER_KNOTS, BEZIER_MULTS) if len(row) == 4 else (SPLIT_KNOTS, SPLIT_MULTS)
+        if not free[c // 4] or free[t // 4]:
+            knots, mults = _side_knots(patches[c // 4], c % 4)
+        else:
+            knots, mults = _side_knots(patches[t // 4], t % 4)
+            knots, mults = 1.0 - knots[::-1], mults[::-1]
         curves.append(EdgeCurve(np.ascontiguousarray(row), knots, mults))
     vertices = np.empty((len(used), 3))
     vertices[index[fv]] = np.stack([patches[c // 4].poles[(0, -1, -1, 0)[c % 4], (0, 0, -1, -1)[c % 4]]
@@ -397,6 +479,7 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     topo = mesh_topology(fv, quads.face_offsets, len(quads.vertices))
     valence = np.bincount(fv, minlength=len(quads.vertices))
     free = (valence[fv].reshape(-1, 4) != 4).any(axis=1)
+    keep = _kept_knots(quads, free, valence)
     bezier = _regular_bezier(quads, topo)
     layout = _Layout(quads, topo, free, bezier)
     free_faces = np.flatnonzero(free)
@@ -406,6 +489,8 @@ def g1_surface_patches(base, measure=True, faces="quad"):
         evaluator = LimitEvaluator(quads)
         A_fit, y_fit = _fit_system(layout, quads, evaluator, free_faces)
         A_g1, y_g1 = _g1_system(layout, quads, topo, free, valence)
+        A_k, y_k = _knot_free_system(layout, free, keep)
+        A_g1, y_g1 = sp.vstack([A_g1, A_k]).tocsr(), np.concatenate([y_g1, y_k])
         x = _solve(A_fit, y_fit, A_g1, y_g1)
         slots[layout.unknown >= 0] = x[layout.unknown[layout.unknown >= 0]]
         residual = float(np.abs(A_g1 @ x - y_g1).max()) if A_g1 is not None else 0.0
@@ -419,7 +504,7 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     for f in range(quads.n_faces):
         if free[f]:
             P = slots[layout.label[f * n2:(f + 1) * n2]].reshape(N_SPLIT, N_SPLIT, 3)
-            patches.append(BSplinePatch(P, SPLIT_KNOTS, SPLIT_MULTS, SPLIT_KNOTS, SPLIT_MULTS))
+            patches.append(_reduced_patch(P, keep[f]))
         else:
             patches.append(BSplinePatch(np.ascontiguousarray(bezier[f]), BEZIER_KNOTS,
                                         BEZIER_MULTS, BEZIER_KNOTS, BEZIER_MULTS))

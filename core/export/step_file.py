@@ -18,11 +18,13 @@ from functools import lru_cache
 import numpy as np
 
 SCHEMA = "AUTOMOTIVE_DESIGN { 1 0 10303 214 1 1 1 1 }"
-POINT_DECIMALS = 9
+POINT_DECIMALS = 8
 """Decimals of the points' coordinates (millimetres; parameters in ``(u, v)``): a rounding of
-at most 5e-10 mm, far inside the B-rep tolerance :data:`core.tolerances.BREP_MM`, and the
-points that vertices, curves and surfaces share are one entity each, so the rounding opens no
-gap; short literals are most of what a reader parses."""
+at most 5e-9 mm, a twentieth of the B-rep tolerance :data:`core.tolerances.BREP_MM` (an edge
+curve whose poles are not the face's own stays within the tolerance of it), and the points
+that vertices, curves and surfaces share are one entity each, so the rounding opens no gap;
+short literals are most of what a reader parses (lines are written ``#n=ENTITY(...)``, without
+optional spaces, for the same reason)."""
 
 
 def step_reals(values):
@@ -227,5 +229,5 @@ def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970
               f"FILE_NAME({step_string(name)},{step_string(timestamp)},(''),(''),"
               "'polycube_wb','polycube_wb','');",
               f"FILE_SCHEMA(('{SCHEMA}'));", "ENDSEC;", "DATA;"]
-    body = [f"#{i} = {line};" for i, line in enumerate(ent.lines, start=1)]
+    body = [f"#{i}={line};" for i, line in enumerate(ent.lines, start=1)]
     return "\n".join(header + body + ["ENDSEC;", "END-ISO-10303-21;", ""])
