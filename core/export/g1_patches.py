@@ -9,9 +9,12 @@ Method
 ------
 * A *regular* quad (its four corners have valence 4) is exactly its limit surface: the
   bicubic Bezier patch of its 4 x 4 B-spline stencil (C2 with its regular neighbours).
-* A quad with an extraordinary corner (EV, valence ``n != 4``) becomes a *free* patch: a
-  bicubic B-spline with double knots at ``h`` and ``1 - h`` in each direction
-  (``h`` = :data:`EV_SPAN`; 8 x 8 poles, C1 inside). Its poles are the solution of one
+* A quad with an extraordinary corner (EV, valence ``n != 4``) or a crease vertex in its
+  stencil becomes a *free* patch: a bicubic B-spline with double knots at ``h`` and ``1 - h``
+  in each direction (``h`` = :data:`EV_SPAN`; 8 x 8 poles, C1 inside), of which it keeps
+  only those at the ends of a direction with an EV or creased corner: elsewhere it is one
+  cubic across the knot (linear conditions below), and the knot is removed from the result
+  (6 x 6 poles at one such corner, 4 x 4 without). Its poles are the solution of one
   sparse least-squares problem over all free patches: they fit exact limit points (the
   squared distance integrated by 4 x 4 Gauss points per pair of knot spans) subject to
 
@@ -31,6 +34,9 @@ Method
     parameters per span. At an EV it forces the spoke tangents into one plane (the
     relation ``x_{k-1} + x_{k+1} = 2 cos(2 pi / n) x_k`` of an affine image of a regular
     ``n``-gon), so the patches share a normal there.
+  - none across sharp crease edges (the patches share the edge only, C0); at a vertex with
+    crease edges each sector of faces between two of them has its own angle
+    (:func:`_corner_cosines`) in place of ``2 pi / n``.
 
   The constraints enter as a penalty of weight :data:`G1_PENALTY` relative to the fit
   (their residual is about ``1 / G1_PENALTY^2`` of the fit's, far below rounding of the
@@ -40,7 +46,8 @@ Method
 
 The patches meet along whole sides; the shared vertices and edges are returned as a
 :class:`core.export.brep_topology.BRepTopology` (an edge next to a regular quad takes the
-quad's Bezier row, an edge between two free patches their shared 8-pole row).
+quad's Bezier row, an edge between two free patches their shared row on the knots that
+patch keeps).
 """
 import numpy as np
 import scipy.sparse as sp
@@ -55,7 +62,7 @@ from core.export.bspline_basis import basis_matrix
 from core.export.bspline_measure import normal_jumps, patch_deviation
 from core.export.spline_knots import insertion_matrix
 from core.export.patch_context import PatchContext
-from core.subdivision.catmull_clark import mesh_topology
+from core.subdivision.catmull_clark import crease_edge_mask, mesh_topology, vertex_crease_counts
 from core.subdivision.limit import LimitEvaluator, quad_mesh_of, quad_stencils
 from core.params import check_face_form
 from core.types import BSplinePatch, PatchSet
@@ -195,6 +202,11 @@ def connection_alpha(t, valence_start, valence_end):
     """
     c_start = np.where(valence_start != 4, np.cos(2.0 * np.pi / valence_start), 0.0)
     c_end = np.where(valence_end != 4, np.cos(2.0 * np.pi / valence_end), 0.0)
+    return _alpha(t, c_start, c_end)
+
+
+def _alpha(t, c_start, c_end):
+    """``alpha(t)`` of :func:`connection_alpha` from the cosines ``c`` (p,) of both ends."""
 
     def phi(s):
         return np.clip(1.0 - s / EV_SPAN, 0.0, None) ** 2
@@ -254,10 +266,10 @@ class _Layout:
         return A, c
 
 
-def _regular_bezier(quads, topo):
-    """(m, 4, 4, 3) Bezier poles of every quad's bicubic B-spline stencil (exact limit of the
-    quads whose corners have valence 4)."""
-    st = quad_stencils(quads, topo)
+def _regular_bezier(quads, topo, st):
+    """(m, 4, 4, 3) Bezier poles of every quad's bicubic B-spline stencil ``st`` (m, 4, 4)
+    (exact limit of the quads whose corners have valence 4 and whose stencil has no crease
+    vertex)."""
     P = quads.vertices[st]
     return np.einsum("ia,fabk,jb->fijk", BSPLINE_TO_BEZIER, P, BSPLINE_TO_BEZIER)
 
@@ -276,16 +288,68 @@ def _fit_system(layout, quads, evaluator, free_faces):
     return A, target * np.tile(root, len(free_faces))[:, None] - c
 
 
-def _g1_system(layout, quads, topo, free, valence):
-    """Rows of the G1 conditions on every edge next to a free patch.
+def _corner_cosines(quads, topo, crease):
+    """(4 m,) float64 ``c = cos(theta)`` of the G1 connection at the start vertex of every
+    corner's edge (half-edge), for the sector of faces around that vertex the edge lies in.
+
+    Without crease edges at the vertex, or with one (a dart: the limit surface has a tangent
+    plane there), ``theta = 2 pi / n`` (``n`` the valence; ``c`` = 0 at valence 4). With two
+    crease edges (a crease vertex, where the crease curve is smooth) a sector of ``k`` faces
+    spans a half plane, ``theta = pi / k``; with three or more (a corner) it spans the sum of
+    its faces' corner angles in the cage, ``theta`` = that sum over ``k``. The spokes of a
+    sector are then an affine image of a regular fan of angle ``theta``
+    (``x_{i-1} + x_{i+1} = 2 c x_i``) between its two crease spokes, so the sector's patches
+    share a tangent plane at the vertex.
+    """
+    fv = quads.face_vertices
+    n = len(quads.vertices)
+    valence = np.bincount(fv, minlength=n)
+    corner = np.arange(len(fv))
+    cosine = np.where(valence[fv] != 4, np.cos(2.0 * np.pi / valence[fv]), 0.0)
+    spoke_crease = crease[topo.corner_edge]
+    n_crease = vertex_crease_counts(topo, crease, n)
+    walk = np.flatnonzero((n_crease[fv] >= 2) & ~spoke_crease)
+    if not len(walk):
+        return cosine
+    prev = corner - corner % 4 + (corner + 3) % 4
+    to_next = quads.vertices[fv[topo.next_corner]] - quads.vertices[fv]
+    to_prev = quads.vertices[fv[prev]] - quads.vertices[fv]
+    angle = np.arctan2(np.linalg.norm(np.cross(to_next, to_prev), axis=1),
+                       np.einsum("ij,ij->i", to_next, to_prev))
+    turn = (topo.twin[prev], topo.next_corner[topo.twin])
+    k = np.zeros(len(walk))
+    total = np.zeros(len(walk))
+    for direction, step in enumerate(turn):
+        s = walk.copy()
+        active = np.ones(len(walk), dtype=bool)
+        for _ in range(int(valence.max())):
+            if direction == 1:
+                s[active] = step[s[active]]
+            k += active
+            total += np.where(active, angle[s], 0.0)
+            if direction == 0:
+                s[active] = step[s[active]]
+            active &= ~spoke_crease[s]
+            if not active.any():
+                break
+    corner_sector = n_crease[fv[walk]] >= 3
+    theta = np.where(corner_sector, total, np.pi) / k
+    cosine[walk] = np.cos(theta)
+    return cosine
+
+
+def _g1_system(layout, quads, topo, free, cosine, crease):
+    """Rows of the G1 conditions on every edge next to a free patch but crease edges.
 
     ``L + R - alpha b' = 0`` at 4 Gauss points per knot span (both sides are cubic there),
     and, on the half of an edge from an EV to a valence-4 vertex, a quadratic edge curve
     (zero third difference of its Bezier points) so that ``alpha b'`` stays cubic.
+    ``cosine`` (4 m,) are the connection's ``c`` per corner (:func:`_corner_cosines`),
+    ``crease`` (n_edges,) the crease edges (C0: the patches there share the edge only).
     """
     fv = quads.face_vertices
     corner = np.arange(len(fv))
-    rep = corner[corner < topo.twin]
+    rep = corner[(corner < topo.twin) & ~crease[topo.corner_edge]]
     face, twin_face = rep // 4, topo.twin[rep] // 4
     rep = rep[free[face] | free[twin_face]]
     if not len(rep):
@@ -297,13 +361,13 @@ def _g1_system(layout, quads, topo, free, valence):
     tt = np.tile(t, len(rep))
     along, inward_near = _side_derivatives(c_near % 4, tt)
     _, inward_far = _side_derivatives(c_far % 4, 1.0 - tt)
-    alpha = connection_alpha(tt, valence[fv[c_near]], valence[fv[topo.next_corner[c_near]]])
+    alpha = _alpha(tt, cosine[c_near], cosine[topo.twin[c_near]])
     A_near, c_near_fixed = layout.split_columns(inward_near - alpha[:, None] * along, c_near // 4)
     A_far, c_far_fixed = layout.split_columns(inward_far, c_far // 4)
     A = [A_near + A_far]
     y = [-(c_near_fixed + c_far_fixed)]
-    ev_start = valence[fv[rep]] != 4
-    ev_end = valence[fv[topo.next_corner[rep]]] != 4
+    ev_start = cosine[rep] != 0.0
+    ev_end = cosine[topo.twin[rep]] != 0.0
     sides = _side_slots(N_SPLIT)
     first = THIRD_DIFFERENCE @ _span_bezier(SPLIT_KNOTS[0], SPLIT_KNOTS[1])
     last = THIRD_DIFFERENCE @ _span_bezier(SPLIT_KNOTS[-2], SPLIT_KNOTS[-1])
@@ -318,12 +382,12 @@ def _g1_system(layout, quads, topo, free, valence):
     return sp.vstack(A).tocsr(), np.concatenate(y)
 
 
-def _kept_knots(quads, free, valence):
+def _kept_knots(quads, free, special):
     """(m, 2, 2) bool: free patch ``f`` keeps its double knot in direction ``d`` (0: ``u``,
     1: ``v``) at end ``e`` (0: ``h``, 1: ``1 - h``) iff a corner at that end of that direction
-    is an extraordinary vertex; elsewhere the G1 connection is C1 and the patch need not
-    depart from one cubic there."""
-    ev = valence[quads.face_vertices].reshape(-1, 4) != 4
+    is ``special`` (n_vertices,) bool: an extraordinary vertex or one with crease edges;
+    elsewhere the G1 connection is C1 and the patch need not depart from one cubic there."""
+    ev = special[quads.face_vertices].reshape(-1, 4)
     keep = np.array([[ev[:, ends].any(axis=1) for ends in pair] for pair in END_CORNERS])
     return keep.transpose(2, 0, 1) & free[:, None, None]
 
@@ -438,8 +502,8 @@ def g1_surface_patches(base, measure=True, faces="quad"):
 
     Parameters
     ----------
-    base : PolyMesh, closed 2-manifold polygon mesh without crease edges (validated by the
-        caller).
+    base : PolyMesh, closed 2-manifold polygon mesh, possibly with sharp crease edges
+        (validated by the caller).
     measure : bool, if True fill ``info`` with the deviation from the exact limit surface
         and the normal jumps across edges (of the per-quad patches).
     faces : ``"quad"`` (one face per quad) or ``"chart"`` (the quads' patches merged into
@@ -464,23 +528,23 @@ def g1_surface_patches(base, measure=True, faces="quad"):
 
     Raises
     ------
-    ExportError when ``base`` has crease edges (their limit surface has no tangent plane to
-        join G1; the graded export handles them), or when the solved poles miss the G1
+    ExportError when the solved poles miss the G1
         conditions by more than :data:`G1_RESIDUAL_MAX` of the cage's bounding-box diagonal
         (conditions that contradict each other), rather than writing a surface with kinks.
     """
     check_face_form(faces, "g1")
-    if base.n_creases:
-        raise ExportError(f"the G1 export does not support crease edges: the cage has "
-                          f"{base.n_creases}; use the exact (graded) export")
     quads = quad_mesh_of(base)
     level = 0 if quads is base else 1
     fv = quads.face_vertices
     topo = mesh_topology(fv, quads.face_offsets, len(quads.vertices))
     valence = np.bincount(fv, minlength=len(quads.vertices))
-    free = (valence[fv].reshape(-1, 4) != 4).any(axis=1)
-    keep = _kept_knots(quads, free, valence)
-    bezier = _regular_bezier(quads, topo)
+    crease = crease_edge_mask(topo, quads.creases)
+    creased = vertex_crease_counts(topo, crease, len(quads.vertices)) > 0
+    special = (valence != 4) | creased
+    st = quad_stencils(quads, topo)
+    free = special[fv].reshape(-1, 4).any(axis=1) | creased[st].any(axis=(1, 2))
+    keep = _kept_knots(quads, free, special)
+    bezier = _regular_bezier(quads, topo, st)
     layout = _Layout(quads, topo, free, bezier)
     free_faces = np.flatnonzero(free)
     slots = np.nan_to_num(layout.fixed_value)
@@ -488,7 +552,8 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     if len(free_faces):
         evaluator = LimitEvaluator(quads)
         A_fit, y_fit = _fit_system(layout, quads, evaluator, free_faces)
-        A_g1, y_g1 = _g1_system(layout, quads, topo, free, valence)
+        A_g1, y_g1 = _g1_system(layout, quads, topo, free, _corner_cosines(quads, topo, crease),
+                                crease)
         A_k, y_k = _knot_free_system(layout, free, keep)
         A_g1, y_g1 = sp.vstack([A_g1, A_k]).tocsr(), np.concatenate([y_g1, y_k])
         x = _solve(A_fit, y_fit, A_g1, y_g1)
