@@ -215,7 +215,7 @@ def _alpha(t, c_start, c_end):
 
 
 class _Layout:
-    """Pole slots of every quad (36 each), merged where patches share poles.
+    """Pole slots of every quad (N_SPLIT^2 each), merged where patches share poles.
 
     ``label[slot]`` is the shared pole of a slot; ``fixed_value`` holds the poles of regular
     quads (NaN for unknown ones) and ``unknown[label]`` the unknown index (-1 if fixed).
@@ -248,7 +248,7 @@ class _Layout:
 
         Parameters
         ----------
-        w : (p, 36) pole weights of free-patch points or derivatives; f : (p,) int64 quads.
+        w : (p, N_SPLIT^2) pole weights of free-patch points or derivatives; f : (p,) int64 quads.
 
         Returns
         -------
@@ -259,8 +259,8 @@ class _Layout:
         unk = self.unknown[lab]
         r = np.repeat(np.arange(len(w)), n2).reshape(len(w), n2)
         known = unk < 0
-        A = sp.csr_matrix((w[~known], (r[~known], unk[~known])),
-                          shape=(len(w), self.n_unknowns))
+        used = ~known & (w != 0.0)
+        A = sp.csr_matrix((w[used], (r[used], unk[used])), shape=(len(w), self.n_unknowns))
         c = np.einsum("pi,pik->pk", np.where(known, w, 0.0),
                       np.nan_to_num(self.fixed_value[lab]))
         return A, c
@@ -274,18 +274,41 @@ def _regular_bezier(quads, topo, st):
     return np.einsum("ia,fabk,jb->fijk", BSPLINE_TO_BEZIER, P, BSPLINE_TO_BEZIER)
 
 
-def _fit_system(layout, quads, evaluator, free_faces):
-    """Least-squares rows fitting free patches to exact limit points: the squared distance
-    integrated over each patch's parameter square (4 x 4 Gauss points per pair of spans,
-    rows scaled by the square roots of their quadrature weights)."""
+def _fit_system(layout, evaluator, free_faces):
+    """Normal equations of the least-squares fit of free patches to exact limit points: the
+    squared distance integrated over each patch's parameter square (4 x 4 Gauss points per
+    pair of spans). Every free patch has the same basis, so its Gram matrix ``G`` (64 x 64
+    over its slots) is formed once and scattered onto the unknowns.
+
+    Returns
+    -------
+    H : (n_unknowns, n_unknowns) csc_matrix; rhs : (n_unknowns, 3); centre : (3,) the mean
+    target point (the solve is centred on it).
+    """
     s, q = _gauss_params()
     U, V = (a.reshape(-1) for a in np.meshgrid(s, s, indexing="ij"))
     root = np.sqrt(np.outer(q, q).reshape(-1))
-    w = _tensor_rows(U, V, 0, 0) * root[:, None]
-    faces = np.repeat(free_faces, len(U))
-    A, c = layout.split_columns(np.tile(w, (len(free_faces), 1)), faces)
-    target = evaluator.evaluate(faces, np.tile(U, len(free_faces)), np.tile(V, len(free_faces)))
-    return A, target * np.tile(root, len(free_faces))[:, None] - c
+    W = _tensor_rows(U, V, 0, 0) * root[:, None]
+    G = W.T @ W
+    n_free, p = len(free_faces), len(U)
+    target = evaluator.evaluate(np.repeat(free_faces, p), np.tile(U, n_free),
+                                np.tile(V, n_free)).reshape(n_free, p, 3)
+    n2 = N_SPLIT * N_SPLIT
+    lab = layout.label[free_faces[:, None] * n2 + np.arange(n2)]
+    unk = layout.unknown[lab]
+    known = unk < 0
+    b = np.einsum("pk,fpc->fkc", W * root[:, None], target)
+    b -= np.einsum("kl,flc->fkc", G, np.where(known[..., None],
+                                               np.nan_to_num(layout.fixed_value[lab]), 0.0))
+    pair = ~known[:, :, None] & ~known[:, None, :] & (G != 0.0)[None]
+    rows = np.broadcast_to(unk[:, :, None], pair.shape)[pair]
+    cols = np.broadcast_to(unk[:, None, :], pair.shape)[pair]
+    values = np.broadcast_to(G, pair.shape)[pair]
+    m = layout.n_unknowns
+    H = sp.csc_matrix((values, (rows, cols)), shape=(m, m))
+    rhs = np.stack([np.bincount(unk[~known], weights=b[..., c][~known], minlength=m)
+                    for c in range(3)], axis=1)
+    return H, rhs, target.reshape(-1, 3).mean(axis=0)
 
 
 def _corner_cosines(quads, topo, crease):
@@ -426,25 +449,25 @@ def _reduced_patch(poles, keep):
     return BSplinePatch(P, u_knots, u_mults, v_knots, v_mults)
 
 
-def _solve(A_fit, y_fit, A_g1, y_g1):
-    """(n_unknowns, 3) least-squares fit ``A_fit x ~ y_fit`` subject to ``A_g1 x = y_g1``.
+def _solve(H, rhs, centre, A_g1, y_g1):
+    """(n_unknowns, 3) least-squares fit (normal equations ``H x = rhs``) subject to
+    ``A_g1 x = y_g1``.
 
-    Solved as the KKT system ``[[A^T A, C^T], [C, -delta I]]`` (``delta = G1_PENALTY^-2``
+    Solved as the KKT system ``[[H, C^T], [C, -delta I]]`` (``delta = G1_PENALTY^-2``
     times the fit's scale): the G1 conditions are redundant where several meet (at every
     vertex), and ``delta`` keeps the system regular with its small eigenvalues in the
-    multipliers of those redundant rows, not in the poles. The data are centred first, so a
-    translation of the cage moves the poles by exactly that vector up to rounding.
+    multipliers of those redundant rows, not in the poles. The unknowns are centred on
+    ``centre`` first, so a translation of the cage moves the poles by exactly that vector up
+    to rounding.
     """
-    centre = y_fit.mean(axis=0)
-    H = (A_fit.T @ A_fit).tocsc()
-    rhs = A_fit.T @ (y_fit - A_fit @ np.broadcast_to(centre, (A_fit.shape[1], 3)))
+    rhs = rhs - H @ np.broadcast_to(centre, (H.shape[1], 3))
     if A_g1 is None:
         return splu(H).solve(np.ascontiguousarray(rhs)) + centre
     delta = H.diagonal().mean() / G1_PENALTY ** 2
     y_c = y_g1 - A_g1 @ np.broadcast_to(centre, (A_g1.shape[1], 3))
     K = sp.bmat([[H, A_g1.T], [A_g1, -delta * sp.identity(A_g1.shape[0])]]).tocsc()
     x = splu(K).solve(np.ascontiguousarray(np.vstack([rhs, y_c])))
-    return x[:A_fit.shape[1]] + centre
+    return x[:H.shape[0]] + centre
 
 
 def _side_row(poles, side):
@@ -551,12 +574,15 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     residual = 0.0
     if len(free_faces):
         evaluator = LimitEvaluator(quads)
-        A_fit, y_fit = _fit_system(layout, quads, evaluator, free_faces)
+        H, rhs, centre = _fit_system(layout, evaluator, free_faces)
         A_g1, y_g1 = _g1_system(layout, quads, topo, free, _corner_cosines(quads, topo, crease),
                                 crease)
         A_k, y_k = _knot_free_system(layout, free, keep)
-        A_g1, y_g1 = sp.vstack([A_g1, A_k]).tocsr(), np.concatenate([y_g1, y_k])
-        x = _solve(A_fit, y_fit, A_g1, y_g1)
+        if A_g1 is None:
+            A_g1, y_g1 = (A_k, y_k) if A_k.shape[0] else (None, None)
+        else:
+            A_g1, y_g1 = sp.vstack([A_g1, A_k]).tocsr(), np.concatenate([y_g1, y_k])
+        x = _solve(H, rhs, centre, A_g1, y_g1)
         slots[layout.unknown >= 0] = x[layout.unknown[layout.unknown >= 0]]
         residual = float(np.abs(A_g1 @ x - y_g1).max()) if A_g1 is not None else 0.0
         diagonal = float(np.linalg.norm(np.ptp(quads.vertices[np.unique(fv)], axis=0)))
