@@ -11,8 +11,9 @@ from core.export.brep_topology import check_topology
 from core.export.bspline_basis import evaluate_patch_points
 from core.export.g1_patches import connection_alpha, g1_surface_patches
 from core.geometry import triangulate
+from core.export.quad_blocks import quad_blocks
 from core.subdivision import sample_cages
-from core.subdivision.catmull_clark import build_hierarchy
+from core.subdivision.catmull_clark import build_hierarchy, crease_edge_mask, mesh_topology
 from core.subdivision.limit import limit_matrices, quad_mesh_of
 from core.target_surface import TargetSurface
 
@@ -137,7 +138,8 @@ def _neighbours(mesh, vertex):
 @pytest.mark.parametrize("name", ["creased_torus", "creased_cube"])
 def test_creased_cage_joins_g1_off_its_creases(name):
     """Sharp creases: the patches across a crease edge share it (one closed shell); every
-    other edge joins G1, and the patches stay close to the creased limit surface."""
+    other edge joins G1, and the patches stay close to the creased limit surface. With
+    faces per block, every crease edge lies on a block side (a B-rep edge)."""
     cage = _creased_cages()[name]
     assert cage.n_creases >= 3
     ps = g1_surface_patches(cage)
@@ -146,6 +148,12 @@ def test_creased_cage_joins_g1_off_its_creases(name):
     assert ps.info["normal_jump_crease_edges"] >= cage.n_creases
     assert ps.info["normal_jump_max_deg"] <= 0.01
     assert ps.info["max_error_rel"] <= 2.5e-3
+    chart = g1_surface_patches(cage, measure=False, faces="chart")
+    assert check_topology(chart.topology, chart.patches, 1e-7 * diag) <= 1e-7 * diag
+    assert len(chart.patches) <= len(ps.patches)
+    quads = quad_mesh_of(cage)
+    topo = mesh_topology(quads.face_vertices, quads.face_offsets, len(quads.vertices))
+    assert quad_blocks(quads).cut_edge[crease_edge_mask(topo, quads.creases)].all()
 
 
 def test_pipeline_patches_stage_builds_the_g1_form_on_request():
