@@ -10,8 +10,8 @@ import pytest
 from core.export.brep_topology import check_topology
 from core.export.bspline_basis import evaluate_patch_points
 from core.export.g1_patches import connection_alpha, g1_surface_patches
-from core.geometry import triangulate
 from core.export.quad_blocks import quad_blocks
+from core.geometry import triangulate
 from core.subdivision import sample_cages
 from core.subdivision.catmull_clark import build_hierarchy, crease_edge_mask, mesh_topology
 from core.subdivision.limit import limit_matrices, quad_mesh_of
