@@ -124,6 +124,18 @@ def _reals(values):
     return "(" + ",".join(step_reals(values)) + ")"
 
 
+def _points_of(ent, arrays):
+    """CARTESIAN_POINT ids (:meth:`_Entities.points`) of the poles of every array in
+    ``arrays`` (each (..., 3)), formatted in one pass: a list of int64 arrays of the arrays'
+    shapes without the last axis."""
+    if not arrays:
+        return []
+    flat = np.concatenate([a.reshape(-1, 3) for a in arrays])
+    ids = np.asarray(ent.points(flat), dtype=np.int64)
+    ends = np.cumsum([a.size // 3 for a in arrays])[:-1]
+    return [part.reshape(a.shape[:-1]) for part, a in zip(np.split(ids, ends), arrays)]
+
+
 def _segment(ent, segments, uv, context_2d):
     """The DEFINITIONAL_REPRESENTATION of the ``(u, v)`` segment ``uv`` (2, 2) from its
     start to its end point, linear in the parameter on [0, 1] (a degree-1 B-spline), made
@@ -180,9 +192,8 @@ def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970
                          "PARAMETRIC_REPRESENTATION_CONTEXT() REPRESENTATION_CONTEXT('2D SPACE','') )")
     segments = {}
     surface_ids = []
-    for patch in patches:
-        poles = np.asarray(patch.poles)
-        ids = np.asarray(ent.points(poles.reshape(-1, 3))).reshape(poles.shape[:2])
+    pole_ids = _points_of(ent, [np.asarray(patch.poles) for patch in patches])
+    for patch, ids in zip(patches, pole_ids):
         grid = "(" + ",".join(_refs(row) for row in ids.tolist()) + ")"
         u_mults, u_knots = _knot_args(patch.u_knots, patch.u_mults)
         v_mults, v_knots = _knot_args(patch.v_knots, patch.v_mults)
@@ -196,8 +207,9 @@ def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970
             ent.add(f"PCURVE('',#{surface_ids[t.use_face[u]]},#{segment})"))
     vertex_ids = [ent.add(f"VERTEX_POINT('',#{p})") for p in ent.points(t.vertices)]
     edge_ids = []
+    curve_pole_ids = _points_of(ent, [np.asarray(curve.poles) for curve in t.edge_curves])
     for e, curve in enumerate(t.edge_curves):
-        poles = ent.points(curve.poles)
+        poles = curve_pole_ids[e].tolist()
         mults, knots = _knot_args(curve.knots, curve.mults)
         bspline = ent.add(f"B_SPLINE_CURVE_WITH_KNOTS('',{int(curve.degree)},{_refs(poles)},"
                           f".UNSPECIFIED.,.F.,.F.,{mults},{knots},.UNSPECIFIED.)")
