@@ -7,8 +7,8 @@ Usage::
 
 Cages: ``examples/genus3_cage.obj``, sample cages of ``core.subdivision.sample_cages`` and
 any OBJ cages given, each optionally with the target mesh it was fitted to (for example the
-fitted cage ``reconstruct TARGET --stop-after fit --base-mesh cage.obj`` writes; the G1 form
-refuses creased cages, recorded as such). For each cage and form (exact; G1 with one face per
+fitted cage ``reconstruct TARGET --stop-after fit --base-mesh cage.obj`` writes; a form that
+refuses a cage is recorded as such). For each cage and form (exact; G1 with one face per
 quad; G1 with one face per block of quads, ``--faces chart``), in one process,
 side by side: ``subd_to_solid`` writes the STEP file, ``Part.Shape().read`` reads it back
 (CPU seconds, best of 3), gmsh imports it (its own OpenCascade, no healing: one volume of
@@ -138,7 +138,7 @@ def run_case(name, cage, target, export, folder, faces="quad"):
         clock = time.process_time()
         solid, report = subd_to_solid(obj, step, export=export, faces=faces)
         row["export_seconds"] = time.process_time() - clock
-    except Exception as exc:  # recorded, e.g. the G1 form refusing creases
+    except Exception as exc:  # recorded: a form that refuses the cage
         row["error"] = str(exc)
         return row
     reads = []
@@ -276,7 +276,8 @@ def write_table(rows, speed):
              "(fractions of the target's diagonal and volume) and the independent "
              "`../shared/tools/evaluate.py`'s (symmetric distances, 100,000 samples per side). Read times are CPU seconds, best "
              "of 3 for FreeCAD (`Part.Shape().read`), one gmsh `occ.importShapes`; 'x faster' "
-             "is the exact row's FreeCAD read time over this row's. 'gmsh valid': one volume "
+             "is the exact row's FreeCAD read time over this row's. 'max normal jump' leaves "
+             "out sharp crease edges; evaluate.py's includes them. 'gmsh valid': one volume "
              f"whose mass is FreeCAD's volume within 1e-6. Load average {os.getloadavg()[0]:.1f} "
              "on 2 cores.", "",
              "| cage | base faces | export | faces | poles | STEP KB | KB per 300 base faces | "

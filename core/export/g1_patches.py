@@ -9,9 +9,12 @@ Method
 ------
 * A *regular* quad (its four corners have valence 4) is exactly its limit surface: the
   bicubic Bezier patch of its 4 x 4 B-spline stencil (C2 with its regular neighbours).
-* A quad with an extraordinary corner (EV, valence ``n != 4``) becomes a *free* patch: a
-  bicubic B-spline with double knots at ``h`` and ``1 - h`` in each direction
-  (``h`` = :data:`EV_SPAN`; 8 x 8 poles, C1 inside). Its poles are the solution of one
+* A quad with an extraordinary corner (EV, valence ``n != 4``) or a crease vertex in its
+  stencil becomes a *free* patch: a bicubic B-spline with double knots at ``h`` and ``1 - h``
+  in each direction (``h`` = :data:`EV_SPAN`; 8 x 8 poles, C1 inside), of which it keeps
+  only those at the ends of a direction with an EV or creased corner: elsewhere it is one
+  cubic across the knot (linear conditions below), and the knot is removed from the result
+  (6 x 6 poles at one such corner, 4 x 4 without). Its poles are the solution of one
   sparse least-squares problem over all free patches: they fit exact limit points (the
   squared distance integrated by 4 x 4 Gauss points per pair of knot spans) subject to
 
@@ -31,6 +34,9 @@ Method
     parameters per span. At an EV it forces the spoke tangents into one plane (the
     relation ``x_{k-1} + x_{k+1} = 2 cos(2 pi / n) x_k`` of an affine image of a regular
     ``n``-gon), so the patches share a normal there.
+  - none across sharp crease edges (the patches share the edge only, C0); at a vertex with
+    crease edges each sector of faces between two of them has its own angle
+    (:func:`_corner_cosines`) in place of ``2 pi / n``.
 
   The constraints enter as a penalty of weight :data:`G1_PENALTY` relative to the fit
   (their residual is about ``1 / G1_PENALTY^2`` of the fit's, far below rounding of the
@@ -40,11 +46,13 @@ Method
 
 The patches meet along whole sides; the shared vertices and edges are returned as a
 :class:`core.export.brep_topology.BRepTopology` (an edge next to a regular quad takes the
-quad's Bezier row, an edge between two free patches their shared 8-pole row).
+quad's Bezier row, an edge between two free patches their shared row on the knots that
+patch keeps).
 """
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
+from scipy.linalg import null_space
 from scipy.sparse.linalg import splu
 
 from core.errors import ExportError
@@ -52,8 +60,9 @@ from core.export.brep_topology import CORNER_UV, BRepTopology, EdgeCurve
 from core.export.chart_faces import chart_patches
 from core.export.bspline_basis import basis_matrix
 from core.export.bspline_measure import normal_jumps, patch_deviation
+from core.export.spline_knots import insertion_matrix
 from core.export.patch_context import PatchContext
-from core.subdivision.catmull_clark import mesh_topology
+from core.subdivision.catmull_clark import crease_edge_mask, mesh_topology, vertex_crease_counts
 from core.subdivision.limit import LimitEvaluator, quad_mesh_of, quad_stencils
 from core.params import check_face_form
 from core.types import BSplinePatch, PatchSet
@@ -102,6 +111,28 @@ BEZIER_TO_SPLIT = _bezier_to_split()
 """(N_SPLIT, 4) poles on the knots :data:`SPLIT_KNOTS` of a cubic Bezier curve."""
 THIRD_DIFFERENCE = np.array([[-1.0, 3.0, -3.0, 1.0]])
 """(1, 4) third difference of 4 Bezier points: zero iff the span is quadratic."""
+
+
+def _reduced_knots(keep_start, keep_end):
+    """Knots and multiplicities of :data:`SPLIT_KNOTS` without the double knot at ``h``
+    (``keep_start`` False) and/or at ``1 - h`` (``keep_end`` False)."""
+    keep = np.array([True, keep_start, keep_end, True])
+    return SPLIT_KNOTS[keep], SPLIT_MULTS[keep]
+
+
+def _knot_free_rows(end):
+    """(2, N_SPLIT) weights whose products with a pole row of :data:`SPLIT_KNOTS` vanish iff
+    the curve is one cubic across the double knot at ``h`` (``end`` 0) or ``1 - h``
+    (``end`` 1): the left null space of the insertion from the knot vector without it."""
+    knots, mults = _reduced_knots(end == 1, end == 0)
+    return null_space(insertion_matrix(knots, mults, SPLIT_KNOTS, SPLIT_MULTS).T).T
+
+
+KNOT_FREE_ROWS = (_knot_free_rows(0), _knot_free_rows(1))
+"""Rows of :func:`_knot_free_rows` for the knot at ``h`` and at ``1 - h``."""
+END_CORNERS = ((np.array([0, 3]), np.array([1, 2])), (np.array([0, 1]), np.array([3, 2])))
+"""Patch corners at the start (``h``) and the end (``1 - h``) of the ``u`` and the ``v``
+direction (corner ``k`` at :data:`core.export.brep_topology.CORNER_UV` ``[k]``)."""
 
 
 def _gauss_params(per_span=4):
@@ -171,6 +202,11 @@ def connection_alpha(t, valence_start, valence_end):
     """
     c_start = np.where(valence_start != 4, np.cos(2.0 * np.pi / valence_start), 0.0)
     c_end = np.where(valence_end != 4, np.cos(2.0 * np.pi / valence_end), 0.0)
+    return _alpha(t, c_start, c_end)
+
+
+def _alpha(t, c_start, c_end):
+    """``alpha(t)`` of :func:`connection_alpha` from the cosines ``c`` (p,) of both ends."""
 
     def phi(s):
         return np.clip(1.0 - s / EV_SPAN, 0.0, None) ** 2
@@ -179,7 +215,7 @@ def connection_alpha(t, valence_start, valence_end):
 
 
 class _Layout:
-    """Pole slots of every quad (36 each), merged where patches share poles.
+    """Pole slots of every quad (N_SPLIT^2 each), merged where patches share poles.
 
     ``label[slot]`` is the shared pole of a slot; ``fixed_value`` holds the poles of regular
     quads (NaN for unknown ones) and ``unknown[label]`` the unknown index (-1 if fixed).
@@ -212,7 +248,7 @@ class _Layout:
 
         Parameters
         ----------
-        w : (p, 36) pole weights of free-patch points or derivatives; f : (p,) int64 quads.
+        w : (p, N_SPLIT^2) pole weights of free-patch points or derivatives; f : (p,) int64 quads.
 
         Returns
         -------
@@ -223,45 +259,120 @@ class _Layout:
         unk = self.unknown[lab]
         r = np.repeat(np.arange(len(w)), n2).reshape(len(w), n2)
         known = unk < 0
-        A = sp.csr_matrix((w[~known], (r[~known], unk[~known])),
-                          shape=(len(w), self.n_unknowns))
+        used = ~known & (w != 0.0)
+        A = sp.csr_matrix((w[used], (r[used], unk[used])), shape=(len(w), self.n_unknowns))
         c = np.einsum("pi,pik->pk", np.where(known, w, 0.0),
                       np.nan_to_num(self.fixed_value[lab]))
         return A, c
 
 
-def _regular_bezier(quads, topo):
-    """(m, 4, 4, 3) Bezier poles of every quad's bicubic B-spline stencil (exact limit of the
-    quads whose corners have valence 4)."""
-    st = quad_stencils(quads, topo)
+def _regular_bezier(quads, topo, st):
+    """(m, 4, 4, 3) Bezier poles of every quad's bicubic B-spline stencil ``st`` (m, 4, 4)
+    (exact limit of the quads whose corners have valence 4 and whose stencil has no crease
+    vertex)."""
     P = quads.vertices[st]
     return np.einsum("ia,fabk,jb->fijk", BSPLINE_TO_BEZIER, P, BSPLINE_TO_BEZIER)
 
 
-def _fit_system(layout, quads, evaluator, free_faces):
-    """Least-squares rows fitting free patches to exact limit points: the squared distance
-    integrated over each patch's parameter square (4 x 4 Gauss points per pair of spans,
-    rows scaled by the square roots of their quadrature weights)."""
+def _fit_system(layout, evaluator, free_faces):
+    """Normal equations of the least-squares fit of free patches to exact limit points: the
+    squared distance integrated over each patch's parameter square (4 x 4 Gauss points per
+    pair of spans). Every free patch has the same basis, so its Gram matrix ``G`` (64 x 64
+    over its slots) is formed once and scattered onto the unknowns.
+
+    Returns
+    -------
+    H : (n_unknowns, n_unknowns) csc_matrix; rhs : (n_unknowns, 3); centre : (3,) the mean
+    target point (the solve is centred on it).
+    """
     s, q = _gauss_params()
     U, V = (a.reshape(-1) for a in np.meshgrid(s, s, indexing="ij"))
     root = np.sqrt(np.outer(q, q).reshape(-1))
-    w = _tensor_rows(U, V, 0, 0) * root[:, None]
-    faces = np.repeat(free_faces, len(U))
-    A, c = layout.split_columns(np.tile(w, (len(free_faces), 1)), faces)
-    target = evaluator.evaluate(faces, np.tile(U, len(free_faces)), np.tile(V, len(free_faces)))
-    return A, target * np.tile(root, len(free_faces))[:, None] - c
+    W = _tensor_rows(U, V, 0, 0) * root[:, None]
+    G = W.T @ W
+    n_free, p = len(free_faces), len(U)
+    target = evaluator.evaluate(np.repeat(free_faces, p), np.tile(U, n_free),
+                                np.tile(V, n_free)).reshape(n_free, p, 3)
+    n2 = N_SPLIT * N_SPLIT
+    lab = layout.label[free_faces[:, None] * n2 + np.arange(n2)]
+    unk = layout.unknown[lab]
+    known = unk < 0
+    b = np.einsum("pk,fpc->fkc", W * root[:, None], target)
+    b -= np.einsum("kl,flc->fkc", G, np.where(known[..., None],
+                                               np.nan_to_num(layout.fixed_value[lab]), 0.0))
+    pair = ~known[:, :, None] & ~known[:, None, :] & (G != 0.0)[None]
+    rows = np.broadcast_to(unk[:, :, None], pair.shape)[pair]
+    cols = np.broadcast_to(unk[:, None, :], pair.shape)[pair]
+    values = np.broadcast_to(G, pair.shape)[pair]
+    m = layout.n_unknowns
+    H = sp.csc_matrix((values, (rows, cols)), shape=(m, m))
+    rhs = np.stack([np.bincount(unk[~known], weights=b[..., c][~known], minlength=m)
+                    for c in range(3)], axis=1)
+    return H, rhs, target.reshape(-1, 3).mean(axis=0)
 
 
-def _g1_system(layout, quads, topo, free, valence):
-    """Rows of the G1 conditions on every edge next to a free patch.
+def _corner_cosines(quads, topo, crease):
+    """(4 m,) float64 ``c = cos(theta)`` of the G1 connection at the start vertex of every
+    corner's edge (half-edge), for the sector of faces around that vertex the edge lies in.
+
+    Without crease edges at the vertex, or with one (a dart: the limit surface has a tangent
+    plane there), ``theta = 2 pi / n`` (``n`` the valence; ``c`` = 0 at valence 4). With two
+    crease edges (a crease vertex, where the crease curve is smooth) a sector of ``k`` faces
+    spans a half plane, ``theta = pi / k``; with three or more (a corner) it spans the sum of
+    its faces' corner angles in the cage, ``theta`` = that sum over ``k``. The spokes of a
+    sector are then an affine image of a regular fan of angle ``theta``
+    (``x_{i-1} + x_{i+1} = 2 c x_i``) between its two crease spokes, so the sector's patches
+    share a tangent plane at the vertex.
+    """
+    fv = quads.face_vertices
+    n = len(quads.vertices)
+    valence = np.bincount(fv, minlength=n)
+    corner = np.arange(len(fv))
+    cosine = np.where(valence[fv] != 4, np.cos(2.0 * np.pi / valence[fv]), 0.0)
+    spoke_crease = crease[topo.corner_edge]
+    n_crease = vertex_crease_counts(topo, crease, n)
+    walk = np.flatnonzero((n_crease[fv] >= 2) & ~spoke_crease)
+    if not len(walk):
+        return cosine
+    prev = corner - corner % 4 + (corner + 3) % 4
+    to_next = quads.vertices[fv[topo.next_corner]] - quads.vertices[fv]
+    to_prev = quads.vertices[fv[prev]] - quads.vertices[fv]
+    angle = np.arctan2(np.linalg.norm(np.cross(to_next, to_prev), axis=1),
+                       np.einsum("ij,ij->i", to_next, to_prev))
+    turn = (topo.twin[prev], topo.next_corner[topo.twin])
+    k = np.zeros(len(walk))
+    total = np.zeros(len(walk))
+    for direction, step in enumerate(turn):
+        s = walk.copy()
+        active = np.ones(len(walk), dtype=bool)
+        for _ in range(int(valence.max())):
+            if direction == 1:
+                s[active] = step[s[active]]
+            k += active
+            total += np.where(active, angle[s], 0.0)
+            if direction == 0:
+                s[active] = step[s[active]]
+            active &= ~spoke_crease[s]
+            if not active.any():
+                break
+    corner_sector = n_crease[fv[walk]] >= 3
+    theta = np.where(corner_sector, total, np.pi) / k
+    cosine[walk] = np.cos(theta)
+    return cosine
+
+
+def _g1_system(layout, quads, topo, free, cosine, crease):
+    """Rows of the G1 conditions on every edge next to a free patch but crease edges.
 
     ``L + R - alpha b' = 0`` at 4 Gauss points per knot span (both sides are cubic there),
     and, on the half of an edge from an EV to a valence-4 vertex, a quadratic edge curve
     (zero third difference of its Bezier points) so that ``alpha b'`` stays cubic.
+    ``cosine`` (4 m,) are the connection's ``c`` per corner (:func:`_corner_cosines`),
+    ``crease`` (n_edges,) the crease edges (C0: the patches there share the edge only).
     """
     fv = quads.face_vertices
     corner = np.arange(len(fv))
-    rep = corner[corner < topo.twin]
+    rep = corner[(corner < topo.twin) & ~crease[topo.corner_edge]]
     face, twin_face = rep // 4, topo.twin[rep] // 4
     rep = rep[free[face] | free[twin_face]]
     if not len(rep):
@@ -273,13 +384,13 @@ def _g1_system(layout, quads, topo, free, valence):
     tt = np.tile(t, len(rep))
     along, inward_near = _side_derivatives(c_near % 4, tt)
     _, inward_far = _side_derivatives(c_far % 4, 1.0 - tt)
-    alpha = connection_alpha(tt, valence[fv[c_near]], valence[fv[topo.next_corner[c_near]]])
+    alpha = _alpha(tt, cosine[c_near], cosine[topo.twin[c_near]])
     A_near, c_near_fixed = layout.split_columns(inward_near - alpha[:, None] * along, c_near // 4)
     A_far, c_far_fixed = layout.split_columns(inward_far, c_far // 4)
     A = [A_near + A_far]
     y = [-(c_near_fixed + c_far_fixed)]
-    ev_start = valence[fv[rep]] != 4
-    ev_end = valence[fv[topo.next_corner[rep]]] != 4
+    ev_start = cosine[rep] != 0.0
+    ev_end = cosine[topo.twin[rep]] != 0.0
     sides = _side_slots(N_SPLIT)
     first = THIRD_DIFFERENCE @ _span_bezier(SPLIT_KNOTS[0], SPLIT_KNOTS[1])
     last = THIRD_DIFFERENCE @ _span_bezier(SPLIT_KNOTS[-2], SPLIT_KNOTS[-1])
@@ -294,30 +405,84 @@ def _g1_system(layout, quads, topo, free, valence):
     return sp.vstack(A).tocsr(), np.concatenate(y)
 
 
-def _solve(A_fit, y_fit, A_g1, y_g1):
-    """(n_unknowns, 3) least-squares fit ``A_fit x ~ y_fit`` subject to ``A_g1 x = y_g1``.
+def _kept_knots(quads, free, special):
+    """(m, 2, 2) bool: free patch ``f`` keeps its double knot in direction ``d`` (0: ``u``,
+    1: ``v``) at end ``e`` (0: ``h``, 1: ``1 - h``) iff a corner at that end of that direction
+    is ``special`` (n_vertices,) bool: an extraordinary vertex or one with crease edges;
+    elsewhere the G1 connection is C1 and the patch need not depart from one cubic there."""
+    ev = special[quads.face_vertices].reshape(-1, 4)
+    keep = np.array([[ev[:, ends].any(axis=1) for ends in pair] for pair in END_CORNERS])
+    return keep.transpose(2, 0, 1) & free[:, None, None]
 
-    Solved as the KKT system ``[[A^T A, C^T], [C, -delta I]]`` (``delta = G1_PENALTY^-2``
+
+def _knot_free_system(layout, free, keep):
+    """Rows making every free patch one cubic across each double knot it does not keep
+    (:func:`_kept_knots`): :data:`KNOT_FREE_ROWS` on every pole row across that knot, so the
+    knot can be removed exactly from the solved patch (:func:`_reduced_patch`)."""
+    n = N_SPLIT
+    weights, faces = [], []
+    for d in (0, 1):
+        for e in (0, 1):
+            f = np.flatnonzero(free & ~keep[:, d, e])
+            for row in KNOT_FREE_ROWS[e]:
+                for j in range(n):
+                    w = np.zeros((n, n))
+                    if d == 0:
+                        w[:, j] = row
+                    else:
+                        w[j, :] = row
+                    weights.append(np.broadcast_to(w.reshape(-1), (len(f), n * n)))
+                    faces.append(f)
+    A, c = layout.split_columns(np.vstack(weights), np.concatenate(faces))
+    return A, -c
+
+
+def _reduced_patch(poles, keep):
+    """The free patch of ``poles`` (N_SPLIT, N_SPLIT, 3) on its kept knots only (``keep``
+    (2, 2) bool of :func:`_kept_knots`): the least-squares poles on the coarser knot vectors,
+    the same surface up to rounding once :func:`_knot_free_system` holds."""
+    u_knots, u_mults = _reduced_knots(*keep[0])
+    v_knots, v_mults = _reduced_knots(*keep[1])
+    Tu = np.linalg.pinv(insertion_matrix(u_knots, u_mults, SPLIT_KNOTS, SPLIT_MULTS))
+    Tv = np.linalg.pinv(insertion_matrix(v_knots, v_mults, SPLIT_KNOTS, SPLIT_MULTS))
+    P = np.einsum("ia,abk,jb->ijk", Tu, poles, Tv)
+    return BSplinePatch(P, u_knots, u_mults, v_knots, v_mults)
+
+
+def _solve(H, rhs, centre, A_g1, y_g1):
+    """(n_unknowns, 3) least-squares fit (normal equations ``H x = rhs``) subject to
+    ``A_g1 x = y_g1``.
+
+    Solved as the KKT system ``[[H, C^T], [C, -delta I]]`` (``delta = G1_PENALTY^-2``
     times the fit's scale): the G1 conditions are redundant where several meet (at every
     vertex), and ``delta`` keeps the system regular with its small eigenvalues in the
-    multipliers of those redundant rows, not in the poles. The data are centred first, so a
-    translation of the cage moves the poles by exactly that vector up to rounding.
+    multipliers of those redundant rows, not in the poles. The unknowns are centred on
+    ``centre`` first, so a translation of the cage moves the poles by exactly that vector up
+    to rounding.
     """
-    centre = y_fit.mean(axis=0)
-    H = (A_fit.T @ A_fit).tocsc()
-    rhs = A_fit.T @ (y_fit - A_fit @ np.broadcast_to(centre, (A_fit.shape[1], 3)))
+    rhs = rhs - H @ np.broadcast_to(centre, (H.shape[1], 3))
     if A_g1 is None:
         return splu(H).solve(np.ascontiguousarray(rhs)) + centre
     delta = H.diagonal().mean() / G1_PENALTY ** 2
     y_c = y_g1 - A_g1 @ np.broadcast_to(centre, (A_g1.shape[1], 3))
     K = sp.bmat([[H, A_g1.T], [A_g1, -delta * sp.identity(A_g1.shape[0])]]).tocsc()
     x = splu(K).solve(np.ascontiguousarray(np.vstack([rhs, y_c])))
-    return x[:A_fit.shape[1]] + centre
+    return x[:H.shape[0]] + centre
 
 
 def _side_row(poles, side):
     """Boundary pole row (n, 3) of a patch's (n, n, 3) poles from corner ``side`` to ``side + 1``."""
     return (poles[:, 0], poles[-1, :], poles[::-1, -1], poles[0, ::-1])[side]
+
+
+def _side_knots(patch, side):
+    """Knots and multiplicities of a patch's boundary row from corner ``side`` to ``side + 1``."""
+    knots, mults = ((patch.u_knots, patch.u_mults) if side % 2 == 0
+                    else (patch.v_knots, patch.v_mults))
+    knots, mults = np.asarray(knots, dtype=np.float64), np.asarray(mults, dtype=np.int64)
+    if side >= 2:
+        return 1.0 - knots[::-1], mults[::-1]
+    return knots, mults
 
 
 def _topology(quads, topo, patches, free):
@@ -338,7 +503,11 @@ def _topology(quads, topo, patches, free):
             row = _side_row(patches[c // 4].poles, c % 4)
         else:
             row = _side_row(patches[t // 4].poles, t % 4)[::-1]
-        knots, mults = (BEZIER_KNOTS, BEZIER_MULTS) if len(row) == 4 else (SPLIT_KNOTS, SPLIT_MULTS)
+        if not free[c // 4] or free[t // 4]:
+            knots, mults = _side_knots(patches[c // 4], c % 4)
+        else:
+            knots, mults = _side_knots(patches[t // 4], t % 4)
+            knots, mults = 1.0 - knots[::-1], mults[::-1]
         curves.append(EdgeCurve(np.ascontiguousarray(row), knots, mults))
     vertices = np.empty((len(used), 3))
     vertices[index[fv]] = np.stack([patches[c // 4].poles[(0, -1, -1, 0)[c % 4], (0, 0, -1, -1)[c % 4]]
@@ -356,8 +525,8 @@ def g1_surface_patches(base, measure=True, faces="quad"):
 
     Parameters
     ----------
-    base : PolyMesh, closed 2-manifold polygon mesh without crease edges (validated by the
-        caller).
+    base : PolyMesh, closed 2-manifold polygon mesh, possibly with sharp crease edges
+        (validated by the caller).
     measure : bool, if True fill ``info`` with the deviation from the exact limit surface
         and the normal jumps across edges (of the per-quad patches).
     faces : ``"quad"`` (one face per quad) or ``"chart"`` (the quads' patches merged into
@@ -382,31 +551,38 @@ def g1_surface_patches(base, measure=True, faces="quad"):
 
     Raises
     ------
-    ExportError when ``base`` has crease edges (their limit surface has no tangent plane to
-        join G1; the graded export handles them), or when the solved poles miss the G1
+    ExportError when the solved poles miss the G1
         conditions by more than :data:`G1_RESIDUAL_MAX` of the cage's bounding-box diagonal
         (conditions that contradict each other), rather than writing a surface with kinks.
     """
     check_face_form(faces, "g1")
-    if base.n_creases:
-        raise ExportError(f"the G1 export does not support crease edges: the cage has "
-                          f"{base.n_creases}; use the exact (graded) export")
     quads = quad_mesh_of(base)
     level = 0 if quads is base else 1
     fv = quads.face_vertices
     topo = mesh_topology(fv, quads.face_offsets, len(quads.vertices))
     valence = np.bincount(fv, minlength=len(quads.vertices))
-    free = (valence[fv].reshape(-1, 4) != 4).any(axis=1)
-    bezier = _regular_bezier(quads, topo)
+    crease = crease_edge_mask(topo, quads.creases)
+    creased = vertex_crease_counts(topo, crease, len(quads.vertices)) > 0
+    special = (valence != 4) | creased
+    st = quad_stencils(quads, topo)
+    free = special[fv].reshape(-1, 4).any(axis=1) | creased[st].any(axis=(1, 2))
+    keep = _kept_knots(quads, free, special)
+    bezier = _regular_bezier(quads, topo, st)
     layout = _Layout(quads, topo, free, bezier)
     free_faces = np.flatnonzero(free)
     slots = np.nan_to_num(layout.fixed_value)
     residual = 0.0
     if len(free_faces):
         evaluator = LimitEvaluator(quads)
-        A_fit, y_fit = _fit_system(layout, quads, evaluator, free_faces)
-        A_g1, y_g1 = _g1_system(layout, quads, topo, free, valence)
-        x = _solve(A_fit, y_fit, A_g1, y_g1)
+        H, rhs, centre = _fit_system(layout, evaluator, free_faces)
+        A_g1, y_g1 = _g1_system(layout, quads, topo, free, _corner_cosines(quads, topo, crease),
+                                crease)
+        A_k, y_k = _knot_free_system(layout, free, keep)
+        if A_g1 is None:
+            A_g1, y_g1 = (A_k, y_k) if A_k.shape[0] else (None, None)
+        else:
+            A_g1, y_g1 = sp.vstack([A_g1, A_k]).tocsr(), np.concatenate([y_g1, y_k])
+        x = _solve(H, rhs, centre, A_g1, y_g1)
         slots[layout.unknown >= 0] = x[layout.unknown[layout.unknown >= 0]]
         residual = float(np.abs(A_g1 @ x - y_g1).max()) if A_g1 is not None else 0.0
         diagonal = float(np.linalg.norm(np.ptp(quads.vertices[np.unique(fv)], axis=0)))
@@ -419,7 +595,7 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     for f in range(quads.n_faces):
         if free[f]:
             P = slots[layout.label[f * n2:(f + 1) * n2]].reshape(N_SPLIT, N_SPLIT, 3)
-            patches.append(BSplinePatch(P, SPLIT_KNOTS, SPLIT_MULTS, SPLIT_KNOTS, SPLIT_MULTS))
+            patches.append(_reduced_patch(P, keep[f]))
         else:
             patches.append(BSplinePatch(np.ascontiguousarray(bezier[f]), BEZIER_KNOTS,
                                         BEZIER_MULTS, BEZIER_KNOTS, BEZIER_MULTS))

@@ -17,6 +17,10 @@ it, or a rectangle whose sides touch each other) gets a *seed*: its interior ver
 from every trail starts four motorcycles of its own, and the graph is traced again. A region
 with no interior vertex left is cut into single quads.
 
+Sharp crease edges are trails from the start (every crease becomes a B-rep edge, and no
+motorcycle crosses one), and the ends and corners of crease lines (vertices with one crease
+edge or three or more) send motorcycles like extraordinary vertices.
+
 A block's sides run along trails; a block corner of one block may lie inside a side of a
 neighbour (a T-junction where a motorcycle stopped), so the B-rep splits block sides at
 every block corner on them (:mod:`core.export.chart_faces`).
@@ -27,7 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
 
-from core.subdivision.catmull_clark import mesh_topology
+from core.subdivision.catmull_clark import crease_edge_mask, mesh_topology, vertex_crease_counts
 
 STEP_OF_SIDE = np.array([[0, -1], [1, 0], [0, 1], [-1, 0]])
 """(4, 2) grid step across a block-aligned side: side ``k - rotation`` of a quad faces
@@ -89,12 +93,13 @@ def _source_corners(topo, fv, sources, every_edge=False):
     return np.array(out, dtype=np.int64)
 
 
-def _trace(topo, fv, sources, seeds, n_vertices):
+def _trace(topo, fv, sources, seeds, n_vertices, crease):
     """(n_edges,) bool edges on the motorcycle trails started at the extraordinary vertices
     ``sources`` (every other edge) and the valence-4 ``seeds`` (every edge), all advancing one
-    edge per round."""
-    cut = np.zeros(len(topo.edges), dtype=bool)
+    edge per round; the ``crease`` edges (n_edges,) bool are trails from the start."""
+    cut = crease.copy()
     on_trail = np.zeros(n_vertices, dtype=bool)
+    on_trail[topo.edges[crease].reshape(-1)] = True
     on_trail[sources] = True
     on_trail[seeds] = True
     active = np.concatenate([_source_corners(topo, fv, sources),
@@ -200,7 +205,7 @@ def quad_blocks(quads):
 
     Parameters
     ----------
-    quads : PolyMesh, closed 2-manifold, every face a quad.
+    quads : PolyMesh, closed 2-manifold, every face a quad, possibly with crease edges.
 
     Returns
     -------
@@ -210,12 +215,15 @@ def quad_blocks(quads):
     n_vertices, n_quads = len(quads.vertices), quads.n_faces
     topo = mesh_topology(fv, quads.face_offsets, n_vertices)
     valence = np.bincount(fv, minlength=n_vertices)
-    sources = np.flatnonzero(valence != 4)
+    crease = crease_edge_mask(topo, quads.creases)
+    n_crease = vertex_crease_counts(topo, crease, n_vertices)
+    sources = np.flatnonzero((valence != 4) | (n_crease == 1) | (n_crease >= 3))
     sources = sources[valence[sources] > 0]
     forced = np.zeros(len(topo.edges), dtype=bool)
     seeds = []
     while True:
-        cut = _trace(topo, fv, sources, np.array(seeds, dtype=np.int64), n_vertices) | forced
+        cut = _trace(topo, fv, sources, np.array(seeds, dtype=np.int64), n_vertices,
+                     crease) | forced
         region = _regions(topo, n_quads, cut)
         blocks, added = [], False
         for r in range(int(region.max()) + 1):

@@ -18,11 +18,13 @@ from functools import lru_cache
 import numpy as np
 
 SCHEMA = "AUTOMOTIVE_DESIGN { 1 0 10303 214 1 1 1 1 }"
-POINT_DECIMALS = 9
+POINT_DECIMALS = 8
 """Decimals of the points' coordinates (millimetres; parameters in ``(u, v)``): a rounding of
-at most 5e-10 mm, far inside the B-rep tolerance :data:`core.tolerances.BREP_MM`, and the
-points that vertices, curves and surfaces share are one entity each, so the rounding opens no
-gap; short literals are most of what a reader parses."""
+at most 5e-9 mm, a twentieth of the B-rep tolerance :data:`core.tolerances.BREP_MM` (an edge
+curve whose poles are not the face's own stays within the tolerance of it), and the points
+that vertices, curves and surfaces share are one entity each, so the rounding opens no gap;
+short literals are most of what a reader parses (lines are written ``#n=ENTITY(...)``, without
+optional spaces, for the same reason)."""
 
 
 def step_reals(values):
@@ -122,6 +124,18 @@ def _reals(values):
     return "(" + ",".join(step_reals(values)) + ")"
 
 
+def _points_of(ent, arrays):
+    """CARTESIAN_POINT ids (:meth:`_Entities.points`) of the poles of every array in
+    ``arrays`` (each (..., 3)), formatted in one pass: a list of int64 arrays of the arrays'
+    shapes without the last axis."""
+    if not arrays:
+        return []
+    flat = np.concatenate([a.reshape(-1, 3) for a in arrays])
+    ids = np.asarray(ent.points(flat), dtype=np.int64)
+    ends = np.cumsum([a.size // 3 for a in arrays])[:-1]
+    return [part.reshape(a.shape[:-1]) for part, a in zip(np.split(ids, ends), arrays)]
+
+
 def _segment(ent, segments, uv, context_2d):
     """The DEFINITIONAL_REPRESENTATION of the ``(u, v)`` segment ``uv`` (2, 2) from its
     start to its end point, linear in the parameter on [0, 1] (a degree-1 B-spline), made
@@ -178,9 +192,8 @@ def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970
                          "PARAMETRIC_REPRESENTATION_CONTEXT() REPRESENTATION_CONTEXT('2D SPACE','') )")
     segments = {}
     surface_ids = []
-    for patch in patches:
-        poles = np.asarray(patch.poles)
-        ids = np.asarray(ent.points(poles.reshape(-1, 3))).reshape(poles.shape[:2])
+    pole_ids = _points_of(ent, [np.asarray(patch.poles) for patch in patches])
+    for patch, ids in zip(patches, pole_ids):
         grid = "(" + ",".join(_refs(row) for row in ids.tolist()) + ")"
         u_mults, u_knots = _knot_args(patch.u_knots, patch.u_mults)
         v_mults, v_knots = _knot_args(patch.v_knots, patch.v_mults)
@@ -194,8 +207,9 @@ def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970
             ent.add(f"PCURVE('',#{surface_ids[t.use_face[u]]},#{segment})"))
     vertex_ids = [ent.add(f"VERTEX_POINT('',#{p})") for p in ent.points(t.vertices)]
     edge_ids = []
+    curve_pole_ids = _points_of(ent, [np.asarray(curve.poles) for curve in t.edge_curves])
     for e, curve in enumerate(t.edge_curves):
-        poles = ent.points(curve.poles)
+        poles = curve_pole_ids[e].tolist()
         mults, knots = _knot_args(curve.knots, curve.mults)
         bspline = ent.add(f"B_SPLINE_CURVE_WITH_KNOTS('',{int(curve.degree)},{_refs(poles)},"
                           f".UNSPECIFIED.,.F.,.F.,{mults},{knots},.UNSPECIFIED.)")
@@ -227,5 +241,5 @@ def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970
               f"FILE_NAME({step_string(name)},{step_string(timestamp)},(''),(''),"
               "'polycube_wb','polycube_wb','');",
               f"FILE_SCHEMA(('{SCHEMA}'));", "ENDSEC;", "DATA;"]
-    body = [f"#{i} = {line};" for i, line in enumerate(ent.lines, start=1)]
+    body = [f"#{i}={line};" for i, line in enumerate(ent.lines, start=1)]
     return "\n".join(header + body + ["ENDSEC;", "END-ISO-10303-21;", ""])

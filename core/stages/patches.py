@@ -26,7 +26,7 @@ def run_patches(fit, params, progress):
     ExportError
         The fitted cage's limit surface crosses itself (the check ``subd-to-step`` makes,
         ``core.subdivision.limit_crossings.export_limit_crossings``): no solid is built of it;
-        or ``export`` is ``g1`` and the cage has crease edges.
+        or ``export`` is ``g1`` and its G1 conditions cannot be met.
     """
     from core.export.bspline import limit_surface_patches
     from core.export.g1_patches import g1_surface_patches

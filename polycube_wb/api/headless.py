@@ -151,8 +151,8 @@ def subd_to_solid(base_mesh_path, step_path=None, report_path=None, depth=EXPORT
         volume the solid is compared with (costs about as much as the export).
     progress : core.progress.Progress.
     export : ``"exact"`` (graded patches, ``depth`` applies) or ``"g1"`` (one light
-        tangent-continuous patch per quad, :mod:`core.export.g1_patches`; cages without
-        creases).
+        tangent-continuous patch per quad, :mod:`core.export.g1_patches`; sharp creases
+        stay C0).
     faces : ``"quad"`` (one B-rep face per quad) or ``"chart"`` (one multi-span face per
         rectangular block of quads, :mod:`core.export.chart_faces`; ``g1`` export only).
 

@@ -36,7 +36,7 @@ class SolidProxy(StageProxy):
         add_property(obj, "App::PropertyEnumeration", "Export", "Solid",
                      "Surface form: exact (graded patches, the Catmull-Clark limit; large) or "
                      "g1 (one light tangent-continuous patch per quad, close to the limit; "
-                     "cages without creases)", list(EXPORT_FORMS), choice=DEFAULT_EXPORT_FORM)
+                     "sharp creases stay C0)", list(EXPORT_FORMS), choice=DEFAULT_EXPORT_FORM)
         add_property(obj, "App::PropertyEnumeration", "Faces", "Solid",
                      "B-rep faces of the g1 form: quad (one per quad of the cage) or chart "
                      "(one multi-span face per rectangular block of quads)",

@@ -7,13 +7,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from core.errors import ExportError
 from core.export.brep_topology import check_topology
 from core.export.bspline_basis import evaluate_patch_points
 from core.export.g1_patches import connection_alpha, g1_surface_patches
+from core.export.quad_blocks import quad_blocks
 from core.geometry import triangulate
 from core.subdivision import sample_cages
-from core.subdivision.catmull_clark import build_hierarchy
+from core.subdivision.catmull_clark import build_hierarchy, crease_edge_mask, mesh_topology
 from core.subdivision.limit import limit_matrices, quad_mesh_of
 from core.target_surface import TargetSurface
 
@@ -108,11 +108,52 @@ def test_connection_function_ends():
     assert np.all(connection_alpha(t, n4, n4) == 0.0)
 
 
-def test_creased_cage_is_refused():
-    cage = sample_cages.cube()
-    creased = dataclasses.replace(cage, creases=np.array([[0, 1]]))
-    with pytest.raises(ExportError, match="crease"):
-        g1_surface_patches(creased)
+def _creased_cages():
+    """A torus with one crease loop around its tube (crease vertices of valence 4), and a
+    cube with the rim of its top face creased (crease vertices with sectors of one and two
+    faces) and one vertical edge (a corner of three creases above, a dart below)."""
+    torus = sample_cages.torus()
+    ring = np.arange(6)
+    torus = dataclasses.replace(torus, creases=np.stack([ring, (ring + 1) % 6], axis=1))
+    cube = sample_cages.cube()
+    fv = cube.face_vertices.reshape(-1, 4)
+    top = fv[np.argmax(cube.vertices[fv, 2].min(axis=1))]
+    rim = np.stack([top, np.roll(top, -1)], axis=1)
+    below = [v for v in _neighbours(cube, int(top[0])) if v not in top.tolist()]
+    creases = np.concatenate([rim, [[top[0], below[0]]]]).astype(np.int64)
+    cube = dataclasses.replace(cube, creases=creases)
+    return {"creased_torus": torus, "creased_cube": cube}
+
+
+def _edges(mesh):
+    fv = mesh.face_vertices.reshape(-1, 4)
+    pairs = np.stack([fv, np.roll(fv, -1, axis=1)], axis=-1).reshape(-1, 2)
+    return {tuple(sorted(p)) for p in pairs.tolist()}
+
+
+def _neighbours(mesh, vertex):
+    return [b if a == vertex else a for a, b in _edges(mesh) if vertex in (a, b)]
+
+
+@pytest.mark.parametrize("name", ["creased_torus", "creased_cube"])
+def test_creased_cage_joins_g1_off_its_creases(name):
+    """Sharp creases: the patches across a crease edge share it (one closed shell); every
+    other edge joins G1, and the patches stay close to the creased limit surface. With
+    faces per block, every crease edge lies on a block side (a B-rep edge)."""
+    cage = _creased_cages()[name]
+    assert cage.n_creases >= 3
+    ps = g1_surface_patches(cage)
+    diag = ps.info["bbox_diagonal"]
+    assert check_topology(ps.topology, ps.patches, 1e-9 * diag) <= 1e-9 * diag
+    assert ps.info["normal_jump_crease_edges"] >= cage.n_creases
+    assert ps.info["normal_jump_max_deg"] <= 0.01
+    assert ps.info["max_error_rel"] <= 2.5e-3
+    chart = g1_surface_patches(cage, measure=False, faces="chart")
+    assert check_topology(chart.topology, chart.patches, 1e-7 * diag) <= 1e-7 * diag
+    assert len(chart.patches) <= len(ps.patches)
+    quads = quad_mesh_of(cage)
+    topo = mesh_topology(quads.face_vertices, quads.face_offsets, len(quads.vertices))
+    assert quad_blocks(quads).cut_edge[crease_edge_mask(topo, quads.creases)].all()
 
 
 def test_pipeline_patches_stage_builds_the_g1_form_on_request():
