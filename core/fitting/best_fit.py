@@ -31,9 +31,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import splu
 
 from core.fitting.responses import InsideBounds, vertex_normals
+from core.fitting.spd_solve import solve_spd
 from core.geometry import scatter_add
 from core.subdivision.catmull_clark import mesh_topology
 from core.tolerances import CONTACT
@@ -212,11 +212,9 @@ class NormalEquations:
     support.
 
     Solution: the matrix is symmetric positive definite and a few percent full (a base
-    vertex is coupled to the vertices whose limit stencils share a fine point with its own).
-    SuperLU factors it with a minimum-degree ordering of ``A^T + A`` and diagonal pivots
-    (symmetric mode: no row interchanges, which a positive definite matrix does not need and
-    which would undo the ordering): faster than a dense Cholesky factorisation from a few
-    thousand unknowns on, and with a fraction of the fill of partial pivoting.
+    vertex is coupled to the vertices whose limit stencils share a fine point with its own);
+    its upper triangle goes to a sparse ``L D L^T`` factorisation
+    (:func:`core.fitting.spd_solve.solve_spd`).
 
     Parameters
     ----------
@@ -255,13 +253,12 @@ class NormalEquations:
                + (self.damping * scale) * V.T.reshape(-1))
         regular = ((self.smoothness * scale) * self.smooth
                    + sp.identity(n, format="csr") * (self.damping * scale))
-        diagonal = [piece[a, a] + regular for a in range(3)]
-        # the off-diagonal blocks are symmetric: block (c, a) is block (a, c)
-        system = sp.bmat([[diagonal[a] if a == c else piece[min(a, c), max(a, c)]
-                           for c in range(3)] for a in range(3)], format="csc")
-        solution = splu(system, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                        options={"SymmetricMode": True}).solve(rhs)
-        return solution.reshape(3, -1).T
+        # the upper triangle of blocks (``piece`` holds those with a <= c; the solver reads
+        # no entry below the diagonal)
+        blocks = [[None] * 3 for _ in range(3)]
+        for (a, c), block in piece.items():
+            blocks[a][c] = block + regular if a == c else block
+        return solve_spd(sp.bmat(blocks, format="coo"), rhs).reshape(3, -1).T
 
     def _data_blocks(self, terms):
         """dict ``(a, b) -> (n_base, n_base)`` sparse: the data part's blocks ``M^T Z_ab M``.
