@@ -17,9 +17,10 @@ import scipy.sparse as sp
 
 from core.optional_imports import optional_module
 
-# imported with this module, before any reconstruction limits the BLAS pools to one thread
-# (core.threads.single_threaded): the BLAS that the bindings load with MUMPS is then one of
-# the pools limited, and the factorisation rounds the same in every call
+# imported with this module, not at the first solve: the BLAS that the bindings load with
+# MUMPS is then loaded when the fit starts and limits every BLAS pool to one thread
+# (core.threads.single_threaded around core.fitting.fit.fit_base_mesh), so it is limited too
+# and the factorisation rounds the same in every call
 mumps = optional_module("mumps", package="python-mumps")
 
 
