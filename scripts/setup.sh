@@ -39,7 +39,7 @@ echo "$PACKAGES" > "$SITE/polycube_runtime.pth"
 stamp_value=$(cat requirements.txt requirements-dev.txt | sha256sum | cut -c1-16)
 stamp_file=.venv/.polycube-setup-stamp
 if [ "$(cat "$stamp_file" 2>/dev/null)" != "$stamp_value:$PACKAGES" ] || \
-   ! .venv/bin/python -c "import trimesh, manifold3d, skimage.morphology, igl, threadpoolctl, numba, pytest, FreeCAD" >/dev/null 2>&1; then
+   ! .venv/bin/python -c "import trimesh, manifold3d, skimage.morphology, igl, threadpoolctl, numba, mumps, pytest, FreeCAD" >/dev/null 2>&1; then
   echo "setup: installing runtime packages into $PACKAGES"
   # --no-deps: numpy and scipy must stay Debian's (FreeCAD's own modules are built against them);
   # pip's warning that scikit-image's optional image-file readers are missing is expected.
@@ -50,9 +50,9 @@ if [ "$(cat "$stamp_file" 2>/dev/null)" != "$stamp_value:$PACKAGES" ] || \
     || { cat .venv/pip-dev.log >&2; exit 1; }
   echo "$stamp_value:$PACKAGES" > "$stamp_file"
 fi
-.venv/bin/python -c "import numpy, scipy, trimesh, manifold3d, skimage.morphology, igl, threadpoolctl, numba, FreeCAD, Part" \
+.venv/bin/python -c "import numpy, scipy, trimesh, manifold3d, skimage.morphology, igl, threadpoolctl, numba, mumps, FreeCAD, Part" \
   || { echo "setup: error: the packages do not import in .venv" >&2; exit 1; }
-(cd /tmp && freecadcmd -c "import trimesh, manifold3d, igl, threadpoolctl, numba; print('setup: FreeCAD sees trimesh', trimesh.__version__)" 2>/dev/null | grep -q "setup: FreeCAD sees") \
+(cd /tmp && freecadcmd -c "import trimesh, manifold3d, igl, threadpoolctl, numba, mumps; print('setup: FreeCAD sees trimesh', trimesh.__version__)" 2>/dev/null | grep -q "setup: FreeCAD sees") \
   || { echo "setup: error: freecadcmd cannot import the runtime packages from $PACKAGES" >&2; exit 1; }
 # numba compiles the spatial queries once per machine (about 10 s) and caches them in core's __pycache__ folders
 compiled=$(.venv/bin/python -c "from core.precompile import compile_now; print('%.1f' % compile_now())") \

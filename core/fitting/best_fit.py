@@ -28,14 +28,12 @@ points change between rounds; the rounds stop when the two-sided RMS distance im
 by less than ``tol`` (relative) or after ``rounds``.
 """
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
-import scipy.linalg
 import scipy.sparse as sp
-from scipy.sparse.linalg import spsolve
 
 from core.fitting.responses import InsideBounds, vertex_normals
+from core.fitting.spd_solve import solve_spd
 from core.geometry import scatter_add
 from core.subdivision.catmull_clark import mesh_topology
 from core.tolerances import CONTACT
@@ -46,11 +44,6 @@ from core.types import PolyMesh
 class BestFitSettings:
     """Tuned constants of the least-squares fit (:func:`best_fit`)."""
 
-    dense_unknowns: int = 4800
-    """Most unknowns solved by dense Cholesky (the Catmull-Clark limit stencils make the
-    normal matrix about 15 % full, and sparse LU fills it in: several times slower at a few
-    thousand unknowns); above, sparse LU with a symmetric minimum-degree ordering. Two dense
-    matrices of this size (the system and the smoothness term) take about 370 MB."""
     compatible: float = 0.5
     """Dot product of a closest-point pair's two unit normals at which the pair counts half
     (:func:`compatibility`)."""
@@ -218,6 +211,11 @@ class NormalEquations:
     ``k`` corners costs ``k^2`` fine entries instead of the square of its base-vertex
     support.
 
+    Solution: the matrix is symmetric positive definite and a few percent full (a base
+    vertex is coupled to the vertices whose limit stencils share a fine point with its own);
+    its upper triangle goes to a sparse ``L D L^T`` factorisation
+    (:func:`core.fitting.spd_solve.solve_spd`).
+
     Parameters
     ----------
     base : PolyMesh, the cage (``V_init`` = its vertices).
@@ -234,8 +232,8 @@ class NormalEquations:
         laplacian = _umbrella(base, self.n_base)
         if stiffness is not None:
             laplacian = sp.diags(np.sqrt(np.asarray(stiffness, dtype=np.float64))) @ laplacian
-        self.smooth = sp.block_diag([laplacian.T @ laplacian] * 3, format="csr")
-        self.smooth_init = self.smooth @ self.V_init.T.reshape(-1)
+        self.smooth = (laplacian.T @ laplacian).tocsr()
+        self.smooth_init = (self.smooth @ self.V_init).T.reshape(-1)
         self.smoothness, self.damping = float(smoothness), float(damping)
         self._mapping_t = self.mapping.T.tocsr()
         # complex copies for the paired products of _data_blocks (their imaginary parts are 0)
@@ -253,24 +251,14 @@ class NormalEquations:
         scale = float(np.mean([piece[a, a].diagonal().mean() for a in range(3)]))
         rhs = (rhs + (self.smoothness * scale) * self.smooth_init
                + (self.damping * scale) * V.T.reshape(-1))
-        if 3 * n <= BEST_FIT.dense_unknowns:
-            system = (self.smoothness * scale) * self._smooth_dense
-            system.flat[::3 * n + 1] += self.damping * scale
-            for (a, c), block in piece.items():
-                dense = block.toarray()
-                system[a * n:(a + 1) * n, c * n:(c + 1) * n] += dense
-                if a != c:  # the blocks are symmetric
-                    system[c * n:(c + 1) * n, a * n:(a + 1) * n] += dense
-            # the system is this call's own array and finite by construction
-            factor = scipy.linalg.cho_factor(system, overwrite_a=True, check_finite=False)
-            solution = scipy.linalg.cho_solve(factor, rhs, check_finite=False)
-        else:
-            system = sp.bmat([[piece[min(a, c), max(a, c)] for c in range(3)] for a in range(3)],
-                             format="csc")
-            regular = ((self.smoothness * scale) * self.smooth
-                       + sp.identity(3 * n, format="csr") * (self.damping * scale))
-            solution = spsolve((system + regular).tocsc(), rhs, permc_spec="MMD_AT_PLUS_A")
-        return solution.reshape(3, -1).T
+        regular = ((self.smoothness * scale) * self.smooth
+                   + sp.identity(n, format="csr") * (self.damping * scale))
+        # the upper triangle of blocks (``piece`` holds those with a <= c; the solver reads
+        # no entry below the diagonal)
+        blocks = [[None] * 3 for _ in range(3)]
+        for (a, c), block in piece.items():
+            blocks[a][c] = block + regular if a == c else block
+        return solve_spd(sp.bmat(blocks, format="coo"), rhs).reshape(3, -1).T
 
     def _data_blocks(self, terms):
         """dict ``(a, b) -> (n_base, n_base)`` sparse: the data part's blocks ``M^T Z_ab M``.
@@ -288,11 +276,6 @@ class NormalEquations:
                                         @ self._mapping_c)
             blocks[_PAIRS[first]], blocks[_PAIRS[second]] = both.real, both.imag
         return blocks
-
-    @cached_property
-    def _smooth_dense(self):
-        """(3 n, 3 n) float64 the smoothness matrix, dense (read only)."""
-        return self.smooth.toarray()
 
 
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
