@@ -48,7 +48,8 @@ CASES = {"to_simp_cantilever": os.path.join(REPO, "examples", "to_simp_cantileve
              ("to_simp_torsion_arm", ".stl"), ("tray_bottom", ".stl"), ("fandisk", ".obj"),
              ("gripper_domain", ".stl"), ("ge_bracket_domain", ".stl"),
              ("to_simp_torsion_arm_fine3", ".stl"), ("featuretype", ".stl"),
-             ("octagonal_pocket", ".stl"))}}
+             ("octagonal_pocket", ".stl"), ("simjeb76_ge_bracket_to", ".stl"),
+             ("toplib_michell3d_density_mc", ".stl"))}}
 """The dev meshes that reach the fit."""
 PERTURBATION = 1e-12
 """Relative size of the noise added to a cage's vertices by ``--perturbations`` (about the
