@@ -137,8 +137,7 @@ def markdown(rows, meta):
              "Written by `benchmarks/basemesh_bench.py`; do not edit by hand.", "",
              f"- Date: {meta['date']}; commit {meta['commit']}; load (1 min) at start "
              f"{meta['load']}; every case in its own process (timeout {meta['timeout']} s)."
-             + (f" Rows of meshes not re-run are from {meta['updated_from']['date']}, commit "
-                f"{meta['updated_from']['commit']}." if "updated_from" in meta else "")
+             + _other_runs(rows, meta)
              + (f" {meta['note']}." if "note" in meta else ""),
              "- Budget: `--target-faces 300` (met when within 25%); genus is the base mesh's "
              "against the target's; inverted: base faces whose limit normal points more than 90 "
@@ -238,6 +237,24 @@ def _percent(value):
     return "–" if value is None else f"{100.0 * value:.2f}"
 
 
+def _other_runs(rows, meta):
+    """Sentence naming the runs (date, commit, rows) of the ``rows`` that ``meta``'s run
+    did not make (``--update`` keeps them); rows without a ``run`` are from a run before
+    rows recorded theirs."""
+    this = (meta["date"], meta["commit"])
+    counts = {}
+    for row in rows:
+        run = row.get("run")
+        key = (run["date"], run["commit"]) if run else None
+        if key != this:
+            counts[key] = counts.get(key, 0) + 1
+    if not counts:
+        return ""
+    parts = [(f"{n} from {key[0]}, commit {key[1]}" if key else f"{n} from an earlier run")
+             for key, n in sorted(counts.items(), key=lambda item: item[0] or ("", ""))]
+    return " Rows not re-run: " + "; ".join(parts) + "."
+
+
 def main(argv):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--meshes", default=DEFAULT_MESHES)
@@ -271,7 +288,6 @@ def main(argv):
                for mode in args.modes}
         kept = [r for r in previous["rows"]
                 if (r["mesh"], r["mode"], r.get("method", "auto")) not in ran]
-        meta["updated_from"] = previous["meta"]
     rows = []
     for name in names:
         stem = os.path.splitext(name)[0]
@@ -292,7 +308,8 @@ def main(argv):
                     row = {"error": f"timed out after {args.timeout} s"}
             if isinstance(row.get("error"), list):
                 row["error"] = " ".join(row["error"])
-            row.update({"mesh": stem, "mode": mode, "method": args.base_mesh_method})
+            row.update({"mesh": stem, "mode": mode, "method": args.base_mesh_method,
+                        "run": {"date": meta["date"], "commit": meta["commit"]}})
             rows.append(row)
             print(stem, mode, row.get("stages", {}).get("basemesh", row.get("error")),
                   row.get("base_mesh", {}).get("faces"), flush=True)
