@@ -40,7 +40,7 @@ import scipy.sparse as sp
 
 from core.errors import ParameterError
 from core.geometry import face_areas
-from core.segmentation.repair_operators import joint_merges
+from core.segmentation.repair_operators import joint_merges, neighbour_merges
 from core.segmentation.charts import OPPOSITE, extract_layout
 from core.segmentation.validity import boundaries_at, sub_topology
 
@@ -167,15 +167,9 @@ def _independent(order, adjacency):
 def _trials(topology, face_part, labels, layout, chart, cost, small):
     """(name, labels) trials for ``chart`` (module docstring); ``small``: (c,) bool candidate
     charts, for the group merges."""
-    nbrs = layout.chart_neighbours[chart].indices
-    nbrs = nbrs[layout.chart_part[nbrs] == layout.chart_part[chart]]
-    in_chart = layout.face_chart == chart
-    out = []
-    for lab in np.unique(layout.chart_label[nbrs]).tolist():
-        cand = labels.copy()
-        cand[in_chart] = lab
-        out.append(("merge", cand))
-    if len(np.unique(layout.chart_label[nbrs])) > 1:
+    merges = neighbour_merges(layout, labels, chart)
+    out = [("merge", cand) for _, cand in merges]
+    if len(merges) > 1:
         cand = dissolved_labels(topology, face_part, labels, layout.face_chart, chart, cost)
         if cand is not None:
             out.append(("dissolve", cand))

@@ -315,6 +315,24 @@ def local_resegment(labels, unary, nb, colour, region, lam, penalty):
     return out.astype(np.int64)
 
 
+def same_part_neighbours(layout, chart):
+    """(k,) int64 the charts next to ``chart`` in its own part."""
+    nbrs = layout.chart_neighbours[chart].indices
+    return nbrs[layout.chart_part[nbrs] == layout.chart_part[chart]]
+
+
+def neighbour_merges(layout, labels, chart):
+    """``[(label, labels)]``: ``labels`` ((m,) int64) with the faces of ``chart`` given each
+    label of its neighbouring charts in its part, one labeling per label."""
+    in_chart = layout.face_chart == chart
+    merges = []
+    for lab in np.unique(layout.chart_label[same_part_neighbours(layout, chart)]).tolist():
+        cand = labels.copy()
+        cand[in_chart] = lab
+        merges.append((lab, cand))
+    return merges
+
+
 def chart_candidates(F, face_part, val, labels, c, cost, unary, nb, colour, penalty, lams):
     """Candidate labelings that change invalid chart ``c``: merges into each neighbouring label;
     for each label of another axis missing around the chart, the faces of the chart and its
@@ -328,14 +346,9 @@ def chart_candidates(F, face_part, val, labels, c, cost, unary, nb, colour, pena
     list of Trial
     """
     lay = val.layout
-    nbrs = lay.chart_neighbours[c].indices
-    nbrs = nbrs[lay.chart_part[nbrs] == lay.chart_part[c]]
+    nbrs = same_part_neighbours(lay, c)
     in_c = lay.face_chart == c
-    out = []
-    for lab in np.unique(lay.chart_label[nbrs]).tolist():
-        cand = labels.copy()
-        cand[in_c] = lab
-        out.append(Trial(f"merge_into_{lab}", cand))
+    out = [Trial(f"merge_into_{lab}", cand) for lab, cand in neighbour_merges(lay, labels, c)]
     region = in_c | np.isin(lay.face_chart, nbrs)
     a = int(lay.chart_label[c])
     present = set(lay.chart_label[nbrs].tolist())
@@ -377,8 +390,7 @@ def joint_merges(lay, labels, c, small):
     list of Trial
     """
     part = lay.chart_part[c]
-    nbrs = lay.chart_neighbours[c].indices
-    nbrs = nbrs[lay.chart_part[nbrs] == part]
+    nbrs = same_part_neighbours(lay, c)
     small = nbrs[small[nbrs]]
     if not len(small):
         return []
