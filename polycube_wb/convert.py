@@ -11,8 +11,6 @@ points and facets with their neighbours) written and parsed with numpy
 ``Mesh.Mesh`` from Python lists, or reading its ``Topology``, holds the GUI thread for about a
 second on a mesh of 150,000 triangles, reading or writing the binary file a few hundredths.
 """
-import os
-import tempfile
 from itertools import chain
 
 import numpy as np
@@ -23,6 +21,7 @@ import MeshPart
 
 from core.errors import InvalidMeshError, ParameterError
 from core.geometry import validate_triangles
+from polycube_wb.file_bytes import bytes_written_by, read_from_bytes
 from polycube_wb.mesh_binary import binary_mesh, binary_mesh_arrays
 
 
@@ -84,22 +83,13 @@ def mesh_to_arrays(mesh):
     if not mesh.Placement.isIdentity():
         points, facets = mesh.Topology
         return vectors_to_array(points), _triangle_array(facets)
-    with tempfile.TemporaryDirectory(prefix="polycube-mesh-") as folder:
-        path = os.path.join(folder, "mesh.bms")
-        mesh.write(path)
-        with open(path, "rb") as handle:
-            data = handle.read()
-    return binary_mesh_arrays(data)
+    return binary_mesh_arrays(bytes_written_by(mesh.write, "mesh.bms"))
 
 
 def _read_binary_mesh(data):
     """``Mesh.Mesh`` read from the bytes of a binary mesh file."""
-    with tempfile.TemporaryDirectory(prefix="polycube-mesh-") as folder:
-        path = os.path.join(folder, "mesh.bms")
-        with open(path, "wb") as handle:
-            handle.write(data)
-        mesh = Mesh.Mesh()
-        mesh.read(path)
+    mesh = Mesh.Mesh()
+    read_from_bytes(data, "mesh.bms", mesh.read)
     return mesh
 
 

@@ -10,10 +10,10 @@ binary shape format (:func:`register_shape_pickling`), so the B-rep work holds n
 GUI waits for.
 """
 import os
-import tempfile
 from dataclasses import dataclass
 
 from core.errors import Cancelled, PolycubeError
+from polycube_wb.file_bytes import bytes_written_by, read_from_bytes
 
 
 class StageFailed(PolycubeError):
@@ -104,21 +104,13 @@ def shape_from_binary(data):
     unpickle)."""
     import Part
 
-    with tempfile.TemporaryDirectory(prefix="polycube-shape-") as folder:
-        path = os.path.join(folder, "shape.bin")
-        with open(path, "wb") as handle:
-            handle.write(data)
-        shape = Part.Shape()
-        shape.importBinary(path)
+    shape = Part.Shape()
+    read_from_bytes(data, "shape.bin", shape.importBinary)
     return shape
 
 
 def _reduce_shape(shape):
-    with tempfile.TemporaryDirectory(prefix="polycube-shape-") as folder:
-        path = os.path.join(folder, "shape.bin")
-        shape.exportBinary(path)
-        with open(path, "rb") as handle:
-            return shape_from_binary, (handle.read(),)
+    return shape_from_binary, (bytes_written_by(shape.exportBinary, "shape.bin"),)
 
 
 def register_shape_pickling():
