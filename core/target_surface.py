@@ -13,7 +13,9 @@ test). The normal at the closest point is the angle-weighted pseudo-normal (Baer
 and Aanaes 2005): the face normal inside a face, the mean of the two face normals on an
 edge, the angle-weighted vertex normal at a corner; with it the sign of
 ``(q - closest) . normal`` is the exact inside / outside sign of ``q`` for a closed,
-outward-oriented mesh. With ``split=True`` the tree holds the long triangles cut into shorter
+outward-oriented mesh. The normal returned takes a closest point within ``CONTACT`` of an
+edge or corner as on it, so that points on the target's feature lines get the same normal
+whatever their last bits; the sign is still the exact one. With ``split=True`` the tree holds the long triangles cut into shorter
 pieces (``SPLIT_EDGE``), each numbered back to its triangle, so a query opens fewer boxes;
 the answers are still computed on the mesh's own triangles.
 
@@ -187,8 +189,11 @@ class TargetSurface:
     def _closest(self, points):
         """:meth:`closest`, computed."""
         near = self.nearest(points)
-        normal = self._normal_at(near.face, near.region)
-        sign = np.where(np.einsum("ij,ij->i", points - near.point, normal) >= 0, 1.0, -1.0)
+        # the sign from the exact region's normal: it is the exact inside / outside sign
+        exact = self._normal_at(near.face, near.region)
+        sign = np.where(np.einsum("ij,ij->i", points - near.point, exact) >= 0, 1.0, -1.0)
+        normal = self._normal_at(near.face, self._snapped_region(near.face, near.region,
+                                                                 near.bary))
         return ClosestPoints(near.point, near.face, near.bary, near.region, near.distance,
                              normal, sign * near.distance)
 
@@ -307,6 +312,49 @@ class TargetSurface:
         weighted = (angles[:, :, None] * fn[:, None, :]).reshape(-1, 3)
         vertex_sum = scatter_add(F.reshape(-1), weighted, len(V))
         return edge_normals, _unit(vertex_sum)
+
+    @cached_property
+    def _heights(self):
+        """(m, 3) float64 distance of each face's corner ``i`` from the opposite edge's line
+        (model units; zero for a degenerate face)."""
+        tri = self._tri
+        twice_area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
+                                    axis=1)
+        opposite = np.linalg.norm(np.roll(tri, -2, axis=1) - np.roll(tri, -1, axis=1), axis=2)
+        return np.divide(twice_area[:, None], opposite, out=np.zeros_like(opposite),
+                         where=opposite > 0)
+
+    def _snapped_region(self, face, region, bary):
+        """``region`` with a closest point within ``CONTACT`` of the diagonal of an edge (of
+        two edges: their corner) moved onto that edge (corner).
+
+        A point on a feature line of the target (a fitted crease curve, a limit point held
+        on an edge) would otherwise take the normal of whichever triangle the last bits of
+        its coordinates fall on: a face normal on one machine, the edge's mean normal on
+        another, and a fit row that uses it turns by up to 90 degrees.
+
+        Parameters
+        ----------
+        face : (k,) int64; region : (k,) int8 codes of :class:`NearestPoints`;
+        bary : (k, 3) float64 barycentric coordinates on ``face``.
+
+        Returns
+        -------
+        (k,) int8 region codes; a region is only ever raised from face to edge or corner,
+        from edge to corner.
+        """
+        near = bary * self._heights[face] <= CONTACT * self.diagonal  # (k, 3)
+        count = near.sum(axis=1)
+        snapped = np.array(region, dtype=np.int8)
+        # near the edge opposite corner i: edge codes 1..3 are (v0 v1), (v1 v2), (v2 v0)
+        one = (count == 1) & (snapped == 0)
+        snapped[one] = np.array([2, 3, 1], dtype=np.int8)[np.argmax(near[one], axis=1)]
+        # near two edges: the corner they share (the one coordinate not near zero); a
+        # degenerate face near all three: its corner of the largest coordinate
+        corner = np.where(count == 2, np.argmin(near, axis=1), np.argmax(bary, axis=1))
+        many = (count >= 2) & (snapped < 4)
+        snapped[many] = 4 + corner[many]
+        return snapped
 
     def _normal_at(self, face, region):
         edge_normals, vertex_normals = self._pseudo_normals

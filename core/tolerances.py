@@ -23,7 +23,8 @@ CONTACT = 1e-9
 positions: triangles meeting only that closely are not self-intersecting, a patch corner
 that near an extraordinary vertex is at it, samples of neighbouring patches that close are
 welded into one vertex of the tessellation, a cage vertex that near a target vertex sits on
-it, a fine point that shallow below the target is queried again when its inside bound does
+it, a closest point that near an edge or corner of the target takes its pseudo-normal, a
+fine point that near the target is on it (not outside it), a fine point that shallow below the target is queried again when its inside bound does
 not prove it inside, a ray's exit that near its start (times the ray's length) does not
 count, and the fit's box and distance bounds are widened by it (relative to the largest
 coordinate where no diagonal is at hand)."""

@@ -205,7 +205,10 @@ def hold_back_crossings(reference, moved, mapping, triangles, clean=True, moved_
     # the reference's pairs, of which only those near a moving vertex can change
     pairs, changed, halving, candidates = allowed, moving, 0, None
     while True:
-        W = reference + fraction[:, None] * (moved - reference)
+        # a vertex not held back is ``moved`` bit for bit (the callers tell held-back
+        # vertices by comparing), not ``reference + (moved - reference)``
+        W = np.where((fraction == 1)[:, None], moved,
+                     reference + fraction[:, None] * (moved - reference))
         if halving == 0 and moved_pairs is not None:
             pairs = moved_pairs
         else:

@@ -20,6 +20,7 @@ import numpy as np
 
 from core.geometry import face_cross, scatter_add
 from core.target_surface import ClosestPoints, TargetSurface
+from core.tolerances import CONTACT
 
 
 def volume(X, T):
@@ -47,16 +48,18 @@ def packaging(X, target, mode="inside", known=None):
     X : (n, 3) float64
     target : core.target_surface.TargetSurface
     mode : ``'inside'`` sums ``max(d_j, 0)`` (penetration out of the target, the
-        paper's form); ``'nearest'`` sums ``|d_j|``.
+        paper's form) over the points more than ``CONTACT`` of the target's diagonal
+        outside (a point that near is on the surface); ``'nearest'`` sums ``|d_j|``.
     known : InsideBounds or None, the queries of earlier calls on the same ``n`` points
         (``mode='inside'`` only): points proven still inside are not queried again.
 
     Returns
     -------
     value : float, model units.
-    gradient : (n, 3) float64. With the closest point inside a target face it is the
-        face normal (Eq. 8); on an edge or a vertex of the target it is the exact
-        gradient of the distance, ``(X_j - CPP_j) / |X_j - CPP_j|``, signed. Zero for
+    gradient : (n, 3) float64, the exact gradient of the signed distance,
+        ``sign(d_j) (X_j - CPP_j) / |X_j - CPP_j|`` (the face normal where the closest point
+        is inside a target face, Eq. 8); for a point on the surface (within ``CONTACT``),
+        where that direction is rounding, the pseudo-normal there. Zero for
         vertices that do not contribute.
     signed : (n,) float64 signed distance ``d_j`` to the target, positive outside; for
         a point that ``known`` proves inside, a negative upper bound of it.
@@ -74,16 +77,19 @@ def packaging(X, target, mode="inside", known=None):
         near = known.closest(target, X, query)
         signed[:] = known.bound(X)
     signed[query] = near.signed
-    region = near.region
+    touch = CONTACT * target.diagonal
     offset = X[query] - near.point
     length = np.abs(near.signed)
-    direction = np.divide(offset, length[:, None], out=near.normal.copy(),
-                          where=(region[:, None] != 0) & (length[:, None] > 0))
-    direction[region != 0] *= np.sign(near.signed[region != 0])[:, None]
+    off_surface = length > touch
+    direction = near.normal.copy()
+    direction[off_surface] = (offset[off_surface] * (np.sign(near.signed[off_surface])
+                                                     / length[off_surface])[:, None])
     if mode == "inside":
-        active = signed > 0
+        # a point on the surface (within the contact tolerance) is not outside: its last
+        # bits would otherwise decide whether it pulls, and in which direction
+        active = signed > touch
         value = float(signed[active].sum())
-        weight = (near.signed > 0).astype(np.float64)
+        weight = (near.signed > touch).astype(np.float64)
     else:
         value = float(length.sum())
         weight = np.sign(near.signed)

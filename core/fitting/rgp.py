@@ -56,6 +56,11 @@ class RGPSettings:
     moving: float = 0.05
     """Length of a search-direction row (at most 1) above which a vertex counts as moving,
     for the zig-zag test of its damping."""
+    reversal: float = 1e-6
+    """A moving vertex's move reverses (zig-zag) when the cosine between it and its previous
+    move is below ``-reversal``. Moves at right angles (common on a symmetric part, where a
+    vertex slides along one axis and then along another) have a cosine of rounding size,
+    whose sign would otherwise decide the damping."""
     shrink: float = 0.7
     """Factor on a vertex's damping when its move reverses (zig-zag)."""
     grow: float = 1.5
@@ -286,9 +291,11 @@ def _buffer_weights(constraints, zones, initial_buffer):
 def _damped(damping, direction, previous):
     """(n,) float64 damping factors after a move along ``direction`` ((n, 3)) that followed
     ``previous``: shrunk where a moving vertex reverses, grown (up to 1) elsewhere."""
-    moving = (np.linalg.norm(direction, axis=1) > RGP.moving) & (
-        np.linalg.norm(previous, axis=1) > RGP.moving)
-    reversed_ = moving & (np.einsum("ij,ij->i", direction, previous) < 0)
+    length, previous_length = (np.linalg.norm(direction, axis=1),
+                               np.linalg.norm(previous, axis=1))
+    moving = (length > RGP.moving) & (previous_length > RGP.moving)
+    reversed_ = moving & (np.einsum("ij,ij->i", direction, previous)
+                          < -RGP.reversal * length * previous_length)
     return np.where(reversed_, np.maximum(RGP.shrink * damping, RGP.min_damping),
                     np.minimum(RGP.grow * damping, 1.0))
 
