@@ -18,6 +18,10 @@ and skips every node whose box lies farther than the nearest triangle found so f
 triangle reached gets Ericson's region test (:func:`closest_on_triangles`, the same
 arithmetic), and equal distances go to the lower triangle number.
 
+Rivals (:func:`rival_triangles`): the same walk, bounded by a point's distance to its
+closest point plus a slack, keeps the nearest triangle whose closest point lies in another
+direction from the point (a point on the mesh's medial axis has two).
+
 Rays (:func:`first_exits`): each ray ``o + t d`` (``d`` a unit vector) skips every node
 whose box the segment ``0 <= t <= best`` misses (slab test), ``best`` being the nearest
 exit found so far (at first the ray's length); the child entered nearer is opened first.
@@ -133,6 +137,35 @@ def nearest_triangles(tree, points):
     ``points`` ((k, 3) float64), the lower number where two are equally near."""
     return _nearest(tree.tri, tree.order, tree.node_lo, tree.node_hi,
                     np.ascontiguousarray(points, dtype=np.float64))
+
+
+@keeps_interrupts
+def rival_triangles(tree, points, closest, distance, slack, cosine):
+    """For each point, the nearest triangle of ``tree`` whose closest point lies in another
+    direction: a point on the medial axis of the mesh (midway between the two walls of a
+    thin member, on the bisector of a concave corner) is as near to two places, and which
+    of them :func:`nearest_triangles` returns is decided by rounding.
+
+    Parameters
+    ----------
+    tree : TriangleTree
+    points : (k, 3) float64; closest : (k, 3) float64 their closest points on the mesh;
+    distance : (k,) float64 the distances to them (model units).
+    slack : float >= 0, model units: a rival is at most ``distance + slack`` away, and a
+        point at most ``slack`` from the mesh has none.
+    cosine : float, a rival's direction from the point makes a cosine below this with the
+        direction to ``closest``.
+
+    Returns
+    -------
+    (k,) int64 tree triangle of each point's rival (the nearest, the lower number of equally
+    near ones), ``-1`` where none.
+    """
+    return _rivals(tree.tri, tree.order, tree.node_lo, tree.node_hi,
+                   np.ascontiguousarray(points, dtype=np.float64),
+                   np.ascontiguousarray(closest, dtype=np.float64),
+                   np.ascontiguousarray(distance, dtype=np.float64), float(slack),
+                   float(cosine))
 
 
 @keeps_interrupts
@@ -351,6 +384,49 @@ def _nearest(tri, order, node_lo, node_hi, points):
                     distance += gap * gap
                 if distance < best or (distance == best and f < best_face):
                     best, best_face = distance, f
+        found[r] = best_face
+    return found
+
+
+@numba.njit(cache=True, nogil=True)
+def _rivals(tri, order, node_lo, node_hi, points, closest, distance, slack, cosine):
+    """The work of :func:`rival_triangles`."""
+    m, size = order.shape[0], node_lo.shape[0] // 2
+    found = np.full(points.shape[0], -1, dtype=np.int64)
+    stack = np.empty(STACK_DEPTH, dtype=np.int64)
+    for r in range(points.shape[0]):
+        if distance[r] <= slack:
+            continue
+        p, c = points[r], closest[r]
+        reach = (distance[r] + slack) ** 2
+        best, best_face = reach, -1
+        stack[0], top = 1, 1
+        while top:
+            top -= 1
+            node = stack[top]
+            if _box_distance(p, node_lo[node], node_hi[node]) > best:
+                continue
+            if node < size:
+                top = _push_children(stack, top, node, best,
+                                     _box_distance(p, node_lo[2 * node], node_hi[2 * node]),
+                                     _box_distance(p, node_lo[2 * node + 1],
+                                                   node_hi[2 * node + 1]))
+                continue
+            first_box, stop = _leaf_boxes(node, size, m)
+            for i in range(first_box, stop):
+                f = order[i]
+                v, w, _ = _closest_on_triangle(p, tri[f])
+                squared, along = 0.0, 0.0
+                for d in range(3):
+                    gap = p[d] - (tri[f, 0, d] + v * (tri[f, 1, d] - tri[f, 0, d])
+                                  + w * (tri[f, 2, d] - tri[f, 0, d]))
+                    squared += gap * gap
+                    along += gap * (p[d] - c[d])
+                if squared > best or (squared == best and f > best_face >= 0):
+                    continue
+                if along >= cosine * np.sqrt(squared) * distance[r]:
+                    continue  # the same place, or near it in the same direction
+                best, best_face = squared, f
         found[r] = best_face
     return found
 

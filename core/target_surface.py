@@ -15,7 +15,10 @@ edge, the angle-weighted vertex normal at a corner; with it the sign of
 ``(q - closest) . normal`` is the exact inside / outside sign of ``q`` for a closed,
 outward-oriented mesh. The normal returned takes a closest point within ``CONTACT`` of an
 edge or corner as on it, so that points on the target's feature lines get the same normal
-whatever their last bits; the sign is still the exact one. With ``split=True`` the tree holds the long triangles cut into shorter
+whatever their last bits; the sign is still the exact one. A query point on the surface's
+medial axis is as near to two places (the two walls of a thin member); the answer names the
+other one too (``tied``), so that the fit's rows can use both rather than the one rounding
+picked (:meth:`ClosestPoints.mean_plane`). With ``split=True`` the tree holds the long triangles cut into shorter
 pieces (``SPLIT_EDGE``), each numbered back to its triangle, so a query opens fewer boxes;
 the answers are still computed on the mesh's own triangles.
 
@@ -30,7 +33,8 @@ from functools import cached_property
 
 import numpy as np
 
-from core.box_tree import closest_on_triangles, first_exits, nearest_triangles, triangle_tree
+from core.box_tree import (closest_on_triangles, first_exits, nearest_triangles,
+                           rival_triangles, triangle_tree)
 from core.geometry import (bisect_long_triangles, morton_codes, sample_surface, scatter_add,
                            unit_face_normals, validate_triangles)
 from core.tolerances import CONTACT
@@ -51,6 +55,11 @@ triangles take about half the time. Meshes without long triangles are unchanged.
 SPLIT_MOST = 4
 """... and at most this many times as many pieces as triangles: while more, the longest
 piece allowed is doubled."""
+TIE_ANGLE = np.radians(8.0)
+"""Two closest points of a query point are two places (the point is tied between them,
+:attr:`ClosestPoints.tied`) when the directions from the point to them differ by more than
+this; the triangles around one closest point, and coplanar ones just beyond it, are within
+a fraction of it."""
 CLOSEST_KEPT = 4
 """Most answers of :meth:`TargetSurface.closest` kept (the latest), each for its query
 points bit for bit, and as many of :meth:`TargetSurface.samples_nearest`: the fit queries
@@ -85,10 +94,32 @@ class ClosestPoints(NearestPoints):
 
     normal : (k, 3) float64 unit pseudo-normal at the closest point.
     signed : (k,) float64 signed distance (model units), positive outside.
+    tied : (k,) bool, another place of the surface in another direction is as near (within
+        ``CONTACT`` of the diagonal): the query point lies on the surface's medial axis
+        (midway between the walls of a thin member, on the bisector of a concave corner),
+        and which of the two ``point`` is was decided by rounding.
+    other_point, other_normal : (k, 3) float64, that other closest point and its
+        pseudo-normal where ``tied``; ``point`` and ``normal`` elsewhere.
     """
 
     normal: np.ndarray = None
     signed: np.ndarray = None
+    tied: np.ndarray = None
+    other_point: np.ndarray = None
+    other_normal: np.ndarray = None
+
+    def mean_plane(self):
+        """The tangent plane of each answer, averaged over its two closest points where it is
+        tied: ``(normal, offset)``, (k, 3) and (k,) float64, the plane
+        ``normal . x = offset`` (``normal`` shorter than one where tied: the mean of two unit
+        normals). A point-to-plane row built on it is the mean of the rows of the two closest
+        points, so it does not depend on which of them rounding picked; elsewhere it is the
+        plane of the pseudo-normal at the closest point, bit for bit.
+        """
+        normal = 0.5 * (self.normal + self.other_normal)
+        offset = 0.5 * (np.einsum("ij,ij->i", self.normal, self.point)
+                        + np.einsum("ij,ij->i", self.other_normal, self.other_point))
+        return normal, offset
 
 
 @dataclass
@@ -194,8 +225,28 @@ class TargetSurface:
         sign = np.where(np.einsum("ij,ij->i", points - near.point, exact) >= 0, 1.0, -1.0)
         normal = self._normal_at(near.face, self._snapped_region(near.face, near.region,
                                                                  near.bary))
+        other_point, other_normal = near.point.copy(), normal.copy()
+        rival = self._rivals(points, near)
+        tied = rival >= 0
+        if tied.any():
+            point, bary, region = closest_on_triangles(self._tri[rival[tied]], points[tied])
+            other_point[tied] = point
+            other_normal[tied] = self._normal_at(rival[tied], self._snapped_region(
+                rival[tied], region, bary))
         return ClosestPoints(near.point, near.face, near.bary, near.region, near.distance,
-                             normal, sign * near.distance)
+                             normal, sign * near.distance, tied, other_point, other_normal)
+
+    def _rivals(self, points, near):
+        """(k,) int64 the triangle of each point's rival closest point
+        (:func:`core.box_tree.rival_triangles`, within ``CONTACT`` of the diagonal and more
+        than ``TIE_ANGLE`` away in direction), ``-1`` where none."""
+        rival = np.full(len(points), -1, dtype=np.int64)
+        if len(points):
+            order = np.argsort(morton_codes(points), kind="stable")
+            rival[order] = self._triangle_of(rival_triangles(
+                self._point_tree, points[order], near.point[order], near.distance[order],
+                CONTACT * self.diagonal, np.cos(TIE_ANGLE)))
+        return rival
 
     def samples_nearest(self, vertices, faces, count, seed=0):
         """Closest points on another triangle mesh to this surface's samples (:meth:`samples`).

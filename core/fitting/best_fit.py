@@ -6,7 +6,9 @@ vertices) should lie on the target and the target on the limit surface. Each
 Gauss-Newton round linearises both distances point-to-plane:
 
 * forward, for every fine limit point ``X_j`` with closest target point ``c_j`` and
-  pseudo-normal ``n_j``: ``r_j = n_j . (X_j - c_j)``;
+  pseudo-normal ``n_j``: ``r_j = n_j . (X_j - c_j)`` (the mean of the rows of its two closest
+  points where it lies on the target's medial axis,
+  :meth:`core.target_surface.ClosestPoints.mean_plane`);
 * backward, for area-weighted samples ``s_k`` of the target (normal ``m_k``) with
   closest point ``y_k = B_k X`` on the triangulated limit surface (``B`` the barycentric
   rows): ``r_k = m_k . (B_k M V - s_k)``;
@@ -126,11 +128,12 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
             break
         # pairs whose normals disagree (the far wall of a thin member) are left out
         normals = vertex_normals(X, triangles)
-        keep_f = compatibility(_dot(normals, forward.normal))
+        plane_normal, plane_offset = forward.mean_plane()
+        keep_f = compatibility(_dot(normals, plane_normal))
         keep_b = compatibility(_dot(_interpolated(normals, triangles[back.face], back.bary),
                                     sample_normal))
-        V = system.solve(V, [(forward.normal * keep_f[:, None], own, ones,
-                              _dot(forward.normal, forward.point) * keep_f, n_fine),
+        V = system.solve(V, [(plane_normal * keep_f[:, None], own, ones,
+                              plane_offset * keep_f, n_fine),
                              (sample_normal * keep_b[:, None], triangles[back.face], back.bary,
                               _dot(sample_normal, points) * keep_b, count)])
     return BestFitResult(best[1], len(rms) - 1, rms, stopped)
@@ -185,9 +188,10 @@ def pull_inside(base, mapping, target, start, margin, rounds=2, smoothness=1e-2,
         active = near.signed > -margin
         if not active.any():
             break
+        plane_normal, plane_offset = near.mean_plane()
         normal, b = np.zeros_like(X), np.zeros(len(X))
-        normal[query] = near.normal * active[:, None]
-        b[query] = (_dot(near.normal, near.point) - margin) * active
+        normal[query] = plane_normal * active[:, None]
+        b[query] = (plane_offset - margin) * active
         V = system.solve(V, [(normal, np.arange(len(X))[:, None], np.ones((len(X), 1)), b,
                               system.n_fine)])
     return V

@@ -119,7 +119,7 @@ def _shift(V, mapping, triangles, target, movable, carry, known):
     out = near.signed > 0
     outside = query[out]
     depth = near.signed[out]
-    wanted = -depth[:, None] * near.normal[out]
+    wanted = -depth[:, None] * near.mean_plane()[0][out]
     owner = _owner(mapping, outside)
     if carry and len(outside):
         direction = -vertex_normals(X, triangles)[outside]

@@ -59,7 +59,9 @@ def packaging(X, target, mode="inside", known=None):
     gradient : (n, 3) float64, the exact gradient of the signed distance,
         ``sign(d_j) (X_j - CPP_j) / |X_j - CPP_j|`` (the face normal where the closest point
         is inside a target face, Eq. 8); for a point on the surface (within ``CONTACT``),
-        where that direction is rounding, the pseudo-normal there. Zero for
+        where that direction is rounding, the pseudo-normal there; for a point on the
+        target's medial axis (``tied``), the mean of the gradients towards its two closest
+        points. Zero for
         vertices that do not contribute.
     signed : (n,) float64 signed distance ``d_j`` to the target, positive outside; for
         a point that ``known`` proves inside, a negative upper bound of it.
@@ -84,6 +86,10 @@ def packaging(X, target, mode="inside", known=None):
     direction = near.normal.copy()
     direction[off_surface] = (offset[off_surface] * (np.sign(near.signed[off_surface])
                                                      / length[off_surface])[:, None])
+    # on the medial axis: the mean of the gradients towards the two closest points
+    tied = near.tied & off_surface
+    direction[tied] = 0.5 * (direction[tied] + (X[query][tied] - near.other_point[tied])
+                             * (np.sign(near.signed[tied]) / length[tied])[:, None])
     if mode == "inside":
         # a point on the surface (within the contact tolerance) is not outside: its last
         # bits would otherwise decide whether it pulls, and in which direction

@@ -329,3 +329,53 @@ def test_nearest_answers_each_point_as_the_tree_does_alone_whatever_the_order():
     np.testing.assert_array_equal(again.face, near.face[shuffle])
     np.testing.assert_array_equal(again.point, near.point[shuffle])
     assert len(surface.nearest(np.zeros((0, 3))).face) == 0
+
+
+def test_a_point_between_two_walls_is_tied_whatever_its_last_bits():
+    # midway inside a thin slab both walls are as near: whichever one rounding names, the
+    # answer names the other too, and the mean plane of the two is the same
+    slab = trimesh.creation.box(extents=(4.0, 4.0, 0.2))
+    target = TargetSurface(slab.vertices, slab.faces, split=True)
+    rng = np.random.default_rng(1)
+    middle = np.column_stack([rng.uniform(-1.5, 1.5, (50, 2)), np.zeros(50)])
+    planes = []
+    for noise in (0.0, 1e-13, -1e-13):
+        near = target.closest(middle + [0.0, 0.0, noise])
+        assert near.tied.all()
+        walls = np.sort(np.column_stack([near.point[:, 2], near.other_point[:, 2]]), axis=1)
+        assert np.allclose(walls, [-0.1, 0.1], atol=1e-12)
+        planes.append(near.mean_plane())
+    for normal, offset in planes[1:]:
+        assert np.allclose(normal, planes[0][0], atol=1e-9)
+        assert np.allclose(offset, planes[0][1], atol=1e-9)
+    assert np.abs(planes[0][0]).max() < 1e-9  # opposite walls: the mean normal vanishes
+
+
+def test_points_off_the_medial_axis_are_not_tied_and_keep_their_plane():
+    slab = trimesh.creation.box(extents=(4.0, 4.0, 0.2))
+    target = TargetSurface(slab.vertices, slab.faces)
+    points = np.array([[0.3, 0.2, 0.02], [0.0, 0.0, 0.5], [1.0, -1.0, -0.09],
+                       [0.5, 0.5, 0.1]])  # the last on the surface
+    near = target.closest(points)
+    assert not near.tied.any()
+    normal, offset = near.mean_plane()
+    assert np.array_equal(normal, near.normal)
+    assert np.allclose(offset, np.einsum("ij,ij->i", near.normal, near.point), atol=0)
+
+
+def test_a_point_outside_a_concave_corner_pulls_along_its_bisector():
+    # an L-shaped solid: outside its inner corner, on the bisector, both faces are as near,
+    # and the packaging gradient is the mean of the two distance gradients
+    from core.fitting.responses import packaging
+
+    a = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
+    a.apply_translation([0.0, -0.5, 0.0])
+    b = trimesh.creation.box(extents=(1.0, 2.0, 1.0))
+    b.apply_translation([-0.5, 0.0, 0.0])
+    solid = a.union(b, engine="manifold")
+    target = TargetSurface(solid.vertices, solid.faces)
+    on_bisector = np.array([[0.2, 0.2, 0.1], [0.05, 0.05, -0.2]])
+    near = target.closest(on_bisector)
+    assert near.tied.all() and (near.signed > 0).all()
+    _, gradient, _ = packaging(on_bisector, target)
+    assert np.allclose(gradient, [[0.5, 0.5, 0.0]] * 2, atol=1e-12)
