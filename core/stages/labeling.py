@@ -11,6 +11,10 @@ REPAIR_PASSES = 3
 """Passes of repair, chart absorption and straightening at most: a pass after the first runs
 only while the labeling is still invalid and the pass before changed it."""
 
+REPAIR_ESCAPES = 4
+"""Uphill restarts (:func:`core.segmentation.repair.repair_labeling`'s ``escapes``) the repair
+of a pass after the first may try."""
+
 
 def run_labeling(intake, parts, frames, params, progress):
     """Label every face with one of six directions of its frame, repair, check validity.
@@ -26,7 +30,8 @@ def run_labeling(intake, parts, frames, params, progress):
     A repair stops where no candidate lowers the invalid count within its angle budget and
     trial caps, but the absorption and the straightening move boundaries and merge charts, so
     the next pass starts from other charts and corners, with a fresh budget and fresh caps
-    measured from its own input: validity comes first, since the base mesh refuses an invalid
+    measured from its own input, and the repair may then leave a stuck state uphill
+    (:data:`REPAIR_ESCAPES`): validity comes first, since the base mesh refuses an invalid
     labeling whatever its angle. A labeling valid after the first pass is never changed again.
 
     Parameters
@@ -73,7 +78,7 @@ def run_labeling(intake, parts, frames, params, progress):
             start = labels
             labels, validity, repair_report, absorb_report, straighten_report = _repair_pass(
                 mesh, face_part, field, labels, params, topology, colour, judge, unit_area,
-                progress)
+                REPAIR_ESCAPES if passes > 1 else 0, progress)
             if validity.is_valid or np.array_equal(labels, start):
                 break
     else:
@@ -108,8 +113,9 @@ def run_labeling(intake, parts, frames, params, progress):
 
 
 def _repair_pass(mesh, face_part, field, labels, params, topology, colour, judge, unit_area,
-                 progress):
-    """One pass of repair, chart absorption and straightening on ``labels`` ((m,) int).
+                 escapes, progress):
+    """One pass of repair (with ``escapes`` uphill restarts), chart absorption and straightening
+    on ``labels`` ((m,) int).
 
     Returns
     -------
@@ -123,7 +129,8 @@ def _repair_pass(mesh, face_part, field, labels, params, topology, colour, judge
     labels, repair_report = repair_labeling(mesh.vertices, mesh.faces, face_part, labels,
                                             field.face_frame, field.face_interface_axis,
                                             lam=params.lam, penalty=params.penalty,
-                                            topology=topology, colour=colour, judge=judge)
+                                            topology=topology, colour=colour, judge=judge,
+                                            escapes=escapes)
     progress.report("labeling", 0.7)
     progress.check_cancel()
     absorption = absorb_charts(mesh.vertices, mesh.faces, face_part, labels, judge, unit_area)
