@@ -48,6 +48,7 @@ def run_labeling(intake, parts, frames, params, progress):
     is invalid), the base-mesh stage refuses it.
     """
     from core.geometry import face_areas
+    from core.progress import SubProgress
     from core.segmentation.charts import build_topology
     from core.segmentation.labeling import (face_colouring, face_normals, hbecvt_labeling,
                                             mean_label_angle, nearest_direction_labels,
@@ -76,9 +77,11 @@ def run_labeling(intake, parts, frames, params, progress):
         unit_area = float(face_areas(mesh.vertices, mesh.faces).sum()) / params.target_faces
         for passes in range(1, REPAIR_PASSES + 1):
             start = labels
+            share = SubProgress(progress, 0.5 + 0.45 * (passes - 1) / REPAIR_PASSES,
+                                0.5 + 0.45 * passes / REPAIR_PASSES)
             labels, validity, repair_report, absorb_report, straighten_report = _repair_pass(
                 mesh, face_part, field, labels, params, topology, colour, judge, unit_area,
-                REPAIR_ESCAPES if passes > 1 else 0, progress)
+                REPAIR_ESCAPES if passes > 1 else 0, share)
             if validity.is_valid or np.array_equal(labels, start):
                 break
     else:
@@ -115,7 +118,7 @@ def run_labeling(intake, parts, frames, params, progress):
 def _repair_pass(mesh, face_part, field, labels, params, topology, colour, judge, unit_area,
                  escapes, progress):
     """One pass of repair (with ``escapes`` uphill restarts), chart absorption and straightening
-    on ``labels`` ((m,) int).
+    on ``labels`` ((m,) int); ``progress`` is the pass's share of the stage's.
 
     Returns
     -------
@@ -131,7 +134,7 @@ def _repair_pass(mesh, face_part, field, labels, params, topology, colour, judge
                                             lam=params.lam, penalty=params.penalty,
                                             topology=topology, colour=colour, judge=judge,
                                             escapes=escapes)
-    progress.report("labeling", 0.7)
+    progress.report("labeling", 0.5)
     progress.check_cancel()
     absorption = absorb_charts(mesh.vertices, mesh.faces, face_part, labels, judge, unit_area)
     progress.report("labeling", 0.8)
