@@ -36,6 +36,12 @@ that touch a separating edge, with the extra rule that a face may only take a la
 among its neighbours (boundaries move, charts are neither created nor split off by it); this undoes
 the jagged edges merges leave. Everything is vectorised per round; the loop is deterministic.
 
+The loop is greedy, so it can stop where every candidate adds invalid items although one of them
+is a step away from a labeling the operators finish (a merge that leaves a neighbour with three
+boundaries, say). With ``escapes`` a stuck repair restarts from the best candidates of its
+smallest invalid charts, growth around each single corner included, and keeps a restart that
+ends with fewer invalid items (:func:`repair_labeling`, Notes).
+
 The operators and the candidate trials are :mod:`core.segmentation.repair_operators` (each returns
 a typed ``Relabel`` or ``Trial``); :class:`RepairRun` holds one repair's state and tries them in
 this order, a round's accepted change being a :class:`Step`. Candidates are scored on the submesh
@@ -56,13 +62,19 @@ from core.segmentation.labeling import (LAMBDA, PENALTY, check_frames, face_colo
                                         part_neighbours)
 from core.segmentation.parts import face_interface_axes, interfaces
 from core.segmentation.repair_operators import (Trial, boundary_faces, chart_candidates,
-                                                faces_at_vertices, insert_one_axis_charts,
-                                                joint_merges, merge_charts, one_axis_corners,
+                                                corner_growths, faces_at_vertices,
+                                                insert_one_axis_charts, joint_merges,
+                                                merge_charts, one_axis_corners,
                                                 relabel_corner_faces, relabel_interface_parallel,
                                                 smooth_boundaries, split_opposite_boundaries)
 from core.segmentation.validity import (check_validity, counts_near, edge_interface_axes,
                                         local_counts, local_invalid_count, with_turning_points)
 from core.types import TriMesh
+
+ESCAPE_CHARTS = 2
+"""Invalid charts (the smallest) whose candidates a stuck repair's escape tries."""
+ESCAPE_PER_CHART = 2
+"""Best candidates per chart an escape tries."""
 
 
 class CandidateJudge:
@@ -299,10 +311,10 @@ class RepairRun:
             return Candidate(cand.name, s, n_s, self.judge.angle(s))
         return cand
 
-    def best_of(self, trials, best):
-        """Best of ``best`` (a Candidate or None) and the Trials ``trials`` for an invalid chart
-        of the current labeling: (fewest invalid items, smallest mean angle) within the angle
-        cap; trials that leave opposite-label boundaries get the strip insertion first."""
+    def scored(self, trials):
+        """The Trials ``trials`` for an invalid chart of the current labeling as Candidates
+        (invalid items, mean angle), those within the angle cap that change the labeling;
+        trials that leave opposite-label boundaries get the strip insertion first."""
         judge, labels, val = self.judge, self.labels, self.val
         for trial in trials:
             name, cand = trial.name, trial.labels
@@ -323,10 +335,41 @@ class RepairRun:
                 if judge.angle(cand) > self.angle_cap:
                     continue
                 n_c = v_c.n_invalid
-            scored = Candidate(name, cand, n_c, judge.angle(cand))
+            yield Candidate(name, cand, n_c, judge.angle(cand))
+
+    def best_of(self, trials, best):
+        """Best of ``best`` (a Candidate or None) and the :meth:`scored` Trials ``trials``:
+        fewest invalid items, then smallest mean angle."""
+        for scored in self.scored(trials):
             if best is None or scored.score < best.score:
                 best = scored
         return best
+
+    def own_trials(self, c):
+        """The :func:`chart_candidates` of invalid chart ``c`` of the current labeling."""
+        return chart_candidates(self.F, self.face_part, self.val, self.labels, c,
+                                self.judge.cost, self.unary, self.nb, self.colour, self.penalty,
+                                (1.0, 2.0, 4.0, 8.0))
+
+    def joint_trials(self, c):
+        """The :func:`joint_merges` of invalid chart ``c`` with its small neighbours."""
+        lay = self.val.layout
+        return joint_merges(lay, self.labels, c, lay.chart_size <= self.small_chart)
+
+    def escapes(self, charts, per_chart):
+        """Candidates that leave a stuck labeling, uphill if need be: for each of the
+        ``charts`` smallest invalid charts, its ``per_chart`` best :meth:`scored` trials (those
+        of a chart step and its :func:`corner_growths`, one per corner, which only a stuck
+        repair pays for), best first over all."""
+        lay = self.val.layout
+        bad = np.flatnonzero(self.val.invalid_chart)
+        found = []
+        for c in bad[np.lexsort((bad, lay.chart_size[bad]))][:charts].tolist():
+            trials = self.own_trials(c) + self.joint_trials(c) + corner_growths(
+                self.F, self.face_part, lay, self.labels, c)
+            ranked = sorted(self.scored(trials), key=lambda cand: cand.score)
+            found += [cand for cand in ranked if self.is_new(cand.labels)][:per_chart]
+        return sorted(found, key=lambda cand: cand.score)
 
     def opposite_step(self):
         """Operator 1: the strip insertion or a merge of a chart of the first opposite-label
@@ -394,12 +437,9 @@ class RepairRun:
             key = (int(lay.chart_first_face[c]), int(lay.chart_label[c]))
             if key in self.gave_up or self.trials >= self.max_trials:
                 continue
-            best = self.best_of(chart_candidates(self.F, self.face_part, val, labels, c,
-                                                 judge.cost, self.unary, self.nb, self.colour,
-                                                 self.penalty, (1.0, 2.0, 4.0, 8.0)), None)
+            best = self.best_of(self.own_trials(c), None)
             if best is None or best.invalid >= val.n_invalid:
-                best = self.best_of(joint_merges(lay, labels, c,
-                                                 lay.chart_size <= self.small_chart), best)
+                best = self.best_of(self.joint_trials(c), best)
             if best is not None:
                 best = self.smoothed_local(best, lay)
                 if best.invalid < val.n_invalid:
@@ -447,7 +487,7 @@ class RepairRun:
 def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis=None,
                     max_rounds=60, smooth=True, max_angle_increase=4.0, small_chart=None,
                     lam=LAMBDA, penalty=PENALTY, topology=None, max_trials=None,
-                    max_sideways=4, colour=None, judge=None):
+                    max_sideways=4, colour=None, judge=None, escapes=0):
     """Drive the invalid charts, boundaries and corners of a labeling towards zero.
 
     Parameters
@@ -475,6 +515,7 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
         omitted; the labeling computes the same one).
     judge : CandidateJudge, optional, of this mesh, parts and frames (built when omitted; the
         labeling stage passes one to the repair and then to the monotonicity pass).
+    escapes : int >= 0, uphill restarts a stuck repair may try (see Notes).
 
     Returns
     -------
@@ -483,8 +524,9 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
         ``round_cap``), ``operations`` (per-round operator and item count), ``before`` and
         ``after`` (the validity reports, without turning points: the monotonicity pass counts
         them), ``angle_before`` / ``angle_after`` (area-weighted mean degrees), ``gave_up``
-        (charts no candidate improved: example face, label, faces) and ``unfixed`` (the
-        remaining invalid items with examples, empty when valid).
+        (charts no candidate improved: example face, label, faces), ``escapes`` (uphill
+        restarts tried) and ``unfixed`` (the remaining invalid items with examples, empty when
+        valid).
 
     Notes
     -----
@@ -499,11 +541,19 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     candidate with the fewest invalid items (then the smallest mean angle) is kept if it has fewer
     invalid items than now and respects the angle budget; a chart with no such candidate is given
     up and reported.
+
+    A repair is greedy: it stops ("stuck") where every candidate adds invalid items, although
+    a merge that breaks a neighbouring chart is often one step from a labeling the operators
+    can finish. With ``escapes``, a stuck repair takes the best candidates of its smallest
+    invalid charts (:meth:`RepairRun.escapes`, best first) one at a time, repairs from each as
+    from a new input (same angle cap, fresh trial caps) and keeps the first that ends with fewer
+    invalid items than the stuck labeling (then, if stuck again, escapes again), at most
+    ``escapes`` restarts in all.
     """
     F = np.asarray(F, dtype=np.int64)
     m = len(F)
-    if int(max_rounds) < 0:
-        raise ParameterError(f"max_rounds must be >= 0, got {max_rounds}")
+    if int(max_rounds) < 0 or int(escapes) < 0:
+        raise ParameterError(f"max_rounds and escapes must be >= 0, got {max_rounds}, {escapes}")
     if not max_angle_increase >= 0:
         raise ParameterError(f"max_angle_increase must be >= 0, got {max_angle_increase}")
     face_part = np.asarray(face_part, dtype=np.int64)
@@ -531,34 +581,60 @@ def repair_labeling(V, F, face_part, face_label, face_frame, face_interface_axis
     if colour is None:
         colour = face_colouring(nb)
     angle0 = judge.angle(labels)
-    run = RepairRun(F, face_part, topology, judge, labels, iface_pen, nb, colour, lam, penalty,
-                    smooth, angle0 + max_angle_increase, small_chart, max_trials, max_sideways)
+
+    def new_run(start):
+        return RepairRun(F, face_part, topology, judge, start, iface_pen, nb, colour, lam,
+                         penalty, smooth, angle0 + max_angle_increase, small_chart, max_trials,
+                         max_sideways)
+
+    run = new_run(labels)
     before = run.val
     ops = []
-    stopped = "round_cap"
-    rounds = 0
-    for rounds in range(1, max_rounds + 1):
-        if run.val.is_valid:
-            stopped = "valid"
-            rounds -= 1
+    stopped, rounds = _descend(run, max_rounds, ops)
+    tried = 0
+    while stopped == "stuck" and tried < escapes:
+        for cand in run.escapes(ESCAPE_CHARTS, ESCAPE_PER_CHART)[:escapes - tried]:
+            tried += 1
+            sub = new_run(cand.labels)
+            sub_ops = [{"round": 0, "operator": f"escape_{cand.name}", "items": 1,
+                        "invalid_after": int(sub.val.n_invalid)}]
+            sub_stopped, sub_rounds = _descend(sub, max_rounds, sub_ops)
+            if sub.val.n_invalid < run.val.n_invalid:
+                run, stopped = sub, sub_stopped
+                rounds += sub_rounds
+                ops += sub_ops
+                break
+        else:
             break
-        step = run.step()
-        if step is None or np.array_equal(step.labels, run.labels):
-            stopped = "stuck"
-            break
-        run.accept(step)
-        ops.append({"round": rounds, "operator": step.operator, "items": int(step.items),
-                    "invalid_after": int(step.validity.n_invalid)})
-    else:
-        if run.val.is_valid:
-            stopped = "valid"
     labels = run.labels
     final = judge.validity(labels)
     r = final.report
     unfixed = {k: r[k] for k in ("invalid_charts", "invalid_boundaries", "invalid_corners")
                if r[k]["count"]}
+    for k, op in enumerate(ops):
+        op["round"] = k + 1
     report = {"rounds": int(rounds), "valid": bool(r["valid"]), "stopped": stopped,
-              "operations": ops, "before": before.report, "after": r,
+              "operations": ops, "escapes": tried, "before": before.report, "after": r,
               "angle_before": angle0, "angle_after": judge.angle(labels),
               "gave_up": list(run.gave_up.values()), "unfixed": unfixed}
     return labels.astype(np.int32), report
+
+
+def _descend(run, max_rounds, ops):
+    """Apply ``run``'s steps (:meth:`RepairRun.step`) until its labeling is valid, no step is
+    left or ``max_rounds`` rounds, appending each to ``ops`` (report entries).
+
+    Returns
+    -------
+    stopped : ``valid``, ``stuck`` or ``round_cap``; rounds : int, the rounds used.
+    """
+    for rounds in range(1, max_rounds + 1):
+        if run.val.is_valid:
+            return "valid", rounds - 1
+        step = run.step()
+        if step is None or np.array_equal(step.labels, run.labels):
+            return "stuck", rounds
+        run.accept(step)
+        ops.append({"round": 0, "operator": step.operator, "items": int(step.items),
+                    "invalid_after": int(step.validity.n_invalid)})
+    return ("valid" if run.val.is_valid else "round_cap"), max_rounds

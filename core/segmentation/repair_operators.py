@@ -377,6 +377,35 @@ def chart_candidates(F, face_part, val, labels, c, cost, unary, nb, colour, pena
     return out
 
 
+def corner_growths(F, face_part, lay, labels, c):
+    """Candidates that grow invalid chart ``c`` over the faces of its part around one of its
+    corners at a time (one labeling per corner vertex of the chart): a chart that touches a
+    neighbour only at that corner gains a boundary with it there, without the changes at its
+    other corners that :func:`chart_candidates`' growth at all corners makes at once.
+
+    Parameters
+    ----------
+    F : (m, 3) int64; face_part : (m,) int64; lay : ChartLayout of ``labels``;
+    labels : (m,) int64; c : int, the chart.
+
+    Returns
+    -------
+    list of Trial
+    """
+    in_c = lay.face_chart == c
+    own = (face_part == lay.chart_part[c]) & ~in_c
+    ring = np.zeros(len(lay.vertex_sep_degree), dtype=bool)
+    ring[F[in_c]] = True
+    out = []
+    for v in np.flatnonzero(ring & (lay.vertex_sep_degree >= 3)).tolist():
+        grow = own & (F == v).any(axis=1)
+        if grow.any():
+            cand = labels.copy()
+            cand[grow] = lay.chart_label[c]
+            out.append(Trial(f"grow_at_corner_{v}", cand))
+    return out
+
+
 def joint_merges(lay, labels, c, small):
     """Candidates that merge chart ``c`` together with its small neighbouring charts of its
     part (``small``: (c,) bool, the charts counted small) into each label around that group:

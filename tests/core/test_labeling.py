@@ -386,3 +386,65 @@ def test_edge_weights_do_not_depend_on_the_size_or_the_resolution_of_the_mesh():
     V4, F4 = cube(3)
     assert np.allclose(np.sort(np.unique(np.round(edge_weights(V4, build_topology(F4)), 9))),
                        np.sort(np.unique(np.round(weights, 9))))
+
+
+SHELF_BRACKET = os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks", "simp_unseen",
+                             "simp_shelf_bracket.stl")
+
+
+@pytest.mark.slow
+def test_a_stuck_repair_escapes_to_fewer_invalid_items_never_more():
+    """A SIMP design in the world frame: the greedy repair stops where every candidate adds
+    invalid items; with escapes it restarts from the best of them and keeps a restart only
+    when it ends with fewer invalid items, so it ends valid here and never worse anywhere."""
+    mesh = trimesh.load(SHELF_BRACKET, process=True)
+    V, F = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+    m = len(F)
+    frame, parts = identity_frames(m), np.zeros(m, dtype=np.int64)
+    labels, _ = hbecvt_labeling(V, F, parts, frame)
+    greedy, rep_greedy = repair_labeling(V, F, parts, labels, frame)
+    out, rep = repair_labeling(V, F, parts, labels, frame, escapes=4)
+    invalid = lambda r: sum(r["after"][k]["count"] for k in (  # noqa: E731
+        "invalid_charts", "invalid_boundaries", "invalid_corners"))
+    assert invalid(rep) <= invalid(rep_greedy)
+    assert rep["escapes"] <= 4
+    assert rep["valid"], rep["unfixed"]
+    v = check_validity(V, F, parts, out, frame)
+    assert v.is_valid and v.layout.chart_boundary_count.min() >= 4
+    assert no_opposite_neighbours(F, out.astype(np.int64))
+    with pytest.raises(ParameterError, match="escapes"):
+        repair_labeling(V, F, parts, labels, frame, escapes=-1)
+
+
+BOLT_PLATE = os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks", "simp_unseen",
+                          "simp_bolt_plate.stl")
+
+
+@pytest.mark.slow
+def test_the_labeling_stage_repairs_again_until_valid_and_keeps_a_valid_first_pass(monkeypatch):
+    """The bolt plate's first pass of repair, absorption and straightening leaves an invalid
+    chart; the next passes end with a labeling every rule accepts. A labeling the first pass
+    leaves valid is what the stage returns, whatever the number of passes allowed."""
+    import core.stages.labeling as stage
+    from core.pipeline import reconstruct
+
+    def labeling(path, passes):
+        monkeypatch.setattr(stage, "REPAIR_PASSES", passes)
+        result = reconstruct(path, stop_after="labeling")
+        assert result.failed is None, result.report["stages"]
+        return result.state
+
+    state = labeling(BOLT_PLATE, stage.REPAIR_PASSES)
+    surface, lab = state.intake.surface, state.labeling
+    v = check_validity(surface.vertices, surface.faces, state.parts.face_part, lab.face_label,
+                       state.frames.frame_field.face_frame)
+    assert v.is_valid and lab.report["valid"] and lab.report["unfixed"] == {}
+    assert v.layout.chart_boundary_count.min() >= 4
+    assert no_opposite_neighbours(surface.faces, np.asarray(lab.face_label, dtype=np.int64))
+
+    tiny = os.path.join(MESHES, "to_levelset_cantilever_tiny.stl")
+    if not os.path.exists(tiny):
+        pytest.skip("dev mesh to_levelset_cantilever_tiny.stl not available")
+    one = labeling(tiny, 1).labeling
+    assert one.report["valid"]
+    assert np.array_equal(labeling(tiny, 3).labeling.face_label, one.face_label)

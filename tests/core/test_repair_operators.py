@@ -9,7 +9,8 @@ import trimesh
 
 from core.segmentation.charts import OPPOSITE, build_topology
 from core.segmentation.labeling import face_normals, label_cost, nearest_direction_labels
-from core.segmentation.repair_operators import (Relabel, insert_one_axis_charts, merge_charts,
+from core.segmentation.repair_operators import (Relabel, Trial, corner_growths,
+                                                insert_one_axis_charts, merge_charts,
                                                 one_axis_corners, split_opposite_boundaries)
 from core.segmentation.validity import check_validity
 
@@ -86,3 +87,34 @@ def test_a_chart_of_the_common_axis_goes_in_at_a_one_axis_corner():
     assert (done.labels[around] == 4).all(), "+Z, the sign of least normal cost"
     after = check_validity(V, F, parts, done.labels, frames, topology)
     assert found.vertices[0] not in after.invalid_corners
+
+
+def test_corner_growths_grow_a_chart_around_one_of_its_corners_at_a_time():
+    """A -Y island on the top at its +X edge: two corners where its boundary meets the edge;
+    each trial gives the faces around one of them, and only those, the island's label."""
+    V, F, parts, frames, labels = labelled_cube()
+    corner = V[F]
+    island = ((corner[:, :, 2] > 0.99).all(axis=1) & (corner[:, :, 0] > 0.74).all(axis=1)
+              & (np.abs(corner[:, :, 1] - 0.5) < 0.26).all(axis=1))
+    labels[island] = 3
+    topology = build_topology(F, len(V))
+    lay = check_validity(V, F, parts, labels, frames, topology).layout
+    chart = int(lay.face_chart[np.flatnonzero(island)[0]])
+    corners = np.intersect1d(lay.corners, F[island])
+    assert len(corners) == 2
+    given = labels.copy()
+    trials = corner_growths(F, parts, lay, labels, chart)
+    assert np.array_equal(labels, given), "the input labels are not modified"
+    assert len(trials) == len(corners) and len({t.name for t in trials}) == len(trials)
+    grown_at = []
+    for trial in trials:
+        assert isinstance(trial, Trial)
+        changed = np.flatnonzero(trial.labels != labels)
+        assert len(changed) and not island[changed].any()
+        assert (trial.labels[changed] == 3).all()
+        at = [v for v in corners.tolist() if (F[changed] == v).any(axis=1).all()]
+        assert len(at) == 1, "every changed face lies around one and the same corner"
+        around = (F == at[0]).any(axis=1)
+        assert (trial.labels[around] == 3).all(), "every face around that corner grown"
+        grown_at += at
+    assert sorted(grown_at) == corners.tolist()
