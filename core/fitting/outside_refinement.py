@@ -18,9 +18,9 @@ refinements cross themselves. The fit
 that leaves the least volume outside is kept.
 
 The default goal (``outside_refinement`` of :class:`core.params.ReconstructionParams`, 0.003)
-is three fifths of the 0.5 % containment goal, because a fit's outside volume moves by about
-0.1 % of the target's volume with the last bits of its cage. Most fits at defaults leave less
-and are not refined.
+is three fifths of the 0.5 % containment goal: the fit's figure is measured on its level-``i``
+limit mesh, and an independent check on the exported solid samples the exact surface. Most
+fits at defaults leave less and are not refined.
 """
 from dataclasses import dataclass, field
 
