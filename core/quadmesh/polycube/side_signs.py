@@ -48,6 +48,18 @@ LIMIT_REACHED, INFEASIBLE = 1, 2
 """``scipy.optimize.milp`` statuses: a node (or other) limit reached; infeasible."""
 
 
+class SideDirectionError(LabelingError):
+    """No side directions make every chart a closed rectilinear polygon.
+
+    ``collapsible``: (s,) bool the sides that were allowed length zero in the program that has
+    no solution (so a caller that changes the labeling can judge the new one the same way).
+    """
+
+    def __init__(self, message, collapsible):
+        super().__init__(message)
+        self.collapsible = np.asarray(collapsible, dtype=bool)
+
+
 def _loop_directions(complex_, loop):
     """Sign keys and base directions of the sides of one loop in its chart's plane.
 
@@ -142,11 +154,11 @@ def make_loops_rectilinear(complex_, collapsible=None, feasible_collapsible=None
     if result.x is None:
         bad = np.flatnonzero(np.isin(loop_turning(complex_), [-4, 4], invert=True))
         charts = np.unique(complex_.loop_chart[bad])
-        raise LabelingError(
+        raise SideDirectionError(
             f"no side directions make every chart a closed rectilinear polygon ({len(charts)} "
             f"charts do not turn by four, e.g. charts {charts[:5].tolist()}); HiGHS says "
             f"'{result.message}'. The labeling is not a polycube there: try {OTHER_PARTS} "
-            "or another labeling")
+            "or another labeling", collapsible)
     used = program.used
     flip = np.rint(result.x[:len(used)]).astype(bool)
     flat = complex_.side_sign.reshape(-1).copy()
@@ -169,11 +181,12 @@ def _raise_on_contradiction(complex_, collapsible, stricter=None):
     contradiction = _local_contradiction(complex_, collapsible, stricter)
     if contradiction is not None:
         charts, message = contradiction
-        raise LabelingError(
+        raise SideDirectionError(
             "no side directions make every chart a closed rectilinear polygon: chart "
             f"{charts[0]} and its {len(charts) - 1} neighbours {charts[1:6].tolist()}... "
             f"cannot close with sides of positive length (HiGHS says '{message}'). The "
-            f"labeling is not a polycube there: try {OTHER_PARTS} or another labeling")
+            f"labeling is not a polycube there: try {OTHER_PARTS} or another labeling",
+            collapsible)
 
 
 def _local_contradiction(complex_, collapsible, stricter=None):
@@ -193,11 +206,7 @@ def _local_contradiction(complex_, collapsible, stricter=None):
     ``(charts, message)``: (k,) int64 the chart then its neighbours, and HiGHS's message; or
     None when every neighbourhood has a solution.
     """
-    rings = []
-    for chart in range(complex_.n_charts):
-        sides = np.flatnonzero((complex_.side_chart == chart).any(axis=1))
-        neighbours = np.unique(complex_.side_chart[sides])
-        rings.append(np.concatenate([[chart], neighbours[neighbours != chart]]))
+    rings = _rings(complex_)
     sizes = [len(ring) for ring in rings]
     if stricter is None:
         order = np.lexsort((np.arange(len(rings)), sizes))
@@ -214,6 +223,30 @@ def _local_contradiction(complex_, collapsible, stricter=None):
         if result.status == INFEASIBLE:
             return ring.astype(np.int64), str(result.message)
     return None
+
+
+def _rings(complex_):
+    """Per chart, (k,) int64 the chart then the charts it shares a side with."""
+    rings = []
+    for chart in range(complex_.n_charts):
+        sides = np.flatnonzero((complex_.side_chart == chart).any(axis=1))
+        neighbours = np.unique(complex_.side_chart[sides])
+        rings.append(np.concatenate([[chart], neighbours[neighbours != chart]]))
+    return rings
+
+
+def contradicting_charts(complex_, collapsible):
+    """(k,) int64 the charts whose neighbourhood alone admits no side directions.
+
+    Each is a proof that the whole side-direction program has none (see
+    :func:`_local_contradiction`); a labeling with none of them may still have no solution, but
+    their number measures how far a labeling is from one that closes.
+    """
+    slits = complex_.slit_walks()
+    bad = [chart for chart, ring in enumerate(_rings(complex_))
+           if _solve(_direction_program(complex_, np.sort(ring), collapsible, slits),
+                     NODE_LIMIT).status == INFEASIBLE]
+    return np.asarray(bad, dtype=np.int64)
 
 
 @dataclass
