@@ -19,11 +19,12 @@ Trials for the first such neighbourhood:
   the wall a hole's rim lacked, or the side a triangle lacked, gets its own chart.
 
 A trial is admissible when the labeling stays valid (:func:`core.segmentation.validity.
-check_validity`) and fewer neighbourhoods contradict; of the admissible trials the one that
-adds the fewest turning points (the side directions are chosen anyway), then changes the least
-area, is kept, and rounds repeat until no
-neighbourhood contradicts. The changed labels are the layout's only: the labeling itself is
-left as it was.
+check_validity`) and fewer neighbourhoods contradict. Merges and dissolutions are judged
+first, suspect by suspect, then the splits, each group cheapest (least changed area) first,
+a bounded number per round; the first admissible one that adds no turning point
+is kept, else the first admissible one (the side directions are chosen anyway); rounds repeat
+until no neighbourhood contradicts. The changed labels are the layout's only: the labeling
+itself is left as it was.
 """
 from dataclasses import dataclass
 
@@ -42,8 +43,13 @@ MAX_ROUNDS = 8
 """Most rounds, each removing at least one contradicting neighbourhood."""
 SPLIT_REGIONS = 3
 """Most regions of one chart tried as a split towards one label."""
-MAX_SUSPECTS = 6
+MAX_SUSPECTS = 4
 """Most charts whose neighbourhoods' trials are judged in one round (the likeliest first)."""
+MAX_JUDGED = 200
+"""Most trials judged for validity in one round (the cheapest first)."""
+MAX_BUILT = 16
+"""Most valid trials whose chart complex is built and searched for contradictions in one
+round."""
 
 
 @dataclass(frozen=True)
@@ -90,19 +96,23 @@ def _ring(complex_, chart):
 
 
 def _trials(topology, face_part, layout, labels, fit, ring):
-    """Candidate labelings ((m,) int64 each) for the neighbourhood ``ring`` (centre first,
-    chart indices of ``layout``): merges of the centre, alone and with one neighbour
-    (:func:`_pair_merges`), its dissolution into its neighbours
-    (each face to the nearest, :func:`~core.segmentation.chart_absorption.dissolved_labels`,
-    by the label cost ``||n - c_l||^2 = 2 - 2 cos``), then splits of every chart of it, one
-    per connected region of its faces that fit another label better than their own (largest
-    first, at most :data:`SPLIT_REGIONS` per chart and label)."""
-    out = [candidate for _, candidate in neighbour_merges(layout, labels, int(ring[0]))]
-    out += _pair_merges(layout, labels, int(ring[0]))
+    """Candidate labelings for the neighbourhood ``ring`` (centre first, charts of ``layout``).
+
+    Returns ``(merges, splits)``, lists of (m,) int64 labelings: the merges of the centre,
+    alone and with one neighbour (:func:`_pair_merges`), and its dissolution into its
+    neighbours (each face to the nearest,
+    :func:`~core.segmentation.chart_absorption.dissolved_labels`, by the label cost
+    ``||n - c_l||^2 = 2 - 2 cos``); the splits of every chart of it, one per connected region
+    of its faces that fit another label better than their own (largest first, at most
+    :data:`SPLIT_REGIONS` per chart and label).
+    """
+    merges = [candidate for _, candidate in neighbour_merges(layout, labels, int(ring[0]))]
+    merges += _pair_merges(layout, labels, int(ring[0]))
     dissolved = dissolved_labels(topology, face_part, labels, layout.face_chart, int(ring[0]),
                                  2.0 - 2.0 * fit)
     if dissolved is not None:
-        out.append(dissolved)
+        merges.append(dissolved)
+    splits = []
     own = fit[np.arange(len(labels)), labels]
     for chart in ring.tolist():
         faces = np.flatnonzero(layout.face_chart == chart)
@@ -116,8 +126,8 @@ def _trials(topology, face_part, layout, labels, fit, ring):
             for region in _regions(topology, grow)[:SPLIT_REGIONS]:
                 candidate = labels.copy()
                 candidate[region] = label
-                out.append(candidate)
-    return out
+                splits.append(candidate)
+    return merges, splits
 
 
 def _pair_merges(layout, labels, chart):
@@ -155,6 +165,53 @@ def _regions(topology, faces):
     return [faces[component == c] for c in np.argsort(-sizes, kind="stable")]
 
 
+def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, bad, turning,
+           build, collapsible_of):
+    """One round of :func:`closable_labels`: ``(labels, complex_, bad, turning points)`` of
+    the kept trial, or None.
+
+    The merges of each suspect (likeliest first), then the splits of all, each group cheapest
+    (least changed area) first, are judged for validity (without turning points, up to
+    :data:`MAX_JUDGED`), the valid ones by the neighbourhoods that still contradict (up to
+    :data:`MAX_BUILT` complexes). The first that
+    lowers them and adds no turning point is kept, else the first that lowers them.
+    """
+    layout = extract_layout(topology, face_part, labels)
+    merges, splits = [], []
+    for suspect in _suspects(complex_, bad).tolist():
+        # charts of the complex and of the layout are both the connected faces of one label
+        # of one part, numbered alike; mapped through a face all the same
+        ring = _ring(complex_, suspect)
+        first_face = np.array([np.flatnonzero(complex_.face_chart == c)[0] for c in ring])
+        merged, split = _trials(topology, face_part, layout, labels, fit,
+                                layout.face_chart[first_face])
+        merges.append(merged)
+        splits += split
+    trials = []
+    for group in merges + [splits]:
+        costs = [area[candidate != labels].sum() for candidate in group]
+        trials += [group[i] for i in np.argsort(costs, kind="stable")]
+    fallback, built = None, 0
+    for candidate in trials[:MAX_JUDGED]:
+        report = check_validity(V, F, face_part, candidate, face_frame, topology,
+                                turning=False).report
+        if not report["valid"]:
+            continue
+        trial = build(candidate)
+        remaining = contradicting_charts(trial, collapsible_of(trial))
+        built += 1
+        if len(remaining) < len(bad):
+            count = check_validity(V, F, face_part, candidate, face_frame,
+                                   topology).report["turning_points"]["count"] or 0
+            if count <= turning:
+                return candidate, trial, remaining, count
+            if fallback is None:
+                fallback = (candidate, trial, remaining, count)
+        if built >= MAX_BUILT:
+            break
+    return fallback
+
+
 def closable_labels(V, F, face_part, face_label, face_frame, build, collapsible_of):
     """Change the labels of the charts that no side directions close, keeping them valid.
 
@@ -168,7 +225,7 @@ def closable_labels(V, F, face_part, face_label, face_frame, build, collapsible_
     Returns
     -------
     ClosableLabels, or None when no admissible trial removes a contradicting neighbourhood
-    (or a labeling without one still has no side directions is left to the caller).
+    (a labeling without one may still have no side directions: the caller finds out).
     """
     face_part = np.asarray(face_part, dtype=np.int64)
     labels = np.asarray(face_label, dtype=np.int64).copy()
@@ -182,34 +239,11 @@ def closable_labels(V, F, face_part, face_label, face_frame, build, collapsible_
     changed = np.zeros(len(labels), dtype=bool)
     rounds = 0
     while len(bad) and rounds < MAX_ROUNDS:
-        layout = extract_layout(topology, face_part, labels)
-        best = None
-        for suspect in _suspects(complex_, bad).tolist():
-            # charts of the complex and of the layout are both the connected faces of one
-            # label of one part, numbered alike; mapped through a face all the same
-            ring = _ring(complex_, suspect)
-            first_face = np.array([np.flatnonzero(complex_.face_chart == c)[0] for c in ring])
-            for candidate in _trials(topology, face_part, layout, labels, fit,
-                                     layout.face_chart[first_face]):
-                cost = float(area[candidate != labels].sum())
-                if best is not None and cost >= best[0][1] and best[0][0] == 0:
-                    continue
-                report = check_validity(V, F, face_part, candidate, face_frame, topology).report
-                if not report["valid"]:
-                    continue
-                rank = (max((report["turning_points"]["count"] or 0) - turning, 0), cost)
-                if best is not None and rank >= best[0]:
-                    continue
-                trial = build(candidate)
-                remaining = contradicting_charts(trial, collapsible_of(trial))
-                if len(remaining) < len(bad):
-                    best = (rank, candidate, trial, remaining,
-                            report["turning_points"]["count"] or 0)
-            if best is not None:
-                break
-        if best is None:
+        found = _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, bad,
+                       turning, build, collapsible_of)
+        if found is None:
             return None
-        _, candidate, complex_, bad, turning = best
+        candidate, complex_, bad, turning = found
         changed |= candidate != labels
         labels = candidate
         rounds += 1
