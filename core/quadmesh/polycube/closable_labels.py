@@ -18,8 +18,10 @@ Trials for the first such neighbourhood:
   of a label of another axis than its own take that label (one trial per chart and label), so
   the wall a hole's rim lacked, or the side a triangle lacked, gets its own chart.
 
-A trial is admissible when the labeling stays valid (:func:`core.segmentation.validity.
-check_validity`) and fewer neighbourhoods contradict. Merges and dissolutions are judged
+A trial is admissible when the faces it changes fit their new labels within
+:data:`~core.segmentation.chart_absorption.MAX_MEAN_ANGLE` on average (a wall of the design is
+never labelled across its normal), the labeling stays valid
+(:func:`core.segmentation.validity.check_validity`) and fewer neighbourhoods contradict. Merges and dissolutions are judged
 first, suspect by suspect, then the splits, each group cheapest (least changed area) first,
 a bounded number per round; the first admissible one that adds no turning point
 is kept, else the first admissible one (the side directions are chosen anyway); rounds repeat
@@ -32,9 +34,10 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from core.errors import LabelingError
 from core.geometry import face_areas, face_cross
 from core.quadmesh.polycube.side_signs import contradicting_charts
-from core.segmentation.chart_absorption import dissolved_labels
+from core.segmentation.chart_absorption import MAX_MEAN_ANGLE, dissolved_labels
 from core.segmentation.charts import build_topology, extract_layout
 from core.segmentation.repair_operators import neighbour_merges
 from core.segmentation.validity import check_validity
@@ -165,6 +168,16 @@ def _regions(topology, faces):
     return [faces[component == c] for c in np.argsort(-sizes, kind="stable")]
 
 
+def _fits(candidate, labels, fit, area):
+    """True when the faces ``candidate`` changes fit their new labels within
+    ``MAX_MEAN_ANGLE`` on average (area-weighted): a wall is never labelled across its
+    normal."""
+    changed = np.flatnonzero(candidate != labels)
+    cosine = np.clip(fit[changed, candidate[changed]], -1.0, 1.0)
+    mean = np.degrees(np.arccos(cosine)) @ area[changed] / max(area[changed].sum(), 1e-300)
+    return bool(mean <= MAX_MEAN_ANGLE)
+
+
 def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, bad, turning,
            build, collapsible_of):
     """One round of :func:`closable_labels`: ``(labels, complex_, bad, turning points)`` of
@@ -189,6 +202,7 @@ def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, b
         splits += split
     trials = []
     for group in merges + [splits]:
+        group = [candidate for candidate in group if _fits(candidate, labels, fit, area)]
         costs = [area[candidate != labels].sum() for candidate in group]
         trials += [group[i] for i in np.argsort(costs, kind="stable")]
     fallback, built = None, 0
@@ -197,7 +211,10 @@ def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, b
                                 turning=False).report
         if not report["valid"]:
             continue
-        trial = build(candidate)
+        try:
+            trial = build(candidate)
+        except LabelingError:
+            continue  # e.g. a boundary loop without corners: no polycube face
         remaining = contradicting_charts(trial, collapsible_of(trial))
         built += 1
         if len(remaining) < len(bad):
