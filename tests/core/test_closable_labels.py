@@ -52,7 +52,10 @@ def test_a_chart_that_cannot_close_is_relabelled_into_a_valid_closable_labeling(
     face_area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]),
                                      axis=1)
     assert 0.0 < fixed.changed_area < 0.5 * face_area[labels == 4].sum()
-    assert fixed.changed_area == pytest.approx(face_area[fixed.face_label != labels].sum())
+    changed = fixed.face_label != labels
+    assert fixed.changed_area == pytest.approx(face_area[changed].sum())
+    # the changed faces take a label their normals fit (nearest-axis labels everywhere)
+    assert np.array_equal(fixed.face_label[changed], nearest_labels(V, F)[changed])
 
 
 def test_a_closable_labeling_is_left_as_it_is():
