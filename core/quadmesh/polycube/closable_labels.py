@@ -42,7 +42,7 @@ from core.segmentation.charts import build_topology, extract_layout
 from core.segmentation.repair_operators import neighbour_merges
 from core.segmentation.validity import check_validity
 
-MAX_ROUNDS = 8
+MAX_ROUNDS = 4
 """Most rounds, each removing at least one contradicting neighbourhood."""
 SPLIT_REGIONS = 3
 """Most regions of one chart tried as a split towards one label."""
@@ -50,7 +50,7 @@ MAX_SUSPECTS = 4
 """Most charts whose neighbourhoods' trials are judged in one round (the likeliest first)."""
 MAX_JUDGED = 200
 """Most trials judged for validity in one round (the cheapest first)."""
-MAX_BUILT = 16
+MAX_BUILT = 6
 """Most valid trials whose chart complex is built and searched for contradictions in one
 round."""
 
