@@ -10,23 +10,24 @@ wraps round it), so the walk round the hole cannot close. Each such chart is the
 neighbourhood (the chart and the charts it shares a side with) whose program alone has no
 solution (:func:`~core.quadmesh.polycube.side_signs.contradicting_charts`).
 
-Trials for the first such neighbourhood:
+Each round takes the charts in most of the contradicting neighbourhoods (the *suspects*, at
+most :data:`MAX_SUSPECTS`) and tries, on the neighbourhood of each:
 
-- *merge*: the centre takes the label of one of its neighbours in its part (it joins that
-  chart);
-- *split*: the faces of one chart of the neighbourhood whose normal lies nearer the direction
-  of a label of another axis than its own take that label (one trial per chart and label), so
-  the wall a hole's rim lacked, or the side a triangle lacked, gets its own chart.
+- *merges*: the suspect takes the label of one of its neighbours in its part, alone or
+  together with one neighbour, or is dissolved into its neighbours face by face;
+- *splits*: a connected region of one chart of the neighbourhood whose faces' normals lie
+  nearer the direction of a label of another axis than their own takes that label, so the
+  wall a hole's rim lacked, or the side a triangle lacked, gets a chart of its own.
 
 A trial is admissible when the faces it changes fit their new labels within
 :data:`~core.segmentation.chart_absorption.MAX_MEAN_ANGLE` on average (a wall of the design is
 never labelled across its normal), the labeling stays valid
-(:func:`core.segmentation.validity.check_validity`) and fewer neighbourhoods contradict. Merges and dissolutions are judged
-first, suspect by suspect, then the splits, each group cheapest (least changed area) first,
-a bounded number per round; the first admissible one that adds no turning point
-is kept, else the first admissible one (the side directions are chosen anyway); rounds repeat
-until no neighbourhood contradicts. The changed labels are the layout's only: the labeling
-itself is left as it was.
+(:func:`core.segmentation.validity.check_validity`) and fewer neighbourhoods contradict.
+Merges are judged first, suspect by suspect, then the splits, each group cheapest (least
+changed area) first, a bounded number per round; the first admissible trial that adds no
+turning point is kept, else the first admissible one (the side directions are chosen anyway).
+Rounds repeat until no neighbourhood contradicts. The changed labels are the layout's only:
+the labeling stage's result is left as it was.
 """
 from dataclasses import dataclass
 
