@@ -9,7 +9,8 @@ from core.polymesh_checks import check_polymesh
 from core.quadmesh import build_base_mesh
 from core.quadmesh.polycube.chart_complex import build_chart_complex
 from core.quadmesh.polycube.closable_labels import closable_labels
-from core.quadmesh.polycube.side_signs import contradicting_charts, make_loops_rectilinear
+from core.quadmesh.polycube.side_signs import (contradicting_charts, lone_sides,
+                                               make_loops_rectilinear)
 from core.segmentation.validity import check_validity
 from core.types import TriMesh
 from tests.core.test_quadmesh import euler_genus, identity_frames, nearest_labels, union_of_boxes
@@ -56,6 +57,24 @@ def test_a_chart_that_cannot_close_is_relabelled_into_a_valid_closable_labeling(
     assert fixed.changed_area == pytest.approx(face_area[changed].sum())
     # the changed faces take a label their normals fit (nearest-axis labels everywhere)
     assert np.array_equal(fixed.face_label[changed], nearest_labels(V, F)[changed])
+
+
+def test_a_walk_with_a_single_side_along_an_axis_is_named():
+    """The tongue's loop has one side along z and one along x: both are lone sides of an outer
+    boundary, and the error names the tongue; the plain box has none."""
+    V, F, labels, tongue = _box_with_a_tongue()
+    part = np.zeros(len(F), dtype=np.int64)
+    frames, _ = identity_frames(len(F))
+    broken = build_chart_complex(V, F, part, labels, frames)
+    chart = int(broken.face_chart[np.flatnonzero(tongue)[0]])
+    found = lone_sides(broken, _none(broken))
+    assert sorted((c, hole, axis) for c, hole, axis, _ in found if c == chart) == [
+        (chart, False, 0), (chart, False, 2)]
+    assert all(chart in broken.side_chart[side] for c, _, _, side in found if c == chart)
+    with pytest.raises(LabelingError, match=f"chart {chart} has a single side along"):
+        make_loops_rectilinear(broken, _none(broken))
+    box = build_chart_complex(V, F, part, nearest_labels(V, F), frames)
+    assert lone_sides(box, _none(box)) == []
 
 
 def test_a_closable_labeling_is_left_as_it_is():

@@ -156,9 +156,10 @@ def make_loops_rectilinear(complex_, collapsible=None, feasible_collapsible=None
         charts = np.unique(complex_.loop_chart[bad])
         raise SideDirectionError(
             f"no side directions make every chart a closed rectilinear polygon ({len(charts)} "
-            f"charts do not turn by four, e.g. charts {charts[:5].tolist()}); HiGHS says "
-            f"'{result.message}'. The labeling is not a polycube there: try {OTHER_PARTS} "
-            "or another labeling", collapsible)
+            f"charts do not turn by four, e.g. charts {charts[:5].tolist()});"
+            f"{_lone_side_note(complex_, collapsible)} HiGHS says '{result.message}'. The "
+            f"labeling is not a polycube there: try {OTHER_PARTS} or another labeling",
+            collapsible)
     used = program.used
     flip = np.rint(result.x[:len(used)]).astype(bool)
     flat = complex_.side_sign.reshape(-1).copy()
@@ -168,6 +169,66 @@ def make_loops_rectilinear(complex_, collapsible=None, feasible_collapsible=None
     sign[slit, 1] = sign[slit, 0]
     flipped = np.stack(np.divmod(used[flip], 2), axis=1)
     return replace(complex_, side_sign=sign), flipped
+
+
+def lone_sides(complex_, collapsible, charts=None):
+    """Walks that no side directions close: a single side along one of their axes.
+
+    A walk is the outer boundary of a chart (its loop without the slits and what they reach)
+    or the rim of a hole (the references inside a slit, :meth:`ChartComplex.slit_walks`).
+    Along each axis it runs, a closed rectilinear walk has sides in both directions, so a
+    single side along an axis closes only with length zero, and an outer boundary with one
+    side along an axis cannot turn by four at all. These are the usual reasons why a valid
+    labeling has no side directions: a triangle chart, or a hole whose rim lacks the wall
+    facing one way.
+
+    Parameters
+    ----------
+    complex_ : ChartComplex; collapsible : (s,) bool sides allowed length zero;
+    charts : (k,) int64 charts to look at, or None for all.
+
+    Returns
+    -------
+    list of ``(chart, hole, axis, side)``: ints, ``hole`` a bool, ``axis`` 0..2 in the
+    chart's part frame. A hole's single side is listed only when it may not collapse.
+    """
+    slits = [walk for walk in complex_.slit_walks() if len(walk)]
+    inside = np.zeros(len(complex_.loop_sides), dtype=bool)
+    for walk in slits:
+        inside[walk] = True
+    walks = [(walk, True) for walk in slits]
+    for loop in range(len(complex_.loop_chart)):
+        walk = np.arange(complex_.loop_offsets[loop], complex_.loop_offsets[loop + 1])
+        walks.append((walk[~inside[walk]], False))
+    found = []
+    for walk, hole in walks:
+        loop = np.searchsorted(complex_.loop_offsets, walk[0], side="right") - 1
+        chart = int(complex_.loop_chart[loop])
+        if charts is not None and chart not in charts:
+            continue
+        refs = complex_.loop_sides[walk]
+        sides = np.where(refs >= 0, refs, ~refs)
+        plain = complex_.side_chart[sides, 0] != complex_.side_chart[sides, 1]
+        _, d = _reference_directions(complex_, walk)
+        axis = np.argmax(np.abs(d), axis=1)
+        for along in np.unique(axis[plain]).tolist():
+            alone = np.flatnonzero(plain & (axis == along))
+            item = (chart, hole, int(along), int(sides[alone[0]])) if len(alone) == 1 else None
+            if item and not (hole and collapsible[item[3]]) and item not in found:
+                found.append(item)  # (nested slits of one hole walk round it alike)
+    return found
+
+
+def _lone_side_note(complex_, collapsible, charts=None):
+    """A sentence naming the first walk of ``charts`` with a single side along an axis, or ''."""
+    found = lone_sides(complex_, collapsible, charts)
+    if not found:
+        return ""
+    chart, hole, axis, side = found[0]
+    other = [c for c in complex_.side_chart[side].tolist() if c != chart]
+    where = "the rim of a hole in chart" if hole else "chart"
+    return (f" {where} {chart} has a single side along {'xyz'[axis]} (with chart "
+            f"{other[0]}), which no side lengths close{' or turn by four' * (not hole)};")
 
 
 def _solve(program, node_limit):
@@ -184,7 +245,8 @@ def _raise_on_contradiction(complex_, collapsible, stricter=None):
         raise SideDirectionError(
             "no side directions make every chart a closed rectilinear polygon: chart "
             f"{charts[0]} and its {len(charts) - 1} neighbours {charts[1:6].tolist()}... "
-            f"cannot close with sides of positive length (HiGHS says '{message}'). The "
+            f"cannot close with sides of positive length;"
+            f"{_lone_side_note(complex_, collapsible, charts)} HiGHS says '{message}'. The "
             f"labeling is not a polycube there: try {OTHER_PARTS} or another labeling",
             collapsible)
 
