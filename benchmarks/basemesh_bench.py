@@ -66,7 +66,8 @@ def run_case(path, mode, method, out_json, image, solid):
             "method", "fallback_reason", "faces", "quads", "triangles",
             "extraordinary_vertices", "min_valence", "max_valence", "genus", "target_faces",
             "within_budget", "minimum_reason", "scale", "solver_status", "collapsed_sides",
-            "side_directions_flipped", "rectangles", "crossing_reason", "candidates",
+            "side_directions_flipped", "rectangles", "relabelled_area", "crossing_reason",
+            "candidates",
             "layout_inverted_faces")}
         row["inverted_faces"] = int(inverted_faces(base, target.vertices, target.faces).sum())
         row["limit_self_intersections"] = count_limit_self_intersections(base, 2)

@@ -46,7 +46,8 @@ from core.quadmesh.polycube.quantize import (BUDGET_TOLERANCE, REFINEMENTS, coll
                                              loop_tables, minimum_faces, quantize,
                                              quantize_for_budget, rectangular_refinement)
 from core.quadmesh.polycube.relax import relax_on_target
-from core.quadmesh.polycube.side_signs import make_loops_rectilinear
+from core.quadmesh.polycube.closable_labels import closable_labels
+from core.quadmesh.polycube.side_signs import SideDirectionError, make_loops_rectilinear
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
@@ -679,13 +680,31 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
     part_frames = np.asarray(part_frames, dtype=np.float64).reshape(-1, 3, 3)
     interface_axis = (None if face_interface_axis is None
                       else np.asarray(face_interface_axis, dtype=np.float64)[parent])
-    complex_ = build_chart_complex(V, F, np.asarray(face_part)[parent],
-                                   np.asarray(face_label)[parent], np.asarray(face_frame)[parent],
-                                   interface_axis)
+    fine_part, fine_frame = np.asarray(face_part)[parent], np.asarray(face_frame)[parent]
+    fine_label = np.asarray(face_label)[parent]
+
+    def build(labels):
+        return build_chart_complex(V, F, fine_part, labels, fine_frame, interface_axis)
+
+    complex_ = build(fine_label)
     target_genus = genus_of(len(V), F, int(connected_face_components(F).max()) + 1)
     layout = _LayoutAttempts(V, F, complex_, part_frames, int(target_faces), max_base_faces,
                              give_up_faces, refinement_rounds, target_genus)
-    best = layout.attempt(None)
+    relabelled = None
+    try:
+        best = layout.attempt(None)
+    except SideDirectionError as exc:
+        # charts no side directions close: change their labels (for the layout only)
+        strict = not exc.collapsible.any()
+        relabelled = closable_labels(
+            V, F, fine_part, fine_label, fine_frame, build,
+            lambda c: (np.zeros(c.n_sides, dtype=bool) if strict
+                       else collapsible_sides(c, int(target_faces))))
+        if relabelled is None:
+            raise
+        layout = _LayoutAttempts(V, F, relabelled.complex_, part_frames, int(target_faces),
+                                 max_base_faces, give_up_faces, refinement_rounds, target_genus)
+        best = layout.attempt(None)
     flipped_faces = inverted_faces(best[0], surface.vertices, surface.faces, surface)
     least = np.zeros(layout.complex_.n_sides, dtype=np.int64)
     for _ in range(COARSE_CHART_ROUNDS if flipped_faces.any() else 0):
@@ -723,5 +742,6 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
         "corners": int(complex_.n_corners), "side_directions_flipped": int(len(flipped)),
         "folded_points": int(folded), "rectangles": refinement.rectangles,
         "collapsed_sides": int((polycube.side_length == 0).sum()),
+        "relabelled_area": 0.0 if relabelled is None else relabelled.changed_area,
     }
     return mesh, info

@@ -48,6 +48,18 @@ LIMIT_REACHED, INFEASIBLE = 1, 2
 """``scipy.optimize.milp`` statuses: a node (or other) limit reached; infeasible."""
 
 
+class SideDirectionError(LabelingError):
+    """No side directions make every chart a closed rectilinear polygon.
+
+    ``collapsible``: (s,) bool the sides that were allowed length zero in the program that has
+    no solution (so a caller that changes the labeling can judge the new one the same way).
+    """
+
+    def __init__(self, message, collapsible):
+        super().__init__(message)
+        self.collapsible = np.asarray(collapsible, dtype=bool)
+
+
 def _loop_directions(complex_, loop):
     """Sign keys and base directions of the sides of one loop in its chart's plane.
 
@@ -142,11 +154,12 @@ def make_loops_rectilinear(complex_, collapsible=None, feasible_collapsible=None
     if result.x is None:
         bad = np.flatnonzero(np.isin(loop_turning(complex_), [-4, 4], invert=True))
         charts = np.unique(complex_.loop_chart[bad])
-        raise LabelingError(
+        raise SideDirectionError(
             f"no side directions make every chart a closed rectilinear polygon ({len(charts)} "
-            f"charts do not turn by four, e.g. charts {charts[:5].tolist()}); HiGHS says "
-            f"'{result.message}'. The labeling is not a polycube there: try {OTHER_PARTS} "
-            "or another labeling")
+            f"charts do not turn by four, e.g. charts {charts[:5].tolist()});"
+            f"{_lone_side_note(complex_, collapsible)} HiGHS says '{result.message}'. The "
+            f"labeling is not a polycube there: try {OTHER_PARTS} or another labeling",
+            collapsible)
     used = program.used
     flip = np.rint(result.x[:len(used)]).astype(bool)
     flat = complex_.side_sign.reshape(-1).copy()
@@ -156,6 +169,66 @@ def make_loops_rectilinear(complex_, collapsible=None, feasible_collapsible=None
     sign[slit, 1] = sign[slit, 0]
     flipped = np.stack(np.divmod(used[flip], 2), axis=1)
     return replace(complex_, side_sign=sign), flipped
+
+
+def lone_sides(complex_, collapsible, charts=None):
+    """Walks that no side directions close: a single side along one of their axes.
+
+    A walk is the outer boundary of a chart (its loop without the slits and what they reach)
+    or the rim of a hole (the references inside a slit, :meth:`ChartComplex.slit_walks`).
+    Along each axis it runs, a closed rectilinear walk has sides in both directions, so a
+    single side along an axis closes only with length zero, and an outer boundary with one
+    side along an axis cannot turn by four at all. These are the usual reasons why a valid
+    labeling has no side directions: a triangle chart, or a hole whose rim lacks the wall
+    facing one way.
+
+    Parameters
+    ----------
+    complex_ : ChartComplex; collapsible : (s,) bool sides allowed length zero;
+    charts : (k,) int64 charts to look at, or None for all.
+
+    Returns
+    -------
+    list of ``(chart, hole, axis, side)``: ints, ``hole`` a bool, ``axis`` 0..2 in the
+    chart's part frame. A hole's single side is listed only when it may not collapse.
+    """
+    slits = [walk for walk in complex_.slit_walks() if len(walk)]
+    inside = np.zeros(len(complex_.loop_sides), dtype=bool)
+    for walk in slits:
+        inside[walk] = True
+    walks = [(walk, True) for walk in slits]
+    for loop in range(len(complex_.loop_chart)):
+        walk = np.arange(complex_.loop_offsets[loop], complex_.loop_offsets[loop + 1])
+        walks.append((walk[~inside[walk]], False))
+    found = []
+    for walk, hole in walks:
+        loop = np.searchsorted(complex_.loop_offsets, walk[0], side="right") - 1
+        chart = int(complex_.loop_chart[loop])
+        if charts is not None and chart not in charts:
+            continue
+        refs = complex_.loop_sides[walk]
+        sides = np.where(refs >= 0, refs, ~refs)
+        plain = complex_.side_chart[sides, 0] != complex_.side_chart[sides, 1]
+        _, d = _reference_directions(complex_, walk)
+        axis = np.argmax(np.abs(d), axis=1)
+        for along in np.unique(axis[plain]).tolist():
+            alone = np.flatnonzero(plain & (axis == along))
+            item = (chart, hole, int(along), int(sides[alone[0]])) if len(alone) == 1 else None
+            if item and not (hole and collapsible[item[3]]) and item not in found:
+                found.append(item)  # (nested slits of one hole walk round it alike)
+    return found
+
+
+def _lone_side_note(complex_, collapsible, charts=None):
+    """A sentence naming the first walk of ``charts`` with a single side along an axis, or ''."""
+    found = lone_sides(complex_, collapsible, charts)
+    if not found:
+        return ""
+    chart, hole, axis, side = found[0]
+    other = [c for c in complex_.side_chart[side].tolist() if c != chart]
+    where = "the rim of a hole in chart" if hole else "chart"
+    return (f" {where} {chart} has a single side along {'xyz'[axis]} (with chart "
+            f"{other[0]}), which no side lengths close{' or turn by four' * (not hole)};")
 
 
 def _solve(program, node_limit):
@@ -169,11 +242,13 @@ def _raise_on_contradiction(complex_, collapsible, stricter=None):
     contradiction = _local_contradiction(complex_, collapsible, stricter)
     if contradiction is not None:
         charts, message = contradiction
-        raise LabelingError(
+        raise SideDirectionError(
             "no side directions make every chart a closed rectilinear polygon: chart "
             f"{charts[0]} and its {len(charts) - 1} neighbours {charts[1:6].tolist()}... "
-            f"cannot close with sides of positive length (HiGHS says '{message}'). The "
-            f"labeling is not a polycube there: try {OTHER_PARTS} or another labeling")
+            f"cannot close with sides of positive length;"
+            f"{_lone_side_note(complex_, collapsible, charts)} HiGHS says '{message}'. The "
+            f"labeling is not a polycube there: try {OTHER_PARTS} or another labeling",
+            collapsible)
 
 
 def _local_contradiction(complex_, collapsible, stricter=None):
@@ -193,11 +268,7 @@ def _local_contradiction(complex_, collapsible, stricter=None):
     ``(charts, message)``: (k,) int64 the chart then its neighbours, and HiGHS's message; or
     None when every neighbourhood has a solution.
     """
-    rings = []
-    for chart in range(complex_.n_charts):
-        sides = np.flatnonzero((complex_.side_chart == chart).any(axis=1))
-        neighbours = np.unique(complex_.side_chart[sides])
-        rings.append(np.concatenate([[chart], neighbours[neighbours != chart]]))
+    rings = _rings(complex_)
     sizes = [len(ring) for ring in rings]
     if stricter is None:
         order = np.lexsort((np.arange(len(rings)), sizes))
@@ -214,6 +285,30 @@ def _local_contradiction(complex_, collapsible, stricter=None):
         if result.status == INFEASIBLE:
             return ring.astype(np.int64), str(result.message)
     return None
+
+
+def _rings(complex_):
+    """Per chart, (k,) int64 the chart then the charts it shares a side with."""
+    rings = []
+    for chart in range(complex_.n_charts):
+        sides = np.flatnonzero((complex_.side_chart == chart).any(axis=1))
+        neighbours = np.unique(complex_.side_chart[sides])
+        rings.append(np.concatenate([[chart], neighbours[neighbours != chart]]))
+    return rings
+
+
+def contradicting_charts(complex_, collapsible):
+    """(k,) int64 the charts whose neighbourhood alone admits no side directions.
+
+    Each is a proof that the whole side-direction program has none (see
+    :func:`_local_contradiction`); a labeling with none of them may still have no solution, but
+    their number measures how far a labeling is from one that closes.
+    """
+    slits = complex_.slit_walks()
+    bad = [chart for chart, ring in enumerate(_rings(complex_))
+           if _solve(_direction_program(complex_, np.sort(ring), collapsible, slits),
+                     NODE_LIMIT).status == INFEASIBLE]
+    return np.asarray(bad, dtype=np.int64)
 
 
 @dataclass
