@@ -73,7 +73,7 @@ def test_compile_now_compiles_every_cached_function():
     done = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True,
                           text=True, timeout=300)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.split("\n")[0] == "7 []"
+    assert done.stdout.split("\n")[0] == "8 []"
 
 
 def test_without_numba_the_command_line_says_what_to_install_and_writes_nothing(tmp_path):
