@@ -41,7 +41,7 @@ from core.quadmesh.polycube.embed import (interior_point_positions, side_point_p
                                           tutte_coordinates)
 from core.quadmesh.polycube.lattice import OverlappingChartsError, build_lattice, chart_orientation
 from core.quadmesh.polycube.milp_solve import MilpTimeLimitError
-from core.quadmesh.polycube.overlap_cuts import corners_to_cut
+from core.quadmesh.polycube.overlap_cuts import corners_to_cut, crossing_separations
 from core.quadmesh.polycube.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapsible_sides,
                                              loop_tables, minimum_faces, quantize,
                                              quantize_for_budget, rectangular_refinement)
@@ -81,6 +81,9 @@ REFINEMENT_ROUNDS = 24
 FALLBACK_REFINEMENT_ROUNDS = 8
 """The same where the paired decimation can take over: layouts within the budget seldom need
 more than a few refinements."""
+SEPARATION_ROUNDS = 24
+"""Rounds of quantization, each keeping apart one more pair of crossing segments of every
+overlapping chart, where the layout separates crossings instead of cutting charts."""
 
 
 def refined_target(target):
@@ -101,9 +104,15 @@ def refined_target(target):
 
 
 def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, collapsible,
-                      give_up_faces, refinement_rounds, least=None):
+                      give_up_faces, refinement_rounds, least=None, separate=False):
     """Quantize, lay out and embed; returns ``(mesh, polycube, rounds, refinement, folded,
     quad_chart)`` (``quad_chart``: (f,) int64 chart of every face of ``mesh``).
+
+    With ``separate``, overlapping charts are cut only when no crossing is left to separate:
+    in each of up to ``SEPARATION_ROUNDS`` rounds, every overlapping chart gets the separation
+    of its crossing segments that the measured chart shows most clearly among those not tried
+    yet (:func:`core.quadmesh.polycube.overlap_cuts.crossing_separations`); separations that
+    make the program infeasible are dropped for good.
 
     Charts whose integer polygon overlaps itself are cut at the reflex corners next to the
     overlap (:mod:`core.quadmesh.polycube.overlap_cuts`; only those charts, so the others keep their
@@ -125,8 +134,9 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     embedded quads are not a closed 2-manifold (a collapse that pinched a vertex).
     """
     refine, cuts, unrefinable, last = {}, {}, set(), None
+    separations, added, rejected, overlapping = [], [], set(), []
     scale, rounds = None, []
-    for _ in range(refinement_rounds):
+    for _ in range(SEPARATION_ROUNDS if separate else refinement_rounds):
         refinement = rectangular_refinement(complex_, tables, refine, cuts)
         if not refine or not np.any(collapsible):
             _check_minimum(complex_, tables, refinement, collapsible, give_up_faces,
@@ -137,12 +147,19 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
                 # refinement rounds in between keep that scale (one program each)
                 polycube, rounds = quantize_for_budget(complex_, tables, refinement,
                                                        target_faces, collapsible, give_up_faces,
-                                                       least)
+                                                       least, separations)
             else:
-                polycube = quantize(complex_, tables, refinement, scale, collapsible, least)
+                polycube = quantize(complex_, tables, refinement, scale, collapsible, least,
+                                    separations)
         except MilpTimeLimitError:
             raise  # not infeasible: another refinement would only make it load-dependent
         except LabelingError:
+            if added:
+                # the separations just added contradict the others: never ask for them again
+                rejected.update(added)
+                separations = [item for item in separations if item not in rejected]
+                added = []
+                continue
             if last is None:
                 raise
             # this chart's rectangles contradict the others: try its next refinement, then
@@ -158,6 +175,7 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
                 unrefinable.add(last)
                 last = None
             continue
+        added = []
         if polycube.faces > give_up_faces and scale is not None:
             scale = None  # the cuts made it larger at this scale: search the budget again
             continue
@@ -169,6 +187,13 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
         try:
             lattice = build_lattice(complex_, tables, polycube)
         except OverlappingChartsError as exc:
+            overlapping = exc.charts
+            if separate:
+                added = _next_separations(tables, polycube, exc.charts, separations, rejected)
+                if added:
+                    separations = separations + added
+                    scale = polycube.scale
+                    continue
             last = _cut_overlapping_chart(complex_, tables, polycube, exc.charts, refine, cuts,
                                           unrefinable)
             if last is None:
@@ -179,7 +204,7 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
             break
         scale, last = None, None  # refined layout found: search the budget with it
     else:
-        raise OverlappingChartsError(sorted(set(refine) | unrefinable))
+        raise OverlappingChartsError(sorted(set(refine) | unrefinable | set(overlapping)))
     orientation = chart_orientation(complex_, tables, polycube.corner_uv)
     face_uv = tutte_coordinates(V, F, complex_, tables, polycube)
     interior, folded = interior_point_positions(V, F, complex_, lattice, face_uv, orientation)
@@ -234,6 +259,21 @@ def _cut_overlapping_chart(complex_, tables, polycube, charts, refine, cuts, unr
         refine.setdefault(chart, REFINEMENTS[0])
         return chart
     return None
+
+
+def _next_separations(tables, polycube, charts, separations, rejected):
+    """For each of ``charts``, the first of its crossing separations
+    (:func:`core.quadmesh.polycube.overlap_cuts.crossing_separations`) that is neither in
+    ``separations`` nor ``rejected``; returns them as a list (empty: none left)."""
+    used = set(separations) | rejected
+    added = []
+    for chart in charts:
+        fresh = [item for item in crossing_separations(tables, polycube.corner_uv, chart)
+                 if item not in used]
+        if fresh:
+            added.append(fresh[0])
+            used.add(fresh[0])
+    return added
 
 
 def _give_up_limit(give_up_faces, max_base_faces):
@@ -552,9 +592,13 @@ class _LayoutAttempts:
 
     The first attempt lets sides measured shorter than half a unit collapse; where that fails
     (or changes the genus), the sides keep at least one unit and the side directions are
-    chosen again. The side directions and loop tables of the first successful attempt are
-    kept (``complex_``, ``tables``, ``collapsible``), so later attempts with larger least
-    lengths quantize the same complex.
+    chosen again. Where both fail, both are tried again with the crossings of overlapping
+    charts kept apart instead of the charts cut (``separate`` of :func:`_layout_on_target`):
+    cuts tie a chart into rectangles of at least one unit each, which can push the layout
+    past the caller's limit where separating the few crossing segments would not. The side
+    directions, loop tables and way of undoing overlaps of the first successful attempt are
+    kept (``complex_``, ``tables``, ``collapsible``, ``separate``), so later attempts with
+    larger least lengths quantize the same complex the same way.
     """
 
     def __init__(self, V, F, complex_, part_frames, target_faces, max_base_faces,
@@ -565,11 +609,12 @@ class _LayoutAttempts:
         self.target_genus = target_genus
         self.original = complex_
         self.complex_, self.tables, self.collapsible, self.flipped = None, None, None, None
+        self.separate, self.reached = False, []
 
     def _run(self, least):
         result = _layout_on_target(self.V, self.F, self.complex_, self.tables, *self.budget,
                                    self.collapsible, self.give_up_faces,
-                                   self.refinement_rounds, least)
+                                   self.refinement_rounds, least, self.separate)
         mesh, polycube, rounds, refinement, folded, quad_chart = result
         return mesh, polycube, rounds, refinement, folded, self.complex_, quad_chart
 
@@ -588,10 +633,33 @@ class _LayoutAttempts:
         _check_chart_minimum(complex_, collapsible, self.give_up_faces, self.budget[1])
         # raised here, it ends the attempt: the retry below keeps every side at least one
         # unit long, a stricter program that no side directions can satisfy either
+        try:
+            return self._cut_attempt(least, collapsible)
+        except MilpTimeLimitError:
+            raise
+        except LabelingError:
+            for reached in list(self.reached):
+                self.complex_, self.flipped, self.collapsible, self.tables = reached
+                self.separate = True
+                try:
+                    result = self._run(least)
+                except MilpTimeLimitError:
+                    raise
+                except (LabelingError, InvalidMeshError):
+                    continue
+                if polymesh_genus(result[0]) == self.target_genus:
+                    return result
+            raise
+
+    def _cut_attempt(self, least, collapsible):
+        """The attempts that cut overlapping charts (the class docstring); every side
+        directions and loop tables they reach are listed in ``reached``."""
+        complex_ = self.original
         self.complex_, self.flipped = make_loops_rectilinear(complex_, collapsible)
         self.collapsible = collapsible
         try:
             self.tables = loop_tables(self.complex_, self.V, self.part_frames)
+            self.reached.append((self.complex_, self.flipped, collapsible, self.tables))
             result = self._run(least)
             if polymesh_genus(result[0]) != self.target_genus:
                 raise LabelingError("collapsing sliver charts changed the genus")
@@ -605,6 +673,7 @@ class _LayoutAttempts:
                 feasible_collapsible=collapsible)
             self.collapsible = np.zeros(complex_.n_sides, dtype=bool)
             self.tables = loop_tables(self.complex_, self.V, self.part_frames)
+            self.reached.append((self.complex_, self.flipped, self.collapsible, self.tables))
             try:
                 return self._run(least)
             except InvalidMeshError as exc:

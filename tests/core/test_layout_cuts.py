@@ -1,13 +1,17 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Quantization details for designs with holes: a hole stays open where short sides may
-collapse, and a partial refinement cuts only the reflex corners it is given."""
+collapse, a partial refinement cuts only the reflex corners it is given, and a separation of
+two crossing segments undoes their crossing without cutting the chart."""
 from types import SimpleNamespace
 
 import numpy as np
 
-from core.quadmesh.polycube.overlap_cuts import chart_walk, corners_to_cut, reflex_references
-from core.quadmesh.polycube.quantize import (LoopTables, first_scale, loop_tables, quantize,
-                                             rectangular_refinement)
+from core.quadmesh.polycube.overlap_cuts import (Separation, chart_walk, corners_to_cut,
+                                                 crossing_separations, overlapping_cells,
+                                                 reflex_references)
+from core.quadmesh.polycube.quantize import (LoopTables, corner_coordinates, first_scale,
+                                             loop_tables, quantize, rectangular_refinement,
+                                             separation_rows)
 from core.quadmesh.polycube.side_signs import make_loops_rectilinear
 from core.quadmesh.polycube.chart_complex import build_chart_complex
 from tests.core.test_quadmesh import _solve, identity_frames, nearest_labels, union_of_boxes
@@ -79,3 +83,45 @@ def test_the_corners_cut_are_next_to_the_overlap():
     reflex = set(np.flatnonzero(reflex_references(tables, chart_walk(tables, 0))).tolist())
     assert cut and cut <= reflex
     assert not corners_to_cut(tables, corner_uv, 0, 1, reflex)  # nothing left to cut
+
+
+def _poking_u():
+    """The U of :func:`u_shape` with goal lengths that draw its notch deeper than the U is
+    high (the notch's two sides cross the bottom side), measured as the U itself."""
+    complex_, tables, axis, sign = u_shape()
+    goal = np.array([3, 2, 1, 3, 1, 3, 1, 2], dtype=np.float64)
+    complex_.side_extent = np.stack([goal, goal], axis=1)
+    return complex_, tables, axis, sign
+
+
+def test_separation_rows_measure_the_offset_between_two_corners():
+    complex_, tables, axis, sign = _poking_u()
+    rng = np.random.default_rng(3)
+    length = np.array([3, 2, 1, 3, 1, 3, 1, 2])
+    corner_uv = corner_coordinates(complex_, tables, length)
+    pairs = [Separation(int(a), int(b), int(c))
+             for a, b, c in zip(rng.integers(0, 8, 12), rng.integers(0, 8, 12),
+                                rng.integers(0, 2, 12))]
+    rows = separation_rows(tables, pairs, complex_.n_sides)
+    expected = [corner_uv[p.high, p.axis] - corner_uv[p.low, p.axis] for p in pairs]
+    assert np.allclose(rows.A @ length, expected)
+
+
+def test_a_separation_undoes_a_crossing_without_cutting_the_chart():
+    complex_, tables, axis, sign = _poking_u()
+    refinement = rectangular_refinement(complex_, tables)
+    crossing = quantize(complex_, tables, refinement, 1.0)
+    walk = chart_walk(tables, 0)
+    assert len(overlapping_cells(tables, crossing.corner_uv, walk, 1))  # the notch pokes out
+    separations = crossing_separations(tables, crossing.corner_uv, 0)
+    assert separations
+    # every separation offered is one the crossing layout violates
+    rows = separation_rows(tables, separations, complex_.n_sides)
+    assert (rows.A @ crossing.side_length < 1).all()
+    separated = quantize(complex_, tables, refinement, 1.0, separations=separations[:1])
+    assert not len(overlapping_cells(tables, separated.corner_uv, walk, 1))
+    assert (separated.side_length >= 1).all()
+    # the notch sides cost 2 (3 - 1) each when it gets one unit shallower than the U is
+    # high, so a U higher than 4 (its two sides 2 (h - 2) >= 6 off their goals) is never
+    # the optimum: at most 3 x 4 squares less the notch
+    assert 1 <= separated.faces <= 11

@@ -1,11 +1,12 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Reflex corners to cut where an integer chart polygon overlaps itself.
+"""Reflex corners to cut, or crossing segments to keep apart, where an integer chart polygon
+overlaps itself.
 
 A chart polygon drawn from integer side lengths can overlap itself
 (:mod:`core.quadmesh.polycube.lattice` finds cells covered twice or with the wrong orientation).
 Splitting the whole chart into rectangles
-(:func:`core.quadmesh.polycube.quantize.rectangular_refinement`) rules that out for every length,
-but every rectangle then needs a width and a height of at least one unit: a plate around several
+(:func:`core.quadmesh.polycube.quantize.rectangular_refinement`) rules out most of that (not a
+hooked arm of rectangles reaching over another), but every rectangle then needs a width and a height of at least one unit: a plate around several
 holes, cut open by slits, has dozens of reflex corners, and its rectangles make the layout several
 times larger than its features need.
 
@@ -16,7 +17,17 @@ far side of the chart (a hole's walk to the plate's rim), the relation the whole
 lacked. Where the chart still overlaps, the next quantization cuts at the corners next to the
 new overlap; once every reflex corner is cut the pieces are Tamassia's rectangles, so the
 escalation ends at the full refinement.
+
+Cuts tie a chart into rectangles of at least one unit each, which can make a layout much larger
+than the overlap needs. A lighter remedy separates the two boundary segments that cross
+(:func:`crossing_separations`): of the ways two axis-parallel segments can lie apart (one
+beyond an end of the other along either axis), the one the measured chart shows most clearly
+becomes a linear row on the side lengths, a corner at least one unit beyond another along an
+axis, as in the lazy validity constraints of Protais et al., "Robust quantization for polycube
+maps" (CAD 2022).
 """
+from dataclasses import dataclass
+
 import numpy as np
 
 from core.quadmesh.polycube.locate import winding_numbers
@@ -91,3 +102,73 @@ def corners_to_cut(tables, corner_uv, chart, orientation, already_cut):
     if not near.any():
         near = nearest == nearest.min()
     return set(candidates[near].tolist())
+
+
+@dataclass(frozen=True)
+class Separation:
+    """Two corners of one chart kept apart: the start corner of reference ``high`` lies at
+    least one unit beyond that of reference ``low`` along ``axis`` (0 ``u``, 1 ``v``)."""
+
+    low: int
+    high: int
+    axis: int
+
+
+def crossing_separations(tables, corner_uv, chart):
+    """Separations that would undo the crossings of ``chart``'s integer polygon, best first.
+
+    Two references of the chart's loop (of different sides: the banks of a slit coincide by
+    construction) cross when a ``u`` segment and a ``v`` segment meet inside both, or when two
+    segments along one line overlap over more than a point. Each crossing yields the
+    separation among the four that undo it (the crossing segment beyond either end of the
+    other, along either axis); they are ordered by their margin in the measured chart
+    (``tables.ref_measured``), largest first, so each crossing's clearest separation comes
+    before its others.
+
+    Parameters
+    ----------
+    tables : LoopTables; corner_uv : (j, 2) int64 the quantization's integer corners.
+    chart : int.
+
+    Returns
+    -------
+    list of Separation, four per crossing (empty when no two segments cross, e.g. a polygon
+    that only touches itself).
+    """
+    walk = chart_walk(tables, chart)
+    nxt = tables.ref_next[walk]
+    axis, side = tables.ref_axis[walk], tables.ref_side[walk]
+    start, end = corner_uv[walk], corner_uv[nxt]
+    low_ref = np.where(tables.ref_sign[walk] > 0, walk, nxt)
+    high_ref = np.where(tables.ref_sign[walk] > 0, nxt, walk)
+    lo, hi = np.minimum(start, end), np.maximum(start, end)
+    measured = tables.ref_measured
+    found = []
+    for i in range(len(walk)):
+        for j in range(len(walk)):
+            if side[i] == side[j]:
+                continue
+            if axis[i] == 0 and axis[j] == 1:
+                if not (lo[i, 0] < start[j, 0] < hi[i, 0] and lo[j, 1] < start[i, 1] < hi[j, 1]):
+                    continue
+                # the v segment left or right of the u segment, or the u one below or above
+                options = [Separation(int(walk[j]), int(low_ref[i]), 0),
+                           Separation(int(high_ref[i]), int(walk[j]), 0),
+                           Separation(int(walk[i]), int(low_ref[j]), 1),
+                           Separation(int(high_ref[j]), int(walk[i]), 1)]
+            elif axis[i] == axis[j] and i < j:
+                a, o = axis[i], 1 - axis[i]
+                if start[i, o] != start[j, o] or max(lo[i, a], lo[j, a]) >= min(hi[i, a],
+                                                                                   hi[j, a]):
+                    continue
+                # one segment beside the other, or beyond either of its ends
+                options = [Separation(int(walk[j]), int(walk[i]), int(o)),
+                           Separation(int(walk[i]), int(walk[j]), int(o)),
+                           Separation(int(high_ref[i]), int(low_ref[j]), int(a)),
+                           Separation(int(high_ref[j]), int(low_ref[i]), int(a))]
+            else:
+                continue
+            found += [(measured[item.high, item.axis] - measured[item.low, item.axis], item)
+                      for item in options]
+    found.sort(key=lambda item: -item[0])
+    return [separation for _, separation in found]

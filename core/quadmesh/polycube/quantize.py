@@ -13,14 +13,22 @@ split into rectangles first, combinatorially, by Tamassia's rectangular refineme
 sequence: from every reflex corner the incoming side is extended to the first side ahead where
 the turns add up to one left turn (its *front*), splitting that side in two. Each rectangle
 closes when its opposite sides are equally long, and any lengths >= 1 that close every
-rectangle draw every chart as a simple polygon tiled by those rectangles: no chart can fold
-over, collapse or overlap itself, whatever the scale.
+rectangle draw every rectangle with positive area: no piece of a chart can fold over or
+collapse, whatever the scale. Rectangles glued along a winding arm of a chart (a hook around a
+notch) can still reach over each other, since only the inside of the chart is refined (Tamassia
+refines the outer face too); :mod:`core.quadmesh.polycube.lattice` finds such overlaps.
 
 Splitting every chart that way makes a layout several times larger than its features need
 where a chart has many reflex corners (a plate around holes), so the base-mesh stage splits only
 the charts whose integer polygon overlaps itself, and those only at the reflex corners next to
 the overlap at first (``cuts`` of :func:`rectangular_refinement`, chosen by
 :mod:`core.quadmesh.polycube.overlap_cuts`): the pieces then close as polygons of their own.
+
+Cutting does not rule out every overlap, and cutting further makes the layout larger; two
+boundary segments that cross can instead be kept apart by a linear row on the side
+lengths (:func:`separation_rows`, the separations chosen by
+:mod:`core.quadmesh.polycube.overlap_cuts`), since the corners of a chart are sums of its
+signed side lengths along its walk.
 
 Where short sides may collapse to length zero, the walk around every hole that a slit reaches
 keeps a width of at least one unit along both axes (:func:`_open_hole_rows`), so a narrow hole
@@ -458,7 +466,39 @@ def _open_hole_rows(complex_, tables, n_columns):
     return LinearConstraint(matrix, 1.0, np.inf)
 
 
-def quantize(complex_, tables, refinement, scale, collapsible=None, least=None):
+def separation_rows(tables, separations, n_columns):
+    """Rows that keep the corner pairs of ``separations`` at least one unit apart.
+
+    The start corner of a reference lies at the signed sum of the lengths walked from the
+    chart's first corner, so the offset along ``axis`` from the corner of ``low`` to that of
+    ``high`` is ``sum sign_r l_r`` over the references ``r`` from ``low`` up to ``high`` (walking
+    the loop forwards) that run along ``axis``.
+
+    Parameters
+    ----------
+    tables : LoopTables; separations : sequence of
+        :class:`core.quadmesh.polycube.overlap_cuts.Separation` (both references of one chart).
+    n_columns : int, columns of the program (the side lengths first).
+
+    Returns
+    -------
+    scipy.optimize.LinearConstraint with one row per separation, each row ``>= 1``.
+    """
+    rows, cols, vals = [], [], []
+    for row, separation in enumerate(separations):
+        ref = separation.low
+        while ref != separation.high:
+            if tables.ref_axis[ref] == separation.axis:
+                rows.append(row)
+                cols.append(int(tables.ref_side[ref]))
+                vals.append(float(tables.ref_sign[ref]))
+            ref = int(tables.ref_next[ref])
+    matrix = sp.csr_matrix((vals, (rows, cols)), shape=(len(separations), n_columns))
+    matrix.sum_duplicates()
+    return LinearConstraint(matrix, 1.0, np.inf)
+
+
+def quantize(complex_, tables, refinement, scale, collapsible=None, least=None, separations=()):
     """Integer side lengths closest to ``scale`` times the measured ones, every rectangle closed.
 
     Parameters
@@ -468,6 +508,7 @@ def quantize(complex_, tables, refinement, scale, collapsible=None, least=None):
     collapsible : (s,) bool sides that may have length zero (slivers collapse), or None.
     least : (s,) int64 least length of every side (units), or None; where it exceeds the
         bound of ``collapsible`` (zero or one unit) it replaces it.
+    separations : sequence of Separation, corner pairs kept apart (:func:`separation_rows`).
 
     Returns
     -------
@@ -490,6 +531,8 @@ def quantize(complex_, tables, refinement, scale, collapsible=None, least=None):
     ]
     if collapsible is not None and np.any(collapsible) and complex_.slit_walks():
         constraints.append(_open_hole_rows(complex_, tables, n + n_sides))
+    if len(separations):
+        constraints.append(separation_rows(tables, separations, n + n_sides))
     # inserted edges and split pieces carry a small cost: no larger than the sides need
     cost = np.concatenate([np.full(n_sides, LENGTH_COST), np.full(n - n_sides, EXTRA_COST),
                            np.ones(n_sides)])
@@ -584,7 +627,7 @@ def collapsible_sides(complex_, target_faces):
 
 
 def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=None,
-                        give_up_faces=None, least=None):
+                        give_up_faces=None, least=None, separations=()):
     """The quantization at the scale nearest the first one whose face count meets the budget.
 
     Starts from the scale that gives the target area in unit squares (:func:`first_scale`) and
@@ -609,7 +652,7 @@ def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=
     -------
     best : IntegerPolycube, the layout chosen as above.
     rounds : list of dicts with the scale and faces of every round (for the report).
-    ``collapsible`` and ``least`` are passed on to :func:`quantize`.
+    ``collapsible``, ``least`` and ``separations`` are passed on to :func:`quantize`.
     """
     low_edge = (1.0 - BUDGET_TOLERANCE) * target_faces
     high_edge = (1.0 + BUDGET_TOLERANCE) * target_faces
@@ -618,7 +661,7 @@ def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=
     below = None  # the first count is below the band (the scale grows), or above it
     outside, inside = None, None  # scales on the far and near side of the band's nearer edge
     for _ in range(SCALE_ROUNDS):
-        result = quantize(complex_, tables, refinement, scale, collapsible, least)
+        result = quantize(complex_, tables, refinement, scale, collapsible, least, separations)
         rounds.append({"scale": scale, "faces": result.faces})
         if closest is None or abs(result.faces - target_faces) < abs(closest.faces - target_faces):
             closest = result
