@@ -13,7 +13,7 @@ OUT.json`` with default parameters, in its own process with this checkout's inte
 mesh: the wall seconds of every stage (from the report), the total, the exit code, the
 base-mesh method, faces and limit-surface crossings of the cage kept, the fit's crossings and
 volume outside, and the first line of the error of a failed run; with ``--evaluate``, the
-verdict of ``../shared/tools/evaluate.py`` on the STEP written. Rows are kept per label in
+verdict of ``../shared/tools/evaluate.py`` on the STEP written (valid, closed, volume outside, symmetric mean and maximum distance). Rows are kept per label in
 ``benchmarks/to_results.json``; ``benchmarks/TO_RESULTS.md`` shows the labels side by side.
 The machine has 2 cores shared with other jobs: compare labels measured in one run.
 """
@@ -71,9 +71,14 @@ def run_mesh(repo, path, evaluate=False):
             checked = subprocess.run([sys.executable, EVALUATE, "--target", path, "--result",
                                       step], capture_output=True, text=True)
             try:
-                brep = json.loads(checked.stdout)["brep"]
+                verdict = json.loads(checked.stdout)
+                brep = verdict["brep"]
+                distance = verdict["distance"]["symmetric"]
                 row["evaluate"] = (f"evaluate.py: valid {brep['is_valid']}, closed "
-                                   f"{brep['all_shells_closed']}, {brep['solids']} solid(s)")
+                                   f"{brep['all_shells_closed']}, {brep['solids']} solid(s), "
+                                   f"outside {verdict['containment']['outside_fraction']:.2%}, "
+                                   f"mean / max distance {distance['mean_frac']:.2%} / "
+                                   f"{distance['max_frac']:.2%} of the diagonal")
             except (ValueError, KeyError, TypeError):
                 row["evaluate"] = (checked.stdout.strip().splitlines() or [""])[-1][:200]
     return row
