@@ -13,7 +13,8 @@ OUT.json`` with default parameters, in its own process with this checkout's inte
 mesh: the wall seconds of every stage (from the report), the total, the exit code, the
 base-mesh method, faces and limit-surface crossings of the cage kept, the fit's crossings and
 volume outside, and the first line of the error of a failed run; with ``--evaluate``, the
-verdict of ``../shared/tools/evaluate.py`` on the STEP written (valid, closed, volume outside, symmetric mean and maximum distance). Rows are kept per label in
+verdict of ``../shared/tools/evaluate.py`` on the STEP written (valid, closed, volume outside,
+symmetric mean and maximum distance). Rows are kept per label in
 ``benchmarks/to_results.json``; ``benchmarks/TO_RESULTS.md`` shows the labels side by side.
 The machine has 2 cores shared with other jobs: compare labels measured in one run.
 """
