@@ -368,10 +368,7 @@ def _nearest(tri, order, node_lo, node_hi, points):
             if _box_distance(p, node_lo[node], node_hi[node]) > best:
                 continue  # farther than the nearest triangle found since it was put
             if node < size:
-                top = _push_children(stack, top, node, best,
-                                     _box_distance(p, node_lo[2 * node], node_hi[2 * node]),
-                                     _box_distance(p, node_lo[2 * node + 1],
-                                                   node_hi[2 * node + 1]))
+                top = _push_children_near(stack, top, node, best, p, node_lo, node_hi)
                 continue
             first_box, stop = _leaf_boxes(node, size, m)
             for i in range(first_box, stop):
@@ -379,8 +376,7 @@ def _nearest(tri, order, node_lo, node_hi, points):
                 v, w, _ = _closest_on_triangle(p, tri[f])
                 distance = 0.0
                 for d in range(3):
-                    gap = p[d] - (tri[f, 0, d] + v * (tri[f, 1, d] - tri[f, 0, d])
-                                  + w * (tri[f, 2, d] - tri[f, 0, d]))
+                    gap = _gap(p, tri[f], v, w, d)
                     distance += gap * gap
                 if distance < best or (distance == best and f < best_face):
                     best, best_face = distance, f
@@ -407,10 +403,7 @@ def _rivals(tri, order, node_lo, node_hi, points, closest, distance, slack, cosi
             if _box_distance(p, node_lo[node], node_hi[node]) > best:
                 continue
             if node < size:
-                top = _push_children(stack, top, node, best,
-                                     _box_distance(p, node_lo[2 * node], node_hi[2 * node]),
-                                     _box_distance(p, node_lo[2 * node + 1],
-                                                   node_hi[2 * node + 1]))
+                top = _push_children_near(stack, top, node, best, p, node_lo, node_hi)
                 continue
             first_box, stop = _leaf_boxes(node, size, m)
             for i in range(first_box, stop):
@@ -418,8 +411,7 @@ def _rivals(tri, order, node_lo, node_hi, points, closest, distance, slack, cosi
                 v, w, _ = _closest_on_triangle(p, tri[f])
                 squared, along = 0.0, 0.0
                 for d in range(3):
-                    gap = p[d] - (tri[f, 0, d] + v * (tri[f, 1, d] - tri[f, 0, d])
-                                  + w * (tri[f, 2, d] - tri[f, 0, d]))
+                    gap = _gap(p, tri[f], v, w, d)
                     squared += gap * gap
                     along += gap * (p[d] - c[d])
                 if squared > best or (squared == best and f > best_face >= 0):
@@ -603,6 +595,23 @@ def _push(stack, top, a, b):
     """Put the pair ``(a, b)`` on ``stack`` ((s, 2) int64) at ``top``; the new top."""
     stack[top, 0], stack[top, 1] = a, b
     return top + 1
+
+
+@numba.njit(inline="always")
+def _push_children_near(stack, top, node, best, p, node_lo, node_hi):
+    """:func:`_push_children` keyed by the squared distances from ``p`` to the children's
+    boxes."""
+    return _push_children(stack, top, node, best,
+                          _box_distance(p, node_lo[2 * node], node_hi[2 * node]),
+                          _box_distance(p, node_lo[2 * node + 1], node_hi[2 * node + 1]))
+
+
+@numba.njit(inline="always")
+def _gap(p, corners, v, w, d):
+    """Coordinate ``d`` of ``p`` minus that of the point ``a + v (b - a) + w (c - a)`` of the
+    triangle ``corners`` ((3, 3))."""
+    return p[d] - (corners[0, d] + v * (corners[1, d] - corners[0, d])
+                   + w * (corners[2, d] - corners[0, d]))
 
 
 @numba.njit(inline="always")
