@@ -379,3 +379,10 @@ def test_a_point_outside_a_concave_corner_pulls_along_its_bisector():
     assert near.tied.all() and (near.signed > 0).all()
     _, gradient, _ = packaging(on_bisector, target)
     assert np.allclose(gradient, [[0.5, 0.5, 0.0]] * 2, atol=1e-12)
+
+
+def test_no_query_points_give_empty_answers_with_their_ties():
+    box = trimesh.creation.box()
+    near = TargetSurface(box.vertices, box.faces, split=True).closest(np.zeros((0, 3)))
+    normal, offset = near.mean_plane()
+    assert near.tied.shape == (0,) and normal.shape == (0, 3) and offset.shape == (0,)
