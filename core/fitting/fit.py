@@ -198,6 +198,42 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         cage_self_intersections=cage_self_intersections)
 
 
+@single_threaded()
+def least_squares_preview(base, target, levels=2, rounds=10, seed=0):
+    """How close ``base`` can come to the target before containment: the inside fit's
+    least-squares start (phase 3 of :func:`fit_base_mesh`, held back where it crosses itself)
+    and its distances, without the pull inside and the RGP.
+
+    A cage whose least-squares fit crosses itself is held back towards the cage there, and
+    those vertices stay far from the target through the rest of the inside fit; the preview
+    says how far, so that two cages of the same target can be compared before either is
+    fitted (:mod:`core.quadmesh.route_review`).
+
+    Parameters
+    ----------
+    base : PolyMesh, closed 2-manifold, outward oriented (model units); its creases, if any,
+        are not fitted (the least-squares start of a creased cage differs, see
+        :func:`fit_base_mesh`).
+    target : TriMesh, closed, outward oriented.
+    levels : int in 1..4; rounds : int >= 0; seed : int, as in :func:`fit_base_mesh`.
+
+    Returns
+    -------
+    core.fitting.records.LeastSquaresFit, the fit (``untangled.held_back`` base vertices held
+    back, ``untangled.crossings`` pairs left); core.fitting.records.Distances of its limit
+    surface (fractions of the target's bounding-box diagonal).
+    """
+    _check_parameters(levels, 0, None, "best-fit", 1.0, 0.05)
+    _check_choices("limit", "best-fit", rounds, 2e-3, 1)
+    _check_base(base)
+    setup = _prepare(base, target, levels, "limit")
+    least_squares = _least_squares(base, setup, rounds, seed, refit_local=False)
+    points = sample_surface(setup.target.vertices, setup.target.faces, FIT.distance_samples,
+                            np.random.default_rng(seed))
+    X = setup.limit_map @ least_squares.untangled.vertices
+    return least_squares, _distances(X, setup.triangles, setup.target, points)
+
+
 def _prepare(base, target, levels, surface):
     """The :class:`core.fitting.records.FitSetup` of a fit of ``base`` to ``target``.
 

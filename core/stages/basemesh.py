@@ -10,20 +10,23 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
 
     With ``base_mesh_method="auto"`` an invalid labeling, or a layout that fails, needs
     more than 1.5 times the budget or has more inverted faces after its repair, falls back to
-    the paired decimation of the target (``core.quadmesh.build_base_mesh``).
+    the paired decimation of the target (``core.quadmesh.build_base_mesh``); so does a layout
+    whose least-squares fit crosses itself and stays much farther from the target than the
+    decimation's (:mod:`core.fitting.route_review`; not with ``fit_mode="none"``).
 
     Parameters
     ----------
     intake : core.types.IntakeResult; parts : core.types.PartsResult;
     frames : core.types.FramesResult; labeling : core.types.LabelingResult.
     params : core.params.ReconstructionParams (``target_faces``, ``max_base_faces``,
-        ``base_mesh_method``).
+        ``base_mesh_method``, ``fit_mode``, ``subdivision_levels``).
     progress : core.progress.Progress; cancellable before the layout starts.
 
     Returns
     -------
     core.types.BaseMeshResult; its report is ``build_base_mesh``'s info (with
-    ``fallback_reason`` when the labeling was invalid), its message names a fallback and
+    ``fallback_reason`` when the labeling was invalid, and the ``route_review`` of a polycube
+    layout in ``auto``), its message names a fallback and
     says when the face budget could not be met or the limit surface of every cage tried
     crosses itself.
 
@@ -35,6 +38,7 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     ``max_base_faces``.
     """
     from core.errors import FaceLimitError, LabelingError
+    from core.fitting.route_review import review_route
     from core.quadmesh.base_mesh import LayoutTooLargeError, build_base_mesh
 
     validity = labeling.validity.report
@@ -51,15 +55,24 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     progress.check_cancel()
     field = frames.frame_field
     interface_axis = field.face_interface_axis if len(field.interfaces) else None
+
+    def build(route):
+        return build_base_mesh(intake.surface, parts.face_part, labeling.face_label,
+                               field.face_frame, field.part_frames,
+                               target_faces=params.target_faces,
+                               max_base_faces=params.max_base_faces,
+                               face_interface_axis=interface_axis, method=route)
+
     try:
-        cage, info = build_base_mesh(intake.surface, parts.face_part, labeling.face_label,
-                                     field.face_frame, field.part_frames,
-                                     target_faces=params.target_faces,
-                                     max_base_faces=params.max_base_faces,
-                                     face_interface_axis=interface_axis, method=method)
+        cage, info = build(method)
     except LayoutTooLargeError as exc:
         # only the polycube route lets it through, and only over the user's max_base_faces
         raise FaceLimitError(str(exc)) from exc
+    if method == "auto" and info["method"] == "polycube" and params.fit_mode != "none":
+        progress.check_cancel()
+        reviewed = review_route(cage, info, intake.surface, params.subdivision_levels,
+                                lambda: build("decimation"))
+        cage, info = reviewed.cage, reviewed.info
     if invalid is not None and params.base_mesh_method == "auto":
         info["fallback_reason"] = f"the labeling is not a valid polycube labeling ({invalid})"
     if info["genus"] != intake.genus:
