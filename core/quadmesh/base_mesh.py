@@ -18,7 +18,8 @@
    (:func:`_polycube_base_mesh`).
 7. Faces whose limit surface still faces away from the target are repaired as on the paired
    decimation's cages (:mod:`limit_interpolation` moves their vertices off the target until
-   the limit reaches it; :mod:`local_repair` moves a corner or splits a quad), so a layout is
+   the limit reaches it; :mod:`local_repair` moves a corner, splits a quad or smooths the
+   patch round a fold in the target's tangent planes), so a layout is
    not given up for a few folded quads that a local edit unfolds. The self-crossings of the
    repaired cage's limit surface are counted as on the decimation's cages: a layout whose
    limit surface crosses itself gives way to a decimation cage whose limit surface does not.
@@ -497,11 +498,12 @@ def _repaired_layout(mesh, info, surface):
     target towards a limit surface through their on-target positions
     (:func:`core.quadmesh.limit_interpolation.unshrink_inverted`, kept only where it lowers the
     inverted faces without adding self-crossings of the limit surface), then a corner moved or
-    a quad split at the faces still inverted or crossing
-    (:func:`core.quadmesh.local_repair.repair_inverted`, kept where it lowers one flaw and
-    raises neither). A quantized layout folds where its integer polygons differ much from the
-    charts' shapes, over a few faces or many; the edits mend the few, and a layout left
-    crossing itself gives way to the paired decimation (:func:`build_base_mesh`).
+    a quad split at the faces still inverted or crossing, and where neither helps, the patch
+    round such a face smoothed in the target's tangent planes
+    (:func:`core.quadmesh.local_repair.repair_inverted` with ``untangle``, kept where it
+    lowers one flaw and raises neither). A quantized layout folds where its integer polygons
+    differ much from the charts' shapes, over a few faces or many; the edits mend the few, and
+    a layout left crossing itself gives way to the paired decimation (:func:`build_base_mesh`).
 
     Returns ``(mesh, info)``: ``info`` updated with the figures of the repaired mesh,
     ``inverted_faces`` (after the repair), ``layout_inverted_faces`` (before it),
@@ -518,7 +520,8 @@ def _repaired_layout(mesh, info, surface):
                                                              count_crossings)
     if inverted or crossings:
         mesh, crossings, inverted, edits = repair_inverted(mesh, surface, crossings,
-                                                           inverted, count_crossings)
+                                                           inverted, count_crossings,
+                                                           untangle=True)
     sizes = mesh.face_sizes
     info = {**info, **_mesh_figures(mesh), "quads": int((sizes == 4).sum()),
             "triangles": int((sizes == 3).sum()), "inverted_faces": inverted,

@@ -29,8 +29,18 @@ in this order: each corner moved (the faces stay quads), then the split along ea
 when it lowers the cage's inverted faces or the self-crossings of its limit surface and raises
 neither; the search then starts again on the edited cage, until no face is flawed or no edit
 helps.
+
+A polycube layout folds where its integer chart polygons differ from the charts' shapes: a
+side measured nearly zero long but given a unit or two leaves quads with two corners almost
+at one point, and the quads beside it fold over. A corner moved onto the target point nearest
+its neighbours' mean can jump to another wall of a thin member; moving it towards that mean
+in the tangent plane of the target at the corner (off the target, as the unshrinking moves
+vertices) untangles such a fold without leaving the corner's wall. With ``untangle``, where
+no edit above helps, the corners of each flawed face, then also their neighbours, get
+:data:`UNTANGLE_ROUNDS` rounds of such tangent-plane smoothing (kept by the same rule).
 """
 from dataclasses import replace
+from itertools import chain
 
 import numpy as np
 
@@ -47,16 +57,23 @@ MAX_TRIANGLE_SHARE = 0.1
 MAX_EDITS = 12
 """Edits kept at most (each one lowers the inverted faces or the crossings; this bounds the
 time on cages with many flawed faces)."""
+PATCH_FACES = 3
+"""Flawed faces one edit is counted on to mend with ``untangle`` (a patch smoothed in the
+tangent planes unfolds a face and its neighbours at once; without it, one face per edit)."""
+UNTANGLE_ROUNDS = (1, 2, 4)
+"""Rounds of tangent-plane smoothing tried per patch (``untangle`` of :func:`repair_inverted`);
+more rounds spread a fold over more of the patch."""
 
 
-def repair_inverted(mesh, surface, crossings, inverted, count_crossings):
+def repair_inverted(mesh, surface, crossings, inverted, count_crossings, untangle=False):
     """The cage with its inverted faces, and the faces where its limit surface crosses
     itself, relaxed or split where that helps (module docstring).
 
     An edit is kept when it lowers the inverted faces or the crossing pairs and raises
     neither. A limit surface that crosses itself gives no solid, so the edits are tried on a
     crossing cage only while its flawed faces (inverted, or holding a crossing) are no more
-    than the edits left: each edit mends about one face, and a cage left crossing is
+    than the edits left (:data:`PATCH_FACES` times that with ``untangle``): each edit mends
+    about one face (with ``untangle``, a patch of faces), and a cage left crossing is
     outranked by any cage that does not (the time would be lost).
 
     Parameters
@@ -67,6 +84,8 @@ def repair_inverted(mesh, surface, crossings, inverted, count_crossings):
         its level-2 limit surface, inverted faces).
     count_crossings : callable PolyMesh -> int, the self-crossing pairs of a cage's limit
         surface (as ``crossings`` was counted).
+    untangle : bool, also try tangent-plane smoothing of the flawed faces' patches once no
+        corner move or split helps (module docstring).
 
     Returns
     -------
@@ -81,9 +100,12 @@ def repair_inverted(mesh, surface, crossings, inverted, count_crossings):
             _, base_faces, _ = limit_self_intersections(mesh, LEVELS)
             crossing = np.unique(base_faces)
             flawed = np.concatenate([flawed, crossing[~np.isin(crossing, flawed)]])
-            if len(flawed) > MAX_EDITS - edits:
-                break  # more faces than edits left: the limit surface would still cross
-        for candidate in _candidates(mesh, flawed, surface):
+            if len(flawed) > (PATCH_FACES if untangle else 1) * (MAX_EDITS - edits):
+                break  # more faces than edits mend: the limit surface would still cross
+        candidates = _candidates(mesh, flawed, surface)
+        if untangle:
+            candidates = chain(candidates, _untangled(mesh, flawed, surface))
+        for candidate in candidates:
             count = int(inverted_faces(candidate, surface.vertices, surface.faces,
                                        surface).sum())
             if count > inverted or (count == inverted and not crossings):
@@ -119,6 +141,35 @@ def _candidates(mesh, faces, surface):
                 # the diagonal is a new edge: every crease edge stays an edge
                 yield from _valid(replace(PolyMesh.from_faces(mesh.vertices, split),
                                           creases=mesh.creases))
+
+
+def _untangled(mesh, faces, surface):
+    """Cages with the patch of each of ``faces`` ((k,) int64) smoothed in the target's tangent
+    planes, lazily: its corners, then its corners and their neighbours, each for every number
+    of :data:`UNTANGLE_ROUNDS`; invalid cages are skipped."""
+    corners = mesh.face_vertices
+    face_of_corner = np.repeat(np.arange(mesh.n_faces), mesh.face_sizes)
+    for face in faces.tolist():
+        own = corners[mesh.face_offsets[face]:mesh.face_offsets[face + 1]]
+        ring = np.unique(corners[np.isin(face_of_corner,
+                                         face_of_corner[np.isin(corners, own)])])
+        for patch in (own, ring):
+            for rounds in UNTANGLE_ROUNDS:
+                yield from _valid(_tangent_smoothed(mesh, patch, surface, rounds))
+
+
+def _tangent_smoothed(mesh, patch, surface, rounds):
+    """``mesh`` with the vertices ``patch`` ((p,) int64) moved ``rounds`` times to the mean of
+    their neighbours, each move projected onto the tangent plane of the target at the vertex
+    (the plane normal to the target's normal at its closest target point)."""
+    vertices = mesh.vertices.copy()
+    for _ in range(rounds):
+        centres = neighbour_mean(vertices, mesh.face_vertices, mesh.face_offsets)[patch]
+        normal = surface.closest(vertices[patch]).normal
+        step = centres - vertices[patch]
+        step -= np.einsum("pk,pk->p", step, normal)[:, None] * normal
+        vertices[patch] += step
+    return replace(mesh, vertices=vertices)
 
 
 def _valid(mesh):

@@ -98,3 +98,29 @@ def test_the_gripper_domain_cage_has_no_inverted_face():
     assert abs(result.mesh.n_faces - 300) <= 0.25 * 300
     assert result.quads >= 0.9 * result.mesh.n_faces
     assert polymesh_genus(result.mesh) == 3
+
+
+def test_two_corners_folded_together_are_untangled_in_the_tangent_plane(box):
+    cage, surface = box
+    vertices = cage.vertices.copy()
+    moved = [int(np.flatnonzero(np.all(cage.vertices == corner, axis=1))[0])
+             for corner in ([2.0, 2.0, 2.0], [3.0, 3.0, 2.0])]
+    vertices[moved] = [[3.9, 3.9, 2.0], [4.9, 4.9, 2.0]]  # both past their neighbours on the top
+    folded = PolyMesh(vertices, cage.face_vertices, cage.face_offsets)
+    count = LimitCrossingCount(folded)
+    inverted = int(inverted_faces(folded, surface.vertices, surface.faces, surface).sum())
+    assert inverted > 0
+    # one corner moved at a time does not unfold the pair
+    assert repair_inverted(folded, surface, count.crossings, inverted, count)[2] > 0
+    repaired, crossings, left, edits = repair_inverted(folded, surface, count.crossings,
+                                                       inverted, count, untangle=True)
+    assert (crossings, left) == (0, 0) and edits >= 1
+    assert LimitCrossingCount(repaired).crossings == 0
+    assert np.array_equal(repaired.face_vertices, cage.face_vertices)
+    # the top's vertices moved in its plane, inside the top, no two of them together
+    top = cage.vertices[:, 2] == 2.0
+    assert np.allclose(repaired.vertices[top, 2], 2.0, rtol=0.0, atol=1e-9)
+    assert np.all((repaired.vertices[top, :2] > -1e-9) & (repaired.vertices[top, :2] < 6 + 1e-9))
+    assert np.allclose(repaired.vertices[~top], cage.vertices[~top], rtol=0.0, atol=1e-12)
+    gaps = np.linalg.norm(repaired.vertices[top][:, None] - repaired.vertices[top][None], axis=2)
+    assert gaps[~np.eye(int(top.sum()), dtype=bool)].min() > 0.1
