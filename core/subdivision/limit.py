@@ -9,6 +9,8 @@
   matrix until the point falls into a regular sub-quad (the idea of Stam 1998,
   with repeated local subdivision instead of an eigen decomposition).
 """
+import functools
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -443,6 +445,9 @@ class LimitEvaluator:
         self._ev_slot = np.full(len(work.vertices), -1, dtype=np.int64)
         self._ev_levels = {}
         keys, kind = self._ev_kinds(self.ev_vertices)
+        self._ev_keys = keys
+        self._ev_kind = np.full(len(work.vertices), -1, dtype=np.int64)
+        self._ev_kind[self.ev_vertices] = kind
         for index, key in enumerate(keys):
             evs = self.ev_vertices[kind == index]
             self._ev_slot[evs] = np.arange(len(evs))
@@ -500,20 +505,6 @@ class LimitEvaluator:
                 g = self._move(g, "+b")
             row_g = self._move(row_g, "+a")
         return self.work.vertices[ids]
-
-    @staticmethod
-    def _stencil_table(n):
-        """(n, 2, 2, 16) template ids of the 4 x 4 stencil of sub-quad (i, j) of a sector."""
-        s = np.arange(n)[:, None, None, None, None]
-        i = np.arange(2)[None, :, None, None, None]
-        j = np.arange(2)[None, None, :, None, None]
-        di = np.arange(-1, 3)[None, None, None, :, None]
-        dj = np.arange(-1, 3)[None, None, None, None, :]
-        shape = (n, 2, 2, 4, 4)
-        ids = _template_id(n, np.broadcast_to(s, shape).reshape(-1),
-                           np.broadcast_to(i + di, shape).reshape(-1),
-                           np.broadcast_to(j + dj, shape).reshape(-1))
-        return ids.reshape(n, 2, 2, 16)
 
     def _ev_level(self, key, m):
         levels = self._ev_levels[key]
@@ -593,29 +584,50 @@ class LimitEvaluator:
         j = np.minimum(np.floor(B), 1).astype(np.int64)
         wa = bspline_weights(A - i)
         wb = bspline_weights(B - j)
-        keys, kind = self._ev_kinds(ev)
+        kind = self._ev_kind[ev]
         res = np.empty((len(rest), 3))
         w = (wa[:, :, None] * wb[:, None, :]).reshape(-1, 16)
-        for index, key in enumerate(keys):
+        # the points of one template kind and level together, each group in index order
+        group = kind * (int(m.max()) + 1) + m
+        order = np.argsort(group, kind="stable")
+        cuts = np.flatnonzero(np.diff(group[order])) + 1
+        for sel in np.split(order, cuts):
+            index, lev = int(kind[sel[0]]), int(m[sel[0]])
+            key = self._ev_keys[index]
             n, bits = key
-            of_key = kind == index
-            table = self._stencil_table(n)
-            for lev in np.unique(m[of_key]):
-                sel = np.flatnonzero(of_key & (m == lev))
-                C = self._ev_level(key, int(lev))
-                tid = table[sector[sel], i[sel], j[sel]]
-                pts = C[self._ev_slot[ev[sel]][:, None], tid]
-                if bits:
-                    # sub-quads next to a creased spoke: phantom points beyond it
-                    pts = pts.reshape(-1, 4, 4, 3).copy()
-                    below = (j[sel] == 0) & ((bits >> sector[sel]) & 1).astype(bool)
-                    left = (i[sel] == 0) & ((bits >> ((sector[sel] + 1) % n)) & 1).astype(bool)
-                    none = np.zeros(len(sel), dtype=bool)
-                    _reflect(pts, below, none, left, none)
-                    pts = pts.reshape(-1, 16, 3)
-                res[sel] = np.einsum("pi,pik->pk", w[sel], pts)
+            table = _stencil_table(n)
+            C = self._ev_level(key, lev)
+            tid = table[sector[sel], i[sel], j[sel]]
+            pts = C[self._ev_slot[ev[sel]][:, None], tid]
+            if bits:
+                # sub-quads next to a creased spoke: phantom points beyond it
+                pts = pts.reshape(-1, 4, 4, 3).copy()
+                below = (j[sel] == 0) & ((bits >> sector[sel]) & 1).astype(bool)
+                left = (i[sel] == 0) & ((bits >> ((sector[sel] + 1) % n)) & 1).astype(bool)
+                none = np.zeros(len(sel), dtype=bool)
+                _reflect(pts, below, none, left, none)
+                pts = pts.reshape(-1, 16, 3)
+            res[sel] = np.einsum("pi,pik->pk", w[sel], pts)
         out[rest] = res
         return out
+
+
+@functools.lru_cache(maxsize=None)
+def _stencil_table(n):
+    """(n, 2, 2, 16) template ids of the 4 x 4 stencil of sub-quad (i, j) of a sector (read-only:
+    one table per valence ``n`` is kept)."""
+    s = np.arange(n)[:, None, None, None, None]
+    i = np.arange(2)[None, :, None, None, None]
+    j = np.arange(2)[None, None, :, None, None]
+    di = np.arange(-1, 3)[None, None, None, :, None]
+    dj = np.arange(-1, 3)[None, None, None, None, :]
+    shape = (n, 2, 2, 4, 4)
+    ids = _template_id(n, np.broadcast_to(s, shape).reshape(-1),
+                       np.broadcast_to(i + di, shape).reshape(-1),
+                       np.broadcast_to(j + dj, shape).reshape(-1))
+    ids = ids.reshape(n, 2, 2, 16)
+    ids.setflags(write=False)
+    return ids
 
 
 def _reflect(P, v_low, v_high, u_low, u_high):
