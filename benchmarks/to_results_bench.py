@@ -11,6 +11,7 @@ export of the commit to compare with, e.g. ``git archive COMMIT | tar -x -C DIR`
 runs the command a user runs, ``python -m polycube_wb reconstruct MESH -o OUT.step --report
 OUT.json`` with default parameters, in its own process with this checkout's interpreter. Per
 mesh: the wall seconds of every stage (from the report), the total, the exit code, the
+CPU seconds of every stage (the report's ``cpu_seconds``), the
 base-mesh method, faces and limit-surface crossings of the cage kept, the fit's crossings and
 volume outside, and the first line of the error of a failed run; with ``--evaluate``, the
 verdict of ``../shared/tools/evaluate.py`` on the STEP written (valid, closed, volume outside,
@@ -61,6 +62,8 @@ def run_mesh(repo, path, evaluate=False):
                 report = json.load(handle)
             row["stages"] = {name: report["stages"][name].get("seconds")
                              for name in STAGES if name in report.get("stages", {})}
+            row["stage_cpu"] = {name: report["stages"][name].get("cpu_seconds")
+                                for name in STAGES if name in report.get("stages", {})}
             row["total"] = report.get("total_seconds")
             base = report.get("base_mesh", {})
             row["base_mesh"] = {key: base.get(key) for key in ("method", "faces", "genus",
@@ -116,6 +119,19 @@ def write_markdown(results):
                      "-" if outside is None else f"{outside:.2%}",
                      row.get("evaluate") or row["error"].replace("|", "/")[:160]]
             lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", "CPU seconds of each stage (its report's `cpu_seconds`: the process's user and "
+              "system time in the stage, which other jobs on the machine change less than "
+              "the wall seconds above; `-`: not reached or not recorded).", "",
+              "| " + " | ".join(["label", "mesh", *STAGES, "sum"]) + " |",
+              "|" + "---|" * (len(STAGES) + 3)]
+    for label, rows in results.items():
+        for row in rows:
+            cpu = row.get("stage_cpu") or {}
+            known = [cpu[name] for name in STAGES if cpu.get(name) is not None]
+            lines.append("| " + " | ".join(
+                [label, row["mesh"], *[("-" if cpu.get(name) is None else f"{cpu[name]:.1f}")
+                                       for name in STAGES],
+                 f"{sum(known):.1f}" if known else "-"]) + " |")
     with open(RESULTS_MD, "w") as handle:
         handle.write("\n".join(lines) + "\n")
 

@@ -53,17 +53,6 @@ def find_self_intersections(vertices, faces, among=None, candidates=None):
     return np.sort(hits, axis=1)[np.lexsort((hits.max(axis=1), hits.min(axis=1)))]
 
 
-def shared_corners(faces, pairs):
-    """(p,) int8 corners that the two faces of each pair ((p, 2) int64 into ``faces``,
-    (m, 3) int64) have in common: 2 for faces sharing an edge, which never cross."""
-    first, second = faces[pairs[:, 0]], faces[pairs[:, 1]]
-    shared = np.zeros(len(pairs), dtype=np.int8)
-    for a in range(3):
-        for b in range(3):
-            shared += first[:, a] == second[:, b]
-    return shared
-
-
 @numba.njit(cache=True, nogil=True)
 def _intersecting(vertices, faces, pairs, marked, eps):
     """(p,) bool: the faces of each pair ((p, 2) int64) intersect (the narrow phase).

@@ -212,10 +212,33 @@ class TargetSurface:
         Returns
         -------
         ClosestPoints, its arrays read only: the answer to the same points (bit for bit)
-            among the last ``CLOSEST_KEPT`` queries is returned again, not recomputed.
+            among the last ``CLOSEST_KEPT`` queries is returned again, not recomputed; of
+            a query of as many points as the latest kept one, only the points that differ
+            from that one's are computed (:meth:`_closest_of_changed`).
         """
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        return _kept_or_new(self._kept, (points,), lambda: self._closest(points))
+        return _kept_or_new(self._kept, (points,), lambda: self._closest_of_changed(points))
+
+    def _closest_of_changed(self, points):
+        """:meth:`_closest` of ``points``, the rows at the coordinates of the same rows of the
+        latest kept query of as many points copied from its answer.
+
+        A point's answer does not depend on the other query points, so the result is the
+        same bit for bit; cages that differ from one in a few moved vertices (the base
+        mesh's repairs) ask for the same face centres again but for a few.
+        """
+        if self._kept:
+            (previous,), answer = next(reversed(self._kept.values()))
+            if previous.shape == points.shape:
+                # compared bit for bit (0.0 and -0.0 differ)
+                fresh = np.flatnonzero((previous.view(np.int64) != points.view(np.int64))
+                                       .any(axis=1))
+                if len(fresh) < len(points):
+                    rows = {name: np.array(value) for name, value in vars(answer).items()}
+                    for name, value in vars(self._closest(points[fresh])).items():
+                        rows[name][fresh] = value
+                    return ClosestPoints(**rows)
+        return self._closest(points)
 
     def _closest(self, points):
         """:meth:`closest`, computed."""

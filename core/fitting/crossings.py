@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.box_tree import face_boxes
-from core.self_intersection import box_pairs, find_self_intersections, shared_corners
+from core.self_intersection import box_pairs, find_self_intersections
 from core.tolerances import CONTACT
 
 
@@ -261,7 +261,7 @@ def _crossings_after(X, triangles, pairs, mapping, changed, candidates):
 def _swept_pairs(reference, moved, mapping, triangles):
     """(c, 2) int64 the fine triangle pairs that may cross on the way from ``reference`` to
     ``moved`` ((n, 3) base vertices): those with a triangle that a moving base vertex
-    influences, not sharing an edge, whose bounding boxes overlap for some base vertices
+    influences whose bounding boxes overlap for some base vertices
     ``reference + t (moved - reference)``, ``t`` in [0, 1] per vertex.
 
     A fine point ``sum_v w_v (r_v + t_v d_v)`` stays within ``sum_v min(0, w_v d_v)`` and
@@ -272,9 +272,10 @@ def _swept_pairs(reference, moved, mapping, triangles):
     from ``mapping``'s arrays, not by scipy's ``maximum``, which sorts the rows of the
     matrix it is called on in place (every later product with it would round differently). A
     pair of triangles that no moving vertex influences keeps its answer
-    (:func:`_crossings_after`), and one sharing an edge is never a crossing
-    (:mod:`core.self_intersection`), so neither is kept: a hold-back's rounds test each of
-    its pairs again.
+    (:func:`_crossings_after`), so it is not kept: a hold-back's rounds test each of the
+    pairs again. Pairs sharing an edge are kept (a few per triangle among millions of pairs):
+    the narrow phase never reports them (:mod:`core.self_intersection`), and sorting them
+    out here would cost more than testing them.
     """
     moving = (moved != reference).any(axis=1)
     rows = np.repeat(np.arange(mapping.shape[0]), np.diff(mapping.indptr))
@@ -287,10 +288,8 @@ def _swept_pairs(reference, moved, mapping, triangles):
     slack = CONTACT * max(float(np.abs(low).max()), float(np.abs(high).max()), 1e-300)
     # from the matrix's arrays too (abs would sort it in place, see _crossings_after)
     moving_fine = np.bincount(rows, moving[mapping.indices] & (mapping.data != 0), len(X)) > 0
-    pairs = box_pairs(face_boxes(low[triangles])[0] - slack,
-                      face_boxes(high[triangles])[1] + slack,
-                      among=moving_fine[triangles].any(axis=1))
-    return pairs[shared_corners(triangles, pairs) < 2]
+    return box_pairs(face_boxes(low[triangles])[0] - slack, face_boxes(high[triangles])[1] + slack,
+                     among=moving_fine[triangles].any(axis=1))
 
 
 def _rows_in(pairs, allowed):

@@ -18,12 +18,39 @@ def face_centre_limit(base):
     (f, 3) float64: one subdivision step turns every face centre into a vertex (its face
     point), whose exact limit position and normal are evaluated.
     """
-    fine, _ = subdivide(base)
-    L, Tu, Tv = limit_matrices(fine)
+    step, L, Tu, Tv = _centre_operators(base)
+    fine = step @ np.asarray(base.vertices, dtype=np.float64)
+    normal = np.cross(Tu @ fine, Tv @ fine)
+    return L @ fine, normal / np.linalg.norm(normal, axis=1, keepdims=True)
+
+
+_LAST_OPERATORS = []
+"""The faces, creases and :func:`_centre_operators` of the last cage asked about."""
+
+
+def _centre_operators(base):
+    """``(S, L, Tu, Tv)``: the subdivision step of ``base`` (sparse, (n_fine, n)) and the rows
+    of the fine mesh's limit masks (:func:`core.subdivision.limit.limit_matrices`) at the
+    face points, (f, n_fine) each.
+
+    They depend on the faces and creases only; the last cage's are kept, since the repairs
+    judge many cages with the faces of one and vertices moved. The rows give the products
+    of the whole masks bit for bit (a sparse row's sum does not depend on the other rows).
+    """
+    creases = None if base.creases is None else np.asarray(base.creases)
+    if _LAST_OPERATORS:
+        face_vertices, face_offsets, kept_creases, operators = _LAST_OPERATORS[0]
+        if (np.array_equal(face_vertices, base.face_vertices)
+                and np.array_equal(face_offsets, base.face_offsets)
+                and (creases is None) == (kept_creases is None)
+                and (creases is None or np.array_equal(creases, kept_creases))):
+            return operators
+    fine, step = subdivide(base)
     centre = len(base.vertices) + np.arange(base.n_faces)
-    points = (L @ fine.vertices)[centre]
-    normal = np.cross((Tu @ fine.vertices)[centre], (Tv @ fine.vertices)[centre])
-    return points, normal / np.linalg.norm(normal, axis=1, keepdims=True)
+    operators = (step, *(matrix[centre] for matrix in limit_matrices(fine)))
+    _LAST_OPERATORS[:] = [(np.array(base.face_vertices), np.array(base.face_offsets),
+                           None if creases is None else creases.copy(), operators)]
+    return operators
 
 
 def inverted_faces(base, target_vertices, target_faces, surface=None):

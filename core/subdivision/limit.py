@@ -9,6 +9,8 @@
   matrix until the point falls into a regular sub-quad (the idea of Stam 1998,
   with repeated local subdivision instead of an eigen decomposition).
 """
+import functools
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -443,6 +445,9 @@ class LimitEvaluator:
         self._ev_slot = np.full(len(work.vertices), -1, dtype=np.int64)
         self._ev_levels = {}
         keys, kind = self._ev_kinds(self.ev_vertices)
+        self._ev_keys = keys
+        self._ev_kind = np.full(len(work.vertices), -1, dtype=np.int64)
+        self._ev_kind[self.ev_vertices] = kind
         for index, key in enumerate(keys):
             evs = self.ev_vertices[kind == index]
             self._ev_slot[evs] = np.arange(len(evs))
@@ -501,20 +506,6 @@ class LimitEvaluator:
             row_g = self._move(row_g, "+a")
         return self.work.vertices[ids]
 
-    @staticmethod
-    def _stencil_table(n):
-        """(n, 2, 2, 16) template ids of the 4 x 4 stencil of sub-quad (i, j) of a sector."""
-        s = np.arange(n)[:, None, None, None, None]
-        i = np.arange(2)[None, :, None, None, None]
-        j = np.arange(2)[None, None, :, None, None]
-        di = np.arange(-1, 3)[None, None, None, :, None]
-        dj = np.arange(-1, 3)[None, None, None, None, :]
-        shape = (n, 2, 2, 4, 4)
-        ids = _template_id(n, np.broadcast_to(s, shape).reshape(-1),
-                           np.broadcast_to(i + di, shape).reshape(-1),
-                           np.broadcast_to(j + dj, shape).reshape(-1))
-        return ids.reshape(n, 2, 2, 16)
-
     def _ev_level(self, key, m):
         levels = self._ev_levels[key]
         if m >= len(levels):
@@ -549,8 +540,7 @@ class LimitEvaluator:
         reg = evc < 0
         plain = reg & ~self.crease_sides[face].any(axis=1)
         if plain.any():
-            out[plain] = self._eval_regular(self.stencils[face[plain]], u[plain], v[plain],
-                                            self.work.vertices)
+            out[plain] = self._eval_regular(face[plain], u[plain], v[plain])
         sharp = reg & ~plain
         if sharp.any():
             out[sharp] = self._eval_crease_regular(face[sharp], u[sharp], v[sharp])
@@ -563,11 +553,13 @@ class LimitEvaluator:
             out[idx] = self._eval_near_ev(ev, self.spoke[corner], a, b)
         return out
 
-    @staticmethod
-    def _eval_regular(stencil, u, v, X):
-        w = (bspline_weights(u)[:, :, None] * bspline_weights(v)[:, None, :]).reshape(-1, 16)
-        st = stencil.reshape(-1, 16)
-        return np.stack([np.einsum("pi,pi->p", w, X[st, k]) for k in range(3)], axis=1)
+    def _eval_regular(self, face, u, v):
+        """(p, 3) limit points of regular quads without creased sides: the bicubic B-spline
+        of each quad's stencil."""
+        from core.subdivision.patch_sums import bspline_patch_points
+
+        return bspline_patch_points(u, v, self.stencils.reshape(-1, 16), face,
+                                    self.work.vertices)
 
     def _eval_crease_regular(self, face, u, v):
         """(p, 3) limit points of regular quads with creased sides (phantom nets)."""
@@ -578,6 +570,8 @@ class LimitEvaluator:
         return np.einsum("pij,pijk->pk", w, P)
 
     def _eval_near_ev(self, ev, sector, a, b):
+        from core.subdivision.patch_sums import bspline_patch_points
+
         out = np.empty((len(ev), 3))
         at_ev = (a <= 0.0) & (b <= 0.0)
         out[at_ev] = self.work_limit[ev[at_ev]]
@@ -591,31 +585,54 @@ class LimitEvaluator:
         B = np.ldexp(b, m)
         i = np.minimum(np.floor(A), 1).astype(np.int64)
         j = np.minimum(np.floor(B), 1).astype(np.int64)
-        wa = bspline_weights(A - i)
-        wb = bspline_weights(B - j)
-        keys, kind = self._ev_kinds(ev)
+        kind = self._ev_kind[ev]
         res = np.empty((len(rest), 3))
-        w = (wa[:, :, None] * wb[:, None, :]).reshape(-1, 16)
-        for index, key in enumerate(keys):
+        # the points of one template kind and level together, each group in index order
+        group = kind * (int(m.max()) + 1) + m
+        order = np.argsort(group, kind="stable")
+        cuts = np.flatnonzero(np.diff(group[order])) + 1
+        for sel in np.split(order, cuts):
+            index, lev = int(kind[sel[0]]), int(m[sel[0]])
+            key = self._ev_keys[index]
             n, bits = key
-            of_key = kind == index
-            table = self._stencil_table(n)
-            for lev in np.unique(m[of_key]):
-                sel = np.flatnonzero(of_key & (m == lev))
-                C = self._ev_level(key, int(lev))
-                tid = table[sector[sel], i[sel], j[sel]]
-                pts = C[self._ev_slot[ev[sel]][:, None], tid]
-                if bits:
-                    # sub-quads next to a creased spoke: phantom points beyond it
-                    pts = pts.reshape(-1, 4, 4, 3).copy()
-                    below = (j[sel] == 0) & ((bits >> sector[sel]) & 1).astype(bool)
-                    left = (i[sel] == 0) & ((bits >> ((sector[sel] + 1) % n)) & 1).astype(bool)
-                    none = np.zeros(len(sel), dtype=bool)
-                    _reflect(pts, below, none, left, none)
-                    pts = pts.reshape(-1, 16, 3)
-                res[sel] = np.einsum("pi,pik->pk", w[sel], pts)
+            table = _stencil_table(n)
+            C = self._ev_level(key, lev)
+            tid = table[sector[sel], i[sel], j[sel]]
+            # the 4 x 4 nets as rows of the level's template points, all EVs of the kind
+            nets = self._ev_slot[ev[sel]][:, None] * C.shape[1] + tid
+            if not bits:
+                res[sel] = bspline_patch_points(A[sel] - i[sel], B[sel] - j[sel], nets,
+                                                np.arange(len(sel)), C.reshape(-1, 3))
+                continue
+            # sub-quads next to a creased spoke: phantom points beyond it
+            pts = C.reshape(-1, 3)[nets].reshape(-1, 4, 4, 3)
+            below = (j[sel] == 0) & ((bits >> sector[sel]) & 1).astype(bool)
+            left = (i[sel] == 0) & ((bits >> ((sector[sel] + 1) % n)) & 1).astype(bool)
+            none = np.zeros(len(sel), dtype=bool)
+            _reflect(pts, below, none, left, none)
+            w = (bspline_weights(A[sel] - i[sel])[:, :, None]
+                 * bspline_weights(B[sel] - j[sel])[:, None, :]).reshape(-1, 16)
+            res[sel] = np.einsum("pi,pik->pk", w, pts.reshape(-1, 16, 3))
         out[rest] = res
         return out
+
+
+@functools.lru_cache(maxsize=None)
+def _stencil_table(n):
+    """(n, 2, 2, 16) template ids of the 4 x 4 stencil of sub-quad (i, j) of a sector (read-only:
+    one table per valence ``n`` is kept)."""
+    s = np.arange(n)[:, None, None, None, None]
+    i = np.arange(2)[None, :, None, None, None]
+    j = np.arange(2)[None, None, :, None, None]
+    di = np.arange(-1, 3)[None, None, None, :, None]
+    dj = np.arange(-1, 3)[None, None, None, None, :]
+    shape = (n, 2, 2, 4, 4)
+    ids = _template_id(n, np.broadcast_to(s, shape).reshape(-1),
+                       np.broadcast_to(i + di, shape).reshape(-1),
+                       np.broadcast_to(j + dj, shape).reshape(-1))
+    ids = ids.reshape(n, 2, 2, 16)
+    ids.setflags(write=False)
+    return ids
 
 
 def _reflect(P, v_low, v_high, u_low, u_high):

@@ -386,3 +386,22 @@ def test_no_query_points_give_empty_answers_with_their_ties():
     near = TargetSurface(box.vertices, box.faces, split=True).closest(np.zeros((0, 3)))
     normal, offset = near.mean_plane()
     assert near.tied.shape == (0,) and normal.shape == (0, 3) and offset.shape == (0,)
+
+
+def test_a_query_differing_in_a_few_points_answers_as_a_fresh_surface_does():
+    """The rows of the latest query of as many points are reused where the points are the
+    same bit for bit; the others are computed: every array equals a fresh surface's."""
+    mesh = trimesh.creation.icosphere(subdivisions=3)
+    V, F = np.asarray(mesh.vertices), np.asarray(mesh.faces, dtype=np.int64)
+    rng = np.random.default_rng(11)
+    points = rng.normal(size=(300, 3)) * 0.8
+    moved = points.copy()
+    moved[::7] += rng.normal(size=moved[::7].shape) * 0.3
+    moved[1] = -0.0 * moved[1]  # a sign bit alone is a change
+    surface = TargetSurface(V, F, split=True)
+    surface.closest(points)
+    reused = surface.closest(moved)
+    fresh = TargetSurface(V, F, split=True).closest(moved)
+    for name, value in vars(fresh).items():
+        assert np.array_equal(getattr(reused, name), value), name
+    assert np.all(reused.signed[np.linalg.norm(moved, axis=1) < 0.5] < 0)

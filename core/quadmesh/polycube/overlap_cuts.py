@@ -142,33 +142,62 @@ def crossing_separations(tables, corner_uv, chart):
     low_ref = np.where(tables.ref_sign[walk] > 0, walk, nxt)
     high_ref = np.where(tables.ref_sign[walk] > 0, nxt, walk)
     lo, hi = np.minimum(start, end), np.maximum(start, end)
+    i, j, parallel = _crossing_pairs(axis, side, start, lo, hi)
+    # per crossing (i, j) in walk order: the v segment j left or right of the u segment i, or
+    # i below or above j; for two segments along one line, one beside the other (across the
+    # line, axis o), or beyond either of its ends (along it, axis a)
+    a = axis[i]
+    o = 1 - a
+    low = np.where(parallel[:, None],
+                   np.stack([walk[j], walk[i], high_ref[i], high_ref[j]], axis=1),
+                   np.stack([walk[j], high_ref[i], walk[i], high_ref[j]], axis=1))
+    high = np.where(parallel[:, None],
+                    np.stack([walk[i], walk[j], low_ref[j], low_ref[i]], axis=1),
+                    np.stack([low_ref[i], walk[j], low_ref[j], walk[i]], axis=1))
+    along = np.where(parallel[:, None], np.stack([o, o, a, a], axis=1),
+                     np.array([0, 0, 1, 1])[None, :])
+    low, high, along = low.reshape(-1), high.reshape(-1), along.reshape(-1)
     measured = tables.ref_measured
-    found = []
-    for i in range(len(walk)):
-        for j in range(len(walk)):
-            if side[i] == side[j]:
-                continue
-            if axis[i] == 0 and axis[j] == 1:
-                if not (lo[i, 0] < start[j, 0] < hi[i, 0] and lo[j, 1] < start[i, 1] < hi[j, 1]):
-                    continue
-                # the v segment left or right of the u segment, or the u one below or above
-                options = [Separation(int(walk[j]), int(low_ref[i]), 0),
-                           Separation(int(high_ref[i]), int(walk[j]), 0),
-                           Separation(int(walk[i]), int(low_ref[j]), 1),
-                           Separation(int(high_ref[j]), int(walk[i]), 1)]
-            elif axis[i] == axis[j] and i < j:
-                a, o = axis[i], 1 - axis[i]
-                if start[i, o] != start[j, o] or max(lo[i, a], lo[j, a]) >= min(hi[i, a],
-                                                                                   hi[j, a]):
-                    continue
-                # one segment beside the other, or beyond either of its ends
-                options = [Separation(int(walk[j]), int(walk[i]), int(o)),
-                           Separation(int(walk[i]), int(walk[j]), int(o)),
-                           Separation(int(high_ref[i]), int(low_ref[j]), int(a)),
-                           Separation(int(high_ref[j]), int(low_ref[i]), int(a))]
-            else:
-                continue
-            found += [(measured[item.high, item.axis] - measured[item.low, item.axis], item)
-                      for item in options]
-    found.sort(key=lambda item: -item[0])
-    return [separation for _, separation in found]
+    margin = measured[high, along] - measured[low, along]
+    order = np.argsort(-margin, kind="stable")
+    return [Separation(int(low[k]), int(high[k]), int(along[k])) for k in order.tolist()]
+
+
+def _crossing_pairs(axis, side, start, lo, hi, block=256):
+    """The crossing segment pairs of a chart's loop, in walk order (``i``, then ``j``).
+
+    Parameters
+    ----------
+    axis, side : (k,) int the segments' axes and sides; start, lo, hi : (k, 2) int64 their
+        start corners and the least and greatest coordinates of their ends.
+    block : int, rows of the (k, k) pair table built at a time (memory).
+
+    Returns
+    -------
+    (i, j, parallel): (p,) int64 the two segments of every crossing (of different sides) and
+    (p,) bool whether they lie along one line (overlapping over more than a point, ``i < j``)
+    rather than a ``u`` segment ``i`` and a ``v`` segment ``j`` meeting inside both.
+    """
+    k = len(axis)
+    found_i, found_j, found_parallel = [], [], []
+    for first in range(0, k, block):
+        rows = np.arange(first, min(first + block, k))
+        ai, aj = axis[rows][:, None], axis[None, :]
+        apart = side[rows][:, None] != side[None, :]
+        across = ((ai == 0) & (aj == 1)
+                  & (lo[rows, 0][:, None] < start[None, :, 0])
+                  & (start[None, :, 0] < hi[rows, 0][:, None])
+                  & (lo[None, :, 1] < start[rows, 1][:, None])
+                  & (start[rows, 1][:, None] < hi[None, :, 1]))
+        a = axis[rows]
+        o = 1 - a
+        along_lo = np.maximum(lo[rows, a][:, None], lo[:, a].T)
+        along_hi = np.minimum(hi[rows, a][:, None], hi[:, a].T)
+        parallel = ((ai == aj) & (rows[:, None] < np.arange(k)[None, :])
+                    & (start[rows, o][:, None] == start[:, o].T) & (along_lo < along_hi))
+        ii, jj = np.nonzero(apart & (across | parallel))
+        found_i.append(rows[ii])
+        found_j.append(jj)
+        found_parallel.append(parallel[ii, jj])
+    return (np.concatenate(found_i).astype(np.int64), np.concatenate(found_j).astype(np.int64),
+            np.concatenate(found_parallel))
