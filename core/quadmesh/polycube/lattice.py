@@ -153,3 +153,46 @@ def build_lattice(complex_, tables, polycube):
                    np.asarray(interior_chart, dtype=np.int64),
                    np.asarray(interior_uv, dtype=np.float64).reshape(-1, 2),
                    np.asarray(identified, dtype=np.int64).reshape(-1, 2))
+
+
+def merged_points(lattice):
+    """(n_points,) int64 the vertex of every lattice point: the lowest point index among those
+    its ``identified`` pairs join (a corner where there is one)."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    n, pairs = lattice.n_points, lattice.identified
+    graph = sp.csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, component = connected_components(graph, directed=False)
+    lowest = np.full(component.max() + 1, n, dtype=np.int64)
+    np.minimum.at(lowest, component, np.arange(n))
+    return lowest[component]
+
+
+def pinched_quads(lattice, vertex):
+    """(f,) bool quads that the identified points pinch: a quad that repeats a vertex, or one
+    with an edge that more than two quads share.
+
+    lattice : Lattice; vertex : (n_points,) int64 :func:`merged_points`.
+    """
+    quads = vertex[lattice.quads]
+    repeats = (quads[:, :, None] == quads[:, None, :]).sum(axis=(1, 2)) > 4
+    a, b = quads.reshape(-1), np.roll(quads, -1, axis=1).reshape(-1)
+    n = np.int64(max(int(vertex.max()) + 1, 1))
+    key = np.minimum(a, b) * n + np.maximum(a, b)
+    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    crowded = (counts[inverse] > 2) & (a != b)
+    return repeats | crowded.reshape(-1, 4).any(axis=1)
+
+
+def pinching_sides(complex_, lattice, vertex, side_length, pinched):
+    """(s,) bool sides of length zero with an end at a vertex of the ``pinched`` quads (f,)
+    bool: the collapses that made those quads meet.
+
+    lattice : Lattice; vertex : (n_points,) int64 :func:`merged_points`; side_length : (s,)
+    int64.
+    """
+    at_pinch = np.zeros(lattice.n_points, dtype=bool)
+    at_pinch[vertex[lattice.quads[pinched]].reshape(-1)] = True
+    corner_pinched = at_pinch[vertex[:lattice.n_corners]]
+    return (side_length == 0) & corner_pinched[complex_.side_corners].any(axis=1)
