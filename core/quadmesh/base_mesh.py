@@ -39,16 +39,12 @@ from core.quadmesh.decimation.paired_decimation import TIGHTEN_ROUNDS, paired_de
 from core.quadmesh.polycube.chart_complex import build_chart_complex
 from core.quadmesh.polycube.embed import (interior_point_positions, side_point_positions,
                                           tutte_coordinates)
-from core.quadmesh.polycube.lattice import (OverlappingChartsError, build_lattice,
-                                            chart_orientation, merged_points, pinched_quads,
-                                            pinching_sides)
+from core.quadmesh.polycube.lattice import OverlappingChartsError, build_lattice, chart_orientation
 from core.quadmesh.polycube.milp_solve import MilpTimeLimitError
-from core.quadmesh.polycube.overlap_cuts import (corners_to_cut, crossing_groups,
-                                                 crossing_separations, goal_margin)
+from core.quadmesh.polycube.overlap_cuts import corners_to_cut, crossing_separations
 from core.quadmesh.polycube.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapse_thresholds,
-                                             closed_lengths, collapsible_sides, loop_tables,
-                                             measured_lengths,
-                                             minimum_faces, quantize, quantize_for_budget,
+                                             collapsible_sides, loop_tables, minimum_faces,
+                                             quantize, quantize_for_budget,
                                              rectangular_refinement)
 from core.quadmesh.polycube.relax import relax_on_target
 from core.quadmesh.polycube.closable_labels import closable_labels
@@ -90,9 +86,6 @@ REFINEMENT_ROUNDS = 24
 FALLBACK_REFINEMENT_ROUNDS = 8
 """The same where the paired decimation can take over: layouts within the budget seldom need
 more than a few refinements."""
-CLEAR_SEPARATION = 1.0
-"""Measured margin (units at the layout's scale) from which the separations of all crossings
-are added in one round (:func:`_next_separations`)."""
 SEPARATION_ROUNDS = 24
 """Rounds of quantization, each keeping apart one more pair of crossing segments of every
 overlapping chart, where the layout separates crossings instead of cutting charts."""
@@ -121,16 +114,10 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     quad_chart)`` (``quad_chart``: (f,) int64 chart of every face of ``mesh``).
 
     With ``separate``, overlapping charts are cut only when no crossing is left to separate:
-    in each of up to ``SEPARATION_ROUNDS`` rounds, the overlapping charts' crossing segments
-    get the separations of :func:`_next_separations`; a batch that makes the program
-    infeasible is halved down to one separation per chart, and those are dropped for good.
-
-    Where sides collapsed, the identified lattice points can pinch quads (a quad that repeats
-    a vertex, an edge of more than two quads: :func:`core.quadmesh.polycube.lattice.pinched_quads`).
-    The charts of such quads get separations of the segments where they touch themselves
-    (``touching`` of :func:`_next_separations`); where none is left, the sides of length zero
-    at the pinch keep at least one unit (once: where that is infeasible they collapse again
-    and the embedding reports the pinch).
+    in each of up to ``SEPARATION_ROUNDS`` rounds, every overlapping chart gets the separation
+    of its crossing segments that the measured chart shows most clearly among those not tried
+    yet (:func:`core.quadmesh.polycube.overlap_cuts.crossing_separations`); separations that
+    make the program infeasible are dropped for good.
 
     Charts whose integer polygon overlaps itself are cut at the reflex corners next to the
     overlap (:mod:`core.quadmesh.polycube.overlap_cuts`; only those charts, so the others keep their
@@ -152,9 +139,8 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     embedded quads are not a closed 2-manifold (a collapse that pinched a vertex).
     """
     refine, cuts, unrefinable, last = {}, {}, set(), None
-    separations, added, fallback, rejected, overlapping = [], [], [], set(), []
+    separations, added, rejected, overlapping = [], [], set(), []
     scale, rounds = None, []
-    uncollapse, uncollapsed = np.any(collapsible), None
     for _ in range(SEPARATION_ROUNDS if separate else refinement_rounds):
         refinement = rectangular_refinement(complex_, tables, refine, cuts)
         if not refine or not np.any(collapsible):
@@ -173,17 +159,6 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
         except MilpTimeLimitError:
             raise  # not infeasible: another refinement would only make it load-dependent
         except LabelingError:
-            if uncollapsed is not None:
-                # those sides cannot all keep a unit: collapse them again, and stop here
-                collapsible, uncollapsed, uncollapse = collapsible | uncollapsed, None, False
-                continue
-            if len(added) > len(fallback):
-                # a batch of clear separations contradicts the others (or itself): add the
-                # clearer half of it (each chart's clearest separation always)
-                kept = added[:max(len(fallback), len(added) // 2)]
-                separations = [item for item in separations if item not in added] + kept
-                added = kept
-                continue
             if added:
                 # the separations just added contradict the others: never ask for them again
                 rejected.update(added)
@@ -205,7 +180,7 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
                 unrefinable.add(last)
                 last = None
             continue
-        added, uncollapsed = [], None
+        added = []
         if polycube.faces > give_up_faces and scale is not None:
             scale = None  # the cuts made it larger at this scale: search the budget again
             continue
@@ -219,8 +194,7 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
         except OverlappingChartsError as exc:
             overlapping = exc.charts
             if separate:
-                added, fallback = _next_separations(complex_, tables, refinement, polycube,
-                                                    exc.charts, separations, rejected)
+                added = _next_separations(tables, polycube, exc.charts, separations, rejected)
                 if added:
                     separations = separations + added
                     scale = polycube.scale
@@ -231,24 +205,6 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
                 raise
             scale = polycube.scale
             continue
-        vertex = merged_points(lattice)
-        pinched = pinched_quads(lattice, vertex)
-        if pinched.any():
-            # collapsed sides made charts touch themselves: keep the touching segments apart,
-            # else keep the collapses at the pinch from collapsing
-            added, fallback = _next_separations(
-                complex_, tables, refinement, polycube, np.unique(lattice.quad_chart[pinched]),
-                separations, rejected, touching=True)
-            if added:
-                separations = separations + added
-                scale = polycube.scale
-                continue
-            keep = pinching_sides(complex_, lattice, vertex, polycube.side_length, pinched)
-            if uncollapse and (keep & collapsible).any():
-                uncollapsed = keep & collapsible
-                collapsible = collapsible & ~keep
-                scale = polycube.scale
-                continue
         if scale is None or abs(polycube.faces - target_faces) <= BUDGET_TOLERANCE * target_faces:
             break
         scale, last = None, None  # refined layout found: search the budget with it
@@ -263,6 +219,7 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     # identified points become one vertex (the lowest name: a corner where there is one);
     # points no quad uses (on sides of charts the quantization collapsed to no area) are
     # dropped, and the checks below judge whether what remains is closed with the genus kept
+    vertex = _merge_points(lattice.n_points, lattice.identified)
     used, compact = np.unique(vertex[lattice.quads.reshape(-1)], return_inverse=True)
     mesh = PolyMesh(points[used], compact.astype(np.int64),
                     np.arange(0, 4 * len(lattice.quads) + 1, 4, dtype=np.int64))
@@ -309,44 +266,19 @@ def _cut_overlapping_chart(complex_, tables, polycube, charts, refine, cuts, unr
     return None
 
 
-def _next_separations(complex_, tables, refinement, polycube, charts, separations, rejected,
-                      touching=False):
-    """Separations to add for the crossings (with ``touching``, the contacts) of ``charts``,
-    none in ``separations`` or ``rejected`` (:mod:`core.quadmesh.polycube.overlap_cuts`).
-
-    Separations are judged by their margin in the charts drawn with the real lengths nearest
-    the goals that close every chart (:func:`core.quadmesh.polycube.quantize.closed_lengths`,
-    :func:`core.quadmesh.polycube.overlap_cuts.goal_margin`): unlike the measured corners,
-    those agree with the side directions and with every chart that shares a side, so a
-    separation they show clearly seldom contradicts the program.
-
-    Returns ``(added, fallback)``, lists of Separation: ``fallback`` holds the separation of
-    largest margin of each chart; ``added`` holds those, then, largest margin first, the
-    separation of largest margin of every other crossing none of whose separations is used,
-    where that margin is at least ``CLEAR_SEPARATION`` units (one round then undoes many
-    crossings; where they contradict each other, the caller halves the batch). Both are empty
-    when none is left.
-    """
+def _next_separations(tables, polycube, charts, separations, rejected):
+    """For each of ``charts``, the first of its crossing separations
+    (:func:`core.quadmesh.polycube.overlap_cuts.crossing_separations`) that is neither in
+    ``separations`` nor ``rejected``; returns them as a list (empty: none left)."""
     used = set(separations) | rejected
-    goal = closed_lengths(refinement, polycube.scale * measured_lengths(complex_))
-    fallback, clear = [], []
+    added = []
     for chart in charts:
-        options = [item for item in crossing_separations(tables, polycube.corner_uv, chart,
-                                                         touching) if item not in used]
-        if not options:
-            continue
-        margins = [goal_margin(tables, goal, item) for item in options]
-        first = options[int(np.argmax(margins))]
-        fallback.append(first)
-        for group in crossing_groups(tables, polycube.corner_uv, chart, touching):
-            if any(item in used or item == first for item in group):
-                continue
-            margins = [goal_margin(tables, goal, item) for item in group]
-            best = int(np.argmax(margins))
-            if margins[best] >= CLEAR_SEPARATION:
-                clear.append((margins[best], group[best]))
-    clear.sort(key=lambda item: -item[0])
-    return fallback + [item for _, item in clear], fallback
+        fresh = [item for item in crossing_separations(tables, polycube.corner_uv, chart)
+                 if item not in used]
+        if fresh:
+            added.append(fresh[0])
+            used.add(fresh[0])
+    return added
 
 
 def _give_up_limit(give_up_faces, max_base_faces):
@@ -413,6 +345,18 @@ def _check_chart_minimum(complex_, collapsible, give_up_faces, max_base_faces):
             f"theorem on the charts without a side shorter than half a unit), more than "
             f"{_give_up_limit(give_up_faces, max_base_faces)} ({complex_.n_charts} charts, "
             f"{complex_.n_sides} sides, each at least one unit long or collapsible)", least)
+
+
+def _merge_points(n, pairs):
+    """(n,) int64 representative (lowest index) of every point under the identified pairs."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    graph = sp.csr_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, component = connected_components(graph, directed=False)
+    lowest = np.full(component.max() + 1, n, dtype=np.int64)
+    np.minimum.at(lowest, component, np.arange(n))
+    return lowest[component]
 
 
 def build_base_mesh(target, face_part, face_label, face_frame, part_frames, target_faces=300,

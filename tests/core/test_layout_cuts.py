@@ -1,20 +1,17 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Quantization details for designs with holes: a hole stays open where short sides may
-collapse, a partial refinement cuts only the reflex corners it is given, a separation of
-two crossing segments undoes their crossing without cutting the chart, contacts of a chart
-with itself are found, and the real lengths that close every chart give path-independent
-margins."""
+collapse, a partial refinement cuts only the reflex corners it is given, and a separation of
+two crossing segments undoes their crossing without cutting the chart."""
 from types import SimpleNamespace
 
 import numpy as np
 
 from core.quadmesh.polycube.overlap_cuts import (Separation, chart_walk, corners_to_cut,
-                                                 crossing_groups, crossing_separations,
-                                                 goal_margin, overlapping_cells,
+                                                 crossing_separations, overlapping_cells,
                                                  reflex_references)
-from core.quadmesh.polycube.quantize import (LoopTables, closed_lengths, corner_coordinates,
-                                             first_scale, loop_tables, quantize,
-                                             rectangular_refinement, separation_rows)
+from core.quadmesh.polycube.quantize import (LoopTables, corner_coordinates, first_scale,
+                                             loop_tables, quantize, rectangular_refinement,
+                                             separation_rows)
 from core.quadmesh.polycube.side_signs import make_loops_rectilinear
 from core.quadmesh.polycube.chart_complex import build_chart_complex
 from tests.core.test_quadmesh import _solve, identity_frames, nearest_labels, union_of_boxes
@@ -128,63 +125,3 @@ def test_a_separation_undoes_a_crossing_without_cutting_the_chart():
     # high, so a U higher than 4 (its two sides 2 (h - 2) >= 6 off their goals) is never
     # the optimum: at most 3 x 4 squares less the notch
     assert 1 <= separated.faces <= 11
-
-
-def _u_corners(length, axis, sign):
-    step = np.zeros((len(axis), 2), dtype=np.int64)
-    step[np.arange(len(axis)), axis] = sign * np.asarray(length)
-    assert (step.sum(axis=0) == 0).all()
-    return np.cumsum(np.vstack([[0, 0], step[:-1]]), axis=0)
-
-
-def test_contacts_include_the_crossings_and_skip_corners_the_loop_shares():
-    complex_, tables, axis, sign = u_shape()
-    plain = _u_corners([3, 2, 1, 1, 1, 1, 1, 2], axis, sign)
-    # the notch lowered onto the bottom side, and the U with its notch collapsed (its two
-    # sides of length zero: the top is three segments in a line, meeting at shared corners)
-    resting = _u_corners([3, 2, 1, 2, 1, 2, 1, 2], axis, sign)
-    collapsed = _u_corners([3, 2, 1, 0, 1, 0, 1, 2], axis, sign)
-    poking = _u_corners([3, 2, 1, 3, 1, 3, 1, 2], axis, sign)
-    for corner_uv in (plain, collapsed):
-        assert not crossing_groups(tables, corner_uv, 0, touching=True)
-    assert crossing_groups(tables, resting, 0, touching=True)
-    for corner_uv in (resting, poking):
-        crossings = {tuple(group) for group in crossing_groups(tables, corner_uv, 0)}
-        contacts = {tuple(group) for group in crossing_groups(tables, corner_uv, 0, True)}
-        assert crossings <= contacts and crossings
-
-
-def test_closed_lengths_close_every_chart_and_keep_lengths_that_close():
-    complex_, tables, axis, sign = _poking_u()
-    refinement = rectangular_refinement(complex_, tables)
-    rng = np.random.default_rng(5)
-    goal = rng.uniform(0.5, 4.0, complex_.n_sides)
-    closed = closed_lengths(refinement, goal)
-    assert np.abs(refinement.equalities @ closed).max() < 1e-8
-    closing = np.array([3, 2, 1, 1, 1, 1, 1, 2], dtype=np.float64)
-    assert np.allclose(closed_lengths(refinement, closing), closing, atol=1e-8)
-    # in a closed chart the margin is the corners' offset, whichever way round it is summed
-    step = np.zeros((complex_.n_sides, 2))
-    step[np.arange(complex_.n_sides), axis] = sign * closed
-    corner_uv = np.cumsum(np.vstack([[0, 0], step[:-1]]), axis=0)
-    for low, high, along in ((0, 3, 0), (5, 2, 1), (6, 1, 0)):
-        margin = goal_margin(tables, closed, Separation(low, high, along))
-        assert abs(margin - (corner_uv[high, along] - corner_uv[low, along])) < 1e-8
-
-
-def test_identified_points_that_pinch_a_quad_are_found():
-    from dataclasses import replace
-
-    from core.quadmesh.polycube.lattice import build_lattice, merged_points, pinched_quads
-    from tests.core.test_quadmesh import layout_problem
-
-    complex_, tables = layout_problem([[[0, 0, 0], [2, 1, 1]]])
-    polycube = quantize(complex_, tables, rectangular_refinement(complex_, tables), 2.0)
-    lattice = build_lattice(complex_, tables, polycube)
-    assert not pinched_quads(lattice, merged_points(lattice)).any()
-    # two opposite corners of one quad made one vertex: that quad repeats a vertex, and its
-    # neighbours' edges at that vertex now meet more quads than two
-    a, b = lattice.quads[0, 0], lattice.quads[0, 2]
-    pinched = replace(lattice, identified=np.vstack([lattice.identified, [[a, b]]]))
-    bad = pinched_quads(pinched, merged_points(pinched))
-    assert bad[0] and bad.sum() < len(bad)

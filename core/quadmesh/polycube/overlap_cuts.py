@@ -114,29 +114,26 @@ class Separation:
     axis: int
 
 
-def crossing_groups(tables, corner_uv, chart, touching=False):
-    """Separations that would undo the crossings of ``chart``'s integer polygon, per crossing.
+def crossing_separations(tables, corner_uv, chart):
+    """Separations that would undo the crossings of ``chart``'s integer polygon, best first.
 
     Two references of the chart's loop (of different sides: the banks of a slit coincide by
     construction) cross when a ``u`` segment and a ``v`` segment meet inside both, or when two
-    segments along one line overlap over more than a point. With ``touching``, segments that
-    meet at a point count too (a ``u`` and a ``v`` segment sharing any point, two segments of
-    one line sharing an end), except where two segments that follow each other along the loop,
-    with only sides of length zero between them, meet at their shared corner alone: where sides
-    collapse, such contacts pinch the chart (its lattice points there are identified). Each
-    crossing yields the separations that undo it (the crossing segment beyond either end of
-    the other, along either axis), ordered by their margin in the measured chart
-    (:func:`measured_margin`), largest first.
+    segments along one line overlap over more than a point. Each crossing yields the
+    separation among the four that undo it (the crossing segment beyond either end of the
+    other, along either axis); they are ordered by their margin in the measured chart
+    (``tables.ref_measured``), largest first, so each crossing's clearest separation comes
+    before its others.
 
     Parameters
     ----------
     tables : LoopTables; corner_uv : (j, 2) int64 the quantization's integer corners.
-    chart : int; touching : bool.
+    chart : int.
 
     Returns
     -------
-    list of lists of four Separation, one list per crossing (empty when no two segments
-    cross, e.g. a polygon that only touches itself and ``touching`` is False).
+    list of Separation, four per crossing (empty when no two segments cross, e.g. a polygon
+    that only touches itself).
     """
     walk = chart_walk(tables, chart)
     nxt = tables.ref_next[walk]
@@ -145,26 +142,14 @@ def crossing_groups(tables, corner_uv, chart, touching=False):
     low_ref = np.where(tables.ref_sign[walk] > 0, walk, nxt)
     high_ref = np.where(tables.ref_sign[walk] > 0, nxt, walk)
     lo, hi = np.minimum(start, end), np.maximum(start, end)
-    moving = (start != end).any(axis=1)
-    # rank of every segment among those of positive length (consecutive ranks are neighbours)
-    rank = np.cumsum(moving) - 1
-    count = int(moving.sum())
+    measured = tables.ref_measured
     found = []
     for i in range(len(walk)):
         for j in range(len(walk)):
-            if side[i] == side[j] or (touching and not (moving[i] and moving[j])):
+            if side[i] == side[j]:
                 continue
-            adjacent = touching and (rank[j] - rank[i]) % count in (1, count - 1) and (
-                np.array_equal(end[i], start[j]) or np.array_equal(end[j], start[i]))
             if axis[i] == 0 and axis[j] == 1:
-                if adjacent:
-                    continue
-                if touching:
-                    if not (lo[i, 0] <= start[j, 0] <= hi[i, 0]
-                            and lo[j, 1] <= start[i, 1] <= hi[j, 1]):
-                        continue
-                elif not (lo[i, 0] < start[j, 0] < hi[i, 0]
-                          and lo[j, 1] < start[i, 1] < hi[j, 1]):
+                if not (lo[i, 0] < start[j, 0] < hi[i, 0] and lo[j, 1] < start[i, 1] < hi[j, 1]):
                     continue
                 # the v segment left or right of the u segment, or the u one below or above
                 options = [Separation(int(walk[j]), int(low_ref[i]), 0),
@@ -173,9 +158,8 @@ def crossing_groups(tables, corner_uv, chart, touching=False):
                            Separation(int(high_ref[j]), int(walk[i]), 1)]
             elif axis[i] == axis[j] and i < j:
                 a, o = axis[i], 1 - axis[i]
-                shared = min(hi[i, a], hi[j, a]) - max(lo[i, a], lo[j, a])
-                if start[i, o] != start[j, o] or shared < 0 or (
-                        shared == 0 and (adjacent or not touching)):
+                if start[i, o] != start[j, o] or max(lo[i, a], lo[j, a]) >= min(hi[i, a],
+                                                                                   hi[j, a]):
                     continue
                 # one segment beside the other, or beyond either of its ends
                 options = [Separation(int(walk[j]), int(walk[i]), int(o)),
@@ -184,52 +168,7 @@ def crossing_groups(tables, corner_uv, chart, touching=False):
                            Separation(int(high_ref[j]), int(low_ref[i]), int(a))]
             else:
                 continue
-            found.append(sorted(options, key=lambda item: -measured_margin(tables, item)))
-    return found
-
-
-def measured_margin(tables, separation):
-    """How far (target units) the corner of ``separation.high`` lies beyond that of
-    ``separation.low`` along its axis in the measured chart (negative: short of it)."""
-    measured = tables.ref_measured
-    return float(measured[separation.high, separation.axis]
-                 - measured[separation.low, separation.axis])
-
-
-def goal_margin(tables, goal, separation):
-    """How far the corner of ``separation.high`` lies beyond that of ``separation.low`` along
-    its axis in the chart drawn with real side lengths ``goal`` (s,) float64 (units).
-
-    The offset is the signed sum of the lengths along the loop, as in
-    :func:`core.quadmesh.polycube.quantize.separation_rows`; the real lengths need not close
-    the loop, so both ways round are summed and the smaller offset is taken. Unlike
-    :func:`measured_margin` it follows the side directions, so a separation that these
-    directions rule out gets no positive margin.
-    """
-    ahead, behind = 0.0, 0.0
-    ref = separation.low
-    while ref != separation.high:
-        if tables.ref_axis[ref] == separation.axis:
-            ahead += tables.ref_sign[ref] * goal[tables.ref_side[ref]]
-        ref = int(tables.ref_next[ref])
-    while ref != separation.low:
-        if tables.ref_axis[ref] == separation.axis:
-            behind -= tables.ref_sign[ref] * goal[tables.ref_side[ref]]
-        ref = int(tables.ref_next[ref])
-    return float(min(ahead, behind))
-
-
-def crossing_separations(tables, corner_uv, chart, touching=False):
-    """The separations of all crossings of ``chart`` (:func:`crossing_groups`), four per
-    crossing, ordered by their measured margin (:func:`measured_margin`), largest first, so
-    each crossing's clearest separation comes before its others.
-
-    Returns
-    -------
-    list of Separation (empty when no two segments cross, e.g. a polygon that only touches
-    itself).
-    """
-    found = [item for group in crossing_groups(tables, corner_uv, chart, touching)
-             for item in group]
-    found.sort(key=lambda item: -measured_margin(tables, item))
-    return found
+            found += [(measured[item.high, item.axis] - measured[item.low, item.axis], item)
+                      for item in options]
+    found.sort(key=lambda item: -item[0])
+    return [separation for _, separation in found]

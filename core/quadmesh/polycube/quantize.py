@@ -414,28 +414,6 @@ def measured_lengths(complex_):
     return complex_.side_extent.mean(axis=1)
 
 
-def closed_lengths(refinement, goal):
-    """(s,) float64 real side lengths nearest ``goal`` (s,) that close every chart polygon.
-
-    The least-squares projection of the goal lengths (the refinement's other unknowns at
-    zero) onto the solutions of ``refinement.equalities`` (``scipy.sparse.linalg.lsqr``, which
-    takes redundant closure rows). Unlike the measured corners, the polygons these lengths
-    draw close and agree with every chart that shares a side, so a corner's offset from
-    another is the same whichever way round the loop it is summed; lengths may come out
-    negative where the side directions contradict the target.
-    """
-    from scipy.sparse.linalg import lsqr
-
-    n_sides = len(goal)
-    full = np.zeros(refinement.n_vars)
-    full[:n_sides] = goal
-    rows = refinement.equalities
-    if rows.shape[0] == 0:
-        return np.asarray(goal, dtype=np.float64)
-    y = lsqr(rows.T.tocsr(), full, atol=1e-10, btol=1e-10)[0]
-    return (full - rows.T @ y)[:n_sides]
-
-
 def closeness_rows(goal, n_vars):
     """Rows ``t_s >= |l_s - goal_s|`` over the variables ``[l (n_vars), t (s)]``, exact on integers.
 
