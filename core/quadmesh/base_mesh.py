@@ -42,10 +42,9 @@ from core.quadmesh.polycube.embed import (interior_point_positions, side_point_p
 from core.quadmesh.polycube.lattice import OverlappingChartsError, build_lattice, chart_orientation
 from core.quadmesh.polycube.milp_solve import MilpTimeLimitError
 from core.quadmesh.polycube.overlap_cuts import corners_to_cut, crossing_separations
-from core.quadmesh.polycube.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapse_thresholds,
-                                             collapsible_sides, loop_tables, minimum_faces,
-                                             quantize, quantize_for_budget,
-                                             rectangular_refinement)
+from core.quadmesh.polycube.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapsible_sides,
+                                             loop_tables, minimum_faces, quantize,
+                                             quantize_for_budget, rectangular_refinement)
 from core.quadmesh.polycube.relax import relax_on_target
 from core.quadmesh.polycube.closable_labels import closable_labels
 from core.quadmesh.polycube.side_signs import SideDirectionError, make_loops_rectilinear
@@ -67,10 +66,6 @@ class LayoutTooLargeError(LabelingError):
     def __init__(self, message, faces=None):
         super().__init__(message)
         self.faces = faces
-
-
-class _GenusChangedError(LabelingError):
-    """Collapsing slivers gave a layout of another genus than the target's."""
 
 
 FALLBACK_OVER_BUDGET = 1.5
@@ -656,49 +651,21 @@ class _LayoutAttempts:
                     return result
             raise
 
-    def _collapsed(self, least, collapsible):
-        """The layout with the sides of ``collapsible`` free to collapse (raises as
-        :func:`_layout_on_target`, or LabelingError when the genus changed)."""
-        self.complex_, self.flipped = make_loops_rectilinear(self.original, collapsible)
-        self.collapsible = collapsible
-        self.tables = loop_tables(self.complex_, self.V, self.part_frames)
-        if not self.reached:
-            self.reached.append((self.complex_, self.flipped, collapsible, self.tables))
-        result = self._run(least)
-        if polymesh_genus(result[0]) != self.target_genus:
-            raise _GenusChangedError("collapsing sliver charts changed the genus")
-        return result
-
     def _cut_attempt(self, least, collapsible):
-        """The attempts that cut overlapping charts (the class docstring); the side directions
-        and loop tables of the first and of the strict attempt are listed in ``reached``.
-
-        Where the collapse changes the genus or pinches the layout (a hole narrower than the
-        collapse threshold closed), the smaller thresholds of
-        :func:`core.quadmesh.polycube.quantize.collapse_thresholds` are tried before every
-        side keeps one unit."""
+        """The attempts that cut overlapping charts (the class docstring); every side
+        directions and loop tables they reach are listed in ``reached``."""
         complex_ = self.original
-        thresholds = collapse_thresholds()
+        self.complex_, self.flipped = make_loops_rectilinear(complex_, collapsible)
+        self.collapsible = collapsible
         try:
-            for k, below in enumerate(thresholds):
-                fewer = collapsible if k == 0 else collapsible & collapsible_sides(
-                    complex_, self.budget[0], below)
-                if k and not fewer.any():
-                    break
-                try:
-                    return self._collapsed(least, fewer)
-                except (_GenusChangedError, InvalidMeshError):
-                    if k + 1 == len(thresholds):
-                        raise
-                except SideDirectionError:
-                    if k == 0:
-                        raise
-                    break  # no side directions close the charts with fewer slivers
-            raise LabelingError("no collapse threshold keeps the genus")
-        except (LayoutTooLargeError, MilpTimeLimitError, SideDirectionError):
-            # keeping the slivers would only make it larger (or slower); side directions that
-            # fail with the slivers free fail without them (the caller relabels)
-            raise
+            self.tables = loop_tables(self.complex_, self.V, self.part_frames)
+            self.reached.append((self.complex_, self.flipped, collapsible, self.tables))
+            result = self._run(least)
+            if polymesh_genus(result[0]) != self.target_genus:
+                raise LabelingError("collapsing sliver charts changed the genus")
+            return result
+        except (LayoutTooLargeError, MilpTimeLimitError):
+            raise  # keeping the slivers would only make it larger (or slower)
         except (LabelingError, InvalidMeshError):
             # slivers that cannot vanish cleanly keep at least one unit
             self.complex_, self.flipped = make_loops_rectilinear(

@@ -76,10 +76,6 @@ BUDGET_TOLERANCE = 0.25
 COLLAPSE_BELOW = 0.5
 """Sides measured shorter than this many units (at the budget's first scale) may get length
 zero: slivers of the labeling collapse (:func:`collapsible_sides`)."""
-COLLAPSE_SHRINK = 1.0 / np.sqrt(2.0)
-"""Factor on the collapse threshold between the thresholds of :func:`collapse_thresholds`."""
-COLLAPSE_STEPS = 3
-"""Collapse thresholds tried (:func:`collapse_thresholds`)."""
 EXTRA_COST = 1e-3
 """Objective weight of the lengths of inserted edges and split pieces (per unit)."""
 LENGTH_COST = 1e-5
@@ -625,22 +621,9 @@ def first_scale(complex_, target_faces):
     return float(np.sqrt(target_faces / max(float(complex_.chart_area.sum()), 1e-300)))
 
 
-def collapsible_sides(complex_, target_faces, below=COLLAPSE_BELOW):
-    """(s,) bool sides shorter than ``below`` units at :func:`first_scale`."""
-    return measured_lengths(complex_) * first_scale(complex_, target_faces) < below
-
-
-def collapse_thresholds():
-    """The collapse thresholds (units) to try, largest first: ``COLLAPSE_BELOW`` times powers
-    of ``COLLAPSE_SHRINK``.
-
-    A side collapses where its chart is thinner than the threshold, and so does a hole that
-    narrow where no slit keeps it open (:func:`_open_hole_rows`): the layout then loses a
-    handle. A smaller threshold collapses only the thinner slivers, which keeps such a hole at
-    the price of a few more quads; the base-mesh stage tries the thresholds in turn while the
-    collapse changes the genus or pinches the layout.
-    """
-    return tuple(COLLAPSE_BELOW * COLLAPSE_SHRINK ** k for k in range(COLLAPSE_STEPS))
+def collapsible_sides(complex_, target_faces):
+    """(s,) bool sides shorter than ``COLLAPSE_BELOW`` units at :func:`first_scale`."""
+    return measured_lengths(complex_) * first_scale(complex_, target_faces) < COLLAPSE_BELOW
 
 
 def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=None,
