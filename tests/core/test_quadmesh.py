@@ -32,6 +32,9 @@ L_SHAPE = [[[0, 0, 0], [4, 1, 1]], [[0, 0, 0], [1, 3, 1]]]
 # a square frame: genus 1, its top and bottom charts are annuli (cut by slits)
 FRAME = [[[0, 0, 0], [3, 1, 1]], [[0, 2, 0], [3, 3, 1]], [[0, 0, 0], [1, 3, 1]],
          [[2, 0, 0], [3, 3, 1]]]
+# the frame as a thin plate: its walls are far thinner than half a unit at these budgets
+THIN_FRAME = [[[0, 0, 0], [4, 1, 0.12]], [[0, 2, 0], [4, 3, 0.12]], [[0, 0, 0], [1, 3, 0.12]],
+              [[3, 0, 0], [4, 3, 0.12]]]
 
 
 def union_of_boxes(boxes, max_edge=0.25):
@@ -426,6 +429,20 @@ def test_the_quantization_program_is_solved_by_its_linear_relaxation(monkeypatch
     plain = [LinearConstraint(constraints[0].A[:2 * s], constraints[0].lb[:2 * s], np.inf)]
     weaker = milp(cost, bounds=bounds, constraints=plain + list(constraints[1:]))
     assert weaker.fun < result.fun - 0.1
+
+
+@pytest.mark.slow
+def test_collapsed_walls_keep_a_closed_layout_of_the_target_genus_growing_with_the_budget():
+    """A thin plate's walls collapse to length zero; the layout stays a closed 2-manifold of
+    the plate's genus and a larger budget never gives fewer quads."""
+    counts = []
+    for budget in (60, 150, 300):
+        V, F, base, info = base_of(THIN_FRAME, target_faces=budget)
+        check_polymesh(base)
+        assert info["collapsed_sides"] > 0
+        assert info["genus"] == euler_genus(V, F) == 1
+        counts.append(base.n_faces)
+    assert counts == sorted(counts)
 
 
 def test_a_box_needs_six_quads_by_the_bound_and_by_the_quantization():
