@@ -184,7 +184,9 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
             raise LayoutTooLargeError(
                 f"the smallest quantized layout found has {polycube.faces} quads, more than "
                 f"{_give_up_limit(give_up_faces, max_base_faces)} ({complex_.n_charts} charts, "
-                f"{complex_.n_sides} sides, each at least one unit long)", polycube.faces)
+                f"{complex_.n_sides} sides, each at least one unit long"
+                f"{' or collapsible' if collapsible is not None and np.any(collapsible) else ''})",
+                polycube.faces)
         try:
             lattice = build_lattice(complex_, tables, polycube)
         except OverlappingChartsError as exc:
