@@ -37,7 +37,9 @@ from scipy.sparse.csgraph import connected_components
 
 from core.errors import LabelingError
 from core.geometry import face_areas, face_cross
-from core.quadmesh.polycube.side_signs import contradicting_charts
+from core.quadmesh.polycube.chart_complex import cornerless_rims
+from core.quadmesh.polycube.rim_walls import rim_walks, rim_wall_labels
+from core.quadmesh.polycube.side_signs import contradicting_charts, lone_sides
 from core.segmentation.chart_absorption import MAX_MEAN_ANGLE, dissolved_labels
 from core.segmentation.charts import build_topology, extract_layout
 from core.segmentation.repair_operators import neighbour_merges
@@ -169,14 +171,16 @@ def _regions(topology, faces):
     return [faces[component == c] for c in np.argsort(-sizes, kind="stable")]
 
 
-def _fits(candidate, labels, fit, area):
+def _fits(candidate, labels, fit, area, lenient=False):
     """True when the faces ``candidate`` changes fit their new labels within
     ``MAX_MEAN_ANGLE`` on average (area-weighted): a wall is never labelled across its
-    normal."""
+    normal. ``lenient``: also when they fit their new labels no worse than their old ones
+    (a hole's wall relabelled by sectors, whose faces may all face along the hole)."""
     changed = np.flatnonzero(candidate != labels)
-    cosine = np.clip(fit[changed, candidate[changed]], -1.0, 1.0)
-    mean = np.degrees(np.arccos(cosine)) @ area[changed] / max(area[changed].sum(), 1e-300)
-    return bool(mean <= MAX_MEAN_ANGLE)
+    weight = area[changed] / max(area[changed].sum(), 1e-300)
+    new = np.degrees(np.arccos(np.clip(fit[changed, candidate[changed]], -1.0, 1.0))) @ weight
+    old = np.degrees(np.arccos(np.clip(fit[changed, labels[changed]], -1.0, 1.0))) @ weight
+    return bool(new <= MAX_MEAN_ANGLE or (lenient and new <= old))
 
 
 def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, bad, turning,
@@ -191,6 +195,11 @@ def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, b
     lowers them and adds no turning point is kept, else the first that lowers them.
     """
     layout = extract_layout(topology, face_part, labels)
+    rims = []
+    for chart, rim, walls in rim_walks(complex_, lone_sides(complex_, collapsible_of(complex_))):
+        rims += rim_wall_labels(V, F, topology, face_part, face_frame, labels,
+                                complex_.face_chart, chart, rim, walls)
+    rims = [candidate for candidate in rims if _fits(candidate, labels, fit, area, True)]
     merges, splits = [], []
     for suspect in _suspects(complex_, bad).tolist():
         # charts of the complex and of the layout are both the connected faces of one label
@@ -201,7 +210,7 @@ def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, b
                                 layout.face_chart[first_face])
         merges.append(merged)
         splits += split
-    trials = []
+    trials = rims
     for group in merges + [splits]:
         group = [candidate for candidate in group if _fits(candidate, labels, fit, area)]
         costs = [area[candidate != labels].sum() for candidate in group]
@@ -230,6 +239,42 @@ def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, b
     return fallback
 
 
+def _first_with_corners(V, F, face_part, face_frame, topology, labels, fit, area, face_chart,
+                        rims):
+    """``(labels, face_chart, rims)`` of the first admissible rim labeling (its changed faces
+    fit, it is valid, it has fewer loops without corners) of any of ``rims``, or None (the
+    loop is listed from both of its charts: one of them bounds the wall)."""
+    for chart, rim, walls in rims:
+        for candidate in rim_wall_labels(V, F, topology, face_part, face_frame, labels,
+                                         face_chart, chart, rim, walls):
+            if not _fits(candidate, labels, fit, area, True) or not check_validity(
+                    V, F, face_part, candidate, face_frame, topology,
+                    turning=False).report["valid"]:
+                continue
+            trial_chart, trial_rims = cornerless_rims(F, face_part, candidate)
+            if len(trial_rims) < len(rims):
+                return candidate, trial_chart, trial_rims
+    return None
+
+
+def _with_corners(V, F, face_part, face_frame, topology, labels, fit, area):
+    """``labels`` ((m,) int64) with a corner on every chart boundary loop, or None.
+
+    Each loop without corners (:func:`~core.quadmesh.polycube.chart_complex.cornerless_rims`)
+    is the rim of a wall with one label all round; the first admissible labeling of
+    :func:`~core.quadmesh.polycube.rim_walls.rim_wall_labels` (:func:`_first_with_corners`)
+    is kept, until none is left (None when no loop has an admissible one).
+    """
+    face_chart, rims = cornerless_rims(F, face_part, labels)
+    while rims:
+        found = _first_with_corners(V, F, face_part, face_frame, topology, labels, fit, area,
+                                    face_chart, rims)
+        if found is None:
+            return None
+        labels, face_chart, rims = found
+    return labels
+
+
 def closable_labels(V, F, face_part, face_label, face_frame, build, collapsible_of):
     """Change the labels of the charts that no side directions close, keeping them valid.
 
@@ -252,10 +297,17 @@ def closable_labels(V, F, face_part, face_label, face_frame, build, collapsible_
     area = face_areas(V, F)
     before = check_validity(V, F, face_part, labels, face_frame, topology).report
     turning = before["turning_points"]["count"] or 0
-    complex_ = build(labels)
+    original = labels
+    labels = _with_corners(V, F, face_part, face_frame, topology, labels, fit, area)
+    if labels is None:
+        return None
+    changed = labels != original
+    rounds = int(changed.any())
+    try:
+        complex_ = build(labels)
+    except LabelingError:
+        return None  # e.g. a boundary between opposite labels: no polycube face
     bad = contradicting_charts(complex_, collapsible_of(complex_))
-    changed = np.zeros(len(labels), dtype=bool)
-    rounds = 0
     while len(bad) and rounds < MAX_ROUNDS:
         found = _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, bad,
                        turning, build, collapsible_of)
