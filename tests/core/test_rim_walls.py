@@ -15,7 +15,8 @@ from core.quadmesh.polycube.side_signs import (contradicting_charts, lone_sides,
                                                make_loops_rectilinear)
 from core.segmentation.validity import check_validity
 from core.types import TriMesh
-from tests.core.test_quadmesh import euler_genus, identity_frames, nearest_labels
+from tests.core.test_quadmesh import (euler_genus, identity_frames, nearest_labels,
+                                      union_of_boxes)
 
 CENTRE, RADIUS = np.array([2.0, 2.0]), 0.8
 
@@ -96,7 +97,7 @@ def test_a_rim_without_corners_gets_its_four_walls():
     part = np.zeros(len(F), dtype=np.int64)
     frames, _ = identity_frames(len(F))
     _, rims = cornerless_rims(F, part, labels)
-    hole_wall = np.unique(build_chart_ids(F, part, labels)[wall])
+    hole_wall = np.unique(_chart_ids(F, part, labels)[wall])
     assert len(hole_wall) == 1 and len(rims) == 4  # two rims, each seen from both sides
     assert all(chart in hole_wall or walls.tolist() == hole_wall.tolist()
                for chart, _, walls in rims)
@@ -107,7 +108,25 @@ def test_a_rim_without_corners_gets_its_four_walls():
                                                         fixed)
 
 
-def build_chart_ids(F, part, labels):
+def test_an_island_without_corners_is_dissolved_into_the_chart_around_it():
+    """A patch of a box's top labelled +Y: its loop passes no corner, and its faces fit the
+    label of the top far better than any wall's."""
+    V, F = union_of_boxes([[[0, 0, 0], [2, 1, 1]]], max_edge=0.1)
+    labels = nearest_labels(V, F)
+    centre = V[F].mean(axis=1)
+    island = (labels == 4) & (np.abs(centre[:, 0] - 1.0) < 0.2) & (np.abs(centre[:, 1] - 0.5)
+                                                                   < 0.2)
+    labels[island] = 2
+    part = np.zeros(len(F), dtype=np.int64)
+    assert len(cornerless_rims(F, part, labels)[1]) == 2  # one loop, seen from both sides
+    part, frames, fixed = _repaired(V, F, labels)
+    assert fixed is not None
+    assert check_validity(V, F, part, fixed.face_label, frames).report["valid"]
+    assert cornerless_rims(F, part, fixed.face_label)[1] == []
+    assert np.array_equal(fixed.face_label, nearest_labels(V, F))  # the island is top again
+
+
+def _chart_ids(F, part, labels):
     """(m,) int64 chart of each face, as cornerless_rims numbers them."""
     return cornerless_rims(F, part, labels)[0]
 

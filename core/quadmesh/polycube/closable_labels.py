@@ -10,8 +10,12 @@ wraps round it), so the walk round the hole cannot close. Each such chart is the
 neighbourhood (the chart and the charts it shares a side with) whose program alone has no
 solution (:func:`~core.quadmesh.polycube.side_signs.contradicting_charts`).
 
-Each round takes the charts in most of the contradicting neighbourhoods (the *suspects*, at
-most :data:`MAX_SUSPECTS`) and tries, on the neighbourhood of each:
+Each round first tries, for every walk with a single side along an axis
+(:func:`~core.quadmesh.polycube.side_signs.lone_sides`), its walls relabelled at once
+(:func:`~core.quadmesh.polycube.rim_walls.rim_wall_labels`: a hole's rim needs the four
+in-plane walls together, which one split at a time never gives). Then it takes the charts in
+most of the contradicting neighbourhoods (the *suspects*, at most :data:`MAX_SUSPECTS`) and
+tries, on the neighbourhood of each:
 
 - *merges*: the suspect takes the label of one of its neighbours in its part, alone or
   together with one neighbour, or is dissolved into its neighbours face by face;
@@ -21,12 +25,15 @@ most :data:`MAX_SUSPECTS`) and tries, on the neighbourhood of each:
 
 A trial is admissible when the faces it changes fit their new labels within
 :data:`~core.segmentation.chart_absorption.MAX_MEAN_ANGLE` on average (a wall of the design is
-never labelled across its normal), the labeling stays valid
+never labelled across its normal; a rim's walls may also fit no worse than before, since a
+small hole's wall may face along the hole), the labeling stays valid
 (:func:`core.segmentation.validity.check_validity`) and fewer neighbourhoods contradict.
-Merges are judged first, suspect by suspect, then the splits, each group cheapest (least
-changed area) first, a bounded number per round; the first admissible trial that adds no
+The rims' trials are judged first, then the merges, suspect by suspect, then the splits,
+each group of merges and of splits cheapest (least changed area) first, a bounded number per round; the first admissible trial that adds no
 turning point is kept, else the first admissible one (the side directions are chosen anyway).
-Rounds repeat until no neighbourhood contradicts. The changed labels are the layout's only:
+Rounds repeat until no neighbourhood contradicts. Before them, every chart boundary loop
+without corners (which no chart complex has) gets corners the same way, its walls relabelled
+or, for an island smaller than the charts around it, the island dissolved. The changed labels are the layout's only:
 the labeling stage's result is left as it was.
 """
 from dataclasses import dataclass
@@ -188,8 +195,9 @@ def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, b
     """One round of :func:`closable_labels`: ``(labels, complex_, bad, turning points)`` of
     the kept trial, or None.
 
-    The merges of each suspect (likeliest first), then the splits of all, each group cheapest
-    (least changed area) first, are judged for validity (without turning points, up to
+    The walls of the rims with a single side along an axis, the merges of each suspect
+    (likeliest first), then the splits of all, each group cheapest (least changed area) first,
+    are judged for validity (without turning points, up to
     :data:`MAX_JUDGED`), the valid ones by the neighbourhoods that still contradict (up to
     :data:`MAX_BUILT` complexes). The first that
     lowers them and adds no turning point is kept, else the first that lowers them.
@@ -198,7 +206,7 @@ def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, b
     rims = []
     for chart, rim, walls in rim_walks(complex_, lone_sides(complex_, collapsible_of(complex_))):
         rims += rim_wall_labels(V, F, topology, face_part, face_frame, labels,
-                                complex_.face_chart, chart, rim, walls)
+                                complex_.face_chart, chart, rim, walls, 2.0 - 2.0 * fit)
     rims = [candidate for candidate in rims if _fits(candidate, labels, fit, area, True)]
     merges, splits = [], []
     for suspect in _suspects(complex_, bad).tolist():
@@ -241,12 +249,24 @@ def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, b
 
 def _first_with_corners(V, F, face_part, face_frame, topology, labels, fit, area, face_chart,
                         rims):
-    """``(labels, face_chart, rims)`` of the first admissible rim labeling (its changed faces
-    fit, it is valid, it has fewer loops without corners) of any of ``rims``, or None (the
-    loop is listed from both of its charts: one of them bounds the wall)."""
+    """``(labels, face_chart, rims)`` of the first admissible labeling (its changed faces
+    fit, it is valid, it has fewer loops without corners) of any of ``rims``, or None.
+
+    Each rim's candidates are its walls relabelled
+    (:func:`~core.quadmesh.polycube.rim_walls.rim_wall_labels`; a loop is listed from both of
+    its charts, one of which bounds the wall), then, when its chart is smaller than every
+    chart across the loop, that chart dissolved into its neighbours (an island a few faces
+    across, at the resolution of the mesh, that no walls can square).
+    """
+    chart_area = np.bincount(face_chart, weights=area)
     for chart, rim, walls in rims:
-        for candidate in rim_wall_labels(V, F, topology, face_part, face_frame, labels,
-                                         face_chart, chart, rim, walls):
+        candidates = rim_wall_labels(V, F, topology, face_part, face_frame, labels, face_chart,
+                                     chart, rim, walls, 2.0 - 2.0 * fit)
+        if chart_area[chart] < chart_area[walls].min():
+            dissolved = dissolved_labels(topology, face_part, labels, face_chart, chart,
+                                         2.0 - 2.0 * fit)
+            candidates += [] if dissolved is None else [dissolved]
+        for candidate in candidates:
             if not _fits(candidate, labels, fit, area, True) or not check_validity(
                     V, F, face_part, candidate, face_frame, topology,
                     turning=False).report["valid"]:

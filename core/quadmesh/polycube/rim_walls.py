@@ -10,25 +10,34 @@ round hole's wall one label all round, or let a member's side wrap round the end
 or two of these walls are missing, and no single split adds them without another one missing
 (the walk still has a single side along an axis after each).
 
-:func:`rim_wall_labels` relabels the hole's wall in one move: the faces of the charts along the
+:func:`rim_wall_labels` relabels the hole's wall in one move: the faces of the charts across the
 rim that lie over the rim's bounding rectangle (in the ``u, v`` plane of the pierced chart,
-within a margin) and are connected to the rim through such faces take the label of the wall of
+within a margin) and are connected to the rim through such faces take the label of the side of
 that rectangle they lie nearest to, facing into the hole (or out of it, around a boss: the
 side the faces' normals point to on average). The rectangle's straight skeleton splits a tube
-into four sectors, each a chart whose two ends are corners with the pierced chart, so the rim
-becomes a rectangle of four sides. A second candidate relabels only the faces whose sector's
-label is missing from the rim.
+into four sectors, each a chart with one side on the rim, so the rim becomes a rectangle of four
+sides. Further candidates relabel only the faces whose sector's label no wall of the rim has,
+in sectors as they are and thinned (the distance to a missing side weighted by
+:data:`THINNING`: the tapered end of a slot between two members is walled by a narrow strip,
+not by the members' sides). A changed face that would meet a face of the opposite label keeps
+its label, and a chart of fewer than four boundaries that the change leaves (a sliver between
+sectors, invalid by :mod:`core.segmentation.validity`) is dissolved into its neighbours.
+
+The same move gives corners to a chart boundary loop that passes none (a wall with one label
+all round, :func:`~core.quadmesh.polycube.chart_complex.cornerless_rims`).
 """
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from core.geometry import face_cross
 from core.quadmesh.polycube.side_signs import chart_walks
+from core.segmentation.chart_absorption import dissolved_labels
+from core.segmentation.charts import extract_layout
 
 RIM_MARGIN = 0.25
-"""Faces whose centre lies within this fraction of the rim rectangle's larger extent outside
+"""Faces whose centre lies within this fraction of the rim rectangle's smaller extent outside
 the rectangle count as the hole's wall (a wall that flares away from the rim)."""
+TIDY_ROUNDS = 4
+"""Most rounds of giving back conflicting changes and dissolving the small charts left."""
 THINNING = 3.0
 """Weight of the distance to a wall the rim lacks in the thinned candidate."""
 
@@ -71,7 +80,7 @@ def rim_walks(complex_, lone):
 
 
 def rim_wall_labels(V, F, topology, face_part, face_frame, labels, face_chart, chart, rim,
-                    walls):
+                    walls, cost):
     """Candidate labelings that give a rim the four walls it needs.
 
     Parameters
@@ -81,6 +90,8 @@ def rim_wall_labels(V, F, topology, face_part, face_frame, labels, face_chart, c
     face_chart : (m,) int64 the charts of ``labels`` (connected faces of one part and label).
     chart : int the chart the rim bounds; rim : (k,) int64 its vertices; walls : (j,) int64
         the charts across it.
+    cost : (m, 6) float64 cost of each label for each face (``||n - c_l||^2``), by which a
+        chart of fewer than four boundaries that the change leaves is dissolved.
 
     Returns
     -------
@@ -123,62 +134,56 @@ def rim_wall_labels(V, F, topology, face_part, face_frame, labels, face_chart, c
         keep = missing[nearest] if only_missing else np.ones(len(region), dtype=bool)
         candidate = labels.copy()
         candidate[region[keep]] = wall_label[nearest[keep]]
-        candidate = _tidied(topology, labels, candidate, seed, region)
+        candidate = _tidied(topology, face_part, labels, candidate, seed)
+        for _ in range(TIDY_ROUNDS):
+            dissolved = _without_small_charts(topology, face_part, labels, candidate, cost)
+            if np.array_equal(dissolved, candidate):
+                break
+            candidate = _tidied(topology, face_part, labels, dissolved, seed)
         if (candidate != labels).any() and not any(np.array_equal(candidate, c) for c in out):
             out.append(candidate)
     return out
 
 
-def _tidied(topology, labels, candidate, seed, region):
+def _tidied(topology, face_part, labels, candidate, seed):
     """``candidate`` ((m,) int64) with the changes that would break the labeling given back
     their label in ``labels``, until none is left: a changed face that meets a face of the
-    opposite label, and a changed region (edge-connected faces of one new label) that touches
-    no ``seed`` face ((m,) bool, the faces at the rim), a fragment of a sector."""
+    opposite label, and the changed faces of a chart all of whose faces changed and none of
+    which touches ``seed`` ((m,) bool, the faces at the rim): a fragment of a sector."""
     candidate = candidate.copy()
     while True:
         changed = np.flatnonzero(candidate != labels)
         if not len(changed):
             return candidate
         nb = topology.neighbours[changed]
-        valid = nb >= 0
-        other = candidate[np.maximum(nb, 0)]
-        opposite = valid & (other == (candidate[changed] ^ 1)[:, None])
+        opposite = (nb >= 0) & (candidate[np.maximum(nb, 0)] == (candidate[changed] ^ 1)[:, None])
         back = changed[opposite.any(axis=1)]
         if not len(back):
-            same = valid & (other == candidate[changed][:, None]) \
-                & (candidate[np.maximum(nb, 0)] != labels[np.maximum(nb, 0)])
-            local = np.full(len(labels), -1, dtype=np.int64)
-            local[changed] = np.arange(len(changed))
-            rows = np.repeat(np.arange(len(changed)), 3)[same.reshape(-1)]
-            graph = sp.csr_matrix((np.ones(len(rows)), (rows, local[nb[same]])),
-                                  shape=(len(changed), len(changed)))
-            _, component = connected_components(graph, directed=False)
-            anchored = np.zeros(component.max() + 1, dtype=bool)
-            anchored[component[seed[changed]]] = True
-            back = changed[~anchored[component]]
+            face_chart = extract_layout(topology, face_part, candidate).face_chart
+            anchored = np.zeros(int(face_chart.max()) + 1, dtype=bool)
+            anchored[face_chart[(candidate == labels) | seed]] = True
+            back = changed[~anchored[face_chart[changed]]]
             if not len(back):
-                return _without_lone_faces(topology, candidate, region)
+                return candidate
         candidate[back] = labels[back]
 
 
-def _without_lone_faces(topology, candidate, region):
-    """``candidate`` ((m,) int64) with every face of ``region`` ((k,) int64) whose label none
-    of its neighbours has, but two of them share, given theirs (a face left between sectors
-    would be a chart of its own)."""
-    candidate = candidate.copy()
-    for _ in range(len(region)):
-        nb = topology.neighbours[region]
-        other = np.where(nb >= 0, candidate[np.maximum(nb, 0)], -1)
-        lone = (other != candidate[region][:, None]).all(axis=1)
-        shared = np.where(other[:, 0] == other[:, 1], other[:, 0],
-                          np.where(other[:, 2] == other[:, 1], other[:, 1],
-                                   np.where(other[:, 0] == other[:, 2], other[:, 0], -1)))
-        fix = lone & (shared >= 0)
-        if not fix.any():
-            break
-        first = np.flatnonzero(fix)[0]  # one at a time: a neighbour may be lone as well
-        candidate[region[first]] = shared[first]
-    return candidate
+def _without_small_charts(topology, face_part, labels, candidate, cost):
+    """``candidate`` ((m,) int64) with every chart of fewer than four boundaries (invalid,
+    :mod:`core.segmentation.validity`) at or next to a face it changes from ``labels``
+    dissolved into its neighbours
+    (:func:`~core.segmentation.chart_absorption.dissolved_labels`, by ``cost``)."""
+    layout = extract_layout(topology, face_part, candidate)
+    changed = np.flatnonzero(candidate != labels)
+    near = topology.neighbours[changed].reshape(-1)
+    touched = np.unique(layout.face_chart[np.concatenate([changed, near[near >= 0]])])
+    small = touched[layout.chart_boundary_count[touched] <= 3]
+    out = candidate
+    for chart in small[np.argsort(layout.chart_size[small], kind="stable")].tolist():
+        dissolved = dissolved_labels(topology, face_part, out, layout.face_chart, chart, cost)
+        if dissolved is not None:
+            out = dissolved
+    return out
 
 
 def _connected_from(topology, allowed, seed):
