@@ -28,13 +28,14 @@ A trial is admissible when the faces it changes fit their new labels within
 never labelled across its normal; a rim's walls may also fit no worse than before, since a
 small hole's wall may face along the hole), the labeling stays valid
 (:func:`core.segmentation.validity.check_validity`) and fewer neighbourhoods contradict.
-The rims' trials are judged first, then the merges, suspect by suspect, then the splits,
-each group of merges and of splits cheapest (least changed area) first, a bounded number per round; the first admissible trial that adds no
-turning point is kept, else the first admissible one (the side directions are chosen anyway).
-Rounds repeat until no neighbourhood contradicts. Before them, every chart boundary loop
-without corners (which no chart complex has) gets corners the same way, its walls relabelled
-or, for an island smaller than the charts around it, the island dissolved. The changed labels are the layout's only:
-the labeling stage's result is left as it was.
+The rims' trials are judged first, then the merges, suspect by suspect, then the splits, each
+group of merges and of splits cheapest (least changed area) first, a bounded number per round;
+the first admissible trial that adds no turning point is kept, else the first admissible one
+(the side directions are chosen anyway). Rounds repeat until no neighbourhood contradicts.
+Before them, every chart boundary loop without corners (which no chart complex has) gets
+corners the same way, its walls relabelled or, for an island smaller than the charts around
+it, the island dissolved. The changed labels are the layout's only: the labeling stage's result
+is left as it was.
 """
 from dataclasses import dataclass
 
@@ -72,7 +73,7 @@ class ClosableLabels:
     face_label : (m,) int64 labels of the faces the complex was built on.
     complex_ : ChartComplex of those labels.
     changed_area : float, surface area whose label changed (target units squared).
-    rounds : int, label changes made.
+    rounds : int, label changes made (the corners given to loops without any count as one).
     """
 
     face_label: np.ndarray
@@ -307,8 +308,9 @@ def closable_labels(V, F, face_part, face_label, face_frame, build, collapsible_
 
     Returns
     -------
-    ClosableLabels, or None when no admissible trial removes a contradicting neighbourhood
-    (a labeling without one may still have no side directions: the caller finds out).
+    ClosableLabels, or None when no admissible trial removes a contradicting neighbourhood or
+    gives a loop without corners its corners (a labeling without either may still have no
+    side directions: the caller finds out).
     """
     face_part = np.asarray(face_part, dtype=np.int64)
     labels = np.asarray(face_label, dtype=np.int64).copy()
