@@ -37,7 +37,7 @@ from core.quadmesh.limit_interpolation import unshrink_inverted
 from core.quadmesh.local_repair import repair_inverted
 from core.quadmesh.orientation import inverted_faces
 from core.quadmesh.decimation.paired_decimation import TIGHTEN_ROUNDS, paired_decimation_base_mesh
-from core.quadmesh.polycube.chart_complex import build_chart_complex
+from core.quadmesh.polycube.chart_complex import CornerlessLoopError, build_chart_complex
 from core.quadmesh.polycube.embed import (interior_point_positions, side_point_positions,
                                           tutte_coordinates)
 from core.quadmesh.polycube.lattice import OverlappingChartsError, build_lattice, chart_orientation
@@ -760,16 +760,16 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
     def build(labels):
         return build_chart_complex(V, F, fine_part, labels, fine_frame, interface_axis)
 
-    complex_ = build(fine_label)
     target_genus = genus_of(len(V), F, int(connected_face_components(F).max()) + 1)
-    layout = _LayoutAttempts(V, F, complex_, part_frames, int(target_faces), max_base_faces,
-                             give_up_faces, refinement_rounds, target_genus)
     relabelled = None
     try:
+        layout = _LayoutAttempts(V, F, build(fine_label), part_frames, int(target_faces),
+                                 max_base_faces, give_up_faces, refinement_rounds, target_genus)
         best = layout.attempt(None)
-    except SideDirectionError as exc:
-        # charts no side directions close: change their labels (for the layout only)
-        strict = not exc.collapsible.any()
+    except (SideDirectionError, CornerlessLoopError) as exc:
+        # charts no side directions close, or a loop without corners: change their labels
+        # (for the layout only)
+        strict = isinstance(exc, SideDirectionError) and not exc.collapsible.any()
         relabelled = closable_labels(
             V, F, fine_part, fine_label, fine_frame, build,
             lambda c: (np.zeros(c.n_sides, dtype=bool) if strict

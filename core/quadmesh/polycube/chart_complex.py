@@ -24,6 +24,10 @@ from core.geometry import face_areas
 from core.segmentation.charts import build_topology, extract_layout
 
 
+class CornerlessLoopError(LabelingError):
+    """A chart boundary loop passes no corner (:func:`cornerless_rims` lists them)."""
+
+
 @dataclass(frozen=True)
 class ChartComplex:
     """Charts, sides and corners of a labelled target (all indices are 0-based).
@@ -104,6 +108,43 @@ class ChartComplex:
     def loop(self, index):
         """(j,) int64 signed side references of loop ``index`` (see ``loop_sides``)."""
         return self.loop_sides[self.loop_offsets[index]:self.loop_offsets[index + 1]]
+
+
+def cornerless_rims(F, face_part, face_label):
+    """The chart boundary loops that pass no corner (which no polycube face can have).
+
+    Such a loop is the rim of a hole (or the foot of a boss) whose wall carries one label all
+    round, so that nothing splits the rim into sides.
+
+    Parameters
+    ----------
+    F : (m, 3) int64 faces of a closed 2-manifold; face_part, face_label : (m,) int64.
+
+    Returns
+    -------
+    face_chart : (m,) int64 chart of each face (connected faces of one part and label).
+    rims : list of ``(chart, rim, walls)``: the chart the loop bounds, (k,) int64 the loop's
+        vertices and (j,) int64 the charts across it; one per loop.
+    """
+    F = np.asarray(F, dtype=np.int64)
+    layout = extract_layout(build_topology(F, int(F.max()) + 1), np.asarray(face_part),
+                            np.asarray(face_label))
+    face_chart = layout.face_chart
+    nxt, twin = _half_edge_tables(F)
+    he_face = np.arange(3 * len(F)) // 3
+    half = np.flatnonzero(face_chart[he_face] != face_chart[he_face[twin]])
+    if not len(half):
+        return face_chart, []
+    succ = _chart_successors(half, face_chart, nxt, twin, np.zeros(3 * len(F), dtype=bool))
+    he_from = F.reshape(-1)
+    _, unvisited = _walk_loops(half, succ, layout.vertex_sep_degree[he_from[half]] >= 3)
+    loops, _ = _walk_loops(half, succ, unvisited)
+    rims = []
+    for cycle in loops:
+        run = half[cycle]
+        walls = np.unique(face_chart[he_face[twin[run]]])
+        rims.append((int(face_chart[he_face[run[0]]]), np.unique(he_from[run]), walls))
+    return face_chart, rims
 
 
 def _half_edge_tables(F):
@@ -275,7 +316,7 @@ def build_chart_complex(V, F, face_part, face_label, face_frame, face_interface_
     if unvisited.any():
         bad = half[np.flatnonzero(unvisited)[0]]
         chart = int(face_chart[he_face[bad]])
-        raise LabelingError(
+        raise CornerlessLoopError(
             f"chart {chart} (label {_LABEL_NAMES[layout.chart_label[chart]]}, part "
             f"{int(layout.chart_part[chart])}) has a boundary loop without corners near "
             f"{np.round(V[he_from[bad]], 4).tolist()}: a polycube face needs corners on each "

@@ -10,8 +10,12 @@ wraps round it), so the walk round the hole cannot close. Each such chart is the
 neighbourhood (the chart and the charts it shares a side with) whose program alone has no
 solution (:func:`~core.quadmesh.polycube.side_signs.contradicting_charts`).
 
-Each round takes the charts in most of the contradicting neighbourhoods (the *suspects*, at
-most :data:`MAX_SUSPECTS`) and tries, on the neighbourhood of each:
+Each round first tries, for every walk with a single side along an axis
+(:func:`~core.quadmesh.polycube.side_signs.lone_sides`), its walls relabelled at once
+(:func:`~core.quadmesh.polycube.rim_walls.rim_wall_labels`: a hole's rim needs the four
+in-plane walls together, which one split at a time never gives). Then it takes the charts in
+most of the contradicting neighbourhoods (the *suspects*, at most :data:`MAX_SUSPECTS`) and
+tries, on the neighbourhood of each:
 
 - *merges*: the suspect takes the label of one of its neighbours in its part, alone or
   together with one neighbour, or is dissolved into its neighbours face by face;
@@ -21,13 +25,17 @@ most :data:`MAX_SUSPECTS`) and tries, on the neighbourhood of each:
 
 A trial is admissible when the faces it changes fit their new labels within
 :data:`~core.segmentation.chart_absorption.MAX_MEAN_ANGLE` on average (a wall of the design is
-never labelled across its normal), the labeling stays valid
+never labelled across its normal; a rim's walls may also fit no worse than before, since a
+small hole's wall may face along the hole), the labeling stays valid
 (:func:`core.segmentation.validity.check_validity`) and fewer neighbourhoods contradict.
-Merges are judged first, suspect by suspect, then the splits, each group cheapest (least
-changed area) first, a bounded number per round; the first admissible trial that adds no
-turning point is kept, else the first admissible one (the side directions are chosen anyway).
-Rounds repeat until no neighbourhood contradicts. The changed labels are the layout's only:
-the labeling stage's result is left as it was.
+The rims' trials are judged first, then the merges, suspect by suspect, then the splits, each
+group of merges and of splits cheapest (least changed area) first, a bounded number per round;
+the first admissible trial that adds no turning point is kept, else the first admissible one
+(the side directions are chosen anyway). Rounds repeat until no neighbourhood contradicts.
+Before them, every chart boundary loop without corners (which no chart complex has) gets
+corners the same way, its walls relabelled or, for an island smaller than the charts around
+it, the island dissolved. The changed labels are the layout's only: the labeling stage's result
+is left as it was.
 """
 from dataclasses import dataclass
 
@@ -37,7 +45,9 @@ from scipy.sparse.csgraph import connected_components
 
 from core.errors import LabelingError
 from core.geometry import face_areas, face_cross
-from core.quadmesh.polycube.side_signs import contradicting_charts
+from core.quadmesh.polycube.chart_complex import cornerless_rims
+from core.quadmesh.polycube.rim_walls import rim_walks, rim_wall_labels
+from core.quadmesh.polycube.side_signs import contradicting_charts, lone_sides
 from core.segmentation.chart_absorption import MAX_MEAN_ANGLE, dissolved_labels
 from core.segmentation.charts import build_topology, extract_layout
 from core.segmentation.repair_operators import neighbour_merges
@@ -63,7 +73,7 @@ class ClosableLabels:
     face_label : (m,) int64 labels of the faces the complex was built on.
     complex_ : ChartComplex of those labels.
     changed_area : float, surface area whose label changed (target units squared).
-    rounds : int, label changes made.
+    rounds : int, label changes made (the corners given to loops without any count as one).
     """
 
     face_label: np.ndarray
@@ -169,14 +179,16 @@ def _regions(topology, faces):
     return [faces[component == c] for c in np.argsort(-sizes, kind="stable")]
 
 
-def _fits(candidate, labels, fit, area):
+def _fits(candidate, labels, fit, area, lenient=False):
     """True when the faces ``candidate`` changes fit their new labels within
     ``MAX_MEAN_ANGLE`` on average (area-weighted): a wall is never labelled across its
-    normal."""
+    normal. ``lenient``: also when they fit their new labels no worse than their old ones
+    (a hole's wall relabelled by sectors, whose faces may all face along the hole)."""
     changed = np.flatnonzero(candidate != labels)
-    cosine = np.clip(fit[changed, candidate[changed]], -1.0, 1.0)
-    mean = np.degrees(np.arccos(cosine)) @ area[changed] / max(area[changed].sum(), 1e-300)
-    return bool(mean <= MAX_MEAN_ANGLE)
+    weight = area[changed] / max(area[changed].sum(), 1e-300)
+    new = np.degrees(np.arccos(np.clip(fit[changed, candidate[changed]], -1.0, 1.0))) @ weight
+    old = np.degrees(np.arccos(np.clip(fit[changed, labels[changed]], -1.0, 1.0))) @ weight
+    return bool(new <= MAX_MEAN_ANGLE or (lenient and new <= old))
 
 
 def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, bad, turning,
@@ -184,13 +196,19 @@ def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, b
     """One round of :func:`closable_labels`: ``(labels, complex_, bad, turning points)`` of
     the kept trial, or None.
 
-    The merges of each suspect (likeliest first), then the splits of all, each group cheapest
-    (least changed area) first, are judged for validity (without turning points, up to
+    The walls of the rims with a single side along an axis, the merges of each suspect
+    (likeliest first), then the splits of all, each group cheapest (least changed area) first,
+    are judged for validity (without turning points, up to
     :data:`MAX_JUDGED`), the valid ones by the neighbourhoods that still contradict (up to
     :data:`MAX_BUILT` complexes). The first that
     lowers them and adds no turning point is kept, else the first that lowers them.
     """
     layout = extract_layout(topology, face_part, labels)
+    rims = []
+    for chart, rim, walls in rim_walks(complex_, lone_sides(complex_, collapsible_of(complex_))):
+        rims += rim_wall_labels(V, F, topology, face_part, face_frame, labels,
+                                complex_.face_chart, chart, rim, walls, 2.0 - 2.0 * fit)
+    rims = [candidate for candidate in rims if _fits(candidate, labels, fit, area, True)]
     merges, splits = [], []
     for suspect in _suspects(complex_, bad).tolist():
         # charts of the complex and of the layout are both the connected faces of one label
@@ -201,7 +219,7 @@ def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, b
                                 layout.face_chart[first_face])
         merges.append(merged)
         splits += split
-    trials = []
+    trials = rims
     for group in merges + [splits]:
         group = [candidate for candidate in group if _fits(candidate, labels, fit, area)]
         costs = [area[candidate != labels].sum() for candidate in group]
@@ -230,6 +248,54 @@ def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, b
     return fallback
 
 
+def _first_with_corners(V, F, face_part, face_frame, topology, labels, fit, area, face_chart,
+                        rims):
+    """``(labels, face_chart, rims)`` of the first admissible labeling (its changed faces
+    fit, it is valid, it has fewer loops without corners) of any of ``rims``, or None.
+
+    Each rim's candidates are its walls relabelled
+    (:func:`~core.quadmesh.polycube.rim_walls.rim_wall_labels`; a loop is listed from both of
+    its charts, one of which bounds the wall), then, when its chart is smaller than every
+    chart across the loop, that chart dissolved into its neighbours (an island a few faces
+    across, at the resolution of the mesh, that no walls can square).
+    """
+    chart_area = np.bincount(face_chart, weights=area)
+    for chart, rim, walls in rims:
+        candidates = rim_wall_labels(V, F, topology, face_part, face_frame, labels, face_chart,
+                                     chart, rim, walls, 2.0 - 2.0 * fit)
+        if chart_area[chart] < chart_area[walls].min():
+            dissolved = dissolved_labels(topology, face_part, labels, face_chart, chart,
+                                         2.0 - 2.0 * fit)
+            candidates += [] if dissolved is None else [dissolved]
+        for candidate in candidates:
+            if not _fits(candidate, labels, fit, area, True) or not check_validity(
+                    V, F, face_part, candidate, face_frame, topology,
+                    turning=False).report["valid"]:
+                continue
+            trial_chart, trial_rims = cornerless_rims(F, face_part, candidate)
+            if len(trial_rims) < len(rims):
+                return candidate, trial_chart, trial_rims
+    return None
+
+
+def _with_corners(V, F, face_part, face_frame, topology, labels, fit, area):
+    """``labels`` ((m,) int64) with a corner on every chart boundary loop, or None.
+
+    Each loop without corners (:func:`~core.quadmesh.polycube.chart_complex.cornerless_rims`)
+    is the rim of a wall with one label all round; the first admissible labeling of
+    :func:`~core.quadmesh.polycube.rim_walls.rim_wall_labels` (:func:`_first_with_corners`)
+    is kept, until none is left (None when no loop has an admissible one).
+    """
+    face_chart, rims = cornerless_rims(F, face_part, labels)
+    while rims:
+        found = _first_with_corners(V, F, face_part, face_frame, topology, labels, fit, area,
+                                    face_chart, rims)
+        if found is None:
+            return None
+        labels, face_chart, rims = found
+    return labels
+
+
 def closable_labels(V, F, face_part, face_label, face_frame, build, collapsible_of):
     """Change the labels of the charts that no side directions close, keeping them valid.
 
@@ -242,8 +308,9 @@ def closable_labels(V, F, face_part, face_label, face_frame, build, collapsible_
 
     Returns
     -------
-    ClosableLabels, or None when no admissible trial removes a contradicting neighbourhood
-    (a labeling without one may still have no side directions: the caller finds out).
+    ClosableLabels, or None when no admissible trial removes a contradicting neighbourhood or
+    gives a loop without corners its corners (a labeling without either may still have no
+    side directions: the caller finds out).
     """
     face_part = np.asarray(face_part, dtype=np.int64)
     labels = np.asarray(face_label, dtype=np.int64).copy()
@@ -252,10 +319,17 @@ def closable_labels(V, F, face_part, face_label, face_frame, build, collapsible_
     area = face_areas(V, F)
     before = check_validity(V, F, face_part, labels, face_frame, topology).report
     turning = before["turning_points"]["count"] or 0
-    complex_ = build(labels)
+    original = labels
+    labels = _with_corners(V, F, face_part, face_frame, topology, labels, fit, area)
+    if labels is None:
+        return None
+    changed = labels != original
+    rounds = int(changed.any())
+    try:
+        complex_ = build(labels)
+    except LabelingError:
+        return None  # e.g. a boundary between opposite labels: no polycube face
     bad = contradicting_charts(complex_, collapsible_of(complex_))
-    changed = np.zeros(len(labels), dtype=bool)
-    rounds = 0
     while len(bad) and rounds < MAX_ROUNDS:
         found = _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, bad,
                        turning, build, collapsible_of)

@@ -192,16 +192,8 @@ def lone_sides(complex_, collapsible, charts=None):
     list of ``(chart, hole, axis, side)``: ints, ``hole`` a bool, ``axis`` 0..2 in the
     chart's part frame. A hole's single side is listed only when it may not collapse.
     """
-    slits = [walk for walk in complex_.slit_walks() if len(walk)]
-    inside = np.zeros(len(complex_.loop_sides), dtype=bool)
-    for walk in slits:
-        inside[walk] = True
-    walks = [(walk, True) for walk in slits]
-    for loop in range(len(complex_.loop_chart)):
-        walk = np.arange(complex_.loop_offsets[loop], complex_.loop_offsets[loop + 1])
-        walks.append((walk[~inside[walk]], False))
     found = []
-    for walk, hole in walks:
+    for walk, hole in chart_walks(complex_):
         loop = np.searchsorted(complex_.loop_offsets, walk[0], side="right") - 1
         chart = int(complex_.loop_chart[loop])
         if charts is not None and chart not in charts:
@@ -217,6 +209,22 @@ def lone_sides(complex_, collapsible, charts=None):
             if item and not (hole and collapsible[item[3]]) and item not in found:
                 found.append(item)  # (nested slits of one hole walk round it alike)
     return found
+
+
+def chart_walks(complex_):
+    """Every walk of :func:`lone_sides`: the rims of holes, then the outer boundaries.
+
+    Returns a list of ``(walk, hole)``: (k,) int64 positions into ``loop_sides`` and a bool.
+    """
+    slits = [walk for walk in complex_.slit_walks() if len(walk)]
+    inside = np.zeros(len(complex_.loop_sides), dtype=bool)
+    for walk in slits:
+        inside[walk] = True
+    walks = [(walk, True) for walk in slits]
+    for loop in range(len(complex_.loop_chart)):
+        walk = np.arange(complex_.loop_offsets[loop], complex_.loop_offsets[loop + 1])
+        walks.append((walk[~inside[walk]], False))
+    return walks
 
 
 def _lone_side_note(complex_, collapsible, charts=None):
