@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Compile every cached compiled function of the spatial queries, the fold-free
-decimation and the limit evaluation now (``make setup``).
+decimation, the fit's volume response and the limit evaluation now (``make setup``).
 
 numba compiles a function the first time it is called with new argument types, several
 seconds for all of them here, and keeps the result in its cache (:mod:`core.compiled`); run once at
@@ -11,6 +11,7 @@ import time
 import numpy as np
 
 from core.box_tree import box_pairs, face_boxes
+from core.fitting.responses import volume
 from core.quadmesh.decimation.fold_free_decimation import FoldFreeDecimation
 from core.self_intersection import find_self_intersections
 from core.subdivision.limit import LimitEvaluator
@@ -34,6 +35,7 @@ def compile_now():
     find_self_intersections(corners, faces)
     find_self_intersections(corners, faces, among=marked, candidates=candidates)
     FoldFreeDecimation(corners, faces).triangles(8)
+    volume(corners, faces)
     quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
     # regular quads and the sub-quads around the cube's valence-3 corners
     LimitEvaluator(PolyMesh.from_faces(corners, quads)).evaluate(

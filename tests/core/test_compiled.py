@@ -63,18 +63,18 @@ def test_compile_now_compiles_every_cached_function():
     compiled (or loaded), so the first reconstruction finds them all in the cache."""
     script = (
         "import core.box_tree as b, core.self_intersection as s\n"
-        "import core.subdivision.patch_sums as p\n"
+        "import core.subdivision.patch_sums as p, core.fitting.responses as r\n"
         "from core.compiled import numba\n"
         "from core.precompile import compile_now\n"
         "compile_now()\n"
-        "cached = [f for m in (b, s, p) for f in vars(m).values()\n"
+        "cached = [f for m in (b, s, p, r) for f in vars(m).values()\n"
         "          if isinstance(f, numba.core.registry.CPUDispatcher)\n"
         "          and type(f._cache).__name__ != 'NullCache']\n"
         "print(len(cached), sorted(f.__name__ for f in cached if not f.signatures))\n")
     done = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True,
                           text=True, timeout=300)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.split("\n")[0] == "9 []"
+    assert done.stdout.split("\n")[0] == "10 []"
 
 
 def test_without_numba_the_command_line_says_what_to_install_and_writes_nothing(tmp_path):
