@@ -20,8 +20,9 @@ refined or reduced in one direction by calling these on its pole grid.
 from functools import lru_cache
 
 import numpy as np
+from scipy.linalg import solve_triangular
 
-from core.export.bspline_basis import basis_matrix
+from core.export.bspline_basis import basis_matrix, full_knots
 
 DEGREE = 3
 
@@ -35,17 +36,17 @@ def _key(knots, mults):
 @lru_cache(maxsize=1024)
 def _insertion(coarse_key, fine_key):
     """(n_fine, n_coarse) matrix of knot insertion (coarse poles -> fine poles): the fine basis
-    reproduces every coarse basis function, so least squares on ``DEGREE + 2`` points in each
-    fine span (unisolvent for cubics) gives it exactly up to rounding, which is cleared."""
+    reproduces every coarse basis function, so interpolating them at the fine knot vector's
+    Greville abscissae (where its collocation matrix is invertible, Schoenberg-Whitney) gives
+    it exactly up to rounding, which is cleared."""
     ck = np.frombuffer(coarse_key[0], dtype=np.float64)
     cm = np.frombuffer(coarse_key[1], dtype=np.int64)
     fk = np.frombuffer(fine_key[0], dtype=np.float64)
     fm = np.frombuffer(fine_key[1], dtype=np.int64)
-    frac = (np.arange(DEGREE + 2) + 0.5) / (DEGREE + 2)
-    t = (fk[:-1, None] + np.diff(fk)[:, None] * frac[None, :]).reshape(-1)
-    fine = basis_matrix(fk, fm, t)
-    coarse = basis_matrix(ck, cm, t)
-    matrix = np.linalg.lstsq(fine, coarse, rcond=None)[0]
+    flat = full_knots(fk, fm)
+    n = len(flat) - DEGREE - 1
+    greville = np.convolve(flat[1:-1], np.full(DEGREE, 1.0 / DEGREE), mode="valid")[:n]
+    matrix = np.linalg.solve(basis_matrix(fk, fm, greville), basis_matrix(ck, cm, greville))
     matrix[np.abs(matrix) < 1e-15] = 0.0
     return matrix
 
@@ -161,7 +162,8 @@ def _project(p0, knots, mults, reduced):
     keep = reduced > 0
     T = insertion_matrix(knots[keep], reduced[keep], knots, mults)
     flat = p0.reshape(len(p0), -1)
-    q = np.linalg.lstsq(T, flat, rcond=None)[0]
+    Q, R = np.linalg.qr(T)
+    q = solve_triangular(R, Q.T @ flat)
     gap = (T @ q - flat).reshape(p0.shape)
     return q.reshape((len(q),) + p0.shape[1:]), float(np.linalg.norm(gap, axis=-1).max())
 
