@@ -35,8 +35,9 @@ Method
     relation ``x_{k-1} + x_{k+1} = 2 cos(2 pi / n) x_k`` of an affine image of a regular
     ``n``-gon), so the patches share a normal there.
   - none across sharp crease edges (the patches share the edge only, C0); at a vertex with
-    crease edges each sector of faces between two of them has its own angle
-    (:func:`_corner_cosines`) in place of ``2 pi / n``.
+    crease edges each sector of faces between two of them has its own cosines in place of
+    ``cos(2 pi / n)`` (:func:`_corner_cosines`: a half fan at a crease vertex, the exact
+    limit's tangent relation at a corner).
 
   The constraints enter as a penalty of weight :data:`G1_PENALTY` relative to the fit
   (their residual is about ``1 / G1_PENALTY^2`` of the fit's, far below rounding of the
