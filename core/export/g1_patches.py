@@ -354,16 +354,18 @@ def _corner_cosines(quads, topo, crease, evaluator):
                 break
     cosine[walk] = np.cos(np.pi / k)
     at_corner = walk[n_crease[fv[walk]] >= 3]
-    cosine[at_corner] = _limit_spoke_cosines(quads, topo, evaluator, at_corner)
+    limit = _limit_spoke_cosines(topo, evaluator, at_corner)
+    cosine[at_corner] = np.where(np.isfinite(limit), limit, cosine[at_corner])
     return cosine
 
 
-def _limit_spoke_cosines(quads, topo, evaluator, spokes):
+def _limit_spoke_cosines(topo, evaluator, spokes):
     """(s,) float64 ``c`` of the relation ``x_- + x_+ = 2 c x`` that the exact limit surface's
     tangents satisfy best (least squares) at the start vertex of each half-edge in ``spokes``
     (s,): ``x`` the tangent along it, ``x_-``, ``x_+`` those along the neighbouring spokes
     of its two faces, as differences of limit points at distance ``h / 2`` along the patch
-    sides (``h`` = :data:`EV_SPAN`, the scale on which the patches depart from the limit)."""
+    sides (``h`` = :data:`EV_SPAN`, the scale on which the patches depart from the limit);
+    NaN where the limit's tangent vanishes."""
     step = 0.5 * EV_SPAN
     face, k = spokes // 4, spokes % 4
     start = CORNER_UV[k]
@@ -376,7 +378,9 @@ def _limit_spoke_cosines(quads, topo, evaluator, spokes):
                                                         - CORNER_UV[other % 4])]).T)
     at, along, before, after = points.reshape(4, len(spokes), 3)
     x = along - at
-    return np.einsum("ij,ij->i", before + after - 2.0 * at, x) / (2.0 * np.einsum("ij,ij->i", x, x))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return (np.einsum("ij,ij->i", before + after - 2.0 * at, x)
+                / (2.0 * np.einsum("ij,ij->i", x, x)))
 
 
 def _g1_system(layout, quads, topo, free, cosine, crease):
@@ -594,8 +598,7 @@ def g1_surface_patches(base, measure=True, faces="quad"):
         evaluator = LimitEvaluator(quads)
         H, rhs, centre = _fit_system(layout, evaluator, free_faces)
         cosine = _corner_cosines(quads, topo, crease, evaluator)
-        A_g1, y_g1 = _g1_system(layout, quads, topo, free, cosine,
-                                crease)
+        A_g1, y_g1 = _g1_system(layout, quads, topo, free, cosine, crease)
         A_k, y_k = _knot_free_system(layout, free, keep)
         if A_g1 is None:
             A_g1, y_g1 = (A_k, y_k) if A_k.shape[0] else (None, None)
