@@ -108,23 +108,27 @@ def _smoothness(poles, knots, mults, tolerance):
     being C^r there. Ends keep 4; no knot gets more than it has.
     """
     knots = np.asarray(knots, dtype=np.float64)
+    need = np.asarray(mults, dtype=np.int64).copy()
+    if len(knots) < 3:
+        return need
     full = np.where(np.arange(len(knots)) % (len(knots) - 1) == 0, DEGREE + 1, DEGREE)
     bez = refine(poles, knots, mults, knots, full)
+    start = DEGREE * np.arange(1, len(knots) - 1)
+    left = bez[start[:, None] + np.arange(-DEGREE, 1)]
+    right = bez[start[:, None] + np.arange(DEGREE + 1)]
+    shape = (-1,) + (1,) * (bez.ndim - 1)
     h = np.diff(knots)
-    need = np.asarray(mults, dtype=np.int64).copy()
-    for i in range(1, len(knots) - 1):
-        left, right = bez[3 * i - 3:3 * i + 1], bez[3 * i:3 * i + 4]
-        hl, hr = h[i - 1], h[i]
-        scale = min(hl, hr)
-        m = DEGREE
-        for r, coefficient, factorial in ((1, 3.0, 1.0), (2, 6.0, 2.0), (3, 6.0, 6.0)):
-            dl = np.diff(left, r, axis=0)[-1] * coefficient / hl ** r
-            dr = np.diff(right, r, axis=0)[0] * coefficient / hr ** r
-            jump = float(np.linalg.norm(dl - dr, axis=-1).max()) * scale ** r / factorial
-            if jump > tolerance:
-                break
-            m = DEGREE - r
-        need[i] = min(need[i], m)
+    hl, hr = h[:-1].reshape(shape), h[1:].reshape(shape)
+    scale = np.minimum(h[:-1], h[1:])
+    smooth = np.ones(len(start), dtype=bool)
+    m = np.full(len(start), DEGREE)
+    for r, coefficient, factorial in ((1, 3.0, 1.0), (2, 6.0, 2.0), (3, 6.0, 6.0)):
+        dl = np.diff(left, r, axis=1)[:, -1] * coefficient / hl ** r
+        dr = np.diff(right, r, axis=1)[:, 0] * coefficient / hr ** r
+        jump = np.linalg.norm(dl - dr, axis=-1).reshape(len(start), -1).max(axis=1)
+        smooth &= jump * scale ** r / factorial <= tolerance
+        m = np.where(smooth, DEGREE - r, m)
+    need[1:-1] = np.minimum(need[1:-1], m)
     return need
 
 
