@@ -104,11 +104,22 @@ def evaluate_patch_points(patches, face, u, v, du=0, dv=0, chunk=4096):
             continue
         P = np.stack([patches[i].poles for i in g])
         for part in np.array_split(idx, max(1, len(idx) // chunk)):
-            Bu = basis_matrix(p0.u_knots, p0.u_mults, u[part], du, p0.degree_u)
-            Bv = basis_matrix(p0.v_knots, p0.v_mults, v[part], dv, p0.degree_v)
-            rows = np.einsum("pi,pijk->pjk", Bu, P[slot[face[part]]])
-            out[part] = np.einsum("pj,pjk->pk", Bv, rows)
+            iu, wu = _support(basis_matrix(p0.u_knots, p0.u_mults, u[part], du, p0.degree_u),
+                              p0.degree_u)
+            iv, wv = _support(basis_matrix(p0.v_knots, p0.v_mults, v[part], dv, p0.degree_v),
+                              p0.degree_v)
+            local = P[slot[face[part]][:, None, None], iu[:, :, None], iv[:, None, :]]
+            out[part] = np.einsum("pa,pb,pabk->pk", wu, wv, local)
     return out
+
+
+def _support(B, degree):
+    """The ``degree + 1`` basis functions that can be nonzero at each parameter (those of its
+    knot span, a contiguous run) of a basis matrix ``B`` (p, n): their indices (p, degree + 1)
+    int64 and values (p, degree + 1), so a point costs (degree + 1)^2 poles, not all of them."""
+    first = np.minimum(np.argmax(B != 0.0, axis=1), B.shape[1] - degree - 1)
+    index = first[:, None] + np.arange(degree + 1)
+    return index, np.take_along_axis(B, index, axis=1)
 
 
 def evaluate_patch_grid(patches, su, sv, du=0, dv=0):

@@ -35,8 +35,9 @@ Method
     relation ``x_{k-1} + x_{k+1} = 2 cos(2 pi / n) x_k`` of an affine image of a regular
     ``n``-gon), so the patches share a normal there.
   - none across sharp crease edges (the patches share the edge only, C0); at a vertex with
-    crease edges each sector of faces between two of them has its own angle
-    (:func:`_corner_cosines`) in place of ``2 pi / n``.
+    crease edges each sector of faces between two of them has its own cosines in place of
+    ``cos(2 pi / n)`` (:func:`_corner_cosines`: a half fan at a crease vertex, the exact
+    limit's tangent relation at a corner).
 
   The constraints enter as a penalty of weight :data:`G1_PENALTY` relative to the fit
   (their residual is about ``1 / G1_PENALTY^2`` of the fit's, far below rounding of the
@@ -311,18 +312,20 @@ def _fit_system(layout, evaluator, free_faces):
     return H, rhs, target.reshape(-1, 3).mean(axis=0)
 
 
-def _corner_cosines(quads, topo, crease):
+def _corner_cosines(quads, topo, crease, evaluator):
     """(4 m,) float64 ``c = cos(theta)`` of the G1 connection at the start vertex of every
     corner's edge (half-edge), for the sector of faces around that vertex the edge lies in.
 
     Without crease edges at the vertex, or with one (a dart: the limit surface has a tangent
     plane there), ``theta = 2 pi / n`` (``n`` the valence; ``c`` = 0 at valence 4). With two
     crease edges (a crease vertex, where the crease curve is smooth) a sector of ``k`` faces
-    spans a half plane, ``theta = pi / k``; with three or more (a corner) it spans the sum of
-    its faces' corner angles in the cage, ``theta`` = that sum over ``k``. The spokes of a
-    sector are then an affine image of a regular fan of angle ``theta``
-    (``x_{i-1} + x_{i+1} = 2 c x_i``) between its two crease spokes, so the sector's patches
-    share a tangent plane at the vertex.
+    spans a half plane, ``theta = pi / k``: the spokes of a sector are then an affine image
+    of a regular fan of angle ``theta`` (``x_{i-1} + x_{i+1} = 2 c x_i``) between its two
+    crease spokes. With three or more (a corner) the limit surface's sectors are no such
+    fans, so each spoke inside a sector takes the ``c`` that the exact limit's own spoke
+    tangents satisfy best (:func:`_limit_spoke_cosines`). Either way the relations chain
+    every spoke of a sector to its two crease spokes, so the sector's patches share a
+    tangent plane at the vertex.
     """
     fv = quads.face_vertices
     n = len(quads.vertices)
@@ -335,13 +338,8 @@ def _corner_cosines(quads, topo, crease):
     if not len(walk):
         return cosine
     prev = corner - corner % 4 + (corner + 3) % 4
-    to_next = quads.vertices[fv[topo.next_corner]] - quads.vertices[fv]
-    to_prev = quads.vertices[fv[prev]] - quads.vertices[fv]
-    angle = np.arctan2(np.linalg.norm(np.cross(to_next, to_prev), axis=1),
-                       np.einsum("ij,ij->i", to_next, to_prev))
     turn = (topo.twin[prev], topo.next_corner[topo.twin])
     k = np.zeros(len(walk))
-    total = np.zeros(len(walk))
     for direction, step in enumerate(turn):
         s = walk.copy()
         active = np.ones(len(walk), dtype=bool)
@@ -349,16 +347,40 @@ def _corner_cosines(quads, topo, crease):
             if direction == 1:
                 s[active] = step[s[active]]
             k += active
-            total += np.where(active, angle[s], 0.0)
             if direction == 0:
                 s[active] = step[s[active]]
             active &= ~spoke_crease[s]
             if not active.any():
                 break
-    corner_sector = n_crease[fv[walk]] >= 3
-    theta = np.where(corner_sector, total, np.pi) / k
-    cosine[walk] = np.cos(theta)
+    cosine[walk] = np.cos(np.pi / k)
+    at_corner = walk[n_crease[fv[walk]] >= 3]
+    limit = _limit_spoke_cosines(topo, evaluator, at_corner)
+    cosine[at_corner] = np.where(np.isfinite(limit), limit, cosine[at_corner])
     return cosine
+
+
+def _limit_spoke_cosines(topo, evaluator, spokes):
+    """(s,) float64 ``c`` of the relation ``x_- + x_+ = 2 c x`` that the exact limit surface's
+    tangents satisfy best (least squares) at the start vertex of each half-edge in ``spokes``
+    (s,): ``x`` the tangent along it, ``x_-``, ``x_+`` those along the neighbouring spokes
+    of its two faces, as differences of limit points at distance ``h / 2`` along the patch
+    sides (``h`` = :data:`EV_SPAN`, the scale on which the patches depart from the limit);
+    NaN where the limit's tangent vanishes."""
+    step = 0.5 * EV_SPAN
+    face, k = spokes // 4, spokes % 4
+    start = CORNER_UV[k]
+    other = topo.next_corner[topo.twin[spokes]]
+    points = evaluator.evaluate(
+        np.concatenate([face, face, face, other // 4]),
+        *np.concatenate([start, start + step * (CORNER_UV[(k + 1) % 4] - start),
+                         start + step * (CORNER_UV[(k + 3) % 4] - start),
+                         CORNER_UV[other % 4] + step * (CORNER_UV[(other + 1) % 4]
+                                                        - CORNER_UV[other % 4])]).T)
+    at, along, before, after = points.reshape(4, len(spokes), 3)
+    x = along - at
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return (np.einsum("ij,ij->i", before + after - 2.0 * at, x)
+                / (2.0 * np.einsum("ij,ij->i", x, x)))
 
 
 def _g1_system(layout, quads, topo, free, cosine, crease):
@@ -575,8 +597,8 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     if len(free_faces):
         evaluator = LimitEvaluator(quads)
         H, rhs, centre = _fit_system(layout, evaluator, free_faces)
-        A_g1, y_g1 = _g1_system(layout, quads, topo, free, _corner_cosines(quads, topo, crease),
-                                crease)
+        cosine = _corner_cosines(quads, topo, crease, evaluator)
+        A_g1, y_g1 = _g1_system(layout, quads, topo, free, cosine, crease)
         A_k, y_k = _knot_free_system(layout, free, keep)
         if A_g1 is None:
             A_g1, y_g1 = (A_k, y_k) if A_k.shape[0] else (None, None)

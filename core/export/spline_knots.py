@@ -20,8 +20,9 @@ refined or reduced in one direction by calling these on its pole grid.
 from functools import lru_cache
 
 import numpy as np
+from scipy.linalg import solve_triangular
 
-from core.export.bspline_basis import basis_matrix
+from core.export.bspline_basis import basis_matrix, full_knots
 
 DEGREE = 3
 
@@ -35,17 +36,17 @@ def _key(knots, mults):
 @lru_cache(maxsize=1024)
 def _insertion(coarse_key, fine_key):
     """(n_fine, n_coarse) matrix of knot insertion (coarse poles -> fine poles): the fine basis
-    reproduces every coarse basis function, so least squares on ``DEGREE + 2`` points in each
-    fine span (unisolvent for cubics) gives it exactly up to rounding, which is cleared."""
+    reproduces every coarse basis function, so interpolating them at the fine knot vector's
+    Greville abscissae (where its collocation matrix is invertible, Schoenberg-Whitney) gives
+    it exactly up to rounding, which is cleared."""
     ck = np.frombuffer(coarse_key[0], dtype=np.float64)
     cm = np.frombuffer(coarse_key[1], dtype=np.int64)
     fk = np.frombuffer(fine_key[0], dtype=np.float64)
     fm = np.frombuffer(fine_key[1], dtype=np.int64)
-    frac = (np.arange(DEGREE + 2) + 0.5) / (DEGREE + 2)
-    t = (fk[:-1, None] + np.diff(fk)[:, None] * frac[None, :]).reshape(-1)
-    fine = basis_matrix(fk, fm, t)
-    coarse = basis_matrix(ck, cm, t)
-    matrix = np.linalg.lstsq(fine, coarse, rcond=None)[0]
+    flat = full_knots(fk, fm)
+    n = len(flat) - DEGREE - 1
+    greville = np.convolve(flat[1:-1], np.full(DEGREE, 1.0 / DEGREE), mode="valid")[:n]
+    matrix = np.linalg.solve(basis_matrix(fk, fm, greville), basis_matrix(ck, cm, greville))
     matrix[np.abs(matrix) < 1e-15] = 0.0
     return matrix
 
@@ -107,23 +108,27 @@ def _smoothness(poles, knots, mults, tolerance):
     being C^r there. Ends keep 4; no knot gets more than it has.
     """
     knots = np.asarray(knots, dtype=np.float64)
+    need = np.asarray(mults, dtype=np.int64).copy()
+    if len(knots) < 3:
+        return need
     full = np.where(np.arange(len(knots)) % (len(knots) - 1) == 0, DEGREE + 1, DEGREE)
     bez = refine(poles, knots, mults, knots, full)
+    start = DEGREE * np.arange(1, len(knots) - 1)
+    left = bez[start[:, None] + np.arange(-DEGREE, 1)]
+    right = bez[start[:, None] + np.arange(DEGREE + 1)]
+    shape = (-1,) + (1,) * (bez.ndim - 1)
     h = np.diff(knots)
-    need = np.asarray(mults, dtype=np.int64).copy()
-    for i in range(1, len(knots) - 1):
-        left, right = bez[3 * i - 3:3 * i + 1], bez[3 * i:3 * i + 4]
-        hl, hr = h[i - 1], h[i]
-        scale = min(hl, hr)
-        m = DEGREE
-        for r, coefficient, factorial in ((1, 3.0, 1.0), (2, 6.0, 2.0), (3, 6.0, 6.0)):
-            dl = np.diff(left, r, axis=0)[-1] * coefficient / hl ** r
-            dr = np.diff(right, r, axis=0)[0] * coefficient / hr ** r
-            jump = float(np.linalg.norm(dl - dr, axis=-1).max()) * scale ** r / factorial
-            if jump > tolerance:
-                break
-            m = DEGREE - r
-        need[i] = min(need[i], m)
+    hl, hr = h[:-1].reshape(shape), h[1:].reshape(shape)
+    scale = np.minimum(h[:-1], h[1:])
+    smooth = np.ones(len(start), dtype=bool)
+    m = np.full(len(start), DEGREE)
+    for r, coefficient, factorial in ((1, 3.0, 1.0), (2, 6.0, 2.0), (3, 6.0, 6.0)):
+        dl = np.diff(left, r, axis=1)[:, -1] * coefficient / hl ** r
+        dr = np.diff(right, r, axis=1)[:, 0] * coefficient / hr ** r
+        jump = np.linalg.norm(dl - dr, axis=-1).reshape(len(start), -1).max(axis=1)
+        smooth &= jump * scale ** r / factorial <= tolerance
+        m = np.where(smooth, DEGREE - r, m)
+    need[1:-1] = np.minimum(need[1:-1], m)
     return need
 
 
@@ -161,7 +166,8 @@ def _project(p0, knots, mults, reduced):
     keep = reduced > 0
     T = insertion_matrix(knots[keep], reduced[keep], knots, mults)
     flat = p0.reshape(len(p0), -1)
-    q = np.linalg.lstsq(T, flat, rcond=None)[0]
+    Q, R = np.linalg.qr(T)
+    q = solve_triangular(R, Q.T @ flat)
     gap = (T @ q - flat).reshape(p0.shape)
     return q.reshape((len(q),) + p0.shape[1:]), float(np.linalg.norm(gap, axis=-1).max())
 

@@ -173,3 +173,19 @@ def test_pipeline_patches_stage_builds_the_g1_form_on_request():
     assert ps.info["normal_jump_max_deg"] <= 0.01
     with pytest.raises(ParameterError, match="export"):
         ReconstructionParams(export="light")
+
+
+def test_corner_sector_follows_the_limit_tangents():
+    """Three crease edges out of one valence-4 vertex of the genus-3 block make a corner with
+    a sector of two faces; its inner spoke is no regular fan's, and the connection there takes
+    the limit surface's own tangent relation, so the patches stay within 1.15e-3 of the
+    diagonal of the creased limit surface."""
+    cage = sample_cages.genus3_block()
+    valence = np.bincount(cage.face_vertices)
+    top = int(np.argmax(cage.vertices[:, 2] + 1e-3 * cage.vertices[:, 0] * (valence == 4)))
+    neighbours = sorted(_neighbours(cage, top))
+    creases = np.array([[top, v] for v in neighbours[:3]], dtype=np.int64)
+    ps = g1_surface_patches(dataclasses.replace(cage, creases=creases))
+    assert valence[top] == 4
+    assert ps.info["normal_jump_max_deg"] <= 0.01
+    assert ps.info["max_error_rel"] <= 1.15e-3
