@@ -105,8 +105,9 @@ def markdown(rows, meta):
     """The results table (str)."""
     lines = ["# Polycube layout against paired decimation at the same face count", "",
              "Written by `benchmarks/route_compare_bench.py`; do not edit by hand.", "",
-             f"- Run: {meta['date']}, commit {meta['commit']}, load (1 min) {meta['load']} at "
-             "start; every run a process of its own at default parameters (`exact` export).",
+             f"- Last run: {meta['date']}, commit {meta['commit']}, load (1 min) {meta['load']} "
+             "at start (rows of meshes not in it are kept from earlier runs); every run a process "
+             "of its own at default parameters (`exact` export).",
              "- `default`: the route `reconstruct` takes; where that is the polycube layout, "
              "`decimation` is the paired decimation with `--target-faces` set to the layout's "
              "face count. Distances: `../shared/tools/evaluate.py`'s symmetric mean and maximum, "
