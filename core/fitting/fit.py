@@ -199,10 +199,11 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
 
 
 @single_threaded()
-def least_squares_preview(base, target, levels=2, rounds=10, seed=0):
-    """How close ``base`` can come to the target before containment: the inside fit's
-    least-squares start (phase 3 of :func:`fit_base_mesh`, held back where it crosses itself)
-    and its distances, without the pull inside and the RGP.
+def least_squares_preview(base, target, levels=2, rounds=10, seed=0, mode="inside"):
+    """How close ``base`` can come to the target before containment: the least-squares fit
+    of phase 3 of :func:`fit_base_mesh` in ``mode`` (untangled as that mode does: held back
+    where it crosses itself, after refits with a stiffer smoothness term in best-fit mode and
+    where the inside fit makes them) and its distances, without the pull inside and the RGP.
 
     A cage whose least-squares fit crosses itself is held back towards the cage there, and
     those vertices stay far from the target through the rest of the inside fit; the preview
@@ -216,6 +217,7 @@ def least_squares_preview(base, target, levels=2, rounds=10, seed=0):
         :func:`fit_base_mesh`).
     target : TriMesh, closed, outward oriented.
     levels : int in 1..4; rounds : int >= 0; seed : int, as in :func:`fit_base_mesh`.
+    mode : ``'inside'`` or ``'best-fit'``, the fit mode whose least-squares fit is previewed.
 
     Returns
     -------
@@ -223,11 +225,14 @@ def least_squares_preview(base, target, levels=2, rounds=10, seed=0):
     back, ``untangled.crossings`` pairs left); core.fitting.records.Distances of its limit
     surface (fractions of the target's bounding-box diagonal).
     """
-    _check_parameters(levels, 0, None, "best-fit", 1.0, 0.05)
+    if mode not in ("inside", "best-fit"):
+        raise ParameterError(f"a least-squares preview is of the inside or best-fit mode, "
+                             f"got {mode!r}")
+    _check_parameters(levels, 0, None, mode, 1.0, 0.05)
     _check_choices("limit", "best-fit", rounds, 2e-3, 1)
     _check_base(base)
     setup = _prepare(base, target, levels, "limit")
-    least_squares = _least_squares(base, setup, rounds, seed, refit_local=False)
+    least_squares = _least_squares(base, setup, rounds, seed, refit_local=mode != "inside")
     points = sample_surface(setup.target.vertices, setup.target.faces, FIT.distance_samples,
                             np.random.default_rng(seed))
     X = setup.limit_map @ least_squares.untangled.vertices

@@ -54,11 +54,12 @@ class ReviewedRoute:
     info: dict
 
 
-def preview_cage(cage, target, subdivision_levels):
+def preview_cage(cage, target, subdivision_levels, fit_mode="inside"):
     """:class:`CagePreview` of ``cage`` (PolyMesh) against ``target`` (TriMesh) at the level
-    the fit uses (:func:`core.subdivision.limit_crossings.fit_levels`)."""
+    the fit uses (:func:`core.subdivision.limit_crossings.fit_levels`), its least-squares fit
+    made as ``fit_mode`` (``'inside'`` or ``'best-fit'``) makes it."""
     least_squares, distances = least_squares_preview(
-        cage, target, levels=fit_levels(cage.n_faces, subdivision_levels))
+        cage, target, levels=fit_levels(cage.n_faces, subdivision_levels), mode=fit_mode)
     return CagePreview(int(least_squares.untangled.held_back),
                        max(distances.max_distance, distances.target_max_distance),
                        distances.target_mean_distance)
@@ -72,7 +73,7 @@ def decimation_wins(layout, decimation):
             and layout.largest_distance > ROUTE_DISTANCE_RATIO * decimation.largest_distance)
 
 
-def review_route(cage, info, target, subdivision_levels, build_decimation):
+def review_route(cage, info, target, subdivision_levels, build_decimation, fit_mode="inside"):
     """Keep the polycube layout ``cage`` unless its least-squares fit is held back and the
     paired decimation's fits much closer (this module's docstring).
 
@@ -84,18 +85,19 @@ def review_route(cage, info, target, subdivision_levels, build_decimation):
     subdivision_levels : int, the fit's subdivision levels (``params.subdivision_levels``).
     build_decimation : callable ``() -> (PolyMesh, dict)``, the paired decimation's cage and
         report (``build_base_mesh(..., method="decimation")``).
+    fit_mode : ``'inside'`` or ``'best-fit'``, the fit that will follow (``params.fit_mode``).
 
     Returns
     -------
     ReviewedRoute; when the decimation is kept, its report's ``fallback_reason`` says why and
     its ``candidates`` keep the polycube layout's entry.
     """
-    layout = preview_cage(cage, target, subdivision_levels)
+    layout = preview_cage(cage, target, subdivision_levels, fit_mode)
     review = {"polycube": layout.section(), "paired decimation": None, "kept": "polycube"}
     if layout.held_back == 0:
         return ReviewedRoute(cage, {**info, "route_review": review})
     other_cage, other_info = build_decimation()
-    other = preview_cage(other_cage, target, subdivision_levels)
+    other = preview_cage(other_cage, target, subdivision_levels, fit_mode)
     review["paired decimation"] = other.section()
     if not decimation_wins(layout, other):
         return ReviewedRoute(cage, {**info, "route_review": review})

@@ -71,7 +71,7 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     if method == "auto" and info["method"] == "polycube" and params.fit_mode != "none":
         progress.check_cancel()
         reviewed = review_route(cage, info, intake.surface, params.subdivision_levels,
-                                lambda: build("decimation"))
+                                lambda: build("decimation"), params.fit_mode)
         cage, info = reviewed.cage, reviewed.info
     if invalid is not None and params.base_mesh_method == "auto":
         info["fallback_reason"] = f"the labeling is not a valid polycube labeling ({invalid})"

@@ -5,6 +5,9 @@ import numpy as np
 import pytest
 import trimesh
 
+from core.errors import ParameterError
+from core.fitting.fit import least_squares_preview
+
 from core.fitting.route_review import (ROUTE_DISTANCE_RATIO, CagePreview, decimation_wins,
                                        preview_cage, review_route)
 from core.subdivision.sample_cages import grid_sphere
@@ -60,3 +63,12 @@ def test_the_preview_measures_the_fitted_cage_not_the_cage_as_given():
     resized = preview_cage(cage, _sphere_target(2.0 * radius), 2)
     assert near.largest_distance < 0.01 and resized.largest_distance < 0.01
     assert near.held_back == 0 and resized.held_back == 0
+
+
+def test_the_preview_is_of_the_inside_or_the_best_fit_mode_only():
+    cage = grid_sphere()
+    radius = float(np.linalg.norm(cage.vertices, axis=1).mean())
+    best = preview_cage(cage, _sphere_target(radius), 2, fit_mode="best-fit")
+    assert best.held_back == 0 and best.largest_distance < 0.01
+    with pytest.raises(ParameterError, match="inside or best-fit"):
+        least_squares_preview(cage, _sphere_target(radius), mode="none")
