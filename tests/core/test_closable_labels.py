@@ -5,15 +5,13 @@ import numpy as np
 import pytest
 
 from core.errors import LabelingError
-from core.polymesh_checks import check_polymesh
-from core.quadmesh import build_base_mesh
 from core.quadmesh.polycube.chart_complex import build_chart_complex
 from core.quadmesh.polycube.closable_labels import closable_labels
 from core.quadmesh.polycube.side_signs import (contradicting_charts, lone_sides,
                                                make_loops_rectilinear)
 from core.segmentation.validity import check_validity
-from core.types import TriMesh
-from tests.core.test_quadmesh import euler_genus, identity_frames, nearest_labels, union_of_boxes
+from tests.core.test_quadmesh import (assert_relabelled_quad_layout,
+                                      identity_frames, nearest_labels, union_of_boxes)
 
 
 def _box_with_a_tongue():
@@ -91,11 +89,4 @@ def test_a_closable_labeling_is_left_as_it_is():
 @pytest.mark.slow
 def test_the_polycube_base_mesh_of_such_a_labeling_is_a_closed_quad_mesh():
     V, F, labels, _ = _box_with_a_tongue()
-    part = np.zeros(len(F), dtype=np.int64)
-    frames, part_frames = identity_frames(len(F))
-    base, info = build_base_mesh(TriMesh(V, F), part, labels, frames, part_frames, 150,
-                                 method="polycube")
-    check_polymesh(base)
-    assert (base.face_sizes == 4).all()
-    assert info["method"] == "polycube" and info["genus"] == euler_genus(V, F)
-    assert info["relabelled_area"] > 0.0
+    assert_relabelled_quad_layout(V, F, labels)

@@ -56,6 +56,21 @@ def identity_frames(m, parts=1):
     return np.tile(np.eye(3), (m, 1, 1)), np.tile(np.eye(3), (parts, 1, 1))
 
 
+def assert_relabelled_quad_layout(V, F, labels, target_faces=150):
+    """Build the one-part polycube base mesh of a labeling the layout has to relabel, and
+    check that it is a closed quad mesh of the target's genus with some area relabelled.
+    Returns the genus."""
+    part = np.zeros(len(F), dtype=np.int64)
+    frames, part_frames = identity_frames(len(F))
+    base, info = build_base_mesh(TriMesh(V, F), part, labels, frames, part_frames, target_faces,
+                                 method="polycube")
+    check_polymesh(base)
+    assert (base.face_sizes == 4).all()
+    assert info["method"] == "polycube" and info["genus"] == euler_genus(V, F)
+    assert info["relabelled_area"] > 0.0
+    return info["genus"]
+
+
 def base_of(boxes, face_part=None, target_faces=300, method="polycube", **kwargs):
     """The polycube base mesh (no fallback) of a union of boxes with nearest-axis labels."""
     V, F = union_of_boxes(boxes)
