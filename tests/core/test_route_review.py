@@ -1,6 +1,8 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """The route review keeps a polycube layout that fits, and gives way only to a much closer
 paired decimation when the layout's least-squares fit had to be held back."""
+import os
+
 import numpy as np
 import pytest
 import trimesh
@@ -14,6 +16,7 @@ from core.subdivision.sample_cages import grid_sphere
 from core.types import TriMesh
 
 pytestmark = pytest.mark.unit
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def _sphere_target(radius):
@@ -72,3 +75,16 @@ def test_the_preview_is_of_the_inside_or_the_best_fit_mode_only():
     assert best.held_back == 0 and best.largest_distance < 0.01
     with pytest.raises(ParameterError, match="inside or best-fit"):
         least_squares_preview(cage, _sphere_target(radius), mode="none")
+
+
+@pytest.mark.slow
+def test_the_base_mesh_stage_reviews_a_layout_only_when_a_fit_follows():
+    from core.pipeline import reconstruct
+
+    sample = os.path.join(REPO, "examples", "to_simp_cantilever.stl")
+    fitted = reconstruct(sample, {}, stop_after="basemesh").report["base_mesh"]
+    unfitted = reconstruct(sample, {"fit_mode": "none"},
+                           stop_after="basemesh").report["base_mesh"]
+    assert fitted["method"] == "polycube" and fitted["route_review"]["kept"] == "polycube"
+    assert fitted["route_review"]["polycube"]["largest_distance"] < 0.05
+    assert "route_review" not in unfitted and unfitted["method"] == "polycube"
