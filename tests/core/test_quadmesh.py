@@ -7,6 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 import trimesh
 from scipy.optimize import Bounds, LinearConstraint, milp
 
@@ -526,6 +527,50 @@ def test_the_hang_guard_is_an_error_not_another_answer(monkeypatch):
     with pytest.raises(MilpTimeLimitError, match="depend on the machine's load"):
         solve_milp("a test program", np.ones(3), np.ones(3), Bounds(1, 10),
                    [LinearConstraint(np.ones((1, 3)), 4.5, np.inf)])
+
+
+def test_a_program_met_again_gets_the_first_answer_without_a_solve(monkeypatch):
+    import core.quadmesh.polycube.milp_solve as milp_solve
+
+    calls = []
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return milp(*args, **kwargs)
+
+    monkeypatch.setattr(milp_solve, "milp", counted)
+    monkeypatch.setattr(milp_solve, "_ANSWERS", type(milp_solve._ANSWERS)())
+    cost = np.array([1.0, 2.0, 3.0])
+
+    def program(rhs):
+        # built afresh each time, the matrix once dense and once sparse with its entries
+        # in another order: the same program
+        matrix = np.ones((1, 3)) if rhs < 5 else sp.coo_matrix(
+            (np.ones(3), (np.zeros(3), np.array([2, 0, 1]))), shape=(1, 3))
+        return solve_milp("a test program", cost.copy(), np.ones(3), Bounds(0, 10),
+                          [LinearConstraint(matrix, rhs, np.inf)])
+
+    first = program(4.5)
+    again = program(4.5)
+    assert len(calls) == 1
+    assert np.array_equal(first.x, again.x) and first.x is not again.x
+    again.x[:] = -1  # a caller changing its copy changes no later answer
+    assert np.array_equal(program(4.5).x, first.x) and len(calls) == 1
+    other = program(7.5)
+    assert len(calls) == 2 and other.x.sum() >= 7.5 > first.x.sum()
+    sparse_again = program(7.5)
+    assert len(calls) == 2 and np.array_equal(sparse_again.x, other.x)
+
+
+def test_answers_kept_are_bounded(monkeypatch):
+    import core.quadmesh.polycube.milp_solve as milp_solve
+
+    monkeypatch.setattr(milp_solve, "_ANSWERS", type(milp_solve._ANSWERS)())
+    monkeypatch.setattr(milp_solve, "ANSWERS_KEPT", 2)
+    for rhs in (1.5, 2.5, 3.5):
+        solve_milp("a test program", np.ones(3), np.ones(3), Bounds(0, 10),
+                   [LinearConstraint(np.ones((1, 3)), rhs, np.inf)])
+    assert len(milp_solve._ANSWERS) == 2
 
 
 @pytest.mark.slow

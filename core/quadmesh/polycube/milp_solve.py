@@ -11,7 +11,19 @@ incumbent. The programs met in practice close within a few nodes, the side-lengt
 quantization's at its root (its linear relaxation is integral,
 :mod:`core.quadmesh.polycube.quantize`),
 far from both limits (``benchmarks/BASEMESH_SPEED_RESULTS.md``).
+
+The base mesh's searches solve many programs more than once: the side-direction program of a
+chart's neighbourhood is the same for every candidate relabelling that leaves the neighbourhood
+alone, and proving one infeasible can take HiGHS thousands of nodes. Since HiGHS gives the same
+answer to the same program, answers are kept by the program's content (every array of it, its
+options and the limits) and a program met again gets a copy of its first answer.
 """
+import copy
+import hashlib
+from collections import OrderedDict
+
+import numpy as np
+import scipy.sparse as sp
 from scipy.optimize import milp
 
 from core.errors import LabelingError, OTHER_PARTS
@@ -22,6 +34,11 @@ HANG_GUARD_SECONDS = 600.0
 """Wall-clock seconds after which a program is abandoned (an error, never another answer)."""
 TIME_LIMIT_MESSAGE = "Time limit reached"
 """Start of scipy's message when HiGHS stopped on ``HANG_GUARD_SECONDS``."""
+ANSWERS_KEPT = 4096
+"""Answers kept for programs met again (the least recently used go first)."""
+
+_ANSWERS = OrderedDict()
+"""Program digest -> scipy.optimize.OptimizeResult, at most ``ANSWERS_KEPT``."""
 
 
 class MilpTimeLimitError(LabelingError):
@@ -52,6 +69,10 @@ def solve_milp(what, cost, integrality, bounds, constraints, mip_rel_gap=None,
     options = {"node_limit": int(node_limit), "time_limit": HANG_GUARD_SECONDS}
     if mip_rel_gap is not None:
         options["mip_rel_gap"] = mip_rel_gap
+    key = program_digest(cost, integrality, bounds, constraints, options)
+    if key in _ANSWERS:
+        _ANSWERS.move_to_end(key)
+        return copy.deepcopy(_ANSWERS[key])
     result = milp(cost, integrality=integrality, bounds=bounds, constraints=constraints,
                   options=options)
     if str(result.message).startswith(TIME_LIMIT_MESSAGE):
@@ -59,4 +80,42 @@ def solve_milp(what, cost, integrality, bounds, constraints, mip_rel_gap=None,
             f"{what} did not finish within {HANG_GUARD_SECONDS:g} s ({len(cost)} variables); "
             f"its answer would depend on the machine's load, so none is used: try {OTHER_PARTS} "
             "or --base-mesh-method decimation")
+    _ANSWERS[key] = copy.deepcopy(result)
+    while len(_ANSWERS) > ANSWERS_KEPT:
+        _ANSWERS.popitem(last=False)
     return result
+
+
+def program_digest(cost, integrality, bounds, constraints, options):
+    """A digest (str) of a program's content: equal programs, equal digests.
+
+    Every array is hashed with its shape and its float64 (or int64 index) bytes; sparse
+    constraint matrices in canonical CSR form, so two ways of building one matrix agree.
+    """
+    digest = hashlib.blake2b(digest_size=20)
+
+    def add(values):
+        array = np.ascontiguousarray(np.asarray(values, dtype=np.float64))
+        digest.update(repr(array.shape).encode())
+        digest.update(array.tobytes())
+
+    add(cost)
+    add(integrality)
+    add(bounds.lb)
+    add(bounds.ub)
+    for constraint in constraints:
+        matrix = constraint.A
+        if sp.issparse(matrix):
+            matrix = sp.csr_matrix(matrix, dtype=np.float64, copy=True)
+            matrix.sum_duplicates()
+            matrix.sort_indices()
+            digest.update(repr(matrix.shape).encode())
+            for part in (matrix.indptr, matrix.indices):
+                digest.update(np.ascontiguousarray(part, dtype=np.int64).tobytes())
+            add(matrix.data)
+        else:
+            add(matrix)
+        add(constraint.lb)
+        add(constraint.ub)
+    digest.update(repr(sorted(options.items())).encode())
+    return digest.hexdigest()
