@@ -90,3 +90,20 @@ def test_a_closable_labeling_is_left_as_it_is():
 def test_the_polycube_base_mesh_of_such_a_labeling_is_a_closed_quad_mesh():
     V, F, labels, _ = _box_with_a_tongue()
     assert_relabelled_quad_layout(V, F, labels)
+
+
+def test_contradicting_charts_are_those_of_a_search_of_every_neighbourhood():
+    """Charts whose own program has no solution mark their neighbourhoods without a search of
+    their own; the list is the one a search of every neighbourhood finds."""
+    import core.quadmesh.polycube.side_signs as side_signs
+
+    V, F, labels, _ = _box_with_a_tongue()
+    broken = build_chart_complex(V, F, np.zeros(len(F), dtype=np.int64), labels,
+                                 identity_frames(len(F))[0])
+    slits = broken.slit_walks()
+    searched = [chart for chart, ring in enumerate(side_signs._rings(broken))
+                if side_signs._solve(side_signs._direction_program(
+                    broken, np.sort(ring), _none(broken), slits),
+                    side_signs.NODE_LIMIT).status == side_signs.INFEASIBLE]
+    assert searched
+    assert contradicting_charts(broken, _none(broken)).tolist() == searched

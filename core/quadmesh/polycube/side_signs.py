@@ -269,7 +269,9 @@ def _local_contradiction(complex_, collapsible, stricter=None):
     nothing and the next is tried. ``stricter``: (k,) int64 sides that lost the freedom to
     collapse in a program otherwise known to have a solution, or None; then only the
     neighbourhoods holding one of them are tried, those holding most first (they are the likely
-    contradictions, found among the first few tried instead of among the last).
+    contradictions, found among the first few tried instead of among the last). A
+    neighbourhood holding a chart whose own program has no solution is infeasible without a
+    search of its own (:func:`_charts_infeasible_alone`).
 
     Returns
     -------
@@ -286,10 +288,15 @@ def _local_contradiction(complex_, collapsible, stricter=None):
         order = np.lexsort((np.arange(len(rings)), sizes, -held))
         order = order[held[order] > 0]
     slits = complex_.slit_walks()
+    # a chart holding no side that lost its freedom has a solution on its own
+    alone = _charts_infeasible_alone(
+        complex_, collapsible, slits,
+        np.arange(complex_.n_charts) if stricter is None else complex_.side_chart[stricter])
     for chart in order:
         ring = rings[chart]
-        result = _solve(_direction_program(complex_, np.sort(ring), collapsible, slits),
-                        NODE_LIMIT)
+        held = [alone[c] for c in ring.tolist() if c in alone]
+        result = held[0] if held else _solve(
+            _direction_program(complex_, np.sort(ring), collapsible, slits), NODE_LIMIT)
         if result.status == INFEASIBLE:
             return ring.astype(np.int64), str(result.message)
     return None
@@ -313,10 +320,32 @@ def contradicting_charts(complex_, collapsible):
     their number measures how far a labeling is from one that closes.
     """
     slits = complex_.slit_walks()
+    alone = _charts_infeasible_alone(complex_, collapsible, slits,
+                                     np.arange(complex_.n_charts))
     bad = [chart for chart, ring in enumerate(_rings(complex_))
-           if _solve(_direction_program(complex_, np.sort(ring), collapsible, slits),
+           if np.isin(ring, list(alone)).any()
+           or _solve(_direction_program(complex_, np.sort(ring), collapsible, slits),
                      NODE_LIMIT).status == INFEASIBLE]
     return np.asarray(bad, dtype=np.int64)
+
+
+def _charts_infeasible_alone(complex_, collapsible, slits, charts):
+    """``{chart: HiGHS result}`` of those of ``charts`` (int64 array, any shape) whose own program (their
+    loops and slit walks only) has no solution.
+
+    A chart's program is a relaxation of that of every neighbourhood holding the chart, so each
+    of these proves its neighbourhoods infeasible. The programs of single charts are small and
+    decided at once, where a neighbourhood's can take thousands of nodes to prove infeasible.
+    """
+    alone = {}
+    with_loops = np.unique(complex_.loop_chart)
+    for chart in np.intersect1d(np.asarray(charts, dtype=np.int64).reshape(-1),
+                                with_loops).tolist():
+        result = _solve(_direction_program(complex_, np.array([chart]), collapsible, slits),
+                        NODE_LIMIT)
+        if result.status == INFEASIBLE:
+            alone[chart] = result
+    return alone
 
 
 @dataclass
