@@ -381,84 +381,85 @@ def _direction_program(complex_, charts, collapsible, slits=None):
     _DirectionProgram
     """
     loops = np.flatnonzero(np.isin(complex_.loop_chart, charts))
-    keys, pair_a, pair_b, pair_turn, pair_parallel, pair_loop = [], [], [], [], [], []
-    for local, loop in enumerate(loops):
+    keys, pair_b, pair_turn, pair_parallel = [], [], [], []
+    for loop in loops:
         k, d, normal = _loop_directions(complex_, loop)
         nxt = np.roll(d, -1, axis=0)
         keys.append(k)
-        pair_a.append(k)
         pair_b.append(np.roll(k, -1))
         pair_turn.append(np.rint(np.cross(d, nxt) @ normal))
         pair_parallel.append(np.einsum("kj,kj->k", d, nxt))
-        pair_loop.append(np.full(len(k), local))
+    loop_of_pair = np.repeat(np.arange(len(loops)), [len(k) for k in keys])
     used = np.unique(np.concatenate(keys))
     nf = len(used)
-    a = np.searchsorted(used, np.concatenate(pair_a))
+    a = np.searchsorted(used, np.concatenate(keys))
     b = np.searchsorted(used, np.concatenate(pair_b))
     turn = np.concatenate(pair_turn)
     parallel = np.concatenate(pair_parallel)
-    loop_of_pair = np.concatenate(pair_loop)
     npairs = len(a)
     n_loops = len(loops)
     sides, key_side = np.unique(used // 2, return_inverse=True)
     n_sides = len(sides)
     # variables: flips f (nf), pair products x (npairs), hole flags h (n_loops), side lengths
-    # l (n_sides), flipped lengths y = f * l (nf)
-    nvar = nf + npairs + n_loops + n_sides + nf
+    # l (n_sides), flipped lengths y = f * l (nf), disagreements z (nd)
     length0 = nf + npairs + n_loops
     flipped0 = length0 + n_sides
-    rows, cols, vals, lo, hi = [], [], [], [], []
-
-    def add(entries, lower, upper):
-        row = len(lo)
-        for col, val in entries:
-            rows.append(row)
-            cols.append(col)
-            vals.append(val)
-        lo.append(lower)
-        hi.append(upper)
-
-    for p in range(npairs):
-        x, fa, fb = nf + p, a[p], b[p]
-        # x = fa XOR fb
-        add([(x, 1), (fa, -1), (fb, 1)], 0, np.inf)
-        add([(x, 1), (fa, 1), (fb, -1)], 0, np.inf)
-        add([(x, 1), (fa, -1), (fb, -1)], -np.inf, 0)
-        add([(x, 1), (fa, 1), (fb, 1)], -np.inf, 2)
-        if abs(parallel[p]) > 0.5:
-            # collinear neighbours must keep going the same way: flip both or neither
-            value = 1 if parallel[p] < 0 else 0
-            add([(x, 1)], value, value)
-    for local in range(n_loops):
-        pairs = np.flatnonzero(loop_of_pair == local)
-        entries = [(nf + p, -2.0 * turn[p]) for p in pairs if abs(parallel[p]) <= 0.5]
-        entries.append((nf + npairs + local, 8.0))
-        rhs = 4.0 - float(turn[pairs].sum())
-        add(entries, rhs, rhs)
-    for chart in charts:
-        mine = np.flatnonzero(complex_.loop_chart[loops] == chart)
+    disagree0 = flipped0 + nf
+    rows = _Rows()
+    # x = fa XOR fb: four rows per pair, and collinear neighbours must keep going the same
+    # way (flip both or neither): a fifth row fixing x
+    x = nf + np.arange(npairs)
+    collinear = np.abs(parallel) > 0.5
+    first = np.concatenate([[0], np.cumsum(4 + collinear)])[:-1]
+    for offset, (sign_a, sign_b, lower, upper) in enumerate(
+            [(-1, 1, 0, np.inf), (1, -1, 0, np.inf), (-1, -1, -np.inf, 0), (1, 1, -np.inf, 2)]):
+        rows.add_at(first + offset, np.stack([x, a, b], axis=1),
+                    np.broadcast_to([1.0, sign_a, sign_b], (npairs, 3)), lower, upper)
+    value = np.where(parallel[collinear] < 0, 1.0, 0.0)
+    rows.add_at(first[collinear] + 4, x[collinear, None], np.ones((collinear.sum(), 1)),
+                value, value)
+    rows.close(int(npairs * 4 + collinear.sum()))
+    # each loop turns by +4 (outer) or -4 (hole, h = 1)
+    turning = np.flatnonzero(~collinear)
+    rhs = 4.0 - np.bincount(loop_of_pair, weights=turn, minlength=n_loops)
+    rows.add_entries(loop_of_pair[turning], nf + turning, -2.0 * turn[turning])
+    rows.add_entries(np.arange(n_loops), nf + npairs + np.arange(n_loops),
+                     np.full(n_loops, 8.0))
+    rows.add_bounds(rhs, rhs)
+    # every chart has exactly one outer loop
+    loop_chart = complex_.loop_chart[loops]
+    for chart in np.asarray(charts).tolist():
+        mine = np.flatnonzero(loop_chart == chart)
         if len(mine):
-            add([(nf + npairs + local, 1.0) for local in mine], len(mine) - 1, len(mine) - 1)
+            rows.add_row(nf + npairs + mine, np.ones(len(mine)), len(mine) - 1, len(mine) - 1)
+    # y = f * l, linearised with the length bound
     big = CLOSURE_BOUND
-    for key in range(nf):
-        f, l, y = key, length0 + key_side[key], flipped0 + key
-        add([(y, 1.0), (f, -big)], -np.inf, 0.0)
-        add([(y, 1.0), (l, -1.0)], -np.inf, 0.0)
-        add([(y, 1.0), (l, -1.0), (f, -big)], -big, np.inf)
-    for keys_, coefficients in _closure_rows(complex_, loops, slits):
-        key = np.searchsorted(used, keys_)
-        add([(length0 + key_side[k], c) for k, c in zip(key, coefficients)]
-            + [(flipped0 + k, -2.0 * c) for k, c in zip(key, coefficients)], 0.0, 0.0)
+    key = np.arange(nf)
+    f, l, y = key, length0 + key_side, flipped0 + key
+    for offset, (columns, values, lower, upper) in enumerate([
+            ((y, f), (1.0, -big), -np.inf, 0.0), ((y, l), (1.0, -1.0), -np.inf, 0.0),
+            ((y, l, f), (1.0, -1.0, -big), -big, np.inf)]):
+        rows.add_at(3 * key + offset, np.stack(columns, axis=1),
+                    np.broadcast_to(values, (nf, len(values))), lower, upper)
+    rows.close(3 * nf)
+    # closure of every walk along every axis it runs
+    walk_row, walk_keys, coefficients, n_walk_rows = _closure_entries(complex_, loops, slits)
+    k = np.searchsorted(used, walk_keys)
+    rows.add_entries(np.concatenate([walk_row, walk_row]),
+                     np.concatenate([length0 + key_side[k], flipped0 + k]),
+                     np.concatenate([coefficients, -2.0 * coefficients]))
+    rows.add_bounds(np.zeros(n_walk_rows), np.zeros(n_walk_rows))
     # disagreements z >= |f(side, 0) - f(side, 1)| of the two charts of a side within one part
     coupled = _coupled_sides(complex_, used)
-    disagree0 = nvar
-    for i, (k0, k1) in enumerate(coupled):
-        add([(disagree0 + i, 1.0), (k0, -1.0), (k1, 1.0)], 0.0, np.inf)
-        add([(disagree0 + i, 1.0), (k0, 1.0), (k1, -1.0)], 0.0, np.inf)
     nd = len(coupled)
-    nvar += nd
-    matrix = sp.csr_matrix((vals, (rows, cols)), shape=(len(lo), nvar))
-    matrix.sum_duplicates()
+    z = disagree0 + np.arange(nd)
+    for offset, (sign_0, sign_1) in enumerate([(-1.0, 1.0), (1.0, -1.0)]):
+        rows.add_at(2 * np.arange(nd) + offset,
+                    np.stack([z, coupled[:, 0], coupled[:, 1]], axis=1),
+                    np.broadcast_to([1.0, sign_0, sign_1], (nd, 3)), 0.0, np.inf)
+    rows.close(2 * nd)
+    nvar = disagree0 + nd
+    matrix = rows.matrix(nvar)
     extent = complex_.side_extent.reshape(-1)[used]
     disagree_cost = DISAGREEMENT_WEIGHT * 0.5 * (extent[coupled[:, 0]] + extent[coupled[:, 1]])
     cost = np.concatenate([0.5 * extent + 1e-9 * (1.0 + np.arange(nf)),
@@ -470,7 +471,81 @@ def _direction_program(complex_, charts, collapsible, slits=None):
     upper = np.concatenate([np.ones(nf + npairs + n_loops), np.full(n_sides + nf, big),
                             np.ones(nd)])
     return _DirectionProgram(used, cost, integrality, Bounds(lower, upper),
-                             [LinearConstraint(matrix, lo, hi)])
+                             [LinearConstraint(matrix, rows.lower(), rows.upper())])
+
+
+class _Rows:
+    """The rows of a sparse linear program, built block by block.
+
+    A block's rows follow the rows before it; within a block, rows are placed by index
+    (:meth:`add_at`, then :meth:`close` with the block's row count) or appended one block of
+    entries and bounds at a time (:meth:`add_entries` then :meth:`add_bounds`, or
+    :meth:`add_row`).
+    """
+
+    def __init__(self):
+        self._rows, self._cols, self._vals = [], [], []
+        self._lower, self._upper = [], []
+        self._n = 0
+        self._pending = None
+
+    def add_at(self, local_rows, columns, values, lower, upper):
+        """Entries ``columns``/``values`` ((r, e) each) of rows ``local_rows`` ((r,)) of the
+        open block, their bounds ``lower``/``upper`` (scalars or (r,))."""
+        if self._pending is None:
+            self._pending = ([], [])
+        local_rows = np.asarray(local_rows, dtype=np.int64)
+        width = np.shape(columns)[1] if len(local_rows) else 0
+        self._rows.append(self._n + np.repeat(local_rows, width))
+        self._cols.append(np.asarray(columns, dtype=np.int64).reshape(-1))
+        self._vals.append(np.asarray(values, dtype=np.float64).reshape(-1))
+        self._pending[0].append(local_rows)
+        self._pending[1].append(np.broadcast_to(
+            np.stack(np.broadcast_arrays(np.asarray(lower, dtype=np.float64),
+                                         np.asarray(upper, dtype=np.float64)), axis=-1),
+            (len(local_rows), 2)))
+
+    def close(self, count):
+        """End the open block of ``count`` rows (every one placed by :meth:`add_at`)."""
+        bounds = np.zeros((count, 2))
+        if self._pending is not None:
+            for local_rows, pairs in zip(*self._pending):
+                bounds[local_rows] = pairs
+        self._lower.append(bounds[:, 0])
+        self._upper.append(bounds[:, 1])
+        self._n += count
+        self._pending = None
+
+    def add_entries(self, local_rows, columns, values):
+        """Entries of the next block's rows ``local_rows`` (counted from the block's first)."""
+        self._rows.append(self._n + np.asarray(local_rows, dtype=np.int64))
+        self._cols.append(np.asarray(columns, dtype=np.int64))
+        self._vals.append(np.asarray(values, dtype=np.float64))
+
+    def add_bounds(self, lower, upper):
+        """Close the block of :meth:`add_entries` with its rows' bounds ((r,) each)."""
+        self._lower.append(np.asarray(lower, dtype=np.float64))
+        self._upper.append(np.asarray(upper, dtype=np.float64))
+        self._n += len(self._lower[-1])
+
+    def add_row(self, columns, values, lower, upper):
+        """One row of its own."""
+        self.add_entries(np.zeros(len(columns), dtype=np.int64), columns, values)
+        self.add_bounds([lower], [upper])
+
+    def matrix(self, n_columns):
+        """(rows, n_columns) CSR matrix, duplicates summed."""
+        matrix = sp.csr_matrix((np.concatenate(self._vals),
+                                (np.concatenate(self._rows), np.concatenate(self._cols))),
+                               shape=(self._n, n_columns))
+        matrix.sum_duplicates()
+        return matrix
+
+    def lower(self):
+        return list(np.concatenate(self._lower))
+
+    def upper(self):
+        return list(np.concatenate(self._upper))
 
 
 def _coupled_sides(complex_, used):
@@ -495,44 +570,50 @@ def loops_are_rectilinear(complex_):
     return bool((outer[has_loop] == 1).all())
 
 
-def _closure_rows(complex_, loops=None, slits=None):
+def _closure_entries(complex_, loops=None, slits=None):
     """Closure equations of loops and slit walks, one per axis they run along.
 
     ``loops`` : (k,) int64 loops whose equations (and those of their slit walks) are given, or
     None for every loop; ``slits``: ``complex_.slit_walks()`` when already made, or None.
 
-    Yields ``(keys, coefficients)``: (k,) int64 sign keys (``side * 2 + column``) and (k,)
-    float64 signed unit directions; the lengths of those sides times the coefficients add up
-    to zero when the walk closes along that axis.
+    Returns ``(row, keys, coefficients, n_rows)``: per entry, (e,) int64 its equation, (e,)
+    int64 sign key (``side * 2 + column``) and (e,) float64 signed unit direction; the lengths
+    of an equation's sides times its coefficients add up to zero when the walk closes along
+    that axis. Equations come walk by walk (the loops, then the slit walks), each walk's by
+    axis; entries in walk order.
     """
     if loops is None:
         loops = np.arange(len(complex_.loop_chart))
     slits = [walk for walk in (complex_.slit_walks() if slits is None else slits) if len(walk)]
     slit_loop = np.searchsorted(complex_.loop_offsets, [walk[0] for walk in slits],
                                 side="right") - 1
+    inside = np.isin(slit_loop, loops) if len(slits) else np.zeros(0, dtype=bool)
     walks = ([np.arange(complex_.loop_offsets[loop], complex_.loop_offsets[loop + 1])
               for loop in loops]
-             + [walk for walk, loop in zip(slits, slit_loop) if np.isin(loop, loops)])
-    for walk in walks:
-        keys, d = _reference_directions(complex_, walk)
-        axis = np.argmax(np.abs(d), axis=1)
-        for along in np.unique(axis):
-            j = np.flatnonzero(axis == along)
-            yield keys[j], d[j, along]
+             + [walk for walk, kept in zip(slits, inside) if kept])
+    if not walks:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, np.zeros(0), 0
+    positions = np.concatenate(walks)
+    walk_of = np.repeat(np.arange(len(walks)), [len(walk) for walk in walks])
+    keys, d = _reference_directions(complex_, positions)
+    axis = np.argmax(np.abs(d), axis=1)
+    order = np.lexsort((np.arange(len(positions)), axis, walk_of))
+    group = walk_of[order] * 3 + axis[order]
+    starts = np.concatenate([[True], group[1:] != group[:-1]])
+    row = np.cumsum(starts) - 1
+    return (row, keys[order], d[order, axis[order]], int(starts.sum()))
 
 
 def charts_close(complex_, collapsible=None):
     """True when side lengths >= 1 (>= 0 for ``collapsible`` sides) close every loop (an LP)."""
     from scipy.optimize import linprog
 
-    equations = list(_closure_rows(complex_))
-    rows = np.concatenate([np.full(len(keys), i) for i, (keys, _) in enumerate(equations)])
-    cols = np.concatenate([keys // 2 for keys, _ in equations])
-    vals = np.concatenate([coefficients for _, coefficients in equations])
-    matrix = sp.csr_matrix((vals, (rows, cols)), shape=(len(equations), complex_.n_sides))
+    rows, keys, vals, n_equations = _closure_entries(complex_)
+    matrix = sp.csr_matrix((vals, (rows, keys // 2)), shape=(n_equations, complex_.n_sides))
     matrix.sum_duplicates()
     zero_ok = (np.zeros(complex_.n_sides, dtype=bool) if collapsible is None
                else np.asarray(collapsible, dtype=bool))
-    result = linprog(np.zeros(complex_.n_sides), A_eq=matrix, b_eq=np.zeros(len(equations)),
+    result = linprog(np.zeros(complex_.n_sides), A_eq=matrix, b_eq=np.zeros(n_equations),
                      bounds=[(0.0 if c else 1.0, None) for c in zero_ok], method="highs")
     return result.status == 0
