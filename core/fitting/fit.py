@@ -46,8 +46,9 @@ class FitSettings:
     """Tuned constants of :func:`fit_base_mesh`, one per choice the fit makes."""
 
     fine_rounds: int = 2
-    """Least-squares rounds on the fit's level after the level-1 rounds
-    (:func:`_two_level_best_fit`), and of each untangling refit (:func:`_untangled`)."""
+    """Least-squares rounds kept for the fit's level after the level-1 rounds (at least; it
+    also gets those the level-1 rounds leave, :func:`_two_level_best_fit`), and the rounds of
+    each untangling refit (:func:`_untangled`)."""
     retry_step: float = 0.4
     """Step of the RGP's second run, times the first's, when the first kept its start
     (:func:`_rgp`)."""
@@ -595,10 +596,12 @@ def _pulled_inside(base, limit_map, T, target, vertices, stiffness):
 
 
 def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness=None, seed=0):
-    """Least-squares fit: ``rounds - FIT.fine_rounds`` rounds on the level-1 limit points
-    (a quarter of the points; the large moves), then up to ``FIT.fine_rounds`` on the fit's
-    level: 8 + 2 rounds reach a lower mean distance than 10 level-2 rounds in about half
-    the time.
+    """Least-squares fit: up to ``rounds - FIT.fine_rounds`` rounds on the level-1 limit
+    points (a quarter of the points; the large moves), then the rest of the ``rounds`` (at
+    least ``FIT.fine_rounds``) on the fit's level: 8 + 2 rounds reach a lower mean distance
+    than 10 level-2 rounds in about half the time. Where the level-1 rounds converge early
+    the fit's level gets the rounds they left: holding it to ``FIT.fine_rounds`` leaves the
+    inside fit that follows more of the volume outside on thin-walled parts.
 
     Returns
     -------
