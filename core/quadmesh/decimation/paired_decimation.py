@@ -72,6 +72,7 @@ from core.quadmesh.decimation.even_triangulation import (even_creased_triangulat
                                                          even_triangulation)
 from core.quadmesh.decimation.feature_decimation import FeatureDecimation
 from core.quadmesh.decimation.fold_free_decimation import FoldFreeDecimation, folded_share
+from core.quadmesh.decimation.valence_cleanup import clean_valences
 from core.quadmesh.limit_interpolation import unshrink_inverted
 from core.quadmesh.local_repair import repair_inverted
 from core.quadmesh.orientation import inverted_faces
@@ -106,6 +107,12 @@ QSLIM_FOLDED_SHARE = 0.5
 before QSlim's. Such a share comes of many thin members coarsely decimated (high-genus
 lattice-like TO results), whose QSlim cages cross themselves at every budget; the targets
 whose QSlim ladder ends clean fold well under half of them."""
+VALENCE_FACE_SLACK = 0.05
+"""The valence cleanup's collapses and splits keep the face count within this share of the
+paired cage's (its collapses outnumber its splits, so it tends to the lower end)."""
+CLEANUP_RETRIES = 2
+"""Valence cleanups run again, with the vertices of the last one's flawed faces kept, while the
+cleaned cage has more limit flaws than the paired cage as it is."""
 TIGHTEN_ROUNDS = 4
 """Fold-free decimations tightened around the crossings of the cage kept, at most (each
 raises the normal agreement asked of the triangles there by one step,
@@ -135,6 +142,8 @@ class PairedDecimation:
     fold_free : bool, ``mesh`` comes of a fold-free decimation (module docstring, step 5).
     tightened : int, the rounds of tightening around crossing faces that decimation had (a
         fold-free or a locally tightened one, steps 5 and 3).
+    valence_moves : int, the moves of the valence cleanup in ``mesh`` (step 3; 0 where the
+        paired cage as it was is kept).
     """
 
     mesh: PolyMesh
@@ -145,6 +154,7 @@ class PairedDecimation:
     limit_crossings: int = None
     fold_free: bool = False
     tightened: int = 0
+    valence_moves: int = 0
 
 
 def _candidate_quads(vertices, faces):
@@ -290,7 +300,7 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     max_faces = int(max_faces or target_faces)
     decimation = Decimation(vertices, faces, coarse_triangles=2 * max(max_faces, target_faces))
     if len(_ladder(target_faces, max_faces)) == 1 and not over_budget_faces:
-        return _paired_mesh(decimation, 2 * target_faces, surface)
+        return _cleaned(_paired_mesh(decimation, 2 * target_faces, surface), surface)[0]
     rounds = []
     fold_free_first = bool(over_budget_faces) and folded_share(
         vertices, faces, *decimation.triangles(2 * target_faces)) > QSLIM_FOLDED_SHARE
@@ -454,20 +464,82 @@ def _flawed_mesh(decimation, budget, surface, rounds):
     flawed, the cage of the decimation as it is is built too, and the less flawed one kept
     (the evened one on a tie)."""
     creased = isinstance(decimation, FeatureDecimation)
-    result, crossings, inverted, moved, edits = _repaired(
+    result, crossings, inverted, moved, edits = _cleaned_or_not(
         _paired_mesh(decimation, 2 * budget, surface), surface)
     evened, evened_flaws = creased, crossings + inverted
     if creased and evened_flaws:
-        plain = _repaired(_paired_mesh(decimation, 2 * budget, surface, even=False), surface)
+        plain = _cleaned_or_not(_paired_mesh(decimation, 2 * budget, surface, even=False),
+                                surface)
         if plain[1] + plain[2] < evened_flaws:
             (result, crossings, inverted, moved, edits), evened = plain, False
     rounds.append({"faces": int(result.mesh.n_faces), "limit_crossings": crossings,
                    "inverted_faces": inverted, "moved_vertices": moved, "edits": edits,
+                   "valence_moves": result.valence_moves,
                    **({"crease_edges": int(result.mesh.n_creases), "evened": evened,
                        "evened_flaws": int(evened_flaws)} if creased else {}),
                    **({"fold_free": result.fold_free, "tightened": result.tightened}
                       if isinstance(decimation, FoldFreeDecimation) else {})})
     return result, crossings, inverted
+
+
+def _cleaned(result, surface, fixed=()):
+    """``(result, origin)``: ``result`` (a PairedDecimation) with its cage's valences cleaned
+    (:func:`core.quadmesh.decimation.valence_cleanup.clean_valences`, face count within
+    :data:`VALENCE_FACE_SLACK` of the paired cage's, the vertices ``fixed`` kept), and the
+    paired cage's vertex each vertex of the cleaned one comes from."""
+    mesh = result.mesh
+    cleanup = clean_valences(mesh, surface, int(np.ceil((1 - VALENCE_FACE_SLACK) * mesh.n_faces)),
+                             int((1 + VALENCE_FACE_SLACK) * mesh.n_faces), fixed)
+    sizes = cleanup.mesh.face_sizes
+    return replace(result, mesh=cleanup.mesh, quads=int((sizes == 4).sum()),
+                   triangles=int((sizes == 3).sum()),
+                   valence_moves=cleanup.rotations + cleanup.collapses + cleanup.splits), \
+        cleanup.origin
+
+
+def _cleaned_or_not(result, surface):
+    """:func:`_repaired` of the cage of ``result`` with its valences cleaned
+    (:func:`_cleaned`). Where the cleaned cage has more self-crossings of its limit surface
+    or more inverted faces than the paired cage as it is (both repaired), the cleanup runs
+    again with the vertices of its flawed faces, and their neighbours, kept as they are
+    (:data:`CLEANUP_RETRIES` times at most); the paired cage as it is is kept where the
+    cleaned one is still more flawed."""
+    fixed = set()
+    plain = None
+    for _ in range(CLEANUP_RETRIES + 1):
+        cleaned, origin = _cleaned(result, surface, sorted(fixed))
+        repaired = _repaired(cleaned, surface)
+        if not repaired[1] + repaired[2]:
+            return repaired
+        if plain is None:
+            plain = _repaired(result, surface)
+        if plain[1] >= repaired[1] and plain[2] >= repaired[2]:
+            return repaired
+        flawed = _flawed_faces(cleaned.mesh, surface)
+        if not len(flawed):
+            break  # flawed only after the repairs: nothing to keep fixed
+        corners = np.unique(origin[np.concatenate(
+            [cleaned.mesh.face_vertices[cleaned.mesh.face_offsets[f]:
+                                        cleaned.mesh.face_offsets[f + 1]] for f in flawed])])
+        fixed.update(_with_neighbours(result.mesh, corners).tolist())
+    return plain
+
+
+def _flawed_faces(mesh, surface):
+    """(k,) int64 faces of ``mesh`` that are inverted or hold a self-crossing of its
+    level-``CROSSING_LEVELS`` limit surface."""
+    from core.subdivision.limit_crossings import limit_self_intersections
+
+    inverted = np.flatnonzero(inverted_faces(mesh, surface.vertices, surface.faces, surface))
+    _, base_faces, _ = limit_self_intersections(mesh, CROSSING_LEVELS)
+    return np.union1d(inverted, base_faces).astype(np.int64)
+
+
+def _with_neighbours(mesh, vertices):
+    """(k,) int64 ``vertices`` and the vertices sharing a face with them, in ``mesh``."""
+    face_of_corner = np.repeat(np.arange(mesh.n_faces), mesh.face_sizes)
+    faces = np.unique(face_of_corner[np.isin(mesh.face_vertices, vertices)])
+    return np.unique(mesh.face_vertices[np.isin(face_of_corner, faces)])
 
 
 def _repaired(result, surface):
