@@ -19,7 +19,13 @@ genus and orientation:
    The dual graph of a closed triangle surface is cubic and bridgeless, so a perfect matching
    exists (Petersen) and the result is all quads in practice; unmatched triangles stay
    triangles (Catmull-Clark and the export take mixed cages). Vertices with only two faces are
-   merged away, and the vertices are moved onto the target.
+   merged away, and the vertices are moved onto the target. The valences of the paired cage are
+   then cleaned up (:mod:`core.quadmesh.decimation.valence_cleanup`: edge rotations, diagonal
+   collapses and vertex splits that lower a valence energy where the faces stay well shaped,
+   the face count within :data:`VALENCE_FACE_SLACK` of the paired cage's, then tangential
+   relaxation); where the cleaned cage has more limit-surface crossings or inverted faces than
+   the uncleaned one after the repairs of step 3, the cleanup runs again with its flawed faces'
+   vertices fixed (:data:`CLEANUP_RETRIES`), and at last the uncleaned cage is kept.
 3. Where the cage's limit surface faces away from the target, the vertices of those faces are
    moved off the target, towards a limit surface through their on-target positions
    (:mod:`core.quadmesh.limit_interpolation`), and faces still inverted are edited: a corner

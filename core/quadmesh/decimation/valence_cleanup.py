@@ -23,19 +23,25 @@ but the quad and no neighbour but its other two corners (the link condition); no
 with fewer than three faces. Crease vertices (``PolyMesh.creases``) keep their position and
 valence and crease edges are never rotated, so a feature cage keeps its crease chains.
 
-The operators lower the energy ``sum_v (valence(v) - 4)^2`` (Tarini et al., section 4),
-greedily: the move that lowers it most is applied first (ties by kind and by vertex and face
-indices, so the same cage always gives the same result), as long as the faces it makes are
-well shaped: the smallest signed corner sine of a new face, measured about the target's normal
-at the corner (:func:`_face_quality`; negative where a corner folds over or a face spans a
-thin strut with its corners on opposite walls), is at least :data:`MIN_CORNER_SINE` or at least
-that of the faces it replaces. A vertex made by a collapse or a split is placed on the target
-(the point nearest the mean of the vertices it comes from, or of its side of the fan). Within
+The operators lower the energy ``sum_v E(valence(v))`` (:data:`ENERGY`: every extraordinary
+vertex costs alike and a valence above 5 little more, so that two vertices of valence 5 may
+merge into one of valence 6), greedily: the move that lowers it most is applied first (ties by
+kind and by vertex and face indices, so the same cage always gives the same result). An edge
+rotation that leaves the energy as it is is taken too where it lowers
+``sum over edges (u, w) of (valence(u) - 4) (valence(w) - 4)``: it brings vertices of valence
+below 4 next to ones above 4, which later moves can cancel (the pair of energies falls at every
+move, so the moves end). A move is kept only where the faces it makes are well shaped: the
+smallest of their corners' signed sines about the target's normal at the corner and of the
+cosines between their normals and the target's at their corners (:func:`_face_quality`;
+negative where a corner folds over or a face spans a thin strut with its corners on opposite
+walls) is at least :data:`MIN_CORNER_SINE` or at least that of the faces it replaces. A vertex
+made by a collapse or a split is placed on the target (the point nearest the mean of the
+vertices it comes from, or halfway to the centre of its side of the fan). Within
 ``min_faces`` and ``max_faces`` collapses and splits keep the face count near the budget.
 
 Then the vertices whose faces changed get :data:`RELAX_ROUNDS` rounds of tangential
 relaxation: each is moved towards the mean of its faces' centres in the target's tangent plane
-and back onto the target, where that leaves its faces no worse shaped.
+and back onto the target, where that leaves its faces better shaped (:func:`_face_quality`).
 """
 import heapq
 import math
@@ -45,7 +51,6 @@ import numpy as np
 
 from core.mesh_topology import polymesh_summary
 from core.polymesh_checks import check_polymesh
-from core.quadmesh.creases import closed_network
 from core.types import PolyMesh
 
 REGULAR_VALENCE = 4
@@ -56,13 +61,13 @@ extraordinary vertex costs 2 and a valence beyond 5 little more: two vertices of
 become one of valence 6 where the faces stay well shaped (fewer extraordinary vertices, each a
 little more irregular), where the squared deviation from 4 would keep them apart."""
 MIN_CORNER_SINE = 0.5
-"""Faces made by a move are kept when their smallest corner sine (about the target's normal
-at the corner) is at least this (corner angles between 30 and 150 degrees), or at least the
-smallest one of the faces they replace."""
+"""Faces made by a move are kept when their :func:`_face_quality` is at least this (corner
+angles between 30 and 150 degrees, normals within 60 degrees of the target's at the corners),
+or at least the smallest one of the faces they replace."""
 RELAX_ROUNDS = 3
 """Rounds of tangential relaxation of the vertices whose faces changed."""
 MAX_MOVES_PER_FACE = 2
-"""Moves applied at most, per face of the cage (each lowers the integer energy, so the moves
+"""Moves applied at most, per face of the cage (each lowers the integer energies, so the moves
 end anyway; this bounds the time on large cages)."""
 
 
@@ -122,7 +127,7 @@ def clean_valences(mesh, surface, min_faces=None, max_faces=None, fixed=()):
 
 def _energy(valence):
     """Energy of one vertex of ``valence`` faces (:data:`ENERGY`; beyond its table, two more
-    per face)."""
+    per face; below valence 3, which no move makes, 16)."""
     if valence in ENERGY:
         return ENERGY[valence]
     return ENERGY[max(ENERGY)] + 2 * (valence - max(ENERGY)) if valence > 4 else 16
