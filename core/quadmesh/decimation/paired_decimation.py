@@ -21,9 +21,9 @@ genus and orientation:
    triangles (Catmull-Clark and the export take mixed cages). Vertices with only two faces are
    merged away, and the vertices are moved onto the target. The valences of the paired cage are
    then cleaned up (:mod:`core.quadmesh.decimation.valence_cleanup`: edge rotations, diagonal
-   collapses and vertex splits that lower a valence energy where the faces stay well shaped,
-   the face count within :data:`VALENCE_FACE_SLACK` of the paired cage's, then tangential
-   relaxation); where the cleaned cage has more limit-surface crossings or inverted faces than
+   collapses and vertex splits that lower a valence energy where the faces stay well shaped
+   and near the target, the face count within :data:`VALENCE_FACE_SLACK` of the paired
+   cage's); where the cleaned cage has more limit-surface crossings or inverted faces than
    the uncleaned one after the repairs of step 3, the cleanup runs again with its flawed faces'
    vertices fixed (:data:`CLEANUP_RETRIES`), and at last the uncleaned cage is kept.
 3. Where the cage's limit surface faces away from the target, the vertices of those faces are

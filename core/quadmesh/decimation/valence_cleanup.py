@@ -34,14 +34,17 @@ move, so the moves end). A move is kept only where the faces it makes are well s
 smallest of their corners' signed sines about the target's normal at the corner and of the
 cosines between their normals and the target's at their corners (:func:`_face_quality`;
 negative where a corner folds over or a face spans a thin strut with its corners on opposite
-walls) is at least :data:`MIN_CORNER_SINE` or at least that of the faces it replaces. A vertex
-made by a collapse or a split is placed on the target (the point nearest the mean of the
-vertices it comes from, or halfway to the centre of its side of the fan). Within
-``min_faces`` and ``max_faces`` collapses and splits keep the face count near the budget.
-
-Then the vertices whose faces changed get :data:`RELAX_ROUNDS` rounds of tangential
-relaxation: each is moved towards the mean of its faces' centres in the target's tangent plane
-and back onto the target, where that leaves its faces better shaped (:func:`_face_quality`).
+walls) is at least :data:`MIN_CORNER_SINE` or at least that of the faces it replaces, and
+where they stay near the target: their centres and edge midpoints, and the places of the
+vertices the move removed or moved, lie within :data:`MAX_DEVIATION` of the mean edge length of
+the target (or of the new faces), or no farther than the old faces' centres and midpoints (a
+collapse must not cut off a tip or a ridge that a vertex held). A vertex made by a collapse or a
+split is placed on the target (the point nearest the mean of the vertices it comes from, or
+halfway to the centre of its side of the fan); the other vertices stay where they are (on the
+target, where the decimation's quadrics put them: a tangential relaxation towards the
+neighbours' mean takes them off ridges and tips, and the fitted surface moves farther from the
+target). Within ``min_faces`` and ``max_faces`` collapses and splits keep the face count near
+the budget.
 """
 import heapq
 import math
@@ -49,6 +52,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from core.box_tree import closest_on_triangles
 from core.mesh_topology import polymesh_summary
 from core.polymesh_checks import check_polymesh
 from core.types import PolyMesh
@@ -64,8 +68,10 @@ MIN_CORNER_SINE = 0.5
 """Faces made by a move are kept when their :func:`_face_quality` is at least this (corner
 angles between 30 and 150 degrees, normals within 60 degrees of the target's at the corners),
 or at least the smallest one of the faces they replace."""
-RELAX_ROUNDS = 3
-"""Rounds of tangential relaxation of the vertices whose faces changed."""
+MAX_DEVIATION = 0.1
+"""Faces made by a move are kept when their centres and edge midpoints, and the places of the
+vertices the move removed or moved, lie at most this share of the mean edge length from the
+target (or from the new faces), or no farther than the old faces' centres and midpoints."""
 MAX_MOVES_PER_FACE = 2
 """Moves applied at most, per face of the cage (each lowers the integer energies, so the moves
 end anyway; this bounds the time on large cages)."""
@@ -77,7 +83,6 @@ class ValenceCleanup:
 
     mesh : PolyMesh, the cleaned cage (closed 2-manifold, the input's genus and creases).
     rotations, collapses, splits : int, moves applied.
-    relaxed : int, vertex moves of the tangential relaxation kept.
     extraordinary_before, extraordinary_after : int, vertices of valence other than 4.
     origin : (k,) int64, for each vertex of ``mesh`` the input vertex it comes from (the
         vertex split, for the second vertex of a split; the first corner, for a collapse).
@@ -87,7 +92,6 @@ class ValenceCleanup:
     rotations: int
     collapses: int
     splits: int
-    relaxed: int
     extraordinary_before: int
     extraordinary_after: int
     origin: np.ndarray
@@ -118,10 +122,9 @@ def clean_valences(mesh, surface, min_faces=None, max_faces=None, fixed=()):
     cage.min_faces = n_faces if min_faces is None else min(int(min_faces), n_faces)
     cage.max_faces = n_faces if max_faces is None else max(int(max_faces), n_faces)
     counts = cage.optimise(MAX_MOVES_PER_FACE * n_faces)
-    relaxed = cage.relax(RELAX_ROUNDS)
     cleaned, origin = cage.mesh(mesh)
     check_polymesh(cleaned)
-    return ValenceCleanup(cleaned, *counts, relaxed, before,
+    return ValenceCleanup(cleaned, *counts, before,
                           polymesh_summary(cleaned)["extraordinary_vertices"], origin)
 
 
@@ -154,7 +157,7 @@ class _Cage:
                 self.frozen[a] = self.frozen[b] = True
                 self.creases.add((min(a, b), max(a, b)))
         self.n_faces = len(self.faces)
-        self.touched, self.changed = set(), set()
+        self.touched = set()
         self.min_faces = self.max_faces = self.n_faces
 
     # --- bookkeeping -------------------------------------------------------------------
@@ -239,9 +242,44 @@ class _Cage:
         found = self.surface.closest(np.asarray([point], dtype=np.float64))
         return found.point[0].tolist(), found.normal[0].tolist()
 
-    def acceptable(self, old_faces, new_faces, moved=None):
+    def acceptable(self, old_faces, new_faces, moved=None, lost=()):
+        """Whether the faces ``new_faces`` (with the vertices of ``moved`` there) may replace
+        ``old_faces``: well shaped (:func:`_face_quality` at least :data:`MIN_CORNER_SINE` or
+        at least the old faces'), and as near the target
+        (:meth:`deviation` at most :data:`MAX_DEVIATION` or at most the old faces'), the
+        points ``lost`` (positions of vertices removed or moved) included."""
         new = self.quality(new_faces, moved)
-        return new >= MIN_CORNER_SINE or new >= self.quality(old_faces)
+        if new < MIN_CORNER_SINE and new < self.quality(old_faces):
+            return False
+        new, old = self.deviation(new_faces, old_faces, moved, lost)
+        return new <= MAX_DEVIATION or new <= old
+
+    def deviation(self, new_faces, old_faces, moved, lost):
+        """Largest distance to the target of the centres and edge midpoints of ``new_faces``
+        and of ``old_faces``, the first with the distance of the points ``lost`` to the new
+        faces, each over the mean edge length of the old faces: two floats."""
+        new = [self._corners(face, moved) for face in new_faces]
+        old = [self._corners(face, None) for face in old_faces]
+        samples = [_samples(corners) for corners in new + old]
+        count = sum(len(sample) for sample in samples[:len(new)])
+        distance = self.surface.nearest(
+            np.asarray([p for sample in samples for p in sample], dtype=np.float64)).distance
+        edges = [math.dist(corners[k], corners[k - 1]) for corners in old
+                 for k in range(len(corners))]
+        scale = sum(edges) / len(edges)
+        worst_new = float(distance[:count].max())
+        if lost:
+            triangles = np.asarray([[corners[0], corners[k], corners[k + 1]] for corners in new
+                                    for k in range(1, len(corners) - 1)], dtype=np.float64)
+            points = np.repeat(np.asarray(lost, dtype=np.float64), len(triangles), axis=0)
+            closest, _, _ = closest_on_triangles(np.tile(triangles, (len(lost), 1, 1)), points)
+            gap = np.linalg.norm(closest - points, axis=1).reshape(len(lost), -1).min(axis=1)
+            worst_new = max(worst_new, float(gap.max()))
+        return worst_new / scale, float(distance[count:].max()) / scale
+
+    def _corners(self, face, moved):
+        return [moved[v][0] if moved is not None and v in moved else self.points[v]
+                for v in face]
 
     # --- moves -------------------------------------------------------------------------
 
@@ -349,7 +387,8 @@ class _Cage:
                 new.append([a if v == c else v for v in self.faces[other]])
         middle = [(p + q) / 2.0 for p, q in zip(self.points[a], self.points[c])]
         moved = {a: self.on_target(middle)}
-        if not self.acceptable([self.faces[i] for i in removed], new, moved):
+        if not self.acceptable([self.faces[i] for i in removed], new, moved,
+                               (self.points[a], self.points[c])):
             return None
         return delta, removed, new, moved
 
@@ -390,7 +429,8 @@ class _Cage:
             new = [list(self.faces[f]) for f in near]
             new += [[w if u == v else u for u in self.faces[f]] for f in far]
             new.append([v, y, w, x])
-            if not self.acceptable([self.faces[f] for f in faces], new, moved):
+            if not self.acceptable([self.faces[f] for f in faces], new, moved,
+                                   (self.points[v],)):
                 continue
             quality = self.quality(new, moved)
             if best is None or quality > best[4]:
@@ -475,36 +515,7 @@ class _Cage:
             for u in list(self.touched):
                 region.update(self.face_ring(u))
             self._candidates(region, heap)
-            self.changed.update(self.touched)
         return counts
-
-    def relax(self, rounds):
-        """Tangential relaxation of the vertices whose faces changed (module docstring);
-        returns the vertex moves kept."""
-        patch = sorted(v for v in self.changed if self.around[v] and not self.frozen[v])
-        kept = 0
-        for _ in range(rounds):
-            if not patch:
-                break
-            goals = []
-            for v in patch:
-                centre, count = [0.0, 0.0, 0.0], 0
-                for index in self.around[v]:
-                    for u in self.faces[index]:
-                        count += 1
-                        for axis in range(3):
-                            centre[axis] += self.points[u][axis]
-                point, normal = self.points[v], self.normals[v]
-                step = [c / count - p for c, p in zip(centre, point)]
-                along = sum(s * n for s, n in zip(step, normal))
-                goals.append([p + s - along * n for p, s, n in zip(point, step, normal)])
-            found = self.surface.closest(np.asarray(goals, dtype=np.float64))
-            for v, point, normal in zip(patch, found.point.tolist(), found.normal.tolist()):
-                faces = [self.faces[index] for index in self.around[v]]
-                if self.quality(faces, {v: (point, normal)}) > self.quality(faces):
-                    self.points[v], self.normals[v] = point, normal
-                    kept += 1
-        return kept
 
     def mesh(self, original):
         """The edited cage as a PolyMesh (unused vertices dropped, creases renumbered) and
@@ -519,6 +530,14 @@ class _Cage:
                                   np.asarray(original.creases).tolist()], dtype=np.int64)
             mesh = replace(mesh, creases=creases.reshape(-1, 2))
         return mesh, np.asarray([self.origin[v] for v in used], dtype=np.int64)
+
+
+def _samples(corners):
+    """The centre and the edge midpoints of a face (its corners, lists of 3 floats)."""
+    size = len(corners)
+    centre = [sum(p[axis] for p in corners) / size for axis in range(3)]
+    return [centre] + [[(p[axis] + q[axis]) / 2.0 for axis in range(3)]
+                       for p, q in zip(corners, corners[1:] + corners[:1])]
 
 
 def _face_quality(points, normals):
