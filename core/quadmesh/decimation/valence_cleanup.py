@@ -158,6 +158,7 @@ class _Cage:
                 self.creases.add((min(a, b), max(a, b)))
         self.n_faces = len(self.faces)
         self.touched = set()
+        self.refused = False
         self.min_faces = self.max_faces = self.n_faces
 
     # --- bookkeeping -------------------------------------------------------------------
@@ -237,10 +238,11 @@ class _Cage:
             worst = min(worst, _face_quality(points, normals))
         return worst
 
-    def on_target(self, point):
-        """(point, normal) of the target nearest ``point`` (3 floats)."""
-        found = self.surface.closest(np.asarray([point], dtype=np.float64))
-        return found.point[0].tolist(), found.normal[0].tolist()
+    def on_target(self, *points):
+        """``(point, normal)`` of the target nearest each of ``points`` (3 floats each), in a
+        list."""
+        found = self.surface.closest(np.asarray(points, dtype=np.float64))
+        return list(zip(found.point.tolist(), found.normal.tolist()))
 
     def acceptable(self, old_faces, new_faces, moved=None, lost=()):
         """Whether the faces ``new_faces`` (with the vertices of ``moved`` there) may replace
@@ -250,9 +252,13 @@ class _Cage:
         points ``lost`` (positions of vertices removed or moved) included."""
         new = self.quality(new_faces, moved)
         if new < MIN_CORNER_SINE and new < self.quality(old_faces):
+            self.refused = True
             return False
         new, old = self.deviation(new_faces, old_faces, moved, lost)
-        return new <= MAX_DEVIATION or new <= old
+        if new <= MAX_DEVIATION or new <= old:
+            return True
+        self.refused = True
+        return False
 
     def deviation(self, new_faces, old_faces, moved, lost):
         """Largest distance to the target of the centres and edge midpoints of ``new_faces``
@@ -354,11 +360,10 @@ class _Cage:
         del new[(min(a, b), max(a, b))]
         new[(min(x, y), max(x, y))] = True
 
-        def excess(v, after):
-            return self.valence(v) - REGULAR_VALENCE + (change.get(v, 0) if after else 0)
-
-        return (sum(excess(u, True) * excess(w, True) for u, w in new)
-                - sum(excess(u, False) * excess(w, False) for u, w in old))
+        before = {v: len(self.around[v]) - REGULAR_VALENCE for edge in old for v in edge}
+        after = {v: excess + change.get(v, 0) for v, excess in before.items()}
+        return (sum(after[u] * after[w] for u, w in new)
+                - sum(before[u] * before[w] for u, w in old))
 
     def collapse(self, index, k, check=True):
         """The collapse of face ``index``'s corners ``k`` and ``k + 2``:
@@ -386,7 +391,7 @@ class _Cage:
             if other != index:
                 new.append([a if v == c else v for v in self.faces[other]])
         middle = [(p + q) / 2.0 for p, q in zip(self.points[a], self.points[c])]
-        moved = {a: self.on_target(middle)}
+        moved = {a: self.on_target(middle)[0]}
         if not self.acceptable([self.faces[i] for i in removed], new, moved,
                                (self.points[a], self.points[c])):
             return None
@@ -424,8 +429,8 @@ class _Cage:
             x, y = ring[i], ring[j]
             near = [f for k, f in enumerate(faces) if i <= k < j]
             far = [f for k, f in enumerate(faces) if not i <= k < j]
-            moved = {v: self.on_target(self._towards(v, near)),
-                     w: self.on_target(self._towards(v, far))}
+            placed = self.on_target(self._towards(v, near), self._towards(v, far))
+            moved = {v: placed[0], w: placed[1]}
             new = [list(self.faces[f]) for f in near]
             new += [[w if u == v else u for u in self.faces[f]] for f in far]
             new.append([v, y, w, x])
@@ -493,9 +498,18 @@ class _Cage:
         heap = []
         self._candidates(range(len(self.points)), heap)
         counts = [0, 0, 0]
+        # moves refused for their faces' shape or distance, by the number of moves applied
+        # then; one is tried again only once a vertex near it has changed since
+        refused = {}
+        stamp = [0] * len(self.points)
         while heap and sum(counts) < max_moves:
             entry = heapq.heappop(heap)
             delta, kind, p, q = entry[:2], *entry[2:]
+            key = (kind, p, q)
+            if key in refused and all(stamp[u] <= refused[key]
+                                      for u in self._region(kind, p, q)):
+                continue
+            self.refused = False
             if kind == 0:
                 move = self.rotation(p, q)
             elif kind == 1:
@@ -503,6 +517,8 @@ class _Cage:
             else:
                 move = self.split(p)
             if move is None:
+                if self.refused:
+                    refused[key] = sum(counts)
                 continue
             found = move[0] if kind == 0 else (move[0], 0)
             if found > delta:
@@ -511,11 +527,30 @@ class _Cage:
             self.touched = set()
             self._apply(move)
             counts[kind] += 1
+            stamp += [0] * (len(self.points) - len(stamp))
+            for u in self.touched:
+                stamp[u] = sum(counts)
             region = set(self.touched)
             for u in list(self.touched):
                 region.update(self.face_ring(u))
             self._candidates(region, heap)
         return counts
+
+    def _region(self, kind, p, q):
+        """The vertices whose valences, places and faces decide the move ``(kind, p, q)``
+        of :meth:`optimise` (a rotation of edge ``(p, q)``, a collapse in face ``p``, a split
+        of vertex ``p``)."""
+        if kind == 0:
+            ends = (p, q)
+        elif kind == 1:
+            ends = [] if self.faces[p] is None else self.faces[p]
+        else:
+            ends = (p,)
+        region = set(ends)
+        for v in ends:
+            if self.around[v]:
+                region.update(self.face_ring(v))
+        return region
 
     def mesh(self, original):
         """The edited cage as a PolyMesh (unused vertices dropped, creases renumbered) and
