@@ -20,12 +20,13 @@ genus and orientation:
    exists (Petersen) and the result is all quads in practice; unmatched triangles stay
    triangles (Catmull-Clark and the export take mixed cages). Vertices with only two faces are
    merged away, and the vertices are moved onto the target. The valences of the paired cage are
-   then cleaned up (:mod:`core.quadmesh.decimation.valence_cleanup`: edge rotations, diagonal
-   collapses and vertex splits that lower a valence energy where the faces stay well shaped
-   and near the target, the face count within :data:`VALENCE_FACE_SLACK` of the paired
-   cage's); where the cleaned cage has more limit-surface crossings or inverted faces than
-   the uncleaned one after the repairs of step 3, the cleanup runs again with its flawed faces'
-   vertices fixed (:data:`CLEANUP_RETRIES`), and at last the uncleaned cage is kept.
+   then cleaned up (:mod:`core.quadmesh.decimation.valence_cleanup`: edge rotations and vertex
+   splits that lower a valence energy where the faces stay well shaped and near the target,
+   at most :data:`VALENCE_FACE_SLACK` more faces; no diagonal collapses, whose cages fit
+   thin struts badly); where the cleaned cage has more limit-surface crossings or inverted
+   faces than the uncleaned one after the repairs of step 3, the cleanup runs again with its
+   flawed faces' vertices fixed (:data:`CLEANUP_RETRIES`), and at last the uncleaned cage is
+   kept.
 3. Where the cage's limit surface faces away from the target, the vertices of those faces are
    moved off the target, towards a limit surface through their on-target positions
    (:mod:`core.quadmesh.limit_interpolation`), and faces still inverted are edited: a corner
@@ -114,8 +115,10 @@ before QSlim's. Such a share comes of many thin members coarsely decimated (high
 lattice-like TO results), whose QSlim cages cross themselves at every budget; the targets
 whose QSlim ladder ends clean fold well under half of them."""
 VALENCE_FACE_SLACK = 0.05
-"""The valence cleanup's collapses and splits keep the face count within this share of the
-paired cage's (its collapses outnumber its splits, so it tends to the lower end)."""
+"""The valence cleanup's vertex splits add at most this share of the paired cage's faces. Its
+diagonal collapses are not used here (the face count may not fall): a collapse takes faces
+from around a thin strut and moves its merged corners, and the least-squares fit of such a
+cage crosses itself and is held back there, far from the target."""
 CLEANUP_RETRIES = 2
 """Valence cleanups run again, with the vertices of the last one's flawed faces kept, while the
 cleaned cage has more limit flaws than the paired cage as it is."""
@@ -490,11 +493,11 @@ def _flawed_mesh(decimation, budget, surface, rounds):
 
 def _cleaned(result, surface, fixed=()):
     """``(result, origin)``: ``result`` (a PairedDecimation) with its cage's valences cleaned
-    (:func:`core.quadmesh.decimation.valence_cleanup.clean_valences`, face count within
-    :data:`VALENCE_FACE_SLACK` of the paired cage's, the vertices ``fixed`` kept), and the
-    paired cage's vertex each vertex of the cleaned one comes from."""
+    (:func:`core.quadmesh.decimation.valence_cleanup.clean_valences`: edge rotations and
+    vertex splits, up to :data:`VALENCE_FACE_SLACK` more faces; the vertices ``fixed`` kept),
+    and the paired cage's vertex each vertex of the cleaned one comes from."""
     mesh = result.mesh
-    cleanup = clean_valences(mesh, surface, int(np.ceil((1 - VALENCE_FACE_SLACK) * mesh.n_faces)),
+    cleanup = clean_valences(mesh, surface, mesh.n_faces,
                              int((1 + VALENCE_FACE_SLACK) * mesh.n_faces), fixed)
     sizes = cleanup.mesh.face_sizes
     return replace(result, mesh=cleanup.mesh, quads=int((sizes == 4).sum()),
