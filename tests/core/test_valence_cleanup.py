@@ -13,7 +13,7 @@ from core.mesh_topology import polymesh_genus, polymesh_summary
 from core.polymesh_checks import check_polymesh
 from core.quadmesh.decimation.decimation import Decimation
 from core.quadmesh.decimation.paired_decimation import (_cleaned_or_not, _paired_mesh,
-                                                        _repaired)
+                                                        _repaired, limit_flaws)
 from core.quadmesh.decimation.valence_cleanup import clean_valences
 from core.quadmesh.orientation import inverted_faces
 from core.target_surface import TargetSurface
@@ -121,6 +121,14 @@ def test_creases_stay_edges_with_their_vertices_in_place():
 def test_the_cage_kept_has_no_more_limit_flaws_than_the_uncleaned_one(name):
     target = load_dev_mesh(name)
     result, surface = paired(target.vertices, target.faces, 300)
-    _, crossings, inverted, _, _ = _cleaned_or_not(result, surface)
-    _, plain_crossings, plain_inverted, _, _ = _repaired(result, surface)
-    assert crossings <= plain_crossings and inverted <= plain_inverted
+    repaired, plain_crossings, plain_inverted, _, _ = _repaired(result, surface)
+    kept, crossings = _cleaned_or_not(repaired, surface, plain_crossings, plain_inverted)
+    assert limit_flaws(kept.mesh, surface) == (crossings, kept_inverted(kept, surface))
+    assert crossings <= plain_crossings
+    assert kept_inverted(kept, surface) <= plain_inverted
+    check_polymesh(kept.mesh)
+    assert polymesh_genus(kept.mesh) == polymesh_genus(result.mesh)
+
+
+def kept_inverted(result, surface):
+    return int(inverted_faces(result.mesh, surface.vertices, surface.faces, surface).sum())

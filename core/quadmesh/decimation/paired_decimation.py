@@ -19,14 +19,7 @@ genus and orientation:
    The dual graph of a closed triangle surface is cubic and bridgeless, so a perfect matching
    exists (Petersen) and the result is all quads in practice; unmatched triangles stay
    triangles (Catmull-Clark and the export take mixed cages). Vertices with only two faces are
-   merged away, and the vertices are moved onto the target. The valences of the paired cage are
-   then cleaned up (:mod:`core.quadmesh.decimation.valence_cleanup`: edge rotations and vertex
-   splits that lower a valence energy where the faces stay well shaped and near the target,
-   at most :data:`VALENCE_FACE_SLACK` more faces; no diagonal collapses, whose cages fit
-   thin struts badly); where the cleaned cage has more limit-surface crossings or inverted
-   faces than the uncleaned one after the repairs of step 3, the cleanup runs again with its
-   flawed faces' vertices fixed (:data:`CLEANUP_RETRIES`), and at last the uncleaned cage is
-   kept.
+   merged away, and the vertices are moved onto the target.
 3. Where the cage's limit surface faces away from the target, the vertices of those faces are
    moved off the target, towards a limit surface through their on-target positions
    (:mod:`core.quadmesh.limit_interpolation`), and faces still inverted are edited: a corner
@@ -65,6 +58,16 @@ genus and orientation:
    budget across the target (:data:`QSLIM_FOLDED_SHARE`: many thin members of a high-genus
    TO result, a raw marching-cubes staircase among them), this ladder runs first and the
    others only when its cage still crosses itself.
+6. The valences of the cage kept are cleaned up
+   (:mod:`core.quadmesh.decimation.valence_cleanup`: edge rotations and vertex splits that lower
+   a valence energy where the faces stay well shaped and near the target, at most
+   :data:`VALENCE_FACE_SLACK` more faces; no diagonal collapses, whose cages fit thin struts
+   badly), and the cleaned cage repaired as in step 3. Where it has more limit-surface
+   crossings or inverted faces than the cage kept, the cleanup runs again with its flawed
+   faces' vertices fixed (:data:`CLEANUP_RETRIES`), and at last the cage is kept as it was.
+   The ladders judge the cages as the pairing leaves them: a cleaned cage can cross itself
+   less, and ending a ladder on it would skip the creased cages that fit a machined part's
+   sharp edges. A single budget asked for (no ladder) is cleaned without this check.
 """
 from dataclasses import dataclass, replace
 
@@ -151,8 +154,8 @@ class PairedDecimation:
     fold_free : bool, ``mesh`` comes of a fold-free decimation (module docstring, step 5).
     tightened : int, the rounds of tightening around crossing faces that decimation had (a
         fold-free or a locally tightened one, steps 5 and 3).
-    valence_moves : int, the moves of the valence cleanup in ``mesh`` (step 3; 0 where the
-        paired cage as it was is kept).
+    valence_moves : int, the moves of the valence cleanup in ``mesh`` (step 6; 0 where the
+        cage is kept as the ladders left it).
     """
 
     mesh: PolyMesh
@@ -336,7 +339,8 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
                                       target_faces, max_faces, over_budget_faces, rounds)
         if fold_free[2] < best[2]:
             best = fold_free
-    return replace(best[1], rounds=tuple(rounds), limit_crossings=int(best[2]))
+    result, crossings = _cleaned_or_not(best[1], surface, best[2], best[0] - best[2])
+    return replace(result, rounds=tuple(rounds), limit_crossings=int(crossings))
 
 
 def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces, rounds,
@@ -473,17 +477,15 @@ def _flawed_mesh(decimation, budget, surface, rounds):
     flawed, the cage of the decimation as it is is built too, and the less flawed one kept
     (the evened one on a tie)."""
     creased = isinstance(decimation, FeatureDecimation)
-    result, crossings, inverted, moved, edits = _cleaned_or_not(
+    result, crossings, inverted, moved, edits = _repaired(
         _paired_mesh(decimation, 2 * budget, surface), surface)
     evened, evened_flaws = creased, crossings + inverted
     if creased and evened_flaws:
-        plain = _cleaned_or_not(_paired_mesh(decimation, 2 * budget, surface, even=False),
-                                surface)
+        plain = _repaired(_paired_mesh(decimation, 2 * budget, surface, even=False), surface)
         if plain[1] + plain[2] < evened_flaws:
             (result, crossings, inverted, moved, edits), evened = plain, False
     rounds.append({"faces": int(result.mesh.n_faces), "limit_crossings": crossings,
                    "inverted_faces": inverted, "moved_vertices": moved, "edits": edits,
-                   "valence_moves": result.valence_moves,
                    **({"crease_edges": int(result.mesh.n_creases), "evened": evened,
                        "evened_flaws": int(evened_flaws)} if creased else {}),
                    **({"fold_free": result.fold_free, "tightened": result.tightened}
@@ -506,24 +508,20 @@ def _cleaned(result, surface, fixed=()):
         cleanup.origin
 
 
-def _cleaned_or_not(result, surface):
-    """:func:`_repaired` of the cage of ``result`` with its valences cleaned
-    (:func:`_cleaned`). Where the cleaned cage has more self-crossings of its limit surface
-    or more inverted faces than the paired cage as it is (both repaired), the cleanup runs
-    again with the vertices of its flawed faces, and their neighbours, kept as they are
-    (:data:`CLEANUP_RETRIES` times at most); the paired cage as it is is kept where the
-    cleaned one is still more flawed."""
+def _cleaned_or_not(result, surface, crossings, inverted):
+    """``(result, crossings)``: the cage kept by the ladders (``result``, with its limit
+    flaws ``crossings`` and ``inverted``) with its valences cleaned (:func:`_cleaned`) and
+    repaired (:func:`_repaired`), where that has no more self-crossings of its limit surface
+    and no more inverted faces; else the cleanup runs again with the vertices of the cleaned
+    cage's flawed faces, and their neighbours, kept as they are (:data:`CLEANUP_RETRIES`
+    times at most), and at last ``result`` is kept as it is. The ladders judge the cages as
+    the pairing leaves them, so the cleanup changes no budget or route they take."""
     fixed = set()
-    plain = None
     for _ in range(CLEANUP_RETRIES + 1):
         cleaned, origin = _cleaned(result, surface, sorted(fixed))
-        repaired = _repaired(cleaned, surface)
-        if not repaired[1] + repaired[2]:
-            return repaired
-        if plain is None:
-            plain = _repaired(result, surface)
-        if plain[1] >= repaired[1] and plain[2] >= repaired[2]:
-            return repaired
+        repaired, cleaned_crossings, cleaned_inverted, _, _ = _repaired(cleaned, surface)
+        if cleaned_crossings <= crossings and cleaned_inverted <= inverted:
+            return repaired, cleaned_crossings
         flawed = _flawed_faces(cleaned.mesh, surface)
         if not len(flawed):
             break  # flawed only after the repairs: nothing to keep fixed
@@ -531,7 +529,7 @@ def _cleaned_or_not(result, surface):
             [cleaned.mesh.face_vertices[cleaned.mesh.face_offsets[f]:
                                         cleaned.mesh.face_offsets[f + 1]] for f in flawed])])
         fixed.update(_with_neighbours(result.mesh, corners).tolist())
-    return plain
+    return result, crossings
 
 
 def _flawed_faces(mesh, surface):
