@@ -16,12 +16,16 @@ from dev_meshes import load_dev_mesh
 
 @pytest.fixture(scope="module")
 def tray():
-    """The tray's target surface and its paired cage of one budget (300), not unshrunk."""
+    """The tray's target surface and its paired cage of one budget (300) as the pairing
+    leaves it (no valence cleanup), not unshrunk."""
+    from core.quadmesh.decimation.decimation import Decimation
+    from core.quadmesh.decimation.paired_decimation import _paired_mesh
     from core.target_surface import TargetSurface
 
     target = load_dev_mesh("tray_bottom.stl")  # a 3.2 mm plate, 356 mm square, genus 23
     surface = TargetSurface(target.vertices, target.faces)
-    return surface, paired_decimation_base_mesh(target.vertices, target.faces, 300, surface).mesh
+    decimation = Decimation(target.vertices, target.faces, coarse_triangles=600)
+    return surface, _paired_mesh(decimation, 600, surface).mesh
 
 
 def test_the_rim_of_a_thin_plate_is_unshrunk_without_new_crossings(tray):

@@ -9,7 +9,8 @@ import pytest
 from core.geometry import triangle_mesh_volume
 from core.polymesh_checks import check_polymesh
 from core.mesh_topology import polymesh_genus
-from core.quadmesh.decimation.paired_decimation import (MIN_WEIGHT, _candidate_quads,
+from core.quadmesh.decimation.paired_decimation import (MIN_WEIGHT, VALENCE_FACE_SLACK,
+                                                        _candidate_quads,
                                                         paired_decimation_base_mesh)
 from core.quality import point_surface_distance
 from dev_meshes import MESHES, load_dev_mesh
@@ -108,8 +109,12 @@ def test_larger_budgets_are_tried_while_the_limit_surface_of_thin_struts_is_flaw
     assert len(result.rounds) >= 2 and flaws[0] > 0
     assert min(flaws) < flaws[0] / 2
     chosen = result.rounds[int(np.argmin(flaws))]
-    assert result.mesh.n_faces == chosen["faces"] <= 1.02 * 375
-    assert sum(limit_flaws(result.mesh, surface)) == min(flaws)
+    assert chosen["faces"] <= 1.02 * 375
+    # the cage kept, its valences cleaned up: a few more faces (vertex splits), no more flaws
+    assert chosen["faces"] <= result.mesh.n_faces <= (1 + VALENCE_FACE_SLACK) * chosen["faces"]
+    crossings, inverted = limit_flaws(result.mesh, surface)
+    assert crossings == result.limit_crossings <= chosen["limit_crossings"]
+    assert inverted <= chosen["inverted_faces"]
     check_polymesh(result.mesh)
     assert polymesh_genus(result.mesh) == 18
 
@@ -129,8 +134,8 @@ def test_budgets_beyond_the_rule_are_tried_while_every_cage_crosses_itself():
     assert len(within) >= 2 and all(r["limit_crossings"] > 0 for r in within)
     assert any(r["tightened"] for r in result.rounds if "tightened" in r)
     assert result.mesh.n_faces > 375
-    assert any(r["faces"] == result.mesh.n_faces and r["limit_crossings"] == 0
-               for r in result.rounds)
+    assert any(r["faces"] <= result.mesh.n_faces <= (1 + VALENCE_FACE_SLACK) * r["faces"]
+               and r["limit_crossings"] == 0 for r in result.rounds)
     assert count_limit_self_intersections(result.mesh, 2) == 0
     assert result.mesh.n_faces <= 1.02 * 3 * 300
     assert polymesh_genus(result.mesh) == 18

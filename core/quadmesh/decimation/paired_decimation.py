@@ -58,6 +58,16 @@ genus and orientation:
    budget across the target (:data:`QSLIM_FOLDED_SHARE`: many thin members of a high-genus
    TO result, a raw marching-cubes staircase among them), this ladder runs first and the
    others only when its cage still crosses itself.
+6. The valences of the cage kept are cleaned up
+   (:mod:`core.quadmesh.decimation.valence_cleanup`: edge rotations and vertex splits that lower
+   a valence energy where the faces stay well shaped and near the target, at most
+   :data:`VALENCE_FACE_SLACK` more faces; no diagonal collapses, whose cages fit thin struts
+   badly), and the cleaned cage repaired as in step 3. Where it has more limit-surface
+   crossings or inverted faces than the cage kept, the cleanup runs again with its flawed
+   faces' vertices fixed (:data:`CLEANUP_RETRIES`), and at last the cage is kept as it was.
+   The ladders judge the cages as the pairing leaves them: a cleaned cage can cross itself
+   less, and ending a ladder on it would skip the creased cages that fit a machined part's
+   sharp edges. A single budget asked for (no ladder) is cleaned without this check.
 """
 from dataclasses import dataclass, replace
 
@@ -72,6 +82,7 @@ from core.quadmesh.decimation.even_triangulation import (even_creased_triangulat
                                                          even_triangulation)
 from core.quadmesh.decimation.feature_decimation import FeatureDecimation
 from core.quadmesh.decimation.fold_free_decimation import FoldFreeDecimation, folded_share
+from core.quadmesh.decimation.valence_cleanup import clean_valences
 from core.quadmesh.limit_interpolation import unshrink_inverted
 from core.quadmesh.local_repair import repair_inverted
 from core.quadmesh.orientation import inverted_faces
@@ -106,6 +117,14 @@ QSLIM_FOLDED_SHARE = 0.5
 before QSlim's. Such a share comes of many thin members coarsely decimated (high-genus
 lattice-like TO results), whose QSlim cages cross themselves at every budget; the targets
 whose QSlim ladder ends clean fold well under half of them."""
+VALENCE_FACE_SLACK = 0.05
+"""The valence cleanup's vertex splits add at most this share of the paired cage's faces. Its
+diagonal collapses are not used here (the face count may not fall): a collapse takes faces
+from around a thin strut and moves its merged corners, and the least-squares fit of such a
+cage crosses itself and is held back there, far from the target."""
+CLEANUP_RETRIES = 2
+"""Valence cleanups run again, with the vertices of the last one's flawed faces kept, while the
+cleaned cage has more limit flaws than the paired cage as it is."""
 TIGHTEN_ROUNDS = 4
 """Fold-free decimations tightened around the crossings of the cage kept, at most (each
 raises the normal agreement asked of the triangles there by one step,
@@ -135,6 +154,8 @@ class PairedDecimation:
     fold_free : bool, ``mesh`` comes of a fold-free decimation (module docstring, step 5).
     tightened : int, the rounds of tightening around crossing faces that decimation had (a
         fold-free or a locally tightened one, steps 5 and 3).
+    valence_moves : int, the moves of the valence cleanup in ``mesh`` (step 6; 0 where the
+        cage is kept as the ladders left it).
     """
 
     mesh: PolyMesh
@@ -145,6 +166,7 @@ class PairedDecimation:
     limit_crossings: int = None
     fold_free: bool = False
     tightened: int = 0
+    valence_moves: int = 0
 
 
 def _candidate_quads(vertices, faces):
@@ -290,7 +312,7 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
     max_faces = int(max_faces or target_faces)
     decimation = Decimation(vertices, faces, coarse_triangles=2 * max(max_faces, target_faces))
     if len(_ladder(target_faces, max_faces)) == 1 and not over_budget_faces:
-        return _paired_mesh(decimation, 2 * target_faces, surface)
+        return _cleaned(_paired_mesh(decimation, 2 * target_faces, surface), surface)[0]
     rounds = []
     fold_free_first = bool(over_budget_faces) and folded_share(
         vertices, faces, *decimation.triangles(2 * target_faces)) > QSLIM_FOLDED_SHARE
@@ -317,7 +339,8 @@ def paired_decimation_base_mesh(vertices, faces, target_faces, surface=None, max
                                       target_faces, max_faces, over_budget_faces, rounds)
         if fold_free[2] < best[2]:
             best = fold_free
-    return replace(best[1], rounds=tuple(rounds), limit_crossings=int(best[2]))
+    result, crossings = _cleaned_or_not(best[1], surface, best[2], best[0] - best[2])
+    return replace(result, rounds=tuple(rounds), limit_crossings=int(crossings))
 
 
 def _budget_ladder(decimation, surface, target_faces, max_faces, over_budget_faces, rounds,
@@ -468,6 +491,62 @@ def _flawed_mesh(decimation, budget, surface, rounds):
                    **({"fold_free": result.fold_free, "tightened": result.tightened}
                       if isinstance(decimation, FoldFreeDecimation) else {})})
     return result, crossings, inverted
+
+
+def _cleaned(result, surface, fixed=()):
+    """``(result, origin)``: ``result`` (a PairedDecimation) with its cage's valences cleaned
+    (:func:`core.quadmesh.decimation.valence_cleanup.clean_valences`: edge rotations and
+    vertex splits, up to :data:`VALENCE_FACE_SLACK` more faces; the vertices ``fixed`` kept),
+    and the paired cage's vertex each vertex of the cleaned one comes from."""
+    mesh = result.mesh
+    cleanup = clean_valences(mesh, surface, mesh.n_faces,
+                             int((1 + VALENCE_FACE_SLACK) * mesh.n_faces), fixed)
+    sizes = cleanup.mesh.face_sizes
+    return replace(result, mesh=cleanup.mesh, quads=int((sizes == 4).sum()),
+                   triangles=int((sizes == 3).sum()),
+                   valence_moves=cleanup.rotations + cleanup.collapses + cleanup.splits), \
+        cleanup.origin
+
+
+def _cleaned_or_not(result, surface, crossings, inverted):
+    """``(result, crossings)``: the cage kept by the ladders (``result``, with its limit
+    flaws ``crossings`` and ``inverted``) with its valences cleaned (:func:`_cleaned`) and
+    repaired (:func:`_repaired`), where that has no more self-crossings of its limit surface
+    and no more inverted faces; else the cleanup runs again with the vertices of the cleaned
+    cage's flawed faces, and their neighbours, kept as they are (:data:`CLEANUP_RETRIES`
+    times at most), and at last ``result`` is kept as it is. The ladders judge the cages as
+    the pairing leaves them, so the cleanup changes no budget or route they take."""
+    fixed = set()
+    for _ in range(CLEANUP_RETRIES + 1):
+        cleaned, origin = _cleaned(result, surface, sorted(fixed))
+        repaired, cleaned_crossings, cleaned_inverted, _, _ = _repaired(cleaned, surface)
+        if cleaned_crossings <= crossings and cleaned_inverted <= inverted:
+            return repaired, cleaned_crossings
+        flawed = _flawed_faces(cleaned.mesh, surface)
+        if not len(flawed):
+            break  # flawed only after the repairs: nothing to keep fixed
+        corners = np.unique(origin[np.concatenate(
+            [cleaned.mesh.face_vertices[cleaned.mesh.face_offsets[f]:
+                                        cleaned.mesh.face_offsets[f + 1]] for f in flawed])])
+        fixed.update(_with_neighbours(result.mesh, corners).tolist())
+    return result, crossings
+
+
+def _flawed_faces(mesh, surface):
+    """(k,) int64 faces of ``mesh`` that are inverted or hold a self-crossing of its
+    level-``CROSSING_LEVELS`` limit surface."""
+    from core.subdivision.limit_crossings import limit_self_intersections
+
+    inverted = np.flatnonzero(inverted_faces(mesh, surface.vertices, surface.faces, surface))
+    _, base_faces, _ = limit_self_intersections(mesh, CROSSING_LEVELS)
+    return np.union1d(inverted, base_faces).astype(np.int64)
+
+
+def _with_neighbours(mesh, vertices):
+    """(k,) int64 ``vertices`` and the vertices sharing a face with them, in ``mesh``."""
+    face_of_corner = np.repeat(np.arange(mesh.n_faces), mesh.face_sizes)
+    faces = np.unique(face_of_corner[np.isin(mesh.face_vertices, vertices)])
+    return np.unique(mesh.face_vertices[np.isin(face_of_corner, faces)])
 
 
 def _repaired(result, surface):
