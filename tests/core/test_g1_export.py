@@ -156,6 +156,17 @@ def test_creased_cage_joins_g1_off_its_creases(name):
     assert quad_blocks(quads).cut_edge[crease_edge_mask(topo, quads.creases)].all()
 
 
+def test_regular_crease_needs_no_knots():
+    """A crease loop through valence-4 vertices with two faces on each side: the limit surface
+    is the bicubic B-spline of the grid reflected across the crease, so every patch is one
+    bicubic (16 poles) equal to the exact limit, joined C1 off the crease."""
+    cage = _creased_cages()["creased_torus"]
+    ps = g1_surface_patches(cage)
+    assert max(p.poles.shape[0] * p.poles.shape[1] for p in ps.patches) == 16
+    assert ps.info["max_error_rel"] <= 1e-9
+    assert ps.info["normal_jump_max_deg"] <= 0.01
+
+
 def test_pipeline_patches_stage_builds_the_g1_form_on_request():
     """``reconstruct --export g1``: the patches stage exports the fitted cage in the G1 form;
     an unknown form is refused by the parameters."""
