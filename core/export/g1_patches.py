@@ -2,8 +2,13 @@
 """Tangent-continuous (G1) bicubic B-spline patches of a Catmull-Clark cage, few poles each.
 
 The light alternative to the graded export (:mod:`core.export.bspline`): one B-spline face
-per quad of the cage (the cage itself if it is all quads, else its first Catmull-Clark
-refinement), with two double interior knots per direction at most.
+per quad of the cage, with two double interior knots per direction at most. A cage with
+other faces is built on its first Catmull-Clark refinement (the same limit surface, all
+quads), and the four patches of each base quad are joined back into one face
+(:func:`core.export.quad_blocks.base_face_blocks`, :func:`core.export.chart_faces.chart_patches`:
+knot insertion, then every knot the surface does not need removed within
+:data:`core.export.chart_faces.MERGE_TOLERANCE`, which leaves at most a knot line at 1/2 per
+direction besides the corner knots); a face with ``n != 4`` corners keeps its ``n`` patches.
 
 Method
 ------
@@ -61,6 +66,7 @@ from scipy.sparse.linalg import splu
 from core.errors import ExportError
 from core.export.brep_topology import CORNER_UV, BRepTopology, EdgeCurve
 from core.export.chart_faces import chart_patches
+from core.export.quad_blocks import base_face_blocks
 from core.export.bspline_basis import basis_matrix
 from core.export.bspline_measure import normal_jumps, patch_deviation
 from core.export.spline_knots import insertion_matrix
@@ -579,10 +585,11 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     Returns
     -------
     PatchSet
-        One patch per quad of ``base`` if it is all quads, else per quad of its first
-        Catmull-Clark refinement (``patch_level`` 1), or per block of them with ``faces``
-        ``"chart"`` (see :func:`core.export.chart_faces.chart_patches` for what it adds to
-        ``info``); ``face_of_patch`` is the base face (of a block's first quad);
+        One patch per quad of ``base`` if it is all quads, else one per base quad and one
+        per quad of the first Catmull-Clark refinement (``patch_level`` 1) of every other
+        face; or per block of quads with ``faces`` ``"chart"`` (see
+        :func:`core.export.chart_faces.chart_patches` for what it adds to ``info``, in both
+        merged forms); ``face_of_patch`` is the base face (of a block's first quad);
         ``topology`` the shared vertices and edges; ``d/du x d/dv`` points outward.
         ``info`` holds ``export`` ("g1"), ``faces``, ``n_faces``, ``patch_level``, ``n_patches``,
         ``patches_per_base_face``, ``n_extraordinary_vertices``, ``n_g1_patches`` (free
@@ -672,4 +679,8 @@ def g1_surface_patches(base, measure=True, faces="quad"):
         info.update(normal_jumps(result, quads, context=ctx, ev_vertex=valence[used] != 4))
     if faces == "chart":
         return chart_patches(result, quads)
+    if level == 1:
+        merged = chart_patches(result, quads, partition=base_face_blocks(base, quads))
+        merged.info["faces"] = "quad"
+        return merged
     return result
