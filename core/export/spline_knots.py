@@ -136,9 +136,8 @@ def remove_knots(poles, knots, mults, tolerance):
     """Lower interior knot multiplicities where the spline allows it within ``tolerance``.
 
     First every knot gets the multiplicity its continuity needs (:func:`_smoothness`, with a
-    tenth of the tolerance) and the result is checked once; from there (or from the input's
-    multiplicities if that misses the tolerance) the knots are lowered further one at a time
-    where the whole tolerance allows it (:func:`_remove_knots_one_by_one`).
+    tenth of the tolerance) and the result is checked once; if that misses the tolerance, the
+    knots are reduced one at a time (:func:`_remove_knots_one_by_one`).
 
     Parameters
     ----------
@@ -155,7 +154,8 @@ def remove_knots(poles, knots, mults, tolerance):
     need = _smoothness(p0, knots, mults, 0.1 * tolerance)
     fit = _project(p0, knots, mults, need)
     if fit[1] <= tolerance:
-        return _remove_knots_one_by_one(p0, knots, mults, tolerance, start=(need, fit[0], fit[1]))
+        keep = need > 0
+        return fit[0], knots[keep], need[keep], fit[1]
     return _remove_knots_one_by_one(p0, knots, mults, tolerance)
 
 
@@ -172,7 +172,7 @@ def _project(p0, knots, mults, reduced):
     return q.reshape((len(q),) + p0.shape[1:]), float(np.linalg.norm(gap, axis=-1).max())
 
 
-def _remove_knots_one_by_one(poles, knots, mults, tolerance, start=None):
+def _remove_knots_one_by_one(poles, knots, mults, tolerance):
     """Lower interior knot multiplicities where the spline allows it within ``tolerance``.
 
     Knot removal one knot at a time: each interior knot in turn is tried at multiplicity 0
@@ -189,8 +189,6 @@ def _remove_knots_one_by_one(poles, knots, mults, tolerance, start=None):
     poles : (n, ..., d) float64, the last axis the coordinates.
     knots, mults : the knot vector (distinct knots, multiplicities; clamped cubic).
     tolerance : float, model units.
-    start : None or (multiplicities (k,), their poles, their error): a reduction already
-        within ``tolerance`` to lower further (default: the input itself).
 
     Returns
     -------
@@ -198,10 +196,8 @@ def _remove_knots_one_by_one(poles, knots, mults, tolerance, start=None):
     """
     p0 = np.asarray(poles, dtype=np.float64)
     knots = np.asarray(knots, dtype=np.float64)
-    if start is None:
-        current, best, error = np.asarray(mults, dtype=np.int64).copy(), p0, 0.0
-    else:
-        current, best, error = np.asarray(start[0], dtype=np.int64).copy(), start[1], start[2]
+    current = np.asarray(mults, dtype=np.int64).copy()
+    best, error = p0, 0.0
     for i in range(1, len(knots) - 1):
         for m in range(0, int(current[i])):
             trial = current.copy()
