@@ -31,6 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
 
+from core.errors import InternalError
 from core.subdivision.catmull_clark import crease_edge_mask, mesh_topology, vertex_crease_counts
 
 STEP_OF_SIDE = np.array([[0, -1], [1, 0], [0, 1], [-1, 0]])
@@ -256,6 +257,11 @@ def base_face_blocks(base, quads):
     Returns
     -------
     QuadBlocks whose cut edges are every edge of ``quads`` but those inside a base quad.
+
+    Raises
+    ------
+    InternalError when a base face's refined quads do not form its block (``quads`` is not
+    the refinement of ``base``).
     """
     fv = quads.face_vertices
     n_vertices = len(quads.vertices)
@@ -276,6 +282,6 @@ def base_face_blocks(base, quads):
         for members in groups:
             block = _grid_of(topo, fv, valence, cut, members)
             if block is None:
-                raise ValueError(f"base face {f} does not give a block of quads")
+                raise InternalError(f"the refined quads of base face {f} do not form a block")
             blocks.append(block)
     return QuadBlocks(blocks, cut, 0)
