@@ -128,7 +128,7 @@ def _edge_curve(quad_topology, vertex_of_mesh, fv, topo, chain, tolerance):
     return EdgeCurve(np.ascontiguousarray(poles), knots, np.asarray(mults, dtype=np.int64)), err
 
 
-def chart_patches(quad_patches, quads, tolerance=MERGE_TOLERANCE):
+def chart_patches(quad_patches, quads, tolerance=MERGE_TOLERANCE, partition=None):
     """Merge one-patch-per-quad B-spline patches into one face per rectangular block of quads.
 
     Parameters
@@ -140,6 +140,8 @@ def chart_patches(quad_patches, quads, tolerance=MERGE_TOLERANCE):
     quads : PolyMesh, closed 2-manifold, all quads.
     tolerance : float, largest distance of a face or edge curve from the per-quad surface
         (model units; default :data:`MERGE_TOLERANCE`).
+    partition : QuadBlocks or None, the blocks to merge (default
+        :func:`core.export.quad_blocks.quad_blocks` of ``quads``).
 
     Returns
     -------
@@ -153,7 +155,7 @@ def chart_patches(quad_patches, quads, tolerance=MERGE_TOLERANCE):
     """
     fv = quads.face_vertices
     topo = mesh_topology(fv, quads.face_offsets, len(quads.vertices))
-    partition = quad_blocks(quads)
+    partition = quad_blocks(quads) if partition is None else partition
     blocks = partition.blocks
     qt = quad_patches.topology
     used = np.unique(fv)

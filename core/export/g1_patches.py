@@ -2,8 +2,13 @@
 """Tangent-continuous (G1) bicubic B-spline patches of a Catmull-Clark cage, few poles each.
 
 The light alternative to the graded export (:mod:`core.export.bspline`): one B-spline face
-per quad of the cage (the cage itself if it is all quads, else its first Catmull-Clark
-refinement), with two double interior knots per direction at most.
+per quad of the cage, with two double interior knots per direction at most. A cage with
+other faces is built on its first Catmull-Clark refinement (the same limit surface, all
+quads), and the four patches of each base quad are joined back into one face
+(:func:`core.export.quad_blocks.base_face_blocks`, :func:`core.export.chart_faces.chart_patches`:
+knot insertion, then every knot the surface does not need removed within
+:data:`core.export.chart_faces.MERGE_TOLERANCE`, which leaves at most a knot line at 1/2 per
+direction besides the corner knots); a face with ``n != 4`` corners keeps its ``n`` patches.
 
 Method
 ------
@@ -12,9 +17,11 @@ Method
 * A quad with an extraordinary corner (EV, valence ``n != 4``) or a crease vertex in its
   stencil becomes a *free* patch: a bicubic B-spline with double knots at ``h`` and ``1 - h``
   in each direction (``h`` = :data:`EV_SPAN`; 8 x 8 poles, C1 inside), of which it keeps
-  only those at the ends of a direction with an EV or creased corner: elsewhere it is one
-  cubic across the knot (linear conditions below), and the knot is removed from the result
-  (6 x 6 poles at one such corner, 4 x 4 without). Its poles are the solution of one
+  only those at the ends of a direction with a *special* corner (an EV, a dart, a corner of
+  three or more creases, or a crease vertex with a sector whose connection is not C1,
+  :func:`_special_vertices`): elsewhere it is one cubic across the knot (linear conditions
+  below), and the knot is removed from the result (6 x 6 poles at one such corner, 4 x 4
+  without, as next to a valence-4 crease vertex with two faces on each side). Its poles are the solution of one
   sparse least-squares problem over all free patches: they fit exact limit points (the
   squared distance integrated by 4 x 4 Gauss points per pair of knot spans) subject to
 
@@ -59,6 +66,7 @@ from scipy.sparse.linalg import splu
 from core.errors import ExportError
 from core.export.brep_topology import CORNER_UV, BRepTopology, EdgeCurve
 from core.export.chart_faces import chart_patches
+from core.export.quad_blocks import base_face_blocks
 from core.export.bspline_basis import basis_matrix
 from core.export.bspline_measure import normal_jumps, patch_deviation
 from core.export.spline_knots import insertion_matrix
@@ -352,7 +360,7 @@ def _corner_cosines(quads, topo, crease, evaluator):
             active &= ~spoke_crease[s]
             if not active.any():
                 break
-    cosine[walk] = np.cos(np.pi / k)
+    cosine[walk] = np.where(k == 2, 0.0, np.cos(np.pi / k))  # exactly C1 in a half plane of two faces
     at_corner = walk[n_crease[fv[walk]] >= 3]
     limit = _limit_spoke_cosines(topo, evaluator, at_corner)
     cosine[at_corner] = np.where(np.isfinite(limit), limit, cosine[at_corner])
@@ -425,6 +433,24 @@ def _g1_system(layout, quads, topo, free, cosine, crease):
             A.append(A_q)
             y.append(-c_q)
     return sp.vstack(A).tocsr(), np.concatenate(y)
+
+
+def _special_vertices(quads, topo, crease, cosine):
+    """(n_vertices,) bool: vertices at which the G1 connection departs from C1, so the patches
+    there keep their corner knots (:func:`_kept_knots`): extraordinary vertices, darts (one
+    crease edge), corners (three or more) and crease vertices with a sector whose connection
+    cosine ``cosine`` (4 m,) is not 0 (:func:`_corner_cosines`). A valence-4 crease vertex
+    with two faces on each side of its crease is none of these: on each side its limit
+    surface is the bicubic B-spline of the grid reflected linearly across the crease (the
+    crease rule keeps that reflection), so the patches there join C1 off the crease like
+    regular ones, with no knot."""
+    fv = quads.face_vertices
+    n = len(quads.vertices)
+    n_crease = vertex_crease_counts(topo, crease, n)
+    special = (np.bincount(fv, minlength=n) != 4) | (n_crease == 1) | (n_crease >= 3)
+    bent = (cosine != 0.0) & ~crease[topo.corner_edge]
+    special[fv[bent]] = True
+    return special
 
 
 def _kept_knots(quads, free, special):
@@ -559,10 +585,11 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     Returns
     -------
     PatchSet
-        One patch per quad of ``base`` if it is all quads, else per quad of its first
-        Catmull-Clark refinement (``patch_level`` 1), or per block of them with ``faces``
-        ``"chart"`` (see :func:`core.export.chart_faces.chart_patches` for what it adds to
-        ``info``); ``face_of_patch`` is the base face (of a block's first quad);
+        One patch per quad of ``base`` if it is all quads, else one per base quad and one
+        per quad of the first Catmull-Clark refinement (``patch_level`` 1) of every other
+        face; or per block of quads with ``faces`` ``"chart"`` (see
+        :func:`core.export.chart_faces.chart_patches` for what it adds to ``info``, in both
+        merged forms); ``face_of_patch`` is the base face (of a block's first quad);
         ``topology`` the shared vertices and edges; ``d/du x d/dv`` points outward.
         ``info`` holds ``export`` ("g1"), ``faces``, ``n_faces``, ``patch_level``, ``n_patches``,
         ``patches_per_base_face``, ``n_extraordinary_vertices``, ``n_g1_patches`` (free
@@ -585,10 +612,9 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     valence = np.bincount(fv, minlength=len(quads.vertices))
     crease = crease_edge_mask(topo, quads.creases)
     creased = vertex_crease_counts(topo, crease, len(quads.vertices)) > 0
-    special = (valence != 4) | creased
     st = quad_stencils(quads, topo)
-    free = special[fv].reshape(-1, 4).any(axis=1) | creased[st].any(axis=(1, 2))
-    keep = _kept_knots(quads, free, special)
+    free = ((valence != 4) | creased)[fv].reshape(-1, 4).any(axis=1) | creased[st].any(axis=(1, 2))
+    keep = np.zeros((quads.n_faces, 2, 2), dtype=bool)
     bezier = _regular_bezier(quads, topo, st)
     layout = _Layout(quads, topo, free, bezier)
     free_faces = np.flatnonzero(free)
@@ -596,8 +622,10 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     residual = 0.0
     if len(free_faces):
         evaluator = LimitEvaluator(quads)
-        H, rhs, centre = _fit_system(layout, evaluator, free_faces)
         cosine = _corner_cosines(quads, topo, crease, evaluator)
+        special = _special_vertices(quads, topo, crease, cosine)
+        keep = _kept_knots(quads, free, special)
+        H, rhs, centre = _fit_system(layout, evaluator, free_faces)
         A_g1, y_g1 = _g1_system(layout, quads, topo, free, cosine, crease)
         A_k, y_k = _knot_free_system(layout, free, keep)
         if A_g1 is None:
@@ -651,4 +679,8 @@ def g1_surface_patches(base, measure=True, faces="quad"):
         info.update(normal_jumps(result, quads, context=ctx, ev_vertex=valence[used] != 4))
     if faces == "chart":
         return chart_patches(result, quads)
+    if level == 1:
+        merged = chart_patches(result, quads, partition=base_face_blocks(base, quads))
+        merged.info["faces"] = "quad"
+        return merged
     return result

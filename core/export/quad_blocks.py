@@ -31,6 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
 
+from core.errors import InternalError
 from core.subdivision.catmull_clark import crease_edge_mask, mesh_topology, vertex_crease_counts
 
 STEP_OF_SIDE = np.array([[0, -1], [1, 0], [0, 1], [-1, 0]])
@@ -240,3 +241,47 @@ def quad_blocks(quads):
             added = True
         if not added:
             return QuadBlocks(blocks, cut, len(seeds))
+
+
+def base_face_blocks(base, quads):
+    """Partition the first Catmull-Clark refinement ``quads`` of a polygon mesh ``base`` into
+    one block per base face: the 2 x 2 quads of each base quad, and each quad of a face with
+    ``n != 4`` corners on its own.
+
+    Parameters
+    ----------
+    base : PolyMesh, closed 2-manifold polygon mesh with at least one non-quad face.
+    quads : PolyMesh, its level-1 refinement (face ``fo[f] + k`` the quad at corner ``k`` of
+        base face ``f``, as :func:`core.subdivision.catmull_clark.subdivide` numbers them).
+
+    Returns
+    -------
+    QuadBlocks whose cut edges are every edge of ``quads`` but those inside a base quad.
+
+    Raises
+    ------
+    InternalError when a base face's refined quads do not form its block (``quads`` is not
+    the refinement of ``base``).
+    """
+    fv = quads.face_vertices
+    n_vertices = len(quads.vertices)
+    topo = mesh_topology(fv, quads.face_offsets, n_vertices)
+    valence = np.bincount(fv, minlength=n_vertices)
+    parent = mesh_topology(base.face_vertices, base.face_offsets,
+                           len(base.vertices)).face_of_corner
+    corner = np.arange(len(fv))
+    is_quad = base.face_sizes == 4
+    inside = (parent[corner // 4] == parent[topo.twin[corner] // 4]) & is_quad[parent[corner // 4]]
+    cut = np.ones(len(topo.edges), dtype=bool)
+    cut[topo.corner_edge[inside]] = False
+    blocks = []
+    offsets = np.asarray(base.face_offsets, dtype=np.int64)
+    for f, size in enumerate(base.face_sizes.tolist()):
+        children = np.arange(offsets[f], offsets[f + 1], dtype=np.int64)
+        groups = [children] if size == 4 else [children[k:k + 1] for k in range(size)]
+        for members in groups:
+            block = _grid_of(topo, fv, valence, cut, members)
+            if block is None:
+                raise InternalError(f"the refined quads of base face {f} do not form a block")
+            blocks.append(block)
+    return QuadBlocks(blocks, cut, 0)

@@ -28,10 +28,10 @@ optional spaces, for the same reason)."""
 
 
 def step_reals(values):
-    """STEP REAL literals of a float array: 17 significant digits (round-trip exact),
-    always with a decimal point (``%#.17G``). Returns a list of str."""
-    flat = np.asarray(values, dtype=np.float64).reshape(-1).tolist()
-    return (("%#.17G," * len(flat)) % tuple(flat)).split(",")[:-1]
+    """STEP REAL literals of a float array: the shortest text that reads back to the same
+    float (round-trip exact, Python's ``repr``), always with a decimal point and an upper-case
+    exponent (``0.125``, ``1.0``, ``1.E-07``). Returns a list of str."""
+    return [step_real(v) for v in np.asarray(values, dtype=np.float64).reshape(-1).tolist()]
 
 
 def step_fixed_reals(values, decimals=POINT_DECIMALS):
@@ -44,7 +44,10 @@ def step_fixed_reals(values, decimals=POINT_DECIMALS):
 
 def step_real(value):
     """STEP REAL literal of one float (see :func:`step_reals`)."""
-    return "%#.17G" % float(value)
+    mantissa, exponent, power = repr(float(value)).partition("e")
+    if "." not in mantissa:
+        mantissa += "."
+    return mantissa + ("E" + power if exponent else "")
 
 
 def step_string(text):

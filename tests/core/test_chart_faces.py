@@ -31,7 +31,7 @@ CAGES = {"cube_once": _cube_once, "torus": sample_cages.torus,
 def merged(request):
     cage = CAGES[request.param]()
     quads = quad_mesh_of(cage)
-    return (request.param, quads, g1_surface_patches(cage, measure=False),
+    return (request.param, quads, g1_surface_patches(quads, measure=False),
             g1_surface_patches(cage, measure=False, faces="chart"))
 
 
