@@ -3,6 +3,7 @@
 extraordinary vertices, the same closed 2-manifold genus, no inverted face, well within the face
 window, the same result every time; and the paired decimation keeps a cleaned cage only where
 its limit flaws do not grow."""
+import dataclasses
 from functools import lru_cache
 
 import numpy as np
@@ -128,6 +129,20 @@ def test_the_cage_kept_has_no_more_limit_flaws_than_the_uncleaned_one(name):
     assert kept_inverted(kept, surface) <= plain_inverted
     check_polymesh(kept.mesh)
     assert polymesh_genus(kept.mesh) == polymesh_genus(result.mesh)
+
+
+def test_a_fold_free_cage_is_kept_as_it_is(monkeypatch):
+    import core.quadmesh.decimation.paired_decimation as paired_decimation
+
+    result, surface = paired_shape(sphere, 150)
+    fold_free = dataclasses.replace(result, fold_free=True)
+
+    def no_cleanup(*args, **kwargs):
+        raise AssertionError("a fold-free cage was cleaned")
+
+    monkeypatch.setattr(paired_decimation, "_cleaned", no_cleanup)
+    kept, crossings = _cleaned_or_not(fold_free, surface, 3, 2)
+    assert kept is fold_free and crossings == 3
 
 
 def kept_inverted(result, surface):

@@ -67,7 +67,10 @@ genus and orientation:
    faces' vertices fixed (:data:`CLEANUP_RETRIES`), and at last the cage is kept as it was.
    The ladders judge the cages as the pairing leaves them: a cleaned cage can cross itself
    less, and ending a ladder on it would skip the creased cages that fit a machined part's
-   sharp edges. A single budget asked for (no ladder) is cleaned without this check.
+   sharp edges. A single budget asked for (no ladder) is cleaned without this check. A cage
+   of a fold-free decimation (step 5) is kept as it is: its faces were placed so that none
+   spans a thin member, and the re-paired faces of the cleanup span them again, so the inside
+   fit leaves more of the volume outside round the members.
 """
 from dataclasses import dataclass, replace
 
@@ -515,7 +518,10 @@ def _cleaned_or_not(result, surface, crossings, inverted):
     and no more inverted faces; else the cleanup runs again with the vertices of the cleaned
     cage's flawed faces, and their neighbours, kept as they are (:data:`CLEANUP_RETRIES`
     times at most), and at last ``result`` is kept as it is. The ladders judge the cages as
-    the pairing leaves them, so the cleanup changes no budget or route they take."""
+    the pairing leaves them, so the cleanup changes no budget or route they take. A cage of a
+    fold-free decimation is kept as it is (module docstring, step 6)."""
+    if result.fold_free:
+        return result, crossings
     fixed = set()
     for _ in range(CLEANUP_RETRIES + 1):
         cleaned, origin = _cleaned(result, surface, sorted(fixed))
