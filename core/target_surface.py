@@ -60,6 +60,10 @@ TIE_ANGLE = np.radians(8.0)
 :attr:`ClosestPoints.tied`) when the directions from the point to them differ by more than
 this; the triangles around one closest point, and coplanar ones just beyond it, are within
 a fraction of it."""
+ORDERED_QUERIES = 64
+"""Queries of at least this many points are searched in Z-order (:func:`_search_order`);
+fewer points are searched as given, since coding and sorting them costs more than the shared
+tree walks save (most of a one-point query's time)."""
 CLOSEST_KEPT = 4
 """Most answers of :meth:`TargetSurface.closest` kept (the latest), each for its query
 points bit for bit, and as many of :meth:`TargetSurface.samples_nearest`: the fit queries
@@ -195,9 +199,7 @@ class TargetSurface:
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         face = np.zeros(len(points), dtype=np.int64)
         if len(points):
-            # in Z-order, neighbouring queries walk the same tree nodes, which is faster
-            # than scattered order; each point's answer does not depend on the order
-            order = np.argsort(morton_codes(points), kind="stable")
+            order = _search_order(points)
             face[order] = self._triangle_of(nearest_triangles(self._point_tree, points[order]))
         point, bary, region = closest_on_triangles(self._tri[face], points)
         return NearestPoints(point, face, bary, region, np.linalg.norm(points - point, axis=1))
@@ -265,7 +267,7 @@ class TargetSurface:
         than ``TIE_ANGLE`` away in direction), ``-1`` where none."""
         rival = np.full(len(points), -1, dtype=np.int64)
         if len(points):
-            order = np.argsort(morton_codes(points), kind="stable")
+            order = _search_order(points)
             rival[order] = self._triangle_of(rival_triangles(
                 self._point_tree, points[order], near.point[order], near.distance[order],
                 CONTACT * self.diagonal, np.cos(TIE_ANGLE)))
@@ -496,3 +498,13 @@ def _kept_or_new(kept, arrays, compute):
     if len(kept) > CLOSEST_KEPT:
         kept.popitem(last=False)
     return answer
+
+
+def _search_order(points):
+    """(k,) int64 the order to search ``points`` ((k, 3) float64) in: Z-order for a query of
+    at least :data:`ORDERED_QUERIES` points (neighbouring queries then walk the same tree
+    nodes, which is faster than scattered order), as given for fewer. Each point's answer
+    does not depend on the order."""
+    if len(points) < ORDERED_QUERIES:
+        return np.arange(len(points))
+    return np.argsort(morton_codes(points), kind="stable")

@@ -331,6 +331,24 @@ def test_nearest_answers_each_point_as_the_tree_does_alone_whatever_the_order():
     assert len(surface.nearest(np.zeros((0, 3))).face) == 0
 
 
+def test_a_few_points_get_the_answers_they_get_within_a_large_query():
+    """Queries of fewer than ORDERED_QUERIES points are searched as given, larger ones in
+    Z-order: the answers (closest points, normals, ties) are the same bit for bit."""
+    from core.target_surface import ORDERED_QUERIES
+
+    mesh = trimesh.creation.icosphere(3)
+    surface = TargetSurface(mesh.vertices, mesh.faces)
+    rng = np.random.default_rng(11)
+    count = 4 * ORDERED_QUERIES
+    points = rng.normal(size=(count, 3)) * rng.uniform(0.2, 2.0, (count, 1))
+    points[:2] = 0.0  # the centre: tied with every direction
+    whole = surface.closest(points)
+    for start, size in ((0, 1), (0, 3), (5, ORDERED_QUERIES - 1), (7, ORDERED_QUERIES)):
+        part = TargetSurface(mesh.vertices, mesh.faces).closest(points[start:start + size])
+        for name, value in vars(part).items():
+            np.testing.assert_array_equal(value, getattr(whole, name)[start:start + size])
+
+
 def test_a_point_between_two_walls_is_tied_whatever_its_last_bits():
     # midway inside a thin slab both walls are as near: whichever one rounding names, the
     # answer names the other too, and the mean plane of the two is the same
