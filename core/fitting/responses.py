@@ -64,18 +64,14 @@ def _volume_terms(X, T):
         bc[f, 2] = q[0] * r[1] - q[1] * r[0]
         for d in range(3):
             gradient[T[f, 0], d] += bc[f, d] / 6.0
-    for f in range(t):
-        p, r = X[T[f, 0]], X[T[f, 2]]
-        v = T[f, 1]
-        gradient[v, 0] += (r[1] * p[2] - r[2] * p[1]) / 6.0
-        gradient[v, 1] += (r[2] * p[0] - r[0] * p[2]) / 6.0
-        gradient[v, 2] += (r[0] * p[1] - r[1] * p[0]) / 6.0
-    for f in range(t):
-        p, q = X[T[f, 0]], X[T[f, 1]]
-        v = T[f, 2]
-        gradient[v, 0] += (p[1] * q[2] - p[2] * q[1]) / 6.0
-        gradient[v, 1] += (p[2] * q[0] - p[0] * q[2]) / 6.0
-        gradient[v, 2] += (p[0] * q[1] - p[1] * q[0]) / 6.0
+    for corner in (1, 2):  # second corners over all triangles, then third corners
+        for f in range(t):
+            # the cross product of the corners after this one, in cyclic order
+            u, w = X[T[f, (corner + 1) % 3]], X[T[f, (corner + 2) % 3]]
+            v = T[f, corner]
+            gradient[v, 0] += (u[1] * w[2] - u[2] * w[1]) / 6.0
+            gradient[v, 1] += (u[2] * w[0] - u[0] * w[2]) / 6.0
+            gradient[v, 2] += (u[0] * w[1] - u[1] * w[0]) / 6.0
     return a, bc, gradient
 
 
