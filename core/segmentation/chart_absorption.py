@@ -25,11 +25,14 @@ corner, no turning point and no boundary loop without corners (which no polycube
 have), the faces it changes fit their new label within :data:`MAX_MEAN_ANGLE` on average, and
 the area-weighted mean angle between normals and label directions over the whole surface
 stays within ``max_angle_increase`` degrees of the input's; of a chart's admissible
-trials the one of least angle increase is taken. Charts are treated smallest first in rounds,
-each an independent set (no two chosen charts share a vertex with a common chart, so each
-local judgement holds with the others applied); the round's changes are judged together on the
-whole mesh and kept when the whole labeling has no more invalid items and turning points than
-before, else one at a time. A chart no trial admits is not tried again while it is unchanged.
+trials the one of least angle increase is taken. Charts are treated smallest first in rounds:
+a round judges every candidate except those next to a chart it has already taken (no two taken
+charts share a vertex with a common chart, so each local judgement holds with the others
+applied), so a candidate no trial admits costs no round; one large chart around many small
+ones would otherwise let a round take one of them only. The round's changes are judged together
+on the whole mesh and kept when the whole labeling has no more invalid items and turning points
+than before, else one at a time. A chart no trial admits is not tried again while it is
+unchanged.
 Validity-first repair merges invalid charts the same way (:mod:`core.segmentation.repair`); here
 the charts are valid ones that are too small for the layout.
 """
@@ -150,20 +153,6 @@ def _chart_vertex_adjacency(F, layout, n_vertices):
     return adj
 
 
-def _independent(order, adjacency):
-    """The charts of ``order`` (priority order) chosen so that no two share a vertex with a
-    common chart (their 2-rings in ``adjacency`` are disjoint)."""
-    ring2 = (adjacency @ adjacency).tocsr()
-    blocked = np.zeros(adjacency.shape[0], dtype=bool)
-    chosen = []
-    for c in order.tolist():
-        if blocked[c]:
-            continue
-        chosen.append(c)
-        blocked[ring2.indices[ring2.indptr[c]:ring2.indptr[c + 1]]] = True
-    return chosen
-
-
 def _trials(topology, face_part, labels, layout, chart, cost, small):
     """(name, labels) trials for ``chart`` (module docstring); ``small``: (c,) bool candidate
     charts, for the group merges."""
@@ -189,7 +178,7 @@ def absorb_charts(V, F, face_part, face_label, judge, unit_area, max_rounds=40,
     judge : core.segmentation.repair.CandidateJudge of this mesh, parts and frames.
     unit_area : float > 0, area of one quad of the face budget (mesh units squared): the
         surface area over the budget.
-    max_rounds : int >= 0, rounds of independent absorptions.
+    max_rounds : int >= 0, rounds of absorptions (each takes charts that share no neighbour).
     max_angle_increase : float >= 0, degrees of area-weighted mean angle the pass may add.
     small_area, thin_width : float, candidates' area (quads) and width (quad edges) limits.
     tau : float, hysteresis of the turning points (mesh units; default the mean edge length,
@@ -233,15 +222,20 @@ def absorb_charts(V, F, face_part, face_label, judge, unit_area, max_rounds=40,
         rounds += 1
         cands = np.flatnonzero(fresh)
         order = cands[np.lexsort((cands, chart_area[cands]))]
-        chosen = _independent(order, _chart_vertex_adjacency(F, lay, topology.n_vertices))
+        ring2 = _chart_vertex_adjacency(F, lay, topology.n_vertices)
+        ring2 = (ring2 @ ring2).tocsr()
+        blocked = np.zeros(lay.n_charts, dtype=bool)
         budget = angle0 + max_angle_increase - float(ang[np.arange(m), labels].sum())
         proposals = []
-        for c in chosen:
+        for c in order.tolist():
+            if blocked[c]:
+                continue  # next to a chart taken this round: judged again on the next one
             best = _best_trial(judge, val, labels, _trials(topology, face_part, labels, lay, c,
                                                            cost, small), tau, budget)
             if best is None:
                 refused.add(tuple(key[c]))
                 continue
+            blocked[ring2.indices[ring2.indptr[c]:ring2.indptr[c + 1]]] = True
             budget -= best[3]
             proposals.append(best + (tuple(key[c]),))
         if not proposals:
