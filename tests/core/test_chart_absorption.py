@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Chart absorption on hand-labelled cubes and plates: a noise chart is taken into its neighbours and the
-labeling stays valid; a small chart that the polycube needs is left alone."""
+"""Chart absorption on hand-labelled cubes and plates: a noise chart is taken into its
+neighbours and the labeling stays valid; a small chart that the polycube needs is left alone."""
 import numpy as np
 import pytest
 
