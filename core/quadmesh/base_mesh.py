@@ -23,6 +23,9 @@
    not given up for a few folded quads that a local edit unfolds. The self-crossings of the
    repaired cage's limit surface are counted as on the decimation's cages: a layout whose
    limit surface crosses itself gives way to a decimation cage whose limit surface does not.
+   Where the repaired layout keeps such flaws, the same quads untangled on the target
+   (:func:`.polycube.relax.untangle_on_target`, folds spread over many quads) are repaired too
+   and kept when they have fewer.
 """
 import time
 
@@ -69,6 +72,10 @@ class LayoutTooLargeError(LabelingError):
         self.faces = faces
 
 
+UNTANGLED_KEY = "untangled_layout"
+"""Key of :func:`_polycube_base_mesh`'s report under which the untangled layout (a PolyMesh,
+or None) is handed to :func:`_repaired_or_untangled`, which takes it out."""
+
 FALLBACK_OVER_BUDGET = 1.5
 """Polycube layouts with up to this many times the budget are kept over the paired decimation
 (which meets the budget, but whose cages have far more extraordinary vertices); larger ones
@@ -107,7 +114,10 @@ def refined_target(target):
 def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, collapsible,
                       give_up_faces, refinement_rounds, least=None, separate=False):
     """Quantize, lay out and embed; returns ``(mesh, polycube, rounds, refinement, folded,
-    quad_chart)`` (``quad_chart``: (f,) int64 chart of every face of ``mesh``).
+    quad_chart, untangled)`` (``quad_chart``: (f,) int64 chart of every face of ``mesh``;
+    ``untangled``: ``mesh`` with its folds untangled on the target,
+    :func:`core.quadmesh.polycube.relax.untangle_on_target`, or None where that degenerated
+    a face).
 
     With ``separate``, overlapping charts are cut only when no crossing is left to separate:
     in each of up to ``SEPARATION_ROUNDS`` rounds, every overlapping chart gets the separation
@@ -232,13 +242,18 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     chart_of[lattice.n_corners + n_side_points:] = lattice.interior_chart
     relaxed = relax_on_target(mesh, V, F, complex_.face_chart, side_of[used], step_of[used],
                               polycube.side_length, chart_of[used],
-                              lambda side: V[complex_.chain(side)])
+                              lambda side: V[complex_.chain(side)], lattice.quad_chart)
+    untangled = PolyMesh(relaxed.untangled, mesh.face_vertices, mesh.face_offsets)
     try:
-        check_polymesh(PolyMesh(relaxed, mesh.face_vertices, mesh.face_offsets))
-        mesh = PolyMesh(relaxed, mesh.face_vertices, mesh.face_offsets)
+        check_polymesh(untangled)
+    except InvalidMeshError:
+        untangled = None
+    try:
+        check_polymesh(PolyMesh(relaxed.smoothed, mesh.face_vertices, mesh.face_offsets))
+        mesh = PolyMesh(relaxed.smoothed, mesh.face_vertices, mesh.face_offsets)
     except InvalidMeshError:
         pass  # smoothing degenerated a face somewhere: keep the Tutte placement
-    return mesh, polycube, rounds, refinement, folded, lattice.quad_chart
+    return mesh, polycube, rounds, refinement, folded, lattice.quad_chart, untangled
 
 
 def _cut_overlapping_chart(complex_, tables, polycube, charts, refine, cuts, unrefinable):
@@ -368,7 +383,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     why (``method``, ``fallback_reason``); a layout within that limit is kept even where the
     decimation would meet the budget more closely. Inverted faces
     (:func:`core.quadmesh.orientation.inverted_faces`) of the layout and faces where its limit
-    surface crosses itself are repaired (:func:`_repaired_layout`) and the flaws counted
+    surface crosses itself are repaired (:func:`_repaired_or_untangled`) and the flaws counted
     again; where inverted faces or crossings remain, the paired decimation is built too and
     the one with fewer flaws is kept (:func:`_flaw_rank`: a limit surface that crosses itself
     never wins over one that does not). ``method="polycube"`` never falls back (its errors are
@@ -409,7 +424,8 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         ``solver_status``, ``scale_rounds``, ``charts``, ``sides``, ``corners``,
         ``side_directions_flipped``, ``folded_points``, ``rectangles``, ``collapsed_sides``,
         ``layout_inverted_faces`` (before the repair), ``limit_crossings`` (self-crossing
-        triangle pairs of its level-2 limit surface), ``moved_vertices`` and ``edits``;
+        triangle pairs of its level-2 limit surface), ``moved_vertices``, ``edits`` and
+        ``untangled`` (the untangled layout was kept, :func:`_repaired_or_untangled`);
         the paired decimation adds ``decimated_triangles``, ``budget_rounds`` (the budgets
         tried while its limit surface crossed itself or had inverted faces; beyond the budget
         rule while it crossed itself, and ``minimum_reason`` says so), ``limit_crossings``
@@ -437,7 +453,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames,
                                          int(target_faces), max_base_faces, face_interface_axis,
                                          max_base_faces, surface=surface)
-        mesh, info = _repaired_layout(mesh, info, surface)
+        mesh, info = _repaired_or_untangled(mesh, info, surface)
     elif method == "auto":
         give_up = int(min(max_base_faces, FALLBACK_OVER_BUDGET * target_faces))
         try:
@@ -450,7 +466,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
             polycube_candidate = {"built": False, "faces": getattr(exc, "faces", None),
                                   "reason": str(exc)}
         else:
-            mesh, info = _repaired_layout(mesh, info, surface)
+            mesh, info = _repaired_or_untangled(mesh, info, surface)
             polycube_candidate = _candidate(info)
             if info["inverted_faces"] or info["limit_crossings"]:
                 other_mesh, other_info = _paired_decimation_base_mesh(
@@ -490,6 +506,25 @@ def _flaws(info):
     """The limit flaws of a built cage in words (a str)."""
     return (f"{info['inverted_faces']} inverted faces and {info['limit_crossings']} "
             f"self-crossing triangle pairs of its limit surface (level 2)")
+
+
+def _repaired_or_untangled(mesh, info, surface):
+    """The repaired layout (:func:`_repaired_layout`), or where it keeps inverted faces or
+    crossings, the repaired untangled layout (``info[UNTANGLED_KEY]``, the same quads with
+    their folds untangled on the target) when that has fewer flaws (:func:`_flaw_rank`).
+
+    Returns ``(mesh, info)`` as :func:`_repaired_layout`, ``info["untangled"]`` saying which
+    was kept.
+    """
+    info = dict(info)
+    untangled = info.pop(UNTANGLED_KEY, None)
+    mesh, repaired = _repaired_layout(mesh, info, surface)
+    repaired["untangled"] = False
+    if untangled is not None and (repaired["inverted_faces"] or repaired["limit_crossings"]):
+        other_mesh, other = _repaired_layout(untangled, info, surface)
+        if _flaw_rank(other) < _flaw_rank(repaired):
+            return other_mesh, {**other, "untangled": True}
+    return mesh, repaired
 
 
 def _repaired_layout(mesh, info, surface):
@@ -620,11 +655,11 @@ class _LayoutAttempts:
         result = _layout_on_target(self.V, self.F, self.complex_, self.tables, *self.budget,
                                    self.collapsible, self.give_up_faces,
                                    self.refinement_rounds, least, self.separate)
-        mesh, polycube, rounds, refinement, folded, quad_chart = result
-        return mesh, polycube, rounds, refinement, folded, self.complex_, quad_chart
+        mesh, polycube, rounds, refinement, folded, quad_chart, untangled = result
+        return mesh, polycube, rounds, refinement, folded, self.complex_, quad_chart, untangled
 
     def attempt(self, least):
-        """``(mesh, polycube, rounds, refinement, folded, complex_, quad_chart)``.
+        """``(mesh, polycube, rounds, refinement, folded, complex_, quad_chart, untangled)``.
 
         Raises as :func:`_polycube_base_mesh`.
         """
@@ -798,7 +833,7 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
         best, flipped_faces = candidate, facing_away
         if not facing_away.any():
             break
-    mesh, polycube, rounds, refinement, folded, layout_complex, _ = best
+    mesh, polycube, rounds, refinement, folded, layout_complex, _, untangled = best
     flipped = layout.flipped
     complex_ = layout_complex
     within = abs(polycube.faces - target_faces) <= BUDGET_TOLERANCE * target_faces
@@ -817,5 +852,6 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
         "folded_points": int(folded), "rectangles": refinement.rectangles,
         "collapsed_sides": int((polycube.side_length == 0).sum()),
         "relabelled_area": 0.0 if relabelled is None else relabelled.changed_area,
+        UNTANGLED_KEY: untangled,
     }
     return mesh, info
