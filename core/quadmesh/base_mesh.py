@@ -73,8 +73,9 @@ class LayoutTooLargeError(LabelingError):
 
 
 UNTANGLED_KEY = "untangled_layout"
-"""Key of :func:`_polycube_base_mesh`'s report under which the untangled layout (a PolyMesh,
-or None) is handed to :func:`_repaired_or_untangled`, which takes it out."""
+"""Key of :func:`_polycube_base_mesh`'s report under which the untangled layout (a callable
+giving a PolyMesh or None, or None) is handed to :func:`_repaired_or_untangled`, which takes
+it out."""
 
 FALLBACK_OVER_BUDGET = 1.5
 """Polycube layouts with up to this many times the budget are kept over the paired decimation
@@ -115,9 +116,9 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
                       give_up_faces, refinement_rounds, least=None, separate=False):
     """Quantize, lay out and embed; returns ``(mesh, polycube, rounds, refinement, folded,
     quad_chart, untangled)`` (``quad_chart``: (f,) int64 chart of every face of ``mesh``;
-    ``untangled``: ``mesh`` with its folds untangled on the target,
+    ``untangled``: callable ``() -> PolyMesh`` ``mesh`` with its folds untangled on the target,
     :func:`core.quadmesh.polycube.relax.untangle_on_target`, or None where that degenerated
-    a face).
+    a face; computed when called).
 
     With ``separate``, overlapping charts are cut only when no crossing is left to separate:
     in each of up to ``SEPARATION_ROUNDS`` rounds, every overlapping chart gets the separation
@@ -243,11 +244,16 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     relaxed = relax_on_target(mesh, V, F, complex_.face_chart, side_of[used], step_of[used],
                               polycube.side_length, chart_of[used],
                               lambda side: V[complex_.chain(side)], lattice.quad_chart)
-    untangled = PolyMesh(relaxed.untangled, mesh.face_vertices, mesh.face_offsets)
-    try:
-        check_polymesh(untangled)
-    except InvalidMeshError:
-        untangled = None
+    faces = (mesh.face_vertices, mesh.face_offsets)
+
+    def untangled():
+        untangled_mesh = PolyMesh(relaxed.untangle(), *faces)
+        try:
+            check_polymesh(untangled_mesh)
+        except InvalidMeshError:
+            return None
+        return untangled_mesh
+
     try:
         check_polymesh(PolyMesh(relaxed.smoothed, mesh.face_vertices, mesh.face_offsets))
         mesh = PolyMesh(relaxed.smoothed, mesh.face_vertices, mesh.face_offsets)
@@ -510,17 +516,21 @@ def _flaws(info):
 
 def _repaired_or_untangled(mesh, info, surface):
     """The repaired layout (:func:`_repaired_layout`), or where it keeps inverted faces or
-    crossings, the repaired untangled layout (``info[UNTANGLED_KEY]``, the same quads with
-    their folds untangled on the target) when that has fewer flaws (:func:`_flaw_rank`).
+    crossings, the repaired untangled layout (``info[UNTANGLED_KEY]``, a callable giving the
+    same quads with their folds untangled on the target, or None) when that has fewer flaws
+    (:func:`_flaw_rank`).
 
     Returns ``(mesh, info)`` as :func:`_repaired_layout`, ``info["untangled"]`` saying which
     was kept.
     """
     info = dict(info)
-    untangled = info.pop(UNTANGLED_KEY, None)
+    untangle = info.pop(UNTANGLED_KEY, None)
     mesh, repaired = _repaired_layout(mesh, info, surface)
     repaired["untangled"] = False
-    if untangled is not None and (repaired["inverted_faces"] or repaired["limit_crossings"]):
+    untangled = None
+    if untangle is not None and (repaired["inverted_faces"] or repaired["limit_crossings"]):
+        untangled = untangle()
+    if untangled is not None:
         other_mesh, other = _repaired_layout(untangled, info, surface)
         if _flaw_rank(other) < _flaw_rank(repaired):
             return other_mesh, {**other, "untangled": True}

@@ -19,6 +19,8 @@ plane, plus the same energy of the determinant of the Catmull-Clark limit normal
 quad's centre against the quad's normal, so the faces' limit normals face out as well.
 """
 from dataclasses import dataclass
+from functools import partial
+from typing import Callable
 
 import numpy as np
 from scipy.optimize import minimize
@@ -78,11 +80,13 @@ class RelaxedLayout:
     """Vertex positions of an embedded layout after :func:`relax_on_target`.
 
     smoothed : (p, 3) float64 after the Laplacian rounds.
-    untangled : (p, 3) float64 those with folded corners and limit normals untangled.
+    untangle : callable ``() -> (p, 3) float64`` those with folded corners and limit normals
+        untangled (:func:`untangle_on_target`), computed when called (only flawed layouts
+        need it).
     """
 
     smoothed: np.ndarray
-    untangled: np.ndarray
+    untangle: Callable[[], np.ndarray]
 
 
 class _OnTarget:
@@ -160,7 +164,7 @@ class _OnTarget:
 def relax_on_target(mesh, V, F, face_chart, vertex_side, vertex_step, side_length,
                     vertex_chart, side_chains, quad_chart, rounds=RELAX_ROUNDS):
     """Constrained Laplacian smoothing of a base mesh whose vertices lie on the target, and
-    the smoothed mesh with its folded corners untangled (:func:`untangle_on_target`).
+    the untangling of the smoothed mesh's folds (:func:`untangle_on_target`), deferred.
 
     Parameters
     ----------
@@ -190,7 +194,7 @@ def relax_on_target(mesh, V, F, face_chart, vertex_side, vertex_step, side_lengt
     area = np.bincount(face_chart, weights=_triangle_areas(V, F))
     count = np.bincount(quad_chart, minlength=len(area))
     size = np.sqrt(area[quad_chart] / count[quad_chart])
-    return RelaxedLayout(positions, untangle_on_target(positions, mesh, size, where))
+    return RelaxedLayout(positions, partial(untangle_on_target, positions, mesh, size, where))
 
 
 def _mean_edge(positions, quads):
