@@ -23,9 +23,8 @@
    not given up for a few folded quads that a local edit unfolds. The self-crossings of the
    repaired cage's limit surface are counted as on the decimation's cages: a layout whose
    limit surface crosses itself gives way to a decimation cage whose limit surface does not.
-   Where the repaired layout keeps such flaws, the same quads untangled on the target
-   (:func:`.polycube.relax.untangle_on_target`, folds spread over many quads) are repaired too
-   and kept when they have fewer.
+   The same quads untangled on the target (:func:`.polycube.relax.untangle_on_target`, near
+   the folds and everywhere) are repaired too, and the one with the fewest flaws is kept.
 """
 import time
 
@@ -49,7 +48,7 @@ from core.quadmesh.polycube.overlap_cuts import corners_to_cut, crossing_separat
 from core.quadmesh.polycube.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapsible_sides,
                                              loop_tables, minimum_faces, quantize,
                                              quantize_for_budget, rectangular_refinement)
-from core.quadmesh.polycube.relax import relax_on_target
+from core.quadmesh.polycube.relax import FLAW_RINGS, relax_on_target
 from core.quadmesh.polycube.closable_labels import closable_labels
 from core.quadmesh.polycube.side_signs import SideDirectionError, make_loops_rectilinear
 from core.target_surface import TargetSurface
@@ -247,12 +246,18 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     faces = (mesh.face_vertices, mesh.face_offsets)
 
     def untangled():
-        untangled_mesh = PolyMesh(relaxed.untangle(), *faces)
-        try:
-            check_polymesh(untangled_mesh)
-        except InvalidMeshError:
-            return None
-        return untangled_mesh
+        meshes = []
+        for rings in (FLAW_RINGS, None):
+            positions = relaxed.untangle(rings)
+            if np.array_equal(positions, relaxed.smoothed):
+                continue  # nothing near a flaw moved
+            untangled_mesh = PolyMesh(positions, *faces)
+            try:
+                check_polymesh(untangled_mesh)
+            except InvalidMeshError:
+                continue
+            meshes.append(untangled_mesh)
+        return meshes
 
     try:
         check_polymesh(PolyMesh(relaxed.smoothed, mesh.face_vertices, mesh.face_offsets))
@@ -515,26 +520,26 @@ def _flaws(info):
 
 
 def _repaired_or_untangled(mesh, info, surface):
-    """The repaired layout (:func:`_repaired_layout`), or where it keeps inverted faces or
-    crossings, the repaired untangled layout (``info[UNTANGLED_KEY]``, a callable giving the
-    same quads with their folds untangled on the target, or None) when that has fewer flaws
-    (:func:`_flaw_rank`).
+    """The repaired untangled layout with the fewest flaws (:func:`_flaw_rank`), the one
+    untangled near its flaws first on a tie, or the repaired layout itself where it has
+    fewer (:func:`_repaired_layout`). ``info[UNTANGLED_KEY]`` is a callable giving the
+    untangled layouts (the same quads with their folds untangled on the target near the flaws,
+    then everywhere), or None.
 
     Returns ``(mesh, info)`` as :func:`_repaired_layout`, ``info["untangled"]`` saying which
     was kept.
     """
     info = dict(info)
     untangle = info.pop(UNTANGLED_KEY, None)
-    mesh, repaired = _repaired_layout(mesh, info, surface)
-    repaired["untangled"] = False
-    untangled = None
-    if untangle is not None and (repaired["inverted_faces"] or repaired["limit_crossings"]):
-        untangled = untangle()
-    if untangled is not None:
+    kept = None
+    for untangled in ([] if untangle is None else untangle()):
         other_mesh, other = _repaired_layout(untangled, info, surface)
-        if _flaw_rank(other) < _flaw_rank(repaired):
-            return other_mesh, {**other, "untangled": True}
-    return mesh, repaired
+        if kept is None or _flaw_rank(other) < _flaw_rank(kept[1]):
+            kept = other_mesh, {**other, "untangled": True}
+    mesh, repaired = _repaired_layout(mesh, info, surface)
+    if kept is None or _flaw_rank(repaired) < _flaw_rank(kept[1]):
+        kept = mesh, {**repaired, "untangled": False}
+    return kept
 
 
 def _repaired_layout(mesh, info, surface):

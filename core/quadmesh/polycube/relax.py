@@ -19,7 +19,6 @@ plane, plus the same energy of the determinant of the Catmull-Clark limit normal
 quad's centre against the quad's normal, so the faces' limit normals face out as well.
 """
 from dataclasses import dataclass
-from functools import partial
 from typing import Callable
 
 import numpy as np
@@ -42,6 +41,8 @@ AREA_WEIGHT = 1.0 / 128.0
 """Weight of the area term of :func:`untangling_energy` (against the shape term)."""
 EPS_START, EPS_FACTOR = 1.0, 0.3
 """``eps`` of the first round of :func:`untangle_on_target` and its factor per round."""
+FLAW_RINGS = 2
+"""The untangling near the flaws moves the vertices within this many rings of them."""
 LIMIT_WEIGHT = 1.0
 """Weight of the limit normals' term of :func:`untangle_on_target` (against the corners')."""
 STEP = 0.5
@@ -80,13 +81,14 @@ class RelaxedLayout:
     """Vertex positions of an embedded layout after :func:`relax_on_target`.
 
     smoothed : (p, 3) float64 after the Laplacian rounds.
-    untangle : callable ``() -> (p, 3) float64`` those with folded corners and limit normals
-        untangled (:func:`untangle_on_target`), computed when called (only flawed layouts
-        need it).
+    untangle : callable ``(rings) -> (p, 3) float64`` those with folded corners and limit
+        normals untangled (:func:`untangle_on_target`, all vertices moving where ``rings`` is
+        None, else those near the flaws), computed when called (only flawed layouts need
+        it).
     """
 
     smoothed: np.ndarray
-    untangle: Callable[[], np.ndarray]
+    untangle: Callable[[object], np.ndarray]
 
 
 class _OnTarget:
@@ -194,7 +196,8 @@ def relax_on_target(mesh, V, F, face_chart, vertex_side, vertex_step, side_lengt
     area = np.bincount(face_chart, weights=_triangle_areas(V, F))
     count = np.bincount(quad_chart, minlength=len(area))
     size = np.sqrt(area[quad_chart] / count[quad_chart])
-    return RelaxedLayout(positions, partial(untangle_on_target, positions, mesh, size, where))
+    return RelaxedLayout(positions, lambda rings: untangle_on_target(positions, mesh, size,
+                                                                     where, rings))
 
 
 def _mean_edge(positions, quads):
@@ -291,7 +294,7 @@ def folded_corners(points, quads, frames):
     return jac[..., 0, 0] * jac[..., 1, 1] - jac[..., 0, 1] * jac[..., 1, 0] <= 0.0
 
 
-def untangle_on_target(positions, mesh, quad_size, where, rounds=UNTANGLE_ROUNDS,
+def untangle_on_target(positions, mesh, quad_size, where, rings=None, rounds=UNTANGLE_ROUNDS,
                        iterations=UNTANGLE_ITERATIONS):
     """Quad corners unfolded by minimising :func:`untangling_energy` on the target.
 
@@ -307,6 +310,9 @@ def untangle_on_target(positions, mesh, quad_size, where, rounds=UNTANGLE_ROUNDS
     quads : (f, 4) int64 corners, counter-clockwise seen from outside.
     quad_size : (f,) float64 edge length of each quad's reference square.
     where : _OnTarget.
+    rings : int or None, move only the vertices within this many rings of the quads flawed
+        at the start (a folded corner or a limit normal facing away, :func:`_near_flaws`),
+        the rest staying where they are; None: every vertex.
     rounds, iterations : int, rounds and L-BFGS iterations per round.
 
     Returns
@@ -316,6 +322,9 @@ def untangle_on_target(positions, mesh, quad_size, where, rounds=UNTANGLE_ROUNDS
     """
     quads = mesh.face_vertices.reshape(-1, 4)
     _, tangent_u, tangent_v = face_centre_operators(mesh)
+    movable = np.ones(len(positions), dtype=bool) if rings is None else _near_flaws(
+        positions, quads, quad_frames(where.normals(positions, quads)), tangent_u, tangent_v,
+        rings)
     best, best_folded = positions, None
     eps = None
     for _ in range(rounds):
@@ -331,7 +340,7 @@ def untangle_on_target(positions, mesh, quad_size, where, rounds=UNTANGLE_ROUNDS
         limit_scale = unit * quad_size ** 2
         if best_folded is None or folded < best_folded:
             best, best_folded = positions, folded
-        directions = where.directions(positions)
+        directions = where.directions(positions) * movable[:, None, None]
         eps = EPS_START if eps is None else eps * EPS_FACTOR
 
         def energy(x, eps=eps, frames=frames, directions=directions):
@@ -364,6 +373,19 @@ def untangle_on_target(positions, mesh, quad_size, where, rounds=UNTANGLE_ROUNDS
     if best_folded is None or _flaws(positions, quads, frames, tangent_u, tangent_v) < best_folded:
         best = positions
     return best
+
+
+def _near_flaws(positions, quads, frames, tangent_u, tangent_v, rings):
+    """(p,) bool vertices within ``rings`` (>= 1) rings of quads with a folded corner or a
+    limit normal facing away from the quad's normal."""
+    normal = np.cross(frames[:, 0], frames[:, 1])
+    det = np.einsum("fk,fk->f", normal, np.cross(tangent_u @ positions, tangent_v @ positions))
+    flawed = (det < 0) | folded_corners(positions, quads, frames).any(axis=1)
+    near = np.zeros(len(positions), dtype=bool)
+    near[quads[flawed].reshape(-1)] = True
+    for _ in range(rings - 1):
+        near[quads[near[quads].any(axis=1)].reshape(-1)] = True
+    return near
 
 
 def _flaws(positions, quads, frames, tangent_u, tangent_v):
