@@ -520,9 +520,9 @@ def _flaws(info):
 
 
 def _repaired_or_untangled(mesh, info, surface):
-    """The repaired untangled layout with the fewest flaws (:func:`_flaw_rank`), the one
-    untangled near its flaws first on a tie, or the repaired layout itself where it has
-    fewer (:func:`_repaired_layout`). ``info[UNTANGLED_KEY]`` is a callable giving the
+    """Of the layout and its untangled copies, each repaired (:func:`_repaired_layout`), the
+    one with the fewest flaws (:func:`_repair_rank`; on a tie the copy untangled near its
+    flaws, then the one untangled everywhere, then the layout itself). ``info[UNTANGLED_KEY]`` is a callable giving the
     untangled layouts (the same quads with their folds untangled on the target near the flaws,
     then everywhere), or None.
 
@@ -534,12 +534,19 @@ def _repaired_or_untangled(mesh, info, surface):
     kept = None
     for untangled in ([] if untangle is None else untangle()):
         other_mesh, other = _repaired_layout(untangled, info, surface)
-        if kept is None or _flaw_rank(other) < _flaw_rank(kept[1]):
+        if kept is None or _repair_rank(other) < _repair_rank(kept[1]):
             kept = other_mesh, {**other, "untangled": True}
     mesh, repaired = _repaired_layout(mesh, info, surface)
-    if kept is None or _flaw_rank(repaired) < _flaw_rank(kept[1]):
+    if kept is None or _repair_rank(repaired) < _repair_rank(kept[1]):
         kept = mesh, {**repaired, "untangled": False}
     return kept
+
+
+def _repair_rank(info):
+    """Order of two repaired embeddings of one layout, the smaller the better (a tuple): the
+    fewer limit flaws after the repair (:func:`_flaw_rank`), then the fewer inverted faces
+    before it and the fewer edits it made (the less the embedding had to be mended)."""
+    return (*_flaw_rank(info), info["layout_inverted_faces"], info["edits"])
 
 
 def _repaired_layout(mesh, info, surface):
