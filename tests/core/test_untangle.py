@@ -132,6 +132,26 @@ def test_folded_quads_of_a_cube_cage_are_unfolded_on_their_faces():
     assert (np.einsum("fk,fk->f", limit_normal, quad_normals) > 0).all()
 
 
+def test_untangling_near_the_fold_leaves_the_far_vertices_where_they_were():
+    mesh, quad_normals = cube_cage()
+    where = OnCube(mesh, quad_normals)
+    quads = mesh.face_vertices.reshape(-1, 4)
+    frames = quad_frames(quad_normals)
+    top = np.flatnonzero(np.isclose(mesh.vertices[:, 2], 1.0) & where.free)
+    corner = top[np.argmin(mesh.vertices[top, 0] + mesh.vertices[top, 1])]
+    folded_positions = mesh.vertices.copy()
+    folded_positions[corner, :2] = [0.9, 0.9]
+    # off the top face: the bottom face's inner vertices are more than two rings away
+    bottom = np.flatnonzero(np.isclose(mesh.vertices[:, 2], 0.0) & where.free)
+    disturbed = folded_positions.copy()
+    disturbed[bottom, :2] += 0.05  # uneven there, but not folded
+    positions = untangle_on_target(disturbed, mesh, np.full(len(quads), 1.0 / N), where,
+                                   rings=2)
+    assert not folded_corners(positions, quads, frames).any()
+    assert np.array_equal(positions[bottom], disturbed[bottom])
+    assert not np.array_equal(positions[corner], disturbed[corner])
+
+
 def test_jacobians_of_a_unit_square_are_the_identity():
     points = np.array([[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0]], dtype=np.float64)
     frames = quad_frames(np.array([[0.0, 0.0, 1.0]]))

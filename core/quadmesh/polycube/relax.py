@@ -221,7 +221,9 @@ def _chi(det, eps):
     ``(det + sqrt(eps^2 + det^2)) / 2``, positive for every ``det`` (written without the
     cancellation where ``det`` is negative)."""
     root = np.sqrt(eps * eps + det * det)
-    chi = np.where(det > 0, 0.5 * (det + root), 0.5 * eps * eps / (root - det))
+    positive = det > 0
+    chi = np.where(positive, 0.5 * (det + root),
+                   0.5 * eps * eps / np.where(positive, 1.0, root - det))
     return chi, 0.5 * (1.0 + det / root)
 
 
@@ -296,18 +298,24 @@ def folded_corners(points, quads, frames):
 
 def untangle_on_target(positions, mesh, quad_size, where, rings=None, rounds=UNTANGLE_ROUNDS,
                        iterations=UNTANGLE_ITERATIONS):
-    """Quad corners unfolded by minimising :func:`untangling_energy` on the target.
+    """Folded quad corners and limit normals of a cage untangled on the target.
 
     Each round fixes every quad's tangent frame (from the target's normals at its corners)
-    and every vertex's directions of motion (:meth:`_OnTarget.directions`), minimises the
-    energy of all corners over the moves along them (L-BFGS), puts the moved vertices back on
-    the target (:meth:`_OnTarget.project`) and lowers ``eps`` as the smallest determinant
-    allows (Garanzha et al., "Foldover-free maps in 50 lines of code", 2021).
+    and every vertex's directions of motion (:meth:`_OnTarget.directions`), minimises
+    :func:`untangling_energy` of all quad corners plus that of the determinants of the limit
+    normals at the face centres against the quads' normals (in units of a typical quad's)
+    over the moves along those directions (L-BFGS, each move at most :data:`STEP` of the
+    vertex's mean edge), puts the moved vertices back on the target
+    (:meth:`_OnTarget.project`) and divides ``eps`` by a constant factor, so the energy goes
+    from smooth to a barrier against folding (Garanzha et al., "Foldover-free maps in 50 lines
+    of code", 2021, lower ``eps`` by the smallest determinant instead; one fold that cannot be
+    undone would keep it large here).
 
     Parameters
     ----------
     positions : (p, 3) float64 vertex positions on the target.
-    quads : (f, 4) int64 corners, counter-clockwise seen from outside.
+    mesh : PolyMesh, the closed all-quad cage (its faces counter-clockwise seen from outside;
+        its vertices are not read).
     quad_size : (f,) float64 edge length of each quad's reference square.
     where : _OnTarget.
     rings : int or None, move only the vertices within this many rings of the quads flawed
@@ -317,8 +325,8 @@ def untangle_on_target(positions, mesh, quad_size, where, rings=None, rounds=UNT
 
     Returns
     -------
-    (p, 3) float64 the positions of the round with the fewest folded corners (``positions``
-    itself where no round had fewer).
+    (p, 3) float64 the positions, after any round, with the fewest limit normals facing away
+    from their quads, then folded corners (``positions`` itself where none had fewer).
     """
     quads = mesh.face_vertices.reshape(-1, 4)
     _, tangent_u, tangent_v = face_centre_operators(mesh)
