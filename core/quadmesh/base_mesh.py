@@ -520,8 +520,9 @@ def _flaws(info):
 
 
 def _repaired_or_untangled(mesh, info, surface):
-    """Of the layout and its untangled copies, each repaired (:func:`_repaired_layout`), the
-    one with the fewest flaws (:func:`_repair_rank`; on a tie the copy untangled near its
+    """The repaired layout (:func:`_repaired_layout`) where it had nothing to mend (no
+    inverted face, no crossing, no edit); else of it and its untangled copies, each repaired,
+    the one with the fewest flaws (:func:`_repair_rank`; on a tie the copy untangled near its
     flaws, then the one untangled everywhere, then the layout itself). ``info[UNTANGLED_KEY]`` is a callable giving the
     untangled layouts (the same quads with their folds untangled on the target near the flaws,
     then everywhere), or None.
@@ -531,14 +532,17 @@ def _repaired_or_untangled(mesh, info, surface):
     """
     info = dict(info)
     untangle = info.pop(UNTANGLED_KEY, None)
+    mesh, repaired = _repaired_layout(mesh, info, surface)
+    repaired["untangled"] = False
+    if untangle is None or _repair_rank(repaired) == (False, 0, 0, 0, 0):
+        return mesh, repaired  # nothing to mend: the layout as it is
     kept = None
-    for untangled in ([] if untangle is None else untangle()):
+    for untangled in untangle():
         other_mesh, other = _repaired_layout(untangled, info, surface)
         if kept is None or _repair_rank(other) < _repair_rank(kept[1]):
             kept = other_mesh, {**other, "untangled": True}
-    mesh, repaired = _repaired_layout(mesh, info, surface)
     if kept is None or _repair_rank(repaired) < _repair_rank(kept[1]):
-        kept = mesh, {**repaired, "untangled": False}
+        kept = mesh, repaired
     return kept
 
 
