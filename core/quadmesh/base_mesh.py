@@ -23,6 +23,8 @@
    not given up for a few folded quads that a local edit unfolds. The self-crossings of the
    repaired cage's limit surface are counted as on the decimation's cages: a layout whose
    limit surface crosses itself gives way to a decimation cage whose limit surface does not.
+   The same quads untangled on the target (:func:`.polycube.relax.untangle_on_target`, near
+   the folds and everywhere) are repaired too, and the one with the fewest flaws is kept.
 """
 import time
 
@@ -46,7 +48,7 @@ from core.quadmesh.polycube.overlap_cuts import corners_to_cut, crossing_separat
 from core.quadmesh.polycube.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapsible_sides,
                                              loop_tables, minimum_faces, quantize,
                                              quantize_for_budget, rectangular_refinement)
-from core.quadmesh.polycube.relax import relax_on_target
+from core.quadmesh.polycube.relax import FLAW_RINGS, relax_on_target
 from core.quadmesh.polycube.closable_labels import closable_labels
 from core.quadmesh.polycube.side_signs import SideDirectionError, make_loops_rectilinear
 from core.target_surface import TargetSurface
@@ -68,6 +70,11 @@ class LayoutTooLargeError(LabelingError):
         super().__init__(message)
         self.faces = faces
 
+
+UNTANGLED_KEY = "untangled_layout"
+"""Key of :func:`_polycube_base_mesh`'s report under which the untangled layout (a callable
+giving a PolyMesh or None, or None) is handed to :func:`_repaired_or_untangled`, which takes
+it out."""
 
 FALLBACK_OVER_BUDGET = 1.5
 """Polycube layouts with up to this many times the budget are kept over the paired decimation
@@ -111,7 +118,10 @@ def refined_target(target):
 def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, collapsible,
                       give_up_faces, refinement_rounds, least=None, separate=False):
     """Quantize, lay out and embed; returns ``(mesh, polycube, rounds, refinement, folded,
-    quad_chart)`` (``quad_chart``: (f,) int64 chart of every face of ``mesh``).
+    quad_chart, untangled)`` (``quad_chart``: (f,) int64 chart of every face of ``mesh``;
+    ``untangled``: callable ``() -> PolyMesh`` ``mesh`` with its folds untangled on the target,
+    :func:`core.quadmesh.polycube.relax.untangle_on_target`, or None where that degenerated
+    a face; computed when called).
 
     With ``separate``, overlapping charts are cut only when no crossing is left to separate:
     in each of up to ``SEPARATION_ROUNDS`` rounds, every overlapping chart gets the separation
@@ -236,13 +246,29 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     chart_of[lattice.n_corners + n_side_points:] = lattice.interior_chart
     relaxed = relax_on_target(mesh, V, F, complex_.face_chart, side_of[used], step_of[used],
                               polycube.side_length, chart_of[used],
-                              lambda side: V[complex_.chain(side)])
+                              lambda side: V[complex_.chain(side)], lattice.quad_chart)
+    faces = (mesh.face_vertices, mesh.face_offsets)
+
+    def untangled():
+        meshes = []
+        for rings in (FLAW_RINGS, None):
+            positions = relaxed.untangle(rings)
+            if np.array_equal(positions, relaxed.smoothed):
+                continue  # nothing near a flaw moved
+            untangled_mesh = PolyMesh(positions, *faces)
+            try:
+                check_polymesh(untangled_mesh)
+            except InvalidMeshError:
+                continue
+            meshes.append(untangled_mesh)
+        return meshes
+
     try:
-        check_polymesh(PolyMesh(relaxed, mesh.face_vertices, mesh.face_offsets))
-        mesh = PolyMesh(relaxed, mesh.face_vertices, mesh.face_offsets)
+        check_polymesh(PolyMesh(relaxed.smoothed, mesh.face_vertices, mesh.face_offsets))
+        mesh = PolyMesh(relaxed.smoothed, mesh.face_vertices, mesh.face_offsets)
     except InvalidMeshError:
         pass  # smoothing degenerated a face somewhere: keep the Tutte placement
-    return mesh, polycube, rounds, refinement, folded, lattice.quad_chart
+    return mesh, polycube, rounds, refinement, folded, lattice.quad_chart, untangled
 
 
 def _cut_overlapping_chart(complex_, tables, polycube, charts, refine, cuts, unrefinable):
@@ -372,7 +398,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     why (``method``, ``fallback_reason``); a layout within that limit is kept even where the
     decimation would meet the budget more closely. Inverted faces
     (:func:`core.quadmesh.orientation.inverted_faces`) of the layout and faces where its limit
-    surface crosses itself are repaired (:func:`_repaired_layout`) and the flaws counted
+    surface crosses itself are repaired (:func:`_repaired_or_untangled`) and the flaws counted
     again; where inverted faces or crossings remain, the paired decimation is built too and
     the one with fewer flaws is kept (:func:`_flaw_rank`: a limit surface that crosses itself
     never wins over one that does not). ``method="polycube"`` never falls back (its errors are
@@ -413,7 +439,8 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         ``solver_status``, ``scale_rounds``, ``charts``, ``sides``, ``corners``,
         ``side_directions_flipped``, ``folded_points``, ``rectangles``, ``collapsed_sides``,
         ``layout_inverted_faces`` (before the repair), ``limit_crossings`` (self-crossing
-        triangle pairs of its level-2 limit surface), ``moved_vertices`` and ``edits``;
+        triangle pairs of its level-2 limit surface), ``moved_vertices``, ``edits`` and
+        ``untangled`` (the untangled layout was kept, :func:`_repaired_or_untangled`);
         the paired decimation adds ``decimated_triangles``, ``budget_rounds`` (the budgets
         tried while its limit surface crossed itself or had inverted faces; beyond the budget
         rule while it crossed itself, and ``minimum_reason`` says so), ``limit_crossings``
@@ -441,7 +468,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames,
                                          int(target_faces), max_base_faces, face_interface_axis,
                                          max_base_faces, surface=surface)
-        mesh, info = _repaired_layout(mesh, info, surface)
+        mesh, info = _repaired_or_untangled(mesh, info, surface)
     elif method == "auto":
         give_up = int(min(max_base_faces, FALLBACK_OVER_BUDGET * target_faces))
         try:
@@ -454,7 +481,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
             polycube_candidate = {"built": False, "faces": getattr(exc, "faces", None),
                                   "reason": str(exc)}
         else:
-            mesh, info = _repaired_layout(mesh, info, surface)
+            mesh, info = _repaired_or_untangled(mesh, info, surface)
             polycube_candidate = _candidate(info)
             if info["inverted_faces"] or info["limit_crossings"]:
                 other_mesh, other_info = _paired_decimation_base_mesh(
@@ -494,6 +521,40 @@ def _flaws(info):
     """The limit flaws of a built cage in words (a str)."""
     return (f"{info['inverted_faces']} inverted faces and {info['limit_crossings']} "
             f"self-crossing triangle pairs of its limit surface (level 2)")
+
+
+def _repaired_or_untangled(mesh, info, surface):
+    """The repaired layout (:func:`_repaired_layout`) where it had nothing to mend (no
+    inverted face, no crossing, no edit); else of it and its untangled copies, each repaired,
+    the one with the fewest flaws (:func:`_repair_rank`; on a tie the copy untangled near its
+    flaws, then the one untangled everywhere, then the layout itself). ``info[UNTANGLED_KEY]`` is a callable giving the
+    untangled layouts (the same quads with their folds untangled on the target near the flaws,
+    then everywhere), or None.
+
+    Returns ``(mesh, info)`` as :func:`_repaired_layout`, ``info["untangled"]`` saying which
+    was kept.
+    """
+    info = dict(info)
+    untangle = info.pop(UNTANGLED_KEY, None)
+    mesh, repaired = _repaired_layout(mesh, info, surface)
+    repaired["untangled"] = False
+    if untangle is None or _repair_rank(repaired) == (False, 0, 0, 0, 0):
+        return mesh, repaired  # nothing to mend: the layout as it is
+    kept = None
+    for untangled in untangle():
+        other_mesh, other = _repaired_layout(untangled, info, surface)
+        if kept is None or _repair_rank(other) < _repair_rank(kept[1]):
+            kept = other_mesh, {**other, "untangled": True}
+    if kept is None or _repair_rank(repaired) < _repair_rank(kept[1]):
+        kept = mesh, repaired
+    return kept
+
+
+def _repair_rank(info):
+    """Order of two repaired embeddings of one layout, the smaller the better (a tuple): the
+    fewer limit flaws after the repair (:func:`_flaw_rank`), then the fewer inverted faces
+    before it and the fewer edits it made (the less the embedding had to be mended)."""
+    return (*_flaw_rank(info), info["layout_inverted_faces"], info["edits"])
 
 
 def _repaired_layout(mesh, info, surface):
@@ -628,11 +689,11 @@ class _LayoutAttempts:
         result = _layout_on_target(self.V, self.F, self.complex_, self.tables, *self.budget,
                                    self.collapsible, self.give_up_faces,
                                    self.refinement_rounds, least, self.separate)
-        mesh, polycube, rounds, refinement, folded, quad_chart = result
-        return mesh, polycube, rounds, refinement, folded, self.complex_, quad_chart
+        mesh, polycube, rounds, refinement, folded, quad_chart, untangled = result
+        return mesh, polycube, rounds, refinement, folded, self.complex_, quad_chart, untangled
 
     def attempt(self, least):
-        """``(mesh, polycube, rounds, refinement, folded, complex_, quad_chart)``.
+        """``(mesh, polycube, rounds, refinement, folded, complex_, quad_chart, untangled)``.
 
         Raises as :func:`_polycube_base_mesh`.
         """
@@ -836,7 +897,7 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
         best, flipped_faces = candidate, facing_away
         if not facing_away.any():
             break
-    mesh, polycube, rounds, refinement, folded, layout_complex, _ = best
+    mesh, polycube, rounds, refinement, folded, layout_complex, _, untangled = best
     flipped = layout.flipped
     complex_ = layout_complex
     within = abs(polycube.faces - target_faces) <= BUDGET_TOLERANCE * target_faces
@@ -855,5 +916,6 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
         "folded_points": int(folded), "rectangles": refinement.rectangles,
         "collapsed_sides": int((polycube.side_length == 0).sum()),
         "relabelled_area": 0.0 if relabelled is None else relabelled.changed_area,
+        UNTANGLED_KEY: untangled,
     }
     return mesh, info

@@ -53,6 +53,14 @@ def _centre_operators(base):
     return operators
 
 
+def face_centre_operators(base):
+    """Limit position and limit tangents at every face centre as linear maps of the base
+    vertices: ``(L, Tu, Tv)``, sparse (f, n) each (:func:`face_centre_limit` multiplies them
+    by the vertices; the normal is ``Tu v x Tv v``)."""
+    step, L, Tu, Tv = _centre_operators(base)
+    return (L @ step).tocsr(), (Tu @ step).tocsr(), (Tv @ step).tocsr()
+
+
 def inverted_faces(base, target_vertices, target_faces, surface=None):
     """(f,) bool base faces whose limit normal is more than 90 degrees from the target's.
 
