@@ -80,6 +80,8 @@ class FitSettings:
     long way usually clears what was left; where they left more, the crossings are where
     the cage cannot follow the part, and the long way does not have fewer but costs
     seconds."""
+    warm_rounds: int = 2
+    """Least-squares rounds of a fit from ``WARM_START`` (on the fit's level only)."""
     distance_samples: int = 20000
     """Target samples of the target-to-surface figures (:func:`_distances`)."""
     near_touch: float = 0.01
@@ -94,7 +96,7 @@ FIT = FitSettings()
 @single_threaded()
 def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="inside",
                   progress=None, penalty=1e5, step_fraction=0.05, surface="limit",
-                  start="best-fit", rounds=10, tol=2e-3, patience=5, seed=0):
+                  start="best-fit", rounds=10, tol=2e-3, patience=5, seed=0, warm=None):
     """Move the base-mesh vertices so the subdivision surface fills or fits the target.
 
     The fit runs in phases, each returning a record of :mod:`core.fitting.records`:
@@ -146,6 +148,10 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         ``'cage'`` (from the cage as given, the paper's start).
     rounds : int >= 0, most Gauss-Newton rounds of the least-squares fit.
     seed : int, seed of its target samples (:meth:`core.target_surface.TargetSurface.samples`).
+    warm : None, or (n, 3) float64 a least-squares fit of a cage that ``base`` refines,
+        placed on ``base`` (:func:`core.fitting.refine.refined_without_crossings` with
+        ``carry``): the least-squares fit starts there with ``FIT.warm_rounds`` rounds on the
+        fit's level only (``WARM_START``); ignored without a least-squares fit.
     tol, patience : the RGP stops when its best objective improved by less than
         ``tol * max(|best|, step)`` over the last ``patience`` iterations (see
         :func:`core.fitting.rgp.run_rgp`); ``iterations`` is the cap.
@@ -169,6 +175,9 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction)
     _check_choices(surface, start, rounds, tol, patience)
     V0 = _check_base(base)
+    if warm is not None and np.shape(warm) != V0.shape:
+        raise ParameterError(f"warm must have the base's shape {V0.shape}, got "
+                             f"{np.shape(warm)}")
     setup = _prepare(base, target, levels, surface)
     creased = None
     if mode != "none" and base.n_creases:
@@ -179,9 +188,12 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     least_squares = inside_start = inside = None
     if mode == "best-fit" or (mode == "inside" and start == "best-fit" and not base.n_creases):
         progress.report("fit", 0.0, "least-squares fit")
-        least_squares = _least_squares(base, setup, rounds, seed, refit_local=mode != "inside")
+        least_squares = _least_squares(base, setup, rounds, seed, refit_local=mode != "inside",
+                                       warm=warm)
     if mode == "inside" and start == "best-fit":
-        inside_start = _inside_start(base, setup, least_squares, start)
+        inside_start = _inside_start(base, setup, least_squares,
+                                     start if warm is None or least_squares is None
+                                     else WARM_START)
     vertices, crossings = _latest(base.vertices, least_squares, inside_start)
     if mode == "inside":
         inside = _inside_fit(base, setup, vertices, crossings, iterations, t_min, penalty,
@@ -273,15 +285,22 @@ def _latest(vertices, *phases):
     return vertices, crossings
 
 
-def _least_squares(base, setup, rounds, seed, refit_local):
-    """The least-squares fit (:func:`_two_level_best_fit`), untangled (:func:`_untangled`).
+def _least_squares(base, setup, rounds, seed, refit_local, warm=None):
+    """The least-squares fit (:func:`_two_level_best_fit`; from ``warm``, (n, 3) float64 or
+    None, ``FIT.warm_rounds`` rounds on the fit's level, ``WARM_START``), untangled
+    (:func:`_untangled`).
 
     Returns
     -------
     core.fitting.records.LeastSquaresFit
     """
-    fitted, coarse = _two_level_best_fit(base, setup.hierarchy, setup.limit_map,
-                                         setup.triangles, setup.target, rounds, seed=seed)
+    if warm is None:
+        fitted, coarse = _two_level_best_fit(base, setup.hierarchy, setup.limit_map,
+                                             setup.triangles, setup.target, rounds, seed=seed)
+    else:
+        fitted = best_fit(base, setup.limit_map, setup.triangles, setup.target,
+                          rounds=min(rounds, FIT.warm_rounds), seed=seed, start=warm)
+        coarse = BestFitResult(fitted.vertices, 0, [], "rounds")
     untangled = _untangled(base, setup, fitted.vertices, rounds, seed, refit_local)
     return LeastSquaresFit(fitted.rounds + coarse.rounds, fitted.rms, coarse.rms,
                            fitted.stopped, untangled)
@@ -472,6 +491,14 @@ def _passes_around_crossings(problem, held, moved, T, step, budget, options):
         if not count:
             break
     return held, passes, used, fixed
+
+
+WARM_START = "best-fit from the fit of the cage this one refines"
+"""The inside fit of a refined cage (:mod:`core.fitting.outside_refinement`) starts its
+least-squares fit from the least-squares fit of the cage it refines, placed on the refined
+cage, and runs ``FIT.warm_rounds`` rounds on the fit's level only: the coarse level's large
+moves were made in the first fit, and the refined strips start on its limit surface. The
+pull inside, the RGP and the hold-backs run as from a cold start."""
 
 
 CREASED_START = "crease-fitted cage"

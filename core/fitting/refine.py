@@ -29,7 +29,7 @@ deviation is at most the tolerance or the next refinement would exceed the face 
 Where every split of the fitted cage crosses itself (an inside fit held a thin wall back, so
 its walls nearly touch), the cage the fit started from is split instead.
 """
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -168,11 +168,17 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
         return result
 
 
-def refined_without_crossings(fitted, deviating, crossing_faces):
+def refined_without_crossings(fitted, deviating, crossing_faces, carry=None):
     """The cage ``fitted`` with the strips of its ``deviating`` (m,) bool faces split, placed
     on its limit surface (``keep_limit``), and faces left whole where that made the limit
     surface cross itself more than the cage's (see :func:`fit_to_tolerance`; the cage need
     not be fitted, :mod:`core.fitting.outside_refinement` refines the unfitted one).
+
+    ``carry`` : None, or (n, 3) float64 other positions of ``fitted``'s vertices (a fit of
+    it). Given, the result has a third element: the vertices of the refined cage (n', 3)
+    placed on the limit surface of ``carry`` the same way, the same strips split (None when
+    nothing was refined), so that a fit of the refined cage can start where the fit of
+    ``fitted`` went.
 
     The deviating faces under the crossings (or, where every crossing lies in faces that
     do not deviate, such as those where strips ended, the deviating faces nearest to them,
@@ -182,26 +188,42 @@ def refined_without_crossings(fitted, deviating, crossing_faces):
     cut the other.
 
     Returns ``(refined PolyMesh, None)``, or ``(None, reason str)`` when no deviating face
-    could be split without a crossing.
+    could be split without a crossing (with ``carry``, a third element as said above).
     """
+    refined, seeds, within, why_not = _split_without_crossings(fitted, deviating,
+                                                               crossing_faces)
+    if carry is None:
+        return refined, why_not
+    if refined is None:
+        return None, why_not, None
+    carried = split_quad_strips(replace(fitted, vertices=np.asarray(carry, dtype=np.float64)),
+                                seeds, within=within, keep_limit=True)
+    return refined, None, carried.vertices
+
+
+def _split_without_crossings(fitted, deviating, crossing_faces):
+    """:func:`refined_without_crossings` without ``carry``: ``(refined PolyMesh, seeds,
+    within, None)`` (the ``seeds`` and ``within`` of :func:`split_quad_strips` that made it),
+    or ``(None, None, None, reason str)``."""
     within = deviating.copy()
     turned = np.zeros(len(within), dtype=bool)
     topology = mesh_topology(fitted.face_vertices, fitted.face_offsets, len(fitted.vertices))
     allowed = None
     for tries in range(REFINE.uncross_tries + 1):
         if not within.any():
-            return None, ("splitting the deviating faces makes the refined limit surface cross "
-                          "itself (thin or sharp features under them need other faces)")
+            return None, None, None, (
+                "splitting the deviating faces makes the refined limit surface cross itself "
+                "(thin or sharp features under them need other faces)")
         seeds = _seed_directions(fitted, np.flatnonzero(within), turned)
         refined, parent = split_quad_strips(fitted, seeds, within=within, keep_limit=True,
                                             with_parent=True)
         if crossing_faces is None:
-            return refined, None
+            return refined, seeds, within, None
         if allowed is None:
             allowed = len(crossing_faces(fitted))
         crossing = crossing_faces(refined)
         if len(crossing) <= allowed:
-            return refined, None
+            return refined, seeds, within, None
         under = np.zeros(len(within), dtype=bool)
         under[parent[np.unique(crossing)]] = True
         hit = under & within
@@ -215,9 +237,10 @@ def refined_without_crossings(fitted, deviating, crossing_faces):
             break
         within[hit & turned] = False  # crossed both ways: left whole
         turned[hit] = True
-    return None, (f"splitting the deviating faces makes the refined limit surface cross itself "
-                  f"({len(crossing)} triangle pairs after {tries + 1} tries turning faces or "
-                  f"leaving them whole)")
+    return None, None, None, (
+        f"splitting the deviating faces makes the refined limit surface cross itself "
+        f"({len(crossing)} triangle pairs after {tries + 1} tries turning faces or leaving "
+        f"them whole)")
 
 
 def split_quad_strips(cage, seeds, within=None, keep_limit=False, with_parent=False):
