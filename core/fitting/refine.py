@@ -168,17 +168,21 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
         return result
 
 
-def refined_without_crossings(fitted, deviating, crossing_faces, carry=None):
+@dataclass(frozen=True)
+class StripSplit:
+    """Which quad strips :func:`split_quad_strips` split: its ``seeds`` ((s, 2) int64) and
+    ``within`` ((m,) bool), so that other positions of the same cage can be split the same
+    way (:func:`split_positions`, :func:`split_values`)."""
+
+    seeds: np.ndarray
+    within: np.ndarray
+
+
+def refined_without_crossings(fitted, deviating, crossing_faces, with_split=False):
     """The cage ``fitted`` with the strips of its ``deviating`` (m,) bool faces split, placed
     on its limit surface (``keep_limit``), and faces left whole where that made the limit
     surface cross itself more than the cage's (see :func:`fit_to_tolerance`; the cage need
     not be fitted, :mod:`core.fitting.outside_refinement` refines the unfitted one).
-
-    ``carry`` : None, or (n, 3) float64 other positions of ``fitted``'s vertices (a fit of
-    it). Given, the result has a third element: the vertices of the refined cage (n', 3)
-    placed on the limit surface of ``carry`` the same way, the same strips split (None when
-    nothing was refined), so that a fit of the refined cage can start where the fit of
-    ``fitted`` went.
 
     The deviating faces under the crossings (or, where every crossing lies in faces that
     do not deviate, such as those where strips ended, the deviating faces nearest to them,
@@ -188,23 +192,39 @@ def refined_without_crossings(fitted, deviating, crossing_faces, carry=None):
     cut the other.
 
     Returns ``(refined PolyMesh, None)``, or ``(None, reason str)`` when no deviating face
-    could be split without a crossing (with ``carry``, a third element as said above).
+    could be split without a crossing; with ``with_split``, a third element, the
+    :class:`StripSplit` that made the refined cage (None when there is none).
     """
     refined, seeds, within, why_not = _split_without_crossings(fitted, deviating,
                                                                crossing_faces)
-    if carry is None:
+    if not with_split:
         return refined, why_not
-    if refined is None:
-        return None, why_not, None
-    carried = split_quad_strips(replace(fitted, vertices=np.asarray(carry, dtype=np.float64)),
-                                seeds, within=within, keep_limit=True)
-    return refined, None, carried.vertices
+    return refined, why_not, None if refined is None else StripSplit(seeds, within)
+
+
+def split_positions(cage, split, vertices):
+    """(n', 3) float64 vertices of ``cage`` split by ``split`` (:class:`StripSplit`) and placed
+    on the limit surface of ``vertices`` ((n, 3) other positions of the cage's vertices, such
+    as a fit of it) instead of the cage's own (:func:`split_quad_strips` with
+    ``keep_limit``)."""
+    moved = replace(cage, vertices=np.asarray(vertices, dtype=np.float64))
+    return split_quad_strips(moved, split.seeds, within=split.within, keep_limit=True).vertices
+
+
+def split_values(cage, split, values):
+    """(n',) float64 ``values`` ((n,) float, one per vertex of ``cage``) on the vertices of the
+    cage split by ``split`` (:class:`StripSplit`): the same at the cage's vertices, the mean
+    of the ends at a new edge midpoint and of the corners at a new face centre."""
+    padded = np.zeros((len(values), 3))
+    padded[:, 0] = values
+    return split_quad_strips(replace(cage, vertices=padded), split.seeds,
+                             within=split.within).vertices[:, 0]
 
 
 def _split_without_crossings(fitted, deviating, crossing_faces):
-    """:func:`refined_without_crossings` without ``carry``: ``(refined PolyMesh, seeds,
-    within, None)`` (the ``seeds`` and ``within`` of :func:`split_quad_strips` that made it),
-    or ``(None, None, None, reason str)``."""
+    """:func:`refined_without_crossings`: ``(refined PolyMesh, seeds, within, None)`` (the
+    ``seeds`` and ``within`` of :func:`split_quad_strips` that made it), or
+    ``(None, None, None, reason str)``."""
     within = deviating.copy()
     turned = np.zeros(len(within), dtype=bool)
     topology = mesh_topology(fitted.face_vertices, fitted.face_offsets, len(fitted.vertices))

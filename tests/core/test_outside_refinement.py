@@ -119,27 +119,37 @@ def test_a_zero_goal_turns_the_refinement_off_and_a_negative_one_is_refused():
         ReconstructionParams(outside_refinement=-0.1)
 
 
-def test_a_refined_cage_is_fitted_from_the_least_squares_fit_split_the_same_way():
-    """The stub's least-squares fit is the cage scaled by 1.1 about the origin: the warm start
-    of the refined cage is the refined cage scaled the same way (the split and its placement
-    on the limit surface are linear in the vertices), and the first fit has none."""
+def test_a_refined_cage_is_fitted_from_the_previous_fit_carried_onto_it():
+    """The stub's least-squares fit is the cage scaled by 1.1 about the origin and its pull's
+    weights are 100 at vertices with x > 0, 1 elsewhere: the warm start of the refined cage
+    is the refined cage scaled the same way (the split and its placement on the limit
+    surface are linear in the vertices), its weights are the cage's at the cage's vertices
+    and geometric means at the new ones (between 1 and 100); the first fit has none."""
     from dataclasses import replace
 
-    from core.fitting.records import LeastSquaresFit, Untangling
+    from core.fitting.records import InsideStart, LeastSquaresFit, Untangling
 
     cage, target = sphere_cut_by_a_box()
     log, warms = [], []
     plain = stub_fit(lambda n: 0.01 if n == 54 else 0.001, log, warms)
+    n = len(cage.vertices)
+    weights = np.where(cage.vertices[:, 0] > 0, 100.0, 1.0)
 
     def fit(cage, warm):
         fitted, record = plain(cage, warm)
-        untangled = Untangling(1.1 * cage.vertices, 0, np.ones(len(cage.vertices)), 0, [0],
-                               None, 0, 0, None)
-        return fitted, replace(record, least_squares=LeastSquaresFit(10, [], [], "rounds",
-                                                                      untangled))
+        V = cage.vertices
+        untangled = Untangling(1.1 * V, 0, np.ones(len(V)), 0, [0], None, 0, 0, None)
+        pulled = np.where(V[:, 0] > 0, 100.0, 1.0)
+        return fitted, replace(record,
+                               least_squares=LeastSquaresFit(10, [], [], "rounds", untangled),
+                               inside_start=InsideStart(V, 0, "best-fit", 0.0, [0], 0, pulled))
 
     fit_with_outside_refinement(cage, target, fit, 0.003, 10_000)
     assert len(log) == 2 and warms[0] is None
-    refined = log[1]
-    assert warms[1].shape == refined.vertices.shape
-    assert np.allclose(warms[1], 1.1 * refined.vertices, atol=1e-9)
+    refined, warm = log[1], warms[1]
+    assert warm.vertices.shape == refined.vertices.shape
+    assert np.allclose(warm.vertices, 1.1 * refined.vertices, atol=1e-9)
+    assert np.allclose(warm.pull_stiffness[:n], weights, rtol=1e-12, atol=0.0)
+    new = warm.pull_stiffness[n:]
+    assert len(new) and np.all((new >= 1.0 - 1e-12) & (new <= 100.0 + 1e-9))
+    assert np.any((new > 1.5) & (new < 99.0))  # a new vertex between the two sides
