@@ -178,9 +178,12 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction)
     _check_choices(surface, start, rounds, tol, patience)
     V0 = _check_base(base)
-    if warm is not None and np.shape(warm.vertices) != V0.shape:
-        raise ParameterError(f"warm.vertices must have the base's shape {V0.shape}, got "
-                             f"{np.shape(warm.vertices)}")
+    if warm is not None and (np.shape(warm.vertices) != V0.shape or (
+            warm.pull_stiffness is not None and np.shape(warm.pull_stiffness) != V0.shape[:1])):
+        raise ParameterError(f"warm: vertices of shape {V0.shape} and pull_stiffness of shape "
+                             f"{V0.shape[:1]} (or None) expected, got "
+                             f"{np.shape(warm.vertices)} and "
+                             f"{np.shape(warm.pull_stiffness)}")
     setup = _prepare(base, target, levels, surface)
     creased = None
     if mode != "none" and base.n_creases:

@@ -262,7 +262,7 @@ def test_thickness_constraint_holds_when_the_target_is_thin():
     {"t_min": -0.1}, {"t_min": float("nan")}, {"mode": "outside"}, {"penalty": 0.0},
     {"step_fraction": 0.0}, {"step_fraction": 2.0}, {"surface": "cage"},
     {"mode": "nearest"}, {"start": "middle"}, {"rounds": -1}, {"rounds": 2.5},
-    {"warm": WarmStart(np.zeros((3, 3)))},
+    {"warm": WarmStart(np.zeros((3, 3)))}, {"warm": WarmStart(np.zeros((8, 3)), np.ones(3))},
 ])
 def test_bad_parameters_raise(kwargs):
     with pytest.raises(ParameterError):
