@@ -80,6 +80,10 @@ class FitSettings:
     long way usually clears what was left; where they left more, the crossings are where
     the cage cannot follow the part, and the long way does not have fewer but costs
     seconds."""
+    warm_rounds: int = 2
+    """Least-squares rounds of a fit from ``WARM_START`` (on the fit's level only)."""
+    warm_pull_tries: int = 1
+    """Stiffer pulls inside of a fit from ``WARM_START`` (:func:`_pulled_inside`)."""
     distance_samples: int = 20000
     """Target samples of the target-to-surface figures (:func:`_distances`)."""
     near_touch: float = 0.01
@@ -94,7 +98,7 @@ FIT = FitSettings()
 @single_threaded()
 def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="inside",
                   progress=None, penalty=1e5, step_fraction=0.05, surface="limit",
-                  start="best-fit", rounds=10, tol=2e-3, patience=5, seed=0):
+                  start="best-fit", rounds=10, tol=2e-3, patience=5, seed=0, warm=None):
     """Move the base-mesh vertices so the subdivision surface fills or fits the target.
 
     The fit runs in phases, each returning a record of :mod:`core.fitting.records`:
@@ -146,6 +150,11 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
         ``'cage'`` (from the cage as given, the paper's start).
     rounds : int >= 0, most Gauss-Newton rounds of the least-squares fit.
     seed : int, seed of its target samples (:meth:`core.target_surface.TargetSurface.samples`).
+    warm : None, or core.fitting.records.WarmStart carried from the fit of a cage that
+        ``base`` refines: the least-squares fit starts from its ``vertices`` with
+        ``FIT.warm_rounds`` rounds on the fit's level only, the pull inside from its
+        ``pull_stiffness`` with ``FIT.warm_pull_tries`` stiffer pulls (``WARM_START``);
+        ignored without a least-squares fit.
     tol, patience : the RGP stops when its best objective improved by less than
         ``tol * max(|best|, step)`` over the last ``patience`` iterations (see
         :func:`core.fitting.rgp.run_rgp`); ``iterations`` is the cap.
@@ -169,6 +178,12 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     _check_parameters(levels, iterations, t_min, mode, penalty, step_fraction)
     _check_choices(surface, start, rounds, tol, patience)
     V0 = _check_base(base)
+    if warm is not None and (np.shape(warm.vertices) != V0.shape or (
+            warm.pull_stiffness is not None and np.shape(warm.pull_stiffness) != V0.shape[:1])):
+        raise ParameterError(f"warm: vertices of shape {V0.shape} and pull_stiffness of shape "
+                             f"{V0.shape[:1]} (or None) expected, got "
+                             f"{np.shape(warm.vertices)} and "
+                             f"{np.shape(warm.pull_stiffness)}")
     setup = _prepare(base, target, levels, surface)
     creased = None
     if mode != "none" and base.n_creases:
@@ -179,9 +194,11 @@ def fit_base_mesh(base, target, levels=2, iterations=100, t_min=None, mode="insi
     least_squares = inside_start = inside = None
     if mode == "best-fit" or (mode == "inside" and start == "best-fit" and not base.n_creases):
         progress.report("fit", 0.0, "least-squares fit")
-        least_squares = _least_squares(base, setup, rounds, seed, refit_local=mode != "inside")
+        least_squares = _least_squares(base, setup, rounds, seed, refit_local=mode != "inside",
+                                       warm=warm)
     if mode == "inside" and start == "best-fit":
-        inside_start = _inside_start(base, setup, least_squares, start)
+        inside_start = _inside_start(base, setup, least_squares, start,
+                                     None if least_squares is None else warm)
     vertices, crossings = _latest(base.vertices, least_squares, inside_start)
     if mode == "inside":
         inside = _inside_fit(base, setup, vertices, crossings, iterations, t_min, penalty,
@@ -273,30 +290,39 @@ def _latest(vertices, *phases):
     return vertices, crossings
 
 
-def _least_squares(base, setup, rounds, seed, refit_local):
-    """The least-squares fit (:func:`_two_level_best_fit`), untangled (:func:`_untangled`).
+def _least_squares(base, setup, rounds, seed, refit_local, warm=None):
+    """The least-squares fit (:func:`_two_level_best_fit`; from ``warm.vertices``, ``warm`` a
+    WarmStart or None, ``FIT.warm_rounds`` rounds on the fit's level, ``WARM_START``),
+    untangled (:func:`_untangled`).
 
     Returns
     -------
     core.fitting.records.LeastSquaresFit
     """
-    fitted, coarse = _two_level_best_fit(base, setup.hierarchy, setup.limit_map,
-                                         setup.triangles, setup.target, rounds, seed=seed)
+    if warm is None:
+        fitted, coarse = _two_level_best_fit(base, setup.hierarchy, setup.limit_map,
+                                             setup.triangles, setup.target, rounds, seed=seed)
+    else:
+        fitted = best_fit(base, setup.limit_map, setup.triangles, setup.target,
+                          rounds=min(rounds, FIT.warm_rounds), seed=seed, start=warm.vertices)
+        coarse = BestFitResult(fitted.vertices, 0, [], "rounds")
     untangled = _untangled(base, setup, fitted.vertices, rounds, seed, refit_local)
     return LeastSquaresFit(fitted.rounds + coarse.rounds, fitted.rms, coarse.rms,
                            fitted.stopped, untangled)
 
 
-def _inside_start(base, setup, least_squares, start):
+def _inside_start(base, setup, least_squares, start, warm=None):
     """The inside fit's start: the least-squares fit, or without one the creased cage
     (``CREASED_START``, its crease curves on the target's feature lines already), pulled
-    just inside the target (:func:`_pulled_inside`) and held back where the pull crosses
-    itself, so that the RGP starts nowhere crossing itself.
+    just inside the target (:func:`_pulled_inside`; from a WarmStart ``warm``, with its
+    ``pull_stiffness``) and held back where the pull crosses itself, so that the RGP starts
+    nowhere crossing itself.
 
     Returns
     -------
     core.fitting.records.InsideStart
     """
+    carried = None
     if least_squares is None:
         vertices, label, held = base.vertices, CREASED_START, 0
         crossings = count_crossings(setup.limit_map, setup.triangles, vertices)
@@ -304,14 +330,16 @@ def _inside_start(base, setup, least_squares, start):
     else:
         vertices, crossings, label = least_squares.vertices, least_squares.crossings, start
         held, stiffness = least_squares.untangled.held_back, least_squares.untangled.stiffness
-    pulled, margin, pull_crossings = _pulled_inside(base, setup.limit_map, setup.triangles,
-                                                    setup.target, vertices, stiffness)
+        if warm is not None:
+            label, carried = WARM_START, warm.pull_stiffness
+    pulled, margin, pull_crossings, weights = _pulled_inside(
+        base, setup.limit_map, setup.triangles, setup.target, vertices, stiffness, carried)
     vertices, crossings, pull_held = _held_back(vertices, crossings, pulled.vertices,
                                                 setup.limit_map, setup.triangles, pulled.pairs)
     held += pull_held
     if held:
         label = f"{label}, held back at {held} base vertices (it crossed itself)"
-    return InsideStart(vertices, crossings, label, margin, pull_crossings, held)
+    return InsideStart(vertices, crossings, label, margin, pull_crossings, held, weights)
 
 
 def _inside_fit(base, setup, vertices, crossings, iterations, t_min, penalty, step_fraction,
@@ -474,6 +502,17 @@ def _passes_around_crossings(problem, held, moved, T, step, budget, options):
     return held, passes, used, fixed
 
 
+WARM_START = "best-fit from the fit of the cage this one refines"
+"""The inside fit of a refined cage (:mod:`core.fitting.outside_refinement`) starts its
+least-squares fit from the least-squares fit of the cage it refines, placed on the refined
+cage, and runs ``FIT.warm_rounds`` rounds on the fit's level only: the coarse level's large
+moves were made in the first fit, and the refined strips start on its limit surface. Its
+pull inside starts with the smoothness weights that fit's pull ended with (stiffer where the
+walls of a thin plate were pulled through each other) and makes ``FIT.warm_pull_tries``
+stiffer pulls (:func:`_pulled_inside`). The RGP and the hold-backs run as from a cold
+start."""
+
+
 CREASED_START = "crease-fitted cage"
 """The inside fit of a cage with creases starts from the cage with its crease curves fitted
 to the target's feature lines (:func:`core.fitting.crease_curves.fit_crease_curves`), pulled
@@ -564,11 +603,15 @@ def _held_back(reference, crossings, moved, mapping, T, moved_pairs=None):
     return vertices, crossings, held
 
 
-def _pulled_inside(base, limit_map, T, target, vertices, stiffness):
+def _pulled_inside(base, limit_map, T, target, vertices, stiffness, carried=None):
     """The least-squares fit pulled just inside the target (:func:`pull_inside`, with the
     fit's smoothness weights ``stiffness``), made stiffer where the pull crosses itself;
     with ``stiffness=None`` (a creased cage's own start, ``CREASED_START``) pulled once, with
-    the plain smoothness term.
+    the plain smoothness term. ``carried`` ((n,) float64 or None, the weights the pull of
+    the fit of a cage that this one refines ended with, ``WARM_START``) multiplies the
+    weights, and at most ``FIT.warm_pull_tries`` stiffer pulls follow: the pull starts stiff
+    where that fit's pull crossed, so it crosses in far fewer pairs than a pull with the
+    plain term, and one stiffer pull leaves fewer than four from the plain term do.
 
     Where the pull's limit surface crosses itself (the two walls of a thin plate pulled
     through each other by a coarse cage's wide stencils), it is made again with the
@@ -581,18 +624,24 @@ def _pulled_inside(base, limit_map, T, target, vertices, stiffness):
     pulled : core.fitting.crossings.Untangled, the pull with the fewest crossings.
     margin : float, the depth pulled to (model units).
     crossings : list of int, crossing pairs of the pull and of each stiffer pull.
+    weights : (n,) float64 or None, the smoothness weights of the pull kept (None: the plain
+        term of a creased cage's start).
     """
     start = target.closest(limit_map @ vertices)
     margin = FIT.inside_margin * float(np.sqrt(np.mean(start.signed ** 2)))
     weights = np.ones(len(vertices)) if stiffness is None else stiffness
+    tries = 0 if stiffness is None else UNTANGLE.stiffen_tries
+    if carried is not None and stiffness is not None:
+        weights, tries = weights * carried, min(tries, FIT.warm_pull_tries)
 
     def pull(extra, previous=None):
         return pull_inside(base, limit_map, target, vertices, margin, FIT.inside_rounds,
                            stiffness=weights * extra, start_closest=start)
 
     pulled = stiffen_until_clean(pull(np.ones(len(vertices))), pull, limit_map, T,
-                                 tries=0 if stiffness is None else UNTANGLE.stiffen_tries)
-    return pulled, margin, pulled.counts
+                                 tries=tries)
+    kept = None if stiffness is None else weights * pulled.stiffness
+    return pulled, margin, pulled.counts, kept
 
 
 def _two_level_best_fit(base, hierarchy, limit_map, T, target, rounds, stiffness=None, seed=0):

@@ -14,8 +14,11 @@ lies outside, splits the quad strips of the **unfitted** cage through the base f
 fine limit points lie outside (:func:`core.fitting.refine.refined_without_crossings`, the
 refined cage on the same limit surface) and fits that again. The fitted cage is not
 refined: its limit surface nearly touches itself where the walls were held back, and its
-refinements cross themselves. The fit
-that leaves the least volume outside is kept.
+refinements cross themselves. The fit of the refined cage starts from the least-squares fit
+of the cage it refines, split the same way, and its pull inside from that fit's smoothness
+weights (``WARM_START`` of :mod:`core.fitting.fit`): that fit has made the large moves
+already, and its pull found where the walls cross. The fit that leaves the least volume
+outside is kept.
 
 The default goal (``outside_refinement`` of :class:`core.params.ReconstructionParams`, 0.003)
 is three fifths of the 0.5 % containment goal: the fit's figure is measured on its level-``i``
@@ -27,8 +30,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from core.fitting.deviation import fine_limit_points
-from core.fitting.records import FitRecord
-from core.fitting.refine import refined_without_crossings
+from core.fitting.records import FitRecord, WarmStart
+from core.fitting.refine import refined_without_crossings, split_positions, split_values
 from core.target_surface import TargetSurface
 from core.types import PolyMesh
 
@@ -74,7 +77,9 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
     ----------
     base : PolyMesh, the cage to fit (closed, quad-dominant, unfitted).
     target : TriMesh, closed, outward oriented.
-    fit : callable ``fit(cage) -> (fitted PolyMesh, FitRecord)``, the configured inside fit.
+    fit : callable ``fit(cage, warm) -> (fitted PolyMesh, FitRecord)``, the configured inside
+        fit (``warm``: None, or the core.fitting.records.WarmStart of a refined cage, the
+        ``warm`` of :func:`core.fitting.fit.fit_base_mesh`).
     goal : float >= 0, fraction of the target's volume allowed outside; 0: no refinement.
     max_faces : int, no cage with more faces is fitted.
     crossing_faces : None or callable ``crossing_faces(cage) -> (k, 2) int``, the base faces
@@ -87,7 +92,7 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
     -------
     OutsideRefinement
     """
-    fitted, info = fit(base)
+    fitted, info = fit(base, None)
     result = OutsideRefinement(fitted, info)
     cage, surface = base, None
     for done in range(rounds + 1):
@@ -108,9 +113,10 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
             surface = TargetSurface(target.vertices, target.faces)
         marked = faces_outside(fitted, info.levels, surface, OUTSIDE.depth)
         result.rounds[-1]["refined_faces"] = int(marked.sum())
-        refined, why_not = (None, "no point lies deeper outside than "
-                            f"{OUTSIDE.depth:g} of the diagonal") if not marked.any() else \
-            refined_without_crossings(cage, marked, crossing_faces)
+        refined, why_not, split = (None, "no point lies deeper outside than "
+                                   f"{OUTSIDE.depth:g} of the diagonal", None) \
+            if not marked.any() else refined_without_crossings(cage, marked, crossing_faces,
+                                                               with_split=True)
         if refined is not None and refined.n_faces > max_faces:
             why_not = (f"the refined cage would have {refined.n_faces} faces, more than "
                        f"max_base_faces={max_faces}")
@@ -121,8 +127,24 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
         if progress is not None:
             progress.report("fit", 0.0, f"{outside:.2%} of the volume outside: fitting a "
                                         f"cage refined there ({refined.n_faces} faces)")
+        warm = _warm_start(cage, split, info)
         cage = refined
-        fitted, info = fit(cage)
+        fitted, info = fit(cage, warm)
+
+
+def _warm_start(cage, split, info):
+    """The WarmStart of the fit of ``cage`` split by ``split``
+    (core.fitting.refine.StripSplit), carried from ``info`` (the FitRecord of the fit of
+    ``cage``): its least-squares fit placed on the refined cage, its pull's smoothness
+    weights spread to the new vertices as geometric means; None without a least-squares
+    fit."""
+    if info.least_squares is None:
+        return None
+    vertices = split_positions(cage, split, info.least_squares.vertices)
+    weights = None if info.inside_start is None else info.inside_start.stiffness
+    if weights is not None:
+        weights = np.exp(split_values(cage, split, np.log(weights)))
+    return WarmStart(vertices, weights)
 
 
 def _kept(result, reason):

@@ -124,6 +124,8 @@ class InsideStart:
     margin : float, the depth pulled to (model units).
     pull_crossings : list of int, crossing pairs of the pull and of each stiffer pull.
     held_back : int, base vertices held back, of the least-squares fit and of the pull.
+    stiffness : (n,) float64 or None, the smoothness weights of the pull kept (None: the
+        plain smoothness term of a creased cage's start).
     """
 
     vertices: np.ndarray
@@ -132,6 +134,24 @@ class InsideStart:
     margin: float
     pull_crossings: list
     held_back: int
+    stiffness: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class WarmStart:
+    """Where the inside fit of a refined cage starts, carried from the fit of the cage it
+    refines (:mod:`core.fitting.outside_refinement`, ``WARM_START`` of
+    :mod:`core.fitting.fit`).
+
+    vertices : (n, 3) float64 that fit's least-squares fit, placed on the refined cage
+        (:func:`core.fitting.refine.split_positions`).
+    pull_stiffness : (n,) float64 or None, the smoothness weights of that fit's pull inside,
+        on the refined cage's vertices (:func:`core.fitting.refine.split_values` of their
+        logarithms); None: the pull starts with the plain term.
+    """
+
+    vertices: np.ndarray
+    pull_stiffness: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ deviation is at most the tolerance or the next refinement would exceed the face 
 Where every split of the fitted cage crosses itself (an inside fit held a thin wall back, so
 its walls nearly touch), the cage the fit started from is split instead.
 """
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -168,7 +168,17 @@ def fit_to_tolerance(base, target, tolerance, max_faces, fit, crossing_faces=Non
         return result
 
 
-def refined_without_crossings(fitted, deviating, crossing_faces):
+@dataclass(frozen=True)
+class StripSplit:
+    """Which quad strips :func:`split_quad_strips` split: its ``seeds`` ((s, 2) int64) and
+    ``within`` ((m,) bool), so that other positions of the same cage can be split the same
+    way (:func:`split_positions`, :func:`split_values`)."""
+
+    seeds: np.ndarray
+    within: np.ndarray
+
+
+def refined_without_crossings(fitted, deviating, crossing_faces, with_split=False):
     """The cage ``fitted`` with the strips of its ``deviating`` (m,) bool faces split, placed
     on its limit surface (``keep_limit``), and faces left whole where that made the limit
     surface cross itself more than the cage's (see :func:`fit_to_tolerance`; the cage need
@@ -182,26 +192,58 @@ def refined_without_crossings(fitted, deviating, crossing_faces):
     cut the other.
 
     Returns ``(refined PolyMesh, None)``, or ``(None, reason str)`` when no deviating face
-    could be split without a crossing.
+    could be split without a crossing; with ``with_split``, a third element, the
+    :class:`StripSplit` that made the refined cage (None when there is none).
     """
+    refined, seeds, within, why_not = _split_without_crossings(fitted, deviating,
+                                                               crossing_faces)
+    if not with_split:
+        return refined, why_not
+    return refined, why_not, None if refined is None else StripSplit(seeds, within)
+
+
+def split_positions(cage, split, vertices):
+    """(n', 3) float64 vertices of ``cage`` split by ``split`` (:class:`StripSplit`) and placed
+    on the limit surface of ``vertices`` ((n, 3) other positions of the cage's vertices, such
+    as a fit of it) instead of the cage's own (:func:`split_quad_strips` with
+    ``keep_limit``)."""
+    moved = replace(cage, vertices=np.asarray(vertices, dtype=np.float64))
+    return split_quad_strips(moved, split.seeds, within=split.within, keep_limit=True).vertices
+
+
+def split_values(cage, split, values):
+    """(n',) float64 ``values`` ((n,) float, one per vertex of ``cage``) on the vertices of the
+    cage split by ``split`` (:class:`StripSplit`): the same at the cage's vertices, the mean
+    of the ends at a new edge midpoint and of the corners at a new face centre."""
+    padded = np.zeros((len(values), 3))
+    padded[:, 0] = values
+    return split_quad_strips(replace(cage, vertices=padded), split.seeds,
+                             within=split.within).vertices[:, 0]
+
+
+def _split_without_crossings(fitted, deviating, crossing_faces):
+    """:func:`refined_without_crossings`: ``(refined PolyMesh, seeds, within, None)`` (the
+    ``seeds`` and ``within`` of :func:`split_quad_strips` that made it), or
+    ``(None, None, None, reason str)``."""
     within = deviating.copy()
     turned = np.zeros(len(within), dtype=bool)
     topology = mesh_topology(fitted.face_vertices, fitted.face_offsets, len(fitted.vertices))
     allowed = None
     for tries in range(REFINE.uncross_tries + 1):
         if not within.any():
-            return None, ("splitting the deviating faces makes the refined limit surface cross "
-                          "itself (thin or sharp features under them need other faces)")
+            return None, None, None, (
+                "splitting the deviating faces makes the refined limit surface cross itself "
+                "(thin or sharp features under them need other faces)")
         seeds = _seed_directions(fitted, np.flatnonzero(within), turned)
         refined, parent = split_quad_strips(fitted, seeds, within=within, keep_limit=True,
                                             with_parent=True)
         if crossing_faces is None:
-            return refined, None
+            return refined, seeds, within, None
         if allowed is None:
             allowed = len(crossing_faces(fitted))
         crossing = crossing_faces(refined)
         if len(crossing) <= allowed:
-            return refined, None
+            return refined, seeds, within, None
         under = np.zeros(len(within), dtype=bool)
         under[parent[np.unique(crossing)]] = True
         hit = under & within
@@ -215,9 +257,10 @@ def refined_without_crossings(fitted, deviating, crossing_faces):
             break
         within[hit & turned] = False  # crossed both ways: left whole
         turned[hit] = True
-    return None, (f"splitting the deviating faces makes the refined limit surface cross itself "
-                  f"({len(crossing)} triangle pairs after {tries + 1} tries turning faces or "
-                  f"leaving them whole)")
+    return None, None, None, (
+        f"splitting the deviating faces makes the refined limit surface cross itself "
+        f"({len(crossing)} triangle pairs after {tries + 1} tries turning faces or leaving "
+        f"them whole)")
 
 
 def split_quad_strips(cage, seeds, within=None, keep_limit=False, with_parent=False):

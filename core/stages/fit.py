@@ -43,11 +43,11 @@ def run_fit(intake, basemesh, params, progress):
     def crossing_faces(cage):
         return limit_self_intersections(cage, levels_of(cage))[1]
 
-    def fit_once(cage):
+    def fit_once(cage, warm=None):
         return fit_base_mesh(cage, target, levels=levels_of(cage),
                              iterations=params.fit_iterations, mode=params.fit_mode,
                              t_min=params.fit_t_min, tol=params.fit_convergence,
-                             progress=progress)
+                             progress=progress, warm=warm)
 
     def fit(cage):
         if params.fit_mode != "inside" or not params.outside_refinement:

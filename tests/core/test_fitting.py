@@ -6,6 +6,7 @@ import trimesh
 
 from core.errors import InvalidMeshError, ParameterError
 from core.fitting import TargetSurface, fit_base_mesh
+from core.fitting.records import WarmStart
 from core.fitting.best_fit import NormalEquations, _FineEntries, _umbrella, best_fit
 from core.fitting.responses import (InsideBounds, packaging, thickness, thickness_constraint,
                                     volume)
@@ -167,6 +168,21 @@ def test_cube_cage_fills_a_sphere_from_inside():
     assert lsq.figures.distances.mean_distance < 0.1 * lsq.figures.initial.mean_distance
 
 
+def test_a_warm_start_runs_few_rounds_and_still_fills_from_inside():
+    from core.fitting.fit import FIT, WARM_START
+
+    target = sphere_target(1.0)
+    base = centred_cube(1.0)
+    _, cold = fit_base_mesh(base, target, levels=2, iterations=60)
+    _, warm = fit_base_mesh(base, target, levels=2, iterations=60,
+                            warm=WarmStart(cold.least_squares.vertices,
+                                           cold.inside_start.stiffness))
+    assert cold.least_squares.rounds > FIT.warm_rounds >= warm.least_squares.rounds
+    assert warm.start.startswith(WARM_START)
+    assert warm.figures.outside_volume_fraction <= 1e-3
+    assert warm.figures.distances.mean_distance < 1.5 * cold.figures.distances.mean_distance
+
+
 @pytest.mark.slow
 def test_best_fit_recovers_a_scaled_limit_surface():
     # the target is the (finely sampled) limit surface of the cage scaled by 1.2; since
@@ -246,6 +262,7 @@ def test_thickness_constraint_holds_when_the_target_is_thin():
     {"t_min": -0.1}, {"t_min": float("nan")}, {"mode": "outside"}, {"penalty": 0.0},
     {"step_fraction": 0.0}, {"step_fraction": 2.0}, {"surface": "cage"},
     {"mode": "nearest"}, {"start": "middle"}, {"rounds": -1}, {"rounds": 2.5},
+    {"warm": WarmStart(np.zeros((3, 3)))}, {"warm": WarmStart(np.zeros((8, 3)), np.ones(3))},
 ])
 def test_bad_parameters_raise(kwargs):
     with pytest.raises(ParameterError):

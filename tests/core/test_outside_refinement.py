@@ -41,11 +41,14 @@ def test_the_faces_marked_are_those_with_limit_points_outside_deeper_than_the_de
     assert np.array_equal(marked, expected)
 
 
-def stub_fit(outside_by_faces, log):
+def stub_fit(outside_by_faces, log, warms=None):
     """A fit that leaves the cage where it is and reports the outside volume fraction
-    ``outside_by_faces(n_faces)``; every cage it is given is appended to ``log``."""
-    def fit(cage):
+    ``outside_by_faces(n_faces)``; every cage it is given is appended to ``log`` (and its
+    warm start to ``warms``, when given)."""
+    def fit(cage, warm):
         log.append(cage)
+        if warms is not None:
+            warms.append(warm)
         nothing = Distances(0.0, 0.0, 0.0, 0.0)
         figures = FitFigures(nothing, nothing, outside_by_faces(cage.n_faces), 0.0, 0.0)
         return cage, FitRecord("inside", 2, "limit", None, figures, 0.0)
@@ -114,3 +117,39 @@ def test_a_zero_goal_turns_the_refinement_off_and_a_negative_one_is_refused():
     assert ReconstructionParams().outside_refinement == 0.003
     with pytest.raises(ParameterError, match="outside_refinement"):
         ReconstructionParams(outside_refinement=-0.1)
+
+
+def test_a_refined_cage_is_fitted_from_the_previous_fit_carried_onto_it():
+    """The stub's least-squares fit is the cage scaled by 1.1 about the origin and its pull's
+    weights are 100 at vertices with x > 0, 1 elsewhere: the warm start of the refined cage
+    is the refined cage scaled the same way (the split and its placement on the limit
+    surface are linear in the vertices), its weights are the cage's at the cage's vertices
+    and geometric means at the new ones (between 1 and 100); the first fit has none."""
+    from dataclasses import replace
+
+    from core.fitting.records import InsideStart, LeastSquaresFit, Untangling
+
+    cage, target = sphere_cut_by_a_box()
+    log, warms = [], []
+    plain = stub_fit(lambda n: 0.01 if n == 54 else 0.001, log, warms)
+    n = len(cage.vertices)
+    weights = np.where(cage.vertices[:, 0] > 0, 100.0, 1.0)
+
+    def fit(cage, warm):
+        fitted, record = plain(cage, warm)
+        V = cage.vertices
+        untangled = Untangling(1.1 * V, 0, np.ones(len(V)), 0, [0], None, 0, 0, None)
+        pulled = np.where(V[:, 0] > 0, 100.0, 1.0)
+        return fitted, replace(record,
+                               least_squares=LeastSquaresFit(10, [], [], "rounds", untangled),
+                               inside_start=InsideStart(V, 0, "best-fit", 0.0, [0], 0, pulled))
+
+    fit_with_outside_refinement(cage, target, fit, 0.003, 10_000)
+    assert len(log) == 2 and warms[0] is None
+    refined, warm = log[1], warms[1]
+    assert warm.vertices.shape == refined.vertices.shape
+    assert np.allclose(warm.vertices, 1.1 * refined.vertices, atol=1e-9)
+    assert np.allclose(warm.pull_stiffness[:n], weights, rtol=1e-12, atol=0.0)
+    new = warm.pull_stiffness[n:]
+    assert len(new) and np.all((new >= 1.0 - 1e-12) & (new <= 100.0 + 1e-9))
+    assert np.any((new > 1.5) & (new < 99.0))  # a new vertex between the two sides
