@@ -92,7 +92,18 @@ class ChartComplex:
         around what the slit reaches (a former hole and whatever hangs off it). Such a walk must
         close by itself, so that the two banks of the slit coincide. (A slit whose banks lie on
         two loops, in a chart that is not a disk, has no walk.)
+
+        The walks depend on the loops only (not on the side directions), and every program of
+        a layout asks for them, so they are found once per complex (a new list each call).
         """
+        cached = self.__dict__.get("_slit_walks")
+        if cached is None:
+            cached = self._find_slit_walks()
+            object.__setattr__(self, "_slit_walks", cached)  # frozen: not a field, not copied
+        return list(cached)
+
+    def _find_slit_walks(self):
+        """The walks of :meth:`slit_walks` (a list of (k,) int64, read-only)."""
         walks = []
         for loop in range(len(self.loop_chart)):
             a, b = self.loop_offsets[loop], self.loop_offsets[loop + 1]
@@ -102,7 +113,9 @@ class ChartComplex:
             for side in np.unique(sides[slit]).tolist():
                 both = np.flatnonzero(sides == side)
                 if len(both) == 2:
-                    walks.append(a + np.arange(both[0] + 1, both[1], dtype=np.int64))
+                    walk = a + np.arange(both[0] + 1, both[1], dtype=np.int64)
+                    walk.flags.writeable = False
+                    walks.append(walk)
         return walks
 
     def loop(self, index):

@@ -335,6 +335,9 @@ def untangle_on_target(positions, mesh, quad_size, where, rings=None, rounds=UNT
         rings)
     best, best_folded = positions, None
     eps = None
+    # every quad corner's gradient goes to the corner after it, the one before it and itself
+    gather = np.concatenate([np.roll(quads, -1, axis=1), np.roll(quads, 1, axis=1),
+                             quads]).reshape(-1)
     for _ in range(rounds):
         frames = quad_frames(where.normals(positions, quads))
         normal = np.cross(frames[:, 0], frames[:, 1])
@@ -357,10 +360,9 @@ def untangle_on_target(positions, mesh, quad_size, where, rings=None, rounds=UNT
                                               eps)
             # J = frame^T (edge) / size: back to the edges, then to the corners
             grad_e = np.einsum("fdk,fcdj->fckj", frames, grad_j) / quad_size[:, None, None, None]
-            grad = np.zeros_like(positions)
-            np.add.at(grad, np.roll(quads, -1, axis=1), grad_e[..., 0])
-            np.add.at(grad, np.roll(quads, 1, axis=1), grad_e[..., 1])
-            np.add.at(grad, quads, -grad_e.sum(axis=-1))
+            grad = _sum_at(len(positions), gather,
+                           np.concatenate([grad_e[..., 0], grad_e[..., 1],
+                                           -grad_e.sum(axis=-1)]).reshape(-1, 3))
             # the limit normal at each face centre against the quad's normal
             tu, tv = tangent_u @ moved, tangent_v @ moved
             det = np.einsum("fk,fk->f", normal, np.cross(tu, tv)) / limit_scale
@@ -381,6 +383,13 @@ def untangle_on_target(positions, mesh, quad_size, where, rings=None, rounds=UNT
     if best_folded is None or _flaws(positions, quads, frames, tangent_u, tangent_v) < best_folded:
         best = positions
     return best
+
+
+def _sum_at(n, index, values):
+    """(n, 3) float64 sums of the rows of ``values`` ((k, 3) float64) at ``index`` ((k,)
+    int64), each added in the order given (as ``np.add.at`` into zeros, column by column)."""
+    return np.stack([np.bincount(index, weights=values[:, axis], minlength=n)
+                     for axis in range(3)], axis=1)
 
 
 def _near_flaws(positions, quads, frames, tangent_u, tangent_v, rings):
