@@ -60,18 +60,37 @@ class SideDirectionError(LabelingError):
         self.collapsible = np.asarray(collapsible, dtype=bool)
 
 
-def _loop_directions(complex_, loop):
-    """Sign keys and base directions of the sides of one loop in its chart's plane.
+def _loop_pairs(complex_, loops):
+    """Every pair of consecutive references (each reference and the one after it, cyclically)
+    of ``loops``, in the chart's plane with the current side directions.
 
-    Returns ``(keys, directions, normal)``: (k,) int64 index into ``complex_.side_sign``'s
-    flat (s * 2 + column) layout, (k, 3) float64 unit directions, (3,) outward label normal.
+    Parameters
+    ----------
+    complex_ : ChartComplex; loops : (l',) int64 loop indices.
+
+    Returns
+    -------
+    keys, next_keys : (k,) int64 sign keys (``side * 2 + column``, as ``complex_.side_sign``'s
+        flat layout) of each reference and of the one after it, loop by loop in walk order.
+    turn : (k,) int64 turn at the corner between them about the chart's outward label normal
+        (+1 left, -1 right, 0 straight).
+    parallel : (k,) float64 dot product of their unit directions (-1: a reversal).
+    loop_of : (k,) int64 index into ``loops`` of each reference.
     """
-    chart = complex_.loop_chart[loop]
-    label = complex_.chart_label[chart]
-    normal = AXES[label // 2] * (1.0 if label % 2 == 0 else -1.0)
-    positions = np.arange(complex_.loop_offsets[loop], complex_.loop_offsets[loop + 1])
-    keys, directions = _reference_directions(complex_, positions)
-    return keys, directions, normal
+    loops = np.asarray(loops, dtype=np.int64)
+    sizes = complex_.loop_offsets[loops + 1] - complex_.loop_offsets[loops]
+    total = int(sizes.sum())
+    first = np.repeat(np.cumsum(sizes) - sizes, sizes)
+    local = np.arange(total) - first
+    positions = np.repeat(complex_.loop_offsets[loops], sizes) + local
+    keys, d = _reference_directions(complex_, positions)
+    nxt = first + (local + 1) % np.maximum(np.repeat(sizes, sizes), 1)
+    label = complex_.chart_label[complex_.loop_chart[loops]]
+    normal = AXES[label // 2] * np.where(label % 2 == 0, 1.0, -1.0)[:, None]
+    turn = np.rint(np.einsum("kj,kj->k", np.cross(d, d[nxt]),
+                             np.repeat(normal, sizes, axis=0))).astype(np.int64)
+    parallel = np.einsum("kj,kj->k", d, d[nxt])
+    return keys, keys[nxt], turn, parallel, np.repeat(np.arange(len(loops)), sizes)
 
 
 def _reference_directions(complex_, positions):
@@ -91,14 +110,11 @@ def _reference_directions(complex_, positions):
 
 def loop_turning(complex_):
     """(l,) int64 turning number of every loop with the current side directions (99 = reversal)."""
-    totals = []
-    for loop in range(len(complex_.loop_chart)):
-        _, d, normal = _loop_directions(complex_, loop)
-        nxt = np.roll(d, -1, axis=0)
-        reverse = np.einsum("kj,kj->k", d, nxt) < -0.5
-        turn = np.rint(np.cross(d, nxt) @ normal).astype(np.int64)
-        totals.append(99 if reverse.any() else int(turn.sum()))
-    return np.asarray(totals, dtype=np.int64)
+    n_loops = len(complex_.loop_chart)
+    _, _, turn, parallel, loop_of = _loop_pairs(complex_, np.arange(n_loops))
+    totals = np.bincount(loop_of, weights=turn, minlength=n_loops).astype(np.int64)
+    reversed_ = np.bincount(loop_of, weights=parallel < -0.5, minlength=n_loops) > 0
+    return np.where(reversed_, 99, totals)
 
 
 def make_loops_rectilinear(complex_, collapsible=None, feasible_collapsible=None):
@@ -381,21 +397,12 @@ def _direction_program(complex_, charts, collapsible, slits=None):
     _DirectionProgram
     """
     loops = np.flatnonzero(np.isin(complex_.loop_chart, charts))
-    keys, pair_b, pair_turn, pair_parallel = [], [], [], []
-    for loop in loops:
-        k, d, normal = _loop_directions(complex_, loop)
-        nxt = np.roll(d, -1, axis=0)
-        keys.append(k)
-        pair_b.append(np.roll(k, -1))
-        pair_turn.append(np.rint(np.cross(d, nxt) @ normal))
-        pair_parallel.append(np.einsum("kj,kj->k", d, nxt))
-    loop_of_pair = np.repeat(np.arange(len(loops)), [len(k) for k in keys])
-    used = np.unique(np.concatenate(keys))
+    keys, pair_b, turn, parallel, loop_of_pair = _loop_pairs(complex_, loops)
+    turn = turn.astype(np.float64)
+    used = np.unique(keys)
     nf = len(used)
-    a = np.searchsorted(used, np.concatenate(keys))
-    b = np.searchsorted(used, np.concatenate(pair_b))
-    turn = np.concatenate(pair_turn)
-    parallel = np.concatenate(pair_parallel)
+    a = np.searchsorted(used, keys)
+    b = np.searchsorted(used, pair_b)
     npairs = len(a)
     n_loops = len(loops)
     sides, key_side = np.unique(used // 2, return_inverse=True)
