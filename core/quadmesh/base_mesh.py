@@ -151,11 +151,17 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     refine, cuts, unrefinable, last = {}, {}, set(), None
     separations, added, rejected, overlapping = [], [], set(), []
     scale, rounds = None, []
+    refinements, bounded = {}, set()  # rounds that keep the refinement (separations) reuse it
     for _ in range(SEPARATION_ROUNDS if separate else refinement_rounds):
-        refinement = rectangular_refinement(complex_, tables, refine, cuts)
-        if not refine or not np.any(collapsible):
+        key = (frozenset(refine.items()),
+               frozenset((chart, frozenset(corners)) for chart, corners in cuts.items()))
+        if key not in refinements:
+            refinements[key] = rectangular_refinement(complex_, tables, refine, cuts)
+        refinement = refinements[key]
+        if (not refine or not np.any(collapsible)) and key not in bounded:
             _check_minimum(complex_, tables, refinement, collapsible, give_up_faces,
                            max_base_faces)
+            bounded.add(key)
         try:
             if scale is None:
                 # the face budget is searched once without refinements and once at the end;
