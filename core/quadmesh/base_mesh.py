@@ -548,7 +548,14 @@ def _repaired_or_untangled(mesh, info, surface):
         return mesh, repaired  # nothing to mend: the layout as it is
     kept = None
     for untangled in untangle():
-        other_mesh, other = _repaired_layout(untangled, info, surface)
+        inverted = int(inverted_faces(untangled, surface.vertices, surface.faces, surface).sum())
+        # the best rank its repair can reach: no flaw left, no edit made; a copy kept needs a
+        # rank below the copies before it and no worse than the layout's (which wins only
+        # when strictly better), so one whose best cannot get there is not repaired at all
+        best = (False, 0, 0, inverted, 0)
+        if (kept is not None and best >= _repair_rank(kept[1])) or best > _repair_rank(repaired):
+            continue
+        other_mesh, other = _repaired_layout(untangled, info, surface, inverted)
         if kept is None or _repair_rank(other) < _repair_rank(kept[1]):
             kept = other_mesh, {**other, "untangled": True}
     if kept is None or _repair_rank(repaired) < _repair_rank(kept[1]):
@@ -563,7 +570,7 @@ def _repair_rank(info):
     return (*_flaw_rank(info), info["layout_inverted_faces"], info["edits"])
 
 
-def _repaired_layout(mesh, info, surface):
+def _repaired_layout(mesh, info, surface, inverted=None):
     """The polycube layout with its inverted faces, and the faces where its limit surface
     crosses itself, repaired where that helps, and its report.
 
@@ -578,13 +585,16 @@ def _repaired_layout(mesh, info, surface):
     differ much from the charts' shapes, over a few faces or many; the edits mend the few, and
     a layout left crossing itself gives way to the paired decimation (:func:`build_base_mesh`).
 
+    ``inverted``: the inverted faces of ``mesh`` (an int) where already counted, or None.
+
     Returns ``(mesh, info)``: ``info`` updated with the figures of the repaired mesh,
     ``inverted_faces`` (after the repair), ``layout_inverted_faces`` (before it),
     ``limit_crossings`` (self-crossing triangle pairs of the repaired cage's level-2 limit
     surface, :class:`core.quadmesh.crossing_count.LimitCrossingCount`), ``moved_vertices`` and
     ``edits``.
     """
-    inverted = int(inverted_faces(mesh, surface.vertices, surface.faces, surface).sum())
+    if inverted is None:
+        inverted = int(inverted_faces(mesh, surface.vertices, surface.faces, surface).sum())
     moved, edits, layout_inverted = 0, 0, inverted
     count_crossings = LimitCrossingCount(mesh)
     crossings = count_crossings.crossings
