@@ -89,10 +89,6 @@ REFINEMENT_ROUNDS = 24
 FALLBACK_REFINEMENT_ROUNDS = 8
 """The same where the paired decimation can take over: layouts within the budget seldom need
 more than a few refinements."""
-COLLAPSE_RETRIES = (0.35, 0.25)
-"""Shorter limits (units at the first scale) below which sides may collapse, tried in turn when
-collapsing every side shorter than ``COLLAPSE_BELOW`` makes a layout that does not embed
-(:class:`_LayoutAttempts`)."""
 SEPARATION_ROUNDS = 24
 """Rounds of quantization, each keeping apart one more pair of crossing segments of every
 overlapping chart, where the layout separates crossings instead of cutting charts."""
@@ -676,14 +672,10 @@ def _paired_decimation_base_mesh(target_v, target_f, surface, target_faces, max_
 class _LayoutAttempts:
     """Quantized layouts of one labeling, with and without collapsible slivers.
 
-    The first attempt lets sides measured shorter than half a unit collapse. Collapsing many
-    sides at once can pinch a vertex, make a chart polygon overlap or touch itself, or close a
-    handle; which sides do that is not known before the layout is built, so where it fails (or
-    changes the genus) only the sides shorter than each limit of :data:`COLLAPSE_RETRIES` in
-    turn may collapse (fewer slivers vanish, the layout grows a little). Where all of those
-    fail, the sides keep at least one unit and the side directions are chosen again. Where
-    every attempt fails, all are tried again with the crossings of overlapping charts kept
-    apart instead of the charts cut (``separate`` of :func:`_layout_on_target`):
+    The first attempt lets sides measured shorter than half a unit collapse; where that fails
+    (or changes the genus), the sides keep at least one unit and the side directions are
+    chosen again. Where both fail, both are tried again with the crossings of overlapping
+    charts kept apart instead of the charts cut (``separate`` of :func:`_layout_on_target`):
     cuts tie a chart into rectangles of at least one unit each, which can push the layout
     past the caller's limit where separating the few crossing segments would not. The side
     directions, loop tables and way of undoing overlaps of the first successful attempt are
@@ -745,60 +737,30 @@ class _LayoutAttempts:
         """The attempts that cut overlapping charts (the class docstring); every side
         directions and loop tables they reach are listed in ``reached``."""
         complex_ = self.original
-        tried = []
-        for below in (None,) + COLLAPSE_RETRIES:
-            limited = collapsible if below is None else (
-                collapsible & collapsible_sides(complex_, self.budget[0], below))
-            if not limited.any() or any(np.array_equal(limited, t) for t in tried):
-                continue
-            tried.append(limited)
-            # the first set's side directions raise (the caller relabels such charts)
-            directions = make_loops_rectilinear(complex_, limited) if len(tried) == 1 else None
-            try:
-                if directions is None:
-                    directions = make_loops_rectilinear(complex_, limited)
-                return self._collapsed_attempt(least, limited, directions)
-            except MilpTimeLimitError:
-                raise  # keeping the slivers would only make it slower
-            except LayoutTooLargeError:
-                if self._bound_exceeds(limited):
-                    raise  # keeping more slivers would only make it larger
-                # larger only where overlapping charts were cut: fewer slivers may need no cut
-            except (LabelingError, InvalidMeshError):
-                pass  # fewer slivers may vanish cleanly
-        # slivers that cannot vanish cleanly keep at least one unit
-        self.complex_, self.flipped = make_loops_rectilinear(
-            complex_, np.zeros(complex_.n_sides, dtype=bool),
-            feasible_collapsible=collapsible)
-        self.collapsible = np.zeros(complex_.n_sides, dtype=bool)
-        self.tables = loop_tables(self.complex_, self.V, self.part_frames)
-        self.reached.append((self.complex_, self.flipped, self.collapsible, self.tables))
-        try:
-            return self._run(least)
-        except InvalidMeshError as exc:
-            raise LabelingError(f"the quantized layout does not embed as a closed "
-                                f"2-manifold: {exc}; try another labeling or --parts") from exc
-
-    def _bound_exceeds(self, collapsible):
-        """Whether the linear bound on every layout of the current side directions without
-        refinements (:func:`minimum_faces`) exceeds ``give_up_faces`` with ``collapsible``
-        sides allowed length zero; fewer collapsible sides only raise it."""
-        refinement = rectangular_refinement(self.complex_, self.tables)
-        return minimum_faces(self.complex_, self.tables, refinement,
-                             collapsible) > self.give_up_faces
-
-    def _collapsed_attempt(self, least, collapsible, directions):
-        """The attempt with ``collapsible`` sides allowed length zero and the side directions
-        ``directions`` (:func:`make_loops_rectilinear` of them); raises as
-        :func:`_layout_on_target`, or LabelingError when the layout changes the genus."""
-        self.complex_, self.flipped = directions
+        self.complex_, self.flipped = make_loops_rectilinear(complex_, collapsible)
         self.collapsible = collapsible
-        self.tables = loop_tables(self.complex_, self.V, self.part_frames)
-        self.reached.append((self.complex_, self.flipped, collapsible, self.tables))
-        result = self._run(least)
-        if polymesh_genus(result[0]) != self.target_genus:
-            raise LabelingError("collapsing sliver charts changed the genus")
-        return result
+        try:
+            self.tables = loop_tables(self.complex_, self.V, self.part_frames)
+            self.reached.append((self.complex_, self.flipped, collapsible, self.tables))
+            result = self._run(least)
+            if polymesh_genus(result[0]) != self.target_genus:
+                raise LabelingError("collapsing sliver charts changed the genus")
+            return result
+        except (LayoutTooLargeError, MilpTimeLimitError):
+            raise  # keeping the slivers would only make it larger (or slower)
+        except (LabelingError, InvalidMeshError):
+            # slivers that cannot vanish cleanly keep at least one unit
+            self.complex_, self.flipped = make_loops_rectilinear(
+                complex_, np.zeros(complex_.n_sides, dtype=bool),
+                feasible_collapsible=collapsible)
+            self.collapsible = np.zeros(complex_.n_sides, dtype=bool)
+            self.tables = loop_tables(self.complex_, self.V, self.part_frames)
+            self.reached.append((self.complex_, self.flipped, self.collapsible, self.tables))
+            try:
+                return self._run(least)
+            except InvalidMeshError as exc:
+                raise LabelingError(f"the quantized layout does not embed as a closed "
+                                    f"2-manifold: {exc}; try another labeling or --parts") from exc
 
 
 def _narrowest_sides(tables, side_length, charts):

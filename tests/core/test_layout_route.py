@@ -177,28 +177,6 @@ def test_a_dev_mesh_with_thin_walls_takes_the_polycube_route_with_no_inverted_fa
     assert base.n_faces <= FALLBACK_OVER_BUDGET * 300
 
 
-@pytest.mark.slow
-def test_a_part_with_many_small_features_takes_the_polycube_route_with_its_genus():
-    """featuretype's pockets, bosses and holes are charts narrower than half a quad: collapsing
-    all of them at once does not embed, collapsing the narrowest does."""
-    import os
-
-    from core.pipeline import reconstruct
-    from tests.core.dev_meshes import MESHES
-
-    path = os.path.join(MESHES, "featuretype.stl")
-    if not os.path.exists(path):
-        pytest.skip("dev mesh featuretype.stl not available")
-    result = reconstruct(path, {"fit_mode": "none"}, stop_after="basemesh")
-    info = result.report["base_mesh"]
-    base = result.state.basemesh.cage
-    assert result.report["labeling"]["valid"]
-    assert info["method"] == "polycube" and info["fallback_reason"] is None
-    check_polymesh(base)
-    assert polymesh_genus(base) == result.report["input"]["genus"] >= 1
-    assert base.n_faces <= FALLBACK_OVER_BUDGET * 300
-
-
 # a frame whose right bar is a fifth as wide as the others (genus 1)
 THIN_BAR_FRAME = [[[0, 0, 0], [4, 1, 1]], [[0, 2, 0], [4, 3, 1]], [[0, 0, 0], [1, 3, 1]],
                   [[3.8, 0, 0], [4, 3, 1]]]

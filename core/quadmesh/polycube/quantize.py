@@ -621,10 +621,9 @@ def first_scale(complex_, target_faces):
     return float(np.sqrt(target_faces / max(float(complex_.chart_area.sum()), 1e-300)))
 
 
-def collapsible_sides(complex_, target_faces, below=COLLAPSE_BELOW):
-    """(s,) bool sides shorter than ``below`` units (default ``COLLAPSE_BELOW``) at
-    :func:`first_scale`."""
-    return measured_lengths(complex_) * first_scale(complex_, target_faces) < below
+def collapsible_sides(complex_, target_faces):
+    """(s,) bool sides shorter than ``COLLAPSE_BELOW`` units at :func:`first_scale`."""
+    return measured_lengths(complex_) * first_scale(complex_, target_faces) < COLLAPSE_BELOW
 
 
 def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=None,
