@@ -105,16 +105,23 @@ def test_a_folded_corner_costs_more_the_smaller_eps():
     assert costs[0] < costs[1] < costs[2] and costs[2] > 1e3
 
 
-def test_folded_quads_of_a_cube_cage_are_unfolded_on_their_faces():
+def folded_cube_cage():
+    """The cube cage with a vertex inside its top face pushed past its diagonal neighbour, so
+    its quads fold: (mesh, quad_normals, where, quads, frames, folded positions, the pushed
+    vertex)."""
     mesh, quad_normals = cube_cage()
     where = OnCube(mesh, quad_normals)
     quads = mesh.face_vertices.reshape(-1, 4)
     frames = quad_frames(quad_normals)
-    # a vertex inside the top face pushed past its diagonal neighbour: its quads fold
     top = np.flatnonzero(np.isclose(mesh.vertices[:, 2], 1.0) & where.free)
     corner = top[np.argmin(mesh.vertices[top, 0] + mesh.vertices[top, 1])]
     folded_positions = mesh.vertices.copy()
     folded_positions[corner, :2] = [0.9, 0.9]
+    return mesh, quad_normals, where, quads, frames, folded_positions, corner
+
+
+def test_folded_quads_of_a_cube_cage_are_unfolded_on_their_faces():
+    mesh, quad_normals, where, quads, frames, folded_positions, corner = folded_cube_cage()
     assert folded_corners(folded_positions, quads, frames).any()
 
     positions = untangle_on_target(folded_positions, mesh, np.full(len(quads), 1.0 / N), where)
@@ -133,14 +140,7 @@ def test_folded_quads_of_a_cube_cage_are_unfolded_on_their_faces():
 
 
 def test_untangling_near_the_fold_leaves_the_far_vertices_where_they_were():
-    mesh, quad_normals = cube_cage()
-    where = OnCube(mesh, quad_normals)
-    quads = mesh.face_vertices.reshape(-1, 4)
-    frames = quad_frames(quad_normals)
-    top = np.flatnonzero(np.isclose(mesh.vertices[:, 2], 1.0) & where.free)
-    corner = top[np.argmin(mesh.vertices[top, 0] + mesh.vertices[top, 1])]
-    folded_positions = mesh.vertices.copy()
-    folded_positions[corner, :2] = [0.9, 0.9]
+    mesh, quad_normals, where, quads, frames, folded_positions, corner = folded_cube_cage()
     # off the top face: the bottom face's inner vertices are more than two rings away
     bottom = np.flatnonzero(np.isclose(mesh.vertices[:, 2], 0.0) & where.free)
     disturbed = folded_positions.copy()
