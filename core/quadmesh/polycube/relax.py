@@ -344,8 +344,7 @@ def untangle_on_target(positions, mesh, quad_size, where, rings=None, rounds=UNT
         folded = _flaws(positions, quads, frames, tangent_u, tangent_v)
         # the limit normals' determinants against the quads' normals, in units of the
         # typical one of a quad of the reference size
-        limit_det = np.einsum("fk,fk->f", normal, np.cross(tangent_u @ positions,
-                                                           tangent_v @ positions))
+        limit_det = _centre_determinants(positions, frames, tangent_u, tangent_v)
         unit = np.median(limit_det[limit_det > 0] / quad_size[limit_det > 0] ** 2) \
             if (limit_det > 0).any() else 1.0
         limit_scale = unit * quad_size ** 2
@@ -392,11 +391,19 @@ def _sum_at(n, index, values):
                      for axis in range(3)], axis=1)
 
 
+def _centre_determinants(positions, frames, tangent_u, tangent_v):
+    """(f,) float64 determinants of the limit tangents at each face centre against the quad's
+    normal (the cross product of its two ``frames`` axes, (f, 2, 3) float64): negative where the limit normal
+    is more than 90 degrees from the quad's. ``tangent_u``, ``tangent_v``: (f, p) sparse
+    centre-derivative operators (:func:`core.quadmesh.orientation.face_centre_operators`)."""
+    normal = np.cross(frames[:, 0], frames[:, 1])
+    return np.einsum("fk,fk->f", normal, np.cross(tangent_u @ positions, tangent_v @ positions))
+
+
 def _near_flaws(positions, quads, frames, tangent_u, tangent_v, rings):
     """(p,) bool vertices within ``rings`` (>= 1) rings of quads with a folded corner or a
     limit normal facing away from the quad's normal."""
-    normal = np.cross(frames[:, 0], frames[:, 1])
-    det = np.einsum("fk,fk->f", normal, np.cross(tangent_u @ positions, tangent_v @ positions))
+    det = _centre_determinants(positions, frames, tangent_u, tangent_v)
     flawed = (det < 0) | folded_corners(positions, quads, frames).any(axis=1)
     near = np.zeros(len(positions), dtype=bool)
     near[quads[flawed].reshape(-1)] = True
@@ -408,6 +415,5 @@ def _near_flaws(positions, quads, frames, tangent_u, tangent_v, rings):
 def _flaws(positions, quads, frames, tangent_u, tangent_v):
     """``(faces, corners)``: quads whose limit normal at the centre is more than 90 degrees
     from their normal, and folded quad corners (compared as a pair, the first first)."""
-    normal = np.cross(frames[:, 0], frames[:, 1])
-    det = np.einsum("fk,fk->f", normal, np.cross(tangent_u @ positions, tangent_v @ positions))
+    det = _centre_determinants(positions, frames, tangent_u, tangent_v)
     return int((det < 0).sum()), int(folded_corners(positions, quads, frames).sum())
