@@ -187,17 +187,33 @@ class LabelingResult:
 
 
 @dataclass(frozen=True)
+class Segmentation:
+    """The parts, frames and labeling one base mesh was built on.
+
+    parts : PartsResult; frames : FramesResult; labeling : LabelingResult (of the same faces).
+    """
+
+    parts: PartsResult
+    frames: FramesResult
+    labeling: LabelingResult
+
+
+@dataclass(frozen=True)
 class BaseMeshResult:
     """The coarse quad base mesh (cage) on the target (report key ``base_mesh``).
 
     cage : PolyMesh, closed, 2-manifold, outward, the target's genus; its ``creases`` are
         the edges on the target's sharp feature lines (``core.quadmesh.creases``; the paired
         decimation only), None when there are none.
+    segmentation : Segmentation the cage was built on when it is not the labeling stage's
+        (the one-part labeling, tried where the parts' polycube layout failed and kept where
+        its layout did not), else None.
     """
 
     cage: PolyMesh
     report: dict = field(default_factory=dict)
     message: str = ""
+    segmentation: Segmentation = None
 
 
 @dataclass(frozen=True)
@@ -248,6 +264,17 @@ class PipelineState:
     basemesh: BaseMeshResult = None
     fit: FitResult = None
     patches: PatchesResult = None
+
+    @property
+    def segmentation(self):
+        """The parts, frames and labeling of the base mesh (a ``Segmentation``): the base-mesh
+        stage's own where it built the cage on another labeling than the labeling stage's
+        (``BaseMeshResult.segmentation``), else the labeling stage's; None before the labeling."""
+        if self.basemesh is not None and self.basemesh.segmentation is not None:
+            return self.basemesh.segmentation
+        if self.labeling is None:
+            return None
+        return Segmentation(self.parts, self.frames, self.labeling)
 
     @property
     def cage(self):

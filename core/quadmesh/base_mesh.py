@@ -390,7 +390,8 @@ def _merge_points(n, pairs):
 
 
 def build_base_mesh(target, face_part, face_label, face_frame, part_frames, target_faces=300,
-                    max_base_faces=2500, face_interface_axis=None, method="auto"):
+                    max_base_faces=2500, face_interface_axis=None, method="auto",
+                    decimation=None):
     """Closed quad base mesh on the target: the polycube layout, else the paired decimation.
 
     With ``method="auto"`` the quantized polycube layout of the labeling (this module's
@@ -419,6 +420,8 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     face_interface_axis : (m, 3) float64 normal of the part interface next to each face, NaN
         rows where none (``FrameField.face_interface_axis``), or None.
     method : one of ``BASE_MESH_METHODS``.
+    decimation : DecimationCache shared by the calls on one target (the paired decimation
+        needs no labeling, so the layouts of several labelings share it), or None.
 
     Returns
     -------
@@ -465,6 +468,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     target_f = np.asarray(target.faces, dtype=np.int64)
     surface = TargetSurface(target_v, target_f)  # one search tree for every check below
     reason = "asked for (--base-mesh-method decimation)" if method == "decimation" else None
+    decimate = _paired_decimation_base_mesh if decimation is None else decimation.build
     polycube_candidate, decimation_candidate = None, None
     if method == "polycube":
         mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames,
@@ -486,7 +490,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
             mesh, info = _repaired_or_untangled(mesh, info, surface)
             polycube_candidate = _candidate(info)
             if info["inverted_faces"] or info["limit_crossings"]:
-                other_mesh, other_info = _paired_decimation_base_mesh(
+                other_mesh, other_info = decimate(
                     target_v, target_f, surface, int(target_faces), max_base_faces,
                     f"the polycube layout has {_flaws(info)} after its repair")
                 decimation_candidate = _candidate(other_info)
@@ -494,13 +498,40 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
                     other_info["fallback_reason"] += f", this one {_flaws(other_info)}"
                     mesh, info = other_mesh, other_info
     if reason is not None:
-        mesh, info = _paired_decimation_base_mesh(target_v, target_f, surface, int(target_faces),
-                                                  max_base_faces, reason)
+        mesh, info = decimate(target_v, target_f, surface, int(target_faces), max_base_faces,
+                              reason)
         decimation_candidate = _candidate(info)
     info["candidates"] = {"polycube": polycube_candidate,
                           "paired decimation": decimation_candidate}
     info["seconds"] = round(time.perf_counter() - started, 4)
     return mesh, info
+
+
+class DecimationCache:
+    """The paired decimation of one target at one face budget, built at most once.
+
+    It needs no labeling, so the base meshes of several labelings of one target (the parts'
+    and the one-part labeling, :func:`core.stages.basemesh.run_basemesh`) share it.
+    ``build`` has the signature of the decimation fallback inside :func:`build_base_mesh`.
+    """
+
+    def __init__(self):
+        self._key = None
+        self._built = None
+
+    def build(self, target_v, target_f, surface, target_faces, max_base_faces, reason):
+        """The paired decimation's ``(mesh, info)`` (:func:`build_base_mesh`'s), built on the
+        first call and returned again, with this call's ``fallback_reason``, for the same
+        target ((n, 3) ``target_v``, (m, 3) ``target_f``) and budgets."""
+        key = (int(target_faces), int(max_base_faces))
+        if self._built is None or self._key[0] != key or \
+                not np.array_equal(self._key[1], target_v) or \
+                not np.array_equal(self._key[2], target_f):
+            self._built = _paired_decimation_base_mesh(target_v, target_f, surface,
+                                                       target_faces, max_base_faces, reason)
+            self._key = (key, target_v.copy(), target_f.copy())
+        mesh, info = self._built
+        return mesh, {**info, "fallback_reason": reason}
 
 
 def _candidate(info):

@@ -2,7 +2,11 @@
 """Base-mesh stage: the coarse quad cage from the labeling (paper Sect. 2.3; a quantized
 polycube embedded on the target instead of a deformed mesh, or a paired decimation of the
 target as fallback: ``core.quadmesh``, docs/DESIGN.md)."""
-from core.types import BaseMeshResult
+import dataclasses
+
+import numpy as np
+
+from core.types import BaseMeshResult, Segmentation
 
 
 def run_basemesh(intake, parts, frames, labeling, params, progress):
@@ -14,21 +18,31 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     whose least-squares fit crosses itself and stays much farther from the target than the
     decimation's (:mod:`core.fitting.route_review`; not with ``fit_mode="none"``).
 
+    Parts make the layout easier where each is a simple polycube, but their interfaces add
+    charts and corners, and a layout of several parts can fail where the one-part labeling's
+    succeeds. So in ``auto``, when the labeling has more parts than one part per connected
+    component and its layout does not give the polycube route, the one-part segmentation is
+    built as ``parts="single"`` builds it (:func:`one_part_segmentation`) and its layout tried
+    the same way; it is kept when it gives the polycube route, and the result then carries it
+    (``BaseMeshResult.segmentation``). Both attempts share one paired decimation.
+
     Parameters
     ----------
     intake : core.types.IntakeResult; parts : core.types.PartsResult;
     frames : core.types.FramesResult; labeling : core.types.LabelingResult.
     params : core.params.ReconstructionParams (``target_faces``, ``max_base_faces``,
-        ``base_mesh_method``, ``fit_mode``, ``subdivision_levels``).
+        ``base_mesh_method``, ``fit_mode``, ``subdivision_levels``; for the one-part labeling
+        also those of the frames and labeling stages).
     progress : core.progress.Progress; cancellable before the layout starts.
 
     Returns
     -------
     core.types.BaseMeshResult; its report is ``build_base_mesh``'s info (with
     ``fallback_reason`` when the labeling was invalid, and the ``route_review`` of a polycube
-    layout in ``auto``), its message names a fallback and
-    says when the face budget could not be met or the limit surface of every cage tried
-    crosses itself.
+    layout in ``auto``) and ``segmentation``, which labeling the cage was built on and why
+    (with ``one_part_labeling``, the one-part labeling's validity figures, where it was tried);
+    its message names a fallback or the one-part labeling and says when the face budget
+    could not be met or the limit surface of every cage tried crosses itself.
 
     Raises
     ------
@@ -37,6 +51,83 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     (a user error) when ``base_mesh_method="polycube"`` and the layout needs more faces than
     ``max_base_faces``.
     """
+    from core.errors import LabelingError
+    from core.progress import SubProgress
+    from core.quadmesh.base_mesh import DecimationCache
+
+    decimation = DecimationCache()
+    n_parts = int(parts.face_part.max()) + 1 if len(parts.face_part) else 0
+    cage, info = _layout(intake, parts, frames, labeling, params, decimation,
+                         SubProgress(progress, 0.0, 0.5))
+    used = None
+    segmentation = f"the labeling stage's ({_parts_words(n_parts)})"
+    if params.base_mesh_method == "auto" and info["method"] != "polycube":
+        one_part = one_part_segmentation(intake, params, SubProgress(progress, 0.5, 0.75),
+                                         parts)
+        if one_part is not None:
+            failed = info["fallback_reason"]
+            other_cage, other_info = _layout(intake, one_part.parts, one_part.frames,
+                                             one_part.labeling, params, decimation,
+                                             SubProgress(progress, 0.75, 1.0))
+            if other_info["method"] == "polycube":
+                cage, info, used = other_cage, other_info, one_part
+                segmentation = f"one part (the {_parts_words(n_parts)}' layout failed: {failed})"
+            else:
+                segmentation += (f"; the one-part labeling's layout failed too: "
+                                 f"{other_info['fallback_reason']}")
+            info["one_part_labeling"] = {key: one_part.labeling.report[key] for key in
+                                         ("valid", "parts", "charts", "corners")}
+    info["segmentation"] = segmentation
+    if info["genus"] != intake.genus:
+        raise LabelingError(
+            f"the base mesh has genus {info['genus']} but the target has genus {intake.genus}")
+    message = ("" if info["within_budget"] else
+               f"{info['faces']} faces for a budget of {info['target_faces']}: "
+               f"{info['minimum_reason'] or 'the closest layout found'}")
+    if info["method"] != "polycube":
+        message = "; ".join(filter(None, [f"{info['method']} ({info['fallback_reason']})",
+                                          message, info["crossing_reason"]]))
+    elif used is not None:
+        message = "; ".join(filter(None, [f"polycube layout of one part (the {_parts_words(n_parts)}' "
+                                          f"layout failed: base_mesh.segmentation says why)",
+                                          message]))
+    return BaseMeshResult(cage, info, message, used)
+
+
+def one_part_segmentation(intake, params, progress, parts=None):
+    """The segmentation of a ``parts="single"`` run: its parts, frames and labeling stages
+    with ``params`` otherwise unchanged.
+
+    Parameters
+    ----------
+    intake : core.types.IntakeResult.
+    params : core.params.ReconstructionParams.
+    progress : core.progress.Progress for the labeling.
+    parts : core.types.PartsResult to compare with, or None.
+
+    Returns
+    -------
+    core.types.Segmentation, or None when ``parts`` is already one part per connected
+    component (the same partition of the faces).
+    """
+    from core.stages.frames import run_frames
+    from core.stages.labeling import run_labeling
+    from core.stages.parts import run_parts
+
+    single = dataclasses.replace(params, parts="single", parts_file="")
+    one = run_parts(intake, single, progress)
+    if parts is not None and _same_partition(parts.face_part, one.face_part):
+        return None
+    frames = run_frames(intake, one, single, progress)
+    progress.check_cancel()
+    labeling = run_labeling(intake, one, frames, single, progress)
+    return Segmentation(one, frames, labeling)
+
+
+def _layout(intake, parts, frames, labeling, params, decimation, progress):
+    """The base mesh of one segmentation: ``(cage, info)`` as :func:`run_basemesh` describes
+    (the route review included), without the genus check; ``decimation`` is the
+    ``DecimationCache`` of the target."""
     from core.errors import FaceLimitError, LabelingError
     from core.fitting.route_review import review_route
     from core.quadmesh.base_mesh import LayoutTooLargeError, build_base_mesh
@@ -61,7 +152,8 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
                                field.face_frame, field.part_frames,
                                target_faces=params.target_faces,
                                max_base_faces=params.max_base_faces,
-                               face_interface_axis=interface_axis, method=route)
+                               face_interface_axis=interface_axis, method=route,
+                               decimation=decimation)
 
     try:
         cage, info = build(method)
@@ -75,13 +167,16 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
         cage, info = reviewed.cage, reviewed.info
     if invalid is not None and params.base_mesh_method == "auto":
         info["fallback_reason"] = f"the labeling is not a valid polycube labeling ({invalid})"
-    if info["genus"] != intake.genus:
-        raise LabelingError(
-            f"the base mesh has genus {info['genus']} but the target has genus {intake.genus}")
-    message = ("" if info["within_budget"] else
-               f"{info['faces']} faces for a budget of {info['target_faces']}: "
-               f"{info['minimum_reason'] or 'the closest layout found'}")
-    if info["method"] != "polycube":
-        message = "; ".join(filter(None, [f"{info['method']} ({info['fallback_reason']})",
-                                          message, info["crossing_reason"]]))
-    return BaseMeshResult(cage, info, message)
+    return cage, info
+
+
+def _same_partition(a, b):
+    """True when the (m,) int part arrays ``a`` and ``b`` split the faces alike (up to the
+    parts' numbering)."""
+    pairs = np.unique(np.stack([a, b], axis=1), axis=0)
+    return len(pairs) == len(np.unique(a)) == len(np.unique(b))
+
+
+def _parts_words(n):
+    """``"1 part"``, ``"3 parts"``."""
+    return f"{n} part" if n == 1 else f"{n} parts"

@@ -27,7 +27,8 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
     mesh_path : path of the target mesh (STL, OBJ, PLY, OFF).
     step_path : path of the STEP file to write (needed when ``stop_after='solid'``).
     base_mesh_path, report_path, labels_path : optional paths for the base-mesh OBJ, the
-        JSON report and the per-face labeling PLY.
+        JSON report and the per-face labeling PLY (the labeling the base mesh was built on,
+        ``PipelineState.segmentation``).
     stop_after : one of ``intake, parts, labeling, basemesh, fit, solid``.
     progress : core.progress.Progress.
     **params : fields of ``core.params.ReconstructionParams``.
@@ -54,13 +55,14 @@ def reconstruct_to_step(mesh_path, step_path=None, base_mesh_path=None, report_p
     with output_transaction():  # every output or none (an error, Ctrl-C)
         progress.report("writing", 1.0)
         if labels_path is not None:
-            if state.labeling is not None:
+            segmentation = state.segmentation  # the one the base mesh was built on
+            if segmentation is not None:
                 from core.segmentation.labels_file import write_labels_ply
 
                 mesh = state.intake.surface  # the labeling's own faces
-                write_labels_ply(labels_path, mesh.vertices, mesh.faces, state.parts.face_part,
-                                 state.labeling.face_label, state.frames.frame_field.face_frame,
-                                 protect=inputs)
+                write_labels_ply(labels_path, mesh.vertices, mesh.faces,
+                                 segmentation.parts.face_part, segmentation.labeling.face_label,
+                                 segmentation.frames.frame_field.face_frame, protect=inputs)
                 outputs["labels"] = os.path.abspath(labels_path)
         if base_mesh_path is not None:
             if state.cage is not None:

@@ -66,14 +66,24 @@ class BaseMeshProxy(CageProxy):
                      "inverted faces after its repair; 'polycube': never fall back; 'decimation': the paired "
                      "decimation only", list(BASE_MESH_METHODS), choice=default("base_mesh_method"))
         add_cage_properties(obj)
+        add_property(obj, "App::PropertyString", "LabelingUsed", "Result",
+                     "The labeling the cage was built on: the segmentation's, or the one-part "
+                     "labeling where the segmentation's parts gave no polycube layout",
+                     "", read_only=True, output=True)
 
     def parameters(self, obj):
         return {"target_faces": int(obj.TargetFaces), "max_base_faces": int(obj.MaxBaseFaces),
                 "base_mesh_method": str(obj.Method)}
 
     def prepare(self, obj):
-        state, params = self.upstream_state(obj), stage_params(**self.parameters(obj))
+        # the segmentation's parameters too: the one-part labeling, built where its parts'
+        # layout fails, is labelled as it would be
+        segmentation = obj.Segmentation
+        upstream = segmentation.Proxy.parameters(segmentation) if segmentation else {}
+        state = self.upstream_state(obj)
+        params = stage_params(**{**upstream, **self.parameters(obj)})
         return StageJob(core_stages, (state, tuple(base_mesh_stages()), params))
 
     def store(self, obj, state):
         store_cage(obj, state.basemesh.cage)
+        obj.LabelingUsed = str(state.basemesh.report.get("segmentation", ""))
