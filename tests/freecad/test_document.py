@@ -100,6 +100,8 @@ def test_reopened_chain_has_its_proxies_and_results(chain_doc):
         # keeps about 15 significant digits).
         first = np.array([[v.X, v.Y, v.Z] for v in shape.Vertexes[:len(cage.vertices)]])
         assert np.abs(first - cage.vertices).max() < 1e-9 * shape.BoundBox.DiagonalLength
+    # one part: the cage is built on the segmentation's own labeling, and says so
+    assert objects["BaseMesh"].LabelingUsed == "the labeling stage's (1 part)"
     base, fitted = read_cage(objects["BaseMesh"]), read_cage(objects["Fit"])
     assert np.array_equal(base.face_vertices, fitted.face_vertices)
     assert np.abs(base.vertices - fitted.vertices).max() > 0, "the fit moved the cage"
