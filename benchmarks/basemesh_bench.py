@@ -67,7 +67,7 @@ def run_case(path, mode, method, out_json, image, solid):
             "extraordinary_vertices", "min_valence", "max_valence", "genus", "target_faces",
             "within_budget", "minimum_reason", "scale", "solver_status", "collapsed_sides",
             "side_directions_flipped", "rectangles", "relabelled_area", "crossing_reason",
-            "candidates",
+            "candidates", "segmentation",
             "layout_inverted_faces")}
         row["inverted_faces"] = int(inverted_faces(base, target.vertices, target.faces).sum())
         row["limit_self_intersections"] = count_limit_self_intersections(base, 2)
@@ -203,10 +203,14 @@ def markdown(rows, meta):
             str(deci.get("faces", "–")), str(deci.get("extraordinary_vertices", "–")),
             str(deci.get("limit_crossings", "–")), b.get("method") or "polycube"]) + " |")
     lines += ["", "Where the base mesh was not reached, the stage's message; where the route "
-              "fell back from the polycube layout, why; where no cage tried had a limit surface "
-              "that does not cross itself, the stage's reason:", ""]
+              "fell back from the polycube layout, why; where the cage was built on the one-part "
+              "labeling instead of the parts' (`base_mesh.segmentation`), why; where no cage "
+              "tried had a limit surface that does not cross itself, the stage's reason:", ""]
     for r in rows:
         reason = (r.get("base_mesh") or {}).get("fallback_reason")
+        segmentation = (r.get("base_mesh") or {}).get("segmentation") or ""
+        if segmentation.startswith("one part"):
+            lines.append(f"- `{r['mesh']}` ({r['mode']}): built on {segmentation[:300]}")
         if not r.get("base_mesh"):
             message = r.get("messages", {}).get("basemesh") or r.get("error") or ""
             lines.append(f"- `{r['mesh']}` ({r['mode']}, {r.get('method', 'auto')}): "
