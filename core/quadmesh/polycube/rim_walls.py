@@ -199,7 +199,8 @@ def _remnants_joined(topology, face_part, labels, candidate):
             nb = topology.neighbours[frontier]
             src = np.repeat(frontier, nb.shape[1])
             nb = nb.reshape(-1)
-            ok = (nb >= 0) & (labels[np.maximum(nb, 0)] == label)
+            ok = ((nb >= 0) & (labels[np.maximum(nb, 0)] == label)
+                  & (face_part[np.maximum(nb, 0)] == face_part[faces[0]]))
             src, nb = src[ok], nb[ok]
             fresh = before[nb] == -2
             src, nb = src[fresh], nb[fresh]
