@@ -9,8 +9,10 @@ import trimesh
 from core.errors import LabelingError
 from core.quadmesh.polycube.chart_complex import build_chart_complex, cornerless_rims
 from core.quadmesh.polycube.closable_labels import closable_labels
+from core.quadmesh.polycube.rim_walls import _remnants_joined
 from core.quadmesh.polycube.side_signs import (contradicting_charts, lone_sides,
                                                make_loops_rectilinear)
+from core.segmentation.charts import build_topology, extract_layout
 from core.segmentation.validity import check_validity
 from tests.core.test_quadmesh import (assert_relabelled_quad_layout,
                                       identity_frames, nearest_labels, union_of_boxes)
@@ -139,3 +141,29 @@ def test_the_polycube_base_mesh_of_a_plate_with_a_badly_walled_hole_is_a_closed_
     V, F, labels, wall = _plate_with_a_hole()
     labels[wall] = 1
     assert assert_relabelled_quad_layout(V, F, labels) == 1
+
+
+def test_a_piece_of_a_chart_cut_off_by_relabelled_faces_is_joined_back_to_it():
+    """A ring of a box's top relabelled +X cuts a patch of the top off (a chart of one
+    boundary, invalid); the shortest path of ring faces back to the top takes its label back,
+    so the patch is the top again and the rest of the ring stays relabelled."""
+    V, F = union_of_boxes([[[0, 0, 0], [2, 2, 1]]], max_edge=0.1)
+    labels = nearest_labels(V, F)
+    part = np.zeros(len(F), dtype=np.int64)
+    topology = build_topology(F, len(V))
+    centre = V[F].mean(axis=1)
+    distance = np.linalg.norm(centre[:, :2] - 1.0, axis=1)
+    ring = (labels == 4) & (distance > 0.3) & (distance < 0.5)
+    candidate = labels.copy()
+    candidate[ring] = 0
+    cut = extract_layout(topology, part, candidate)
+    assert (cut.chart_boundary_count <= 3).any()  # the patch inside the ring
+    joined = _remnants_joined(topology, part, labels, candidate)
+    layout = extract_layout(topology, part, joined)
+    small = layout.chart_boundary_count[layout.face_chart] <= 3
+    assert not (small & (joined == labels)).any()  # no piece of an unchanged chart is left
+    back = joined != candidate
+    assert back.any() and not (back & ~ring).any()  # only ring faces took their label back
+    assert back.sum() < 0.25 * ring.sum()  # a path across the ring, not the ring
+    top = np.unique(layout.face_chart[joined == 4])
+    assert len(top) == 1  # the patch and the rest of the top are one chart again

@@ -20,8 +20,10 @@ sides. Further candidates relabel only the faces whose sector's label no wall of
 in sectors as they are and thinned (the distance to a missing side weighted by
 :data:`THINNING`: the tapered end of a slot between two members is walled by a narrow strip,
 not by the members' sides). A changed face that would meet a face of the opposite label keeps
-its label, and a chart of fewer than four boundaries that the change leaves (a sliver between
-sectors, invalid by :mod:`core.segmentation.validity`) is dissolved into its neighbours.
+its label, a piece of a chart that the changes cut off and leave with fewer than four
+boundaries (invalid by :mod:`core.segmentation.validity`) is joined back to its chart by the
+shortest path of changed faces that had its label, and a chart of fewer than four boundaries
+that is still left (a sliver between sectors) is dissolved into its neighbours.
 
 The same move gives corners to a chart boundary loop that passes none (a wall with one label
 all round, :func:`~core.quadmesh.polycube.chart_complex.cornerless_rims`).
@@ -136,7 +138,9 @@ def rim_wall_labels(V, F, topology, face_part, face_frame, labels, face_chart, c
         candidate[region[keep]] = wall_label[nearest[keep]]
         candidate = _tidied(topology, face_part, labels, candidate, seed)
         for _ in range(TIDY_ROUNDS):
-            dissolved = _without_small_charts(topology, face_part, labels, candidate, cost)
+            joined = _tidied(topology, face_part, labels,
+                             _remnants_joined(topology, face_part, labels, candidate), seed)
+            dissolved = _without_small_charts(topology, face_part, labels, joined, cost)
             if np.array_equal(dissolved, candidate):
                 break
             candidate = _tidied(topology, face_part, labels, dissolved, seed)
@@ -166,6 +170,51 @@ def _tidied(topology, face_part, labels, candidate, seed):
             if not len(back):
                 return candidate
         candidate[back] = labels[back]
+
+
+def _remnants_joined(topology, face_part, labels, candidate):
+    """``candidate`` ((m,) int64) with every *remnant* joined back to the chart it was cut from.
+
+    A remnant is a chart of fewer than four boundaries (invalid,
+    :mod:`core.segmentation.validity`) whose faces all keep their label in ``labels``: a
+    piece of a chart that the changed faces around it cut off, e.g. a face of the wall
+    left between two opposite sectors where a slot tapers (dissolving it into either sector
+    would make them meet). The changed faces on the shortest edge path, through faces
+    whose label in ``labels`` was the remnant's, from the remnant to another face of that
+    label that kept it take their label back; a remnant with no such path is left as it is.
+    """
+    layout = extract_layout(topology, face_part, candidate)
+    changed = candidate != labels
+    small = np.flatnonzero(layout.chart_boundary_count <= 3)
+    out = candidate.copy()
+    for chart in small.tolist():
+        faces = np.flatnonzero(layout.face_chart == chart)
+        if changed[faces].any():
+            continue
+        label = int(candidate[faces[0]])
+        before = np.full(len(labels), -2, dtype=np.int64)
+        before[faces] = -1
+        frontier, reached = faces, -1
+        while len(frontier) and reached < 0:
+            nb = topology.neighbours[frontier]
+            src = np.repeat(frontier, nb.shape[1])
+            nb = nb.reshape(-1)
+            ok = ((nb >= 0) & (labels[np.maximum(nb, 0)] == label)
+                  & (face_part[np.maximum(nb, 0)] == face_part[faces[0]]))
+            src, nb = src[ok], nb[ok]
+            fresh = before[nb] == -2
+            src, nb = src[fresh], nb[fresh]
+            nb, first = np.unique(nb, return_index=True)
+            before[nb] = src[first]
+            kept = nb[~changed[nb]]
+            if len(kept):
+                reached = int(kept[0])
+            frontier = nb[changed[nb]]
+        face = before[reached] if reached >= 0 else -1
+        while face >= 0 and changed[face]:
+            out[face] = labels[face]
+            face = before[face]
+    return out
 
 
 def _without_small_charts(topology, face_part, labels, candidate, cost):
