@@ -81,6 +81,10 @@ FALLBACK_OVER_BUDGET = 1.5
 (which meets the budget, but whose cages have far more extraordinary vertices); larger ones
 give way to it."""
 
+CORNER_COST = 2.0
+"""Objective weight (per unit and axis, against one per unit of side length) of the corners of
+drifting charts in the quantization tried where a layout lost without them
+(:func:`core.quadmesh.polycube.quantize.quantize`)."""
 COARSE_CHART_ROUNDS = 3
 """Quantizations tried with longer shortest sides on the charts of inverted faces
 (:func:`_polycube_base_mesh`)."""
@@ -112,7 +116,8 @@ def refined_target(target):
 
 
 def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, collapsible,
-                      give_up_faces, refinement_rounds, least=None, separate=False):
+                      give_up_faces, refinement_rounds, least=None, separate=False,
+                      corner_cost=0.0):
     """Quantize, lay out and embed; returns ``(mesh, polycube, rounds, refinement, folded,
     quad_chart, untangled)`` (``quad_chart``: (f,) int64 chart of every face of ``mesh``;
     ``untangled``: callable ``() -> PolyMesh`` ``mesh`` with its folds untangled on the target,
@@ -123,7 +128,8 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     in each of up to ``SEPARATION_ROUNDS`` rounds, every overlapping chart gets the separation
     of its crossing segments that the measured chart shows most clearly among those not tried
     yet (:func:`core.quadmesh.polycube.overlap_cuts.crossing_separations`); separations that
-    make the program infeasible are dropped for good.
+    make the program infeasible are dropped for good. ``corner_cost`` is passed on to the
+    quantization (:func:`core.quadmesh.polycube.quantize.quantize`).
 
     Charts whose integer polygon overlaps itself are cut at the reflex corners next to the
     overlap (:mod:`core.quadmesh.polycube.overlap_cuts`; only those charts, so the others keep their
@@ -164,10 +170,10 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
                 # refinement rounds in between keep that scale (one program each)
                 polycube, rounds = quantize_for_budget(complex_, tables, refinement,
                                                        target_faces, collapsible, give_up_faces,
-                                                       least, separations)
+                                                       least, separations, corner_cost)
             else:
                 polycube = quantize(complex_, tables, refinement, scale, collapsible, least,
-                                    separations)
+                                    separations, corner_cost)
         except MilpTimeLimitError:
             raise  # not infeasible: another refinement would only make it load-dependent
         except LabelingError:
@@ -390,7 +396,8 @@ def _merge_points(n, pairs):
 
 
 def build_base_mesh(target, face_part, face_label, face_frame, part_frames, target_faces=300,
-                    max_base_faces=2500, face_interface_axis=None, method="auto"):
+                    max_base_faces=2500, face_interface_axis=None, method="auto",
+                    corner_cost=0.0):
     """Closed quad base mesh on the target: the polycube layout, else the paired decimation.
 
     With ``method="auto"`` the quantized polycube layout of the labeling (this module's
@@ -405,7 +412,10 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     the one with fewer flaws is kept (:func:`_flaw_rank`: a limit surface that crosses itself
     never wins over one that does not). ``method="polycube"`` never falls back (its errors are
     raised; layouts up to ``max_base_faces`` are kept, repaired as in ``auto``);
-    ``method="decimation"`` skips the polycube layout.
+    ``method="decimation"`` skips the polycube layout. In ``auto``, a layout left with flaws
+    is quantized again with the corners of its drifting charts kept near their measured
+    places (``CORNER_COST``, :func:`core.quadmesh.polycube.quantize.quantize`), and the one of
+    the two with fewer flaws goes on to the comparison with the decimation.
 
     Parameters
     ----------
@@ -419,6 +429,8 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     face_interface_axis : (m, 3) float64 normal of the part interface next to each face, NaN
         rows where none (``FrameField.face_interface_axis``), or None.
     method : one of ``BASE_MESH_METHODS``.
+    corner_cost : float >= 0, weight of the corners of drifting charts in the layout's
+        quantization (0: sides only; the report's ``corner_cost`` says which was kept).
 
     Returns
     -------
@@ -469,7 +481,8 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     if method == "polycube":
         mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames,
                                          int(target_faces), max_base_faces, face_interface_axis,
-                                         max_base_faces, surface=surface)
+                                         max_base_faces, surface=surface,
+                                         corner_cost=corner_cost)
         mesh, info = _repaired_or_untangled(mesh, info, surface)
     elif method == "auto":
         give_up = int(min(max_base_faces, FALLBACK_OVER_BUDGET * target_faces))
@@ -477,13 +490,27 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
             mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame,
                                              part_frames, int(target_faces), max_base_faces,
                                              face_interface_axis, give_up,
-                                             FALLBACK_REFINEMENT_ROUNDS, surface=surface)
+                                             FALLBACK_REFINEMENT_ROUNDS, surface=surface,
+                                             corner_cost=corner_cost)
         except (LabelingError, InvalidMeshError) as exc:
             reason = f"the polycube layout failed: {exc}"
             polycube_candidate = {"built": False, "faces": getattr(exc, "faces", None),
                                   "reason": str(exc)}
         else:
             mesh, info = _repaired_or_untangled(mesh, info, surface)
+            if (info["inverted_faces"] or info["limit_crossings"]) and corner_cost == 0:
+                try:
+                    other_mesh, other_info = _polycube_base_mesh(
+                        target, face_part, face_label, face_frame, part_frames,
+                        int(target_faces), max_base_faces, face_interface_axis, give_up,
+                        FALLBACK_REFINEMENT_ROUNDS, surface=surface, corner_cost=CORNER_COST)
+                except (LabelingError, InvalidMeshError):
+                    pass  # the layout without corner terms stays
+                else:
+                    other_mesh, other_info = _repaired_or_untangled(other_mesh, other_info,
+                                                                    surface)
+                    if _flaw_rank(other_info) < _flaw_rank(info):
+                        mesh, info = other_mesh, other_info
             polycube_candidate = _candidate(info)
             if info["inverted_faces"] or info["limit_crossings"]:
                 other_mesh, other_info = _paired_decimation_base_mesh(
@@ -680,12 +707,14 @@ class _LayoutAttempts:
     past the caller's limit where separating the few crossing segments would not. The side
     directions, loop tables and way of undoing overlaps of the first successful attempt are
     kept (``complex_``, ``tables``, ``collapsible``, ``separate``), so later attempts with
-    larger least lengths quantize the same complex the same way.
+    larger least lengths quantize the same complex the same way. ``corner_cost`` is passed on
+    to every quantization (:func:`core.quadmesh.polycube.quantize.quantize`).
     """
 
     def __init__(self, V, F, complex_, part_frames, target_faces, max_base_faces,
-                 give_up_faces, refinement_rounds, target_genus):
+                 give_up_faces, refinement_rounds, target_genus, corner_cost=0.0):
         self.V, self.F, self.part_frames = V, F, part_frames
+        self.corner_cost = corner_cost
         self.budget = (target_faces, max_base_faces)
         self.give_up_faces, self.refinement_rounds = give_up_faces, refinement_rounds
         self.target_genus = target_genus
@@ -696,7 +725,8 @@ class _LayoutAttempts:
     def _run(self, least):
         result = _layout_on_target(self.V, self.F, self.complex_, self.tables, *self.budget,
                                    self.collapsible, self.give_up_faces,
-                                   self.refinement_rounds, least, self.separate)
+                                   self.refinement_rounds, least, self.separate,
+                                   self.corner_cost)
         mesh, polycube, rounds, refinement, folded, quad_chart, untangled = result
         return mesh, polycube, rounds, refinement, folded, self.complex_, quad_chart, untangled
 
@@ -802,13 +832,14 @@ def _fold_free_limit(mesh, max_base_faces):
 
 def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, target_faces,
                         max_base_faces, face_interface_axis, give_up_faces,
-                        refinement_rounds=REFINEMENT_ROUNDS, surface=None):
+                        refinement_rounds=REFINEMENT_ROUNDS, surface=None, corner_cost=0.0):
     """Closed all-quad base mesh on the target from a valid polycube labeling.
 
     Parameters as :func:`build_base_mesh`; ``give_up_faces``: the budget search stops and
     raises once the layout needs more quads than this; ``refinement_rounds``: most
     quantizations that split overlapping charts into rectangles; ``surface``: TargetSurface of
-    the target (built here when None). Returns ``(mesh, info)`` as there, without
+    the target (built here when None); ``corner_cost``: weight of the corners of drifting
+    charts in the quantization (:func:`core.quadmesh.polycube.quantize.quantize`). Returns ``(mesh, info)`` as there, without
     ``inverted_faces`` and ``seconds``.
 
     A chart one quad across a thin wall has a limit surface pulled past the wall's middle, so
@@ -841,7 +872,8 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
     relabelled = None
     try:
         layout = _LayoutAttempts(V, F, build(fine_label), part_frames, int(target_faces),
-                                 max_base_faces, give_up_faces, refinement_rounds, target_genus)
+                                 max_base_faces, give_up_faces, refinement_rounds, target_genus,
+                                 corner_cost)
         best = layout.attempt(None)
     except (SideDirectionError, CornerlessLoopError) as exc:
         # charts no side directions close, or a loop without corners: change their labels
@@ -854,7 +886,8 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
         if relabelled is None:
             raise
         layout = _LayoutAttempts(V, F, relabelled.complex_, part_frames, int(target_faces),
-                                 max_base_faces, give_up_faces, refinement_rounds, target_genus)
+                                 max_base_faces, give_up_faces, refinement_rounds, target_genus,
+                                 corner_cost)
         best = layout.attempt(None)
     flipped_faces = inverted_faces(best[0], surface.vertices, surface.faces, surface)
     least = np.zeros(layout.complex_.n_sides, dtype=np.int64)
@@ -894,6 +927,6 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
         "folded_points": int(folded), "rectangles": refinement.rectangles,
         "collapsed_sides": int((polycube.side_length == 0).sum()),
         "relabelled_area": 0.0 if relabelled is None else relabelled.changed_area,
-        UNTANGLED_KEY: untangled,
+        "corner_cost": float(corner_cost), UNTANGLED_KEY: untangled,
     }
     return mesh, info

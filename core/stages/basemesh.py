@@ -12,7 +12,9 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     more than 1.5 times the budget or has more inverted faces after its repair, falls back to
     the paired decimation of the target (``core.quadmesh.build_base_mesh``); so does a layout
     whose least-squares fit crosses itself and stays much farther from the target than the
-    decimation's (:mod:`core.fitting.route_review`; not with ``fit_mode="none"``).
+    decimation's (:mod:`core.fitting.route_review`; not with ``fit_mode="none"``), unless the
+    layout quantized again with the corners of its drifting charts kept near their measured
+    places (``core.quadmesh.base_mesh.CORNER_COST``) passes that review.
 
     Parameters
     ----------
@@ -39,7 +41,7 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     """
     from core.errors import FaceLimitError, LabelingError
     from core.fitting.route_review import review_route
-    from core.quadmesh.base_mesh import LayoutTooLargeError, build_base_mesh
+    from core.quadmesh.base_mesh import CORNER_COST, LayoutTooLargeError, build_base_mesh
 
     validity = labeling.validity.report
     method = params.base_mesh_method
@@ -56,12 +58,13 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     field = frames.frame_field
     interface_axis = field.face_interface_axis if len(field.interfaces) else None
 
-    def build(route):
+    def build(route, corner_cost=0.0):
         return build_base_mesh(intake.surface, parts.face_part, labeling.face_label,
                                field.face_frame, field.part_frames,
                                target_faces=params.target_faces,
                                max_base_faces=params.max_base_faces,
-                               face_interface_axis=interface_axis, method=route)
+                               face_interface_axis=interface_axis, method=route,
+                               corner_cost=corner_cost)
 
     try:
         cage, info = build(method)
@@ -70,9 +73,21 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
         raise FaceLimitError(str(exc)) from exc
     if method == "auto" and info["method"] == "polycube" and params.fit_mode != "none":
         progress.check_cancel()
+        polycube_info = info
         reviewed = review_route(cage, info, intake.surface, params.subdivision_levels,
                                 lambda: build("decimation"), params.fit_mode)
         cage, info = reviewed.cage, reviewed.info
+        if info["method"] != "polycube" and polycube_info["corner_cost"] == 0:
+            # the layout lost the review: quantized again with the corners of its drifting
+            # charts kept near their places, it is reviewed against the same decimation
+            progress.check_cancel()
+            other_cage, other_info = build("auto", CORNER_COST)
+            if other_info["method"] == "polycube":
+                again = review_route(other_cage, other_info, intake.surface,
+                                     params.subdivision_levels, lambda: (cage, info),
+                                     params.fit_mode)
+                if again.info["method"] == "polycube":
+                    cage, info = again.cage, again.info
     if invalid is not None and params.base_mesh_method == "auto":
         info["fallback_reason"] = f"the labeling is not a valid polycube labeling ({invalid})"
     if info["genus"] != intake.genus:
