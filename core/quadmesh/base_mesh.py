@@ -128,8 +128,9 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     in each of up to ``SEPARATION_ROUNDS`` rounds, every overlapping chart gets the separation
     of its crossing segments that the measured chart shows most clearly among those not tried
     yet (:func:`core.quadmesh.polycube.overlap_cuts.crossing_separations`); separations that
-    make the program infeasible are dropped for good. ``corner_cost`` is passed on to the
-    quantization (:func:`core.quadmesh.polycube.quantize.quantize`).
+    make the program infeasible are dropped for good. With ``corner_cost`` > 0 the layout
+    found is quantized once more with the corners of its drifting charts
+    (:func:`_with_corners`), and that one is embedded unless it is not a closed 2-manifold.
 
     Charts whose integer polygon overlaps itself are cut at the reflex corners next to the
     overlap (:mod:`core.quadmesh.polycube.overlap_cuts`; only those charts, so the others keep their
@@ -170,10 +171,10 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
                 # refinement rounds in between keep that scale (one program each)
                 polycube, rounds = quantize_for_budget(complex_, tables, refinement,
                                                        target_faces, collapsible, give_up_faces,
-                                                       least, separations, corner_cost)
+                                                       least, separations)
             else:
                 polycube = quantize(complex_, tables, refinement, scale, collapsible, least,
-                                    separations, corner_cost)
+                                    separations)
         except MilpTimeLimitError:
             raise  # not infeasible: another refinement would only make it load-dependent
         except LabelingError:
@@ -230,20 +231,33 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
         scale, last = None, None  # refined layout found: search the budget with it
     else:
         raise OverlappingChartsError(sorted(set(refine) | unrefinable | set(overlapping)))
-    orientation = chart_orientation(complex_, tables, polycube.corner_uv)
-    face_uv = tutte_coordinates(V, F, complex_, tables, polycube)
-    interior, folded = interior_point_positions(V, F, complex_, lattice, face_uv, orientation)
-    points = np.concatenate([V[complex_.corner_vertex],
-                             side_point_positions(V, complex_, lattice, polycube.side_length),
-                             interior])
-    # identified points become one vertex (the lowest name: a corner where there is one);
-    # points no quad uses (on sides of charts the quantization collapsed to no area) are
-    # dropped, and the checks below judge whether what remains is closed with the genus kept
-    vertex = _merge_points(lattice.n_points, lattice.identified)
-    used, compact = np.unique(vertex[lattice.quads.reshape(-1)], return_inverse=True)
-    mesh = PolyMesh(points[used], compact.astype(np.int64),
-                    np.arange(0, 4 * len(lattice.quads) + 1, 4, dtype=np.int64))
-    check_polymesh(mesh)
+    layouts = [(polycube, lattice)]
+    if corner_cost > 0:
+        layouts = _with_corners(complex_, tables, refinement, polycube, collapsible, least,
+                                separations, corner_cost, give_up_faces) + layouts
+    for polycube, lattice in layouts:
+        orientation = chart_orientation(complex_, tables, polycube.corner_uv)
+        face_uv = tutte_coordinates(V, F, complex_, tables, polycube)
+        interior, folded = interior_point_positions(V, F, complex_, lattice, face_uv,
+                                                    orientation)
+        points = np.concatenate([V[complex_.corner_vertex],
+                                 side_point_positions(V, complex_, lattice,
+                                                      polycube.side_length), interior])
+        # identified points become one vertex (the lowest name: a corner where there is one);
+        # points no quad uses (on sides of charts the quantization collapsed to no area) are
+        # dropped, and the checks below judge whether what remains is closed with the genus
+        # kept
+        vertex = _merge_points(lattice.n_points, lattice.identified)
+        used, compact = np.unique(vertex[lattice.quads.reshape(-1)], return_inverse=True)
+        mesh = PolyMesh(points[used], compact.astype(np.int64),
+                        np.arange(0, 4 * len(lattice.quads) + 1, 4, dtype=np.int64))
+        try:
+            check_polymesh(mesh)
+        except InvalidMeshError:
+            if polycube is layouts[-1][0]:
+                raise
+            continue  # the layout with corners pinches where the plain one may not
+        break
     n_side_points = len(lattice.side_point_side)
     side_of = np.full(lattice.n_points, -1, dtype=np.int64)
     side_of[lattice.n_corners:lattice.n_corners + n_side_points] = lattice.side_point_side
@@ -277,6 +291,33 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     except InvalidMeshError:
         pass  # smoothing degenerated a face somewhere: keep the Tutte placement
     return mesh, polycube, rounds, refinement, folded, lattice.quad_chart, untangled
+
+
+def _with_corners(complex_, tables, refinement, polycube, collapsible, least, separations,
+                  corner_cost, give_up_faces):
+    """``[(polycube, lattice)]``: the layout ``polycube`` quantized again at its scale, with
+    its refinement and separations, and the corners of its drifting charts kept near their
+    measured places (:func:`core.quadmesh.polycube.quantize.quantize` with ``corner_cost``),
+    where that program has a solution whose charts do not overlap and which stays within
+    ``give_up_faces``; else ``[]``.
+
+    The corner terms make each program far slower than the plain one, so the scale, cuts and
+    separations are searched without them and the terms only move the side lengths of the
+    layout found.
+    """
+    try:
+        other = quantize(complex_, tables, refinement, polycube.scale, collapsible, least,
+                         separations, corner_cost)
+    except MilpTimeLimitError:
+        raise
+    except LabelingError:
+        return []
+    if other.faces > give_up_faces:
+        return []
+    try:
+        return [(other, build_lattice(complex_, tables, other))]
+    except OverlappingChartsError:
+        return []
 
 
 def _cut_overlapping_chart(complex_, tables, polycube, charts, refine, cuts, unrefinable):

@@ -82,12 +82,15 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
             # charts kept near their places, it is reviewed against the same decimation
             progress.check_cancel()
             other_cage, other_info = build("auto", CORNER_COST)
+            retry = None
             if other_info["method"] == "polycube":
                 again = review_route(other_cage, other_info, intake.surface,
                                      params.subdivision_levels, lambda: (cage, info),
                                      params.fit_mode)
+                retry = again.info["route_review"]["polycube"]
                 if again.info["method"] == "polycube":
                     cage, info = again.cage, again.info
+            info["route_review"] = {**info["route_review"], "corner_retry": retry}
     if invalid is not None and params.base_mesh_method == "auto":
         info["fallback_reason"] = f"the labeling is not a valid polycube labeling ({invalid})"
     if info["genus"] != intake.genus:

@@ -6,8 +6,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from core.quadmesh.polycube.quantize import (LoopTables, corner_walk_matrix, drifting_charts,
-                                             quantize, rectangular_refinement)
+from core.quadmesh.polycube.quantize import (LoopTables, drifting_charts, quantize,
+                                             rectangular_refinement)
 
 pytestmark = pytest.mark.unit
 
@@ -40,16 +40,6 @@ def test_only_a_chart_whose_sides_drift_is_flagged():
     assert drifting_charts(complex_, tables, 1.0).tolist() == [0]
     complex_, tables = rectangle()
     assert len(drifting_charts(complex_, tables, 1.0)) == 0
-
-
-def test_the_corner_walk_gives_the_corners_of_the_side_lengths():
-    complex_, tables = slanted_steps()
-    lengths = np.array([8, 2, 4, 3, 4, 5])
-    walk = corner_walk_matrix(tables, complex_.n_sides)
-    step = np.zeros((6, 2))
-    step[np.arange(6), tables.ref_axis] = tables.ref_sign * lengths
-    expected = np.cumsum(np.vstack([[0, 0], step[:-1]]), axis=0)
-    assert np.array_equal((walk @ lengths).reshape(-1, 2), expected)
 
 
 def test_corner_terms_keep_a_slanted_chart_as_tall_as_it_is_measured():

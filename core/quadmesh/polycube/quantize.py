@@ -62,7 +62,7 @@ in no side, and the polygon closest to the side lengths can be far narrower or w
 chart: its quads are then stretched many times over on the target, and the fit of the cage
 crosses itself there. With ``corner_cost``, the corners of such charts (:func:`drifting_charts`)
 are also kept near their measured places, ``min sum |c - s C - t|`` over the corners ``c`` of a
-chart (linear in the side lengths, :func:`corner_walk_matrix`), ``C`` measured and ``t`` a
+chart (linear in the side lengths, :func:`corner_rows`), ``C`` measured and ``t`` a
 free shift of the chart: the polygon then balances the slant over its sides. Those terms
 break the network structure above, so the program takes more branching; the base-mesh stage
 asks for them only for a layout that lost without them.
@@ -78,7 +78,7 @@ import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint
 
 from core.errors import LabelingError, OTHER_PARTS
-from core.quadmesh.polycube.milp_solve import solve_milp
+from core.quadmesh.polycube.milp_solve import NODE_LIMIT, solve_milp
 
 MILP_GAP = 0.01
 """Relative optimality gap accepted from HiGHS (the objective is a soft closeness measure)."""
@@ -95,6 +95,9 @@ LENGTH_COST = 1e-5
 CORNER_DRIFT = 1.0
 """Charts whose sides, at their measured lengths, put a corner more than this many units from
 its measured place get the corner terms of :func:`quantize` (:func:`drifting_charts`)."""
+CORNER_NODE_LIMIT = 200
+"""Branch-and-bound nodes of a program with corner terms: their relaxation is seldom integral,
+and the best layout found within a few hundred nodes is as good a balance of the slant."""
 SCALE_ROUNDS = 10
 """Most scales tried by :func:`quantize_for_budget`."""
 SCALE_PRECISION = 0.02
@@ -480,30 +483,58 @@ def _open_hole_rows(complex_, tables, n_columns):
     return LinearConstraint(matrix, 1.0, np.inf)
 
 
-def corner_walk_matrix(tables, n_columns):
-    """(2 j, n_columns) CSR float64: row ``2 r + a`` gives coordinate ``a`` of reference
-    ``r``'s start corner in its chart, relative to the chart's first corner, as the signed
-    sum of the side lengths walked from there (the side lengths are the first columns)."""
-    rows, cols, vals = [], [], []
-    order = np.argsort(tables.ref_chart, kind="stable")
-    charts = np.unique(tables.ref_chart)
-    starts = np.searchsorted(tables.ref_chart[order], charts)
-    for first in order[starts]:
-        walked = []  # (axis, side, sign) of the references before r
-        r = first
-        while True:
-            for axis, side, sign in walked:
-                rows.append(2 * r + axis)
-                cols.append(side)
-                vals.append(sign)
-            walked.append((int(tables.ref_axis[r]), int(tables.ref_side[r]),
-                           float(tables.ref_sign[r])))
-            r = int(tables.ref_next[r])
-            if r == first:
-                break
-    matrix = sp.csr_matrix((vals, (rows, cols)), shape=(2 * len(tables.ref_side), n_columns))
-    matrix.sum_duplicates()
-    return matrix
+def corner_rows(tables, refs, scale, n_vars, n_sides):
+    """Rows that make ``e`` at least the distance of every corner in ``refs`` from its
+    measured place (:func:`quantize`'s corner terms), sparse.
+
+    Each reference ``r`` of ``refs`` (whole loops: every reference of a chart or none) gets
+    its start corner's integer place ``p_r`` (two free unknowns): walking the side of ``r``
+    leads to the next corner, ``p_next = p_r + sign_r l_r e_axis``, which fixes the places up
+    to one shift per chart, so ``e_r >= |p_r - scale C_r|`` measures each corner's distance
+    from its measured place ``C_r`` after the chart's best shift.
+
+    Parameters
+    ----------
+    tables : LoopTables; refs : (k,) int64 references; scale : float, units per length.
+    n_vars : int, length unknowns (the side lengths first); n_sides : int, closeness slacks
+        after them. The unknowns are ``[l (n_vars), t (n_sides), p (2 k), e (2 k)]``.
+
+    Returns
+    -------
+    list of scipy.optimize.LinearConstraint: ``2 k`` walk equalities, then ``4 k`` rows
+    ``>= 0`` for the distances.
+    """
+    k = len(refs)
+    slot = np.full(len(tables.ref_side), -1, dtype=np.int64)
+    slot[refs] = np.arange(k)
+    nxt = slot[tables.ref_next[refs]]
+    if (nxt < 0).any():
+        raise ValueError("corner_rows needs whole loops")
+    place = n_vars + n_sides + 2 * np.arange(k)[:, None] + np.array([0, 1])  # (k, 2) columns
+    error = place + 2 * k
+    n_columns = n_vars + n_sides + 4 * k
+    rows = np.repeat(np.arange(2 * k), 2)
+    cols = np.stack([place[nxt].reshape(-1), place.reshape(-1)], axis=1).reshape(-1)
+    vals = np.tile([1.0, -1.0], 2 * k)
+    walk_rows = 2 * np.arange(k) + tables.ref_axis[refs]
+    rows = np.concatenate([rows, walk_rows])
+    cols = np.concatenate([cols, tables.ref_side[refs]])
+    vals = np.concatenate([vals, -tables.ref_sign[refs].astype(np.float64)])
+    walk = sp.csr_matrix((vals, (rows, cols)), shape=(2 * k, n_columns))
+    measured = scale * tables.ref_measured[refs].reshape(-1)
+    ones = np.ones(2 * k)
+    index = np.arange(2 * k)
+    above = sp.csr_matrix((np.concatenate([-ones, ones]),
+                           (np.concatenate([index, index]),
+                            np.concatenate([place.reshape(-1), error.reshape(-1)]))),
+                          shape=(2 * k, n_columns))
+    below = sp.csr_matrix((np.concatenate([ones, ones]),
+                           (np.concatenate([index, index]),
+                            np.concatenate([place.reshape(-1), error.reshape(-1)]))),
+                          shape=(2 * k, n_columns))
+    return [LinearConstraint(walk, 0.0, 0.0),
+            LinearConstraint(sp.vstack([above, below]).tocsr(),
+                             np.concatenate([-measured, measured]), np.inf)]
 
 
 def drifting_charts(complex_, tables, scale):
@@ -588,7 +619,7 @@ def quantize(complex_, tables, refinement, scale, collapsible=None, least=None, 
     separations : sequence of Separation, corner pairs kept apart (:func:`separation_rows`).
     corner_cost : float >= 0, objective weight (per unit, per axis) of the distance of every
         corner of a drifting chart (:func:`drifting_charts`) from its measured place, up to a
-        shift of the chart (:func:`corner_walk_matrix`); 0 leaves the corners out.
+        shift of the chart (:func:`corner_rows`); 0 leaves the corners out.
 
     Returns
     -------
@@ -599,56 +630,43 @@ def quantize(complex_, tables, refinement, scale, collapsible=None, least=None, 
     LabelingError when no integer lengths close every rectangle.
     """
     n_sides, n = complex_.n_sides, refinement.n_vars
-    n_charts = complex_.n_charts
     # variables [lengths (n), t (n_sides), shift (2 c), e (2 j)]: t >= |l - goal| for the side
     # lengths, e >= |corner - scale * measured corner - shift of its chart| for the corners
     refs = np.zeros(0, dtype=np.int64)
     if corner_cost > 0:
         refs = np.flatnonzero(np.isin(tables.ref_chart, drifting_charts(complex_, tables, scale)))
     n_refs = len(refs)
-    extra = 2 * n_charts + 2 * n_refs if n_refs else 0
+    extra = 4 * n_refs
     side_rows = closeness_rows(scale * measured_lengths(complex_), n)
     constraints = [
         LinearConstraint(sp.hstack([side_rows.A, sp.csr_matrix((side_rows.A.shape[0], extra))]),
                          side_rows.lb, side_rows.ub),
         LinearConstraint(sp.hstack([refinement.equalities,
-                                    sp.csr_matrix((refinement.equalities.shape[0], n_sides + extra))]),
-                         0.0, 0.0),
+                                    sp.csr_matrix((refinement.equalities.shape[0],
+                                                   n_sides + extra))]), 0.0, 0.0),
         LinearConstraint(sp.hstack([refinement.extents,
-                                    sp.csr_matrix((refinement.extents.shape[0], n_sides + extra))]),
-                         1.0, np.inf),
+                                    sp.csr_matrix((refinement.extents.shape[0],
+                                                   n_sides + extra))]), 1.0, np.inf),
     ]
     if collapsible is not None and np.any(collapsible) and complex_.slit_walks():
         constraints.append(_open_hole_rows(complex_, tables, n + n_sides + extra))
     if len(separations):
         constraints.append(separation_rows(tables, separations, n + n_sides + extra))
-    if extra:
-        rows = (2 * refs[:, None] + np.array([0, 1])).reshape(-1)
-        walk = corner_walk_matrix(tables, n)[rows]
-        shift = sp.csr_matrix((np.ones(2 * n_refs), (np.arange(2 * n_refs),
-                                                     2 * np.repeat(tables.ref_chart[refs], 2)
-                                                     + np.tile([0, 1], n_refs))),
-                              shape=(2 * n_refs, 2 * n_charts))
-        measured = scale * tables.ref_measured[refs].reshape(-1)
-        slack = sp.identity(2 * n_refs, format="csr")
-        gap = sp.csr_matrix((2 * n_refs, n_sides))
-        constraints.append(LinearConstraint(sp.hstack([walk, gap, -shift, slack]).tocsr(),
-                                            measured, np.inf))
-        constraints.append(LinearConstraint(sp.hstack([-walk, gap, shift, slack]).tocsr(),
-                                            -measured, np.inf))
+    if n_refs:
+        constraints += corner_rows(tables, refs, scale, n, n_sides)
     # inserted edges and split pieces carry a small cost: no larger than the sides need
     cost = np.concatenate([np.full(n_sides, LENGTH_COST), np.full(n - n_sides, EXTRA_COST),
-                           np.ones(n_sides), np.zeros(2 * n_charts if extra else 0),
-                           np.full(2 * n_refs if extra else 0, corner_cost)])
+                           np.ones(n_sides), np.zeros(2 * n_refs),
+                           np.full(2 * n_refs, corner_cost)])
     integrality = np.concatenate([np.ones(n), np.zeros(n_sides + extra)])
     side_lower = np.ones(n_sides) if collapsible is None else np.where(collapsible, 0.0, 1.0)
     if least is not None:
         side_lower = np.maximum(side_lower, least)
     lower = np.concatenate([side_lower, np.where(refinement.piece[n_sides:], 0.0, 1.0),
-                            np.zeros(n_sides), np.full(2 * n_charts if extra else 0, -np.inf),
-                            np.zeros(2 * n_refs if extra else 0)])
+                            np.zeros(n_sides), np.full(2 * n_refs, -np.inf),
+                            np.zeros(2 * n_refs)])
     result = solve_milp("the side-length quantization", cost, integrality, Bounds(lower, np.inf),
-                        constraints, MILP_GAP)
+                        constraints, MILP_GAP, CORNER_NODE_LIMIT if extra else NODE_LIMIT)
     if result.x is None:
         raise LabelingError(
             f"no integer side lengths close every rectangle of this labeling's charts "
