@@ -40,7 +40,7 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     ``max_base_faces``.
     """
     from core.errors import FaceLimitError, LabelingError
-    from core.fitting.route_review import review_route
+    from core.fitting.route_review import CagePreview, review_route
     from core.quadmesh.base_mesh import CORNER_COST, LayoutTooLargeError, build_base_mesh
 
     validity = labeling.validity.report
@@ -86,7 +86,8 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
             if other_info["method"] == "polycube":
                 again = review_route(other_cage, other_info, intake.surface,
                                      params.subdivision_levels, lambda: (cage, info),
-                                     params.fit_mode)
+                                     params.fit_mode,
+                                     CagePreview(**info["route_review"]["paired decimation"]))
                 retry = again.info["route_review"]["polycube"]
                 if again.info["method"] == "polycube":
                     cage, info = again.cage, again.info

@@ -54,3 +54,36 @@ def test_corner_terms_keep_a_slanted_chart_as_tall_as_it_is_measured():
     assert height["sides"] <= 2 < 3 <= height["corners"] <= 6
     for result in (sides_only, with_corners):
         assert (result.side_length >= 1).all() and result.faces > 0
+
+
+def tapered_plate():
+    """A plate 1 thick whose outline tapers from 6 wide to 2 wide over 12 (slanted sides
+    about 10 degrees off the x axis), small triangles."""
+    import trimesh
+
+    outline = np.array([[0, 0], [12, 2], [12, 4], [0, 6]], dtype=np.float64)
+    corners = np.concatenate([np.column_stack([outline, np.full(4, z)]) for z in (0.0, 1.0)])
+    mesh = trimesh.convex.convex_hull(corners)
+    V, F = trimesh.remesh.subdivide_to_size(mesh.vertices, mesh.faces, max_edge=0.3)
+    mesh = trimesh.Trimesh(V, F, process=True)
+    return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+
+
+@pytest.mark.slow
+def test_a_tapered_plate_laid_out_with_its_corners_is_a_closed_quad_cage():
+    from core.polymesh_checks import check_polymesh
+    from core.quadmesh.base_mesh import build_base_mesh
+    from core.types import TriMesh
+    from tests.core.test_quadmesh import identity_frames, nearest_labels
+
+    V, F = tapered_plate()
+    frames, part_frames = identity_frames(len(F))
+    labels = nearest_labels(V, F)
+    for cost in (0.0, 2.0):
+        base, info = build_base_mesh(TriMesh(V, F), np.zeros(len(F), dtype=np.int64), labels,
+                                     frames, part_frames, 120, method="polycube",
+                                     corner_cost=cost)
+        check_polymesh(base)
+        assert info["method"] == "polycube" and info["genus"] == 0
+        assert info["corner_cost"] == cost
+        assert 0.5 * 120 <= info["faces"] <= 1.5 * 120
