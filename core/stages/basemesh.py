@@ -82,16 +82,19 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
             # charts kept near their places, it is reviewed against the same decimation
             progress.check_cancel()
             other_cage, other_info = build("auto", CORNER_COST)
-            retry = None
+            review, retry = info["route_review"], None
             if other_info["method"] == "polycube":
                 again = review_route(other_cage, other_info, intake.surface,
                                      params.subdivision_levels, lambda: (cage, info),
                                      params.fit_mode,
-                                     CagePreview(**info["route_review"]["paired decimation"]))
+                                     CagePreview(**review["paired decimation"]))
                 retry = again.info["route_review"]["polycube"]
                 if again.info["method"] == "polycube":
                     cage, info = again.cage, again.info
-            info["route_review"] = {**info["route_review"], "corner_retry": retry}
+            info["route_review"] = {**review, "corner_retry": retry,
+                                    "kept": ("polycube with corners"
+                                             if info["method"] == "polycube" else
+                                             review["kept"])}
     if invalid is not None and params.base_mesh_method == "auto":
         info["fallback_reason"] = f"the labeling is not a valid polycube labeling ({invalid})"
     if info["genus"] != intake.genus:
