@@ -508,8 +508,6 @@ def corner_rows(tables, refs, scale, n_vars, n_sides):
     slot = np.full(len(tables.ref_side), -1, dtype=np.int64)
     slot[refs] = np.arange(k)
     nxt = slot[tables.ref_next[refs]]
-    if (nxt < 0).any():
-        raise ValueError("corner_rows needs whole loops")
     place = n_vars + n_sides + 2 * np.arange(k)[:, None] + np.array([0, 1])  # (k, 2) columns
     error = place + 2 * k
     n_columns = n_vars + n_sides + 4 * k
