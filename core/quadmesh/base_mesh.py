@@ -83,8 +83,8 @@ give way to it."""
 
 CORNER_COST = 2.0
 """Objective weight (per unit and axis, against one per unit of side length) of the corners of
-drifting charts in the quantization tried where a layout lost without them
-(:func:`core.quadmesh.polycube.quantize.quantize`)."""
+drifting charts in the quantization of a layout that lost the route review without them
+(:func:`core.quadmesh.polycube.quantize.quantize`, ``core.stages.basemesh``)."""
 COARSE_CHART_ROUNDS = 3
 """Quantizations tried with longer shortest sides on the charts of inverted faces
 (:func:`_polycube_base_mesh`)."""
@@ -453,10 +453,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     the one with fewer flaws is kept (:func:`_flaw_rank`: a limit surface that crosses itself
     never wins over one that does not). ``method="polycube"`` never falls back (its errors are
     raised; layouts up to ``max_base_faces`` are kept, repaired as in ``auto``);
-    ``method="decimation"`` skips the polycube layout. In ``auto``, a layout left with flaws
-    is quantized again with the corners of its drifting charts kept near their measured
-    places (``CORNER_COST``, :func:`core.quadmesh.polycube.quantize.quantize`), and the one of
-    the two with fewer flaws goes on to the comparison with the decimation.
+    ``method="decimation"`` skips the polycube layout.
 
     Parameters
     ----------
@@ -471,7 +468,9 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         rows where none (``FrameField.face_interface_axis``), or None.
     method : one of ``BASE_MESH_METHODS``.
     corner_cost : float >= 0, weight of the corners of drifting charts in the layout's
-        quantization (0: sides only; the report's ``corner_cost`` says which was kept).
+        quantization (0: sides only). A layout with corner terms is the retry of one that lost
+        (``core.stages.basemesh``): in ``auto`` it is returned with its flaws, no decimation
+        built, for the caller to judge.
 
     Returns
     -------
@@ -539,21 +538,8 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
                                   "reason": str(exc)}
         else:
             mesh, info = _repaired_or_untangled(mesh, info, surface)
-            if (info["inverted_faces"] or info["limit_crossings"]) and corner_cost == 0:
-                try:
-                    other_mesh, other_info = _polycube_base_mesh(
-                        target, face_part, face_label, face_frame, part_frames,
-                        int(target_faces), max_base_faces, face_interface_axis, give_up,
-                        FALLBACK_REFINEMENT_ROUNDS, surface=surface, corner_cost=CORNER_COST)
-                except (LabelingError, InvalidMeshError):
-                    pass  # the layout without corner terms stays
-                else:
-                    other_mesh, other_info = _repaired_or_untangled(other_mesh, other_info,
-                                                                    surface)
-                    if _flaw_rank(other_info) < _flaw_rank(info):
-                        mesh, info = other_mesh, other_info
             polycube_candidate = _candidate(info)
-            if info["inverted_faces"] or info["limit_crossings"]:
+            if (info["inverted_faces"] or info["limit_crossings"]) and corner_cost == 0:
                 other_mesh, other_info = _paired_decimation_base_mesh(
                     target_v, target_f, surface, int(target_faces), max_base_faces,
                     f"the polycube layout has {_flaws(info)} after its repair")

@@ -83,7 +83,8 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
             progress.check_cancel()
             other_cage, other_info = build("auto", CORNER_COST)
             review, retry = info["route_review"], None
-            if other_info["method"] == "polycube":
+            if (other_info["method"] == "polycube" and not other_info["inverted_faces"]
+                    and not other_info["limit_crossings"]):
                 again = review_route(other_cage, other_info, intake.surface,
                                      params.subdivision_levels, lambda: (cage, info),
                                      params.fit_mode,
