@@ -494,7 +494,8 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         ``side_directions_flipped``, ``folded_points``, ``rectangles``, ``collapsed_sides``,
         ``layout_inverted_faces`` (before the repair), ``limit_crossings`` (self-crossing
         triangle pairs of its level-2 limit surface), ``moved_vertices``, ``edits`` and
-        ``untangled`` (the untangled layout was kept, :func:`_repaired_or_untangled`);
+        ``untangled`` (the untangled layout was kept, :func:`_repaired_or_untangled`) and
+        ``corner_cost`` (the weight of the corner terms its quantization had);
         the paired decimation adds ``decimated_triangles``, ``budget_rounds`` (the budgets
         tried while its limit surface crossed itself or had inverted faces; beyond the budget
         rule while it crossed itself, and ``minimum_reason`` says so), ``limit_crossings``
