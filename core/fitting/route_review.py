@@ -73,7 +73,8 @@ def decimation_wins(layout, decimation):
             and layout.largest_distance > ROUTE_DISTANCE_RATIO * decimation.largest_distance)
 
 
-def review_route(cage, info, target, subdivision_levels, build_decimation, fit_mode="inside"):
+def review_route(cage, info, target, subdivision_levels, build_decimation, fit_mode="inside",
+                 decimation_preview=None):
     """Keep the polycube layout ``cage`` unless its least-squares fit is held back and the
     paired decimation's fits much closer (this module's docstring).
 
@@ -86,6 +87,8 @@ def review_route(cage, info, target, subdivision_levels, build_decimation, fit_m
     build_decimation : callable ``() -> (PolyMesh, dict)``, the paired decimation's cage and
         report (``build_base_mesh(..., method="decimation")``).
     fit_mode : ``'inside'`` or ``'best-fit'``, the fit that will follow (``params.fit_mode``).
+    decimation_preview : CagePreview of the cage ``build_decimation`` gives, where already
+        measured (another layout of the same target was reviewed against it), or None.
 
     Returns
     -------
@@ -97,7 +100,8 @@ def review_route(cage, info, target, subdivision_levels, build_decimation, fit_m
     if layout.held_back == 0:
         return ReviewedRoute(cage, {**info, "route_review": review})
     other_cage, other_info = build_decimation()
-    other = preview_cage(other_cage, target, subdivision_levels, fit_mode)
+    other = (preview_cage(other_cage, target, subdivision_levels, fit_mode)
+             if decimation_preview is None else decimation_preview)
     review["paired decimation"] = other.section()
     if not decimation_wins(layout, other):
         return ReviewedRoute(cage, {**info, "route_review": review})

@@ -81,6 +81,10 @@ FALLBACK_OVER_BUDGET = 1.5
 (which meets the budget, but whose cages have far more extraordinary vertices); larger ones
 give way to it."""
 
+CORNER_COST = 2.0
+"""Objective weight (per unit and axis, against one per unit of side length) of the corners of
+drifting charts in the quantization of a layout that lost the route review without them
+(:func:`core.quadmesh.polycube.quantize.quantize`, ``core.stages.basemesh``)."""
 COARSE_CHART_ROUNDS = 3
 """Quantizations tried with longer shortest sides on the charts of inverted faces
 (:func:`_polycube_base_mesh`)."""
@@ -112,7 +116,8 @@ def refined_target(target):
 
 
 def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, collapsible,
-                      give_up_faces, refinement_rounds, least=None, separate=False):
+                      give_up_faces, refinement_rounds, least=None, separate=False,
+                      corner_cost=0.0):
     """Quantize, lay out and embed; returns ``(mesh, polycube, rounds, refinement, folded,
     quad_chart, untangled)`` (``quad_chart``: (f,) int64 chart of every face of ``mesh``;
     ``untangled``: callable ``() -> PolyMesh`` ``mesh`` with its folds untangled on the target,
@@ -123,7 +128,9 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     in each of up to ``SEPARATION_ROUNDS`` rounds, every overlapping chart gets the separation
     of its crossing segments that the measured chart shows most clearly among those not tried
     yet (:func:`core.quadmesh.polycube.overlap_cuts.crossing_separations`); separations that
-    make the program infeasible are dropped for good.
+    make the program infeasible are dropped for good. With ``corner_cost`` > 0 the layout
+    found is quantized once more with the corners of its drifting charts
+    (:func:`_with_corners`), and that one is embedded unless it is not a closed 2-manifold.
 
     Charts whose integer polygon overlaps itself are cut at the reflex corners next to the
     overlap (:mod:`core.quadmesh.polycube.overlap_cuts`; only those charts, so the others keep their
@@ -224,20 +231,33 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
         scale, last = None, None  # refined layout found: search the budget with it
     else:
         raise OverlappingChartsError(sorted(set(refine) | unrefinable | set(overlapping)))
-    orientation = chart_orientation(complex_, tables, polycube.corner_uv)
-    face_uv = tutte_coordinates(V, F, complex_, tables, polycube)
-    interior, folded = interior_point_positions(V, F, complex_, lattice, face_uv, orientation)
-    points = np.concatenate([V[complex_.corner_vertex],
-                             side_point_positions(V, complex_, lattice, polycube.side_length),
-                             interior])
-    # identified points become one vertex (the lowest name: a corner where there is one);
-    # points no quad uses (on sides of charts the quantization collapsed to no area) are
-    # dropped, and the checks below judge whether what remains is closed with the genus kept
-    vertex = _merge_points(lattice.n_points, lattice.identified)
-    used, compact = np.unique(vertex[lattice.quads.reshape(-1)], return_inverse=True)
-    mesh = PolyMesh(points[used], compact.astype(np.int64),
-                    np.arange(0, 4 * len(lattice.quads) + 1, 4, dtype=np.int64))
-    check_polymesh(mesh)
+    layouts = [(polycube, lattice)]
+    if corner_cost > 0:
+        layouts = _with_corners(complex_, tables, refinement, polycube, collapsible, least,
+                                separations, corner_cost, give_up_faces) + layouts
+    for polycube, lattice in layouts:
+        orientation = chart_orientation(complex_, tables, polycube.corner_uv)
+        face_uv = tutte_coordinates(V, F, complex_, tables, polycube)
+        interior, folded = interior_point_positions(V, F, complex_, lattice, face_uv,
+                                                    orientation)
+        points = np.concatenate([V[complex_.corner_vertex],
+                                 side_point_positions(V, complex_, lattice,
+                                                      polycube.side_length), interior])
+        # identified points become one vertex (the lowest name: a corner where there is one);
+        # points no quad uses (on sides of charts the quantization collapsed to no area) are
+        # dropped, and the checks below judge whether what remains is closed with the genus
+        # kept
+        vertex = _merge_points(lattice.n_points, lattice.identified)
+        used, compact = np.unique(vertex[lattice.quads.reshape(-1)], return_inverse=True)
+        mesh = PolyMesh(points[used], compact.astype(np.int64),
+                        np.arange(0, 4 * len(lattice.quads) + 1, 4, dtype=np.int64))
+        try:
+            check_polymesh(mesh)
+        except InvalidMeshError:
+            if polycube is layouts[-1][0]:
+                raise
+            continue  # the layout with corners pinches where the plain one may not
+        break
     n_side_points = len(lattice.side_point_side)
     side_of = np.full(lattice.n_points, -1, dtype=np.int64)
     side_of[lattice.n_corners:lattice.n_corners + n_side_points] = lattice.side_point_side
@@ -271,6 +291,33 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     except InvalidMeshError:
         pass  # smoothing degenerated a face somewhere: keep the Tutte placement
     return mesh, polycube, rounds, refinement, folded, lattice.quad_chart, untangled
+
+
+def _with_corners(complex_, tables, refinement, polycube, collapsible, least, separations,
+                  corner_cost, give_up_faces):
+    """``[(polycube, lattice)]``: the layout ``polycube`` quantized again at its scale, with
+    its refinement and separations, and the corners of its drifting charts kept near their
+    measured places (:func:`core.quadmesh.polycube.quantize.quantize` with ``corner_cost``),
+    where that program has a solution whose charts do not overlap and which stays within
+    ``give_up_faces``; else ``[]``.
+
+    The corner terms make each program far slower than the plain one, so the scale, cuts and
+    separations are searched without them and the terms only move the side lengths of the
+    layout found.
+    """
+    try:
+        other = quantize(complex_, tables, refinement, polycube.scale, collapsible, least,
+                         separations, corner_cost)
+    except MilpTimeLimitError:
+        raise
+    except LabelingError:
+        return []
+    if other.faces > give_up_faces:
+        return []
+    try:
+        return [(other, build_lattice(complex_, tables, other))]
+    except OverlappingChartsError:
+        return []
 
 
 def _cut_overlapping_chart(complex_, tables, polycube, charts, refine, cuts, unrefinable):
@@ -391,7 +438,7 @@ def _merge_points(n, pairs):
 
 def build_base_mesh(target, face_part, face_label, face_frame, part_frames, target_faces=300,
                     max_base_faces=2500, face_interface_axis=None, method="auto",
-                    decimation=None):
+                    decimation=None, corner_cost=0.0):
     """Closed quad base mesh on the target: the polycube layout, else the paired decimation.
 
     With ``method="auto"`` the quantized polycube layout of the labeling (this module's
@@ -422,6 +469,10 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     method : one of ``BASE_MESH_METHODS``.
     decimation : DecimationCache shared by the calls on one target (the paired decimation
         needs no labeling, so the layouts of several labelings share it), or None.
+    corner_cost : float >= 0, weight of the corners of drifting charts in the layout's
+        quantization (0: sides only). A layout with corner terms is the retry of one that lost
+        (``core.stages.basemesh``): in ``auto`` it is returned with its flaws, no decimation
+        built, for the caller to judge.
 
     Returns
     -------
@@ -445,7 +496,8 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         ``side_directions_flipped``, ``folded_points``, ``rectangles``, ``collapsed_sides``,
         ``layout_inverted_faces`` (before the repair), ``limit_crossings`` (self-crossing
         triangle pairs of its level-2 limit surface), ``moved_vertices``, ``edits`` and
-        ``untangled`` (the untangled layout was kept, :func:`_repaired_or_untangled`);
+        ``untangled`` (the untangled layout was kept, :func:`_repaired_or_untangled`) and
+        ``corner_cost`` (the weight of the corner terms its quantization had);
         the paired decimation adds ``decimated_triangles``, ``budget_rounds`` (the budgets
         tried while its limit surface crossed itself or had inverted faces; beyond the budget
         rule while it crossed itself, and ``minimum_reason`` says so), ``limit_crossings``
@@ -473,7 +525,8 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
     if method == "polycube":
         mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames,
                                          int(target_faces), max_base_faces, face_interface_axis,
-                                         max_base_faces, surface=surface)
+                                         max_base_faces, surface=surface,
+                                         corner_cost=corner_cost)
         mesh, info = _repaired_or_untangled(mesh, info, surface)
     elif method == "auto":
         give_up = int(min(max_base_faces, FALLBACK_OVER_BUDGET * target_faces))
@@ -481,7 +534,8 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
             mesh, info = _polycube_base_mesh(target, face_part, face_label, face_frame,
                                              part_frames, int(target_faces), max_base_faces,
                                              face_interface_axis, give_up,
-                                             FALLBACK_REFINEMENT_ROUNDS, surface=surface)
+                                             FALLBACK_REFINEMENT_ROUNDS, surface=surface,
+                                             corner_cost=corner_cost)
         except (LabelingError, InvalidMeshError) as exc:
             reason = f"the polycube layout failed: {exc}"
             polycube_candidate = {"built": False, "faces": getattr(exc, "faces", None),
@@ -489,7 +543,7 @@ def build_base_mesh(target, face_part, face_label, face_frame, part_frames, targ
         else:
             mesh, info = _repaired_or_untangled(mesh, info, surface)
             polycube_candidate = _candidate(info)
-            if info["inverted_faces"] or info["limit_crossings"]:
+            if (info["inverted_faces"] or info["limit_crossings"]) and corner_cost == 0:
                 other_mesh, other_info = decimate(
                     target_v, target_f, surface, int(target_faces), max_base_faces,
                     f"the polycube layout has {_flaws(info)} after its repair")
@@ -711,12 +765,14 @@ class _LayoutAttempts:
     past the caller's limit where separating the few crossing segments would not. The side
     directions, loop tables and way of undoing overlaps of the first successful attempt are
     kept (``complex_``, ``tables``, ``collapsible``, ``separate``), so later attempts with
-    larger least lengths quantize the same complex the same way.
+    larger least lengths quantize the same complex the same way. ``corner_cost`` is passed on
+    to every quantization (:func:`core.quadmesh.polycube.quantize.quantize`).
     """
 
     def __init__(self, V, F, complex_, part_frames, target_faces, max_base_faces,
-                 give_up_faces, refinement_rounds, target_genus):
+                 give_up_faces, refinement_rounds, target_genus, corner_cost=0.0):
         self.V, self.F, self.part_frames = V, F, part_frames
+        self.corner_cost = corner_cost
         self.budget = (target_faces, max_base_faces)
         self.give_up_faces, self.refinement_rounds = give_up_faces, refinement_rounds
         self.target_genus = target_genus
@@ -727,7 +783,8 @@ class _LayoutAttempts:
     def _run(self, least):
         result = _layout_on_target(self.V, self.F, self.complex_, self.tables, *self.budget,
                                    self.collapsible, self.give_up_faces,
-                                   self.refinement_rounds, least, self.separate)
+                                   self.refinement_rounds, least, self.separate,
+                                   self.corner_cost)
         mesh, polycube, rounds, refinement, folded, quad_chart, untangled = result
         return mesh, polycube, rounds, refinement, folded, self.complex_, quad_chart, untangled
 
@@ -833,13 +890,14 @@ def _fold_free_limit(mesh, max_base_faces):
 
 def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, target_faces,
                         max_base_faces, face_interface_axis, give_up_faces,
-                        refinement_rounds=REFINEMENT_ROUNDS, surface=None):
+                        refinement_rounds=REFINEMENT_ROUNDS, surface=None, corner_cost=0.0):
     """Closed all-quad base mesh on the target from a valid polycube labeling.
 
     Parameters as :func:`build_base_mesh`; ``give_up_faces``: the budget search stops and
     raises once the layout needs more quads than this; ``refinement_rounds``: most
     quantizations that split overlapping charts into rectangles; ``surface``: TargetSurface of
-    the target (built here when None). Returns ``(mesh, info)`` as there, without
+    the target (built here when None); ``corner_cost``: weight of the corners of drifting
+    charts in the quantization (:func:`core.quadmesh.polycube.quantize.quantize`). Returns ``(mesh, info)`` as there, without
     ``inverted_faces`` and ``seconds``.
 
     A chart one quad across a thin wall has a limit surface pulled past the wall's middle, so
@@ -872,7 +930,8 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
     relabelled = None
     try:
         layout = _LayoutAttempts(V, F, build(fine_label), part_frames, int(target_faces),
-                                 max_base_faces, give_up_faces, refinement_rounds, target_genus)
+                                 max_base_faces, give_up_faces, refinement_rounds, target_genus,
+                                 corner_cost)
         best = layout.attempt(None)
     except (SideDirectionError, CornerlessLoopError) as exc:
         # charts no side directions close, or a loop without corners: change their labels
@@ -885,7 +944,8 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
         if relabelled is None:
             raise
         layout = _LayoutAttempts(V, F, relabelled.complex_, part_frames, int(target_faces),
-                                 max_base_faces, give_up_faces, refinement_rounds, target_genus)
+                                 max_base_faces, give_up_faces, refinement_rounds, target_genus,
+                                 corner_cost)
         best = layout.attempt(None)
     flipped_faces = inverted_faces(best[0], surface.vertices, surface.faces, surface)
     least = np.zeros(layout.complex_.n_sides, dtype=np.int64)
@@ -925,6 +985,6 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
         "folded_points": int(folded), "rectangles": refinement.rectangles,
         "collapsed_sides": int((polycube.side_length == 0).sum()),
         "relabelled_area": 0.0 if relabelled is None else relabelled.changed_area,
-        UNTANGLED_KEY: untangled,
+        "corner_cost": float(corner_cost), UNTANGLED_KEY: untangled,
     }
     return mesh, info

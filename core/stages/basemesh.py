@@ -16,7 +16,9 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     more than 1.5 times the budget or has more inverted faces after its repair, falls back to
     the paired decimation of the target (``core.quadmesh.build_base_mesh``); so does a layout
     whose least-squares fit crosses itself and stays much farther from the target than the
-    decimation's (:mod:`core.fitting.route_review`; not with ``fit_mode="none"``).
+    decimation's (:mod:`core.fitting.route_review`; not with ``fit_mode="none"``), unless the
+    layout quantized again with the corners of its drifting charts kept near their measured
+    places (``core.quadmesh.base_mesh.CORNER_COST``) passes that review.
 
     Parts make the layout easier where each is a simple polycube, but their interfaces add
     charts and corners, and a layout of several parts can fail where the one-part labeling's
@@ -129,8 +131,8 @@ def _layout(intake, parts, frames, labeling, params, decimation, progress):
     (the route review included), without the genus check; ``decimation`` is the
     ``DecimationCache`` of the target."""
     from core.errors import FaceLimitError, LabelingError
-    from core.fitting.route_review import review_route
-    from core.quadmesh.base_mesh import LayoutTooLargeError, build_base_mesh
+    from core.fitting.route_review import CagePreview, review_route
+    from core.quadmesh.base_mesh import CORNER_COST, LayoutTooLargeError, build_base_mesh
 
     validity = labeling.validity.report
     method = params.base_mesh_method
@@ -147,13 +149,13 @@ def _layout(intake, parts, frames, labeling, params, decimation, progress):
     field = frames.frame_field
     interface_axis = field.face_interface_axis if len(field.interfaces) else None
 
-    def build(route):
+    def build(route, corner_cost=0.0):
         return build_base_mesh(intake.surface, parts.face_part, labeling.face_label,
                                field.face_frame, field.part_frames,
                                target_faces=params.target_faces,
                                max_base_faces=params.max_base_faces,
                                face_interface_axis=interface_axis, method=route,
-                               decimation=decimation)
+                               decimation=decimation, corner_cost=corner_cost)
 
     try:
         cage, info = build(method)
@@ -162,9 +164,29 @@ def _layout(intake, parts, frames, labeling, params, decimation, progress):
         raise FaceLimitError(str(exc)) from exc
     if method == "auto" and info["method"] == "polycube" and params.fit_mode != "none":
         progress.check_cancel()
+        polycube_info = info
         reviewed = review_route(cage, info, intake.surface, params.subdivision_levels,
                                 lambda: build("decimation"), params.fit_mode)
         cage, info = reviewed.cage, reviewed.info
+        if info["method"] != "polycube" and polycube_info["corner_cost"] == 0:
+            # the layout lost the review: quantized again with the corners of its drifting
+            # charts kept near their places, it is reviewed against the same decimation
+            progress.check_cancel()
+            other_cage, other_info = build("auto", CORNER_COST)
+            review, retry = info["route_review"], None
+            if (other_info["method"] == "polycube" and not other_info["inverted_faces"]
+                    and not other_info["limit_crossings"]):
+                again = review_route(other_cage, other_info, intake.surface,
+                                     params.subdivision_levels, lambda: (cage, info),
+                                     params.fit_mode,
+                                     CagePreview(**review["paired decimation"]))
+                retry = again.info["route_review"]["polycube"]
+                if again.info["method"] == "polycube":
+                    cage, info = again.cage, again.info
+            info["route_review"] = {**review, "corner_retry": retry,
+                                    "kept": ("polycube with corners"
+                                             if info["method"] == "polycube" else
+                                             review["kept"])}
     if invalid is not None and params.base_mesh_method == "auto":
         info["fallback_reason"] = f"the labeling is not a valid polycube labeling ({invalid})"
     return cage, info

@@ -430,8 +430,8 @@ def test_the_quantization_program_is_solved_by_its_linear_relaxation(monkeypatch
     refinement = rectangular_refinement(complex_, tables, range(complex_.n_charts))
     programs = []
 
-    def recorded(what, cost, integrality, bounds, constraints, gap=None):
-        result = solve_milp(what, cost, integrality, bounds, constraints, gap)
+    def recorded(what, cost, integrality, bounds, constraints, gap=None, *limits):
+        result = solve_milp(what, cost, integrality, bounds, constraints, gap, *limits)
         programs.append((cost, bounds, constraints, result))
         return result
 

@@ -56,6 +56,17 @@ and another shrinks on the same side of their goals), and another solver path wo
 another of them; a small cost per unit of side length (``LENGTH_COST``) prefers the shorter
 ones, which gives the base meshes the closeness alone would give when they are unique.
 
+A side is measured along its own axis only. Where a chart's boundary runs at a slant (a
+tapering arm, a strut at an angle to the part's axes), what a side moves across its axis is
+in no side, and the polygon closest to the side lengths can be far narrower or wider than the
+chart: its quads are then stretched many times over on the target, and the fit of the cage
+crosses itself there. With ``corner_cost``, the corners of such charts (:func:`drifting_charts`)
+are also kept near their measured places, ``min sum |c - s C - t|`` over the corners ``c`` of a
+chart (linear in the side lengths, :func:`corner_rows`), ``C`` measured and ``t`` a
+free shift of the chart: the polygon then balances the slant over its sides. Those terms
+break the network structure above, so the program takes more branching; the base-mesh stage
+asks for them only for a layout that lost without them.
+
 After Protais, Bourcier, Ledoux, Lévy, "Robust quantization for polycube maps" (CAD 2022);
 Lyon, Campen, Kobbelt, "Quad layouts via constrained T-mesh quantization" (EG 2021); Tamassia,
 "On embedding a graph in the grid with the minimum number of bends" (SIAM J. Comput. 1987).
@@ -67,7 +78,7 @@ import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint
 
 from core.errors import LabelingError, OTHER_PARTS
-from core.quadmesh.polycube.milp_solve import solve_milp
+from core.quadmesh.polycube.milp_solve import NODE_LIMIT, solve_milp
 
 MILP_GAP = 0.01
 """Relative optimality gap accepted from HiGHS (the objective is a soft closeness measure)."""
@@ -81,6 +92,12 @@ EXTRA_COST = 1e-3
 LENGTH_COST = 1e-5
 """Objective weight of the side lengths (per unit): among lengths equally close to their goals
 (module docstring), the shorter ones, whatever path the solver takes."""
+CORNER_DRIFT = 1.0
+"""Charts whose sides, at their measured lengths, put a corner more than this many units from
+its measured place get the corner terms of :func:`quantize` (:func:`drifting_charts`)."""
+CORNER_NODE_LIMIT = 200
+"""Branch-and-bound nodes of a program with corner terms: their relaxation is seldom integral,
+and the best layout found within a few hundred nodes is as good a balance of the slant."""
 SCALE_ROUNDS = 10
 """Most scales tried by :func:`quantize_for_budget`."""
 SCALE_PRECISION = 0.02
@@ -466,6 +483,94 @@ def _open_hole_rows(complex_, tables, n_columns):
     return LinearConstraint(matrix, 1.0, np.inf)
 
 
+def corner_rows(tables, refs, scale, n_vars, n_sides):
+    """Rows that make ``e`` at least the distance of every corner in ``refs`` from its
+    measured place (:func:`quantize`'s corner terms), sparse.
+
+    Each reference ``r`` of ``refs`` (whole loops: every reference of a chart or none) gets
+    its start corner's integer place ``p_r`` (two free unknowns): walking the side of ``r``
+    leads to the next corner, ``p_next = p_r + sign_r l_r e_axis``, which fixes the places up
+    to one shift per chart, so ``e_r >= |p_r - scale C_r|`` measures each corner's distance
+    from its measured place ``C_r`` after the chart's best shift.
+
+    Parameters
+    ----------
+    tables : LoopTables; refs : (k,) int64 references; scale : float, units per length.
+    n_vars : int, length unknowns (the side lengths first); n_sides : int, closeness slacks
+        after them. The unknowns are ``[l (n_vars), t (n_sides), p (2 k), e (2 k)]``.
+
+    Returns
+    -------
+    list of scipy.optimize.LinearConstraint: ``2 k`` walk equalities, then ``4 k`` rows
+    ``>= 0`` for the distances.
+    """
+    k = len(refs)
+    slot = np.full(len(tables.ref_side), -1, dtype=np.int64)
+    slot[refs] = np.arange(k)
+    nxt = slot[tables.ref_next[refs]]
+    place = n_vars + n_sides + 2 * np.arange(k)[:, None] + np.array([0, 1])  # (k, 2) columns
+    error = place + 2 * k
+    n_columns = n_vars + n_sides + 4 * k
+    rows = np.repeat(np.arange(2 * k), 2)
+    cols = np.stack([place[nxt].reshape(-1), place.reshape(-1)], axis=1).reshape(-1)
+    vals = np.tile([1.0, -1.0], 2 * k)
+    walk_rows = 2 * np.arange(k) + tables.ref_axis[refs]
+    rows = np.concatenate([rows, walk_rows])
+    cols = np.concatenate([cols, tables.ref_side[refs]])
+    vals = np.concatenate([vals, -tables.ref_sign[refs].astype(np.float64)])
+    walk = sp.csr_matrix((vals, (rows, cols)), shape=(2 * k, n_columns))
+    measured = scale * tables.ref_measured[refs].reshape(-1)
+    ones = np.ones(2 * k)
+    index = np.arange(2 * k)
+    above = sp.csr_matrix((np.concatenate([-ones, ones]),
+                           (np.concatenate([index, index]),
+                            np.concatenate([place.reshape(-1), error.reshape(-1)]))),
+                          shape=(2 * k, n_columns))
+    below = sp.csr_matrix((np.concatenate([ones, ones]),
+                           (np.concatenate([index, index]),
+                            np.concatenate([place.reshape(-1), error.reshape(-1)]))),
+                          shape=(2 * k, n_columns))
+    return [LinearConstraint(walk, 0.0, 0.0),
+            LinearConstraint(sp.vstack([above, below]).tocsr(),
+                             np.concatenate([-measured, measured]), np.inf)]
+
+
+def drifting_charts(complex_, tables, scale):
+    """(k,) int64 charts whose sides drift: their corners, walked from the first one along the
+    sides at their measured lengths (``scale`` times, in units), land more than
+    ``CORNER_DRIFT`` units from the measured corners, after the shift that best matches the
+    two (the mean offset).
+
+    A side is measured along its own axis only; where the target's boundary runs at a slant
+    (a tapering arm, a strut at an angle to the part's axes), what it moves across that axis
+    is in no side, and the integer polygon is narrower or wider there than the chart it
+    stands for.
+    """
+    goal = scale * measured_lengths(complex_)
+    step = np.zeros((len(tables.ref_side), 2))
+    step[np.arange(len(step)), tables.ref_axis] = tables.ref_sign * goal[tables.ref_side]
+    order = np.argsort(tables.ref_chart, kind="stable")
+    charts = np.unique(tables.ref_chart)
+    starts = np.searchsorted(tables.ref_chart[order], charts)
+    walked = np.zeros_like(step)
+    for first in order[starts]:
+        r, position = first, np.zeros(2)
+        while True:
+            walked[r] = position
+            position = position + step[r]
+            r = int(tables.ref_next[r])
+            if r == first:
+                break
+    off = walked - scale * tables.ref_measured
+    n = complex_.n_charts
+    mean = np.stack([np.bincount(tables.ref_chart, weights=off[:, a], minlength=n)
+                     for a in (0, 1)], axis=1) / np.maximum(
+        np.bincount(tables.ref_chart, minlength=n), 1)[:, None]
+    worst = np.zeros(n)
+    np.maximum.at(worst, tables.ref_chart, np.abs(off - mean[tables.ref_chart]).max(axis=1))
+    return np.flatnonzero(worst > CORNER_DRIFT)
+
+
 def separation_rows(tables, separations, n_columns):
     """Rows that keep the corner pairs of ``separations`` at least one unit apart.
 
@@ -498,7 +603,8 @@ def separation_rows(tables, separations, n_columns):
     return LinearConstraint(matrix, 1.0, np.inf)
 
 
-def quantize(complex_, tables, refinement, scale, collapsible=None, least=None, separations=()):
+def quantize(complex_, tables, refinement, scale, collapsible=None, least=None, separations=(),
+             corner_cost=0.0):
     """Integer side lengths closest to ``scale`` times the measured ones, every rectangle closed.
 
     Parameters
@@ -509,6 +615,9 @@ def quantize(complex_, tables, refinement, scale, collapsible=None, least=None, 
     least : (s,) int64 least length of every side (units), or None; where it exceeds the
         bound of ``collapsible`` (zero or one unit) it replaces it.
     separations : sequence of Separation, corner pairs kept apart (:func:`separation_rows`).
+    corner_cost : float >= 0, objective weight (per unit, per axis) of the distance of every
+        corner of a drifting chart (:func:`drifting_charts`) from its measured place, up to a
+        shift of the chart (:func:`corner_rows`); 0 leaves the corners out.
 
     Returns
     -------
@@ -519,31 +628,43 @@ def quantize(complex_, tables, refinement, scale, collapsible=None, least=None, 
     LabelingError when no integer lengths close every rectangle.
     """
     n_sides, n = complex_.n_sides, refinement.n_vars
-    # variables [lengths (n), t (n_sides)]: t >= |l - goal| for the side lengths
+    # variables [lengths (n), t (n_sides), shift (2 c), e (2 j)]: t >= |l - goal| for the side
+    # lengths, e >= |corner - scale * measured corner - shift of its chart| for the corners
+    refs = np.zeros(0, dtype=np.int64)
+    if corner_cost > 0:
+        refs = np.flatnonzero(np.isin(tables.ref_chart, drifting_charts(complex_, tables, scale)))
+    n_refs = len(refs)
+    extra = 4 * n_refs
+    side_rows = closeness_rows(scale * measured_lengths(complex_), n)
     constraints = [
-        closeness_rows(scale * measured_lengths(complex_), n),
+        LinearConstraint(sp.hstack([side_rows.A, sp.csr_matrix((side_rows.A.shape[0], extra))]),
+                         side_rows.lb, side_rows.ub),
         LinearConstraint(sp.hstack([refinement.equalities,
-                                    sp.csr_matrix((refinement.equalities.shape[0], n_sides))]),
-                         0.0, 0.0),
+                                    sp.csr_matrix((refinement.equalities.shape[0],
+                                                   n_sides + extra))]), 0.0, 0.0),
         LinearConstraint(sp.hstack([refinement.extents,
-                                    sp.csr_matrix((refinement.extents.shape[0], n_sides))]),
-                         1.0, np.inf),
+                                    sp.csr_matrix((refinement.extents.shape[0],
+                                                   n_sides + extra))]), 1.0, np.inf),
     ]
     if collapsible is not None and np.any(collapsible) and complex_.slit_walks():
-        constraints.append(_open_hole_rows(complex_, tables, n + n_sides))
+        constraints.append(_open_hole_rows(complex_, tables, n + n_sides + extra))
     if len(separations):
-        constraints.append(separation_rows(tables, separations, n + n_sides))
+        constraints.append(separation_rows(tables, separations, n + n_sides + extra))
+    if n_refs:
+        constraints += corner_rows(tables, refs, scale, n, n_sides)
     # inserted edges and split pieces carry a small cost: no larger than the sides need
     cost = np.concatenate([np.full(n_sides, LENGTH_COST), np.full(n - n_sides, EXTRA_COST),
-                           np.ones(n_sides)])
-    integrality = np.concatenate([np.ones(n), np.zeros(n_sides)])
+                           np.ones(n_sides), np.zeros(2 * n_refs),
+                           np.full(2 * n_refs, corner_cost)])
+    integrality = np.concatenate([np.ones(n), np.zeros(n_sides + extra)])
     side_lower = np.ones(n_sides) if collapsible is None else np.where(collapsible, 0.0, 1.0)
     if least is not None:
         side_lower = np.maximum(side_lower, least)
     lower = np.concatenate([side_lower, np.where(refinement.piece[n_sides:], 0.0, 1.0),
-                            np.zeros(n_sides)])
+                            np.zeros(n_sides), np.full(2 * n_refs, -np.inf),
+                            np.zeros(2 * n_refs)])
     result = solve_milp("the side-length quantization", cost, integrality, Bounds(lower, np.inf),
-                        constraints, MILP_GAP)
+                        constraints, MILP_GAP, CORNER_NODE_LIMIT if extra else NODE_LIMIT)
     if result.x is None:
         raise LabelingError(
             f"no integer side lengths close every rectangle of this labeling's charts "
@@ -627,7 +748,7 @@ def collapsible_sides(complex_, target_faces):
 
 
 def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=None,
-                        give_up_faces=None, least=None, separations=()):
+                        give_up_faces=None, least=None, separations=(), corner_cost=0.0):
     """The quantization at the scale nearest the first one whose face count meets the budget.
 
     Starts from the scale that gives the target area in unit squares (:func:`first_scale`) and
@@ -652,7 +773,8 @@ def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=
     -------
     best : IntegerPolycube, the layout chosen as above.
     rounds : list of dicts with the scale and faces of every round (for the report).
-    ``collapsible``, ``least`` and ``separations`` are passed on to :func:`quantize`.
+    ``collapsible``, ``least``, ``separations`` and ``corner_cost`` are passed on to
+    :func:`quantize`.
     """
     low_edge = (1.0 - BUDGET_TOLERANCE) * target_faces
     high_edge = (1.0 + BUDGET_TOLERANCE) * target_faces
@@ -661,7 +783,8 @@ def quantize_for_budget(complex_, tables, refinement, target_faces, collapsible=
     below = None  # the first count is below the band (the scale grows), or above it
     outside, inside = None, None  # scales on the far and near side of the band's nearer edge
     for _ in range(SCALE_ROUNDS):
-        result = quantize(complex_, tables, refinement, scale, collapsible, least, separations)
+        result = quantize(complex_, tables, refinement, scale, collapsible, least, separations,
+                          corner_cost)
         rounds.append({"scale": scale, "faces": result.faces})
         if closest is None or abs(result.faces - target_faces) < abs(closest.faces - target_faces):
             closest = result
