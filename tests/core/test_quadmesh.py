@@ -243,13 +243,18 @@ def test_a_stricter_copy_of_a_feasible_program_is_searched_where_it_is_stricter(
     ell = build_chart_complex(V, F, np.zeros(len(F)), nearest_labels(V, F), frames)
     none = np.zeros(ell.n_sides, dtype=bool)
     solved = []
-    solve = side_signs._solve
+    solve, feasibility = side_signs._solve, side_signs._feasibility
 
     def spy(program, node_limit):
         solved.append(np.unique(program.used // 2))
         return solve(program, node_limit)
 
+    def feasibility_spy(program):
+        solved.append(np.unique(program.used // 2))
+        return feasibility(program)
+
     monkeypatch.setattr(side_signs, "_solve", spy)
+    monkeypatch.setattr(side_signs, "_feasibility", feasibility_spy)
     assert side_signs._local_contradiction(ell, none, np.zeros(0, dtype=np.int64)) is None
     assert solved == []
     rings = [np.unique(ell.side_chart[(ell.side_chart == c).any(axis=1)])
@@ -573,6 +578,39 @@ def test_answers_kept_are_bounded(monkeypatch):
         solve_milp("a test program", np.ones(3), np.ones(3), Bounds(0, 10),
                    [LinearConstraint(np.ones((1, 3)), rhs, np.inf)])
     assert len(milp_solve._ANSWERS) == 2
+
+
+def test_feasibility_is_decided_once_per_feasible_set_whatever_the_costs(monkeypatch):
+    import core.quadmesh.polycube.milp_solve as milp_solve
+
+    calls = []
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return milp(*args, **kwargs)
+
+    monkeypatch.setattr(milp_solve, "milp", counted)
+    monkeypatch.setattr(milp_solve, "_ANSWERS", type(milp_solve._ANSWERS)())
+    monkeypatch.setattr(milp_solve, "_VERDICTS", type(milp_solve._VERDICTS)())
+
+    def status(cost, rhs, upper=10):
+        # integers in [0, upper] summing to at least rhs and at most 2.5: none where rhs > 2.5
+        return milp_solve.solve_feasibility(
+            "a test program", np.asarray(cost, dtype=float), np.ones(3), Bounds(0, upper),
+            [LinearConstraint(np.ones((1, 3)), rhs, 2.5)]).status
+
+    assert status([1, 2, 3], 3.5) == 2 and len(calls) == 1
+    assert status([3, 1, 2], 3.5) == 2 and len(calls) == 1  # other costs: decided already
+    assert status([1, 2, 3], 1.5) == 0 and len(calls) == 2
+    assert status([5, 5, 5], 1.5) == 0 and len(calls) == 2
+    assert status([1, 2, 3], 1.5, upper=0) == 2 and len(calls) == 3  # other bounds: solved
+    # a search stopped by its node limit decided nothing: solved again, never taken as given
+    monkeypatch.setattr(milp_solve, "milp", lambda *args, **kwargs: SimpleNamespace(
+        status=1, x=None, message="node limit"))
+    assert milp_solve.solve_feasibility("a test program", np.ones(3), np.ones(3),
+                                        Bounds(0, 10), [LinearConstraint(np.ones((1, 3)), 4.5,
+                                                                         np.inf)]).status == 1
+    assert len(milp_solve._VERDICTS) == 3
 
 
 @pytest.mark.slow

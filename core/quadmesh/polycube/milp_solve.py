@@ -39,6 +39,11 @@ ANSWERS_KEPT = 4096
 
 _ANSWERS = OrderedDict()
 """Program digest -> scipy.optimize.OptimizeResult, at most ``ANSWERS_KEPT``."""
+_VERDICTS = OrderedDict()
+"""Digest of a program's feasible set -> OptimizeResult that decided it (optimal or
+infeasible), at most ``ANSWERS_KEPT``."""
+DECIDED = (0, 2)
+"""``scipy.optimize.milp`` statuses that decide feasibility: optimal, infeasible."""
 
 
 class MilpTimeLimitError(LabelingError):
@@ -83,6 +88,32 @@ def solve_milp(what, cost, integrality, bounds, constraints, mip_rel_gap=None,
     _ANSWERS[key] = copy.deepcopy(result)
     while len(_ANSWERS) > ANSWERS_KEPT:
         _ANSWERS.popitem(last=False)
+    return result
+
+
+def solve_feasibility(what, cost, integrality, bounds, constraints, node_limit=NODE_LIMIT):
+    """:func:`solve_milp` for a caller that reads only whether the program has a solution.
+
+    Whether a program has a solution does not depend on its costs. The search programs of
+    the base mesh meet many programs that differ from one solved before in their costs
+    only (a relabelling elsewhere moved the measured extents of a few sides), and proving
+    one of them infeasible can take seconds. So a program whose feasible set (integrality,
+    bounds, constraints and limits) was decided before, found optimal or infeasible, gets
+    that answer; one that reached a limit decided nothing and is solved as it is.
+
+    Parameters and returns as :func:`solve_milp`; ``status`` and ``message`` are those of
+    the program, ``x`` (where not None) a solution of it that may not be the cheapest.
+    """
+    options = {"node_limit": int(node_limit), "time_limit": HANG_GUARD_SECONDS}
+    key = program_digest(np.zeros(len(cost)), integrality, bounds, constraints, options)
+    if key in _VERDICTS:
+        _VERDICTS.move_to_end(key)
+        return copy.deepcopy(_VERDICTS[key])
+    result = solve_milp(what, cost, integrality, bounds, constraints, node_limit=node_limit)
+    if result.status in DECIDED:
+        _VERDICTS[key] = copy.deepcopy(result)
+        while len(_VERDICTS) > ANSWERS_KEPT:
+            _VERDICTS.popitem(last=False)
     return result
 
 

@@ -28,7 +28,7 @@ import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint
 
 from core.errors import InternalError, LabelingError, OTHER_PARTS
-from core.quadmesh.polycube.milp_solve import NODE_LIMIT, solve_milp
+from core.quadmesh.polycube.milp_solve import NODE_LIMIT, solve_feasibility, solve_milp
 
 AXES = np.eye(3)
 DISAGREEMENT_WEIGHT = 2.0
@@ -261,6 +261,13 @@ def _solve(program, node_limit):
                       program.bounds, program.constraints, node_limit=node_limit)
 
 
+def _feasibility(program):
+    """``solve_feasibility`` of a :class:`_DirectionProgram` within ``NODE_LIMIT`` nodes: for
+    callers that read only whether it is ``INFEASIBLE``."""
+    return solve_feasibility("the side-direction repair", program.cost, program.integrality,
+                             program.bounds, program.constraints)
+
+
 def _raise_on_contradiction(complex_, collapsible, stricter=None):
     """Raise LabelingError naming a neighbourhood that cannot close (see _local_contradiction)."""
     contradiction = _local_contradiction(complex_, collapsible, stricter)
@@ -311,8 +318,8 @@ def _local_contradiction(complex_, collapsible, stricter=None):
     for chart in order:
         ring = rings[chart]
         held = [alone[c] for c in ring.tolist() if c in alone]
-        result = held[0] if held else _solve(
-            _direction_program(complex_, np.sort(ring), collapsible, slits), NODE_LIMIT)
+        result = held[0] if held else _feasibility(
+            _direction_program(complex_, np.sort(ring), collapsible, slits))
         if result.status == INFEASIBLE:
             return ring.astype(np.int64), str(result.message)
     return None
@@ -340,8 +347,8 @@ def contradicting_charts(complex_, collapsible):
                                      np.arange(complex_.n_charts))
     bad = [chart for chart, ring in enumerate(_rings(complex_))
            if np.isin(ring, list(alone)).any()
-           or _solve(_direction_program(complex_, np.sort(ring), collapsible, slits),
-                     NODE_LIMIT).status == INFEASIBLE]
+           or _feasibility(_direction_program(complex_, np.sort(ring), collapsible,
+                                              slits)).status == INFEASIBLE]
     return np.asarray(bad, dtype=np.int64)
 
 
@@ -357,8 +364,8 @@ def _charts_infeasible_alone(complex_, collapsible, slits, charts):
     with_loops = np.unique(complex_.loop_chart)
     for chart in np.intersect1d(np.asarray(charts, dtype=np.int64).reshape(-1),
                                 with_loops).tolist():
-        result = _solve(_direction_program(complex_, np.array([chart]), collapsible, slits),
-                        NODE_LIMIT)
+        result = _feasibility(_direction_program(complex_, np.array([chart]), collapsible,
+                                                 slits))
         if result.status == INFEASIBLE:
             alone[chart] = result
     return alone
