@@ -163,8 +163,9 @@ def make_loops_rectilinear(complex_, collapsible=None, feasible_collapsible=None
     result = _solve(program, ROOT_NODES)
     if result.status == LIMIT_REACHED:
         # not decided within ROOT_NODES: a neighbourhood that cannot close is a quick proof
-        # that the whole program is infeasible; without one, the full search
-        if not searched:
+        # that the whole program is infeasible; without one, the full search. A program with
+        # a solution found already has none (each neighbourhood's program is a relaxation)
+        if not searched and result.x is None:
             _raise_on_contradiction(complex_, collapsible)
         result = _solve(program, NODE_LIMIT)
     if result.x is None:
