@@ -38,3 +38,15 @@ def test_the_crossing_count_of_moved_vertices_is_the_full_count():
                                                                faces[quad][[0, 2, 3]]]
                                 + faces[quad + 1:])
     assert count(split) == count_limit_self_intersections(split, 2)
+    # moves on the split cage (a split kept, then corner moves tried): its count is kept and
+    # the moves counted against it, the same as a full count; the first cage's still holds
+    split_totals = []
+    for moved in (3, 30):
+        vertices = split.vertices.copy()
+        chosen = rng.choice(len(vertices), moved, replace=False)
+        vertices[chosen] += rng.normal(scale=0.02 * surface.diagonal, size=(moved, 3))
+        trial = replace(split, vertices=vertices)
+        split_totals.append(count(trial))
+        assert split_totals[-1] == count_limit_self_intersections(trial, 2)
+    assert max(split_totals) > count(split)
+    assert count(replace(cage, vertices=cage.vertices.copy())) == count.crossings
