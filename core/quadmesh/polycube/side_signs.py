@@ -41,9 +41,9 @@ ROOT_NODES = 16
 """Nodes of the first solve of the whole program. The programs met in practice that have a
 solution close within a few nodes (those of labelings with hundreds of charts seldom at the
 root itself, and checking every neighbourhood instead costs several times the search); one
-that does not is first checked for a neighbourhood that cannot close
-(:func:`_local_contradiction`), which proves it infeasible in a fraction of the time a full
-branch and bound takes to prove it."""
+that does not (and has no solution found yet) is first checked for a neighbourhood that cannot
+close (:func:`_local_contradiction`), which proves it infeasible in a fraction of the time a
+full branch and bound takes to prove it."""
 LIMIT_REACHED, INFEASIBLE = 1, 2
 """``scipy.optimize.milp`` statuses: a node (or other) limit reached; infeasible."""
 
