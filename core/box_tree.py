@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.compiled import keeps_interrupts, numba, rows_in_threads
+from core.compiled import keeps_interrupts, numba
 
 LEAF_BOXES = 4
 """Boxes per leaf: a few boxes a leaf make the tree shallower and the self-overlap search
@@ -135,9 +135,8 @@ def box_pairs(lo, hi, among=None):
 def nearest_triangles(tree, points):
     """(k,) int64 the triangle of ``tree`` (:class:`TriangleTree`) nearest to each of
     ``points`` ((k, 3) float64), the lower number where two are equally near."""
-    points = np.ascontiguousarray(points, dtype=np.float64)
-    return rows_in_threads(lambda rows: _nearest(tree.tri, tree.order, tree.node_lo,
-                                                 tree.node_hi, points[rows]), len(points))
+    return _nearest(tree.tri, tree.order, tree.node_lo, tree.node_hi,
+                    np.ascontiguousarray(points, dtype=np.float64))
 
 
 @keeps_interrupts
@@ -162,12 +161,11 @@ def rival_triangles(tree, points, closest, distance, slack, cosine):
     (k,) int64 tree triangle of each point's rival (the nearest, the lower number of equally
     near ones), ``-1`` where none.
     """
-    points = np.ascontiguousarray(points, dtype=np.float64)
-    closest = np.ascontiguousarray(closest, dtype=np.float64)
-    distance = np.ascontiguousarray(distance, dtype=np.float64)
-    return rows_in_threads(lambda rows: _rivals(tree.tri, tree.order, tree.node_lo, tree.node_hi,
-                                                points[rows], closest[rows], distance[rows],
-                                                float(slack), float(cosine)), len(points))
+    return _rivals(tree.tri, tree.order, tree.node_lo, tree.node_hi,
+                   np.ascontiguousarray(points, dtype=np.float64),
+                   np.ascontiguousarray(closest, dtype=np.float64),
+                   np.ascontiguousarray(distance, dtype=np.float64), float(slack),
+                   float(cosine))
 
 
 @keeps_interrupts

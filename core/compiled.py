@@ -10,20 +10,10 @@ wrote a report for a mesh the user had stopped); :func:`keeps_interrupts` raises
 interrupt instead.
 """
 import functools
-import os
-from concurrent.futures import ThreadPoolExecutor
-
-import numpy as np
 
 from core.optional_imports import optional_module
 
 numba = optional_module("numba")
-
-ROWS_PER_THREAD = 2048
-"""Fewest rows a thread of :func:`rows_in_threads` gets: below it, starting a thread costs
-more than the rows' work."""
-MAX_THREADS = 4
-"""Most threads :func:`rows_in_threads` runs at once."""
 
 
 def keeps_interrupts(function):
@@ -54,38 +44,3 @@ def _interrupt_behind(error):
         error = error.__cause__ or error.__context__
     return None
 
-
-
-def rows_in_threads(run, count):
-    """``run`` over consecutive row ranges of ``count`` rows in threads, results concatenated.
-
-    The compiled kernels (``nogil=True``) release the interpreter lock, so a kernel that
-    treats each row on its own (a query point, a candidate pair) runs on every core the
-    process may use. Each row's result depends on that row alone, so the concatenation is the
-    same bit for bit as one call over all rows, whatever the number of threads.
-
-    Parameters
-    ----------
-    run : callable, ``run(rows)`` with ``rows`` a ``slice`` of ``range(count)``, returning a
-        (k, ...) array for the k rows of the slice.
-    count : int >= 0, number of rows.
-
-    Returns
-    -------
-    (count, ...) array, ``run(slice(0, count))``.
-    """
-    threads = min(_usable_cores(), MAX_THREADS, max(1, count // ROWS_PER_THREAD))
-    if threads == 1:
-        return run(slice(0, count))
-    bounds = np.linspace(0, count, threads + 1).astype(np.int64)
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        parts = list(pool.map(run, [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]))
-    return np.concatenate(parts)
-
-
-def _usable_cores():
-    """Cores this process may run on (its affinity where the platform tells it)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1

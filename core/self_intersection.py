@@ -18,7 +18,7 @@ so only the first run on a machine compiles them (a few seconds).
 import numpy as np
 
 from core.box_tree import box_pairs, face_boxes
-from core.compiled import keeps_interrupts, numba, rows_in_threads
+from core.compiled import keeps_interrupts, numba
 from core.tolerances import CONTACT
 
 
@@ -49,9 +49,7 @@ def find_self_intersections(vertices, faces, among=None, candidates=None):
         among = None
     candidates = np.ascontiguousarray(candidates, dtype=np.int64).reshape(-1, 2)
     marked = np.zeros(0, dtype=np.bool_) if among is None else np.asarray(among, dtype=np.bool_)
-    hits = candidates[rows_in_threads(
-        lambda rows: _intersecting(vertices, faces, candidates[rows], marked, eps),
-        len(candidates))]
+    hits = candidates[_intersecting(vertices, faces, candidates, marked, eps)]
     return np.sort(hits, axis=1)[np.lexsort((hits.max(axis=1), hits.min(axis=1)))]
 
 

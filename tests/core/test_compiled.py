@@ -100,30 +100,3 @@ def test_without_numba_the_command_line_says_what_to_install_and_writes_nothing(
     assert intake["status"] == "failed" and "pip install numba" in intake["message"]
     with open(source, "rb") as handle:
         assert handle.read() == before
-
-
-def test_rows_in_threads_equals_one_call_bit_for_bit(monkeypatch):
-    """Queries split over threads return exactly what one call over all rows returns."""
-    import numpy as np
-
-    from core import compiled
-    from core.box_tree import nearest_triangles, triangle_tree
-    from core.self_intersection import find_self_intersections
-
-    rng = np.random.default_rng(3)
-    tri = rng.random((400, 3, 3))
-    points = rng.random((5000, 3)) * 1.4 - 0.2
-    vertices, faces = tri.reshape(-1, 3), np.arange(1200).reshape(-1, 3)
-    tree = triangle_tree(tri, 0.0)
-    monkeypatch.setattr(compiled, "MAX_THREADS", 1)
-    one_nearest = nearest_triangles(tree, points)
-    one_pairs = find_self_intersections(vertices, faces)
-    monkeypatch.setattr(compiled, "MAX_THREADS", 3)
-    monkeypatch.setattr(compiled, "ROWS_PER_THREAD", 7)
-    monkeypatch.setattr(compiled, "_usable_cores", lambda: 3)
-    assert np.array_equal(nearest_triangles(tree, points), one_nearest)
-    assert len(one_pairs) > 10
-    assert np.array_equal(find_self_intersections(vertices, faces), one_pairs)
-    chunks = []
-    compiled.rows_in_threads(lambda rows: chunks.append(rows) or np.zeros(0), 21)
-    assert sorted((c.start, c.stop) for c in chunks) == [(0, 7), (7, 14), (14, 21)]
