@@ -131,8 +131,8 @@ def _layout(intake, parts, frames, labeling, params, decimation, progress):
     (the route review included), without the genus check; ``decimation`` is the
     ``DecimationCache`` of the target."""
     from core.errors import FaceLimitError, LabelingError
-    from core.fitting.route_review import CagePreview, review_route
-    from core.quadmesh.base_mesh import CORNER_COST, LayoutTooLargeError, build_base_mesh
+    from core.fitting.route_review import review_route
+    from core.quadmesh.base_mesh import LayoutTooLargeError, build_base_mesh
 
     validity = labeling.validity.report
     method = params.base_mesh_method
@@ -169,26 +169,47 @@ def _layout(intake, parts, frames, labeling, params, decimation, progress):
                                 lambda: build("decimation"), params.fit_mode)
         cage, info = reviewed.cage, reviewed.info
         if info["method"] != "polycube" and polycube_info["corner_cost"] == 0:
-            # the layout lost the review: quantized again with the corners of its drifting
-            # charts kept near their places, it is reviewed against the same decimation
             progress.check_cancel()
-            other_cage, other_info = build("auto", CORNER_COST)
-            review, retry = info["route_review"], None
-            if (other_info["method"] == "polycube" and not other_info["inverted_faces"]
-                    and not other_info["limit_crossings"]):
-                again = review_route(other_cage, other_info, intake.surface,
-                                     params.subdivision_levels, lambda: (cage, info),
-                                     params.fit_mode,
-                                     CagePreview(**review["paired decimation"]))
-                retry = again.info["route_review"]["polycube"]
-                if again.info["method"] == "polycube":
-                    cage, info = again.cage, again.info
-            info["route_review"] = {**review, "corner_retry": retry,
-                                    "kept": ("polycube with corners"
-                                             if info["method"] == "polycube" else
-                                             review["kept"])}
+            cage, info = _corner_retry(cage, info, build, intake.surface, params)
     if invalid is not None and params.base_mesh_method == "auto":
         info["fallback_reason"] = f"the labeling is not a valid polycube labeling ({invalid})"
+    return cage, info
+
+
+def _corner_retry(cage, info, build, surface, params):
+    """The layout that lost the route review, quantized again with the corners of its
+    drifting charts kept near their measured places, reviewed against the same decimation.
+
+    Parameters
+    ----------
+    cage : core.types.PolyMesh, info : dict, the decimation cage the review kept and its
+        report (with ``route_review``).
+    build : callable ``build(route, corner_cost)`` returning ``(cage, info)``
+        (:func:`core.quadmesh.base_mesh.build_base_mesh` on this segmentation).
+    surface : core.types.TriMesh, the target; params : core.params.ReconstructionParams.
+
+    Returns
+    -------
+    (cage, info): the corner-term layout where it is flawless and wins the review (its
+    ``route_review.kept`` is ``"polycube with corners"``), else the given ones; either way
+    ``route_review.corner_retry`` holds the retry's preview, None where it was not reviewed.
+    """
+    from core.fitting.route_review import CagePreview, review_route
+    from core.quadmesh.base_mesh import CORNER_COST
+
+    review, retry = info["route_review"], None
+    other_cage, other_info = build("auto", CORNER_COST)
+    if (other_info["method"] == "polycube" and not other_info["inverted_faces"]
+            and not other_info["limit_crossings"]):
+        again = review_route(other_cage, other_info, surface, params.subdivision_levels,
+                             lambda: (cage, info), params.fit_mode,
+                             CagePreview(**review["paired decimation"]))
+        retry = again.info["route_review"]["polycube"]
+        if again.info["method"] == "polycube":
+            cage, info = again.cage, again.info
+    info["route_review"] = {**review, "corner_retry": retry,
+                            "kept": ("polycube with corners" if info["method"] == "polycube"
+                                     else review["kept"])}
     return cage, info
 
 
