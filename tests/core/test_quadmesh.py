@@ -536,7 +536,9 @@ def test_the_hang_guard_is_an_error_not_another_answer(monkeypatch):
                    [LinearConstraint(np.ones((1, 3)), 4.5, np.inf)])
 
 
-def test_a_program_met_again_gets_the_first_answer_without_a_solve(monkeypatch):
+def _counted_solves(monkeypatch):
+    """A list that gets an entry per HiGHS solve of ``milp_solve``, whose kept answers and
+    verdicts start empty."""
     import core.quadmesh.polycube.milp_solve as milp_solve
 
     calls = []
@@ -547,6 +549,12 @@ def test_a_program_met_again_gets_the_first_answer_without_a_solve(monkeypatch):
 
     monkeypatch.setattr(milp_solve, "milp", counted)
     monkeypatch.setattr(milp_solve, "_ANSWERS", type(milp_solve._ANSWERS)())
+    monkeypatch.setattr(milp_solve, "_VERDICTS", type(milp_solve._VERDICTS)())
+    return calls
+
+
+def test_a_program_met_again_gets_the_first_answer_without_a_solve(monkeypatch):
+    calls = _counted_solves(monkeypatch)
     cost = np.array([1.0, 2.0, 3.0])
 
     def program(rhs):
@@ -583,15 +591,7 @@ def test_answers_kept_are_bounded(monkeypatch):
 def test_feasibility_is_decided_once_per_feasible_set_whatever_the_costs(monkeypatch):
     import core.quadmesh.polycube.milp_solve as milp_solve
 
-    calls = []
-
-    def counted(*args, **kwargs):
-        calls.append(1)
-        return milp(*args, **kwargs)
-
-    monkeypatch.setattr(milp_solve, "milp", counted)
-    monkeypatch.setattr(milp_solve, "_ANSWERS", type(milp_solve._ANSWERS)())
-    monkeypatch.setattr(milp_solve, "_VERDICTS", type(milp_solve._VERDICTS)())
+    calls = _counted_solves(monkeypatch)
 
     def status(cost, rhs, upper=10):
         # integers in [0, upper] summing to at least rhs and at most 2.5: none where rhs > 2.5
