@@ -937,12 +937,18 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
         # charts no side directions close, or a loop without corners: change their labels
         # (for the layout only)
         strict = isinstance(exc, SideDirectionError) and not exc.collapsible.any()
-        relabelled = closable_labels(
-            V, F, fine_part, fine_label, fine_frame, build,
-            lambda c: (np.zeros(c.n_sides, dtype=bool) if strict
-                       else collapsible_sides(c, int(target_faces))))
-        if relabelled is None:
-            raise
+        try:
+            relabelled = closable_labels(
+                V, F, fine_part, fine_label, fine_frame, build,
+                lambda c: (np.zeros(c.n_sides, dtype=bool) if strict
+                           else collapsible_sides(c, int(target_faces))))
+        except LabelingError as failed:
+            if isinstance(exc, SideDirectionError):
+                raise exc from failed  # its message names the charts and HiGHS's finding
+            if isinstance(failed, CornerlessLoopError):
+                raise  # the loop that no label change gives corners, and its shape
+            raise LabelingError(f"label changes gave every chart boundary loop corners, but "
+                                f"{failed}") from exc
         layout = _LayoutAttempts(V, F, relabelled.complex_, part_frames, int(target_faces),
                                  max_base_faces, give_up_faces, refinement_rounds, target_genus,
                                  corner_cost)

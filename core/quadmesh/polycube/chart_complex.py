@@ -160,6 +160,54 @@ def cornerless_rims(F, face_part, face_label):
     return face_chart, rims
 
 
+FACING = 0.1
+"""Least mean cosine between the normals of the faces along a loop without corners and the
+direction away from (or towards) the loop's axis for those faces to be said to face away from
+(towards) it (:func:`_cornerless_loop_shape`)."""
+
+
+def _cornerless_loop_shape(V, F, run, twin):
+    """What a chart boundary loop without corners runs round, in words for an error message.
+
+    The loop's axis is the normal of its least-squares plane through its centroid. Where the
+    faces along the loop on both of its sides face away from the axis (mean cosine between
+    their normals and the direction from the axis to them above :data:`FACING`), the loop
+    runs round a member of the design (a neck of the surface); where they face towards it,
+    round a hole through the design; otherwise it is the rim of a wall, boss or island. A
+    member or hole whose faces two charts share round their loop has no walls of its own, and
+    when it is a few triangles round, no labels can give it the four a polycube puts round it.
+
+    Parameters
+    ----------
+    V : (n, 3) float64, F : (m, 3) int64 the target; run : (k,) int64 half-edges ``3 f + j``
+        of the loop in order; twin : (3m,) int64 twin of every half-edge.
+
+    Returns
+    -------
+    str, e.g. "it runs round a member 4 edges round and 2.3 units across".
+    """
+    points = V[F.reshape(-1)[run]]
+    centre = points.mean(axis=0)
+    axis = np.linalg.svd(points - centre)[2][-1]
+    across = float(np.linalg.norm(points[:, None] - points[None], axis=2).max())
+    facing = []
+    for faces in (run // 3, twin[run] // 3):
+        normal = np.cross(V[F[faces, 1]] - V[F[faces, 0]], V[F[faces, 2]] - V[F[faces, 0]])
+        away = V[F[faces]].mean(axis=1) - centre
+        away -= np.outer(away @ axis, axis)
+        cosine = np.einsum("ij,ij->i", normal, away) / np.maximum(
+            np.linalg.norm(normal, axis=1) * np.linalg.norm(away, axis=1), 1e-300)
+        facing.append(float(cosine.mean()))
+    size = f"{len(run)} edges round and {across:.3g} units across"
+    if min(facing) > FACING:
+        return (f"it runs round a member {size} whose faces the two charts share, so the "
+                f"member has no walls of its own")
+    if max(facing) < -FACING:
+        return (f"it runs round a hole through the design {size} whose wall the two charts "
+                f"share, so the hole has no walls of its own")
+    return "it is the rim of a wall, boss or island that carries one label all round"
+
+
 def _half_edge_tables(F):
     """Next half-edge in its face and twin half-edge of every half-edge ``3 f + k``.
 
@@ -327,12 +375,15 @@ def build_chart_complex(V, F, face_part, face_label, face_frame, face_interface_
     succ = _chart_successors(half, face_chart, nxt, twin, no_cut)
     loops, unvisited = _walk_loops(half, succ, layout.vertex_sep_degree[he_from[half]] >= 3)
     if unvisited.any():
-        bad = half[np.flatnonzero(unvisited)[0]]
-        chart = int(face_chart[he_face[bad]])
+        run = half[_walk_loops(half, succ, unvisited)[0][0]]
+        chart = int(face_chart[he_face[run[0]]])
+        across = np.unique(face_chart[he_face[twin[run]]]).tolist()
         raise CornerlessLoopError(
             f"chart {chart} (label {_LABEL_NAMES[layout.chart_label[chart]]}, part "
             f"{int(layout.chart_part[chart])}) has a boundary loop without corners near "
-            f"{np.round(V[he_from[bad]], 4).tolist()}: a polycube face needs corners on each "
+            f"{np.round(V[he_from[run[0]]], 4).tolist()} (with chart"
+            f"{'s' if len(across) > 1 else ''} {', '.join(map(str, across))} across it): "
+            f"{_cornerless_loop_shape(V, F, run, twin)}; a polycube face needs corners on each "
             f"boundary loop (try {OTHER_PARTS} or a different labeling)")
     cut_edge, middles = _slit_edges(V, F, face_chart, he_from, he_to, topology.edges, loops,
                                     half, layout.vertex_sep_degree)

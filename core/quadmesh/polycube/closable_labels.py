@@ -43,7 +43,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from core.errors import LabelingError
+from core.errors import LabelingError, OTHER_PARTS
 from core.geometry import face_areas, face_cross
 from core.quadmesh.polycube.chart_complex import cornerless_rims
 from core.quadmesh.polycube.rim_walls import rim_walks, rim_wall_labels
@@ -279,21 +279,28 @@ def _first_with_corners(V, F, face_part, face_frame, topology, labels, fit, area
 
 
 def _with_corners(V, F, face_part, face_frame, topology, labels, fit, area):
-    """``labels`` ((m,) int64) with a corner on every chart boundary loop, or None.
+    """``labels`` ((m,) int64) with corners given to every chart boundary loop that admits
+    them, and the loops still without (a list as
+    :func:`~core.quadmesh.polycube.chart_complex.cornerless_rims` gives, empty when every loop
+    has corners).
 
-    Each loop without corners (:func:`~core.quadmesh.polycube.chart_complex.cornerless_rims`)
-    is the rim of a wall with one label all round; the first admissible labeling of
-    :func:`~core.quadmesh.polycube.rim_walls.rim_wall_labels` (:func:`_first_with_corners`)
-    is kept, until none is left (None when no loop has an admissible one).
+    Each loop without corners is the rim of a wall with one label all round; the first
+    admissible labeling of :func:`~core.quadmesh.polycube.rim_walls.rim_wall_labels`
+    (:func:`_first_with_corners`) is kept, until none is left or no loop has an admissible one.
     """
     face_chart, rims = cornerless_rims(F, face_part, labels)
     while rims:
         found = _first_with_corners(V, F, face_part, face_frame, topology, labels, fit, area,
                                     face_chart, rims)
         if found is None:
-            return None
+            break
         labels, face_chart, rims = found
-    return labels
+    return labels, rims
+
+
+class UnclosableChartsError(LabelingError):
+    """Neighbourhoods of charts that admit no side directions remain and no admissible label
+    change removes one (:func:`closable_labels`)."""
 
 
 def closable_labels(V, F, face_part, face_label, face_frame, build, collapsible_of):
@@ -308,9 +315,16 @@ def closable_labels(V, F, face_part, face_label, face_frame, build, collapsible_
 
     Returns
     -------
-    ClosableLabels, or None when no admissible trial removes a contradicting neighbourhood or
-    gives a loop without corners its corners (a labeling without either may still have no
-    side directions: the caller finds out).
+    ClosableLabels: every neighbourhood admits side directions (the whole labeling may still
+    have none: the caller finds out).
+
+    Raises
+    ------
+    LabelingError from ``build`` on the labels with corners given to every loop that admits
+    them: a :class:`~core.quadmesh.polycube.chart_complex.CornerlessLoopError` naming a loop
+    that no admissible trial gives corners (and what it runs round), or a boundary between
+    opposite labels; UnclosableChartsError when no admissible trial removes a contradicting
+    neighbourhood (within :data:`MAX_ROUNDS` rounds), naming them.
     """
     face_part = np.asarray(face_part, dtype=np.int64)
     labels = np.asarray(face_label, dtype=np.int64).copy()
@@ -320,25 +334,24 @@ def closable_labels(V, F, face_part, face_label, face_frame, build, collapsible_
     before = check_validity(V, F, face_part, labels, face_frame, topology).report
     turning = before["turning_points"]["count"] or 0
     original = labels
-    labels = _with_corners(V, F, face_part, face_frame, topology, labels, fit, area)
-    if labels is None:
-        return None
+    labels, _ = _with_corners(V, F, face_part, face_frame, topology, labels, fit, area)
     changed = labels != original
     rounds = int(changed.any())
-    try:
-        complex_ = build(labels)
-    except LabelingError:
-        return None  # e.g. a boundary between opposite labels: no polycube face
+    complex_ = build(labels)
     bad = contradicting_charts(complex_, collapsible_of(complex_))
     while len(bad) and rounds < MAX_ROUNDS:
         found = _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, bad,
                        turning, build, collapsible_of)
         if found is None:
-            return None
+            break
         candidate, complex_, bad, turning = found
         changed |= candidate != labels
         labels = candidate
         rounds += 1
     if len(bad):
-        return None
+        raise UnclosableChartsError(
+            f"the neighbourhoods of {len(bad)} charts (e.g. charts {bad[:5].tolist()}) admit no "
+            f"side directions and no admissible label change closes them (after {rounds} "
+            f"label changes). The labeling is not a polycube there: try {OTHER_PARTS} or "
+            f"another labeling")
     return ClosableLabels(labels, complex_, float(area[changed].sum()), rounds)
