@@ -377,12 +377,11 @@ def build_chart_complex(V, F, face_part, face_label, face_frame, face_interface_
     if unvisited.any():
         run = half[_walk_loops(half, succ, unvisited)[0][0]]
         chart = int(face_chart[he_face[run[0]]])
-        across = np.unique(face_chart[he_face[twin[run]]]).tolist()
+        across = int(face_chart[he_face[twin[run[0]]]])  # one chart: no corner, no change
         raise CornerlessLoopError(
             f"chart {chart} (label {_LABEL_NAMES[layout.chart_label[chart]]}, part "
             f"{int(layout.chart_part[chart])}) has a boundary loop without corners near "
-            f"{np.round(V[he_from[run[0]]], 4).tolist()} (with chart"
-            f"{'s' if len(across) > 1 else ''} {', '.join(map(str, across))} across it): "
+            f"{np.round(V[he_from[run[0]]], 4).tolist()} (chart {across} across it): "
             f"{_cornerless_loop_shape(V, F, run, twin)}; a polycube face needs corners on each "
             f"boundary loop (try {OTHER_PARTS} or a different labeling)")
     cut_edge, middles = _slit_edges(V, F, face_chart, he_from, he_to, topology.edges, loops,

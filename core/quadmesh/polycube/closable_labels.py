@@ -280,13 +280,12 @@ def _first_with_corners(V, F, face_part, face_frame, topology, labels, fit, area
 
 def _with_corners(V, F, face_part, face_frame, topology, labels, fit, area):
     """``labels`` ((m,) int64) with corners given to every chart boundary loop that admits
-    them, and the loops still without (a list as
-    :func:`~core.quadmesh.polycube.chart_complex.cornerless_rims` gives, empty when every loop
-    has corners).
+    them (a loop left without them makes the chart complex of the result raise).
 
-    Each loop without corners is the rim of a wall with one label all round; the first
-    admissible labeling of :func:`~core.quadmesh.polycube.rim_walls.rim_wall_labels`
-    (:func:`_first_with_corners`) is kept, until none is left or no loop has an admissible one.
+    Each loop without corners (:func:`~core.quadmesh.polycube.chart_complex.cornerless_rims`)
+    is the rim of a wall with one label all round; the first admissible labeling of
+    :func:`~core.quadmesh.polycube.rim_walls.rim_wall_labels` (:func:`_first_with_corners`)
+    is kept, until none is left or no loop has an admissible one.
     """
     face_chart, rims = cornerless_rims(F, face_part, labels)
     while rims:
@@ -295,7 +294,7 @@ def _with_corners(V, F, face_part, face_frame, topology, labels, fit, area):
         if found is None:
             break
         labels, face_chart, rims = found
-    return labels, rims
+    return labels
 
 
 class UnclosableChartsError(LabelingError):
@@ -334,7 +333,7 @@ def closable_labels(V, F, face_part, face_label, face_frame, build, collapsible_
     before = check_validity(V, F, face_part, labels, face_frame, topology).report
     turning = before["turning_points"]["count"] or 0
     original = labels
-    labels, _ = _with_corners(V, F, face_part, face_frame, topology, labels, fit, area)
+    labels = _with_corners(V, F, face_part, face_frame, topology, labels, fit, area)
     changed = labels != original
     rounds = int(changed.any())
     complex_ = build(labels)
