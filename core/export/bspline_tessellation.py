@@ -9,7 +9,7 @@ import numpy as np
 from scipy.sparse.csgraph import connected_components
 import scipy.sparse as sp
 
-from core.export.bspline_basis import evaluate_patch_grid, layout_groups
+from core.export.bspline_basis import basis_matrix, evaluate_patch_grid, layout_groups
 from core.tolerances import CONTACT
 
 
@@ -79,9 +79,9 @@ def tessellate_patches(patchset, resolution=16, weld_tolerance=CONTACT):
 def enclosed_volume(patches, chunk=64):
     """Signed volume enclosed by a closed patch set (divergence theorem).
 
-    ``V = 1/3 sum_patches int (S - c) . (S_u x S_v) du dv`` with ``c`` the mean corner,
-    by Gauss-Legendre quadrature with 5 nodes per knot span, exact for bicubic
-    patches (the integrand has degree 8 in each parameter).
+    ``V = sum_patches int (S_z - c_z) (S_u x S_v)_z du dv`` (the field ``(0, 0, z - c_z)``,
+    of divergence 1) with ``c`` the mean corner, by Gauss-Legendre quadrature with 5 nodes
+    per knot span, exact for bicubic patches (the integrand has degree 8 in each parameter).
 
     Parameters
     ----------
@@ -105,10 +105,15 @@ def enclosed_volume(patches, chunk=64):
         p0 = patches[g[0]]
         su, wu = rule(p0.u_knots)
         sv, wv = rule(p0.v_knots)
+        # the basis and its first derivative in u and in v (only z and the normal's z
+        # component are needed: two of the three coordinates of each derivative)
+        Bu = [basis_matrix(p0.u_knots, p0.u_mults, su, order) for order in (0, 1)]
+        Bv = [basis_matrix(p0.v_knots, p0.v_mults, sv, order) for order in (0, 1)]
         for part in np.array_split(g, max(1, len(g) // chunk)):
-            sel = [patches[i] for i in part]
-            S = evaluate_patch_grid(sel, su, sv) - centre
-            normal = np.cross(evaluate_patch_grid(sel, su, sv, 1, 0),
-                              evaluate_patch_grid(sel, su, sv, 0, 1))
-            total += float(np.einsum("i,nijk,nijk,j->", wu, S, normal, wv))
-    return total / 3.0
+            P = np.stack([patches[i].poles for i in part])
+            x, y, z = P[..., 0], P[..., 1], P[..., 2]
+            height = Bu[0] @ z @ Bv[0].T - centre[2]
+            normal_z = ((Bu[1] @ x @ Bv[0].T) * (Bu[0] @ y @ Bv[1].T)
+                        - (Bu[1] @ y @ Bv[0].T) * (Bu[0] @ x @ Bv[1].T))
+            total += float(np.einsum("i,nij,nij,j->", wu, height, normal_z, wv))
+    return total

@@ -40,8 +40,17 @@ def run_fit(intake, basemesh, params, progress):
     def levels_of(cage):
         return fit_levels(cage.n_faces, params.subdivision_levels)
 
+    checked = []  # (cage, its crossing base faces) of every cage checked, the same object
+
     def crossing_faces(cage):
-        return limit_self_intersections(cage, levels_of(cage))[1]
+        # each cage is checked once: a refinement round checks the cage it refines, which
+        # the round before checked as its refinement
+        for known, faces in checked:
+            if known is cage:
+                return faces
+        faces = limit_self_intersections(cage, levels_of(cage))[1]
+        checked.append((cage, faces))
+        return faces
 
     def fit_once(cage, warm=None):
         return fit_base_mesh(cage, target, levels=levels_of(cage),
