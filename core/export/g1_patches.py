@@ -66,6 +66,7 @@ from scipy.sparse.linalg import splu
 from core.errors import ExportError
 from core.export.brep_topology import CORNER_UV, BRepTopology, EdgeCurve
 from core.export.chart_faces import chart_patches
+from core.export.corner_warp import vertex_growth, warped_params
 from core.export.quad_blocks import base_face_blocks
 from core.export.bspline_basis import basis_matrix
 from core.export.bspline_measure import normal_jumps, patch_deviation
@@ -283,10 +284,12 @@ def _regular_bezier(quads, topo, st):
     return np.einsum("ia,fabk,jb->fijk", BSPLINE_TO_BEZIER, P, BSPLINE_TO_BEZIER)
 
 
-def _fit_system(layout, evaluator, free_faces):
+def _fit_system(layout, evaluator, free_faces, growth):
     """Normal equations of the least-squares fit of free patches to exact limit points: the
     squared distance integrated over each patch's parameter square (4 x 4 Gauss points per
-    pair of spans). Every free patch has the same basis, so its Gram matrix ``G`` (64 x 64
+    pair of spans), each patch point matched with the limit point at its warped parameters
+    (:func:`core.export.corner_warp.warped_params` with the corners' exponents ``growth``
+    (n_free, 4)). Every free patch has the same basis, so its Gram matrix ``G`` (64 x 64
     over its slots) is formed once and scattered onto the unknowns.
 
     Returns
@@ -300,8 +303,10 @@ def _fit_system(layout, evaluator, free_faces):
     W = _tensor_rows(U, V, 0, 0) * root[:, None]
     G = W.T @ W
     n_free, p = len(free_faces), len(U)
-    target = evaluator.evaluate(np.repeat(free_faces, p), np.tile(U, n_free),
-                                np.tile(V, n_free)).reshape(n_free, p, 3)
+    Uw, Vw = warped_params(np.broadcast_to(U, (n_free, p)), np.broadcast_to(V, (n_free, p)),
+                           growth)
+    target = evaluator.evaluate(np.repeat(free_faces, p), Uw.reshape(-1),
+                                Vw.reshape(-1)).reshape(n_free, p, 3)
     n2 = N_SPLIT * N_SPLIT
     lab = layout.label[free_faces[:, None] * n2 + np.arange(n2)]
     unk = layout.unknown[lab]
@@ -615,6 +620,7 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     st = quad_stencils(quads, topo)
     free = ((valence != 4) | creased)[fv].reshape(-1, 4).any(axis=1) | creased[st].any(axis=(1, 2))
     keep = np.zeros((quads.n_faces, 2, 2), dtype=bool)
+    growth = np.ones((quads.n_faces, 4))
     bezier = _regular_bezier(quads, topo, st)
     layout = _Layout(quads, topo, free, bezier)
     free_faces = np.flatnonzero(free)
@@ -625,7 +631,8 @@ def g1_surface_patches(base, measure=True, faces="quad"):
         cosine = _corner_cosines(quads, topo, crease, evaluator)
         special = _special_vertices(quads, topo, crease, cosine)
         keep = _kept_knots(quads, free, special)
-        H, rhs, centre = _fit_system(layout, evaluator, free_faces)
+        growth = vertex_growth(quads, topo, crease, special)[fv].reshape(-1, 4)
+        H, rhs, centre = _fit_system(layout, evaluator, free_faces, growth[free_faces])
         A_g1, y_g1 = _g1_system(layout, quads, topo, free, cosine, crease)
         A_k, y_k = _knot_free_system(layout, free, keep)
         if A_g1 is None:
@@ -674,7 +681,8 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     }
     result = PatchSet(patches, face_of_patch, info, topology)
     if measure:
-        info.update(patch_deviation(result, quads, context=ctx))
+        info.update(patch_deviation(result, quads, context=ctx, target_params=(
+            lambda f, u, v: warped_params(u[:, None], v[:, None], growth[f]))))
         used = np.unique(fv)
         info.update(normal_jumps(result, quads, context=ctx, ev_vertex=valence[used] != 4))
     if faces == "chart":
