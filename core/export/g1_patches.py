@@ -66,7 +66,7 @@ from scipy.sparse.linalg import splu
 from core.errors import ExportError
 from core.export.brep_topology import CORNER_UV, BRepTopology, EdgeCurve
 from core.export.chart_faces import chart_patches
-from core.export.corner_warp import vertex_growth, warped_params
+from core.export.corner_warp import corner_growth, spoke_growth, warped_params
 from core.export.quad_blocks import base_face_blocks
 from core.export.bspline_basis import basis_matrix
 from core.export.bspline_measure import normal_jumps, patch_deviation
@@ -289,7 +289,7 @@ def _fit_system(layout, evaluator, free_faces, growth):
     squared distance integrated over each patch's parameter square (4 x 4 Gauss points per
     pair of spans), each patch point matched with the limit point at its warped parameters
     (:func:`core.export.corner_warp.warped_params` with the corners' exponents ``growth``
-    (n_free, 4)). Every free patch has the same basis, so its Gram matrix ``G`` (64 x 64
+    (n_free, 4, 2)). Every free patch has the same basis, so its Gram matrix ``G`` (64 x 64
     over its slots) is formed once and scattered onto the unknowns.
 
     Returns
@@ -620,7 +620,7 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     st = quad_stencils(quads, topo)
     free = ((valence != 4) | creased)[fv].reshape(-1, 4).any(axis=1) | creased[st].any(axis=(1, 2))
     keep = np.zeros((quads.n_faces, 2, 2), dtype=bool)
-    growth = np.ones((quads.n_faces, 4))
+    growth = np.ones((quads.n_faces, 4, 2))
     bezier = _regular_bezier(quads, topo, st)
     layout = _Layout(quads, topo, free, bezier)
     free_faces = np.flatnonzero(free)
@@ -631,7 +631,7 @@ def g1_surface_patches(base, measure=True, faces="quad"):
         cosine = _corner_cosines(quads, topo, crease, evaluator)
         special = _special_vertices(quads, topo, crease, cosine)
         keep = _kept_knots(quads, free, special)
-        growth = vertex_growth(quads, topo, crease, special)[fv].reshape(-1, 4)
+        growth = corner_growth(topo, spoke_growth(quads, topo, crease, special))
         H, rhs, centre = _fit_system(layout, evaluator, free_faces, growth[free_faces])
         A_g1, y_g1 = _g1_system(layout, quads, topo, free, cosine, crease)
         A_k, y_k = _knot_free_system(layout, free, keep)

@@ -3,10 +3,12 @@
 limit's growth come from the subdivision's eigenvalues, the warp keeps corners and disk rims
 fixed and moves points along their ray, and a G1 export of a cage with a valence-8 vertex
 stays closer to the limit surface than an equal-parameter fit can."""
+import dataclasses
+
 import numpy as np
 import pytest
 
-from core.export.corner_warp import WARP_RADIUS, vertex_growth, warped_params
+from core.export.corner_warp import WARP_RADIUS, corner_growth, spoke_growth, warped_params
 from core.export.g1_patches import g1_surface_patches
 from core.geometry import triangulate
 from core.subdivision.catmull_clark import build_hierarchy, crease_edge_mask, mesh_topology
@@ -41,22 +43,44 @@ def _subdominant(n):
 
 @pytest.mark.parametrize("n", [3, 5, 8])
 def test_growth_is_the_subdivision_exponent(n):
+    """Along every spoke of a smooth vertex of valence ``n``: ``-log2`` of Catmull-Clark's
+    subdominant eigenvalue (1 at valence 4); exactly 1 at vertices not flagged special."""
     cage = spindle(n)
     topo = mesh_topology(cage.face_vertices, cage.face_offsets, len(cage.vertices))
     crease = crease_edge_mask(topo, cage.creases)
-    valence = np.bincount(cage.face_vertices)
-    gamma = vertex_growth(cage, topo, crease, np.ones(len(cage.vertices), dtype=bool))
+    valence = np.bincount(cage.face_vertices)[cage.face_vertices]
+    gamma = spoke_growth(cage, topo, crease, np.ones(len(cage.vertices), dtype=bool))
     assert np.abs(gamma[valence == 4] - 1.0).max() <= 1e-9
     assert np.abs(gamma[valence == n] + np.log2(_subdominant(n))).max() <= 1e-9
     assert np.abs(gamma[valence == 3] + np.log2(_subdominant(3))).max() <= 1e-9
-    plain = vertex_growth(cage, topo, crease, valence == n)
+    plain = spoke_growth(cage, topo, crease, np.bincount(cage.face_vertices) == n)
     assert np.all(plain[valence != n] == 1.0)
+    sides = corner_growth(topo, gamma)
+    assert np.array_equal(sides[..., 0].reshape(-1), gamma)
+    assert np.abs(sides[..., 1].reshape(-1) - gamma).max() <= 1e-9  # one value per vertex
+
+
+def test_crease_spokes_follow_their_crease_curve():
+    """Two opposite crease edges out of a valence-8 tip: along them the limit is the crease's
+    cubic B-spline (exponent 1), while the spokes between them keep a smaller exponent (the
+    faces' ring contracts more slowly than 1/2)."""
+    n = 8
+    cage = spindle(n)
+    cage = dataclasses.replace(cage, creases=np.array([[0, 1], [0, 1 + n // 2]], dtype=np.int64))
+    topo = mesh_topology(cage.face_vertices, cage.face_offsets, len(cage.vertices))
+    crease = crease_edge_mask(topo, cage.creases)
+    gamma = spoke_growth(cage, topo, crease, np.ones(len(cage.vertices), dtype=bool))
+    tip = cage.face_vertices == 0
+    on_crease = crease[topo.corner_edge]
+    assert (tip & on_crease).sum() == 2 and (tip & ~on_crease).sum() == n - 2
+    assert np.abs(gamma[tip & on_crease] - 1.0).max() <= 1e-6  # a defective eigenvalue 1/2
+    assert gamma[tip & ~on_crease].max() <= 0.95
 
 
 def test_warp_moves_points_along_their_ray_inside_the_disks_only():
     rng = np.random.default_rng(3)
     u, v = rng.random((2, 1, 400))
-    growth = np.array([[0.7, 1.0, 1.29, 0.9]])
+    growth = np.array([[[0.7, 0.7], [1.0, 1.0], [1.29, 1.29], [0.9, 0.9]]])
     wu, wv = warped_params(u, v, growth)
     assert np.all((wu >= 0.0) & (wu <= 1.0) & (wv >= 0.0) & (wv <= 1.0))
     corners = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
@@ -70,7 +94,7 @@ def test_warp_moves_points_along_their_ray_inside_the_disks_only():
     cross = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
     assert np.abs(cross).max() <= 1e-12  # same ray from the nearest corner
     r, r_new = np.linalg.norm(before, axis=1), np.linalg.norm(after, axis=1)
-    g = growth[0, near]
+    g = growth[0, near, 0]
     inside = ~far
     expected = WARP_RADIUS * (r[inside] / WARP_RADIUS) ** (1.0 / g[inside])
     assert np.abs(r_new[inside] - expected).max() <= 1e-12
