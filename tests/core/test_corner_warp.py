@@ -123,3 +123,26 @@ def test_valence_eight_tips_stay_close_to_the_limit_surface():
     assert ps.info["max_error_rel"] <= 2e-3
     assert ps.info["normal_jump_max_deg"] <= 0.01
     assert max(p.poles.shape[0] * p.poles.shape[1] for p in ps.patches) <= 64
+
+
+def test_reported_deviation_finds_the_limit_point_from_a_nearby_start():
+    """The G1 report's deviation moves from the warped start to the nearest limit point in
+    the quad: limit points found again from perturbed parameters (to rounding of the
+    difference steps), and never farther than the start."""
+    from core.export.bspline_measure import _closest_in_face
+    from core.export.patch_context import PatchContext
+
+    cage = spindle(5)
+    ctx = PatchContext(cage, 1)
+    rng = np.random.default_rng(7)
+    k = 200
+    face = rng.integers(0, cage.n_faces, k)
+    u, v = rng.uniform(0.1, 0.9, (2, k))
+    points = ctx.evaluate(face, u, v)
+    du, dv = rng.uniform(-0.05, 0.05, (2, k))
+    start = ctx.evaluate(face, u + du, v + dv)
+    found = _closest_in_face(ctx, face, u + du, v + dv, points)
+    d_start = np.linalg.norm(start - points, axis=1)
+    d_found = np.linalg.norm(found - points, axis=1)
+    assert np.all(d_found <= d_start)
+    assert d_found.max() <= 1e-6 * ctx.bbox_diagonal < d_start.min()
