@@ -25,6 +25,10 @@ def _measure_params(patch_knots, per_span=3, depth_extra=4):
 
 PROJECTION_STEPS = 3
 """Gauss-Newton steps of :func:`_closest_in_face`."""
+REFINE_FRACTION = 0.1
+"""Patch points farther than this fraction of the largest distance (per batch) from their
+limit point are moved to the nearest limit point (the largest distance is what is reported;
+the others keep an upper bound)."""
 
 
 def _closest_in_face(ctx, face, u, v, points, steps=PROJECTION_STEPS, eps=1e-6):
@@ -60,8 +64,8 @@ def patch_deviation(patchset, base, dense="ev", context=None, target_params=None
     """Largest distance between patches and the exact limit surface.
 
     Patch points are compared with exact limit points at the same (u, v) or, with
-    ``target_params``, with the limit point nearest to them in the same quad; either
-    bounds the geometric distance from above.
+    ``target_params``, at those parameters (moved to the nearest limit point in the quad
+    where they are far); either bounds the geometric distance from above.
 
     Parameters
     ----------
@@ -73,10 +77,11 @@ def patch_deviation(patchset, base, dense="ev", context=None, target_params=None
     context : the ``PatchContext`` of ``base`` when the caller has it (the fit does), else
         None (one is built).
     target_params : None (equal parameters) or a function ``(face, u, v) -> (u', v')`` of
-        (k,) arrays: where to start looking for the limit point each patch point is compared
-        with (the G1 export's warped parameters, :mod:`core.export.corner_warp`), which then
-        moves to the closest one in the same quad (:func:`_closest_in_face`); any limit
-        point bounds the distance to the limit surface from above.
+        (k,) arrays: the limit parameters each patch point is compared with (the G1
+        export's warped parameters, :mod:`core.export.corner_warp`); where that distance
+        exceeds :data:`REFINE_FRACTION` of the largest, the limit point then moves to the
+        closest one in the same quad (:func:`_closest_in_face`). Any limit point bounds the
+        distance to the limit surface from above.
 
     Returns
     -------
@@ -108,8 +113,13 @@ def patch_deviation(patchset, base, dense="ev", context=None, target_params=None
                 if target_params is None:
                     X = ctx.evaluate(face, Uc, Vc).reshape(S.shape)
                 else:
-                    Uc, Vc = (a.reshape(-1) for a in target_params(face, Uc, Vc))
-                    X = _closest_in_face(ctx, face, Uc, Vc, S.reshape(-1, 3)).reshape(S.shape)
+                    Uw, Vw = (a.reshape(-1) for a in target_params(face, Uc, Vc))
+                    X = ctx.evaluate(face, Uw, Vw)
+                    P = S.reshape(-1, 3)
+                    d0 = np.linalg.norm(X - P, axis=1)
+                    far = d0 > REFINE_FRACTION * d0.max()
+                    X[far] = _closest_in_face(ctx, face[far], Uw[far], Vw[far], P[far])
+                    X = X.reshape(S.shape)
                 d = np.linalg.norm(S - X, axis=2)
                 worst[chunk] = d.max(axis=1)
                 sq_sum += float(np.sum(d ** 2))
