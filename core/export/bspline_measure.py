@@ -23,11 +23,49 @@ def _measure_params(patch_knots, per_span=3, depth_extra=4):
     return np.unique(np.concatenate([t, [1.0], geo, 1.0 - geo]))
 
 
-def patch_deviation(patchset, base, dense="ev", context=None):
-    """Largest distance between patches and the exact limit surface at equal parameters.
+PROJECTION_STEPS = 3
+"""Gauss-Newton steps of :func:`_closest_in_face`."""
+REFINE_FRACTION = 0.1
+"""Patch points farther than this fraction of the largest distance (per batch) from their
+limit point are moved to the nearest limit point (the largest distance is what is reported;
+the others keep an upper bound)."""
 
-    Patch points are compared with exact limit points at the same (u, v), which
-    bounds the geometric distance from above.
+
+def _closest_in_face(ctx, face, u, v, points, steps=PROJECTION_STEPS, eps=1e-6):
+    """(k, 3) limit points of quads ``face`` (k,) near ``points`` (k, 3): Gauss-Newton steps
+    from the parameters ``(u, v)`` (k,) towards the closest point within the quad (parameters
+    clamped to [0, 1], derivatives by one-sided differences of ``eps``); a step that does not
+    bring the point closer is not taken, so the result is never farther than the start."""
+    best = ctx.evaluate(face, u, v)
+    dist = np.linalg.norm(best - points, axis=1)
+    for _ in range(steps):
+        hu = np.where(u + eps <= 1.0, eps, -eps)
+        hv = np.where(v + eps <= 1.0, eps, -eps)
+        Xu = (ctx.evaluate(face, u + hu, v) - best) / hu[:, None]
+        Xv = (ctx.evaluate(face, u, v + hv) - best) / hv[:, None]
+        r = points - best
+        a, b, c = (np.einsum("ij,ij->i", Xu, Xu), np.einsum("ij,ij->i", Xu, Xv),
+                   np.einsum("ij,ij->i", Xv, Xv))
+        ru, rv = np.einsum("ij,ij->i", Xu, r), np.einsum("ij,ij->i", Xv, r)
+        det = a * c - b * b
+        ok = det > 1e-12 * np.maximum(a * c, 1e-300)
+        safe = np.where(ok, det, 1.0)
+        nu = np.clip(u + np.where(ok, (c * ru - b * rv) / safe, 0.0), 0.0, 1.0)
+        nv = np.clip(v + np.where(ok, (a * rv - b * ru) / safe, 0.0), 0.0, 1.0)
+        X = ctx.evaluate(face, nu, nv)
+        d = np.linalg.norm(X - points, axis=1)
+        better = d < dist
+        u, v = np.where(better, nu, u), np.where(better, nv, v)
+        best[better], dist[better] = X[better], d[better]
+    return best
+
+
+def patch_deviation(patchset, base, dense="ev", context=None, target_params=None):
+    """Largest distance between patches and the exact limit surface.
+
+    Patch points are compared with exact limit points at the same (u, v) or, with
+    ``target_params``, at those parameters (moved to the nearest limit point in the quad
+    where they are far); either bounds the geometric distance from above.
 
     Parameters
     ----------
@@ -38,6 +76,12 @@ def patch_deviation(patchset, base, dense="ev", context=None):
         a 5 x 5 grid (they are exact); ``"all"`` samples every patch densely.
     context : the ``PatchContext`` of ``base`` when the caller has it (the fit does), else
         None (one is built).
+    target_params : None (equal parameters) or a function ``(face, u, v) -> (u', v')`` of
+        (k,) arrays: the limit parameters each patch point is compared with (the G1
+        export's warped parameters, :mod:`core.export.corner_warp`); where that distance
+        exceeds :data:`REFINE_FRACTION` of the largest, the limit point then moves to the
+        closest one in the same quad (:func:`_closest_in_face`). Any limit point bounds the
+        distance to the limit surface from above.
 
     Returns
     -------
@@ -65,8 +109,17 @@ def patch_deviation(patchset, base, dense="ev", context=None):
             for chunk in np.array_split(sub, max(1, len(sub) * len(U) // 200000)):
                 S = evaluate_patch_grid([patches[i] for i in chunk], su, sv)
                 S = S.reshape(len(chunk), -1, 3)
-                X = ctx.evaluate(np.repeat(chunk, len(U)), np.tile(U, len(chunk)),
-                                 np.tile(V, len(chunk))).reshape(S.shape)
+                face, Uc, Vc = np.repeat(chunk, len(U)), np.tile(U, len(chunk)), np.tile(V, len(chunk))
+                if target_params is None:
+                    X = ctx.evaluate(face, Uc, Vc).reshape(S.shape)
+                else:
+                    Uw, Vw = (a.reshape(-1) for a in target_params(face, Uc, Vc))
+                    X = ctx.evaluate(face, Uw, Vw)
+                    P = S.reshape(-1, 3)
+                    d0 = np.linalg.norm(X - P, axis=1)
+                    far = d0 > REFINE_FRACTION * d0.max()
+                    X[far] = _closest_in_face(ctx, face[far], Uw[far], Vw[far], P[far])
+                    X = X.reshape(S.shape)
                 d = np.linalg.norm(S - X, axis=2)
                 worst[chunk] = d.max(axis=1)
                 sq_sum += float(np.sum(d ** 2))

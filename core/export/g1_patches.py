@@ -7,8 +7,9 @@ other faces is built on its first Catmull-Clark refinement (the same limit surfa
 quads), and the four patches of each base quad are joined back into one face
 (:func:`core.export.quad_blocks.base_face_blocks`, :func:`core.export.chart_faces.chart_patches`:
 knot insertion, then every knot the surface does not need removed within
-:data:`core.export.chart_faces.MERGE_TOLERANCE`, which leaves at most a knot line at 1/2 per
-direction besides the corner knots); a face with ``n != 4`` corners keeps its ``n`` patches.
+:data:`core.export.chart_faces.MERGE_TOLERANCE`; the four patches are made to join C2, so
+this leaves at most a single knot line at 1/2 per direction besides the corner knots,
+:func:`_base_join_system`); a face with ``n != 4`` corners keeps its ``n`` patches.
 
 Method
 ------
@@ -66,6 +67,7 @@ from scipy.sparse.linalg import splu
 from core.errors import ExportError
 from core.export.brep_topology import CORNER_UV, BRepTopology, EdgeCurve
 from core.export.chart_faces import chart_patches
+from core.export.corner_warp import corner_growth, spoke_growth, warped_params
 from core.export.quad_blocks import base_face_blocks
 from core.export.bspline_basis import basis_matrix
 from core.export.bspline_measure import normal_jumps, patch_deviation
@@ -188,6 +190,42 @@ def _side_derivatives(side, s):
     return along, inward
 
 
+def _inward_derivative(side, s, order):
+    """(p, N_SPLIT^2) pole weights of the ``order``-th derivative across ``side`` into the
+    patch (its parameter increasing inwards) at positions ``s`` (p,) along it."""
+    u, v = _side_uv(side, s)
+    k = side[:, None]
+    d_u = _tensor_rows(u, v, order, 0)
+    d_v = _tensor_rows(u, v, 0, order)
+    sign = (-1.0) ** order
+    return np.select([k == 0, k == 1, k == 2], [d_v, sign * d_u, sign * d_v], d_u)
+
+
+def _base_join_system(layout, topo, free, base_face, base_sizes):
+    """Rows making the refined patches of one base quad join C2 across the edges between
+    them (as the limit surface does there): equal second derivatives into both patches at
+    4 Gauss points per knot span (both sides are cubic there; value and first derivative
+    already agree by the shared poles and the C1 connection), so the face joined from them
+    keeps a single knot line at 1/2 instead of a double one. One polynomial across (C3)
+    would ask the corner knots' kinks to end at the edge, which the G1 conditions next to
+    an extraordinary corner do not allow. ``base_face`` (m,) is the base face of every
+    quad, ``base_sizes`` the base faces' corner counts."""
+    corner = np.arange(len(topo.twin))
+    twin = topo.twin
+    rep = corner[(corner < twin) & (base_face[corner // 4] == base_face[twin // 4])]
+    rep = rep[(base_sizes[base_face[rep // 4]] == 4) & (free[rep // 4] | free[twin[rep] // 4])]
+    if not len(rep):
+        return None, None
+    t = _gauss_params()[0]
+    p = len(t)
+    c_near = np.repeat(rep, p)
+    c_far = np.repeat(twin[rep], p)
+    tt = np.tile(t, len(rep))
+    A_near, c_n = layout.split_columns(_inward_derivative(c_near % 4, tt, 2), c_near // 4)
+    A_far, c_f = layout.split_columns(_inward_derivative(c_far % 4, 1.0 - tt, 2), c_far // 4)
+    return (A_near - A_far).tocsr(), c_f - c_n
+
+
 def connection_alpha(t, valence_start, valence_end):
     """The G1 connection function ``alpha(t)`` along edges (module docstring).
 
@@ -283,10 +321,12 @@ def _regular_bezier(quads, topo, st):
     return np.einsum("ia,fabk,jb->fijk", BSPLINE_TO_BEZIER, P, BSPLINE_TO_BEZIER)
 
 
-def _fit_system(layout, evaluator, free_faces):
+def _fit_system(layout, evaluator, free_faces, growth):
     """Normal equations of the least-squares fit of free patches to exact limit points: the
     squared distance integrated over each patch's parameter square (4 x 4 Gauss points per
-    pair of spans). Every free patch has the same basis, so its Gram matrix ``G`` (64 x 64
+    pair of spans), each patch point matched with the limit point at its warped parameters
+    (:func:`core.export.corner_warp.warped_params` with the corners' exponents ``growth``
+    (n_free, 4, 2)). Every free patch has the same basis, so its Gram matrix ``G`` (64 x 64
     over its slots) is formed once and scattered onto the unknowns.
 
     Returns
@@ -300,8 +340,10 @@ def _fit_system(layout, evaluator, free_faces):
     W = _tensor_rows(U, V, 0, 0) * root[:, None]
     G = W.T @ W
     n_free, p = len(free_faces), len(U)
-    target = evaluator.evaluate(np.repeat(free_faces, p), np.tile(U, n_free),
-                                np.tile(V, n_free)).reshape(n_free, p, 3)
+    Uw, Vw = warped_params(np.broadcast_to(U, (n_free, p)), np.broadcast_to(V, (n_free, p)),
+                           growth)
+    target = evaluator.evaluate(np.repeat(free_faces, p), Uw.reshape(-1),
+                                Vw.reshape(-1)).reshape(n_free, p, 3)
     n2 = N_SPLIT * N_SPLIT
     lab = layout.label[free_faces[:, None] * n2 + np.arange(n2)]
     unk = layout.unknown[lab]
@@ -595,7 +637,8 @@ def g1_surface_patches(base, measure=True, faces="quad"):
         ``patches_per_base_face``, ``n_extraordinary_vertices``, ``n_g1_patches`` (free
         patches), ``n_poles``, ``g1_residual`` (largest residual of the G1 conditions,
         model units per unit parameter), ``bbox_diagonal`` and, if ``measure``, the figures
-        of :func:`core.export.bspline_measure.patch_deviation` and
+        of :func:`core.export.bspline_measure.patch_deviation` (distances to the limit
+        surface from the fit's warped parameters, :mod:`core.export.corner_warp`) and
         :func:`core.export.bspline_measure.normal_jumps`.
 
     Raises
@@ -605,6 +648,27 @@ def g1_surface_patches(base, measure=True, faces="quad"):
         (conditions that contradict each other), rather than writing a surface with kinks.
     """
     check_face_form(faces, "g1")
+    result, quads = g1_quad_patches(base, measure)
+    if faces == "chart":
+        return chart_patches(result, quads)
+    if result.info["patch_level"] == 1:
+        merged = chart_patches(result, quads, partition=base_face_blocks(base, quads))
+        merged.info["faces"] = "quad"
+        return merged
+    return result
+
+
+def g1_quad_patches(base, measure=True):
+    """The G1 patches of :func:`g1_surface_patches` on the quad mesh of ``base`` (``base``
+    itself, or its first Catmull-Clark refinement when it has other faces), one per quad,
+    before any merge.
+
+    Returns
+    -------
+    (PatchSet, PolyMesh): the patches (``face_of_patch`` the base face of each quad;
+    ``info`` as :func:`g1_surface_patches` describes, with ``faces`` "quad") and the quad
+    mesh.
+    """
     quads = quad_mesh_of(base)
     level = 0 if quads is base else 1
     fv = quads.face_vertices
@@ -615,6 +679,12 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     st = quad_stencils(quads, topo)
     free = ((valence != 4) | creased)[fv].reshape(-1, 4).any(axis=1) | creased[st].any(axis=(1, 2))
     keep = np.zeros((quads.n_faces, 2, 2), dtype=bool)
+    if level == 0:
+        base_face_of_quad = np.arange(base.n_faces, dtype=np.int64)
+    else:
+        base_face_of_quad = mesh_topology(base.face_vertices, base.face_offsets,
+                                          len(base.vertices)).face_of_corner.astype(np.int64)
+    growth = np.ones((quads.n_faces, 4, 2))
     bezier = _regular_bezier(quads, topo, st)
     layout = _Layout(quads, topo, free, bezier)
     free_faces = np.flatnonzero(free)
@@ -625,9 +695,14 @@ def g1_surface_patches(base, measure=True, faces="quad"):
         cosine = _corner_cosines(quads, topo, crease, evaluator)
         special = _special_vertices(quads, topo, crease, cosine)
         keep = _kept_knots(quads, free, special)
-        H, rhs, centre = _fit_system(layout, evaluator, free_faces)
+        growth = corner_growth(topo, spoke_growth(quads, topo, crease, special))
+        H, rhs, centre = _fit_system(layout, evaluator, free_faces, growth[free_faces])
         A_g1, y_g1 = _g1_system(layout, quads, topo, free, cosine, crease)
         A_k, y_k = _knot_free_system(layout, free, keep)
+        if level == 1:
+            A_j, y_j = _base_join_system(layout, topo, free, base_face_of_quad, base.face_sizes)
+            if A_j is not None:
+                A_k, y_k = sp.vstack([A_k, A_j]).tocsr(), np.concatenate([y_k, y_j])
         if A_g1 is None:
             A_g1, y_g1 = (A_k, y_k) if A_k.shape[0] else (None, None)
         else:
@@ -650,11 +725,7 @@ def g1_surface_patches(base, measure=True, faces="quad"):
             patches.append(BSplinePatch(np.ascontiguousarray(bezier[f]), BEZIER_KNOTS,
                                         BEZIER_MULTS, BEZIER_KNOTS, BEZIER_MULTS))
     topology = _topology(quads, topo, patches, free)
-    if level == 0:
-        face_of_patch = np.arange(base.n_faces, dtype=np.int64)
-    else:
-        face_of_patch = mesh_topology(base.face_vertices, base.face_offsets,
-                                      len(base.vertices)).face_of_corner.astype(np.int64)
+    face_of_patch = base_face_of_quad
     sizes = base.face_sizes
     per_face = np.bincount(face_of_patch, minlength=base.n_faces)
     ctx = PatchContext(quads, 1)
@@ -674,13 +745,8 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     }
     result = PatchSet(patches, face_of_patch, info, topology)
     if measure:
-        info.update(patch_deviation(result, quads, context=ctx))
+        info.update(patch_deviation(result, quads, context=ctx, target_params=(
+            lambda f, u, v: warped_params(u[:, None], v[:, None], growth[f]))))
         used = np.unique(fv)
         info.update(normal_jumps(result, quads, context=ctx, ev_vertex=valence[used] != 4))
-    if faces == "chart":
-        return chart_patches(result, quads)
-    if level == 1:
-        merged = chart_patches(result, quads, partition=base_face_blocks(base, quads))
-        merged.info["faces"] = "quad"
-        return merged
-    return result
+    return result, quads

@@ -10,13 +10,12 @@ from core.export.brep_topology import check_topology
 from core.export.bspline_basis import evaluate_patch_points
 from core.export.bspline_tessellation import enclosed_volume
 from core.export.chart_faces import MERGE_TOLERANCE
-from core.export.g1_patches import g1_surface_patches
+from core.export.g1_patches import g1_quad_patches, g1_surface_patches
 from core.export.quad_blocks import quad_blocks
 from core.export.spline_knots import join, refine, remove_knots
 from core.params import ReconstructionParams
 from core.subdivision import sample_cages
 from core.subdivision.catmull_clark import build_hierarchy
-from core.subdivision.limit import quad_mesh_of
 
 
 def _cube_once():
@@ -30,9 +29,8 @@ CAGES = {"cube_once": _cube_once, "torus": sample_cages.torus,
 @pytest.fixture(scope="module", params=sorted(CAGES))
 def merged(request):
     cage = CAGES[request.param]()
-    quads = quad_mesh_of(cage)
-    return (request.param, quads, g1_surface_patches(quads, measure=False),
-            g1_surface_patches(cage, measure=False, faces="chart"))
+    per_quad, quads = g1_quad_patches(cage, measure=False)
+    return (request.param, quads, per_quad, g1_surface_patches(cage, measure=False, faces="chart"))
 
 
 def test_blocks_tile_the_quads_as_rectangles(merged):

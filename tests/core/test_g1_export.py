@@ -43,15 +43,19 @@ def test_patches_form_one_closed_shell(exported):
 
 
 def test_mixed_cage_gets_one_face_per_base_quad(exported):
-    """A cage with non-quad faces: one face per base quad (its four refined patches joined,
-    at most two double knots and a knot line at 1/2 per direction) and one per quad of each
-    other face, within the merge tolerance of the refined patches."""
+    """A cage with non-quad faces: one face per base quad (its four refined patches joined
+    C2, at most two double knots and a single knot line at 1/2 per direction) and one per
+    quad of each other face, within the merge tolerance of the refined patches."""
     name, cage, ps = exported
     sizes = cage.face_sizes
     if (sizes == 4).all():
         pytest.skip("all quads")
     assert len(ps.patches) == int((sizes == 4).sum() + sizes[sizes != 4].sum())
-    assert max(p.poles.shape[0] * p.poles.shape[1] for p in ps.patches) <= 100
+    assert max(p.poles.shape[0] * p.poles.shape[1] for p in ps.patches) <= 81
+    for patch, face in zip(ps.patches, ps.face_of_patch):
+        if sizes[face] == 4:
+            for knots, mults in ((patch.u_knots, patch.u_mults), (patch.v_knots, patch.v_mults)):
+                assert np.all(np.asarray(mults)[np.isclose(knots, 0.5)] <= 1)
     assert ps.info["faces"] == "quad" and ps.info["merge_error"] <= 1e-7
 
 
