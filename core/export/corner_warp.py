@@ -27,7 +27,7 @@ keep their exact limit points.
 import numpy as np
 
 from core.export.brep_topology import CORNER_UV
-from core.subdivision.limit import TEMPLATE_RADIUS, _template_id, spoke_order, template_matrix
+from core.subdivision.limit import TEMPLATE_RADIUS, template_id, spoke_order, template_matrix
 
 WARP_RADIUS = 0.5
 """Parameter distance from a corner within which the targets are warped (half a side: the
@@ -48,7 +48,7 @@ def _kind_growth(n, bits):
     r = TEMPLATE_RADIUS
     growth = np.ones(n)
     for s in range(n):
-        ids = _template_id(n, np.full(r, s), np.arange(1, r + 1), np.zeros(r, dtype=np.int64))
+        ids = template_id(n, np.full(r, s), np.arange(1, r + 1), np.zeros(r, dtype=np.int64))
         entry = np.abs(vectors[ids]).max(axis=0)
         used = moving & (entry > 1e-9 * np.abs(vectors).max(axis=0))
         growth[s] = -np.log2(magnitude[used].max())

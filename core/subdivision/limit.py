@@ -323,7 +323,7 @@ def quad_stencils(quad_mesh, topo):
 
 # ---------------------------------------------------------------- EV templates ----
 
-def _template_id(n, s, a, b, r=TEMPLATE_RADIUS):
+def template_id(n, s, a, b, r=TEMPLATE_RADIUS):
     """Unique template point id of sector coordinates (s, a, b); a, b in -1..r."""
     s = np.asarray(s, dtype=np.int64).copy()
     a = np.asarray(a, dtype=np.int64).copy()
@@ -351,7 +351,7 @@ def template_matrix(n, r=TEMPLATE_RADIUS, crease_spokes=0):
     """(K, K) dense subdivision matrix of the radius-``r`` neighbourhood of a valence-``n`` EV.
 
     The neighbourhood is ``n`` sectors of ``r x r`` quads around the EV (what every
-    EV looks like after two subdivision steps); row order is :func:`_template_id`.
+    EV looks like after two subdivision steps); row order is :func:`template_id`.
     Row ``i`` gives template point ``i`` one level finer, in the same sector
     coordinates, as exact Catmull-Clark combinations (valid for ``r >= 3``).
     ``crease_spokes`` : int, bit ``s`` set when spoke ``s`` (the edges from the centre
@@ -363,14 +363,14 @@ def template_matrix(n, r=TEMPLATE_RADIUS, crease_spokes=0):
     K = 1 + n * r * (r + 1)
     s, i, j = np.meshgrid(np.arange(n), np.arange(r), np.arange(r), indexing="ij")
     s, i, j = s.reshape(-1), i.reshape(-1), j.reshape(-1)
-    quads = np.stack([_template_id(n, s, i, j, r), _template_id(n, s, i + 1, j, r),
-                      _template_id(n, s, i + 1, j + 1, r), _template_id(n, s, i, j + 1, r)],
+    quads = np.stack([template_id(n, s, i, j, r), template_id(n, s, i + 1, j, r),
+                      template_id(n, s, i + 1, j + 1, r), template_id(n, s, i, j + 1, r)],
                      axis=1)
     n_faces = len(quads)
     creased = np.flatnonzero((int(crease_spokes) >> np.arange(n)) & 1)
     cs, ca = np.repeat(creased, r), np.tile(np.arange(r), len(creased))
-    creases = np.stack([_template_id(n, cs, ca, np.zeros_like(ca), r),
-                        _template_id(n, cs, ca + 1, np.zeros_like(ca), r)], axis=1)
+    creases = np.stack([template_id(n, cs, ca, np.zeros_like(ca), r),
+                        template_id(n, cs, ca + 1, np.zeros_like(ca), r)], axis=1)
     _, _, S, topo = subdivision_operator(quads.reshape(-1),
                                          np.arange(0, 4 * n_faces + 1, 4), K, allow_open=True,
                                          creases=creases if len(creases) else None)
@@ -380,8 +380,8 @@ def template_matrix(n, r=TEMPLATE_RADIUS, crease_spokes=0):
     fb = np.concatenate([[0], fb])
     a0, b0 = fa // 2, fb // 2
     a1, b1 = (fa + 1) // 2, (fb + 1) // 2
-    vert = _template_id(n, fs, a0, b0, r)
-    edge = topo.edge_index(_template_id(n, fs, a0, b0, r), _template_id(n, fs, a1, b1, r))
+    vert = template_id(n, fs, a0, b0, r)
+    edge = topo.edge_index(template_id(n, fs, a0, b0, r), template_id(n, fs, a1, b1, r))
     face = fs * r * r + a0 * r + b0
     fine = np.where((fa % 2 == 0) & (fb % 2 == 0), vert,
                     np.where((fa % 2 == 1) & (fb % 2 == 1), K + face, K + n_faces + edge))
@@ -499,7 +499,7 @@ class LimitEvaluator:
                         a, b = i + la, j + lb
                         if a == 0:
                             continue
-                        tid = _template_id(n, np.arange(n), np.full(n, a), np.full(n, b), r)
+                        tid = template_id(n, np.arange(n), np.full(n, a), np.full(n, b), r)
                         vid = self._corner_vertex(g, np.full(g.shape, la), np.full(g.shape, lb))
                         ids[:, tid] = vid
                 g = self._move(g, "+b")
@@ -627,7 +627,7 @@ def _stencil_table(n):
     di = np.arange(-1, 3)[None, None, None, :, None]
     dj = np.arange(-1, 3)[None, None, None, None, :]
     shape = (n, 2, 2, 4, 4)
-    ids = _template_id(n, np.broadcast_to(s, shape).reshape(-1),
+    ids = template_id(n, np.broadcast_to(s, shape).reshape(-1),
                        np.broadcast_to(i + di, shape).reshape(-1),
                        np.broadcast_to(j + dj, shape).reshape(-1))
     ids = ids.reshape(n, 2, 2, 16)
