@@ -246,7 +246,7 @@ def test_thickness_constraint_holds_when_the_target_is_thin():
     target = TriMesh(np.asarray(mesh.vertices), np.asarray(mesh.faces, dtype=np.int64))
     base = PolyMesh(grid_sphere(2).vertices * [0.7, 0.7, 0.3], grid_sphere(2).face_vertices,
                     grid_sphere(2).face_offsets)
-    t_min = 0.15
+    t_min = 0.18
     walls = []
     for limit in (t_min, 0.0):
         fitted, _ = fit_base_mesh(base, target, levels=2, iterations=40, t_min=limit,
