@@ -70,9 +70,9 @@ def cache_cages(names, folder):
                 pickle.dump((state.basemesh.cage, state.intake.target), handle)
 
 
-def perturbed(cage, k):
-    """``cage`` for ``k = 0``, else a copy whose vertices carry noise of ``PERTURBATION`` of
-    the largest coordinate (numpy's normal generator seeded with ``k``)."""
+def perturbed(cage, k, size=PERTURBATION):
+    """``cage`` for ``k = 0``, else a copy whose vertices carry noise of ``size`` (default
+    ``PERTURBATION``) of the largest coordinate (numpy's normal generator seeded with ``k``)."""
     if not k:
         return cage
     import numpy as np
@@ -80,7 +80,7 @@ def perturbed(cage, k):
 
     noise = np.random.default_rng(k).standard_normal(cage.vertices.shape)
     return replace(cage, vertices=cage.vertices
-                   + PERTURBATION * float(np.abs(cage.vertices).max()) * noise)
+                   + size * float(np.abs(cage.vertices).max()) * noise)
 
 
 def worker(tree, path):

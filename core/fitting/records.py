@@ -17,7 +17,7 @@ The fit is a sequence of phases, each returning one record:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # annotations only: the records import nothing of the fit
@@ -167,11 +167,14 @@ class InsideFit:
     t_min : float, minimal wall thickness (model units; 0: not constrained).
     step : float, largest base-vertex move per iteration of the first run (model units).
     held_back : int, base vertices whose RGP move was cut back where the surface crossed.
-    retried : bool, the RGP ran again with a shorter step.
+    retried : bool, the RGP ran again from its start (without the default thickness
+        constraint, or with a shorter step).
     passes : list of [iterations, held back] or None, the further passes around the
         crossings (None: none ran).
     nudged : list of int or None, base vertices moved in each round of
         :func:`core.fitting.contain.nudge_inside` (None: not nudged).
+    polish : list of int, iterations of each RGP run with a shorter step after the first
+        (:func:`core.fitting.fit._polished`).
     """
 
     vertices: np.ndarray
@@ -187,6 +190,7 @@ class InsideFit:
     retried: bool
     passes: list | None
     nudged: list | None
+    polish: list = field(default_factory=list)
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,7 @@ gradients with coefficients ``2 (w - 1)`` for ``w > 1``; an inner loop raises th
 relaxation (then the correction) while the linearised step would still violate a
 constraint; zone sizes follow the largest observed constraint change and grow when
 the constraint zig-zags. """
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -98,6 +99,13 @@ class FitProblem:
         self.area = float(area)
         # queries of the points proven still inside are skipped (exact, see InsideBounds)
         self.known = InsideBounds(CONTACT * target.diagonal) if mode == "inside" else None
+
+    def with_t_min(self, t_min):
+        """The same problem with the minimal wall thickness ``t_min`` (model units; 0: no
+        constraint), sharing this one's matrices and its cache of points known inside."""
+        other = copy.copy(self)
+        other.t_min = float(t_min)
+        return other
 
     def fine(self, V0):
         """(n_fine, 3) float64 fine positions ``M V0`` (Eq. 10)."""

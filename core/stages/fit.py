@@ -137,7 +137,7 @@ def fit_section(record):
 def _phase_section(record):
     """What the phases of a fit did: the least-squares fit's refits (``refits``,
     ``refit_crossings``, ``cold_refit_crossings``, ``stiffened``), the base vertices
-    ``held_back`` at the start, the RGP's (``rgp_held_back``, ``rgp_retried``,
+    ``held_back`` at the start, the RGP's (``rgp_held_back``, ``rgp_retried``, ``rgp_polish``,
     ``rgp_passes``, ``nudged``), the inside start's ``pull_crossings``, the cage's
     ``cage_self_intersections``, the ``crease_curves`` and the ``outside_refinement``;
     each only when that phase ran or that happened."""
@@ -165,7 +165,8 @@ def _phase_section(record):
 
 
 def _inside_section(inside):
-    """The RGP's hold-backs, retry, passes and nudges (none without an inside fit)."""
+    """The RGP's hold-backs, retry, shorter-step runs, passes and nudges (none without an
+    inside fit)."""
     if inside is None:
         return {}
     section = {"rgp_held_back": inside.held_back}
@@ -175,4 +176,6 @@ def _inside_section(inside):
         section["rgp_passes"] = inside.passes
     if inside.nudged is not None:
         section["nudged"] = inside.nudged
+    if inside.polish:
+        section["rgp_polish"] = inside.polish
     return section
