@@ -65,6 +65,7 @@ from scipy.linalg import null_space
 from scipy.sparse.linalg import splu
 
 from core.errors import ExportError
+from core.optional_imports import optional_module
 from core.export.brep_topology import CORNER_UV, BRepTopology, EdgeCurve
 from core.export.chart_faces import chart_patches
 from core.export.corner_warp import corner_growth, spoke_growth, warped_params
@@ -78,6 +79,8 @@ from core.subdivision.limit import LimitEvaluator, quad_mesh_of, quad_stencils
 from core.params import check_face_form
 from core.types import BSplinePatch, PatchSet
 
+mumps = optional_module("mumps", package="python-mumps")
+
 EV_SPAN = 0.125
 """Length ``h`` of a free patch's corner knot spans: the part of an edge next to an
 extraordinary vertex on which the G1 connection departs from C1."""
@@ -89,6 +92,9 @@ N_SPLIT = int(SPLIT_MULTS.sum()) - 4
 """Poles per direction of a free patch (cubic, double knots at h and 1 - h)."""
 G1_PENALTY = 1.0e4
 """Weight of the G1 and C1 conditions against the fit to limit points."""
+REFINE_STEPS = 20
+"""Most steps of iterative refinement of the G1 fit's KKT system after its regularised
+factorisation (:func:`_solve_quasi_definite`)."""
 G1_RESIDUAL_MAX = 1.0e-6
 """Largest residual of the G1 conditions accepted, as a fraction of the bounding-box diagonal
 (per unit parameter; solved conditions leave rounding, about 1e-11)."""
@@ -543,21 +549,60 @@ def _solve(H, rhs, centre, A_g1, y_g1):
     """(n_unknowns, 3) least-squares fit (normal equations ``H x = rhs``) subject to
     ``A_g1 x = y_g1``.
 
-    Solved as the KKT system ``[[H, C^T], [C, -delta I]]`` (``delta = G1_PENALTY^-2``
-    times the fit's scale): the G1 conditions are redundant where several meet (at every
-    vertex), and ``delta`` keeps the system regular with its small eigenvalues in the
-    multipliers of those redundant rows, not in the poles. The unknowns are centred on
-    ``centre`` first, so a translation of the cage moves the poles by exactly that vector up
-    to rounding.
+    The solution of the KKT system ``[[H, C^T], [C, 0]]``, with the condition rows ``C``
+    scaled to the norm ``sqrt(s)`` (``s`` the mean diagonal of ``H``, the fit's scale; rows
+    without unknowns are left out: they hold or fail whatever the poles). The G1 conditions
+    are redundant where several meet (at every vertex), so that system is singular in the
+    multipliers; its regularised form ``[[H, C^T], [C, -delta I]]`` (``delta = s /
+    G1_PENALTY^2``, the fit plus ``G1_PENALTY^2`` times the conditions' squared residuals)
+    is quasi-definite, as ``H`` is positive definite, and is factored once
+    (:func:`_solve_quasi_definite`); steps of iterative refinement against the
+    unregularised system then move the poles to the constrained fit (the method of
+    multipliers: each step shifts the multipliers by the conditions' residual over
+    ``delta``). The unknowns are centred on ``centre`` first, so a translation of the cage
+    moves the poles by exactly that vector up to rounding.
     """
     rhs = rhs - H @ np.broadcast_to(centre, (H.shape[1], 3))
     if A_g1 is None:
-        return splu(H).solve(np.ascontiguousarray(rhs)) + centre
-    delta = H.diagonal().mean() / G1_PENALTY ** 2
-    y_c = y_g1 - A_g1 @ np.broadcast_to(centre, (A_g1.shape[1], 3))
-    K = sp.bmat([[H, A_g1.T], [A_g1, -delta * sp.identity(A_g1.shape[0])]]).tocsc()
-    x = splu(K).solve(np.ascontiguousarray(np.vstack([rhs, y_c])))
+        return splu(H.tocsc()).solve(np.ascontiguousarray(rhs)) + centre
+    scale = H.diagonal().mean()
+    A_g1 = A_g1.tocsr()
+    norm = np.sqrt(np.asarray(A_g1.multiply(A_g1).sum(axis=1)).reshape(-1))
+    live = np.flatnonzero(norm > 0.0)
+    row_scale = sp.diags(np.sqrt(scale) / norm[live])
+    C = (row_scale @ A_g1[live]).tocsr()
+    y_c = row_scale @ (y_g1[live] - A_g1[live] @ np.broadcast_to(centre, (A_g1.shape[1], 3)))
+    delta = scale / G1_PENALTY ** 2
+    x = _solve_quasi_definite(sp.bmat([[H, C.T], [C, None]], format="csr"), H.shape[0],
+                              delta, np.vstack([rhs, y_c]))
     return x[:H.shape[0]] + centre
+
+
+def _solve_quasi_definite(upper, n, delta, b):
+    """``K x = b`` for the symmetric ``K`` given by its upper triangle ``upper`` (m, m)
+    (entries below the diagonal are not read), a positive definite leading (n, n) block and
+    zeros on the rest of the diagonal, to which ``-delta`` is added for the factorisation: ``L D
+    L^T`` of that quasi-definite matrix by MUMPS in an approximate minimum degree order
+    without pivoting (quasi-definite matrices need none), then up to :data:`REFINE_STEPS`
+    steps of iterative refinement against ``K`` itself, while the residual shrinks. ``b``
+    (m, k); returns (m, k) float64."""
+    K = sp.triu(upper, format="csr")
+    full = K + sp.triu(K, 1).T
+    shift = sp.diags(np.where(np.arange(K.shape[0]) < n, 0.0, -delta))
+    context = mumps.Context()
+    context.set_matrix(sp.coo_matrix(K + shift), symmetric=True)
+    context.factor(ordering="amd", pivot_tol=0.0)
+    x = np.zeros_like(b)
+    r = np.array(b, dtype=np.float64)
+    best = np.abs(r).max()
+    for _ in range(REFINE_STEPS + 1):
+        step = x + np.asarray(context.solve(r), dtype=np.float64)
+        r_step = b - full @ step
+        size = np.abs(r_step).max()
+        if not size < best:
+            break
+        x, r, best = step, r_step, size
+    return x
 
 
 def _side_row(poles, side):
