@@ -308,14 +308,16 @@ class _Layout:
         A : (p, n_unknowns) csr_matrix; c : (p, 3) the fixed poles' contribution.
         """
         n2 = N_SPLIT * N_SPLIT
-        lab = self.label[f[:, None] * n2 + np.arange(n2)]
+        row, slot = np.nonzero(w)
+        weight = w[row, slot]
+        lab = self.label[f[row] * n2 + slot]
         unk = self.unknown[lab]
-        r = np.repeat(np.arange(len(w)), n2).reshape(len(w), n2)
         known = unk < 0
-        used = ~known & (w != 0.0)
-        A = sp.csr_matrix((w[used], (r[used], unk[used])), shape=(len(w), self.n_unknowns))
-        c = np.einsum("pi,pik->pk", np.where(known, w, 0.0),
-                      np.nan_to_num(self.fixed_value[lab]))
+        A = sp.csr_matrix((weight[~known], (row[~known], unk[~known])),
+                          shape=(len(w), self.n_unknowns))
+        fixed = self.fixed_value[lab[known]] * weight[known, None]
+        c = np.stack([np.bincount(row[known], weights=fixed[:, k], minlength=len(w))
+                      for k in range(3)], axis=1)
         return A, c
 
 
@@ -355,8 +357,9 @@ def _fit_system(layout, evaluator, free_faces, growth):
     unk = layout.unknown[lab]
     known = unk < 0
     b = np.einsum("pk,fpc->fkc", W * root[:, None], target)
-    b -= np.einsum("kl,flc->fkc", G, np.where(known[..., None],
-                                               np.nan_to_num(layout.fixed_value[lab]), 0.0))
+    fixed = layout.fixed_value[lab]
+    fixed[~known] = 0.0
+    b -= np.einsum("kl,flc->fkc", G, fixed)
     pair = ~known[:, :, None] & ~known[:, None, :] & (G != 0.0)[None]
     rows = np.broadcast_to(unk[:, :, None], pair.shape)[pair]
     cols = np.broadcast_to(unk[:, None, :], pair.shape)[pair]
