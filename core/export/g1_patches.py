@@ -190,9 +190,9 @@ def _side_derivatives(side, s):
     u, v = _side_uv(side, s)
     d_u = _tensor_rows(u, v, 1, 0)
     d_v = _tensor_rows(u, v, 0, 1)
-    k = side[:, None]
-    along = np.select([k == 0, k == 1, k == 2], [d_u, d_v, -d_u], -d_v)
-    inward = np.select([k == 0, k == 1, k == 2], [d_v, -d_u, -d_v], d_u)
+    across_v = (side % 2 == 0)[:, None]
+    along = np.where(across_v, d_u, d_v) * np.array([1.0, 1.0, -1.0, -1.0])[side, None]
+    inward = np.where(across_v, d_v, d_u) * np.array([1.0, -1.0, -1.0, 1.0])[side, None]
     return along, inward
 
 
@@ -200,11 +200,10 @@ def _inward_derivative(side, s, order):
     """(p, N_SPLIT^2) pole weights of the ``order``-th derivative across ``side`` into the
     patch (its parameter increasing inwards) at positions ``s`` (p,) along it."""
     u, v = _side_uv(side, s)
-    k = side[:, None]
     d_u = _tensor_rows(u, v, order, 0)
     d_v = _tensor_rows(u, v, 0, order)
-    sign = (-1.0) ** order
-    return np.select([k == 0, k == 1, k == 2], [d_v, sign * d_u, sign * d_v], d_u)
+    sign = np.array([1.0, (-1.0) ** order, (-1.0) ** order, 1.0])[side, None]
+    return np.where((side % 2 == 0)[:, None], d_v, d_u) * sign
 
 
 def _base_join_system(layout, topo, free, base_face, base_sizes):
