@@ -164,12 +164,22 @@ def _project(p0, knots, mults, reduced):
     to ``p0`` through knot insertion, and the largest pole distance (a bound of the distance
     between the two splines)."""
     keep = reduced > 0
-    T = insertion_matrix(knots[keep], reduced[keep], knots, mults)
+    coarse = _key(knots[keep], reduced[keep])
+    fine = _key(knots, mults)
+    T = _insertion(coarse, fine)
     flat = p0.reshape(len(p0), -1)
-    Q, R = np.linalg.qr(T)
-    q = solve_triangular(R, Q.T @ flat)
+    q = _least_squares(coarse, fine) @ flat
     gap = (T @ q - flat).reshape(p0.shape)
     return q.reshape((len(q),) + p0.shape[1:]), float(np.linalg.norm(gap, axis=-1).max())
+
+
+@lru_cache(maxsize=1024)
+def _least_squares(coarse_key, fine_key):
+    """(n_coarse, n_fine) matrix of the least-squares inverse of knot insertion
+    (:func:`_insertion`), ``R^-1 Q^T`` of its QR factorisation: the coarse poles whose
+    insertion is closest to given fine poles."""
+    Q, R = np.linalg.qr(_insertion(coarse_key, fine_key))
+    return solve_triangular(R, Q.T)
 
 
 def _remove_knots_one_by_one(poles, knots, mults, tolerance):
