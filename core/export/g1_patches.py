@@ -47,9 +47,9 @@ Method
     ``cos(2 pi / n)`` (:func:`_corner_cosines`: a half fan at a crease vertex, the exact
     limit's tangent relation at a corner).
 
-  The constraints enter as a penalty of weight :data:`G1_PENALTY` relative to the fit
-  (their residual is about ``1 / G1_PENALTY^2`` of the fit's, far below rounding of the
-  normals). Everything is linear in the cage with fixed coefficients: every pole is a
+  The constrained fit is one sparse KKT system, factored once in a regularised
+  (quasi-definite) form, the conditions as a penalty of weight :data:`G1_PENALTY` relative
+  to the fit, and refined to the conditions met up to rounding (:func:`_solve`). Everything is linear in the cage with fixed coefficients: every pole is a
   fixed affine combination of cage vertices (weights summing to 1), so translating or
   scaling the cage translates or scales the patches.
 
@@ -91,7 +91,8 @@ BEZIER_MULTS = np.array([4, 4], dtype=np.int64)
 N_SPLIT = int(SPLIT_MULTS.sum()) - 4
 """Poles per direction of a free patch (cubic, double knots at h and 1 - h)."""
 G1_PENALTY = 1.0e4
-"""Weight of the G1 and C1 conditions against the fit to limit points."""
+"""Weight of the G1 and C1 conditions against the fit to limit points in the regularised KKT
+system that is factored (:func:`_solve`; refinement then meets them up to rounding)."""
 REFINE_STEPS = 20
 """Most steps of iterative refinement of the G1 fit's KKT system after its regularised
 factorisation (:func:`_solve_quasi_definite`)."""
