@@ -542,10 +542,20 @@ def _reduced_patch(poles, keep):
     the same surface up to rounding once :func:`_knot_free_system` holds."""
     u_knots, u_mults = _reduced_knots(*keep[0])
     v_knots, v_mults = _reduced_knots(*keep[1])
-    Tu = np.linalg.pinv(insertion_matrix(u_knots, u_mults, SPLIT_KNOTS, SPLIT_MULTS))
-    Tv = np.linalg.pinv(insertion_matrix(v_knots, v_mults, SPLIT_KNOTS, SPLIT_MULTS))
+    Tu, Tv = REMOVAL[tuple(keep[0])], REMOVAL[tuple(keep[1])]
     P = np.einsum("ia,abk,jb->ijk", Tu, poles, Tv)
     return BSplinePatch(P, u_knots, u_mults, v_knots, v_mults)
+
+
+def _removal(keep_start, keep_end):
+    """(n, N_SPLIT) least-squares inverse of the knot insertion from the knots that
+    :func:`_reduced_knots` keeps to :data:`SPLIT_KNOTS`."""
+    knots, mults = _reduced_knots(keep_start, keep_end)
+    return np.linalg.pinv(insertion_matrix(knots, mults, SPLIT_KNOTS, SPLIT_MULTS))
+
+
+REMOVAL = {(a, b): _removal(a, b) for a in (False, True) for b in (False, True)}
+"""Matrices of :func:`_removal` for every pair of kept corner knots."""
 
 
 def _solve(H, rhs, centre, A_g1, y_g1):
