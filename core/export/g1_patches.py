@@ -585,37 +585,45 @@ def _solve(H, rhs, centre, A_g1, y_g1):
     row_scale = sp.diags(np.sqrt(scale) / norm[live])
     C = (row_scale @ A_g1[live]).tocsr()
     y_c = row_scale @ (y_g1[live] - A_g1[live] @ np.broadcast_to(centre, (A_g1.shape[1], 3)))
-    delta = scale / G1_PENALTY ** 2
-    x = _solve_quasi_definite(sp.bmat([[H, C.T], [C, None]], format="csr"), H.shape[0],
-                              delta, np.vstack([rhs, y_c]))
+    x = _solve_quasi_definite(H, C, scale / G1_PENALTY ** 2, np.vstack([rhs, y_c]))
     return x[:H.shape[0]] + centre
 
 
-def _solve_quasi_definite(upper, n, delta, b):
-    """``K x = b`` for the symmetric ``K`` given by its upper triangle ``upper`` (m, m)
-    (entries below the diagonal are not read), a positive definite leading (n, n) block and
-    zeros on the rest of the diagonal, to which ``-delta`` is added for the factorisation: ``L D
-    L^T`` of that quasi-definite matrix by MUMPS in an approximate minimum degree order
-    without pivoting (quasi-definite matrices need none), then up to :data:`REFINE_STEPS`
-    steps of iterative refinement against ``K`` itself, while the residual shrinks. ``b``
-    (m, k); returns (m, k) float64."""
-    K = sp.triu(upper, format="csr")
-    full = K + sp.triu(K, 1).T
-    shift = sp.diags(np.where(np.arange(K.shape[0]) < n, 0.0, -delta))
+def _solve_quasi_definite(H, C, delta, b):
+    """``K z = b`` for the KKT matrix ``K = [[H, C^T], [C, 0]]`` (``H`` (n, n) positive
+    definite, ``C`` (k, n)), ``b`` (n + k, d): ``L D L^T`` of the quasi-definite
+    ``[[H, C^T], [C, -delta I]]`` by MUMPS in an approximate minimum degree order without
+    pivoting (quasi-definite matrices need none), then up to :data:`REFINE_STEPS` steps of
+    iterative refinement against ``K`` itself, while the residual shrinks. Returns (n + k, d)
+    float64."""
+    n, k = H.shape[0], C.shape[0]
+    H_upper = sp.triu(H, format="coo")
+    C_coo = C.tocoo()
+    diagonal = n + np.arange(k)
+    upper = sp.coo_matrix((np.concatenate([H_upper.data, C_coo.data, np.full(k, -delta)]),
+                           (np.concatenate([H_upper.row, C_coo.col, diagonal]),
+                            np.concatenate([H_upper.col, n + C_coo.row, diagonal]))),
+                          shape=(n + k, n + k))
     context = mumps.Context()
-    context.set_matrix(sp.coo_matrix(K + shift), symmetric=True)
+    context.set_matrix(upper, symmetric=True)
     context.factor(ordering="amd", pivot_tol=0.0)
-    x = np.zeros_like(b)
+    H, C = H.tocsr(), C.tocsr()
+    C_t = C.T.tocsr()
+
+    def residual(z):
+        return b - np.vstack([H @ z[:n] + C_t @ z[n:], C @ z[:n]])
+
+    z = np.zeros_like(b)
     r = np.array(b, dtype=np.float64)
     best = np.abs(r).max()
     for _ in range(REFINE_STEPS + 1):
-        step = x + np.asarray(context.solve(r), dtype=np.float64)
-        r_step = b - full @ step
+        step = z + np.asarray(context.solve(r), dtype=np.float64)
+        r_step = residual(step)
         size = np.abs(r_step).max()
         if not size < best:
             break
-        x, r, best = step, r_step, size
-    return x
+        z, r, best = step, r_step, size
+    return z
 
 
 def _side_row(poles, side):
