@@ -287,7 +287,8 @@ class _Layout:
         graph = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(n_slots, n_slots))
         _, self.label = connected_components(graph, directed=False)
         n_labels = int(self.label.max()) + 1
-        split = np.einsum("ia,fabk,jb->fijk", BEZIER_TO_SPLIT, bezier, BEZIER_TO_SPLIT)
+        split = np.einsum("ia,fabk,jb->fijk", BEZIER_TO_SPLIT, bezier, BEZIER_TO_SPLIT,
+                          optimize=True)
         fixed_slots = (np.flatnonzero(~free)[:, None] * n2 + np.arange(n2)).reshape(-1)
         self.fixed_value = np.full((n_labels, 3), np.nan)
         self.fixed_value[self.label[fixed_slots]] = split[~free].reshape(-1, 3)
@@ -326,7 +327,7 @@ def _regular_bezier(quads, topo, st):
     (exact limit of the quads whose corners have valence 4 and whose stencil has no crease
     vertex)."""
     P = quads.vertices[st]
-    return np.einsum("ia,fabk,jb->fijk", BSPLINE_TO_BEZIER, P, BSPLINE_TO_BEZIER)
+    return np.einsum("ia,fabk,jb->fijk", BSPLINE_TO_BEZIER, P, BSPLINE_TO_BEZIER, optimize=True)
 
 
 def _fit_system(layout, evaluator, free_faces, growth):
@@ -356,10 +357,10 @@ def _fit_system(layout, evaluator, free_faces, growth):
     lab = layout.label[free_faces[:, None] * n2 + np.arange(n2)]
     unk = layout.unknown[lab]
     known = unk < 0
-    b = np.einsum("pk,fpc->fkc", W * root[:, None], target)
+    b = np.matmul((W * root[:, None]).T, target)
     fixed = layout.fixed_value[lab]
     fixed[~known] = 0.0
-    b -= np.einsum("kl,flc->fkc", G, fixed)
+    b -= np.matmul(G, fixed)
     pair = ~known[:, :, None] & ~known[:, None, :] & (G != 0.0)[None]
     rows = np.broadcast_to(unk[:, :, None], pair.shape)[pair]
     cols = np.broadcast_to(unk[:, None, :], pair.shape)[pair]
