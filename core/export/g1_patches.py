@@ -75,7 +75,7 @@ from core.export.bspline_measure import normal_jumps, patch_deviation
 from core.export.spline_knots import insertion_matrix
 from core.export.patch_context import PatchContext
 from core.subdivision.catmull_clark import crease_edge_mask, mesh_topology, vertex_crease_counts
-from core.subdivision.limit import LimitEvaluator, quad_mesh_of, quad_stencils
+from core.subdivision.limit import quad_mesh_of, quad_stencils
 from core.params import check_face_form
 from core.types import BSplinePatch, PatchSet
 
@@ -752,13 +752,14 @@ def g1_quad_patches(base, measure=True):
         base_face_of_quad = mesh_topology(base.face_vertices, base.face_offsets,
                                           len(base.vertices)).face_of_corner.astype(np.int64)
     growth = np.ones((quads.n_faces, 4, 2))
+    ctx = PatchContext(quads, 1)
     bezier = _regular_bezier(quads, topo, st)
     layout = _Layout(quads, topo, free, bezier)
     free_faces = np.flatnonzero(free)
     slots = np.nan_to_num(layout.fixed_value)
     residual = 0.0
     if len(free_faces):
-        evaluator = LimitEvaluator(quads)
+        evaluator = ctx.evaluator  # the limit of ``quads`` itself: it is all quads
         cosine = _corner_cosines(quads, topo, crease, evaluator)
         special = _special_vertices(quads, topo, crease, cosine)
         keep = _kept_knots(quads, free, special)
@@ -795,7 +796,6 @@ def g1_quad_patches(base, measure=True):
     face_of_patch = base_face_of_quad
     sizes = base.face_sizes
     per_face = np.bincount(face_of_patch, minlength=base.n_faces)
-    ctx = PatchContext(quads, 1)
     info = {
         "export": "g1",
         "faces": "quad",
