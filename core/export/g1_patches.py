@@ -47,9 +47,9 @@ Method
     ``cos(2 pi / n)`` (:func:`_corner_cosines`: a half fan at a crease vertex, the exact
     limit's tangent relation at a corner).
 
-  The constraints enter as a penalty of weight :data:`G1_PENALTY` relative to the fit
-  (their residual is about ``1 / G1_PENALTY^2`` of the fit's, far below rounding of the
-  normals). Everything is linear in the cage with fixed coefficients: every pole is a
+  The constrained fit is one sparse KKT system, factored once in a regularised
+  (quasi-definite) form, the conditions as a penalty of weight :data:`G1_PENALTY` relative
+  to the fit, and refined to the conditions met up to rounding (:func:`_solve`). Everything is linear in the cage with fixed coefficients: every pole is a
   fixed affine combination of cage vertices (weights summing to 1), so translating or
   scaling the cage translates or scales the patches.
 
@@ -65,6 +65,7 @@ from scipy.linalg import null_space
 from scipy.sparse.linalg import splu
 
 from core.errors import ExportError
+from core.optional_imports import optional_module
 from core.export.brep_topology import CORNER_UV, BRepTopology, EdgeCurve
 from core.export.chart_faces import chart_patches
 from core.export.corner_warp import corner_growth, spoke_growth, warped_params
@@ -74,9 +75,11 @@ from core.export.bspline_measure import normal_jumps, patch_deviation
 from core.export.spline_knots import insertion_matrix
 from core.export.patch_context import PatchContext
 from core.subdivision.catmull_clark import crease_edge_mask, mesh_topology, vertex_crease_counts
-from core.subdivision.limit import LimitEvaluator, quad_mesh_of, quad_stencils
+from core.subdivision.limit import quad_mesh_of, quad_stencils
 from core.params import check_face_form
 from core.types import BSplinePatch, PatchSet
+
+mumps = optional_module("mumps", package="python-mumps")
 
 EV_SPAN = 0.125
 """Length ``h`` of a free patch's corner knot spans: the part of an edge next to an
@@ -88,7 +91,11 @@ BEZIER_MULTS = np.array([4, 4], dtype=np.int64)
 N_SPLIT = int(SPLIT_MULTS.sum()) - 4
 """Poles per direction of a free patch (cubic, double knots at h and 1 - h)."""
 G1_PENALTY = 1.0e4
-"""Weight of the G1 and C1 conditions against the fit to limit points."""
+"""Weight of the G1 and C1 conditions against the fit to limit points in the regularised KKT
+system that is factored (:func:`_solve`; refinement then meets them up to rounding)."""
+REFINE_STEPS = 20
+"""Most steps of iterative refinement of the G1 fit's KKT system after its regularised
+factorisation (:func:`_solve_quasi_definite`)."""
 G1_RESIDUAL_MAX = 1.0e-6
 """Largest residual of the G1 conditions accepted, as a fraction of the bounding-box diagonal
 (per unit parameter; solved conditions leave rounding, about 1e-11)."""
@@ -184,9 +191,9 @@ def _side_derivatives(side, s):
     u, v = _side_uv(side, s)
     d_u = _tensor_rows(u, v, 1, 0)
     d_v = _tensor_rows(u, v, 0, 1)
-    k = side[:, None]
-    along = np.select([k == 0, k == 1, k == 2], [d_u, d_v, -d_u], -d_v)
-    inward = np.select([k == 0, k == 1, k == 2], [d_v, -d_u, -d_v], d_u)
+    across_v = (side % 2 == 0)[:, None]
+    along = np.where(across_v, d_u, d_v) * np.array([1.0, 1.0, -1.0, -1.0])[side, None]
+    inward = np.where(across_v, d_v, d_u) * np.array([1.0, -1.0, -1.0, 1.0])[side, None]
     return along, inward
 
 
@@ -194,11 +201,10 @@ def _inward_derivative(side, s, order):
     """(p, N_SPLIT^2) pole weights of the ``order``-th derivative across ``side`` into the
     patch (its parameter increasing inwards) at positions ``s`` (p,) along it."""
     u, v = _side_uv(side, s)
-    k = side[:, None]
     d_u = _tensor_rows(u, v, order, 0)
     d_v = _tensor_rows(u, v, 0, order)
-    sign = (-1.0) ** order
-    return np.select([k == 0, k == 1, k == 2], [d_v, sign * d_u, sign * d_v], d_u)
+    sign = np.array([1.0, (-1.0) ** order, (-1.0) ** order, 1.0])[side, None]
+    return np.where((side % 2 == 0)[:, None], d_v, d_u) * sign
 
 
 def _base_join_system(layout, topo, free, base_face, base_sizes):
@@ -281,7 +287,8 @@ class _Layout:
         graph = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(n_slots, n_slots))
         _, self.label = connected_components(graph, directed=False)
         n_labels = int(self.label.max()) + 1
-        split = np.einsum("ia,fabk,jb->fijk", BEZIER_TO_SPLIT, bezier, BEZIER_TO_SPLIT)
+        split = np.einsum("ia,fabk,jb->fijk", BEZIER_TO_SPLIT, bezier, BEZIER_TO_SPLIT,
+                          optimize=True)
         fixed_slots = (np.flatnonzero(~free)[:, None] * n2 + np.arange(n2)).reshape(-1)
         self.fixed_value = np.full((n_labels, 3), np.nan)
         self.fixed_value[self.label[fixed_slots]] = split[~free].reshape(-1, 3)
@@ -302,14 +309,16 @@ class _Layout:
         A : (p, n_unknowns) csr_matrix; c : (p, 3) the fixed poles' contribution.
         """
         n2 = N_SPLIT * N_SPLIT
-        lab = self.label[f[:, None] * n2 + np.arange(n2)]
+        row, slot = np.nonzero(w)
+        weight = w[row, slot]
+        lab = self.label[f[row] * n2 + slot]
         unk = self.unknown[lab]
-        r = np.repeat(np.arange(len(w)), n2).reshape(len(w), n2)
         known = unk < 0
-        used = ~known & (w != 0.0)
-        A = sp.csr_matrix((w[used], (r[used], unk[used])), shape=(len(w), self.n_unknowns))
-        c = np.einsum("pi,pik->pk", np.where(known, w, 0.0),
-                      np.nan_to_num(self.fixed_value[lab]))
+        A = sp.csr_matrix((weight[~known], (row[~known], unk[~known])),
+                          shape=(len(w), self.n_unknowns))
+        fixed = self.fixed_value[lab[known]] * weight[known, None]
+        c = np.stack([np.bincount(row[known], weights=fixed[:, k], minlength=len(w))
+                      for k in range(3)], axis=1)
         return A, c
 
 
@@ -318,7 +327,7 @@ def _regular_bezier(quads, topo, st):
     (exact limit of the quads whose corners have valence 4 and whose stencil has no crease
     vertex)."""
     P = quads.vertices[st]
-    return np.einsum("ia,fabk,jb->fijk", BSPLINE_TO_BEZIER, P, BSPLINE_TO_BEZIER)
+    return np.einsum("ia,fabk,jb->fijk", BSPLINE_TO_BEZIER, P, BSPLINE_TO_BEZIER, optimize=True)
 
 
 def _fit_system(layout, evaluator, free_faces, growth):
@@ -348,9 +357,10 @@ def _fit_system(layout, evaluator, free_faces, growth):
     lab = layout.label[free_faces[:, None] * n2 + np.arange(n2)]
     unk = layout.unknown[lab]
     known = unk < 0
-    b = np.einsum("pk,fpc->fkc", W * root[:, None], target)
-    b -= np.einsum("kl,flc->fkc", G, np.where(known[..., None],
-                                               np.nan_to_num(layout.fixed_value[lab]), 0.0))
+    b = np.matmul((W * root[:, None]).T, target)
+    fixed = layout.fixed_value[lab]
+    fixed[~known] = 0.0
+    b -= np.matmul(G, fixed)
     pair = ~known[:, :, None] & ~known[:, None, :] & (G != 0.0)[None]
     rows = np.broadcast_to(unk[:, :, None], pair.shape)[pair]
     cols = np.broadcast_to(unk[:, None, :], pair.shape)[pair]
@@ -533,31 +543,88 @@ def _reduced_patch(poles, keep):
     the same surface up to rounding once :func:`_knot_free_system` holds."""
     u_knots, u_mults = _reduced_knots(*keep[0])
     v_knots, v_mults = _reduced_knots(*keep[1])
-    Tu = np.linalg.pinv(insertion_matrix(u_knots, u_mults, SPLIT_KNOTS, SPLIT_MULTS))
-    Tv = np.linalg.pinv(insertion_matrix(v_knots, v_mults, SPLIT_KNOTS, SPLIT_MULTS))
+    Tu, Tv = REMOVAL[tuple(keep[0])], REMOVAL[tuple(keep[1])]
     P = np.einsum("ia,abk,jb->ijk", Tu, poles, Tv)
     return BSplinePatch(P, u_knots, u_mults, v_knots, v_mults)
+
+
+def _removal(keep_start, keep_end):
+    """(n, N_SPLIT) least-squares inverse of the knot insertion from the knots that
+    :func:`_reduced_knots` keeps to :data:`SPLIT_KNOTS`."""
+    knots, mults = _reduced_knots(keep_start, keep_end)
+    return np.linalg.pinv(insertion_matrix(knots, mults, SPLIT_KNOTS, SPLIT_MULTS))
+
+
+REMOVAL = {(a, b): _removal(a, b) for a in (False, True) for b in (False, True)}
+"""Matrices of :func:`_removal` for every pair of kept corner knots."""
 
 
 def _solve(H, rhs, centre, A_g1, y_g1):
     """(n_unknowns, 3) least-squares fit (normal equations ``H x = rhs``) subject to
     ``A_g1 x = y_g1``.
 
-    Solved as the KKT system ``[[H, C^T], [C, -delta I]]`` (``delta = G1_PENALTY^-2``
-    times the fit's scale): the G1 conditions are redundant where several meet (at every
-    vertex), and ``delta`` keeps the system regular with its small eigenvalues in the
-    multipliers of those redundant rows, not in the poles. The unknowns are centred on
-    ``centre`` first, so a translation of the cage moves the poles by exactly that vector up
-    to rounding.
+    The solution of the KKT system ``[[H, C^T], [C, 0]]``, with the condition rows ``C``
+    scaled to the norm ``sqrt(s)`` (``s`` the mean diagonal of ``H``, the fit's scale; rows
+    without unknowns are left out: they hold or fail whatever the poles). The G1 conditions
+    are redundant where several meet (at every vertex), so that system is singular in the
+    multipliers; its regularised form ``[[H, C^T], [C, -delta I]]`` (``delta = s /
+    G1_PENALTY^2``, the fit plus ``G1_PENALTY^2`` times the conditions' squared residuals)
+    is quasi-definite, as ``H`` is positive definite, and is factored once
+    (:func:`_solve_quasi_definite`); steps of iterative refinement against the
+    unregularised system then move the poles to the constrained fit (the method of
+    multipliers: each step shifts the multipliers by the conditions' residual over
+    ``delta``). The unknowns are centred on ``centre`` first, so a translation of the cage
+    moves the poles by exactly that vector up to rounding.
     """
     rhs = rhs - H @ np.broadcast_to(centre, (H.shape[1], 3))
     if A_g1 is None:
-        return splu(H).solve(np.ascontiguousarray(rhs)) + centre
-    delta = H.diagonal().mean() / G1_PENALTY ** 2
-    y_c = y_g1 - A_g1 @ np.broadcast_to(centre, (A_g1.shape[1], 3))
-    K = sp.bmat([[H, A_g1.T], [A_g1, -delta * sp.identity(A_g1.shape[0])]]).tocsc()
-    x = splu(K).solve(np.ascontiguousarray(np.vstack([rhs, y_c])))
+        return splu(H.tocsc()).solve(np.ascontiguousarray(rhs)) + centre
+    scale = H.diagonal().mean()
+    A_g1 = A_g1.tocsr()
+    norm = np.sqrt(np.asarray(A_g1.multiply(A_g1).sum(axis=1)).reshape(-1))
+    live = np.flatnonzero(norm > 0.0)
+    row_scale = sp.diags(np.sqrt(scale) / norm[live])
+    C = (row_scale @ A_g1[live]).tocsr()
+    y_c = row_scale @ (y_g1[live] - A_g1[live] @ np.broadcast_to(centre, (A_g1.shape[1], 3)))
+    x = _solve_quasi_definite(H, C, scale / G1_PENALTY ** 2, np.vstack([rhs, y_c]))
     return x[:H.shape[0]] + centre
+
+
+def _solve_quasi_definite(H, C, delta, b):
+    """``K z = b`` for the KKT matrix ``K = [[H, C^T], [C, 0]]`` (``H`` (n, n) positive
+    definite, ``C`` (k, n)), ``b`` (n + k, d): ``L D L^T`` of the quasi-definite
+    ``[[H, C^T], [C, -delta I]]`` by MUMPS in an approximate minimum degree order without
+    pivoting (quasi-definite matrices need none), then up to :data:`REFINE_STEPS` steps of
+    iterative refinement against ``K`` itself, while the residual shrinks. Returns (n + k, d)
+    float64."""
+    n, k = H.shape[0], C.shape[0]
+    H_upper = sp.triu(H, format="coo")
+    C_coo = C.tocoo()
+    diagonal = n + np.arange(k)
+    upper = sp.coo_matrix((np.concatenate([H_upper.data, C_coo.data, np.full(k, -delta)]),
+                           (np.concatenate([H_upper.row, C_coo.col, diagonal]),
+                            np.concatenate([H_upper.col, n + C_coo.row, diagonal]))),
+                          shape=(n + k, n + k))
+    context = mumps.Context()
+    context.set_matrix(upper, symmetric=True)
+    context.factor(ordering="amd", pivot_tol=0.0)
+    H, C = H.tocsr(), C.tocsr()
+    C_t = C.T.tocsr()
+
+    def residual(z):
+        return b - np.vstack([H @ z[:n] + C_t @ z[n:], C @ z[:n]])
+
+    z = np.zeros_like(b)
+    r = np.array(b, dtype=np.float64)
+    best = np.abs(r).max()
+    for _ in range(REFINE_STEPS + 1):
+        step = z + np.asarray(context.solve(r), dtype=np.float64)
+        r_step = residual(step)
+        size = np.abs(r_step).max()
+        if not size < best:
+            break
+        z, r, best = step, r_step, size
+    return z
 
 
 def _side_row(poles, side):
@@ -685,13 +752,14 @@ def g1_quad_patches(base, measure=True):
         base_face_of_quad = mesh_topology(base.face_vertices, base.face_offsets,
                                           len(base.vertices)).face_of_corner.astype(np.int64)
     growth = np.ones((quads.n_faces, 4, 2))
+    ctx = PatchContext(quads, 1)
     bezier = _regular_bezier(quads, topo, st)
     layout = _Layout(quads, topo, free, bezier)
     free_faces = np.flatnonzero(free)
     slots = np.nan_to_num(layout.fixed_value)
     residual = 0.0
     if len(free_faces):
-        evaluator = LimitEvaluator(quads)
+        evaluator = ctx.evaluator  # the limit of ``quads`` itself: it is all quads
         cosine = _corner_cosines(quads, topo, crease, evaluator)
         special = _special_vertices(quads, topo, crease, cosine)
         keep = _kept_knots(quads, free, special)
@@ -728,7 +796,6 @@ def g1_quad_patches(base, measure=True):
     face_of_patch = base_face_of_quad
     sizes = base.face_sizes
     per_face = np.bincount(face_of_patch, minlength=base.n_faces)
-    ctx = PatchContext(quads, 1)
     info = {
         "export": "g1",
         "faces": "quad",

@@ -99,6 +99,12 @@ def join(pieces):
     return np.concatenate(poles), np.array(knots), np.array(mults, dtype=np.int64)
 
 
+LAST_DIFFERENCES = np.array([[0.0, 0.0, -1.0, 1.0], [0.0, 1.0, -2.0, 1.0], [-1.0, 3.0, -3.0, 1.0]])
+"""(3, 4) last first, second and third differences of four Bezier points."""
+FIRST_DIFFERENCES = np.array([[-1.0, 1.0, 0.0, 0.0], [1.0, -2.0, 1.0, 0.0], [-1.0, 3.0, -3.0, 1.0]])
+"""(3, 4) first first, second and third differences of four Bezier points."""
+
+
 def _smoothness(poles, knots, mults, tolerance):
     """(k,) int64 multiplicity each knot needs: 3 - (order of continuity within ``tolerance``).
 
@@ -120,12 +126,14 @@ def _smoothness(poles, knots, mults, tolerance):
     h = np.diff(knots)
     hl, hr = h[:-1].reshape(shape), h[1:].reshape(shape)
     scale = np.minimum(h[:-1], h[1:])
+    dl = np.tensordot(LAST_DIFFERENCES, left, axes=(1, 1))
+    dr = np.tensordot(FIRST_DIFFERENCES, right, axes=(1, 1))
     smooth = np.ones(len(start), dtype=bool)
     m = np.full(len(start), DEGREE)
     for r, coefficient, factorial in ((1, 3.0, 1.0), (2, 6.0, 2.0), (3, 6.0, 6.0)):
-        dl = np.diff(left, r, axis=1)[:, -1] * coefficient / hl ** r
-        dr = np.diff(right, r, axis=1)[:, 0] * coefficient / hr ** r
-        jump = np.linalg.norm(dl - dr, axis=-1).reshape(len(start), -1).max(axis=1)
+        jump = np.linalg.norm(dl[r - 1] * (coefficient / hl ** r)
+                              - dr[r - 1] * (coefficient / hr ** r), axis=-1)
+        jump = jump.reshape(len(start), -1).max(axis=1)
         smooth &= jump * scale ** r / factorial <= tolerance
         m = np.where(smooth, DEGREE - r, m)
     need[1:-1] = np.minimum(need[1:-1], m)
@@ -164,12 +172,22 @@ def _project(p0, knots, mults, reduced):
     to ``p0`` through knot insertion, and the largest pole distance (a bound of the distance
     between the two splines)."""
     keep = reduced > 0
-    T = insertion_matrix(knots[keep], reduced[keep], knots, mults)
+    coarse = _key(knots[keep], reduced[keep])
+    fine = _key(knots, mults)
+    T = _insertion(coarse, fine)
     flat = p0.reshape(len(p0), -1)
-    Q, R = np.linalg.qr(T)
-    q = solve_triangular(R, Q.T @ flat)
+    q = _least_squares(coarse, fine) @ flat
     gap = (T @ q - flat).reshape(p0.shape)
     return q.reshape((len(q),) + p0.shape[1:]), float(np.linalg.norm(gap, axis=-1).max())
+
+
+@lru_cache(maxsize=1024)
+def _least_squares(coarse_key, fine_key):
+    """(n_coarse, n_fine) matrix of the least-squares inverse of knot insertion
+    (:func:`_insertion`), ``R^-1 Q^T`` of its QR factorisation: the coarse poles whose
+    insertion is closest to given fine poles."""
+    Q, R = np.linalg.qr(_insertion(coarse_key, fine_key))
+    return solve_triangular(R, Q.T)
 
 
 def _remove_knots_one_by_one(poles, knots, mults, tolerance):

@@ -221,3 +221,30 @@ def test_corner_sector_follows_the_limit_tangents():
     assert valence[top] == 4
     assert ps.info["normal_jump_max_deg"] <= 0.01
     assert ps.info["max_error_rel"] <= 1.15e-3
+
+
+def test_kkt_solve_meets_redundant_conditions_and_matches_the_constrained_fit():
+    # a least-squares fit subject to conditions given twice over (redundant rows, as the G1
+    # conditions are at every vertex): the solve must meet them to rounding and give the
+    # constrained minimiser, which the null-space method computes densely
+    from scipy.linalg import null_space
+    import scipy.sparse as sp
+
+    from core.export.g1_patches import _solve
+
+    rng = np.random.default_rng(3)
+    n, k = 40, 12
+    J = rng.normal(size=(80, n))
+    H = J.T @ J
+    rhs = rng.normal(size=(n, 3))
+    A = rng.normal(size=(k, n)) * 300.0  # condition rows far from the fit's scale
+    A = np.vstack([A, 2.0 * A[:4] - A[4:8], np.zeros((1, n))])  # dependent rows, an empty one
+    x_star = rng.normal(size=(n, 3))
+    y = A @ x_star
+    centre = rng.normal(size=3)
+    x = _solve(sp.csc_matrix(H), rhs, centre, sp.csr_matrix(A), y)
+    N = null_space(A)
+    expected = x_star + N @ np.linalg.solve(N.T @ H @ N, N.T @ (rhs - H @ x_star))
+    scale = np.abs(expected).max()
+    assert np.abs(A @ x - y).max() < 1e-9 * np.abs(A).max() * scale
+    np.testing.assert_allclose(x, expected, atol=1e-8 * scale)
