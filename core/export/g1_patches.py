@@ -9,7 +9,9 @@ quads), and the four patches of each base quad are joined back into one face
 knot insertion, then every knot the surface does not need removed within
 :data:`core.export.chart_faces.MERGE_TOLERANCE`; the four patches are made to join C2, so
 this leaves at most a single knot line at 1/2 per direction besides the corner knots,
-:func:`_base_join_system`); a face with ``n != 4`` corners keeps its ``n`` patches.
+:func:`_base_join_system`, unless those joins contradict the G1 conditions, when the patches
+join C1 and a double knot line may stay); a face with ``n != 4`` corners keeps its ``n``
+patches.
 
 Method
 ------
@@ -725,6 +727,27 @@ def g1_surface_patches(base, measure=True, faces="quad"):
     return result
 
 
+def _conditioned_solve(H, rhs, centre, systems):
+    """The constrained least-squares poles of :func:`_solve` under the stacked condition rows
+    of ``systems`` (pairs ``(A, y)``; ``A`` None or without rows adds none).
+
+    Returns
+    -------
+    (x, A, y): the solution and the stacked conditions (None, None without any).
+    """
+    kept = [(A, y) for A, y in systems if A is not None and A.shape[0]]
+    if not kept:
+        return _solve(H, rhs, centre, None, None), None, None
+    A = sp.vstack([A for A, _ in kept]).tocsr()
+    y = np.concatenate([y for _, y in kept])
+    return _solve(H, rhs, centre, A, y), A, y
+
+
+def _residual(A, y, x):
+    """Largest residual of the conditions ``A x = y`` (0 without conditions)."""
+    return float(np.abs(A @ x - y).max()) if A is not None else 0.0
+
+
 def g1_quad_patches(base, measure=True):
     """The G1 patches of :func:`g1_surface_patches` on the quad mesh of ``base`` (``base``
     itself, or its first Catmull-Clark refinement when it has other faces), one per quad,
@@ -767,18 +790,17 @@ def g1_quad_patches(base, measure=True):
         H, rhs, centre = _fit_system(layout, evaluator, free_faces, growth[free_faces])
         A_g1, y_g1 = _g1_system(layout, quads, topo, free, cosine, crease)
         A_k, y_k = _knot_free_system(layout, free, keep)
-        if level == 1:
-            A_j, y_j = _base_join_system(layout, topo, free, base_face_of_quad, base.face_sizes)
-            if A_j is not None:
-                A_k, y_k = sp.vstack([A_k, A_j]).tocsr(), np.concatenate([y_k, y_j])
-        if A_g1 is None:
-            A_g1, y_g1 = (A_k, y_k) if A_k.shape[0] else (None, None)
-        else:
-            A_g1, y_g1 = sp.vstack([A_g1, A_k]).tocsr(), np.concatenate([y_g1, y_k])
-        x = _solve(H, rhs, centre, A_g1, y_g1)
-        slots[layout.unknown >= 0] = x[layout.unknown[layout.unknown >= 0]]
-        residual = float(np.abs(A_g1 @ x - y_g1).max()) if A_g1 is not None else 0.0
+        A_j, y_j = (_base_join_system(layout, topo, free, base_face_of_quad, base.face_sizes)
+                    if level == 1 else (None, None))
         diagonal = float(np.linalg.norm(np.ptp(quads.vertices[np.unique(fv)], axis=0)))
+        x, A, y = _conditioned_solve(H, rhs, centre, [(A_g1, y_g1), (A_k, y_k), (A_j, y_j)])
+        residual = _residual(A, y, x)
+        if residual > G1_RESIDUAL_MAX * diagonal and A_j is not None:
+            # the C2 joins inside base quads only save poles; where they contradict the G1
+            # conditions, the quads join C1 (a knot line at 1/2 stays in the merged face)
+            x, A, y = _conditioned_solve(H, rhs, centre, [(A_g1, y_g1), (A_k, y_k)])
+            residual = _residual(A, y, x)
+        slots[layout.unknown >= 0] = x[layout.unknown[layout.unknown >= 0]]
         if residual > G1_RESIDUAL_MAX * diagonal:
             raise ExportError(f"the G1 conditions of this cage could not be met (residual "
                               f"{residual / diagonal:.1e} of the bounding-box diagonal); use "
