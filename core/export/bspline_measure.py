@@ -109,7 +109,8 @@ def patch_deviation(patchset, base, dense="ev", context=None, target_params=None
             for chunk in np.array_split(sub, max(1, len(sub) * len(U) // 200000)):
                 S = evaluate_patch_grid([patches[i] for i in chunk], su, sv)
                 S = S.reshape(len(chunk), -1, 3)
-                face, Uc, Vc = np.repeat(chunk, len(U)), np.tile(U, len(chunk)), np.tile(V, len(chunk))
+                face = np.repeat(chunk, len(U))
+                Uc, Vc = np.tile(U, len(chunk)), np.tile(V, len(chunk))
                 if target_params is None:
                     X = ctx.evaluate(face, Uc, Vc).reshape(S.shape)
                 else:

@@ -51,9 +51,10 @@ Method
 
   The constrained fit is one sparse KKT system, factored once in a regularised
   (quasi-definite) form, the conditions as a penalty of weight :data:`G1_PENALTY` relative
-  to the fit, and refined to the conditions met up to rounding (:func:`_solve`). Everything is linear in the cage with fixed coefficients: every pole is a
-  fixed affine combination of cage vertices (weights summing to 1), so translating or
-  scaling the cage translates or scales the patches.
+  to the fit, and refined to the conditions met up to rounding (:func:`_solve`).
+  Everything is linear in the cage with fixed coefficients: every pole is a fixed affine
+  combination of cage vertices (weights summing to 1), so translating or scaling the cage
+  translates or scales the patches.
 
 The patches meet along whole sides; the shared vertices and edges are returned as a
 :class:`core.export.brep_topology.BRepTopology` (an edge next to a regular quad takes the
