@@ -248,3 +248,25 @@ def test_kkt_solve_meets_redundant_conditions_and_matches_the_constrained_fit():
     scale = np.abs(expected).max()
     assert np.abs(A @ x - y).max() < 1e-9 * np.abs(A).max() * scale
     np.testing.assert_allclose(x, expected, atol=1e-8 * scale)
+
+
+def test_joins_that_contradict_the_g1_conditions_are_left_out(monkeypatch):
+    """The C2 joins inside base quads only save poles: where they cannot hold with the G1
+    conditions, the export still gives a closed G1 shell (the quads join C1)."""
+    import scipy.sparse as sp
+
+    import core.export.g1_patches as g1
+
+    joins = g1._base_join_system
+
+    def contradicting(*args):
+        A, y = joins(*args)
+        row = A[:1]
+        return sp.vstack([A, row, row]).tocsr(), np.concatenate([y, y[:1] + 1.0, y[:1] - 1.0])
+
+    monkeypatch.setattr(g1, "_base_join_system", contradicting)
+    ps = g1_surface_patches(sample_cages.mixed_prism())
+    diag = ps.info["bbox_diagonal"]
+    assert ps.info["g1_residual"] <= g1.G1_RESIDUAL_MAX * diag
+    assert check_topology(ps.topology, ps.patches, 1e-7 * diag) <= 1e-7 * diag
+    assert ps.info["normal_jump_max_deg"] < 0.01
