@@ -12,7 +12,9 @@ Each case is a dev mesh refined by uniform midpoint subdivision (every triangle 
 with default parameters, in a process of its own. Per stage the report gives wall and CPU
 seconds and the process's peak resident memory so far; the run's own wall time and the
 report's ``brep`` (valid, closed) and ``fit`` figures say whether the solid and its deviation
-match the coarsest version of the same design. Writes ``SCALE_RESULTS.md``,
+match the coarsest version of the same design. ``../shared/tools/evaluate.py`` then measures each
+STEP against the design's unrefined mesh (the same surface, so every case is measured by the same
+samples of it), the resolution-independent comparison of the deviation. Writes ``SCALE_RESULTS.md``,
 ``scale_results.json`` and ``images/scale_time.png`` (log-log: seconds against triangles)
 into ``--out``, keeping the cases of an earlier run that ``--cases`` leaves out.
 """
@@ -36,6 +38,7 @@ DESIGNS = {
     "torsion_arm": (os.path.join(MESHES, "to_simp_torsion_arm_fine3.stl"), (0, 1, 2)),
 }
 STAGES = ("intake", "parts", "frames", "labeling", "basemesh", "fit", "patches")
+EVALUATE = os.path.join(REPO, "..", "shared", "tools", "evaluate.py")
 TIMEOUT = 1800.0
 
 
@@ -88,7 +91,26 @@ def run_case(name):
         if os.path.exists(report_path):
             with open(report_path, encoding="utf-8") as handle:
                 row.update(_figures(json.load(handle)))
+        if done.returncode == 0 and os.path.exists(EVALUATE):
+            row.update(_evaluated(DESIGNS[design][0], step))
     return row
+
+
+def _evaluated(target, step):
+    """``../shared/tools/evaluate.py``'s symmetric distances and volume outside of ``step``
+    against ``target`` (percent of the diagonal and of the volume), or its error line."""
+    checked = subprocess.run([sys.executable, EVALUATE, "--target", target, "--result", step],
+                             cwd=REPO, capture_output=True, text=True, timeout=TIMEOUT)
+    try:
+        verdict = json.loads(checked.stdout)
+        distance = verdict["distance"]["symmetric"]
+        return {"evaluate_mean_pct": _percent(distance["mean_frac"]),
+                "evaluate_max_pct": _percent(distance["max_frac"]),
+                "evaluate_outside_pct": _percent(verdict["containment"]["outside_fraction"]),
+                "evaluate_valid": bool(verdict["brep"]["is_valid"]
+                                       and verdict["brep"]["all_shells_closed"])}
+    except (ValueError, KeyError, TypeError):
+        return {"evaluate_error": (checked.stdout.strip().splitlines() or [""])[-1][:200]}
 
 
 def _figures(report):
@@ -129,13 +151,19 @@ def markdown(rows):
              "resident memory; `proxy`: triangles of the working surface the segmentation "
              "and base mesh ran on.",
              "- `faces`, `mean %`, `max %`: the cage and the fit's distances (% of the "
-             "bounding-box diagonal; mean from the surface, max both ways); `vs x1`: faces and distances against the design's "
-             "coarsest case (1.00 = the same).", "",
+             "bounding-box diagonal; mean from the surface, max both ways, over samples and "
+             "every target vertex, so a finer target is searched more finely); `vs x1`: faces "
+             "and distances against the design's coarsest case (1.00 = the same).",
+             "- `evaluate.py`: `../shared/tools/evaluate.py` on the STEP against the design's "
+             "unrefined mesh (the same surface for every case): symmetric mean and maximum "
+             "distance (% of the diagonal), volume outside (%), and both distances against the "
+             "coarsest case.", "",
              "![seconds against triangles](images/scale_time.png)", "",
              "| case | triangles | proxy | load | " + " | ".join(STAGES)
              + " | wall s | peak MiB | route | faces | genus | valid closed | mean % | max % "
-             "| outside % | vs x1: faces, mean, max | exit |",
-             "|" + "---|" * (len(STAGES) + 15)]
+             "| outside % | vs x1: faces, mean, max | evaluate.py mean %, max %, outside % "
+             "| evaluate.py vs x1: mean, max | exit |",
+             "|" + "---|" * (len(STAGES) + 17)]
     first = {}
     for row in rows:
         if row.get("levels") == 0:
@@ -152,6 +180,7 @@ def markdown(rows):
                "yes" if row.get("valid") and row.get("closed") else "no",
                str(row.get("mean_pct", "–")), str(row.get("max_pct", "–")),
                str(row.get("outside_pct", "–")), _versus(row, first.get(row["design"])),
+               _evaluation(row), _versus_evaluated(row, first.get(row["design"])),
                str(row.get("exit", "–")) + (f" {row['error']}" if row.get("error") else "")])
             + " |")
     return "\n".join(lines) + "\n"
@@ -164,6 +193,22 @@ def _versus(row, base):
     for key in ("mean_pct", "max_pct"):
         ratios.append(row[key] / base[key] if row.get(key) and base.get(key) else float("nan"))
     return ", ".join(f"{value:.2f}" for value in ratios)
+
+
+def _evaluation(row):
+    if row.get("evaluate_error"):
+        return row["evaluate_error"].replace("|", "/")
+    if row.get("evaluate_max_pct") is None:
+        return "–"
+    return (f"{row['evaluate_mean_pct']}, {row['evaluate_max_pct']}, "
+            f"{row['evaluate_outside_pct']}" + ("" if row.get("evaluate_valid") else " (invalid)"))
+
+
+def _versus_evaluated(row, base):
+    keys = ("evaluate_mean_pct", "evaluate_max_pct")
+    if base is None or any(not row.get(key) or not base.get(key) for key in keys):
+        return "–"
+    return ", ".join(f"{row[key] / base[key]:.2f}" for key in keys)
 
 
 def plot(rows, path):
