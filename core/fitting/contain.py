@@ -102,6 +102,13 @@ def nudge_inside(vertices, mapping, triangles, target, movable=None, rounds=NUDG
 def _shift(V, mapping, triangles, target, movable, carry, known):
     """Per base vertex the mean inward move of the outside points it carries.
 
+    A point within ``core.tolerances.CONTACT`` of the diagonal outside the target is on it
+    and not carried; the weight of a point in the mean ramps from 0 there to 1 at twice that
+    depth, so the move is continuous in the points' positions. Some of the points a fit
+    leaves outside lie on the target's surface to rounding (such as points of crease curves
+    placed on the target's feature lines): counted as outside, each would change the count
+    that divides the others' moves, and rounding decides which are.
+
     ``known`` (:class:`core.fitting.responses.InsideBounds`, kept over the rounds) skips the
     closest-point queries of the fine points proven inside since their last one; a far
     wall's corner is queried when its bound does not already prove the room the carry
@@ -120,6 +127,7 @@ def _shift(V, mapping, triangles, target, movable, carry, known):
     outside = query[out]
     depth = near.signed[out]
     wanted = -depth[:, None] * near.mean_plane()[0][out]
+    weight = np.clip(depth / (CONTACT * target.diagonal) - 1.0, 0.0, 1.0)
     owner = _owner(mapping, outside)
     if carry and len(outside):
         direction = -vertex_normals(X, triangles)[outside]
@@ -137,16 +145,18 @@ def _shift(V, mapping, triangles, target, movable, carry, known):
         far = np.flatnonzero(found)[roomy & (hits.t[found] < NUDGE.carry_reach * depth[found])]
         owner = np.concatenate([owner, _owner(mapping, triangles[hits.face[far]].reshape(-1))])
         wanted = np.concatenate([wanted, np.repeat(wanted[far], 3, axis=0)])
+        weight = np.concatenate([weight, np.repeat(weight[far], 3)])
+    keep = weight > 0
     if movable is not None:
-        keep = movable[owner]
-        owner, wanted = owner[keep], wanted[keep]
+        keep &= movable[owner]
+    owner, wanted, weight = owner[keep], wanted[keep], weight[keep]
     if not len(owner):
         return None, float(depth.sum())
     shift = np.zeros_like(V)
-    np.add.at(shift, owner, wanted)
-    count = np.bincount(owner, minlength=len(V)).astype(np.float64)
-    carries = count > 0
-    shift[carries] /= count[carries, None]
+    np.add.at(shift, owner, wanted * weight[:, None])
+    total = np.bincount(owner, weight, minlength=len(V))
+    carries = total > 0
+    shift[carries] /= total[carries, None]
     return shift, float(depth.sum())
 
 

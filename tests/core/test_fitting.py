@@ -561,6 +561,42 @@ def test_a_nudge_round_with_loose_bounds_carries_the_far_walls_as_with_exact_one
     assert depth == exact_depth
 
 
+def test_a_nudge_round_moves_continuously_as_points_cross_the_target_surface():
+    """A box whose top face passes exactly through a ring of fine limit points of a grid
+    sphere poking out of it: moving the base vertex that carries them by 1e-12 up or down
+    takes them just outside or just inside, which changes how many outside points that
+    vertex carries, and its move changes by no more than rounding's size (a plain mean
+    over the points would divide by another count)."""
+    from core.fitting.contain import _owner, _shift
+    from core.fitting.responses import InsideBounds
+
+    base = grid_sphere(3)
+    V = base.vertices / np.linalg.norm(base.vertices, axis=1).max()
+    h, fine, T = fine_mesh(base, 2)
+    M = (limit_matrices(fine)[0] @ h.composite(1)).tocsr()
+    M.sort_indices()
+    X = M @ V
+    owner = _owner(M, np.arange(len(X)))
+    top = owner[np.argmax(X[:, 2])]
+    carried = np.flatnonzero(owner == top)
+    heights = np.unique(X[carried, 2])
+    assert len(heights) >= 3
+    level = heights[-2]                         # the points below the highest one
+    box = trimesh.creation.box(extents=(4.0, 4.0, 4.0))
+    corners = np.asarray(box.vertices)
+    corners[:, 2] = np.where(corners[:, 2] > 0, level, -2.0)
+    target = TargetSurface(corners, np.asarray(box.faces, dtype=np.int64))
+    shifts, outside = [], []
+    for sign in (1.0, -1.0):
+        W = V.copy()
+        W[top, 2] += sign * 1e-12
+        outside.append(int((target.closest(M @ W).signed > 0).sum()))
+        shifts.append(_shift(W, M, T, target, None, False, InsideBounds(0.0))[0][top])
+    assert outside[0] > outside[1]              # the ring is outside, then inside
+    assert np.linalg.norm(shifts[0]) > 1e-4
+    assert np.linalg.norm(shifts[0] - shifts[1]) < 1e-9 * np.linalg.norm(shifts[0])
+
+
 def test_nudge_inside_stops_a_kind_of_rounds_that_no_longer_takes_depth_off(monkeypatch):
     """When a round leaves the summed outside depth where it was (less than
     ``NudgeSettings.progress`` off), no further round of that kind runs: with a depth that never
