@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.compiled import keeps_interrupts, numba
+from core.compiled import by_rows, keeps_interrupts, numba
 
 LEAF_BOXES = 4
 """Boxes per leaf: a few boxes a leaf make the tree shallower and the self-overlap search
@@ -135,8 +135,8 @@ def box_pairs(lo, hi, among=None):
 def nearest_triangles(tree, points):
     """(k,) int64 the triangle of ``tree`` (:class:`TriangleTree`) nearest to each of
     ``points`` ((k, 3) float64), the lower number where two are equally near."""
-    return _nearest(tree.tri, tree.order, tree.node_lo, tree.node_hi,
-                    np.ascontiguousarray(points, dtype=np.float64))
+    return by_rows(_nearest, (4,), tree.tri, tree.order, tree.node_lo, tree.node_hi,
+                   np.ascontiguousarray(points, dtype=np.float64))
 
 
 @keeps_interrupts
@@ -161,7 +161,7 @@ def rival_triangles(tree, points, closest, distance, slack, cosine):
     (k,) int64 tree triangle of each point's rival (the nearest, the lower number of equally
     near ones), ``-1`` where none.
     """
-    return _rivals(tree.tri, tree.order, tree.node_lo, tree.node_hi,
+    return by_rows(_rivals, (4, 5, 6), tree.tri, tree.order, tree.node_lo, tree.node_hi,
                    np.ascontiguousarray(points, dtype=np.float64),
                    np.ascontiguousarray(closest, dtype=np.float64),
                    np.ascontiguousarray(distance, dtype=np.float64), float(slack),
@@ -207,10 +207,11 @@ def first_exits(tree, normals, origins, directions, max_length, t_low, edge_tol)
     face : (k,) int64 triangle exited through, ``-1`` where none.
     uv : (k, 2) float64 barycentric ``(u, v)`` of the exit on it (zeros where none).
     """
-    return _cast(tree.tri, np.ascontiguousarray(normals, dtype=np.float64), tree.order,
-                 tree.node_lo, tree.node_hi, np.ascontiguousarray(origins, dtype=np.float64),
-                 np.ascontiguousarray(directions, dtype=np.float64),
-                 float(max_length), float(t_low), float(edge_tol))
+    return by_rows(_cast, (5, 6), tree.tri, np.ascontiguousarray(normals, dtype=np.float64),
+                   tree.order, tree.node_lo, tree.node_hi,
+                   np.ascontiguousarray(origins, dtype=np.float64),
+                   np.ascontiguousarray(directions, dtype=np.float64),
+                   float(max_length), float(t_low), float(edge_tol))
 
 
 @numba.njit(cache=True, nogil=True)

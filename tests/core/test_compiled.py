@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""A Ctrl-C during a compiled call stays a KeyboardInterrupt (core/compiled.py), and
+"""A Ctrl-C during a compiled call stays a KeyboardInterrupt (core/compiled.py), queries
+cut into blocks over the cores answer as one block does, and
 ``core.precompile.compile_now`` compiles every cached function.
 
 numba's dispatcher turns a ``KeyboardInterrupt`` raised by a signal handler while it runs
@@ -12,6 +13,7 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from core.compiled import keeps_interrupts
@@ -55,6 +57,47 @@ def test_other_system_errors_and_results_pass_through():
         broken()
     assert isinstance(raised.value.__cause__.__cause__, ValueError)
     assert keeps_interrupts(lambda a, b=2: a + b)(1, b=3) == 4
+
+
+@pytest.mark.slow
+def test_queries_cut_into_blocks_answer_as_one_block(monkeypatch):
+    """Nearest triangles, rival triangles and ray exits of more points than a block, on a
+    sphere with points inside: the blocks' answers joined are the kernel's on all
+    rows, bit for bit; too few rows stay one call; a forked child makes its own threads."""
+    import trimesh
+
+    import core.box_tree as tree_module
+    import core.compiled
+    from core.box_tree import (closest_on_triangles, first_exits, nearest_triangles,
+                               rival_triangles, triangle_tree)
+
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    tri = np.asarray(sphere.vertices)[np.asarray(sphere.faces)]
+    tree = triangle_tree(tri, 1e-9)
+    monkeypatch.setattr(core.compiled, "ROW_BLOCK", 64)
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-0.55, 0.55, size=(3 * 64 + 17, 3))  # inside the sphere
+    one = tree_module._nearest(tree.tri, tree.order, tree.node_lo, tree.node_hi, points)
+    assert np.array_equal(nearest_triangles(tree, points), one)
+    assert np.array_equal(nearest_triangles(tree, points[:100]), one[:100])
+    closest = closest_on_triangles(tri[one], points)[0]
+    distance = np.linalg.norm(points - closest, axis=1)
+    rivals = rival_triangles(tree, points, closest, distance, 1e-3, 0.5)
+    assert np.array_equal(rivals, tree_module._rivals(tree.tri, tree.order, tree.node_lo,
+                                                      tree.node_hi, points, closest, distance,
+                                                      1e-3, 0.5))
+    directions = rng.normal(size=points.shape)
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    normals = np.array(sphere.face_normals, dtype=np.float64)  # writable, as first_exits passes
+    split = first_exits(tree, normals, points, directions, 3.0, 0.0, 1e-9)
+    whole = tree_module._cast(tree.tri, normals, tree.order, tree.node_lo, tree.node_hi,
+                              points, directions, 3.0, 0.0, 1e-9)
+    assert all(np.array_equal(a, b) for a, b in zip(split, whole))
+    assert (split[1] >= 0).all()  # every ray from inside leaves the sphere
+    child = os.fork()
+    if child == 0:  # pragma: no cover (the child's exit code is the assertion)
+        os._exit(0 if np.array_equal(nearest_triangles(tree, points), one) else 1)
+    assert os.waitpid(child, 0)[1] == 0
 
 
 def test_compile_now_compiles_every_cached_function():
