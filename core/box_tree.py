@@ -117,10 +117,14 @@ def box_pairs(lo, hi, among=None):
     """(p, 2) int64 pairs of boxes that overlap (i < j in each row; touching counts).
 
     The tree over the boxes ``lo``, ``hi`` ((m, 3) float64 each) is traversed against itself
-    (:func:`_tree_self_overlaps`): only node pairs whose boxes overlap are opened, so the work
+    (:func:`_overlaps_below`): only node pairs whose boxes overlap are opened, so the work
     follows the number of truly overlapping pairs, whatever the spread of box sizes. With ``among`` ((m,) bool), node pairs without
     a marked box below either node are dropped too. The rows come in the order of the
-    traversal (the same for the same boxes).
+    traversal (the same for the same boxes). The traversal opens the node pairs of the top
+    ``SPLIT_LEVELS`` levels in the order it pops them (:func:`_start_pairs`) and traverses
+    below each of them in turn, those in blocks on the cores (:func:`core.compiled.by_rows`):
+    a traversal below a node pair ends before the next pair is popped, so the rows are
+    those of one traversal from the root.
     """
     lo = np.ascontiguousarray(lo, dtype=np.float64)
     hi = np.ascontiguousarray(hi, dtype=np.float64)
@@ -128,7 +132,30 @@ def box_pairs(lo, hi, among=None):
         return np.zeros((0, 2), dtype=np.int64)
     order = tree_order(lo, hi)
     marked = np.ones(len(lo), dtype=np.bool_) if among is None else np.asarray(among, np.bool_)
-    return _tree_self_overlaps(lo[order], hi[order], marked[order], order)
+    lo, hi, marked = lo[order], hi[order], marked[order]
+    node_lo, node_hi, node_marked = _marked_tree(lo, hi, marked)
+    starts = _start_pairs(len(node_lo) // 2, SPLIT_LEVELS)
+    return by_rows(_overlaps_below, (7,), lo, hi, marked, order, node_lo, node_hi, node_marked,
+                   starts, least=1)
+
+
+SPLIT_LEVELS = 3
+"""Levels of the tree whose node pairs :func:`box_pairs` opens before traversing below each
+(up to 36 pairs: enough blocks for the cores)."""
+
+
+def _start_pairs(size, levels):
+    """(k, 2) int64 the node pairs ``levels`` levels below the root pair (or leaf pairs, in a
+    tree of ``size`` leaves), in the order :func:`_overlaps_below`'s stack pops them."""
+
+    def below(a, b, level):
+        if level == 0 or a >= size:
+            return [(a, b)]
+        pushed = ([(2 * a, 2 * a), (2 * a + 1, 2 * a + 1), (2 * a, 2 * a + 1)] if a == b else
+                  [(2 * a, 2 * b), (2 * a, 2 * b + 1), (2 * a + 1, 2 * b), (2 * a + 1, 2 * b + 1)])
+        return [pair for child in reversed(pushed) for pair in below(*child, level - 1)]
+
+    return np.array(below(1, 1, levels), dtype=np.int64).reshape(-1, 2)
 
 
 @keeps_interrupts
@@ -304,14 +331,9 @@ def _build_tree(lo, hi):
 
 
 @numba.njit(cache=True, nogil=True)
-def _tree_self_overlaps(lo, hi, marked, numbers):
-    """(p, 2) int64 the overlapping pairs (with a marked box) of the boxes ``lo``, ``hi``
-    ((m, 3) float64, in tree order, ``marked`` (m,) bool), as ``numbers`` ((m,) int64) of
-    the boxes, smaller first.
-
-    A stack holds the node pairs still to open (at most three per level for a node paired
-    with itself, four for two nodes); two overlapping leaves test their boxes pair by pair.
-    """
+def _marked_tree(lo, hi, marked):
+    """Node boxes (:func:`_build_tree`) of the boxes ``lo``, ``hi`` ((m, 3) float64, in tree
+    order) and (2 size,) bool: a box marked in ``marked`` ((m,) bool) lies below the node."""
     m = lo.shape[0]
     node_lo, node_hi, size = _build_tree(lo, hi)
     node_marked = np.zeros(2 * size, dtype=np.bool_)
@@ -320,36 +342,53 @@ def _tree_self_overlaps(lo, hi, marked, numbers):
         node_marked[leaf] = marked[first:stop].any() if first < stop else False
     for k in range(size - 1, 0, -1):
         node_marked[k] = node_marked[2 * k] or node_marked[2 * k + 1]
-    pairs = np.empty((4 * m + 16, 2), dtype=np.int64)
+    return node_lo, node_hi, node_marked
+
+
+@numba.njit(cache=True, nogil=True)
+def _overlaps_below(lo, hi, marked, numbers, node_lo, node_hi, node_marked, starts):
+    """(p, 2) int64 the overlapping pairs (with a marked box) of the boxes ``lo``, ``hi``
+    ((m, 3) float64, in tree order, ``marked`` (m,) bool) below each node pair of ``starts``
+    ((k, 2) int64, one after another), as ``numbers`` ((m,) int64) of the boxes, smaller
+    first; the tree is :func:`_marked_tree`'s.
+
+    A stack holds the node pairs still to open (at most three per level for a node paired
+    with itself, four for two nodes); two overlapping leaves test their boxes pair by pair.
+    """
+    m = lo.shape[0]
+    size = node_lo.shape[0] // 2
+    pairs = np.empty((m + 16, 2), dtype=np.int64)
     count = 0
     stack = np.empty((4 * 64, 2), dtype=np.int64)
-    top = _push(stack, 0, 1, 1)
-    while top:
-        top -= 1
-        a, b = stack[top, 0], stack[top, 1]
-        if not (node_marked[a] or node_marked[b]) or not _boxes_overlap(node_lo, node_hi, a, b):
-            continue
-        if a >= size:  # two leaves (or one leaf with itself)
-            first_a, stop_a = _leaf_boxes(a, size, m)
-            first_b, stop_b = _leaf_boxes(b, size, m)
-            for i in range(first_a, stop_a):
-                for j in range(i + 1 if a == b else first_b, stop_b):
-                    if not (marked[i] or marked[j]) or not _boxes_overlap(lo, hi, i, j):
-                        continue
-                    if count == pairs.shape[0]:
-                        pairs = np.concatenate((pairs, np.empty_like(pairs)))
-                    pairs[count, 0] = min(numbers[i], numbers[j])
-                    pairs[count, 1] = max(numbers[i], numbers[j])
-                    count += 1
-        elif a == b:
-            top = _push(stack, top, 2 * a, 2 * a)
-            top = _push(stack, top, 2 * a + 1, 2 * a + 1)
-            top = _push(stack, top, 2 * a, 2 * a + 1)
-        else:
-            top = _push(stack, top, 2 * a, 2 * b)
-            top = _push(stack, top, 2 * a, 2 * b + 1)
-            top = _push(stack, top, 2 * a + 1, 2 * b)
-            top = _push(stack, top, 2 * a + 1, 2 * b + 1)
+    for s in range(starts.shape[0]):
+        top = _push(stack, 0, starts[s, 0], starts[s, 1])
+        while top:
+            top -= 1
+            a, b = stack[top, 0], stack[top, 1]
+            if not (node_marked[a] or node_marked[b]) or \
+                    not _boxes_overlap(node_lo, node_hi, a, b):
+                continue
+            if a >= size:  # two leaves (or one leaf with itself)
+                first_a, stop_a = _leaf_boxes(a, size, m)
+                first_b, stop_b = _leaf_boxes(b, size, m)
+                for i in range(first_a, stop_a):
+                    for j in range(i + 1 if a == b else first_b, stop_b):
+                        if not (marked[i] or marked[j]) or not _boxes_overlap(lo, hi, i, j):
+                            continue
+                        if count == pairs.shape[0]:
+                            pairs = np.concatenate((pairs, np.empty_like(pairs)))
+                        pairs[count, 0] = min(numbers[i], numbers[j])
+                        pairs[count, 1] = max(numbers[i], numbers[j])
+                        count += 1
+            elif a == b:
+                top = _push(stack, top, 2 * a, 2 * a)
+                top = _push(stack, top, 2 * a + 1, 2 * a + 1)
+                top = _push(stack, top, 2 * a, 2 * a + 1)
+            else:
+                top = _push(stack, top, 2 * a, 2 * b)
+                top = _push(stack, top, 2 * a, 2 * b + 1)
+                top = _push(stack, top, 2 * a + 1, 2 * b)
+                top = _push(stack, top, 2 * a + 1, 2 * b + 1)
     return pairs[:count].copy()
 
 

@@ -75,20 +75,20 @@ def _pool():
 os.register_at_fork(after_in_child=_pool.cache_clear)
 
 
-def by_rows(kernel, rows, *args):
+def by_rows(kernel, rows, *args, least=ROW_BLOCK):
     """``kernel(*args)`` of a compiled function whose rows are independent, on the cores.
 
     ``rows`` indices into ``args`` name the arguments with one row per query (their first
     axes equal); each query's result depends on its own row and the other arguments only.
     The rows are cut into contiguous blocks, one per core this process may use (none smaller
-    than :data:`ROW_BLOCK`); the first block runs in the calling thread, the others in worker
+    than ``least`` rows, :data:`ROW_BLOCK` unless a row is much work); the first block runs in the calling thread, the others in worker
     threads while it does (the kernel must be compiled with ``nogil=True``), and the results
     (an array, or a tuple of arrays, with one row per query) are joined in row order. So the
     result is the kernel's on all rows bit for bit, whatever the number of cores.
     """
     n = len(args[rows[0]])
     pool, cores = _pool()
-    blocks = min(cores, n // ROW_BLOCK)
+    blocks = min(cores, n // least)
     if blocks < 2:
         return kernel(*args)
     cuts = np.linspace(0, n, blocks + 1).astype(np.int64)

@@ -62,8 +62,8 @@ def test_other_system_errors_and_results_pass_through():
 @pytest.mark.slow
 def test_queries_cut_into_blocks_answer_as_one_block(monkeypatch):
     """Nearest triangles, rival triangles and ray exits of more points than a block, on a
-    sphere with points inside: the blocks' answers joined are the kernel's on all
-    rows, bit for bit; too few rows stay one call; a forked child makes its own threads."""
+    sphere with points inside, and the overlapping boxes of its triangles: the blocks'
+    answers joined are the kernel's on all rows (the traversal from the root), bit for bit; too few rows stay one call; a forked child makes its own threads."""
     import trimesh
 
     import core.box_tree as tree_module
@@ -94,6 +94,13 @@ def test_queries_cut_into_blocks_answer_as_one_block(monkeypatch):
                               points, directions, 3.0, 0.0, 1e-9)
     assert all(np.array_equal(a, b) for a, b in zip(split, whole))
     assert (split[1] >= 0).all()  # every ray from inside leaves the sphere
+    lo, hi = tree_module.face_boxes(tri * 1.01)  # boxes of neighbouring triangles overlap
+    among = rng.random(len(lo)) < 0.3
+    order = tree_module.tree_order(lo, hi)
+    node_lo, node_hi, node_marked = tree_module._marked_tree(lo[order], hi[order], among[order])
+    root = tree_module._overlaps_below(lo[order], hi[order], among[order], order, node_lo,
+                                       node_hi, node_marked, np.array([[1, 1]]))
+    assert len(root) > len(lo) and np.array_equal(tree_module.box_pairs(lo, hi, among), root)
     child = os.fork()
     if child == 0:  # pragma: no cover (the child's exit code is the assertion)
         os._exit(0 if np.array_equal(nearest_triangles(tree, points), one) else 1)
@@ -117,7 +124,7 @@ def test_compile_now_compiles_every_cached_function():
     done = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True,
                           text=True, timeout=300)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.split("\n")[0] == "10 []"
+    assert done.stdout.split("\n")[0] == "11 []"
 
 
 def test_without_numba_the_command_line_says_what_to_install_and_writes_nothing(tmp_path):
