@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.compiled import by_rows, keeps_interrupts, numba
+from core.compiled import ROW_BLOCK, by_rows, keeps_interrupts, numba, worker_pool
 
 LEAF_BOXES = 4
 """Boxes per leaf: a few boxes a leaf make the tree shallower and the self-overlap search
@@ -79,7 +79,22 @@ def tree_order(lo, hi):
     opened 260 leaves.)
     """
     centres = np.ascontiguousarray(lo + hi, dtype=np.float64)
-    return _kd_order(centres, LEAF_BOXES)
+    m = len(centres)
+    capacity = LEAF_BOXES
+    while capacity < m:
+        capacity *= 2
+    order = np.arange(m)
+    if m < 2 * ROW_BLOCK or capacity <= LEAF_BOXES:
+        _kd_levels(centres, order, 0, m, capacity, LEAF_BOXES)
+        return order
+    # the root's split, then its two children's boxes (apart in ``order``) on two cores
+    half = capacity // 2
+    _kd_levels(centres, order, 0, m, capacity, half)
+    pool, _ = worker_pool()
+    second = pool.submit(_kd_levels, centres, order, half, m, half, LEAF_BOXES)
+    _kd_levels(centres, order, 0, half, half, LEAF_BOXES)
+    second.result()
+    return order
 
 
 @dataclass(frozen=True)
@@ -242,29 +257,24 @@ def first_exits(tree, normals, origins, directions, max_length, t_low, edge_tol)
 
 
 @numba.njit(cache=True, nogil=True)
-def _kd_order(centres, leaf_boxes_count):
-    """The order of :func:`tree_order` for box centres ``centres`` ((m, 3) float64)."""
-    m = centres.shape[0]
-    size = 1
-    while size * leaf_boxes_count < m:
-        size *= 2
-    order = np.arange(m)
-    capacity = size * leaf_boxes_count
-    while capacity > leaf_boxes_count:
+def _kd_levels(centres, order, first, stop, capacity, smallest):
+    """Put ``order[first:stop]`` in the order of :func:`tree_order` from nodes of ``capacity``
+    boxes (a power of two times ``LEAF_BOXES``, ``first`` a multiple of it) down to nodes of
+    ``smallest`` boxes, in place; ``centres`` ((m, 3) float64) are the box centres."""
+    while capacity > smallest:
         half = capacity // 2
-        for start in range(0, m, capacity):
-            stop = min(start + capacity, m)
-            if stop - start <= half:
+        for start in range(first, stop, capacity):
+            end = min(start + capacity, stop)
+            if end - start <= half:
                 continue  # all in the first child
             low = np.full(3, np.inf)
             high = np.full(3, -np.inf)
-            for i in range(start, stop):
+            for i in range(start, end):
                 for d in range(3):
                     low[d] = min(low[d], centres[order[i], d])
                     high[d] = max(high[d], centres[order[i], d])
-            _select(order, centres[:, np.argmax(high - low)], start, stop, start + half)
+            _select(order, centres[:, np.argmax(high - low)], start, end, start + half)
         capacity = half
-    return order
 
 
 @numba.njit(inline="always")

@@ -61,7 +61,7 @@ more than it saves."""
 
 
 @functools.lru_cache(maxsize=1)
-def _pool():
+def worker_pool():
     """``(pool, cores)``: the worker threads of :func:`by_rows`, one fewer than the ``cores``
     this process may use, made at the first split (a forked child, which has none of its
     parent's threads, makes its own)."""
@@ -72,7 +72,7 @@ def _pool():
     return ThreadPoolExecutor(max_workers=max(1, cores - 1)), cores
 
 
-os.register_at_fork(after_in_child=_pool.cache_clear)
+os.register_at_fork(after_in_child=worker_pool.cache_clear)
 
 
 def by_rows(kernel, rows, *args, least=ROW_BLOCK):
@@ -87,7 +87,7 @@ def by_rows(kernel, rows, *args, least=ROW_BLOCK):
     result is the kernel's on all rows bit for bit, whatever the number of cores.
     """
     n = len(args[rows[0]])
-    pool, cores = _pool()
+    pool, cores = worker_pool()
     blocks = min(cores, n // least)
     if blocks < 2:
         return kernel(*args)

@@ -96,7 +96,11 @@ def test_queries_cut_into_blocks_answer_as_one_block(monkeypatch):
     assert (split[1] >= 0).all()  # every ray from inside leaves the sphere
     lo, hi = tree_module.face_boxes(tri * 1.01)  # boxes of neighbouring triangles overlap
     among = rng.random(len(lo)) < 0.3
-    order = tree_module.tree_order(lo, hi)
+    monkeypatch.setattr(tree_module, "ROW_BLOCK", 64)
+    order = tree_module.tree_order(lo, hi)  # the root's children ordered on two cores
+    single = np.arange(len(lo))
+    tree_module._kd_levels(lo + hi, single, 0, len(lo), 4 * 2 ** 11, tree_module.LEAF_BOXES)
+    assert np.array_equal(order, single)
     node_lo, node_hi, node_marked = tree_module._marked_tree(lo[order], hi[order], among[order])
     root = tree_module._overlaps_below(lo[order], hi[order], among[order], order, node_lo,
                                        node_hi, node_marked, np.array([[1, 1]]))
