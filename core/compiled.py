@@ -104,3 +104,21 @@ def by_rows(kernel, rows, *args, least=ROW_BLOCK):
     if isinstance(results[0], tuple):
         return tuple(np.concatenate(parts) for parts in zip(*results))
     return np.concatenate(results)
+
+
+def each_on_a_core(function, items):
+    """``[function(item) for item in items]``, the items dealt round the cores this process
+    may use (the first core's in the calling thread, the others' in worker threads
+    meanwhile): for independent pieces of work that release the interpreter (scipy's sparse
+    products, numpy's array operations), each computed as it would be alone."""
+    items = list(items)
+    pool, cores = worker_pool()
+    if cores < 2 or len(items) < 2:
+        return [function(item) for item in items]
+
+    def every(first):
+        return [function(item) for item in items[first::cores]]
+
+    futures = [pool.submit(every, first) for first in range(1, min(cores, len(items)))]
+    dealt = [every(0)] + [future.result() for future in futures]
+    return [dealt[k % cores][k // cores] for k in range(len(items))]

@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """A Ctrl-C during a compiled call stays a KeyboardInterrupt (core/compiled.py), queries
-cut into blocks over the cores answer as one block does, and
+cut into blocks over the cores answer as one block does, work dealt round the cores comes
+back in order, and
 ``core.precompile.compile_now`` compiles every cached function.
 
 numba's dispatcher turns a ``KeyboardInterrupt`` raised by a signal handler while it runs
@@ -16,7 +17,7 @@ import sys
 import numpy as np
 import pytest
 
-from core.compiled import keeps_interrupts
+from core.compiled import each_on_a_core, keeps_interrupts
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -57,6 +58,20 @@ def test_other_system_errors_and_results_pass_through():
         broken()
     assert isinstance(raised.value.__cause__.__cause__, ValueError)
     assert keeps_interrupts(lambda a, b=2: a + b)(1, b=3) == 4
+
+
+def test_work_dealt_round_the_cores_comes_back_in_order():
+    """Sparse products dealt round the cores come back in the items' order, each equal bit
+    for bit to the product made alone; one item or none stays in this thread."""
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(5)
+    matrices = [sp.random(300, 300, density=0.05, format="csr", random_state=k)
+                for k in range(7)]
+    vector = rng.normal(size=300)
+    dealt = each_on_a_core(lambda matrix: matrix.T @ (matrix @ vector), matrices)
+    assert all(np.array_equal(got, m.T @ (m @ vector)) for got, m in zip(dealt, matrices))
+    assert each_on_a_core(len, [[1, 2]]) == [2] and each_on_a_core(len, []) == []
 
 
 @pytest.mark.slow
