@@ -72,7 +72,8 @@ def worker_pool():
     return ThreadPoolExecutor(max_workers=max(1, cores - 1)), cores
 
 
-os.register_at_fork(after_in_child=worker_pool.cache_clear)
+if hasattr(os, "register_at_fork"):  # POSIX only; elsewhere nothing forks
+    os.register_at_fork(after_in_child=worker_pool.cache_clear)
 
 
 def by_rows(kernel, rows, *args, least=ROW_BLOCK):
