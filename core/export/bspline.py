@@ -328,6 +328,9 @@ def limit_surface_patches(base, depth=EXPORT_DEPTH, measure=True):
     if measure:
         # the normal jumps on another core while the deviation is measured here
         jumps = Ahead(normal_jumps, result, base, None, ctx)
-        info.update(patch_deviation(result, base, context=ctx))
-        info.update(jumps.result() or normal_jumps(result, base, context=ctx))
+        try:
+            info.update(patch_deviation(result, base, context=ctx))
+            info.update(jumps.result() or normal_jumps(result, base, context=ctx))
+        finally:
+            jumps.cancel()  # ends the child where the deviation raised
     return result

@@ -438,8 +438,11 @@ def _measure(setup, vertices, V0, seed):
     X, X0 = setup.limit_map @ vertices, setup.limit_map @ V0
     # the distances on another core while the containment is measured here
     both = Ahead(_both_distances, X, X0, T, target, points)
-    report = containment(X, T, target.vertices, target.faces)
-    distances, initial = both.result() or _both_distances(X, X0, T, target, points)
+    try:
+        report = containment(X, T, target.vertices, target.faces)
+        distances, initial = both.result() or _both_distances(X, X0, T, target, points)
+    finally:
+        both.cancel()  # ends the child where the containment raised
     return FitFigures(distances, initial, report["outside_volume_fraction"],
                       report["uncovered_volume_fraction"], time.perf_counter() - measuring)
 
