@@ -97,11 +97,13 @@ def write_markdown(results):
              "level-2 limit surface, `fit x` the fitted limit surface's crossing pairs, "
              "`outside` the share of the target's volume outside it. The machine has 2 cores "
              "shared with other jobs: labels measured in one run compare; figures across runs "
-             "vary by a factor up to 2; `cpu` is the CPU seconds of the whole process (user and "
+             "vary by a factor up to 2; `total` is the report's (the core stages, without the "
+             "solid), `wall` the process's end to end (start-up and the solid included), `cpu` "
+             "the CPU seconds of the whole process and of the work it forks (user and "
              "system), which the other jobs change less, `load` the machine's 1-minute load "
              "average when the run ended.", ""]
-    header = ["label", "mesh", *STAGES, "total", "cpu", "load", "exit", "cage", "fit x",
-              "outside", "error"]
+    header = ["label", "mesh", *STAGES, "total", "wall", "cpu", "load", "exit", "cage",
+              "fit x", "outside", "error"]
     lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for label, rows in results.items():
         for row in rows:
@@ -111,7 +113,7 @@ def write_markdown(results):
             cells = [label, row["mesh"],
                      *[("-" if stages.get(name) is None else f"{stages[name]:.1f}")
                        for name in STAGES],
-                     f"{row.get('total') or row['wall']:.1f}",
+                     f"{row.get('total') or row['wall']:.1f}", f"{row['wall']:.1f}",
                      "-" if row.get("cpu") is None else f"{row['cpu']:.1f}",
                      "-" if row.get("load") is None else f"{row['load']:.1f}", str(row["exit"]),
                      f"{base.get('faces')} / {base.get('limit_crossings')}",
@@ -121,7 +123,9 @@ def write_markdown(results):
             lines.append("| " + " | ".join(cells) + " |")
     lines += ["", "CPU seconds of each stage (its report's `cpu_seconds`: the process's user and "
               "system time in the stage, which other jobs on the machine change less than "
-              "the wall seconds above; `-`: not reached or not recorded).", "",
+              "the wall seconds above; work a stage forks to another core, such as the paired "
+              "decimation built ahead, is in `cpu` above, not here; `-`: not reached or not "
+              "recorded).", "",
               "| " + " | ".join(["label", "mesh", *STAGES, "sum"]) + " |",
               "|" + "---|" * (len(STAGES) + 3)]
     for label, rows in results.items():

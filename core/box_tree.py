@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.compiled import keeps_interrupts, numba
+from core.compiled import ROW_BLOCK, by_rows, keeps_interrupts, numba, worker_pool
 
 LEAF_BOXES = 4
 """Boxes per leaf: a few boxes a leaf make the tree shallower and the self-overlap search
@@ -79,7 +79,22 @@ def tree_order(lo, hi):
     opened 260 leaves.)
     """
     centres = np.ascontiguousarray(lo + hi, dtype=np.float64)
-    return _kd_order(centres, LEAF_BOXES)
+    m = len(centres)
+    capacity = LEAF_BOXES
+    while capacity < m:
+        capacity *= 2
+    order = np.arange(m)
+    if m < 2 * ROW_BLOCK or capacity <= LEAF_BOXES:
+        _kd_levels(centres, order, 0, m, capacity, LEAF_BOXES)
+        return order
+    # the root's split, then its two children's boxes (apart in ``order``) on two cores
+    half = capacity // 2
+    _kd_levels(centres, order, 0, m, capacity, half)
+    pool, _ = worker_pool()
+    second = pool.submit(_kd_levels, centres, order, half, m, half, LEAF_BOXES)
+    _kd_levels(centres, order, 0, half, half, LEAF_BOXES)
+    second.result()
+    return order
 
 
 @dataclass(frozen=True)
@@ -117,10 +132,14 @@ def box_pairs(lo, hi, among=None):
     """(p, 2) int64 pairs of boxes that overlap (i < j in each row; touching counts).
 
     The tree over the boxes ``lo``, ``hi`` ((m, 3) float64 each) is traversed against itself
-    (:func:`_tree_self_overlaps`): only node pairs whose boxes overlap are opened, so the work
+    (:func:`_overlaps_below`): only node pairs whose boxes overlap are opened, so the work
     follows the number of truly overlapping pairs, whatever the spread of box sizes. With ``among`` ((m,) bool), node pairs without
     a marked box below either node are dropped too. The rows come in the order of the
-    traversal (the same for the same boxes).
+    traversal (the same for the same boxes). The traversal opens the node pairs of the top
+    ``SPLIT_LEVELS`` levels in the order it pops them (:func:`_start_pairs`) and traverses
+    below each of them in turn, those in blocks on the cores (:func:`core.compiled.by_rows`):
+    a traversal below a node pair ends before the next pair is popped, so the rows are
+    those of one traversal from the root.
     """
     lo = np.ascontiguousarray(lo, dtype=np.float64)
     hi = np.ascontiguousarray(hi, dtype=np.float64)
@@ -128,15 +147,38 @@ def box_pairs(lo, hi, among=None):
         return np.zeros((0, 2), dtype=np.int64)
     order = tree_order(lo, hi)
     marked = np.ones(len(lo), dtype=np.bool_) if among is None else np.asarray(among, np.bool_)
-    return _tree_self_overlaps(lo[order], hi[order], marked[order], order)
+    lo, hi, marked = lo[order], hi[order], marked[order]
+    node_lo, node_hi, node_marked = _marked_tree(lo, hi, marked)
+    starts = _start_pairs(len(node_lo) // 2, SPLIT_LEVELS)
+    return by_rows(_overlaps_below, (7,), lo, hi, marked, order, node_lo, node_hi, node_marked,
+                   starts, least=1)
+
+
+SPLIT_LEVELS = 3
+"""Levels of the tree whose node pairs :func:`box_pairs` opens before traversing below each
+(up to 36 pairs: enough blocks for the cores)."""
+
+
+def _start_pairs(size, levels):
+    """(k, 2) int64 the node pairs ``levels`` levels below the root pair (or leaf pairs, in a
+    tree of ``size`` leaves), in the order :func:`_overlaps_below`'s stack pops them."""
+
+    def below(a, b, level):
+        if level == 0 or a >= size:
+            return [(a, b)]
+        pushed = ([(2 * a, 2 * a), (2 * a + 1, 2 * a + 1), (2 * a, 2 * a + 1)] if a == b else
+                  [(2 * a, 2 * b), (2 * a, 2 * b + 1), (2 * a + 1, 2 * b), (2 * a + 1, 2 * b + 1)])
+        return [pair for child in reversed(pushed) for pair in below(*child, level - 1)]
+
+    return np.array(below(1, 1, levels), dtype=np.int64).reshape(-1, 2)
 
 
 @keeps_interrupts
 def nearest_triangles(tree, points):
     """(k,) int64 the triangle of ``tree`` (:class:`TriangleTree`) nearest to each of
     ``points`` ((k, 3) float64), the lower number where two are equally near."""
-    return _nearest(tree.tri, tree.order, tree.node_lo, tree.node_hi,
-                    np.ascontiguousarray(points, dtype=np.float64))
+    return by_rows(_nearest, (4,), tree.tri, tree.order, tree.node_lo, tree.node_hi,
+                   np.ascontiguousarray(points, dtype=np.float64))
 
 
 @keeps_interrupts
@@ -161,7 +203,7 @@ def rival_triangles(tree, points, closest, distance, slack, cosine):
     (k,) int64 tree triangle of each point's rival (the nearest, the lower number of equally
     near ones), ``-1`` where none.
     """
-    return _rivals(tree.tri, tree.order, tree.node_lo, tree.node_hi,
+    return by_rows(_rivals, (4, 5, 6), tree.tri, tree.order, tree.node_lo, tree.node_hi,
                    np.ascontiguousarray(points, dtype=np.float64),
                    np.ascontiguousarray(closest, dtype=np.float64),
                    np.ascontiguousarray(distance, dtype=np.float64), float(slack),
@@ -207,36 +249,32 @@ def first_exits(tree, normals, origins, directions, max_length, t_low, edge_tol)
     face : (k,) int64 triangle exited through, ``-1`` where none.
     uv : (k, 2) float64 barycentric ``(u, v)`` of the exit on it (zeros where none).
     """
-    return _cast(tree.tri, np.ascontiguousarray(normals, dtype=np.float64), tree.order,
-                 tree.node_lo, tree.node_hi, np.ascontiguousarray(origins, dtype=np.float64),
-                 np.ascontiguousarray(directions, dtype=np.float64),
-                 float(max_length), float(t_low), float(edge_tol))
+    return by_rows(_cast, (5, 6), tree.tri, np.ascontiguousarray(normals, dtype=np.float64),
+                   tree.order, tree.node_lo, tree.node_hi,
+                   np.ascontiguousarray(origins, dtype=np.float64),
+                   np.ascontiguousarray(directions, dtype=np.float64),
+                   float(max_length), float(t_low), float(edge_tol))
 
 
 @numba.njit(cache=True, nogil=True)
-def _kd_order(centres, leaf_boxes_count):
-    """The order of :func:`tree_order` for box centres ``centres`` ((m, 3) float64)."""
-    m = centres.shape[0]
-    size = 1
-    while size * leaf_boxes_count < m:
-        size *= 2
-    order = np.arange(m)
-    capacity = size * leaf_boxes_count
-    while capacity > leaf_boxes_count:
+def _kd_levels(centres, order, first, stop, capacity, smallest):
+    """Put ``order[first:stop]`` in the order of :func:`tree_order` from nodes of ``capacity``
+    boxes (a power of two times ``LEAF_BOXES``, ``first`` a multiple of it) down to nodes of
+    ``smallest`` boxes, in place; ``centres`` ((m, 3) float64) are the box centres."""
+    while capacity > smallest:
         half = capacity // 2
-        for start in range(0, m, capacity):
-            stop = min(start + capacity, m)
-            if stop - start <= half:
+        for start in range(first, stop, capacity):
+            end = min(start + capacity, stop)
+            if end - start <= half:
                 continue  # all in the first child
             low = np.full(3, np.inf)
             high = np.full(3, -np.inf)
-            for i in range(start, stop):
+            for i in range(start, end):
                 for d in range(3):
                     low[d] = min(low[d], centres[order[i], d])
                     high[d] = max(high[d], centres[order[i], d])
-            _select(order, centres[:, np.argmax(high - low)], start, stop, start + half)
+            _select(order, centres[:, np.argmax(high - low)], start, end, start + half)
         capacity = half
-    return order
 
 
 @numba.njit(inline="always")
@@ -303,14 +341,9 @@ def _build_tree(lo, hi):
 
 
 @numba.njit(cache=True, nogil=True)
-def _tree_self_overlaps(lo, hi, marked, numbers):
-    """(p, 2) int64 the overlapping pairs (with a marked box) of the boxes ``lo``, ``hi``
-    ((m, 3) float64, in tree order, ``marked`` (m,) bool), as ``numbers`` ((m,) int64) of
-    the boxes, smaller first.
-
-    A stack holds the node pairs still to open (at most three per level for a node paired
-    with itself, four for two nodes); two overlapping leaves test their boxes pair by pair.
-    """
+def _marked_tree(lo, hi, marked):
+    """Node boxes (:func:`_build_tree`) of the boxes ``lo``, ``hi`` ((m, 3) float64, in tree
+    order) and (2 size,) bool: a box marked in ``marked`` ((m,) bool) lies below the node."""
     m = lo.shape[0]
     node_lo, node_hi, size = _build_tree(lo, hi)
     node_marked = np.zeros(2 * size, dtype=np.bool_)
@@ -319,36 +352,53 @@ def _tree_self_overlaps(lo, hi, marked, numbers):
         node_marked[leaf] = marked[first:stop].any() if first < stop else False
     for k in range(size - 1, 0, -1):
         node_marked[k] = node_marked[2 * k] or node_marked[2 * k + 1]
-    pairs = np.empty((4 * m + 16, 2), dtype=np.int64)
+    return node_lo, node_hi, node_marked
+
+
+@numba.njit(cache=True, nogil=True)
+def _overlaps_below(lo, hi, marked, numbers, node_lo, node_hi, node_marked, starts):
+    """(p, 2) int64 the overlapping pairs (with a marked box) of the boxes ``lo``, ``hi``
+    ((m, 3) float64, in tree order, ``marked`` (m,) bool) below each node pair of ``starts``
+    ((k, 2) int64, one after another), as ``numbers`` ((m,) int64) of the boxes, smaller
+    first; the tree is :func:`_marked_tree`'s.
+
+    A stack holds the node pairs still to open (at most three per level for a node paired
+    with itself, four for two nodes); two overlapping leaves test their boxes pair by pair.
+    """
+    m = lo.shape[0]
+    size = node_lo.shape[0] // 2
+    pairs = np.empty((m + 16, 2), dtype=np.int64)
     count = 0
     stack = np.empty((4 * 64, 2), dtype=np.int64)
-    top = _push(stack, 0, 1, 1)
-    while top:
-        top -= 1
-        a, b = stack[top, 0], stack[top, 1]
-        if not (node_marked[a] or node_marked[b]) or not _boxes_overlap(node_lo, node_hi, a, b):
-            continue
-        if a >= size:  # two leaves (or one leaf with itself)
-            first_a, stop_a = _leaf_boxes(a, size, m)
-            first_b, stop_b = _leaf_boxes(b, size, m)
-            for i in range(first_a, stop_a):
-                for j in range(i + 1 if a == b else first_b, stop_b):
-                    if not (marked[i] or marked[j]) or not _boxes_overlap(lo, hi, i, j):
-                        continue
-                    if count == pairs.shape[0]:
-                        pairs = np.concatenate((pairs, np.empty_like(pairs)))
-                    pairs[count, 0] = min(numbers[i], numbers[j])
-                    pairs[count, 1] = max(numbers[i], numbers[j])
-                    count += 1
-        elif a == b:
-            top = _push(stack, top, 2 * a, 2 * a)
-            top = _push(stack, top, 2 * a + 1, 2 * a + 1)
-            top = _push(stack, top, 2 * a, 2 * a + 1)
-        else:
-            top = _push(stack, top, 2 * a, 2 * b)
-            top = _push(stack, top, 2 * a, 2 * b + 1)
-            top = _push(stack, top, 2 * a + 1, 2 * b)
-            top = _push(stack, top, 2 * a + 1, 2 * b + 1)
+    for s in range(starts.shape[0]):
+        top = _push(stack, 0, starts[s, 0], starts[s, 1])
+        while top:
+            top -= 1
+            a, b = stack[top, 0], stack[top, 1]
+            if not (node_marked[a] or node_marked[b]) or \
+                    not _boxes_overlap(node_lo, node_hi, a, b):
+                continue
+            if a >= size:  # two leaves (or one leaf with itself)
+                first_a, stop_a = _leaf_boxes(a, size, m)
+                first_b, stop_b = _leaf_boxes(b, size, m)
+                for i in range(first_a, stop_a):
+                    for j in range(i + 1 if a == b else first_b, stop_b):
+                        if not (marked[i] or marked[j]) or not _boxes_overlap(lo, hi, i, j):
+                            continue
+                        if count == pairs.shape[0]:
+                            pairs = np.concatenate((pairs, np.empty_like(pairs)))
+                        pairs[count, 0] = min(numbers[i], numbers[j])
+                        pairs[count, 1] = max(numbers[i], numbers[j])
+                        count += 1
+            elif a == b:
+                top = _push(stack, top, 2 * a, 2 * a)
+                top = _push(stack, top, 2 * a + 1, 2 * a + 1)
+                top = _push(stack, top, 2 * a, 2 * a + 1)
+            else:
+                top = _push(stack, top, 2 * a, 2 * b)
+                top = _push(stack, top, 2 * a, 2 * b + 1)
+                top = _push(stack, top, 2 * a + 1, 2 * b)
+                top = _push(stack, top, 2 * a + 1, 2 * b + 1)
     return pairs[:count].copy()
 
 

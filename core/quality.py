@@ -98,7 +98,7 @@ def containment(result_V, result_F, target_V, target_F):
         manifold3d is not installed.
     """
     result = _checked_manifold(result_V, result_F, "result")
-    target = _checked_manifold(target_V, target_F, "target")
+    target = _target_manifold(target_V, target_F)
     target_volume = float(target.volume())
     result_volume = float(result.volume())
     # one boolean: vol(A - B) = vol(A) - vol(A n B) for both differences
@@ -233,6 +233,26 @@ def _to_manifold(V, F):
     mesh = manifold3d.Mesh64(np.ascontiguousarray(V, dtype=np.float64),
                              np.ascontiguousarray(F, dtype=np.uint64))
     return manifold3d.Manifold(mesh)
+
+
+_LAST_TARGET = []
+"""``[(key, Manifold)]``: the last target :func:`_target_manifold` made (a fit measures the
+containment of every fit it makes against one target)."""
+
+
+def _target_manifold(V, F):
+    """:func:`_checked_manifold` of the target ``V``, ``F``, made again only when their bytes
+    differ from the last target's (a Manifold is immutable)."""
+    import hashlib
+
+    V = np.ascontiguousarray(V)
+    F = np.ascontiguousarray(F)
+    digest = hashlib.blake2b(V.tobytes(), digest_size=32)
+    digest.update(F.tobytes())
+    key = (V.shape, V.dtype.str, F.shape, F.dtype.str, digest.digest())
+    if not _LAST_TARGET or _LAST_TARGET[0][0] != key:
+        _LAST_TARGET[:] = [(key, _checked_manifold(V, F, "target"))]
+    return _LAST_TARGET[0][1]
 
 
 def _checked_manifold(V, F, name):

@@ -18,7 +18,7 @@ so only the first run on a machine compiles them (a few seconds).
 import numpy as np
 
 from core.box_tree import box_pairs, face_boxes
-from core.compiled import keeps_interrupts, numba
+from core.compiled import by_rows, keeps_interrupts, numba
 from core.tolerances import CONTACT
 
 
@@ -49,7 +49,7 @@ def find_self_intersections(vertices, faces, among=None, candidates=None):
         among = None
     candidates = np.ascontiguousarray(candidates, dtype=np.int64).reshape(-1, 2)
     marked = np.zeros(0, dtype=np.bool_) if among is None else np.asarray(among, dtype=np.bool_)
-    hits = candidates[_intersecting(vertices, faces, candidates, marked, eps)]
+    hits = candidates[by_rows(_intersecting, (2,), vertices, faces, candidates, marked, eps)]
     return np.sort(hits, axis=1)[np.lexsort((hits.max(axis=1), hits.min(axis=1)))]
 
 

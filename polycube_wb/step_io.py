@@ -65,7 +65,8 @@ def write_step(shape, path, input_paths=(), overwrite=True, name=None):
     return target
 
 
-def write_solid_step(built, patchset, path, input_paths=(), overwrite=True, name=None):
+def write_solid_step(built, patchset, path, input_paths=(), overwrite=True, name=None,
+                     ahead=None):
     """Write a solid from :func:`polycube_wb.brep.make_solid` to an AP214 STEP file.
 
     A solid built from shared edges is written directly from its patches and topology
@@ -77,24 +78,57 @@ def write_solid_step(built, patchset, path, input_paths=(), overwrite=True, name
     built : polycube_wb.brep.BuiltSolid
     patchset : core.types.PatchSet the solid was built from.
     path, input_paths, overwrite, name : as in :func:`write_step`.
+    ahead : None, or the :func:`step_text_ahead` of ``patchset`` and ``name``: its text is
+        written where it is the one this function would make (the solid was built from the
+        patch set's shared edges, oriented alike), else it is ended and the text made here.
 
     Returns
     -------
     str, absolute path of the written file.
     """
     if built.topology is None:
+        if ahead is not None:
+            ahead.cancel()
         return write_step(built.solid, path, input_paths, overwrite, name)
     from core.export.step_file import step_text
     from core.tolerances import BREP_MM
 
     target, inputs = _checked_target(path, input_paths, overwrite)
-    text = step_text(patchset.patches, built.topology, _product_name(target, name), BREP_MM,
-                     built.reverse)
+    product = _product_name(target, name)
+    text = None
+    if ahead is not None:
+        made = ahead.result() if built.topology is patchset.topology else None
+        ahead.cancel()
+        if made is not None and made[:2] == (built.reverse, product):
+            text = made[2]
+    if text is None:
+        text = step_text(patchset.patches, built.topology, product, BREP_MM, built.reverse)
     try:
         write_text_atomic(target, text, inputs, "STEP file")
     except ParameterError as exc:
         raise StepPathError(str(exc)) from exc
     return target
+
+
+def step_text_ahead(patchset, name):
+    """The STEP text of the solid :func:`polycube_wb.brep.make_solid` builds from the shared
+    edges of ``patchset`` (its ``topology``, not None), with the product ``name`` (a
+    non-empty str), made ahead on another core (:class:`core.forked.Ahead`) while the solid is
+    built and checked; for the ``ahead`` of :func:`write_solid_step`."""
+    from core.forked import Ahead
+
+    return Ahead(_shared_edge_step_text, patchset.patches, patchset.topology, str(name))
+
+
+def _shared_edge_step_text(patches, topology, name):
+    """``(reverse, name, text)``: the orientation ``make_solid`` gives the solid (the sign of
+    the patches' enclosed volume) and the STEP text of that solid."""
+    from core.export.bspline_tessellation import enclosed_volume
+    from core.export.step_file import step_text
+    from core.tolerances import BREP_MM
+
+    reverse = bool(enclosed_volume(patches) < 0)
+    return reverse, name, step_text(patches, topology, name, BREP_MM, reverse)
 
 
 def _checked_target(path, input_paths, overwrite):

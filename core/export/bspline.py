@@ -42,6 +42,7 @@ from core.export.bspline_basis import (BEZIER, GRADED, basis_matrix, knot_vector
                                       tensor_apply)
 from core.export.bspline_measure import normal_jumps, patch_deviation
 from core.export.patch_context import PatchContext
+from core.forked import Ahead
 from core.params import EXPORT_DEPTH, check_export_depth
 from core.types import BSplinePatch, PatchSet
 
@@ -325,6 +326,11 @@ def limit_surface_patches(base, depth=EXPORT_DEPTH, measure=True):
     }
     result = PatchSet(patches, ctx.face_of_patch, info, topology)
     if measure:
-        info.update(patch_deviation(result, base, context=ctx))
-        info.update(normal_jumps(result, base, context=ctx))
+        # the normal jumps on another core while the deviation is measured here
+        jumps = Ahead(normal_jumps, result, base, None, ctx)
+        try:
+            info.update(patch_deviation(result, base, context=ctx))
+            info.update(jumps.result() or normal_jumps(result, base, context=ctx))
+        finally:
+            jumps.cancel()  # ends the child where the deviation raised
     return result

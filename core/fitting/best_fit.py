@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from core.compiled import each_on_a_core
 from core.fitting.responses import InsideBounds, vertex_normals
 from core.fitting.spd_solve import solve_spd
 from core.geometry import scatter_add
@@ -274,10 +275,15 @@ class NormalEquations:
         index work, which the two parts share).
         """
         fine = _FineEntries(terms)
+
+        def product(pair):
+            return self._mapping_t_c @ (fine.pair_matrix(*pair, self.n_fine) @ self._mapping_c)
+
+        pairs = ((0, 1), (2, 3), (4, 5))
         blocks = {}
-        for first, second in ((0, 1), (2, 3), (4, 5)):
-            both = self._mapping_t_c @ (fine.pair_matrix(first, second, self.n_fine)
-                                        @ self._mapping_c)
+        # the three products are independent: on the cores (scipy's products release the
+        # interpreter), each rounded as alone
+        for (first, second), both in zip(pairs, each_on_a_core(product, pairs)):
             blocks[_PAIRS[first]], blocks[_PAIRS[second]] = both.real, both.imag
         return blocks
 

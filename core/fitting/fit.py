@@ -25,6 +25,7 @@ from core.fitting.records import (Distances, FitFigures, FitRecord, FitSetup, In
                                     InsideStart, LeastSquaresFit, Untangling)
 from core.fitting.responses import thickness, volume
 from core.fitting.rgp import FitProblem, run_rgp
+from core.forked import Ahead
 from core.geometry import face_areas, sample_surface, triangulate
 from core.mesh_topology import next_corners
 from core.progress import NO_PROGRESS
@@ -434,12 +435,21 @@ def _measure(setup, vertices, V0, seed):
     # the points of target.samples without the pseudo-normals it also finds (not needed here)
     points = sample_surface(target.vertices, target.faces, FIT.distance_samples,
                             np.random.default_rng(seed))
-    X = setup.limit_map @ vertices
-    report = containment(X, T, target.vertices, target.faces)
-    distances = _distances(X, T, target, points)
-    initial = _distances(setup.limit_map @ V0, T, target, points)
+    X, X0 = setup.limit_map @ vertices, setup.limit_map @ V0
+    # the distances on another core while the containment is measured here
+    both = Ahead(_both_distances, X, X0, T, target, points)
+    try:
+        report = containment(X, T, target.vertices, target.faces)
+        distances, initial = both.result() or _both_distances(X, X0, T, target, points)
+    finally:
+        both.cancel()  # ends the child where the containment raised
     return FitFigures(distances, initial, report["outside_volume_fraction"],
                       report["uncovered_volume_fraction"], time.perf_counter() - measuring)
+
+
+def _both_distances(X, X0, T, target, points):
+    """:func:`_distances` of the result's fine limit points ``X`` and of the cage's ``X0``."""
+    return _distances(X, T, target, points), _distances(X0, T, target, points)
 
 
 def _rgp(problem, vertices, step, iterations, options, target_volume, defaulted=False):

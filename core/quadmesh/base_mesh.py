@@ -567,25 +567,63 @@ class DecimationCache:
     It needs no labeling, so the base meshes of several labelings of one target (the parts'
     and the one-part labeling, :func:`core.stages.basemesh.run_basemesh`) share it.
     ``build`` has the signature of the decimation fallback inside :func:`build_base_mesh`.
+    :meth:`start` builds it ahead on another core (:class:`core.forked.Ahead`) while the
+    polycube layout is tried; :meth:`close` ends that work when it was not asked for.
     """
 
     def __init__(self):
         self._key = None
         self._built = None
+        self._ahead = None  # (key, core.forked.Ahead) of the decimation built ahead
+
+    @staticmethod
+    def _key_of(target_v, target_f, target_faces, max_base_faces):
+        return ((int(target_faces), int(max_base_faces)), np.array(target_v, dtype=np.float64),
+                np.array(target_f, dtype=np.int64))
+
+    @staticmethod
+    def _same(key, other):
+        return (key is not None and key[0] == other[0] and np.array_equal(key[1], other[1])
+                and np.array_equal(key[2], other[2]))
+
+    def start(self, target_v, target_f, target_faces, max_base_faces):
+        """Build the decimation of this target ((n, 3) ``target_v``, (m, 3) ``target_f``)
+        and budgets ahead, unless it is built or started already."""
+        from core.forked import Ahead
+
+        key = self._key_of(target_v, target_f, target_faces, max_base_faces)
+        if self._ahead is None and not self._same(self._key, key):
+            self._ahead = (key, Ahead(_decimation_ahead, *key))
+
+    def close(self):
+        """End the decimation built ahead when its result was not asked for."""
+        if self._ahead is not None:
+            self._ahead[1].cancel()
+            self._ahead = None
 
     def build(self, target_v, target_f, surface, target_faces, max_base_faces, reason):
         """The paired decimation's ``(mesh, info)`` (:func:`build_base_mesh`'s), built on the
-        first call and returned again, with this call's ``fallback_reason``, for the same
-        target ((n, 3) ``target_v``, (m, 3) ``target_f``) and budgets."""
-        key = (int(target_faces), int(max_base_faces))
-        if self._built is None or self._key[0] != key or \
-                not np.array_equal(self._key[1], target_v) or \
-                not np.array_equal(self._key[2], target_f):
-            self._built = _paired_decimation_base_mesh(target_v, target_f, surface,
-                                                       target_faces, max_base_faces, reason)
-            self._key = (key, target_v.copy(), target_f.copy())
+        first call (or taken from :meth:`start`'s child) and returned again, with this call's
+        ``fallback_reason``, for the same target and budgets."""
+        key = self._key_of(target_v, target_f, target_faces, max_base_faces)
+        if self._built is None or not self._same(self._key, key):
+            built = None
+            if self._ahead is not None and self._same(self._ahead[0], key):
+                built = self._ahead[1].result()
+                self._ahead = None
+            if built is None:
+                built = _paired_decimation_base_mesh(target_v, target_f, surface, target_faces,
+                                                     max_base_faces, reason)
+            self._built, self._key = built, key
         mesh, info = self._built
         return mesh, {**info, "fallback_reason": reason}
+
+
+def _decimation_ahead(budgets, target_v, target_f):
+    """:func:`_paired_decimation_base_mesh` of the target with its own search tree (the
+    ``fallback_reason`` is set by :meth:`DecimationCache.build`)."""
+    return _paired_decimation_base_mesh(target_v, target_f, TargetSurface(target_v, target_f),
+                                        budgets[0], budgets[1], None)
 
 
 def _candidate(info):

@@ -53,11 +53,25 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     (a user error) when ``base_mesh_method="polycube"`` and the layout needs more faces than
     ``max_base_faces``.
     """
-    from core.errors import LabelingError
-    from core.progress import SubProgress
     from core.quadmesh.base_mesh import DecimationCache
 
     decimation = DecimationCache()
+    try:
+        return _basemesh(intake, parts, frames, labeling, params, progress, decimation)
+    finally:
+        decimation.close()
+
+
+def _basemesh(intake, parts, frames, labeling, params, progress, decimation):
+    """The work of :func:`run_basemesh`, with the target's ``DecimationCache``: in ``auto`` the
+    decimation is built ahead on another core (``DecimationCache.start``) while the layout is
+    tried, since most designs the layout fails on need it."""
+    from core.errors import LabelingError
+    from core.progress import SubProgress
+
+    if params.base_mesh_method == "auto":
+        decimation.start(intake.surface.vertices, intake.surface.faces, params.target_faces,
+                         params.max_base_faces)
     n_parts = int(parts.face_part.max()) + 1 if len(parts.face_part) else 0
     cage, info = _layout(intake, parts, frames, labeling, params, decimation,
                          SubProgress(progress, 0.0, 0.5))

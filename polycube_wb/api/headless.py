@@ -122,15 +122,23 @@ def _check_outputs(outputs, inputs, stop_after):
 def _solid_and_step(patches, step_path, inputs):
     """Build the solid from patches, write STEP if asked; returns the report's ``brep`` section."""
     from polycube_wb.brep import make_solid
-    from polycube_wb.step_io import write_solid_step
+    from polycube_wb.step_io import step_text_ahead, write_solid_step
 
-    built = make_solid(patches)
-    section = built.figures
-    section["max_normal_jump_deg"] = patches.info.get("normal_jump_max_deg")
-    section["step_path"] = None
-    if step_path is not None:
-        section["step_path"] = write_solid_step(built, patches, step_path, input_paths=inputs,
-                                                name=_input_name(inputs[0]))
+    name = _input_name(inputs[0])
+    # the STEP text is made on another core while the solid is built and checked
+    ahead = (step_text_ahead(patches, name)
+             if step_path is not None and patches.topology is not None and name else None)
+    try:
+        built = make_solid(patches)
+        section = built.figures
+        section["max_normal_jump_deg"] = patches.info.get("normal_jump_max_deg")
+        section["step_path"] = None
+        if step_path is not None:
+            section["step_path"] = write_solid_step(built, patches, step_path,
+                                                    input_paths=inputs, name=name, ahead=ahead)
+    finally:
+        if ahead is not None:
+            ahead.cancel()
     return section
 
 

@@ -135,3 +135,21 @@ def test_second_reader_gmsh_finds_one_closed_volume_in_millimetres(exported):
     surface = trimesh.Trimesh(coords.reshape(-1, 3)[order], index.reshape(-1, 3), process=True)
     assert surface.is_watertight
     assert abs(abs(surface.volume) - 1e-9 * solid.Volume) < 0.02 * 1e-9 * solid.Volume
+
+
+def test_the_step_text_made_ahead_is_the_one_made_here(tmp_path):
+    """The STEP text made on another core while the solid is built (``step_text_ahead``)
+    writes the same file as the text made after it; one made for another product name is
+    not used, and the file is still the same."""
+    from core.export.bspline import limit_surface_patches
+    from polycube_wb.brep import make_solid
+    from polycube_wb.step_io import step_text_ahead, write_solid_step
+
+    patches = limit_surface_patches(sample_cages.genus3_block(), measure=False)
+    built = make_solid(patches)
+    texts = []
+    for label, ahead in (("here", None), ("ahead", step_text_ahead(patches, "block")),
+                         ("renamed", step_text_ahead(patches, "another name"))):
+        write_solid_step(built, patches, tmp_path / f"{label}.step", name="block", ahead=ahead)
+        texts.append((tmp_path / f"{label}.step").read_text())
+    assert "'block'" in texts[0] and texts[1] == texts[0] and texts[2] == texts[0]
