@@ -67,8 +67,9 @@ def worker_pool():
     parent's threads, makes its own)."""
     from concurrent.futures import ThreadPoolExecutor
 
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    cores = max(1, cores or 1)
+    from core.threads import usable_cores
+
+    cores = usable_cores()
     return ThreadPoolExecutor(max_workers=max(1, cores - 1)), cores
 
 

@@ -12,12 +12,15 @@ so :class:`Ahead` forks a child that runs the function and sends its pickled res
 through a pipe. The child runs the same code on a copy of the same memory, so the result is
 the one the parent would compute, bit for bit. A child that fails sends nothing, and the
 caller computes the result itself (raising what the child met); a result not needed is
-never waited for: :meth:`Ahead.cancel` ends the child. Where the platform cannot fork,
-nothing is started and every caller computes its result itself.
+never waited for: :meth:`Ahead.cancel` ends the child. Where the platform cannot fork, or
+the process may use one core only (:func:`core.threads.usable_cores`), nothing is started and
+every caller computes its result itself.
 """
 import os
 import pickle
 import signal
+
+from core.threads import usable_cores
 
 
 class Ahead:
@@ -31,7 +34,7 @@ class Ahead:
 
     def __init__(self, function, *args):
         self._pid = self._read = None
-        if not hasattr(os, "fork"):
+        if not hasattr(os, "fork") or usable_cores() < 2:
             return
         read, write = os.pipe()
         pid = os.fork()

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from core.errors import ParameterError
 from core.output_files import write_json_atomic
 from core.params import ReconstructionParams
+from core.threads import CORES_VARIABLE, usable_cores
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off")
 OUTPUT_SUFFIXES = {"step": ".step", "base_mesh": ".base.obj", "labels": ".labels.ply",
@@ -54,6 +55,8 @@ class MeshJob:
     memory_mb : resident-memory cap of the mesh's process in MiB, None for none, or
         ``AUTO_MEMORY``: the default share of the machine that runs it with one mesh per
         core (:func:`polycube_wb.batch_memory.default_memory_limit_mb`; Dask workers).
+    cores : cores the mesh's process may use (``core.threads.CORES_VARIABLE``), or None for
+        all it is given: its share where several meshes run at once.
     """
 
     source: str
@@ -62,6 +65,7 @@ class MeshJob:
     params: dict
     timeout: float = None
     memory_mb: float | str | None = None
+    cores: int | None = None
 
     def paths(self):
         """dict of output kind -> absolute path (see ``OUTPUT_SUFFIXES``)."""
@@ -289,6 +293,8 @@ def run_isolated(job):
     package_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         filter(None, [package_root, os.environ.get("PYTHONPATH")])))
+    if job.cores:
+        env[CORES_VARIABLE] = str(job.cores)
     started = time.perf_counter()
     process = subprocess.Popen([_python(), "-m", "polycube_wb.batch_worker"],
                                stdin=subprocess.PIPE, stdout=subprocess.PIPE,
@@ -425,9 +431,10 @@ def run_batch(jobs, jobs_at_once=1, scheduler=None, force=False, progress=None, 
 
     if scheduler is not None:
         width = len(todo)
-        _run_on_dask(scheduler, jobs, todo, finished)
+        _run_on_dask(scheduler, _sharing_cores(jobs, 1), todo, finished)
     else:
         width = max(1, int(jobs_at_once))
+        jobs = _sharing_cores(jobs, max(1, usable_cores() // width) if width > 1 else None)
         redraw()
         with ThreadPoolExecutor(max_workers=width) as pool:
             futures = {pool.submit(run_isolated, jobs[k]): k for k in todo}
@@ -439,6 +446,12 @@ def run_batch(jobs, jobs_at_once=1, scheduler=None, force=False, progress=None, 
                 if not ready:
                     redraw()
     return rows
+
+
+def _sharing_cores(jobs, cores):
+    """The ``jobs`` with ``cores`` each, unless a job sets its own: a Dask worker runs one
+    mesh per core, a local batch of ``jobs_at_once`` meshes gives each its share of the cores."""
+    return [job if job.cores else dataclasses.replace(job, cores=cores) for job in jobs]
 
 
 def _run_on_dask(scheduler, jobs, todo, finished):

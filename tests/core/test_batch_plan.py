@@ -118,3 +118,16 @@ def test_progress_lines_for_the_gui_are_one_json_object_each():
     assert json.loads(second[len(MESH_PREFIX):]) == {
         "name": "m", "status": "failed", "failed_stage": "fit", "seconds": 1.5,
         "message": "memory limit of 9 MB exceeded at stage fit", "skipped": False}
+
+
+def test_meshes_run_at_once_share_the_cores():
+    """A local batch of several meshes at once gives each process its share of the cores
+    (at least one), a Dask worker's mesh one core, and a job's own setting is kept."""
+    from core.threads import usable_cores
+    from polycube_wb.batch import MeshJob, _sharing_cores
+
+    jobs = [MeshJob("/a.stl", "a", "/out", {}), MeshJob("/b.stl", "b", "/out", {}, cores=3)]
+    shared = _sharing_cores(jobs, max(1, usable_cores() // 4))
+    assert shared[0].cores == max(1, usable_cores() // 4) and shared[1].cores == 3
+    assert _sharing_cores(jobs, None)[0].cores is None
+    assert jobs[0].cores is None  # the caller's jobs are not changed

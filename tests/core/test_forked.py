@@ -9,6 +9,10 @@ import numpy as np
 import pytest
 
 from core.forked import Ahead
+from core.threads import CORES_VARIABLE, usable_cores
+
+needs_two_cores = pytest.mark.skipif(usable_cores() < 2, reason="a child is forked only "
+                                     "where the process may use two cores")
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -21,6 +25,7 @@ def _fails():
     raise ValueError("not in the parent")
 
 
+@needs_two_cores
 def test_the_childs_result_is_the_functions_and_comes_once():
     ahead = Ahead(_arrays, 100000, 0.1)
     got = ahead.result()
@@ -37,6 +42,17 @@ def test_a_failed_child_gives_none_and_a_cancelled_one_ends_at_once():
     ahead.cancel()
     assert time.perf_counter() - started < 10
     assert ahead.result() is None
+
+
+def test_nothing_is_forked_where_the_process_may_use_one_core(monkeypatch):
+    """With the cores capped at one (a batch's share), no child is started and the caller
+    computes the result itself; a cap that is not a positive integer is ignored."""
+    monkeypatch.setenv(CORES_VARIABLE, "1")
+    assert usable_cores() == 1
+    assert Ahead(_arrays, 10, 1.0).result() is None
+    for ignored in ("0", "-2", "many", ""):
+        monkeypatch.setenv(CORES_VARIABLE, ignored)
+        assert usable_cores() == len(os.sched_getaffinity(0))
 
 
 @pytest.mark.slow
