@@ -245,10 +245,20 @@ def corner_jacobians(points, quads, frames, size):
     determinant is not positive.
     """
     here = points[quads]
-    ahead = np.roll(here, -1, axis=1) - here
-    behind = np.roll(here, 1, axis=1) - here
-    edges = np.stack([ahead, behind], axis=-1)  # (f, 4, 3, 2)
-    return np.einsum("fdk,fckj->fcdj", frames, edges) / size[:, None, None, None]
+    across = frames[:, None]  # (f, 1, 2, 3)
+    # each product summed over k in order, written out (einsum is several times slower here)
+    columns = [_along(across, (here[:, step] - here)[:, :, None]) for step in (_AHEAD, _BEHIND)]
+    return np.stack(columns, axis=-1) / size[:, None, None, None]
+
+
+_AHEAD, _BEHIND = [1, 2, 3, 0], [3, 0, 1, 2]
+"""Each quad corner's next and previous corners."""
+
+
+def _along(frames, vectors):
+    """``sum_k frames[..., k] * vectors[..., k]`` over the last axis (3), broadcast."""
+    return (frames[..., 0] * vectors[..., 0] + frames[..., 1] * vectors[..., 1]
+            + frames[..., 2] * vectors[..., 2])
 
 
 def untangling_energy(jacobians, eps, area_weight=AREA_WEIGHT):
@@ -358,7 +368,9 @@ def untangle_on_target(positions, mesh, quad_size, where, rings=None, rounds=UNT
             value, grad_j = untangling_energy(corner_jacobians(moved, quads, frames, quad_size),
                                               eps)
             # J = frame^T (edge) / size: back to the edges, then to the corners
-            grad_e = np.einsum("fdk,fcdj->fckj", frames, grad_j) / quad_size[:, None, None, None]
+            grad_e = (frames[:, None, 0, :, None] * grad_j[:, :, 0, None, :]
+                      + frames[:, None, 1, :, None] * grad_j[:, :, 1, None, :]) \
+                / quad_size[:, None, None, None]
             grad = _sum_at(len(positions), gather,
                            np.concatenate([grad_e[..., 0], grad_e[..., 1],
                                            -grad_e.sum(axis=-1)]).reshape(-1, 3))
