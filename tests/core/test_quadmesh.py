@@ -232,9 +232,9 @@ def test_a_stricter_copy_of_a_feasible_program_is_searched_where_it_is_stricter(
     """A program known feasible with more collapsible sides can contradict only in the
     neighbourhoods holding a side that lost its freedom: those are solved (most such sides
     first), the others never; with no such side nothing is solved before the root, and the
-    answer is that of the plain call (the side's own charts are not tried alone: a
-    neighbourhood holding them had a solution within the root nodes). A collapsible side
-    missing from the feasible set is an error."""
+    answer is that of the plain call (the side's own charts are also tried alone, a quick
+    relaxation of their neighbourhoods). A collapsible side missing from the feasible set is an
+    error."""
     import core.quadmesh.polycube.side_signs as side_signs
 
     V, F = union_of_boxes([[[0, 0, 0], [5, 1, 1]], [[0, 0, 0], [1, 2, 1]], [[4, 0, 0], [5, 2, 1]]],
@@ -264,8 +264,8 @@ def test_a_stricter_copy_of_a_feasible_program_is_searched_where_it_is_stricter(
     side = int(np.argmin(holding.sum(axis=1)))  # a tooth's side: far charts do not hold it
     assert holding[side].sum() < ell.n_charts
     assert side_signs._local_contradiction(ell, none, np.array([side])) is None
-    # the neighbourhoods holding the side, each once
-    assert len(solved) == holding[side].sum()
+    # the neighbourhoods holding the side, and the side's charts on their own
+    assert len(solved) == holding[side].sum() + len(np.unique(ell.side_chart[side]))
     assert all(side in sides for sides in solved)
     solved.clear()
     plain = make_loops_rectilinear(ell, none)

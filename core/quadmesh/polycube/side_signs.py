@@ -295,7 +295,7 @@ def _local_contradiction(complex_, collapsible, stricter=None):
     neighbourhoods holding one of them are tried, those holding most first (they are the likely
     contradictions, found among the first few tried instead of among the last). A
     neighbourhood holding a chart whose own program has no solution is infeasible without a
-    search of its own (:class:`_ChartsAlone`).
+    search of its own (:func:`_charts_infeasible_alone`).
 
     Returns
     -------
@@ -313,15 +313,14 @@ def _local_contradiction(complex_, collapsible, stricter=None):
         order = order[held[order] > 0]
     slits = complex_.slit_walks()
     # a chart holding no side that lost its freedom has a solution on its own
-    alone = _ChartsAlone(
+    alone = _charts_infeasible_alone(
         complex_, collapsible, slits,
         np.arange(complex_.n_charts) if stricter is None else complex_.side_chart[stricter])
     for chart in order:
         ring = rings[chart]
-        program = _direction_program(complex_, np.sort(ring), collapsible, slits)
-        if alone.solved_with(ring, program):
-            continue
-        result = alone.first_infeasible(ring) or _feasibility(program)
+        held = [alone[c] for c in ring.tolist() if c in alone]
+        result = held[0] if held else _feasibility(
+            _direction_program(complex_, np.sort(ring), collapsible, slits))
         if result.status == INFEASIBLE:
             return ring.astype(np.int64), str(result.message)
     return None
@@ -345,62 +344,32 @@ def contradicting_charts(complex_, collapsible):
     their number measures how far a labeling is from one that closes.
     """
     slits = complex_.slit_walks()
-    alone = _ChartsAlone(complex_, collapsible, slits, np.arange(complex_.n_charts))
-    bad = []
-    for chart, ring in enumerate(_rings(complex_)):
-        program = _direction_program(complex_, np.sort(ring), collapsible, slits)
-        if not alone.solved_with(ring, program) and (
-                alone.first_infeasible(ring) is not None
-                or _feasibility(program).status == INFEASIBLE):
-            bad.append(chart)
+    alone = _charts_infeasible_alone(complex_, collapsible, slits,
+                                     np.arange(complex_.n_charts))
+    bad = [chart for chart, ring in enumerate(_rings(complex_))
+           if np.isin(ring, list(alone)).any()
+           or _feasibility(_direction_program(complex_, np.sort(ring), collapsible,
+                                              slits)).status == INFEASIBLE]
     return np.asarray(bad, dtype=np.int64)
 
 
-class _ChartsAlone:
-    """Which charts' own programs (their loops and slit walks only) have no solution.
+def _charts_infeasible_alone(complex_, collapsible, slits, charts):
+    """``{chart: HiGHS result}`` of those of ``charts`` (int64 array, any shape) whose own program (their
+    loops and slit walks only) has no solution.
 
     A chart's program is a relaxation of that of every neighbourhood holding the chart, so each
-    chart without a solution proves its neighbourhoods infeasible. The programs of single
-    charts are small and decided at once, where a neighbourhood's can take thousands of nodes
-    to prove infeasible; but most neighbourhoods have a solution found within
-    :data:`ROOT_NODES` nodes, which proves every one of their charts' programs feasible (and
-    the neighbourhood's verdict: the full search follows the same path), so a chart's own
-    program is solved only when no neighbourhood holding it had a solution yet.
-
-    Parameters
-    ----------
-    complex_ : ChartComplex; collapsible : (s,) bool; slits : ``complex_.slit_walks()``;
-    charts : int64 array (any shape) of the charts that may lack a solution (the others are
-        known to have one).
+    of these proves its neighbourhoods infeasible. The programs of single charts are small and
+    decided at once, where a neighbourhood's can take thousands of nodes to prove infeasible.
     """
-
-    def __init__(self, complex_, collapsible, slits, charts):
-        self._complex, self._collapsible, self._slits = complex_, collapsible, slits
-        self._open = np.zeros(complex_.n_charts, dtype=bool)
-        self._open[np.intersect1d(np.asarray(charts, dtype=np.int64).reshape(-1),
-                                  complex_.loop_chart)] = True
-        self._verdicts = {}
-
-    def solved_with(self, ring, program):
-        """True when a solution of the neighbourhood ``ring``'s ``program`` was found within
-        :data:`ROOT_NODES` nodes; its charts then have solutions of their own."""
-        if _solve(program, ROOT_NODES).x is None:
-            return False
-        self._open[ring] = False
-        return True
-
-    def first_infeasible(self, ring):
-        """HiGHS's result for the first chart of ``ring`` whose own program has no solution,
-        or None."""
-        for chart in ring.tolist():
-            if not self._open[chart]:
-                continue
-            if chart not in self._verdicts:
-                self._verdicts[chart] = _feasibility(_direction_program(
-                    self._complex, np.array([chart]), self._collapsible, self._slits))
-            if self._verdicts[chart].status == INFEASIBLE:
-                return self._verdicts[chart]
-        return None
+    alone = {}
+    with_loops = np.unique(complex_.loop_chart)
+    for chart in np.intersect1d(np.asarray(charts, dtype=np.int64).reshape(-1),
+                                with_loops).tolist():
+        result = _feasibility(_direction_program(complex_, np.array([chart]), collapsible,
+                                                 slits))
+        if result.status == INFEASIBLE:
+            alone[chart] = result
+    return alone
 
 
 @dataclass
