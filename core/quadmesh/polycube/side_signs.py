@@ -555,8 +555,8 @@ class _Rows:
 
     def matrix(self, n_columns):
         """(rows, n_columns) CSR matrix in canonical form (indices sorted, duplicates
-        summed), built directly (scipy's conversion from coordinates costs more than the
-        rest of a small program)."""
+        summed), built directly: scipy's conversion from coordinates is a large share of the
+        cost of the many small programs of a neighbourhood search."""
         rows, cols = np.concatenate(self._rows), np.concatenate(self._cols)
         values = np.concatenate(self._vals)
         order = np.lexsort((cols, rows))
