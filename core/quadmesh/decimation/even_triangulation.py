@@ -264,12 +264,14 @@ def _flip_pass(vertices, faces, surface, max_passes=20, fixed=None):
     Untangling flips go first, then shape flips by their gain. The ``fixed`` edges ((k, 2)
     int64 vertex pairs or None) are never flipped. Returns the new faces.
     """
+    facing = None  # of every triangle; a pass finds it for the flipped triangles only
     for _ in range(max_passes):
         edges, halfedges = _edge_halfedges(faces)
         a, b, c, f1 = _wings(faces, halfedges[:, 0])
         _, _, d, f2 = _wings(faces, halfedges[:, 1])
         normals = unit_face_normals(vertices, faces)
-        facing = _facing_target(vertices, faces, normals, surface)
+        if facing is None:
+            facing = _facing_target(vertices, faces, normals, surface)
         new_first = np.stack([a, d, c], axis=1)
         new_second = np.stack([d, b, c], axis=1)
         n_first = face_cross(vertices, new_first)
@@ -305,9 +307,10 @@ def _flip_pass(vertices, faces, surface, max_passes=20, fixed=None):
         # facing it and reshaping keeps them, so no flip is undone later (without this, flips
         # can go back and forth until max_passes)
         wanted = np.flatnonzero(untangle | reshape)
-        new_facing = np.zeros(len(edges), dtype=bool)
-        new_facing[wanted] = _facing_target(vertices, new_first[wanted], None, surface) \
-            & _facing_target(vertices, new_second[wanted], None, surface)
+        first_facing, second_facing = (np.zeros(len(edges), dtype=bool) for _ in range(2))
+        first_facing[wanted] = _facing_target(vertices, new_first[wanted], None, surface)
+        second_facing[wanted] = _facing_target(vertices, new_second[wanted], None, surface)
+        new_facing = first_facing & second_facing
         untangle &= new_facing
         reshape &= new_facing
         order = np.concatenate([np.flatnonzero(untangle), np.flatnonzero(reshape)[
@@ -320,6 +323,9 @@ def _flip_pass(vertices, faces, surface, max_passes=20, fixed=None):
         faces = faces.copy()
         faces[f1[chosen]] = new_first[chosen]
         faces[f2[chosen]] = new_second[chosen]
+        facing = facing.copy()
+        facing[f1[chosen]] = first_facing[chosen]
+        facing[f2[chosen]] = second_facing[chosen]
     return faces
 
 

@@ -97,7 +97,11 @@ class FeatureDecimation:
     Targets of more than :data:`core.quadmesh.decimation.decimation.SOURCE_TRIANGLES` triangles are
     decimated to that many once, on first use, and every count starts from that (pure
     Python, so its time grows with the triangles collapsed: about a second for a few
-    thousand, a minute for 150k).
+    thousand, a minute for 150k). The collapses run in one order whatever the count (quadric
+    error, ties by the order they were queued; only where they stop depends on it), so one
+    decimation of the source serves every count: a lower count continues it, a higher one
+    replays the first of its collapses (:meth:`_CollapseState.replay`) without judging them
+    again.
 
     Raises
     ------
@@ -115,6 +119,7 @@ class FeatureDecimation:
         self._components = int(connected_face_components(faces).max()) + 1
         self._genus = genus_of(len(vertices), faces, self._components)
         self._source = None
+        self._state = None
         self._results = {}
 
     @property
@@ -143,8 +148,21 @@ class FeatureDecimation:
         if count not in self._results:
             floor = self._floor()
             self._results[count] = (floor if floor is not None and count < len(floor[1]) else
-                                    self._decimated(self._source, count))
+                                    self._checked(self._from_source(count)))
         return self._results[count][:3]
+
+    def _from_source(self, count):
+        """``(vertices, faces, features, corner)`` of the source's decimation to ``count``
+        triangles: the live decimation continued when it has not reached ``count`` yet, else
+        its first collapses replayed."""
+        if self._state is None:
+            self._state = _CollapseState(*self._source, self._surface)
+        if self._state.n_faces > count:
+            self._state.run(count)
+            return self._state.result()
+        replay = _CollapseState(*self._source, self._surface, queued=False)
+        replay.replay(self._state.log, count)
+        return replay.result()
 
     def _floor(self):
         """The cached decimation that stopped short of its count because every collapse left
@@ -160,7 +178,11 @@ class FeatureDecimation:
         return min(short, key=lambda result: len(result[1]), default=None)
 
     def _decimated(self, source, count):
-        vertices, faces, features, corner = collapse_edges(*source, count, self._surface)
+        return self._checked(collapse_edges(*source, count, self._surface))
+
+    def _checked(self, decimated):
+        """``decimated`` ``(vertices, faces, features, corner)``, checked to keep the genus."""
+        vertices, faces, features, corner = decimated
         if genus_of(len(vertices), faces, self._components) != self._genus:
             raise InvalidMeshError("the decimated target changed its genus; the input surface "
                                    "is not a clean 2-manifold")
@@ -251,9 +273,11 @@ def collapse_edges(vertices, faces, features, corner, count, surface):
 
 class _CollapseState:
     """The mesh being decimated by :func:`collapse_edges`: faces as vertex lists, per-vertex
-    face and feature-neighbour sets, quadrics, and the heap of candidate collapses."""
+    face and feature-neighbour sets, quadrics, the heap of candidate collapses (none when not
+    ``queued``: a state that only replays) and ``log``, the collapses made, each
+    ``(keep, remove, position)``."""
 
-    def __init__(self, vertices, faces, features, corner, surface):
+    def __init__(self, vertices, faces, features, corner, surface, queued=True):
         self.surface = surface
         self.V = np.array(vertices, dtype=np.float64)
         self.Q = vertex_quadrics(self.V, faces, features)
@@ -273,9 +297,11 @@ class _CollapseState:
         self.heap = []
         self.pushed = 0
         self.n_faces = len(self.faces)
-        edges, _ = edge_faces(faces)
-        for a, b in edges.tolist():
-            self._push(a, b)
+        self.log = []
+        if queued:
+            edges, _ = edge_faces(faces)
+            for a, b in edges.tolist():
+                self._push(a, b)
 
     def neighbours(self, v):
         """Set of the vertices sharing a face with ``v``."""
@@ -294,6 +320,7 @@ class _CollapseState:
                 self.blocked.setdefault(b, set()).add(a)
                 continue
             self._collapse(keep, remove, position)
+            self.log.append((keep, remove, position))
             ring = self.neighbours(keep)
             for w in ring:
                 self._push(keep, w)
@@ -301,6 +328,16 @@ class _CollapseState:
                 for x in self.blocked.pop(w, ()):
                     if self.stamp[x] >= 0 and x in self.neighbours(w) and x != keep:
                         self._push(w, x)
+
+    def replay(self, log, count):
+        """Make the collapses of ``log`` (another state's, from the same mesh) in order until
+        ``count`` triangles are left: the mesh :meth:`run` leaves, since its collapses do not
+        depend on where it stops."""
+        for keep, remove, position in log:
+            if self.n_faces <= count:
+                break
+            self._collapse(keep, remove, position)
+            self.log.append((keep, remove, position))
 
     def _plan(self, a, b):
         """``(keep, remove, position)`` of collapsing edge ``(a, b)``, or None if the feature

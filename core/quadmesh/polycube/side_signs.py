@@ -517,26 +517,22 @@ class _Rows:
         """Entries ``columns``/``values`` ((r, e) each) of rows ``local_rows`` ((r,)) of the
         open block, their bounds ``lower``/``upper`` (scalars or (r,))."""
         if self._pending is None:
-            self._pending = ([], [])
+            self._pending = []
         local_rows = np.asarray(local_rows, dtype=np.int64)
         width = np.shape(columns)[1] if len(local_rows) else 0
         self._rows.append(self._n + np.repeat(local_rows, width))
         self._cols.append(np.asarray(columns, dtype=np.int64).reshape(-1))
         self._vals.append(np.asarray(values, dtype=np.float64).reshape(-1))
-        self._pending[0].append(local_rows)
-        self._pending[1].append(np.broadcast_to(
-            np.stack(np.broadcast_arrays(np.asarray(lower, dtype=np.float64),
-                                         np.asarray(upper, dtype=np.float64)), axis=-1),
-            (len(local_rows), 2)))
+        self._pending.append((local_rows, lower, upper))
 
     def close(self, count):
         """End the open block of ``count`` rows (every one placed by :meth:`add_at`)."""
-        bounds = np.zeros((count, 2))
-        if self._pending is not None:
-            for local_rows, pairs in zip(*self._pending):
-                bounds[local_rows] = pairs
-        self._lower.append(bounds[:, 0])
-        self._upper.append(bounds[:, 1])
+        lower, upper = np.zeros(count), np.zeros(count)
+        for local_rows, low, high in self._pending or ():
+            lower[local_rows] = low
+            upper[local_rows] = high
+        self._lower.append(lower)
+        self._upper.append(upper)
         self._n += count
         self._pending = None
 
@@ -558,12 +554,20 @@ class _Rows:
         self.add_bounds([lower], [upper])
 
     def matrix(self, n_columns):
-        """(rows, n_columns) CSR matrix, duplicates summed."""
-        matrix = sp.csr_matrix((np.concatenate(self._vals),
-                                (np.concatenate(self._rows), np.concatenate(self._cols))),
-                               shape=(self._n, n_columns))
-        matrix.sum_duplicates()
-        return matrix
+        """(rows, n_columns) CSR matrix in canonical form (indices sorted, duplicates
+        summed), built directly: scipy's conversion from coordinates is a large share of the
+        cost of the many small programs of a neighbourhood search."""
+        rows, cols = np.concatenate(self._rows), np.concatenate(self._cols)
+        values = np.concatenate(self._vals)
+        order = np.lexsort((cols, rows))
+        rows, cols, values = rows[order], cols[order], values[order]
+        first = np.flatnonzero(np.concatenate([[True], (rows[1:] != rows[:-1])
+                                               | (cols[1:] != cols[:-1])])) if len(rows) else \
+            np.zeros(0, dtype=np.int64)
+        data = np.add.reduceat(values, first) if len(first) else np.zeros(0)
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[first], minlength=self._n))])
+        return sp.csr_matrix((data, cols[first].astype(np.int32), indptr.astype(np.int32)),
+                             shape=(self._n, n_columns))
 
     def lower(self):
         return list(np.concatenate(self._lower))
