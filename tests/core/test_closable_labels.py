@@ -65,14 +65,14 @@ def test_a_walk_with_a_single_side_along_an_axis_is_named():
     frames, _ = identity_frames(len(F))
     broken = build_chart_complex(V, F, part, labels, frames)
     chart = int(broken.face_chart[np.flatnonzero(tongue)[0]])
-    found = lone_sides(broken)
+    found = lone_sides(broken, _none(broken))
     assert sorted((c, hole, axis) for c, hole, axis, _ in found if c == chart) == [
         (chart, False, 0), (chart, False, 2)]
     assert all(chart in broken.side_chart[side] for c, _, _, side in found if c == chart)
     with pytest.raises(LabelingError, match=f"chart {chart} has a single side along"):
         make_loops_rectilinear(broken, _none(broken))
     box = build_chart_complex(V, F, part, nearest_labels(V, F), frames)
-    assert lone_sides(box) == []
+    assert lone_sides(box, _none(box)) == []
 
 
 def test_a_closable_labeling_is_left_as_it_is():

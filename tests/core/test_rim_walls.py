@@ -10,7 +10,7 @@ from core.errors import LabelingError
 from core.quadmesh.polycube.chart_complex import build_chart_complex, cornerless_rims
 from core.quadmesh.polycube.closable_labels import closable_labels
 from core.quadmesh.polycube.rim_walls import _remnants_joined
-from core.quadmesh.polycube.side_signs import (charts_close, contradicting_charts, lone_sides,
+from core.quadmesh.polycube.side_signs import (contradicting_charts, lone_sides,
                                                make_loops_rectilinear)
 from core.segmentation.charts import build_topology, extract_layout
 from core.segmentation.validity import check_validity
@@ -20,11 +20,9 @@ from tests.core.test_quadmesh import (assert_relabelled_quad_layout,
 CENTRE, RADIUS = np.array([2.0, 2.0]), 0.8
 
 
-def _plate_with_a_hole(max_edge=0.5, plate=None):
-    """A 4 x 4 x 1 plate (or ``plate``, a trimesh solid of height 1 round the centre) with a
-    round hole (16 facets, none facing a diagonal) through z."""
-    if plate is None:
-        plate = trimesh.creation.box(bounds=np.array([[0, 0, 0], [4, 4, 1]], dtype=float))
+def _plate_with_a_hole(max_edge=0.5):
+    """A 4 x 4 x 1 plate with a round hole (16 facets, none facing a diagonal) through z."""
+    plate = trimesh.creation.box(bounds=np.array([[0, 0, 0], [4, 4, 1]], dtype=float))
     drill = trimesh.creation.cylinder(radius=RADIUS, height=3.0, sections=16)
     drill.apply_translation([CENTRE[0], CENTRE[1], 0.5])
     mesh = trimesh.boolean.difference([plate, drill], engine="manifold")
@@ -83,63 +81,12 @@ def test_a_rim_with_a_single_side_along_an_axis_gets_its_four_walls():
     frames, _ = identity_frames(len(F))
     assert check_validity(V, F, part, labels, frames).report["valid"]
     broken = build_chart_complex(V, F, part, labels, frames)
-    assert lone_sides(broken)
+    assert lone_sides(broken, _none(broken))
     with pytest.raises(LabelingError, match="rectilinear polygon"):
         make_loops_rectilinear(broken, _none(broken))
     part, frames, fixed = _repaired(V, F, labels)
     _assert_closable_with_the_wall_facing_into_the_hole(V, F, labels, wall, part, frames,
                                                         fixed)
-
-
-def _every(complex_):
-    return np.ones(complex_.n_sides, dtype=bool)
-
-
-def _disk_with_a_hole(quarter_wall):
-    """A disk of radius 2 and height 1 (16 facets) with the round hole of the plate, labelled
-    by nearest axis; with ``quarter_wall`` the hole's wall is +Y below ``y = 1.6`` and +X all
-    round the rest, so the rim of the hole in the top and bottom faces has a single side
-    along x (the +Y quarter) that only collapsing the hole would close."""
-    disk = trimesh.creation.cylinder(radius=2.0, height=1.0, sections=16)
-    disk.apply_translation([CENTRE[0], CENTRE[1], 0.5])
-    V, F, labels, wall = _plate_with_a_hole(plate=disk)
-    centre = V[F].mean(axis=1)
-    if quarter_wall:
-        labels[wall] = np.where(centre[wall, 1] < CENTRE[1] - 0.4, 2, 0)
-    return V, F, labels
-
-
-def test_a_hole_is_not_closed_by_collapsing_the_single_side_of_its_rim():
-    """Even with every side allowed length zero, the side directions keep a hole open (as
-    the quantization does), so a rim with a single side along an axis has none, and the
-    error names the rim; relabelling its walls gives it the sides it lacks."""
-    V, F, labels = _disk_with_a_hole(quarter_wall=True)
-    part = np.zeros(len(F), dtype=np.int64)
-    frames, _ = identity_frames(len(F))
-    assert check_validity(V, F, part, labels, frames).report["valid"]
-    broken = build_chart_complex(V, F, part, labels, frames)
-    assert any(hole for _, hole, _, _ in lone_sides(broken))
-    assert not charts_close(broken, _every(broken))
-    assert len(contradicting_charts(broken, _every(broken)))
-    with pytest.raises(LabelingError, match="rim of a hole"):
-        make_loops_rectilinear(broken, _every(broken))
-    fixed = closable_labels(V, F, part, labels, frames,
-                            lambda face_label: build_chart_complex(V, F, part, face_label,
-                                                                   frames), _every)
-    assert check_validity(V, F, part, fixed.face_label, frames).report["valid"]
-    assert not any(hole for _, hole, _, _ in lone_sides(fixed.complex_))
-    assert len(contradicting_charts(fixed.complex_, _every(fixed.complex_))) == 0
-    make_loops_rectilinear(fixed.complex_, _every(fixed.complex_))  # does not raise
-
-
-def test_a_hole_with_its_four_walls_closes_with_every_side_collapsible():
-    V, F, labels = _disk_with_a_hole(quarter_wall=False)
-    part = np.zeros(len(F), dtype=np.int64)
-    frames, _ = identity_frames(len(F))
-    complex_ = build_chart_complex(V, F, part, labels, frames)
-    assert complex_.slit_walks() and not lone_sides(complex_)
-    assert charts_close(complex_, _every(complex_))
-    make_loops_rectilinear(complex_, _every(complex_))  # does not raise
 
 
 def test_a_rim_without_corners_gets_its_four_walls():

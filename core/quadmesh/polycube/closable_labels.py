@@ -205,7 +205,7 @@ def _round(V, F, face_part, face_frame, topology, labels, fit, area, complex_, b
     """
     layout = extract_layout(topology, face_part, labels)
     rims = []
-    for chart, rim, walls in rim_walks(complex_, lone_sides(complex_)):
+    for chart, rim, walls in rim_walks(complex_, lone_sides(complex_, collapsible_of(complex_))):
         rims += rim_wall_labels(V, F, topology, face_part, face_frame, labels,
                                 complex_.face_chart, chart, rim, walls, 2.0 - 2.0 * fit)
     rims = [candidate for candidate in rims if _fits(candidate, labels, fit, area, True)]

@@ -174,7 +174,7 @@ def make_loops_rectilinear(complex_, collapsible=None, feasible_collapsible=None
         raise SideDirectionError(
             f"no side directions make every chart a closed rectilinear polygon ({len(charts)} "
             f"charts do not turn by four, e.g. charts {charts[:5].tolist()});"
-            f"{_lone_side_note(complex_)} HiGHS says '{result.message}'. The "
+            f"{_lone_side_note(complex_, collapsible)} HiGHS says '{result.message}'. The "
             f"labeling is not a polycube there: try {OTHER_PARTS} or another labeling",
             collapsible)
     used = program.used
@@ -188,26 +188,26 @@ def make_loops_rectilinear(complex_, collapsible=None, feasible_collapsible=None
     return replace(complex_, side_sign=sign), flipped
 
 
-def lone_sides(complex_, charts=None):
+def lone_sides(complex_, collapsible, charts=None):
     """Walks that no side directions close: a single side along one of their axes.
 
     A walk is the outer boundary of a chart (its loop without the slits and what they reach)
     or the rim of a hole (the references inside a slit, :meth:`ChartComplex.slit_walks`).
     Along each axis it runs, a closed rectilinear walk has sides in both directions, so a
-    single side along an axis closes only with length zero, which would close a hole along
-    that axis (holes are kept open, :func:`_open_hole_entries`), and an outer boundary with
-    one side along an axis cannot turn by four at all. These are the usual reasons why a valid
+    single side along an axis closes only with length zero, and an outer boundary with one
+    side along an axis cannot turn by four at all. These are the usual reasons why a valid
     labeling has no side directions: a triangle chart, or a hole whose rim lacks the wall
     facing one way.
 
     Parameters
     ----------
-    complex_ : ChartComplex; charts : (k,) int64 charts to look at, or None for all.
+    complex_ : ChartComplex; collapsible : (s,) bool sides allowed length zero;
+    charts : (k,) int64 charts to look at, or None for all.
 
     Returns
     -------
     list of ``(chart, hole, axis, side)``: ints, ``hole`` a bool, ``axis`` 0..2 in the
-    chart's part frame.
+    chart's part frame. A hole's single side is listed only when it may not collapse.
     """
     found = []
     for walk, hole in chart_walks(complex_):
@@ -223,7 +223,7 @@ def lone_sides(complex_, charts=None):
         for along in np.unique(axis[plain]).tolist():
             alone = np.flatnonzero(plain & (axis == along))
             item = (chart, hole, int(along), int(sides[alone[0]])) if len(alone) == 1 else None
-            if item and item not in found:
+            if item and not (hole and collapsible[item[3]]) and item not in found:
                 found.append(item)  # (nested slits of one hole walk round it alike)
     return found
 
@@ -244,9 +244,9 @@ def chart_walks(complex_):
     return walks
 
 
-def _lone_side_note(complex_, charts=None):
+def _lone_side_note(complex_, collapsible, charts=None):
     """A sentence naming the first walk of ``charts`` with a single side along an axis, or ''."""
-    found = lone_sides(complex_, charts)
+    found = lone_sides(complex_, collapsible, charts)
     if not found:
         return ""
     chart, hole, axis, side = found[0]
@@ -278,7 +278,7 @@ def _raise_on_contradiction(complex_, collapsible, stricter=None):
             "no side directions make every chart a closed rectilinear polygon: chart "
             f"{charts[0]} and its {len(charts) - 1} neighbours {charts[1:6].tolist()}... "
             f"cannot close with sides of positive length;"
-            f"{_lone_side_note(complex_, charts)} HiGHS says '{message}'. The "
+            f"{_lone_side_note(complex_, collapsible, charts)} HiGHS says '{message}'. The "
             f"labeling is not a polycube there: try {OTHER_PARTS} or another labeling",
             collapsible)
 
@@ -464,15 +464,6 @@ def _direction_program(complex_, charts, collapsible, slits=None):
                      np.concatenate([length0 + key_side[k], flipped0 + k]),
                      np.concatenate([coefficients, -2.0 * coefficients]))
     rows.add_bounds(np.zeros(n_walk_rows), np.zeros(n_walk_rows))
-    # holes stay open: along each axis, the sides a rim walk advances by (kept forward, or
-    # flipped backward) are at least one unit long in all
-    hole_row, hole_keys, forward, n_hole_rows = _open_hole_entries(complex_, collapsible,
-                                                                   loops, slits)
-    k = np.searchsorted(used, hole_keys)
-    rows.add_entries(np.concatenate([hole_row, hole_row]),
-                     np.concatenate([length0 + key_side[k], flipped0 + k]),
-                     np.concatenate([(forward > 0).astype(np.float64), -forward]))
-    rows.add_bounds(np.ones(n_hole_rows), np.full(n_hole_rows, np.inf))
     # disagreements z >= |f(side, 0) - f(side, 1)| of the two charts of a side within one part
     coupled = _coupled_sides(complex_, used)
     nd = len(coupled)
@@ -612,26 +603,13 @@ def _closure_entries(complex_, loops=None, slits=None):
     """
     if loops is None:
         loops = np.arange(len(complex_.loop_chart))
-    walks = ([np.arange(complex_.loop_offsets[loop], complex_.loop_offsets[loop + 1])
-              for loop in loops]
-             + _slit_walks_of(complex_, loops, slits))
-    return _walk_entries(complex_, walks)
-
-
-def _slit_walks_of(complex_, loops, slits=None):
-    """The non-empty slit walks (:meth:`ChartComplex.slit_walks`; ``slits`` when already made)
-    on ``loops`` ((k,) int64), a list of (j,) int64 positions into ``loop_sides``."""
     slits = [walk for walk in (complex_.slit_walks() if slits is None else slits) if len(walk)]
     slit_loop = np.searchsorted(complex_.loop_offsets, [walk[0] for walk in slits],
                                 side="right") - 1
     inside = np.isin(slit_loop, loops) if len(slits) else np.zeros(0, dtype=bool)
-    return [walk for walk, kept in zip(slits, inside) if kept]
-
-
-def _walk_entries(complex_, walks):
-    """The references of ``walks`` (a list of (j,) int64 positions into ``loop_sides``)
-    grouped by walk and axis: ``(row, keys, coefficients, n_rows)`` as
-    :func:`_closure_entries` returns them, one row per walk and axis it runs along."""
+    walks = ([np.arange(complex_.loop_offsets[loop], complex_.loop_offsets[loop + 1])
+              for loop in loops]
+             + [walk for walk, kept in zip(slits, inside) if kept])
     if not walks:
         empty = np.zeros(0, dtype=np.int64)
         return empty, empty, np.zeros(0), 0
@@ -646,35 +624,8 @@ def _walk_entries(complex_, walks):
     return (row, keys[order], d[order, axis[order]], int(starts.sum()))
 
 
-def _open_hole_entries(complex_, collapsible, loops=None, slits=None):
-    """Rows that keep every hole open, as the quantization does: each slit walk (the rim of a
-    hole, :meth:`ChartComplex.slit_walks`) advances by at least one unit along every axis it
-    runs along.
-
-    Only walks along an axis with a ``collapsible`` side ((s,) bool) get a row: with every
-    side at least one unit long, closing the walk already advances it. Without these rows a
-    rim with a single side along an axis closes by collapsing that side, the hole to a
-    segment, and the quantization (which keeps it open) then has no solution.
-
-    Returns ``(row, keys, coefficients, n_rows)`` as :func:`_closure_entries`, for the slit
-    walks of ``loops`` ((k,) int64, or None for all) only: the lengths of a row's entries
-    whose coefficient (the measured direction) is positive add up to at least one where those
-    directions are kept.
-    """
-    if loops is None:
-        loops = np.arange(len(complex_.loop_chart))
-    row, keys, coefficients, _ = _walk_entries(complex_, _slit_walks_of(complex_, loops, slits))
-    free = np.bincount(row, weights=collapsible[keys // 2],
-                       minlength=int(row.max()) + 1 if len(row) else 0) > 0
-    kept = free[row]
-    row, keys, coefficients = row[kept], keys[kept], coefficients[kept]
-    _, row = np.unique(row, return_inverse=True)
-    return row, keys, coefficients, int(free.sum())
-
-
 def charts_close(complex_, collapsible=None):
-    """True when side lengths >= 1 (>= 0 for ``collapsible`` sides) close every loop and keep
-    every hole open (:func:`_open_hole_entries`; an LP)."""
+    """True when side lengths >= 1 (>= 0 for ``collapsible`` sides) close every loop (an LP)."""
     from scipy.optimize import linprog
 
     rows, keys, vals, n_equations = _closure_entries(complex_)
@@ -682,13 +633,6 @@ def charts_close(complex_, collapsible=None):
     matrix.sum_duplicates()
     zero_ok = (np.zeros(complex_.n_sides, dtype=bool) if collapsible is None
                else np.asarray(collapsible, dtype=bool))
-    hole_row, hole_keys, forward, n_holes = _open_hole_entries(complex_, zero_ok)
-    ahead = forward > 0
-    open_rows = sp.csr_matrix((-np.ones(int(ahead.sum())), (hole_row[ahead],
-                                                            hole_keys[ahead] // 2)),
-                              shape=(n_holes, complex_.n_sides))
-    result = linprog(np.zeros(complex_.n_sides), A_ub=open_rows if n_holes else None,
-                     b_ub=-np.ones(n_holes) if n_holes else None, A_eq=matrix,
-                     b_eq=np.zeros(n_equations),
+    result = linprog(np.zeros(complex_.n_sides), A_eq=matrix, b_eq=np.zeros(n_equations),
                      bounds=[(0.0 if c else 1.0, None) for c in zero_ok], method="highs")
     return result.status == 0
