@@ -54,7 +54,6 @@ def _interrupt_behind(error):
     return None
 
 
-
 ROW_BLOCK = 4096
 """Fewest rows a block of :func:`by_rows` hands to another thread: below this a thread costs
 more than it saves."""
@@ -83,8 +82,9 @@ def by_rows(kernel, rows, *args, least=ROW_BLOCK):
     ``rows`` indices into ``args`` name the arguments with one row per query (their first
     axes equal); each query's result depends on its own row and the other arguments only.
     The rows are cut into contiguous blocks, one per core this process may use (none smaller
-    than ``least`` rows, :data:`ROW_BLOCK` unless a row is much work); the first block runs in the calling thread, the others in worker
-    threads while it does (the kernel must be compiled with ``nogil=True``), and the results
+    than ``least`` rows, :data:`ROW_BLOCK` unless a row is much work); the first block runs
+    in the calling thread, the others in worker threads while it does (the kernel must be
+    compiled with ``nogil=True``), and the results
     (an array, or a tuple of arrays, with one row per query) are joined in row order. So the
     result is the kernel's on all rows bit for bit, whatever the number of cores.
     """

@@ -78,7 +78,8 @@ def test_work_dealt_round_the_cores_comes_back_in_order():
 def test_queries_cut_into_blocks_answer_as_one_block(monkeypatch):
     """Nearest triangles, rival triangles and ray exits of more points than a block, on a
     sphere with points inside, and the overlapping boxes of its triangles: the blocks'
-    answers joined are the kernel's on all rows (the traversal from the root), bit for bit; too few rows stay one call; a forked child makes its own threads."""
+    answers joined are the kernel's on all rows (the traversal from the root), bit for bit;
+    too few rows stay one call; a forked child makes its own threads."""
     import trimesh
 
     import core.box_tree as tree_module
