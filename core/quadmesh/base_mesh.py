@@ -314,7 +314,8 @@ def _with_corners(complex_, tables, refinement, polycube, collapsible, least, se
     (:func:`_next_separations`) and the program is solved again, up to :data:`TOUCH_ROUNDS`
     times.
     """
-    added, rejected = [], set()
+    charts = range(complex_.n_charts)
+    added, rejected, touching = [], set(), None
     for _ in range(TOUCH_ROUNDS + 1):
         try:
             other = quantize(complex_, tables, refinement, polycube.scale, collapsible, least,
@@ -324,10 +325,13 @@ def _with_corners(complex_, tables, refinement, polycube, collapsible, least, se
         except LabelingError:
             if not added:
                 return []
-            # the separations just added contradict the others: try the next ones
+            # the separations just added contradict the others: try the next ones of the
+            # layout that touched itself
             rejected.update(added)
             separations = [item for item in separations if item not in rejected]
-            added = _next_separations(tables, touched, touched_charts, separations, rejected)
+            added = _next_separations(tables, touching, charts, separations, rejected)
+            if not added:
+                return []
             separations = separations + added
             continue
         if other.faces > give_up_faces:
@@ -336,10 +340,10 @@ def _with_corners(complex_, tables, refinement, polycube, collapsible, least, se
             lattice = build_lattice(complex_, tables, other)
         except OverlappingChartsError:
             return []
-        # a polygon that does not overlap itself but has crossing segments runs along
-        # itself: it touches itself there
-        touched, touched_charts = other, range(complex_.n_charts)
-        added = _next_separations(tables, touched, touched_charts, separations, rejected)
+        # no cell is covered twice, so segments that cross run along one another: the
+        # polygon touches itself there
+        touching = other
+        added = _next_separations(tables, touching, charts, separations, rejected)
         if not added:
             return [(other, lattice)]
         separations = list(separations) + added
