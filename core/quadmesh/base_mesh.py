@@ -93,6 +93,9 @@ REFINEMENT_ROUNDS = 24
 FALLBACK_REFINEMENT_ROUNDS = 8
 """The same where the paired decimation can take over: layouts within the budget seldom need
 more than a few refinements."""
+TOUCH_ROUNDS = 8
+"""Most separations added, one round each, where the layout quantized with corner terms
+touches itself (:func:`_with_corners`)."""
 SEPARATION_ROUNDS = 24
 """Rounds of quantization, each keeping apart one more pair of crossing segments of every
 overlapping chart, where the layout separates crossings instead of cutting charts."""
@@ -298,26 +301,53 @@ def _with_corners(complex_, tables, refinement, polycube, collapsible, least, se
     """``[(polycube, lattice)]``: the layout ``polycube`` quantized again at its scale, with
     its refinement and separations, and the corners of its drifting charts kept near their
     measured places (:func:`core.quadmesh.polycube.quantize.quantize` with ``corner_cost``),
-    where that program has a solution whose charts do not overlap and which stays within
-    ``give_up_faces``; else ``[]``.
+    where that program has a solution whose charts neither overlap nor touch themselves and
+    which stays within ``give_up_faces``; else ``[]``.
 
     The corner terms make each program far slower than the plain one, so the scale, cuts and
     separations are searched without them and the terms only move the side lengths of the
-    layout found.
+    layout found. They can move corners that the plain layout kept apart onto one another,
+    so that a chart polygon runs along itself (its boundary segments cross without any cell
+    covered twice, which :func:`core.quadmesh.polycube.lattice.build_lattice` lets through:
+    its points are identified and the cage pinches there); each such chart gets the
+    separation of those segments that the measured chart shows most clearly
+    (:func:`_next_separations`) and the program is solved again, up to :data:`TOUCH_ROUNDS`
+    times.
     """
-    try:
-        other = quantize(complex_, tables, refinement, polycube.scale, collapsible, least,
-                         separations, corner_cost)
-    except MilpTimeLimitError:
-        raise
-    except LabelingError:
-        return []
-    if other.faces > give_up_faces:
-        return []
-    try:
-        return [(other, build_lattice(complex_, tables, other))]
-    except OverlappingChartsError:
-        return []
+    charts = range(complex_.n_charts)
+    added, rejected, touching = [], set(), None
+    for _ in range(TOUCH_ROUNDS + 1):
+        try:
+            other = quantize(complex_, tables, refinement, polycube.scale, collapsible, least,
+                             separations, corner_cost)
+        except MilpTimeLimitError:
+            raise
+        except LabelingError:
+            if not added:
+                return []
+            # the separations just added contradict the others: try the next ones of the
+            # layout that touched itself
+            rejected.update(added)
+            separations = [item for item in separations if item not in rejected]
+            added = _next_separations(tables, touching, charts, separations, rejected)
+            if not added:
+                return []
+            separations = separations + added
+            continue
+        if other.faces > give_up_faces:
+            return []
+        try:
+            lattice = build_lattice(complex_, tables, other)
+        except OverlappingChartsError:
+            return []
+        # no cell is covered twice, so segments that cross run along one another: the
+        # polygon touches itself there
+        touching = other
+        added = _next_separations(tables, touching, charts, separations, rejected)
+        if not added:
+            return [(other, lattice)]
+        separations = list(separations) + added
+    return []
 
 
 def _cut_overlapping_chart(complex_, tables, polycube, charts, refine, cuts, unrefinable):

@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Corner terms of the quantization: a chart whose boundary runs at a slant keeps its measured
 shape, which its side lengths alone do not say."""
+import os
 from types import SimpleNamespace
 
 import numpy as np
@@ -87,3 +88,38 @@ def test_a_tapered_plate_laid_out_with_its_corners_is_a_closed_quad_cage():
         assert info["method"] == "polycube" and info["genus"] == 0
         assert info["corner_cost"] == cost
         assert 0.5 * 120 <= info["faces"] <= 1.5 * 120
+
+
+SPACE_FRAME = os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks", "simp_unseen",
+                           "simp_space_frame.stl")
+
+
+@pytest.mark.slow
+def test_a_space_frame_of_slanted_struts_keeps_the_layout_with_its_corners():
+    """The struts of the frame run at a slant to its axes: the layout quantized from its side
+    lengths alone stretches quads whose least-squares fit crosses itself, and the layout with
+    the corner terms draws a chart polygon running along itself unless its segments are kept
+    apart. The layout kept is a clean cage whose fit comes as close as the decimation's."""
+    from core.fitting.route_review import ROUTE_DISTANCE_RATIO, preview_cage
+    from core.mesh_topology import polymesh_genus
+    from core.params import ReconstructionParams
+    from core.pipeline import reconstruct
+    from core.polymesh_checks import check_polymesh
+    from core.quadmesh.base_mesh import FALLBACK_OVER_BUDGET
+    from core.quadmesh.orientation import inverted_faces
+    from core.subdivision.limit_crossings import count_limit_self_intersections
+
+    params = ReconstructionParams.from_dict({"parts": "single"})
+    result = reconstruct(SPACE_FRAME, params, stop_after="basemesh")
+    info = result.report["base_mesh"]
+    base, target = result.state.basemesh.cage, result.state.intake.target
+    assert info["method"] == "polycube"
+    check_polymesh(base)
+    assert (base.face_sizes == 4).all()
+    assert polymesh_genus(base) == result.report["input"]["genus"]
+    assert not inverted_faces(base, target.vertices, target.faces).any()
+    assert count_limit_self_intersections(base, 2) == 0
+    assert base.n_faces <= FALLBACK_OVER_BUDGET * params.target_faces
+    preview = preview_cage(base, target, params.subdivision_levels, params.fit_mode)
+    decimation = info["route_review"]["paired decimation"]["largest_distance"]
+    assert preview.largest_distance <= ROUTE_DISTANCE_RATIO * decimation
