@@ -125,3 +125,46 @@ def test_a_separation_undoes_a_crossing_without_cutting_the_chart():
     # high, so a U higher than 4 (its two sides 2 (h - 2) >= 6 off their goals) is never
     # the optimum: at most 3 x 4 squares less the notch
     assert 1 <= separated.faces <= 11
+
+
+def _poking_notch():
+    """The U of :func:`u_shape` and integer corners that draw its notch poking out below."""
+    complex_, tables, axis, sign = u_shape()
+    length = np.array([3, 2, 1, 3, 1, 3, 1, 2])
+    step = np.zeros((len(axis), 2), dtype=np.int64)
+    step[np.arange(len(axis)), axis] = sign * length
+    return complex_, tables, np.cumsum(np.vstack([[0, 0], step[:-1]]), axis=0)
+
+
+def test_corners_at_a_side_that_may_collapse_are_not_cut():
+    complex_, tables, corner_uv = _poking_notch()
+    walk = chart_walk(tables, 0)
+    reflex = set(walk[reflex_references(tables, walk)].tolist())
+    assert corners_to_cut(tables, corner_uv, 0, 1, set())
+    for position, ref in enumerate(walk.tolist()):
+        collapsible = np.zeros(complex_.n_sides, dtype=bool)
+        collapsible[tables.ref_side[ref]] = True
+        # the corners of the collapsible side start this reference and the next one
+        at_sliver = {ref, int(walk[(position + 1) % len(walk)])}
+        cut = corners_to_cut(tables, corner_uv, 0, 1, set(), collapsible)
+        assert cut <= reflex - at_sliver
+    # sides that may collapse starting at every reflex corner: none is left to cut
+    collapsible = np.zeros(complex_.n_sides, dtype=bool)
+    collapsible[tables.ref_side[sorted(reflex)]] = True
+    assert not corners_to_cut(tables, corner_uv, 0, 1, set(), collapsible)
+
+
+def test_an_overlapping_chart_with_only_sliver_corners_left_is_passed_over():
+    from core.quadmesh.polycube.quantize import IntegerPolycube
+    from core.quadmesh.base_mesh import _cut_overlapping_chart
+
+    complex_, tables, corner_uv = _poking_notch()
+    polycube = IntegerPolycube(np.zeros(complex_.n_sides, dtype=np.int64), corner_uv, 1.0, 0,
+                               np.zeros(1, dtype=np.int64), "")
+    every_side = np.ones(complex_.n_sides, dtype=bool)
+    refine, cuts = {}, {}
+    assert _cut_overlapping_chart(complex_, tables, polycube, [0], refine, cuts, set(),
+                                  every_side) is None
+    assert not refine and not cuts  # nothing cut: the caller keeps the crossings apart
+    assert _cut_overlapping_chart(complex_, tables, polycube, [0], refine, cuts, set()) == 0
+    assert 0 in refine and cuts[0]  # without slivers the corners next to the overlap are cut
