@@ -20,6 +20,7 @@ the model's size or turn a normal along a boundary by more than a small angle
 the rest of its work is per face and edge (building the shape, checking wires, edges and the
 solid's orientation), the same in either form.
 """
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -75,6 +76,34 @@ def step_string(text):
     return "'" + clean.replace("'", "''") + "'"
 
 
+_POINT_KEY = np.dtype((np.void, 24))
+
+
+def _point_keys(xyz):
+    """(n,) keys of the rows of ``xyz`` (n, 3) float64, equal iff the points are equal bit for
+    bit (``-0.0`` taken as ``0.0``)."""
+    return np.ascontiguousarray(np.asarray(xyz, dtype=np.float64) + 0.0).view(
+        _POINT_KEY).reshape(-1)
+
+
+@dataclass
+class PointDecimals:
+    """Decimals of a light file's points (:func:`light_point_decimals`).
+
+    keys : (k,) sorted keys of points (:func:`_point_keys`); places : (k,) int64 decimals of
+    each; points not listed take :data:`POINT_DECIMALS`.
+    """
+
+    keys: np.ndarray
+    places: np.ndarray
+
+    def of(self, xyz):
+        """(n,) int64 decimals of the rows of ``xyz`` (n, 3)."""
+        keys = _point_keys(xyz)
+        at = np.minimum(np.searchsorted(self.keys, keys), len(self.keys) - 1)
+        return np.where(self.keys[at] == keys, self.places[at], POINT_DECIMALS)
+
+
 class _Entities:
     """Numbered DATA section lines."""
 
@@ -91,23 +120,21 @@ class _Entities:
         """The CARTESIAN_POINT ids of the rows of ``xyz`` (n, d), d = 3 (model space) or 2
         (parameter space): one entity per distinct point, shared by every vertex, curve and
         surface that has a pole there (the poles along a shared patch side are equal bit for
-        bit), so each is written and read once. A model-space row whose bytes ``decimals``
-        (a dict, or None) maps to a number of decimals is written with that many, the others
-        with :data:`POINT_DECIMALS`.
+        bit), so each is written and read once. Model-space points take the decimals of
+        ``decimals`` (a :class:`PointDecimals`, or None: :data:`POINT_DECIMALS`).
         """
-        xyz = np.ascontiguousarray(np.asarray(xyz, dtype=np.float64) + 0.0)  # no -0.0
-        reals = step_fixed_reals(xyz)
+        xyz = np.asarray(xyz, dtype=np.float64) + 0.0  # no -0.0
         d = xyz.shape[1]
-        if d == 3 and self.decimals:
-            places = np.array([self.decimals.get(row.tobytes(), POINT_DECIMALS) for row in xyz])
+        reals = np.array(step_fixed_reals(xyz), dtype=object).reshape(-1, d)
+        if d == 3 and self.decimals is not None:
+            places = self.decimals.of(xyz)
             for decimals in np.unique(places[places < POINT_DECIMALS]).tolist():
                 rows = np.flatnonzero(places == decimals)
-                coarse = step_fixed_reals(xyz[rows], decimals)
-                for k, i in enumerate(rows.tolist()):
-                    reals[i * d:(i + 1) * d] = coarse[k * d:(k + 1) * d]
+                reals[rows] = np.array(step_fixed_reals(xyz[rows], decimals),
+                                       dtype=object).reshape(-1, d)
         ids = []
-        for i in range(0, len(reals), d):
-            text = f"CARTESIAN_POINT('',({','.join(reals[i:i + d])}))"
+        for row in reals.tolist():
+            text = f"CARTESIAN_POINT('',({','.join(row)}))"
             known = self.point_ids.get(text)
             if known is None:
                 known = self.point_ids[text] = self.add(text)
@@ -125,30 +152,45 @@ def _boundary_row(poles, uv):
 
 
 def _exact_points(patches, topology):
-    """Bytes of the points that a light file keeps at :data:`POINT_DECIMALS`: the vertices
-    (not always a pole of the curves they end), the poles of every edge curve that is not,
-    pole for pole, the boundary row of a face it bounds (a knot-inserted form of it, or a part
-    of a longer side), and that boundary row. Elsewhere a curve and its faces share their
-    point entities, so rounding them moves them together; these only agree within
+    """(k, 3) points that a light file keeps at :data:`POINT_DECIMALS`: the vertices (not
+    always a pole of the curves they end), the poles of every edge curve that is not, pole for
+    pole, the boundary row of a face it bounds (a knot-inserted form of it, or a part of a
+    longer side), and that boundary row. Elsewhere a curve and its faces share their point
+    entities, so rounding them moves them together; these only agree within
     :data:`POINT_DECIMALS`."""
     t = topology
-    exact = {p.tobytes() for p in np.ascontiguousarray(np.asarray(t.vertices, dtype=np.float64)
-                                                      + 0.0)}
-    for u in range(len(t.use_edge)):
-        curve = np.asarray(t.edge_curves[t.use_edge[u]].poles, dtype=np.float64)
-        row = _boundary_row(np.asarray(patches[t.use_face[u]].poles, dtype=np.float64),
-                            t.use_uv[u])
-        if row.shape == curve.shape and (np.array_equal(row, curve)
-                                         or np.array_equal(row[::-1], curve)):
-            continue
-        for points in (curve, row):
-            exact.update(p.tobytes() for p in np.ascontiguousarray(points + 0.0))
-    return exact
+    curves = [np.asarray(t.edge_curves[e].poles, dtype=np.float64) for e in t.use_edge.tolist()]
+    rows = [_boundary_row(np.asarray(patches[f].poles, dtype=np.float64), uv)
+            for f, uv in zip(t.use_face.tolist(), t.use_uv)]
+    lengths = np.array([(len(c), len(r)) for c, r in zip(curves, rows)])
+    exact = [np.asarray(t.vertices, dtype=np.float64)]
+    for n_curve, n_row in np.unique(lengths, axis=0).tolist():
+        which = np.flatnonzero((lengths == (n_curve, n_row)).all(axis=1))
+        C = np.stack([curves[i] for i in which])
+        R = np.stack([rows[i] for i in which])
+        if n_curve == n_row:
+            same = (C == R).all(axis=(1, 2)) | (C == R[:, ::-1]).all(axis=(1, 2))
+            C, R = C[~same], R[~same]
+        exact += [C.reshape(-1, 3), R.reshape(-1, 3)]
+    return np.concatenate(exact)
+
+
+def _across_distances(poles):
+    """(p,) shortest distance, per patch of ``poles`` (a list of (n_u, n_v, 3) grids), between
+    a boundary pole and the pole next to it across that boundary."""
+    across = np.empty(len(poles))
+    shapes = np.array([P.shape[:2] for P in poles])
+    for shape in np.unique(shapes, axis=0):
+        which = np.flatnonzero((shapes == shape).all(axis=1))
+        G = np.stack([poles[i] for i in which])
+        steps = (G[:, 1] - G[:, 0], G[:, -2] - G[:, -1], G[:, :, 1] - G[:, :, 0],
+                 G[:, :, -2] - G[:, :, -1])
+        across[which] = np.min([np.linalg.norm(d, axis=-1).min(axis=-1) for d in steps], axis=0)
+    return across
 
 
 def light_point_decimals(patches, topology):
-    """Decimals of every point of a light file, by the bytes of its coordinates (a dict;
-    points not in it keep :data:`POINT_DECIMALS`).
+    """The decimals of every point of a light file (:class:`PointDecimals`).
 
     A patch's poles take the fewest decimals whose rounding step is at most
     :data:`LIGHT_POINT_STEP` of the poles' bounding-box diagonal and at most
@@ -158,21 +200,21 @@ def light_point_decimals(patches, topology):
     each patch's normals keep their bound. The points of :func:`_exact_points` keep
     :data:`POINT_DECIMALS`.
     """
-    poles = [np.ascontiguousarray(np.asarray(p.poles, dtype=np.float64) + 0.0) for p in patches]
-    diagonal = float(np.linalg.norm(np.ptp(np.concatenate([P.reshape(-1, 3) for P in poles]),
-                                           axis=0)))
-    across = np.array([min(float(np.linalg.norm(d, axis=-1).min()) for d in (
-        P[1] - P[0], P[-2] - P[-1], P[:, 1] - P[:, 0], P[:, -2] - P[:, -1])) for P in poles])
-    step = np.minimum(LIGHT_POINT_STEP * diagonal, LIGHT_NORMAL_TURN * across / np.sqrt(3.0))
+    poles = [np.asarray(p.poles, dtype=np.float64) for p in patches]
+    every = np.concatenate([P.reshape(-1, 3) for P in poles])
+    diagonal = float(np.linalg.norm(np.ptp(every, axis=0)))
+    step = np.minimum(LIGHT_POINT_STEP * diagonal,
+                      LIGHT_NORMAL_TURN * _across_distances(poles) / np.sqrt(3.0))
     with np.errstate(divide="ignore"):
-        places = np.clip(np.ceil(-np.log10(step)), 0, POINT_DECIMALS).astype(int).tolist()
-    decimals = {}
-    for P, k in zip(poles, places):
-        for point in P.reshape(-1, 3):
-            key = point.tobytes()
-            decimals[key] = max(decimals.get(key, 0), k)
-    decimals.update(dict.fromkeys(_exact_points(patches, topology), POINT_DECIMALS))
-    return decimals
+        places = np.clip(np.ceil(-np.log10(step)), 0, POINT_DECIMALS).astype(np.int64)
+    exact = _exact_points(patches, topology)
+    wanted = np.concatenate([np.repeat(places, [P.shape[0] * P.shape[1] for P in poles]),
+                             np.full(len(exact), POINT_DECIMALS)])
+    keys, inverse = np.unique(np.concatenate([_point_keys(every), _point_keys(exact)]),
+                              return_inverse=True)
+    most = np.zeros(len(keys), dtype=np.int64)
+    np.maximum.at(most, inverse.reshape(-1), wanted)
+    return PointDecimals(keys, most)
 
 
 def _outermost_first(face_ids, patches):
