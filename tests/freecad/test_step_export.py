@@ -175,6 +175,7 @@ def _largest_normal_jump_deg(shape, samples=5):
     return largest
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("faces", ["quad", "chart"])
 def test_light_file_rounds_points_without_gaps_or_kinks(tmp_path, faces):
     """The light form of the G1 export (fewer decimals where they cannot open a gap) reads
