@@ -34,17 +34,17 @@ that vertices, curves and surfaces share are one entity each, so the rounding op
 short literals are most of what a reader parses (lines are written ``#n=ENTITY(...)``, without
 optional spaces, for the same reason)."""
 LIGHT_POINT_STEP = 1e-6
-"""Largest rounding step of a light file's free points (:func:`light_point_decimals`), as a fraction
-of the poles' bounding-box diagonal: a displacement far below the G1 export's own departure
-from the limit surface."""
+"""Largest rounding step of a light file's points (:func:`light_point_decimals`), as a
+fraction of the poles' bounding-box diagonal: a displacement far below the G1 export's own
+departure from the limit surface."""
 LIGHT_NORMAL_TURN = 1e-3
 """Largest turn (radians) of a face's normal along its boundary that the rounding of a light
-file's free points may cause (:func:`light_point_decimals`): the normal there is the cross product
-of the boundary's tangent and a weighted mean of the differences between the boundary row and
-the pole row next to it, so moving both rows by at most half the rounding step in each
+file's points may cause (:func:`light_point_decimals`): the normal there is the cross
+product of the boundary's tangent and a weighted mean of the differences between the boundary
+row and the pole row next to it, so moving both rows by at most half the rounding step in each
 coordinate turns it by about ``sqrt(3)`` times the step over the length of those differences
 at most; the normals of the two faces at an edge turn independently, so the rounding keeps
-their jump within about twice this (an 0.1-degree bound for a G1 export held to 1 degree)."""
+their jump within about twice this (a 0.1-degree bound for a G1 export held to 1 degree)."""
 
 
 def step_reals(values):
