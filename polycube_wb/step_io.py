@@ -102,7 +102,8 @@ def write_solid_step(built, patchset, path, input_paths=(), overwrite=True, name
         if made is not None and made[:2] == (built.reverse, product):
             text = made[2]
     if text is None:
-        text = step_text(patchset.patches, built.topology, product, BREP_MM, built.reverse)
+        text = step_text(patchset.patches, built.topology, product, BREP_MM, built.reverse,
+                         light=_light(patchset))
     try:
         write_text_atomic(target, text, inputs, "STEP file")
     except ParameterError as exc:
@@ -117,10 +118,17 @@ def step_text_ahead(patchset, name):
     built and checked; for the ``ahead`` of :func:`write_solid_step`."""
     from core.forked import Ahead
 
-    return Ahead(_shared_edge_step_text, patchset.patches, patchset.topology, str(name))
+    return Ahead(_shared_edge_step_text, patchset.patches, patchset.topology, str(name),
+                 _light(patchset))
 
 
-def _shared_edge_step_text(patches, topology, name):
+def _light(patchset):
+    """Whether the STEP text of ``patchset`` is written light (``core.export.step_file``):
+    the G1 export, which departs from the limit surface far more than the rounding."""
+    return patchset.info.get("export") == "g1"
+
+
+def _shared_edge_step_text(patches, topology, name, light):
     """``(reverse, name, text)``: the orientation ``make_solid`` gives the solid (the sign of
     the patches' enclosed volume) and the STEP text of that solid."""
     from core.export.bspline_tessellation import enclosed_volume
@@ -128,7 +136,7 @@ def _shared_edge_step_text(patches, topology, name):
     from core.tolerances import BREP_MM
 
     reverse = bool(enclosed_volume(patches) < 0)
-    return reverse, name, step_text(patches, topology, name, BREP_MM, reverse)
+    return reverse, name, step_text(patches, topology, name, BREP_MM, reverse, light=light)
 
 
 def _checked_target(path, input_paths, overwrite):

@@ -12,7 +12,15 @@ the straight segment in ``(u, v)`` that the topology gives, as a degree-1 B-spli
 3-D curve's parameter. A reader that finds no parameter curves projects the 3-D curves onto
 the surfaces (OpenCascade's ``ShapeFix_Edge::FixAddPCurve``), which costs more than reading
 the whole file; the segments are shared by every use with the same end points.
+
+A *light* file (``step_text(..., light=True)``, the G1 export) writes the points with fewer
+decimals wherever that cannot open a gap, move the surface by more than a small fraction of
+the model's size or turn a normal along a boundary by more than a small angle
+(:func:`light_point_decimals`). Short point literals are most of the text a reader parses;
+the rest of its work is per face and edge (building the shape, checking wires, edges and the
+solid's orientation), the same in either form.
 """
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -25,6 +33,18 @@ curve whose poles are not the face's own stays within the tolerance of it), and 
 that vertices, curves and surfaces share are one entity each, so the rounding opens no gap;
 short literals are most of what a reader parses (lines are written ``#n=ENTITY(...)``, without
 optional spaces, for the same reason)."""
+LIGHT_POINT_STEP = 1e-6
+"""Largest rounding step of a light file's points (:func:`light_point_decimals`), as a
+fraction of the poles' bounding-box diagonal: a displacement far below the G1 export's own
+departure from the limit surface."""
+LIGHT_NORMAL_TURN = 1e-3
+"""Largest turn (radians) of a face's normal along its boundary that the rounding of a light
+file's points may cause (:func:`light_point_decimals`): the normal there is the cross
+product of the boundary's tangent and a weighted mean of the differences between the boundary
+row and the pole row next to it, so moving both rows by at most half the rounding step in each
+coordinate turns it by about ``sqrt(3)`` times the step over the length of those differences
+at most; the normals of the two faces at an edge turn independently, so the rounding keeps
+their jump within about twice this (a 0.1-degree bound for a G1 export held to 1 degree)."""
 
 
 def step_reals(values):
@@ -56,12 +76,41 @@ def step_string(text):
     return "'" + clean.replace("'", "''") + "'"
 
 
+_POINT_KEY = np.dtype((np.void, 24))
+
+
+def _point_keys(xyz):
+    """(n,) keys of the rows of ``xyz`` (n, 3) float64, equal iff the points are equal bit for
+    bit (``-0.0`` taken as ``0.0``)."""
+    return np.ascontiguousarray(np.asarray(xyz, dtype=np.float64) + 0.0).view(
+        _POINT_KEY).reshape(-1)
+
+
+@dataclass
+class PointDecimals:
+    """Decimals of a light file's points (:func:`light_point_decimals`).
+
+    keys : (k,) sorted keys of points (:func:`_point_keys`); places : (k,) int64 decimals of
+    each; points not listed take :data:`POINT_DECIMALS`.
+    """
+
+    keys: np.ndarray
+    places: np.ndarray
+
+    def of(self, xyz):
+        """(n,) int64 decimals of the rows of ``xyz`` (n, 3)."""
+        keys = _point_keys(xyz)
+        at = np.minimum(np.searchsorted(self.keys, keys), len(self.keys) - 1)
+        return np.where(self.keys[at] == keys, self.places[at], POINT_DECIMALS)
+
+
 class _Entities:
     """Numbered DATA section lines."""
 
-    def __init__(self):
+    def __init__(self, decimals=None):
         self.lines = []
         self.point_ids = {}
+        self.decimals = decimals
 
     def add(self, text):
         self.lines.append(text)
@@ -71,19 +120,101 @@ class _Entities:
         """The CARTESIAN_POINT ids of the rows of ``xyz`` (n, d), d = 3 (model space) or 2
         (parameter space): one entity per distinct point, shared by every vertex, curve and
         surface that has a pole there (the poles along a shared patch side are equal bit for
-        bit), so each is written and read once.
+        bit), so each is written and read once. Model-space points take the decimals of
+        ``decimals`` (a :class:`PointDecimals`, or None: :data:`POINT_DECIMALS`).
         """
-        xyz = np.asarray(xyz, dtype=np.float64)
-        reals = step_fixed_reals(xyz)
+        xyz = np.asarray(xyz, dtype=np.float64) + 0.0  # no -0.0
         d = xyz.shape[1]
+        reals = np.array(step_fixed_reals(xyz), dtype=object).reshape(-1, d)
+        if d == 3 and self.decimals is not None:
+            places = self.decimals.of(xyz)
+            for decimals in np.unique(places[places < POINT_DECIMALS]).tolist():
+                rows = np.flatnonzero(places == decimals)
+                reals[rows] = np.array(step_fixed_reals(xyz[rows], decimals),
+                                       dtype=object).reshape(-1, d)
         ids = []
-        for i in range(0, len(reals), d):
-            text = f"CARTESIAN_POINT('',({','.join(reals[i:i + d])}))"
+        for row in reals.tolist():
+            text = f"CARTESIAN_POINT('',({','.join(row)}))"
             known = self.point_ids.get(text)
             if known is None:
                 known = self.point_ids[text] = self.add(text)
             ids.append(known)
         return ids
+
+
+def _boundary_row(poles, uv):
+    """The pole row (n, 3) of the patch side that the ``(u, v)`` segment ``uv`` (2, 2) lies on
+    (patches are parametrised on the unit square), from ``u`` or ``v`` = 0 to 1."""
+    (u0, v0), (u1, v1) = np.asarray(uv, dtype=np.float64)
+    if v0 == v1:
+        return poles[:, 0] if v0 == 0.0 else poles[:, -1]
+    return poles[0, :] if u0 == 0.0 else poles[-1, :]
+
+
+def _exact_points(patches, topology):
+    """(k, 3) points that a light file keeps at :data:`POINT_DECIMALS`: the vertices (not
+    always a pole of the curves they end), the poles of every edge curve that is not, pole for
+    pole, the boundary row of a face it bounds (a knot-inserted form of it, or a part of a
+    longer side), and that boundary row. Elsewhere a curve and its faces share their point
+    entities, so rounding them moves them together; these only agree within
+    :data:`POINT_DECIMALS`."""
+    t = topology
+    curves = [np.asarray(t.edge_curves[e].poles, dtype=np.float64) for e in t.use_edge.tolist()]
+    rows = [_boundary_row(np.asarray(patches[f].poles, dtype=np.float64), uv)
+            for f, uv in zip(t.use_face.tolist(), t.use_uv)]
+    lengths = np.array([(len(c), len(r)) for c, r in zip(curves, rows)])
+    exact = [np.asarray(t.vertices, dtype=np.float64)]
+    for n_curve, n_row in np.unique(lengths, axis=0).tolist():
+        which = np.flatnonzero((lengths == (n_curve, n_row)).all(axis=1))
+        C = np.stack([curves[i] for i in which])
+        R = np.stack([rows[i] for i in which])
+        if n_curve == n_row:
+            same = (C == R).all(axis=(1, 2)) | (C == R[:, ::-1]).all(axis=(1, 2))
+            C, R = C[~same], R[~same]
+        exact += [C.reshape(-1, 3), R.reshape(-1, 3)]
+    return np.concatenate(exact)
+
+
+def _across_distances(poles):
+    """(p,) shortest distance, per patch of ``poles`` (a list of (n_u, n_v, 3) grids), between
+    a boundary pole and the pole next to it across that boundary."""
+    across = np.empty(len(poles))
+    shapes = np.array([P.shape[:2] for P in poles])
+    for shape in np.unique(shapes, axis=0):
+        which = np.flatnonzero((shapes == shape).all(axis=1))
+        G = np.stack([poles[i] for i in which])
+        steps = (G[:, 1] - G[:, 0], G[:, -2] - G[:, -1], G[:, :, 1] - G[:, :, 0],
+                 G[:, :, -2] - G[:, :, -1])
+        across[which] = np.min([np.linalg.norm(d, axis=-1).min(axis=-1) for d in steps], axis=0)
+    return across
+
+
+def light_point_decimals(patches, topology):
+    """The decimals of every point of a light file (:class:`PointDecimals`).
+
+    A patch's poles take the fewest decimals whose rounding step is at most
+    :data:`LIGHT_POINT_STEP` of the poles' bounding-box diagonal and at most
+    :data:`LIGHT_NORMAL_TURN` times the patch's shortest distance between a boundary pole and
+    the pole next to it across that boundary over ``sqrt(3)`` (at most
+    :data:`POINT_DECIMALS`); a pole shared by several patches takes the most of theirs, so
+    each patch's normals keep their bound. The points of :func:`_exact_points` keep
+    :data:`POINT_DECIMALS`.
+    """
+    poles = [np.asarray(p.poles, dtype=np.float64) for p in patches]
+    every = np.concatenate([P.reshape(-1, 3) for P in poles])
+    diagonal = float(np.linalg.norm(np.ptp(every, axis=0)))
+    step = np.minimum(LIGHT_POINT_STEP * diagonal,
+                      LIGHT_NORMAL_TURN * _across_distances(poles) / np.sqrt(3.0))
+    with np.errstate(divide="ignore"):
+        places = np.clip(np.ceil(-np.log10(step)), 0, POINT_DECIMALS).astype(np.int64)
+    exact = _exact_points(patches, topology)
+    wanted = np.concatenate([np.repeat(places, [P.shape[0] * P.shape[1] for P in poles]),
+                             np.full(len(exact), POINT_DECIMALS)])
+    keys, inverse = np.unique(np.concatenate([_point_keys(every), _point_keys(exact)]),
+                              return_inverse=True)
+    most = np.zeros(len(keys), dtype=np.int64)
+    np.maximum.at(most, inverse.reshape(-1), wanted)
+    return PointDecimals(keys, most)
 
 
 def _outermost_first(face_ids, patches):
@@ -153,7 +284,8 @@ def _segment(ent, segments, uv, context_2d):
     return known
 
 
-def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970-01-01T00:00:00"):
+def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970-01-01T00:00:00",
+              light=False):
     """AP214 STEP text of one solid bounded by ``patches``.
 
     Parameters
@@ -166,13 +298,16 @@ def step_text(patches, topology, name, tolerance, reverse=False, timestamp="1970
     reverse : bool, the patches' ``d/du x d/dv`` points into the solid.
     timestamp : str, ISO 8601 time for the header (fixed by default so equal inputs
         give byte-identical files).
+    light : bool, write the points with the decimals of :func:`light_point_decimals` (the G1
+        export, which departs from the limit surface far more than that rounding); else every
+        point with :data:`POINT_DECIMALS`.
 
     Returns
     -------
     str
     """
     t = topology
-    ent = _Entities()
+    ent = _Entities(light_point_decimals(patches, t) if light else None)
     app = ent.add("APPLICATION_CONTEXT('core data for automotive mechanical design processes')")
     ent.add(f"APPLICATION_PROTOCOL_DEFINITION('international standard','automotive_design',2000,#{app})")
     product_context = ent.add(f"PRODUCT_CONTEXT('',#{app},'mechanical')")

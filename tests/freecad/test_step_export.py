@@ -153,3 +153,64 @@ def test_the_step_text_made_ahead_is_the_one_made_here(tmp_path):
         write_solid_step(built, patches, tmp_path / f"{label}.step", name="block", ahead=ahead)
         texts.append((tmp_path / f"{label}.step").read_text())
     assert "'block'" in texts[0] and texts[1] == texts[0] and texts[2] == texts[0]
+
+
+def _largest_normal_jump_deg(shape, samples=5):
+    """Largest angle (degrees) between the normals of the two faces of any edge of ``shape``,
+    at ``samples`` points inside each edge."""
+    import numpy as np
+
+    faces_of = {}
+    for face in shape.Faces:
+        for edge in face.Edges:
+            faces_of.setdefault(edge.hashCode(), (edge, []))[1].append(face)
+    largest = 0.0
+    for edge, faces in faces_of.values():
+        first, last = edge.ParameterRange
+        for t in np.linspace(first, last, samples + 2)[1:-1]:
+            point = edge.valueAt(float(t))
+            normals = [np.array(f.normalAt(*f.Surface.parameter(point))) for f in faces]
+            cosine = np.clip(np.dot(normals[0], normals[1]), -1.0, 1.0)
+            largest = max(largest, float(np.degrees(np.arccos(cosine))))
+    return largest
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("faces", ["quad", "chart"])
+def test_light_file_rounds_points_without_gaps_or_kinks(tmp_path, faces):
+    """The light form of the G1 export (fewer decimals where they cannot open a gap) reads
+    back as the same valid solid with the B-rep tolerance everywhere (a rounded boundary pole
+    that a face did not share with its edge would open a gap of the rounding step, a hundred
+    times the tolerance on this cage), its normals still agree across edges within the bound
+    of the rounding, and it is shorter."""
+    import dataclasses
+
+    import numpy as np
+
+    from core.export.g1_patches import g1_surface_patches
+    from core.export.step_file import LIGHT_NORMAL_TURN, light_point_decimals, step_text
+    from core.tolerances import BREP_MM
+    from polycube_wb.brep import make_solid
+
+    cage = sample_cages.mixed_prism()
+    cage = dataclasses.replace(cage, vertices=100.0 * cage.vertices)
+    patches = g1_surface_patches(cage, measure=False, faces=faces)
+    built = make_solid(patches)
+    assert 10.0 ** -light_point_decimals(patches.patches, built.topology).places.min() \
+        > 100 * BREP_MM
+    shapes, sizes = {}, {}
+    for light in (False, True):
+        text = step_text(patches.patches, built.topology, "prism", BREP_MM, built.reverse,
+                         light=light)
+        path = tmp_path / f"light_{light}.step"
+        path.write_text(text)
+        shapes[light], sizes[light] = Part.read(str(path)), len(text)
+    light = shapes[True]
+    assert light.ShapeType == "Solid" and light.isValid() and light.Shells[0].isClosed()
+    assert len(light.Faces) == len(shapes[False].Faces) == len(patches.patches)
+    tolerance = max(max(e.Tolerance for e in s.Edges + s.Vertexes) for s in shapes.values())
+    assert tolerance <= 10 * BREP_MM
+    assert abs(light.Volume - shapes[False].Volume) <= 1e-5 * shapes[False].Volume
+    assert _largest_normal_jump_deg(shapes[False]) < 1e-3
+    assert _largest_normal_jump_deg(light) <= 1.5 * 2 * np.degrees(LIGHT_NORMAL_TURN)
+    assert sizes[True] < 0.97 * sizes[False]
