@@ -45,9 +45,10 @@ from core.quadmesh.polycube.embed import (interior_point_positions, side_point_p
 from core.quadmesh.polycube.lattice import OverlappingChartsError, build_lattice, chart_orientation
 from core.quadmesh.polycube.milp_solve import MilpTimeLimitError
 from core.quadmesh.polycube.overlap_cuts import corners_to_cut, crossing_separations
-from core.quadmesh.polycube.quantize import (BUDGET_TOLERANCE, REFINEMENTS, collapsible_sides,
-                                             loop_tables, minimum_faces, quantize,
-                                             quantize_for_budget, rectangular_refinement)
+from core.quadmesh.polycube.quantize import (BUDGET_TOLERANCE, COLLAPSE_BELOW, REFINEMENTS,
+                                             collapsible_sides, loop_tables, minimum_faces,
+                                             quantize, quantize_for_budget,
+                                             rectangular_refinement)
 from core.quadmesh.polycube.relax import FLAW_RINGS, relax_on_target
 from core.quadmesh.polycube.closable_labels import closable_labels
 from core.quadmesh.polycube.side_signs import SideDirectionError, make_loops_rectilinear
@@ -921,7 +922,7 @@ class _LayoutAttempts:
             return result
         except (LayoutTooLargeError, MilpTimeLimitError):
             raise  # keeping the slivers would only make it larger (or slower)
-        except (LabelingError, InvalidMeshError):
+        except (LabelingError, InvalidMeshError) as collapsing:
             # slivers that cannot vanish cleanly keep at least one unit
             self.complex_, self.flipped = make_loops_rectilinear(
                 complex_, np.zeros(complex_.n_sides, dtype=bool),
@@ -931,6 +932,15 @@ class _LayoutAttempts:
             self.reached.append((self.complex_, self.flipped, self.collapsible, self.tables))
             try:
                 return self._run(least)
+            except LayoutTooLargeError as exc:
+                if not np.any(collapsible):
+                    raise
+                # the bound holds with every side at least one unit; smaller layouts were
+                # reached with collapsing slivers, and why they failed is the real reason
+                raise LayoutTooLargeError(
+                    f"{exc}, where every side keeps at least one unit; with the sides shorter "
+                    f"than {COLLAPSE_BELOW} unit allowed to collapse: {collapsing}",
+                    exc.faces) from exc
             except InvalidMeshError as exc:
                 raise LabelingError(f"the quantized layout does not embed as a closed "
                                     f"2-manifold: {exc}; try another labeling or --parts") from exc

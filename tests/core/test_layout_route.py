@@ -8,6 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from core.errors import LabelingError
 from core.mesh_topology import polymesh_genus
 from core.polymesh_checks import check_polymesh
 from core.quadmesh import base_mesh as base_mesh_module
@@ -194,3 +195,26 @@ def test_a_thin_bar_gets_quads_that_face_the_target_before_any_repair():
     assert not inverted_faces(base, V, F).any()
     assert count_limit_self_intersections(base, 2) == 0
     assert base.n_faces <= FALLBACK_OVER_BUDGET * 100
+
+
+def test_a_layout_too_large_with_every_side_kept_says_why_collapsing_slivers_failed(
+        monkeypatch):
+    # the bound of the layout that keeps every side hides what the smaller layouts that let
+    # slivers collapse ran into: the report names both
+    def every_side(complex_, target_faces):
+        return np.ones(complex_.n_sides, dtype=bool)
+
+    def layout(V, F, complex_, tables, target_faces, max_base_faces, collapsible, *args,
+               **kwargs):
+        if collapsible.any():
+            raise LabelingError("2 integer chart polygons overlap")
+        raise base_mesh_module.LayoutTooLargeError("at least 999 quads", 999)
+
+    monkeypatch.setattr(base_mesh_module, "collapsible_sides", every_side)
+    monkeypatch.setattr(base_mesh_module, "_layout_on_target", layout)
+    V, F, base, info = auto_base_mesh(TWO_HOLES, 300)
+    polycube = info["candidates"]["polycube"]
+    assert info["method"] == "paired decimation" and not polycube["built"]
+    assert polycube["faces"] == 999
+    assert "at least 999 quads" in polycube["reason"]
+    assert "2 integer chart polygons overlap" in polycube["reason"]
