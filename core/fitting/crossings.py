@@ -278,8 +278,11 @@ def _swept_pairs(reference, moved, mapping, triangles):
     out here would cost more than testing them.
     """
     moving = (moved != reference).any(axis=1)
-    rows = np.repeat(np.arange(mapping.shape[0]), np.diff(mapping.indptr))
-    terms = mapping.data[:, None] * (moved - reference)[mapping.indices]
+    # only the entries of moving vertices: the others' terms are zeros, whose sums leave
+    # every row's sum as it is
+    entries = np.flatnonzero(moving[mapping.indices])
+    rows = np.searchsorted(mapping.indptr, entries, side="right") - 1
+    terms = mapping.data[entries, None] * (moved - reference)[mapping.indices[entries]]
     X = mapping @ reference
     low, high = X.copy(), X.copy()
     for axis in range(3):
@@ -287,7 +290,7 @@ def _swept_pairs(reference, moved, mapping, triangles):
         high[:, axis] += np.bincount(rows, np.maximum(terms[:, axis], 0.0), len(X))
     slack = CONTACT * max(float(np.abs(low).max()), float(np.abs(high).max()), 1e-300)
     # from the matrix's arrays too (abs would sort it in place, see _crossings_after)
-    moving_fine = np.bincount(rows, moving[mapping.indices] & (mapping.data != 0), len(X)) > 0
+    moving_fine = np.bincount(rows, mapping.data[entries] != 0, len(X)) > 0
     return box_pairs(face_boxes(low[triangles])[0] - slack, face_boxes(high[triangles])[1] + slack,
                      among=moving_fine[triangles].any(axis=1))
 

@@ -18,7 +18,8 @@ refinements cross themselves. The fit of the refined cage starts from the least-
 of the cage it refines, split the same way, and its pull inside from that fit's smoothness
 weights (``WARM_START`` of :mod:`core.fitting.fit`): that fit has made the large moves
 already, and its pull found where the walls cross. The fit that leaves the least volume
-outside is kept.
+outside is kept. A refined cage's fit is refined again only where it leaves more than
+``OUTSIDE.again`` times the goal outside.
 
 The default goal (``outside_refinement`` of :class:`core.params.ReconstructionParams`, 0.003)
 is three fifths of the 0.5 % containment goal: the fit's figure is measured on its level-``i``
@@ -44,7 +45,13 @@ class OutsideRefinementSettings:
     """Depth outside the target, a fraction of its bounding-box diagonal, beyond which a fine
     limit point has its base face refined."""
     rounds: int = 2
-    """Most refinements (a second round seldom leaves less outside than the first)."""
+    """Most refinements."""
+    again: float = 5.0 / 3.0
+    """Volume outside, times the goal, above which a refined cage's fit is refined again (the
+    0.5 % containment goal at the default goal). A second refinement splits a few strips of
+    a fit already near the goal, as often leaves more outside than less (the fit leaving
+    least is kept either way) and costs a whole fit; where the first refinement left
+    several times the goal, it takes off a good part of that."""
 
 
 OUTSIDE = OutsideRefinementSettings()
@@ -85,7 +92,8 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
     crossing_faces : None or callable ``crossing_faces(cage) -> (k, 2) int``, the base faces
         where a cage's limit surface crosses itself (a refinement crossing more than the
         unfitted cage is not fitted, :func:`core.fitting.refine.refined_without_crossings`).
-    rounds : int >= 0, most refinements.
+    rounds : int >= 0, most refinements; after the first, only while the last fit leaves
+        more than ``OUTSIDE.again * goal`` outside.
     progress : core.progress.Progress or None, told when a refined cage is fitted.
 
     Returns
@@ -105,9 +113,11 @@ def fit_with_outside_refinement(base, target, fit, goal, max_faces, crossing_fac
             result.reason = "" if done == 0 else (f"{outside:.3%} of the volume outside after "
                                                   f"{done} refinement{'s' * (done > 1)}")
             return result
-        if done == rounds:
-            result.reason = _kept(result, f"still {outside:.3%} outside after {rounds} "
-                                          "refinements")
+        if done == rounds or (done and outside <= OUTSIDE.again * goal):
+            further = "" if done == rounds else (f" (refined again only above "
+                                                 f"{OUTSIDE.again * goal:.3%})")
+            result.reason = _kept(result, f"still {outside:.3%} outside after {done} "
+                                          f"refinement{'s' * (done > 1)}{further}")
             return result
         if surface is None:
             surface = TargetSurface(target.vertices, target.faces)

@@ -100,6 +100,22 @@ def test_the_fit_leaving_least_outside_is_kept_and_the_rounds_are_capped():
     assert result.reason.endswith("; the fit of the 54-face cage is kept (1.000% outside)")
 
 
+@pytest.mark.parametrize("refined_outside, fits", [(0.004, 2), (0.006, 3)])
+def test_a_refined_fit_is_refined_again_only_well_above_the_goal(refined_outside, fits):
+    cage, target = sphere_cut_by_a_box()
+    log = []
+    goal = 0.003
+    assert goal < 0.004 <= OUTSIDE.again * goal < 0.006
+    result = fit_with_outside_refinement(
+        cage, target, stub_fit(lambda n: 0.01 if n == 54 else refined_outside, log), goal,
+        10_000, rounds=2)
+    assert len(log) == fits
+    assert result.mesh is log[1]  # the first refined cage's fit leaves least outside
+    if fits == 2:
+        assert result.reason == ("still 0.400% outside after 1 refinement (refined again "
+                                 "only above 0.500%)")
+
+
 def test_refinement_stops_at_the_face_budget_and_says_so():
     cage, target = sphere_cut_by_a_box()
     log = []
