@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
+from core.compiled import keeps_interrupts, numba
 from core.mesh_topology import faces_across, halfedge_faces, unique_edges
 
 OPPOSITE = np.array([1, 0, 3, 2, 5, 4], dtype=np.int64)
@@ -121,12 +121,52 @@ def find_charts(topology, face_part, face_label):
     ok = (ef[:, 0] >= 0) & (ef[:, 1] >= 0)
     a, b = ef[ok, 0], ef[ok, 1]
     same = (face_part[a] == face_part[b]) & (face_label[a] == face_label[b])
-    m = len(face_label)
-    graph = sp.csr_matrix((np.ones(int(same.sum()), dtype=np.int8), (a[same], b[same])),
-                          shape=(m, m))
-    n, comp = connected_components(graph, directed=False)
-    # renumber so chart ids follow the lowest face index (independent of scipy's numbering)
-    return _rank_by_first(comp, n)
+    return components_by_first(a[same], b[same], len(face_label))
+
+
+@keeps_interrupts
+def components_by_first(a, b, n):
+    """(n,) int64 connected component of each node of the graph with edges ``a[i] - b[i]``,
+    components numbered in the order of their lowest node.
+
+    Parameters
+    ----------
+    a, b : (k,) int node pairs, nodes 0..n-1.
+    n : int number of nodes.
+    """
+    return _components_by_first(np.ascontiguousarray(a, dtype=np.int64),
+                                np.ascontiguousarray(b, dtype=np.int64), int(n))
+
+
+@numba.njit(cache=True, nogil=True)
+def _components_by_first(a, b, n):
+    """Union-find with path halving over the pairs, then one pass in node order that numbers
+    each root the first time one of its nodes is met (so ids follow the lowest node)."""
+    parent = np.arange(n)
+    for i in range(len(a)):
+        x, y = a[i], b[i]
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        while parent[y] != y:
+            parent[y] = parent[parent[y]]
+            y = parent[y]
+        if x != y:
+            if x < y:
+                parent[y] = x
+            else:
+                parent[x] = y
+    comp = np.full(n, -1, dtype=np.int64)
+    count = 0
+    for v in range(n):
+        r = v
+        while parent[r] != r:
+            r = parent[r]
+        if comp[r] < 0:
+            comp[r] = count
+            count += 1
+        comp[v] = comp[r]
+    return comp
 
 
 def _first_index(ids, n):
@@ -134,13 +174,6 @@ def _first_index(ids, n):
     first = np.empty(n, dtype=np.int64)
     first[ids[::-1]] = np.arange(len(ids) - 1, -1, -1)
     return first
-
-
-def _rank_by_first(ids, n):
-    """Renumber ids 0..n-1 (all present) in the order of their first occurrence."""
-    rank = np.empty(n, dtype=np.int64)
-    rank[np.argsort(_first_index(ids, n), kind="stable")] = np.arange(n)
-    return rank[ids]
 
 
 def extract_layout(topology, face_part, face_label):
@@ -183,13 +216,8 @@ def extract_layout(topology, face_part, face_label):
     ends_v, ends_e = ends_v[order], ends_e[order]
     two = degree[ends_v] == 2
     e2 = ends_e[two]
-    pa, pb = e2[0::2], e2[1::2]
-    graph = sp.csr_matrix((np.ones(len(pa), dtype=np.int8), (pa, pb)), shape=(k, k))
-    if k:
-        n_b, comp = connected_components(graph, directed=False)
-    else:
-        n_b, comp = 0, np.zeros(0, dtype=np.int64)
-    sep_boundary = _rank_by_first(comp.astype(np.int64), n_b)
+    sep_boundary = components_by_first(e2[0::2], e2[1::2], k)
+    n_b = int(sep_boundary.max()) + 1 if k else 0
     first_edge = _first_index(sep_boundary, n_b)
     bc = np.sort(np.stack([ca[sep_edges[first_edge]], cb[sep_edges[first_edge]]], axis=1), axis=1)
     boundary_size = np.bincount(sep_boundary, minlength=n_b)
