@@ -117,11 +117,8 @@ def find_charts(topology, face_part, face_label):
     topology : MeshTopology
     face_part, face_label : (m,) int arrays.
     """
-    ef = topology.edge_faces
-    ok = (ef[:, 0] >= 0) & (ef[:, 1] >= 0)
-    a, b = ef[ok, 0], ef[ok, 1]
-    same = (face_part[a] == face_part[b]) & (face_label[a] == face_label[b])
-    return components_by_first(a[same], b[same], len(face_label))
+    return _charts(topology.edge_faces, np.ascontiguousarray(face_part, dtype=np.int64),
+                   np.ascontiguousarray(face_label, dtype=np.int64))
 
 
 @keeps_interrupts
@@ -138,35 +135,89 @@ def components_by_first(a, b, n):
                                 np.ascontiguousarray(b, dtype=np.int64), int(n))
 
 
-@numba.njit(cache=True, nogil=True)
-def _components_by_first(a, b, n):
-    """Union-find with path halving over the pairs, then one pass in node order that numbers
-    each root the first time one of its nodes is met (so ids follow the lowest node)."""
-    parent = np.arange(n)
-    for i in range(len(a)):
-        x, y = a[i], b[i]
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        while parent[y] != y:
-            parent[y] = parent[parent[y]]
-            y = parent[y]
-        if x != y:
-            if x < y:
-                parent[y] = x
-            else:
-                parent[x] = y
+@numba.njit(inline="always")
+def _root(parent, x):
+    """Root of ``x`` in the union-find forest ``parent``, halving the path on the way."""
+    while parent[x] != x:
+        parent[x] = parent[parent[x]]
+        x = parent[x]
+    return x
+
+
+@numba.njit(inline="always")
+def _join(parent, x, y):
+    """Merge the sets of ``x`` and ``y`` under the lower root."""
+    x, y = _root(parent, x), _root(parent, y)
+    if x < y:
+        parent[y] = x
+    elif y < x:
+        parent[x] = y
+
+
+@numba.njit(inline="always")
+def _number_by_first(parent):
+    """(n,) int64 set of each node, sets numbered the first time one of their nodes is met in
+    node order (so ids follow each set's lowest node)."""
+    n = len(parent)
     comp = np.full(n, -1, dtype=np.int64)
     count = 0
     for v in range(n):
-        r = v
-        while parent[r] != r:
-            r = parent[r]
+        r = _root(parent, v)
         if comp[r] < 0:
             comp[r] = count
             count += 1
         comp[v] = comp[r]
     return comp
+
+
+@numba.njit(cache=True, nogil=True)
+def _components_by_first(a, b, n):
+    """:func:`components_by_first` by union-find."""
+    parent = np.arange(n)
+    for i in range(len(a)):
+        _join(parent, a[i], b[i])
+    return _number_by_first(parent)
+
+
+@numba.njit(cache=True, nogil=True)
+def _charts(edge_faces, face_part, face_label):
+    """:func:`find_charts`: faces joined across every edge with two faces of one part and
+    label."""
+    parent = np.arange(len(face_label))
+    for e in range(len(edge_faces)):
+        f, g = edge_faces[e, 0], edge_faces[e, 1]
+        if f >= 0 and g >= 0 and face_part[f] == face_part[g] and face_label[f] == face_label[g]:
+            _join(parent, f, g)
+    return _number_by_first(parent)
+
+
+@numba.njit(cache=True, nogil=True)
+def _separating(edge_faces, face_chart):
+    """(k,) int64 ascending edges with two faces in different charts."""
+    keep = np.zeros(len(edge_faces), dtype=np.bool_)
+    for e in range(len(edge_faces)):
+        f, g = edge_faces[e, 0], edge_faces[e, 1]
+        keep[e] = f >= 0 and g >= 0 and face_chart[f] != face_chart[g]
+    return np.flatnonzero(keep)
+
+
+@numba.njit(cache=True, nogil=True)
+def _boundaries(sep_vertices, degree):
+    """(k,) int64 boundary of each separating edge (vertex pairs ``sep_vertices``, (k, 2)):
+    edges joined at every vertex with exactly two separating edges (``degree`` of each vertex),
+    boundaries numbered by lowest edge."""
+    k = len(sep_vertices)
+    parent = np.arange(k)
+    other = np.full(len(degree), -1, dtype=np.int64)
+    for i in range(k):
+        for end in range(2):
+            v = sep_vertices[i, end]
+            if degree[v] == 2:
+                if other[v] < 0:
+                    other[v] = i
+                else:
+                    _join(parent, other[v], i)
+    return _number_by_first(parent)
 
 
 def _first_index(ids, n):
@@ -176,8 +227,9 @@ def _first_index(ids, n):
     return first
 
 
+@keeps_interrupts
 def extract_layout(topology, face_part, face_label):
-    """Charts, boundaries and corners of a labeling (vectorised).
+    """Charts, boundaries and corners of a labeling.
 
     Parameters
     ----------
@@ -189,50 +241,44 @@ def extract_layout(topology, face_part, face_label):
     -------
     ChartLayout
     """
-    face_part = np.asarray(face_part, dtype=np.int64)
-    face_label = np.asarray(face_label, dtype=np.int64)
+    face_part = np.ascontiguousarray(face_part, dtype=np.int64)
+    face_label = np.ascontiguousarray(face_label, dtype=np.int64)
     m = len(face_label)
-    face_chart = find_charts(topology, face_part, face_label)
+    ef = topology.edge_faces
+    face_chart = _charts(ef, face_part, face_label)
     n_charts = int(face_chart.max()) + 1 if m else 0
     chart_size = np.bincount(face_chart, minlength=n_charts)
     chart_first = _first_index(face_chart, n_charts)
     chart_label = face_label[chart_first]
     chart_part = face_part[chart_first]
 
-    ef = topology.edge_faces
-    ok = (ef[:, 0] >= 0) & (ef[:, 1] >= 0)
-    ca = np.where(ok, face_chart[np.maximum(ef[:, 0], 0)], -1)
-    cb = np.where(ok, face_chart[np.maximum(ef[:, 1], 0)], -1)
-    sep_edges = np.flatnonzero(ok & (ca != cb))
+    sep_edges = _separating(ef, face_chart)
     k = len(sep_edges)
     ev = topology.edges[sep_edges]
     n = topology.n_vertices
     degree = np.bincount(ev.reshape(-1), minlength=n)
-
-    # join separating edges at vertices with exactly two of them
-    ends_v = ev.T.reshape(-1)
-    ends_e = np.tile(np.arange(k), 2)
-    order = np.lexsort((ends_e, ends_v))
-    ends_v, ends_e = ends_v[order], ends_e[order]
-    two = degree[ends_v] == 2
-    e2 = ends_e[two]
-    sep_boundary = components_by_first(e2[0::2], e2[1::2], k)
+    sep_boundary = _boundaries(ev, degree)
     n_b = int(sep_boundary.max()) + 1 if k else 0
     first_edge = _first_index(sep_boundary, n_b)
-    bc = np.sort(np.stack([ca[sep_edges[first_edge]], cb[sep_edges[first_edge]]], axis=1), axis=1)
+    bc = np.sort(face_chart[ef[sep_edges[first_edge]]], axis=1).reshape(n_b, 2)
     boundary_size = np.bincount(sep_boundary, minlength=n_b)
 
-    pairs = np.concatenate([np.stack([np.arange(n_b), bc[:, 0]], 1),
-                            np.stack([np.arange(n_b), bc[:, 1]], 1)])
-    chart_boundary_count = np.bincount(pairs[:, 1], minlength=n_charts)
-    nb = sp.csr_matrix((np.ones(2 * n_b, dtype=np.int64),
-                        (np.concatenate([bc[:, 0], bc[:, 1]]), np.concatenate([bc[:, 1], bc[:, 0]]))),
-                       shape=(n_charts, n_charts))
-    nb.sum_duplicates()
+    chart_boundary_count = np.bincount(bc.reshape(-1), minlength=n_charts)
     corners = np.flatnonzero(degree >= 3)
     return ChartLayout(face_chart, chart_label, chart_part, chart_size, chart_first, sep_edges,
                        sep_boundary, bc, boundary_size, sep_edges[first_edge],
-                       chart_boundary_count, nb, degree, corners)
+                       chart_boundary_count, _chart_neighbours(bc, n_charts), degree, corners)
+
+
+def _chart_neighbours(boundary_charts, n_charts):
+    """(c, c) CSR int64 number of boundaries between each two charts (both ways), indices
+    sorted, from the (b, 2) charts of each boundary."""
+    bc = boundary_charts
+    key = np.concatenate([bc[:, 0] * n_charts + bc[:, 1], bc[:, 1] * n_charts + bc[:, 0]])
+    key, count = np.unique(key, return_counts=True)
+    indptr = np.searchsorted(key // n_charts if n_charts else key, np.arange(n_charts + 1))
+    return sp.csr_matrix((count.astype(np.int64), key % n_charts if n_charts else key, indptr),
+                         shape=(n_charts, n_charts))
 
 
 def boundary_chains(topology, layout, which=None):
