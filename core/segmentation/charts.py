@@ -281,6 +281,7 @@ def _chart_neighbours(boundary_charts, n_charts):
                          shape=(n_charts, n_charts))
 
 
+@keeps_interrupts
 def boundary_chains(topology, layout, which=None):
     """Ordered vertex chains of every boundary (or of the boundaries flagged in ``which``).
 
@@ -294,53 +295,101 @@ def boundary_chains(topology, layout, which=None):
     list of (b,) entries; entry ``i`` is ``(vertices, edges, closed)`` with ``vertices`` a
     (len+1,) int64 array of vertex indices along boundary ``i`` (first == last when closed),
     ``edges`` the (len,) int64 edge indices in walking order and ``closed`` a bool.
-    Walks start at a corner (lowest corner vertex) or, for corner-free loops, at the lowest vertex.
+    Walks start at a corner (lowest corner vertex) or, for corner-free loops, at the lowest vertex,
+    along the lowest edge of the boundary there, and go on along the lowest edge not walked yet
+    until a corner, or until every edge of the boundary is walked.
     """
+    n_b = layout.n_boundaries
+    walk = np.ones(n_b, dtype=np.bool_) if which is None else np.asarray(which, dtype=np.bool_)
     sep = layout.sep_edges
-    # vertices renumbered compactly (the walk touches only boundary vertices)
-    verts_used, ev_local = np.unique(topology.edges[sep], return_inverse=True)
-    ev_local = ev_local.reshape(-1, 2)
-    degree = layout.vertex_sep_degree[verts_used]
-    # incidence: for each vertex the separating edges (local ids) at it
-    inc_v = ev_local.reshape(-1)
-    inc_e = np.repeat(np.arange(len(sep)), 2)
-    order = np.lexsort((inc_e, inc_v))
-    inc_v, inc_e = inc_v[order], inc_e[order]
-    start = np.searchsorted(inc_v, np.arange(len(verts_used) + 1))
-    by_b = np.argsort(layout.sep_boundary, kind="stable")
-    cuts = np.cumsum(layout.boundary_size)[:-1]
-    members = [m.tolist() for m in np.split(by_b, cuts)] if layout.n_boundaries else []
+    chain_v, chain_e, offsets, length, closed = _walk_boundaries(
+        topology.edges[sep], layout.vertex_sep_degree, layout.sep_boundary, n_b, walk)
     chains = []
-    ev_list = ev_local.tolist()
-    degree = degree.tolist()
-    inc_e, start = inc_e.tolist(), start.tolist()
-    for b, local_edges in enumerate(members):
-        if which is not None and not which[b]:
+    for b, (lo, n, c) in enumerate(zip(offsets.tolist(), length.tolist(), closed.tolist())):
+        if not walk[b]:
             chains.append(None)
             continue
-        verts = {v for e in local_edges for v in ev_list[e]}
-        corner_verts = sorted(v for v in verts if degree[v] != 2)
-        closed = not corner_verts
-        v0 = corner_verts[0] if corner_verts else min(verts)
-        bset = set(local_edges)
-        cand = [e for e in inc_e[start[v0]:start[v0 + 1]] if e in bset]
-        e_cur = cand[0]
-        chain_v = [v0]
-        chain_e = [e_cur]
-        used = {e_cur}
-        v = v0
-        while True:
-            a, c = ev_list[e_cur]
-            v = c if a == v else a
-            chain_v.append(v)
-            if degree[v] != 2 or len(used) == len(local_edges):
-                break
-            nxt = [e for e in inc_e[start[v]:start[v + 1]] if e not in used and e in bset]
-            if not nxt:
-                break
-            e_cur = nxt[0]
-            used.add(e_cur)
-            chain_e.append(e_cur)
-        chains.append((verts_used[np.array(chain_v, dtype=np.int64)],
-                       sep[np.array(chain_e, dtype=np.int64)], closed))
+        chains.append((chain_v[lo + b:lo + b + n + 1], sep[chain_e[lo:lo + n]], c))
     return chains
+
+
+@numba.njit(cache=True, nogil=True)
+def _walk_boundaries(sep_vertices, degree, sep_boundary, n_b, walk):
+    """The walks of :func:`boundary_chains` over the separating edges (vertex pairs
+    ``sep_vertices``, (k, 2)) of the boundaries flagged in ``walk``.
+
+    Returns
+    -------
+    chain_v : int64 vertices of the walks, ``offsets[b] + b`` to ``offsets[b] + b + length[b]``
+        (inclusive) the walk of boundary ``b``.
+    chain_e : int64 positions in ``sep_vertices`` of the walked edges, ``offsets[b]`` to
+        ``offsets[b] + length[b]`` (exclusive) those of boundary ``b``.
+    offsets : (b,) int64 room of each boundary (its edges before it, among the flagged ones).
+    length : (b,) int64 edges walked on each boundary.
+    closed : (b,) bool, True for a boundary without a corner.
+    """
+    k = len(sep_vertices)
+    n = len(degree)
+    # separating edges at each vertex, ascending (filled in edge order)
+    start = np.zeros(n + 1, dtype=np.int64)
+    for i in range(k):
+        start[sep_vertices[i, 0] + 1] += 1
+        start[sep_vertices[i, 1] + 1] += 1
+    for v in range(n):
+        start[v + 1] += start[v]
+    fill = start[:-1].copy()
+    incident = np.empty(2 * k, dtype=np.int64)
+    for i in range(k):
+        for end in range(2):
+            v = sep_vertices[i, end]
+            incident[fill[v]] = i
+            fill[v] += 1
+    # start vertex: lowest corner vertex, else lowest vertex
+    size = np.zeros(n_b, dtype=np.int64)
+    low_corner = np.full(n_b, n, dtype=np.int64)
+    low_any = np.full(n_b, n, dtype=np.int64)
+    for i in range(k):
+        b = sep_boundary[i]
+        size[b] += 1
+        for end in range(2):
+            v = sep_vertices[i, end]
+            low_any[b] = min(low_any[b], v)
+            if degree[v] != 2:
+                low_corner[b] = min(low_corner[b], v)
+    offsets = np.zeros(n_b + 1, dtype=np.int64)
+    for b in range(n_b):
+        offsets[b + 1] = offsets[b] + (size[b] if walk[b] else 0)
+    chain_e = np.empty(offsets[n_b], dtype=np.int64)
+    chain_v = np.empty(offsets[n_b] + n_b, dtype=np.int64)
+    closed = low_corner == n
+    used = np.zeros(k, dtype=np.bool_)
+    length = np.zeros(n_b, dtype=np.int64)
+    for b in range(n_b):
+        if not walk[b]:
+            continue
+        v = low_any[b] if closed[b] else low_corner[b]
+        pos_v = offsets[b] + b
+        chain_v[pos_v] = v
+        pos_v += 1
+        count = 0
+        e = -1
+        for j in range(start[v], start[v + 1]):
+            if sep_boundary[incident[j]] == b:
+                e = incident[j]
+                break
+        while e >= 0:
+            used[e] = True
+            chain_e[offsets[b] + count] = e
+            count += 1
+            v = sep_vertices[e, 1] if sep_vertices[e, 0] == v else sep_vertices[e, 0]
+            chain_v[pos_v] = v
+            pos_v += 1
+            if degree[v] != 2 or count == size[b]:
+                break
+            e = -1
+            for j in range(start[v], start[v + 1]):
+                if not used[incident[j]] and sep_boundary[incident[j]] == b:
+                    e = incident[j]
+                    break
+        length[b] = count
+    return chain_v, chain_e, offsets[:-1], length, closed
