@@ -281,7 +281,38 @@ def _chart_neighbours(boundary_charts, n_charts):
                          shape=(n_charts, n_charts))
 
 
+@dataclass(frozen=True)
+class BoundaryWalks:
+    """The walks of :func:`boundary_chains` one after another.
+
+    vertices : int64 vertices of the walks; ``offsets[b] + b`` to ``offsets[b] + b + length[b]``
+        (inclusive) the walk of boundary ``b``.
+    edges : int64 edges (indices into ``topology.edges``) of the walks; ``offsets[b]`` to
+        ``offsets[b] + length[b]`` (exclusive) those of boundary ``b``.
+    offsets : (b,) int64; length : (b,) int64 edges walked on each boundary (0 where not walked).
+    closed : (b,) bool, True for a boundary without a corner.
+    walked : (b,) bool, the boundaries walked.
+    """
+
+    vertices: np.ndarray
+    edges: np.ndarray
+    offsets: np.ndarray
+    length: np.ndarray
+    closed: np.ndarray
+    walked: np.ndarray
+
+
 @keeps_interrupts
+def boundary_walks(topology, layout, which=None):
+    """The walks of :func:`boundary_chains` as flat arrays (a :class:`BoundaryWalks`)."""
+    n_b = layout.n_boundaries
+    walk = np.ones(n_b, dtype=np.bool_) if which is None else np.asarray(which, dtype=np.bool_)
+    sep = layout.sep_edges
+    chain_v, chain_e, offsets, length, closed = _walk_boundaries(
+        topology.edges[sep], layout.vertex_sep_degree, layout.sep_boundary, n_b, walk)
+    return BoundaryWalks(chain_v, sep[chain_e], offsets, length, closed, walk)
+
+
 def boundary_chains(topology, layout, which=None):
     """Ordered vertex chains of every boundary (or of the boundaries flagged in ``which``).
 
@@ -299,17 +330,12 @@ def boundary_chains(topology, layout, which=None):
     along the lowest edge of the boundary there, and go on along the lowest edge not walked yet
     until a corner, or until every edge of the boundary is walked.
     """
-    n_b = layout.n_boundaries
-    walk = np.ones(n_b, dtype=np.bool_) if which is None else np.asarray(which, dtype=np.bool_)
-    sep = layout.sep_edges
-    chain_v, chain_e, offsets, length, closed = _walk_boundaries(
-        topology.edges[sep], layout.vertex_sep_degree, layout.sep_boundary, n_b, walk)
+    w = boundary_walks(topology, layout, which)
     chains = []
-    for b, (lo, n, c) in enumerate(zip(offsets.tolist(), length.tolist(), closed.tolist())):
-        if not walk[b]:
-            chains.append(None)
-            continue
-        chains.append((chain_v[lo + b:lo + b + n + 1], sep[chain_e[lo:lo + n]], c))
+    for b, (lo, n, c, walked) in enumerate(zip(w.offsets.tolist(), w.length.tolist(),
+                                                 w.closed.tolist(), w.walked.tolist())):
+        chains.append((w.vertices[lo + b:lo + b + n + 1], w.edges[lo:lo + n], c)
+                      if walked else None)
     return chains
 
 
