@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
+from core.compiled import keeps_interrupts, numba
 from core.mesh_topology import faces_across, halfedge_faces, unique_edges
 
 OPPOSITE = np.array([1, 0, 3, 2, 5, 4], dtype=np.int64)
@@ -117,16 +117,107 @@ def find_charts(topology, face_part, face_label):
     topology : MeshTopology
     face_part, face_label : (m,) int arrays.
     """
-    ef = topology.edge_faces
-    ok = (ef[:, 0] >= 0) & (ef[:, 1] >= 0)
-    a, b = ef[ok, 0], ef[ok, 1]
-    same = (face_part[a] == face_part[b]) & (face_label[a] == face_label[b])
-    m = len(face_label)
-    graph = sp.csr_matrix((np.ones(int(same.sum()), dtype=np.int8), (a[same], b[same])),
-                          shape=(m, m))
-    n, comp = connected_components(graph, directed=False)
-    # renumber so chart ids follow the lowest face index (independent of scipy's numbering)
-    return _rank_by_first(comp, n)
+    return _charts(topology.edge_faces, np.ascontiguousarray(face_part, dtype=np.int64),
+                   np.ascontiguousarray(face_label, dtype=np.int64))
+
+
+@keeps_interrupts
+def components_by_first(a, b, n):
+    """(n,) int64 connected component of each node of the graph with edges ``a[i] - b[i]``,
+    components numbered in the order of their lowest node.
+
+    Parameters
+    ----------
+    a, b : (k,) int node pairs, nodes 0..n-1.
+    n : int number of nodes.
+    """
+    return _components_by_first(np.ascontiguousarray(a, dtype=np.int64),
+                                np.ascontiguousarray(b, dtype=np.int64), int(n))
+
+
+@numba.njit(inline="always")
+def _root(parent, x):
+    """Root of ``x`` in the union-find forest ``parent``, halving the path on the way."""
+    while parent[x] != x:
+        parent[x] = parent[parent[x]]
+        x = parent[x]
+    return x
+
+
+@numba.njit(inline="always")
+def _join(parent, x, y):
+    """Merge the sets of ``x`` and ``y`` under the lower root."""
+    x, y = _root(parent, x), _root(parent, y)
+    if x < y:
+        parent[y] = x
+    elif y < x:
+        parent[x] = y
+
+
+@numba.njit(inline="always")
+def _number_by_first(parent):
+    """(n,) int64 set of each node, sets numbered the first time one of their nodes is met in
+    node order (so ids follow each set's lowest node)."""
+    n = len(parent)
+    comp = np.full(n, -1, dtype=np.int64)
+    count = 0
+    for v in range(n):
+        r = _root(parent, v)
+        if comp[r] < 0:
+            comp[r] = count
+            count += 1
+        comp[v] = comp[r]
+    return comp
+
+
+@numba.njit(cache=True, nogil=True)
+def _components_by_first(a, b, n):
+    """:func:`components_by_first` by union-find."""
+    parent = np.arange(n)
+    for i in range(len(a)):
+        _join(parent, a[i], b[i])
+    return _number_by_first(parent)
+
+
+@numba.njit(cache=True, nogil=True)
+def _charts(edge_faces, face_part, face_label):
+    """:func:`find_charts`: faces joined across every edge with two faces of one part and
+    label."""
+    parent = np.arange(len(face_label))
+    for e in range(len(edge_faces)):
+        f, g = edge_faces[e, 0], edge_faces[e, 1]
+        if f >= 0 and g >= 0 and face_part[f] == face_part[g] and face_label[f] == face_label[g]:
+            _join(parent, f, g)
+    return _number_by_first(parent)
+
+
+@numba.njit(cache=True, nogil=True)
+def _separating(edge_faces, face_chart):
+    """(k,) int64 ascending edges with two faces in different charts."""
+    keep = np.zeros(len(edge_faces), dtype=np.bool_)
+    for e in range(len(edge_faces)):
+        f, g = edge_faces[e, 0], edge_faces[e, 1]
+        keep[e] = f >= 0 and g >= 0 and face_chart[f] != face_chart[g]
+    return np.flatnonzero(keep)
+
+
+@numba.njit(cache=True, nogil=True)
+def _boundaries(sep_vertices, degree):
+    """(k,) int64 boundary of each separating edge (vertex pairs ``sep_vertices``, (k, 2)):
+    edges joined at every vertex with exactly two separating edges (``degree`` of each vertex),
+    boundaries numbered by lowest edge."""
+    k = len(sep_vertices)
+    parent = np.arange(k)
+    other = np.full(len(degree), -1, dtype=np.int64)
+    for i in range(k):
+        for end in range(2):
+            v = sep_vertices[i, end]
+            if degree[v] == 2:
+                if other[v] < 0:
+                    other[v] = i
+                else:
+                    _join(parent, other[v], i)
+    return _number_by_first(parent)
 
 
 def _first_index(ids, n):
@@ -136,15 +227,9 @@ def _first_index(ids, n):
     return first
 
 
-def _rank_by_first(ids, n):
-    """Renumber ids 0..n-1 (all present) in the order of their first occurrence."""
-    rank = np.empty(n, dtype=np.int64)
-    rank[np.argsort(_first_index(ids, n), kind="stable")] = np.arange(n)
-    return rank[ids]
-
-
+@keeps_interrupts
 def extract_layout(topology, face_part, face_label):
-    """Charts, boundaries and corners of a labeling (vectorised).
+    """Charts, boundaries and corners of a labeling.
 
     Parameters
     ----------
@@ -156,55 +241,76 @@ def extract_layout(topology, face_part, face_label):
     -------
     ChartLayout
     """
-    face_part = np.asarray(face_part, dtype=np.int64)
-    face_label = np.asarray(face_label, dtype=np.int64)
+    face_part = np.ascontiguousarray(face_part, dtype=np.int64)
+    face_label = np.ascontiguousarray(face_label, dtype=np.int64)
     m = len(face_label)
-    face_chart = find_charts(topology, face_part, face_label)
+    ef = topology.edge_faces
+    face_chart = _charts(ef, face_part, face_label)
     n_charts = int(face_chart.max()) + 1 if m else 0
     chart_size = np.bincount(face_chart, minlength=n_charts)
     chart_first = _first_index(face_chart, n_charts)
     chart_label = face_label[chart_first]
     chart_part = face_part[chart_first]
 
-    ef = topology.edge_faces
-    ok = (ef[:, 0] >= 0) & (ef[:, 1] >= 0)
-    ca = np.where(ok, face_chart[np.maximum(ef[:, 0], 0)], -1)
-    cb = np.where(ok, face_chart[np.maximum(ef[:, 1], 0)], -1)
-    sep_edges = np.flatnonzero(ok & (ca != cb))
+    sep_edges = _separating(ef, face_chart)
     k = len(sep_edges)
     ev = topology.edges[sep_edges]
     n = topology.n_vertices
     degree = np.bincount(ev.reshape(-1), minlength=n)
-
-    # join separating edges at vertices with exactly two of them
-    ends_v = ev.T.reshape(-1)
-    ends_e = np.tile(np.arange(k), 2)
-    order = np.lexsort((ends_e, ends_v))
-    ends_v, ends_e = ends_v[order], ends_e[order]
-    two = degree[ends_v] == 2
-    e2 = ends_e[two]
-    pa, pb = e2[0::2], e2[1::2]
-    graph = sp.csr_matrix((np.ones(len(pa), dtype=np.int8), (pa, pb)), shape=(k, k))
-    if k:
-        n_b, comp = connected_components(graph, directed=False)
-    else:
-        n_b, comp = 0, np.zeros(0, dtype=np.int64)
-    sep_boundary = _rank_by_first(comp.astype(np.int64), n_b)
+    sep_boundary = _boundaries(ev, degree)
+    n_b = int(sep_boundary.max()) + 1 if k else 0
     first_edge = _first_index(sep_boundary, n_b)
-    bc = np.sort(np.stack([ca[sep_edges[first_edge]], cb[sep_edges[first_edge]]], axis=1), axis=1)
+    bc = np.sort(face_chart[ef[sep_edges[first_edge]]], axis=1).reshape(n_b, 2)
     boundary_size = np.bincount(sep_boundary, minlength=n_b)
 
-    pairs = np.concatenate([np.stack([np.arange(n_b), bc[:, 0]], 1),
-                            np.stack([np.arange(n_b), bc[:, 1]], 1)])
-    chart_boundary_count = np.bincount(pairs[:, 1], minlength=n_charts)
-    nb = sp.csr_matrix((np.ones(2 * n_b, dtype=np.int64),
-                        (np.concatenate([bc[:, 0], bc[:, 1]]), np.concatenate([bc[:, 1], bc[:, 0]]))),
-                       shape=(n_charts, n_charts))
-    nb.sum_duplicates()
+    chart_boundary_count = np.bincount(bc.reshape(-1), minlength=n_charts)
     corners = np.flatnonzero(degree >= 3)
     return ChartLayout(face_chart, chart_label, chart_part, chart_size, chart_first, sep_edges,
                        sep_boundary, bc, boundary_size, sep_edges[first_edge],
-                       chart_boundary_count, nb, degree, corners)
+                       chart_boundary_count, _chart_neighbours(bc, n_charts), degree, corners)
+
+
+def _chart_neighbours(boundary_charts, n_charts):
+    """(c, c) CSR int64 number of boundaries between each two charts (both ways), indices
+    sorted, from the (b, 2) charts of each boundary."""
+    bc = boundary_charts
+    key = np.concatenate([bc[:, 0] * n_charts + bc[:, 1], bc[:, 1] * n_charts + bc[:, 0]])
+    key, count = np.unique(key, return_counts=True)
+    indptr = np.searchsorted(key // n_charts if n_charts else key, np.arange(n_charts + 1))
+    return sp.csr_matrix((count.astype(np.int64), key % n_charts if n_charts else key, indptr),
+                         shape=(n_charts, n_charts))
+
+
+@dataclass(frozen=True)
+class BoundaryWalks:
+    """The walks of :func:`boundary_chains` one after another.
+
+    vertices : int64 vertices of the walks; ``offsets[b] + b`` to ``offsets[b] + b + length[b]``
+        (inclusive) the walk of boundary ``b``.
+    edges : int64 edges (indices into ``topology.edges``) of the walks; ``offsets[b]`` to
+        ``offsets[b] + length[b]`` (exclusive) those of boundary ``b``.
+    offsets : (b,) int64; length : (b,) int64 edges walked on each boundary (0 where not walked).
+    closed : (b,) bool, True for a boundary without a corner.
+    walked : (b,) bool, the boundaries walked.
+    """
+
+    vertices: np.ndarray
+    edges: np.ndarray
+    offsets: np.ndarray
+    length: np.ndarray
+    closed: np.ndarray
+    walked: np.ndarray
+
+
+@keeps_interrupts
+def boundary_walks(topology, layout, which=None):
+    """The walks of :func:`boundary_chains` as flat arrays (a :class:`BoundaryWalks`)."""
+    n_b = layout.n_boundaries
+    walk = np.ones(n_b, dtype=np.bool_) if which is None else np.asarray(which, dtype=np.bool_)
+    sep = layout.sep_edges
+    chain_v, chain_e, offsets, length, closed = _walk_boundaries(
+        topology.edges[sep], layout.vertex_sep_degree, layout.sep_boundary, n_b, walk)
+    return BoundaryWalks(chain_v, sep[chain_e], offsets, length, closed, walk)
 
 
 def boundary_chains(topology, layout, which=None):
@@ -220,53 +326,96 @@ def boundary_chains(topology, layout, which=None):
     list of (b,) entries; entry ``i`` is ``(vertices, edges, closed)`` with ``vertices`` a
     (len+1,) int64 array of vertex indices along boundary ``i`` (first == last when closed),
     ``edges`` the (len,) int64 edge indices in walking order and ``closed`` a bool.
-    Walks start at a corner (lowest corner vertex) or, for corner-free loops, at the lowest vertex.
+    Walks start at a corner (lowest corner vertex) or, for corner-free loops, at the lowest vertex,
+    along the lowest edge of the boundary there, and go on along the lowest edge not walked yet
+    until a corner, or until every edge of the boundary is walked.
     """
-    sep = layout.sep_edges
-    # vertices renumbered compactly (the walk touches only boundary vertices)
-    verts_used, ev_local = np.unique(topology.edges[sep], return_inverse=True)
-    ev_local = ev_local.reshape(-1, 2)
-    degree = layout.vertex_sep_degree[verts_used]
-    # incidence: for each vertex the separating edges (local ids) at it
-    inc_v = ev_local.reshape(-1)
-    inc_e = np.repeat(np.arange(len(sep)), 2)
-    order = np.lexsort((inc_e, inc_v))
-    inc_v, inc_e = inc_v[order], inc_e[order]
-    start = np.searchsorted(inc_v, np.arange(len(verts_used) + 1))
-    by_b = np.argsort(layout.sep_boundary, kind="stable")
-    cuts = np.cumsum(layout.boundary_size)[:-1]
-    members = [m.tolist() for m in np.split(by_b, cuts)] if layout.n_boundaries else []
+    w = boundary_walks(topology, layout, which)
     chains = []
-    ev_list = ev_local.tolist()
-    degree = degree.tolist()
-    inc_e, start = inc_e.tolist(), start.tolist()
-    for b, local_edges in enumerate(members):
-        if which is not None and not which[b]:
-            chains.append(None)
-            continue
-        verts = {v for e in local_edges for v in ev_list[e]}
-        corner_verts = sorted(v for v in verts if degree[v] != 2)
-        closed = not corner_verts
-        v0 = corner_verts[0] if corner_verts else min(verts)
-        bset = set(local_edges)
-        cand = [e for e in inc_e[start[v0]:start[v0 + 1]] if e in bset]
-        e_cur = cand[0]
-        chain_v = [v0]
-        chain_e = [e_cur]
-        used = {e_cur}
-        v = v0
-        while True:
-            a, c = ev_list[e_cur]
-            v = c if a == v else a
-            chain_v.append(v)
-            if degree[v] != 2 or len(used) == len(local_edges):
-                break
-            nxt = [e for e in inc_e[start[v]:start[v + 1]] if e not in used and e in bset]
-            if not nxt:
-                break
-            e_cur = nxt[0]
-            used.add(e_cur)
-            chain_e.append(e_cur)
-        chains.append((verts_used[np.array(chain_v, dtype=np.int64)],
-                       sep[np.array(chain_e, dtype=np.int64)], closed))
+    for b, (lo, n, c, walked) in enumerate(zip(w.offsets.tolist(), w.length.tolist(),
+                                                 w.closed.tolist(), w.walked.tolist())):
+        chains.append((w.vertices[lo + b:lo + b + n + 1], w.edges[lo:lo + n], c)
+                      if walked else None)
     return chains
+
+
+@numba.njit(cache=True, nogil=True)
+def _walk_boundaries(sep_vertices, degree, sep_boundary, n_b, walk):
+    """The walks of :func:`boundary_chains` over the separating edges (vertex pairs
+    ``sep_vertices``, (k, 2)) of the boundaries flagged in ``walk``.
+
+    Returns
+    -------
+    chain_v : int64 vertices of the walks, ``offsets[b] + b`` to ``offsets[b] + b + length[b]``
+        (inclusive) the walk of boundary ``b``.
+    chain_e : int64 positions in ``sep_vertices`` of the walked edges, ``offsets[b]`` to
+        ``offsets[b] + length[b]`` (exclusive) those of boundary ``b``.
+    offsets : (b,) int64 room of each boundary (its edges before it, among the flagged ones).
+    length : (b,) int64 edges walked on each boundary.
+    closed : (b,) bool, True for a boundary without a corner.
+    """
+    k = len(sep_vertices)
+    n = len(degree)
+    # separating edges at each vertex, ascending (filled in edge order)
+    start = np.zeros(n + 1, dtype=np.int64)
+    for i in range(k):
+        start[sep_vertices[i, 0] + 1] += 1
+        start[sep_vertices[i, 1] + 1] += 1
+    for v in range(n):
+        start[v + 1] += start[v]
+    fill = start[:-1].copy()
+    incident = np.empty(2 * k, dtype=np.int64)
+    for i in range(k):
+        for end in range(2):
+            v = sep_vertices[i, end]
+            incident[fill[v]] = i
+            fill[v] += 1
+    # start vertex: lowest corner vertex, else lowest vertex
+    size = np.zeros(n_b, dtype=np.int64)
+    low_corner = np.full(n_b, n, dtype=np.int64)
+    low_any = np.full(n_b, n, dtype=np.int64)
+    for i in range(k):
+        b = sep_boundary[i]
+        size[b] += 1
+        for end in range(2):
+            v = sep_vertices[i, end]
+            low_any[b] = min(low_any[b], v)
+            if degree[v] != 2:
+                low_corner[b] = min(low_corner[b], v)
+    offsets = np.zeros(n_b + 1, dtype=np.int64)
+    for b in range(n_b):
+        offsets[b + 1] = offsets[b] + (size[b] if walk[b] else 0)
+    chain_e = np.empty(offsets[n_b], dtype=np.int64)
+    chain_v = np.empty(offsets[n_b] + n_b, dtype=np.int64)
+    closed = low_corner == n
+    used = np.zeros(k, dtype=np.bool_)
+    length = np.zeros(n_b, dtype=np.int64)
+    for b in range(n_b):
+        if not walk[b]:
+            continue
+        v = low_any[b] if closed[b] else low_corner[b]
+        pos_v = offsets[b] + b
+        chain_v[pos_v] = v
+        pos_v += 1
+        count = 0
+        e = -1
+        for j in range(start[v], start[v + 1]):
+            if sep_boundary[incident[j]] == b:
+                e = incident[j]
+                break
+        while e >= 0:
+            used[e] = True
+            chain_e[offsets[b] + count] = e
+            count += 1
+            v = sep_vertices[e, 1] if sep_vertices[e, 0] == v else sep_vertices[e, 0]
+            chain_v[pos_v] = v
+            pos_v += 1
+            if degree[v] != 2 or count == size[b]:
+                break
+            e = -1
+            for j in range(start[v], start[v + 1]):
+                if not used[incident[j]] and sep_boundary[incident[j]] == b:
+                    e = incident[j]
+                    break
+        length[b] = count
+    return chain_v, chain_e, offsets[:-1], length, closed

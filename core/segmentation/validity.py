@@ -42,7 +42,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from core.segmentation.charts import MeshTopology, boundary_chains, build_topology, extract_layout
+from core.compiled import keeps_interrupts, numba
+from core.segmentation.charts import MeshTopology, boundary_walks, build_topology, extract_layout
 from core.segmentation.parts import interface_pieces, interface_x_axis
 
 COS_45 = float(np.sqrt(0.5))
@@ -99,30 +100,57 @@ def _interface_side_axis(face_frame, face, label, ix):
     return np.where(parallel, -1, axis).astype(np.int64)
 
 
+@keeps_interrupts
 def _turning_points(V, topology, layout, face_frame, boundary_axis, tau, which=None):
     """(t, 2) int64 rows (boundary, vertex) of the turning points (module docstring); only the
     boundaries flagged in ``which`` ((b,) bool) are walked when it is given."""
+    w = boundary_walks(topology, layout, which)
+    return _turning_kernel(np.ascontiguousarray(V, dtype=np.float64), topology.edge_faces,
+                           np.ascontiguousarray(face_frame, dtype=np.float64), w.vertices,
+                           w.edges, w.offsets, w.length, w.closed, w.walked,
+                           np.ascontiguousarray(boundary_axis, dtype=np.int64), float(tau))
+
+
+@numba.njit(cache=True, nogil=True)
+def _turning_kernel(V, edge_faces, face_frame, chain_v, chain_e, offsets, length, closed,
+                    walked, boundary_axis, tau):
+    """:func:`_turning_points` on the walks of :func:`core.segmentation.charts.boundary_walks`
+    (its arrays): the displacement along each walked boundary of axis ``k >= 0`` and two or
+    more edges, projected on the ``k`` axis of the frame of each edge's first face, summed
+    from the start (a loop from its lowest point), and the hysteresis walk over the sums."""
     rows = []
-    chains = boundary_chains(topology, layout, which)
-    for b, chain in enumerate(chains):
-        if chain is None:
-            continue
-        verts, edges, closed = chain
+    for b in range(len(offsets)):
         k = boundary_axis[b]
-        if k < 0 or len(edges) < 2:
+        n = length[b]
+        if not walked[b] or k < 0 or n < 2:
             continue
-        f = topology.edge_faces[edges, 0]
-        step = ((V[verts[1:]] - V[verts[:-1]]) * face_frame[f, k]).sum(axis=1)
-        if closed:
+        v0 = offsets[b] + b
+        e0 = offsets[b]
+        step = np.empty(n)
+        for i in range(n):
+            a, c, f = chain_v[v0 + i], chain_v[v0 + i + 1], edge_faces[chain_e[e0 + i], 0]
+            acc = (V[c, 0] - V[a, 0]) * face_frame[f, k, 0]
+            acc += (V[c, 1] - V[a, 1]) * face_frame[f, k, 1]
+            acc += (V[c, 2] - V[a, 2]) * face_frame[f, k, 2]
+            step[i] = acc
+        verts = chain_v[v0:v0 + n + 1].copy()
+        if closed[b]:
             # start a loop at its lowest point so the turn there is seen when the walk closes
-            low = int(np.argmin(np.concatenate([[0.0], np.cumsum(step)])[:-1]))
-            step = np.roll(step, -low)
-            verts = np.concatenate([np.roll(verts[:-1], -low), [verts[low]]])
-        s = np.concatenate([[0.0], np.cumsum(step)]).tolist()
+            low, lowest, total = 0, 0.0, 0.0
+            for i in range(n - 1):
+                total += step[i]
+                if total < lowest:
+                    low, lowest = i + 1, total
+            step = np.concatenate((step[low:], step[:low]))
+            ring = verts[:n]
+            verts = np.concatenate((ring[low:], ring[:low], ring[low:low + 1]))
         found = len(rows)
         direction, ext, ext_i = 0, 0.0, 0
         lo = hi = 0.0
-        for i, si in enumerate(s):
+        si = 0.0
+        for i in range(n + 1):
+            if i:
+                si += step[i - 1]
             if direction == 0:
                 lo, hi = min(lo, si), max(hi, si)
                 if si - lo > tau:
@@ -132,11 +160,14 @@ def _turning_points(V, topology, layout, face_frame, boundary_axis, tau, which=N
             elif direction * (si - ext) > 0:
                 ext, ext_i = si, i
             elif direction * (ext - si) > tau:
-                rows.append((b, int(verts[ext_i])))
+                rows.append((b, verts[ext_i]))
                 direction, ext, ext_i = -direction, si, i
-        if closed and len(rows) > found and direction < 0:
-            rows.append((b, int(verts[0])))
-    return np.array(rows, dtype=np.int64).reshape(-1, 2)
+        if closed[b] and len(rows) > found and direction < 0:
+            rows.append((b, verts[0]))
+    out = np.empty((len(rows), 2), dtype=np.int64)
+    for i in range(len(rows)):
+        out[i, 0], out[i, 1] = rows[i]
+    return out
 
 
 def _example_point(V, F, face):

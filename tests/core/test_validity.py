@@ -4,7 +4,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from core.segmentation.charts import boundary_chains, build_topology, extract_layout
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from core.segmentation.charts import (boundary_chains, build_topology, components_by_first,
+                                      extract_layout)
 from core.segmentation.labeling import face_normals, nearest_direction_labels
 from core.segmentation.validity import check_validity, corner_axes_valid
 
@@ -32,6 +36,23 @@ def judge(V, F, labels, parts=None, **kw):
     m = len(F)
     parts = np.zeros(m, dtype=np.int64) if parts is None else parts
     return check_validity(V, F, parts, labels, frames(m), **kw)
+
+
+@pytest.mark.parametrize("n, k", [(0, 0), (7, 0), (300, 150), (3000, 2900)])
+def test_components_by_first_matches_scipy_renumbered_by_lowest_node(n, k):
+    rng = np.random.default_rng(n + k)
+    a, b = rng.integers(0, max(n, 1), (2, k))
+    comp = components_by_first(a, b, n)
+    assert comp.shape == (n,) and comp.dtype == np.int64
+    if not n:
+        return
+    _, ref = connected_components(coo_matrix((np.ones(k), (a, b)), shape=(n, n)), directed=False)
+    # same partition: the two labelings map one to one
+    pairs = np.unique(np.stack([comp, ref], axis=1), axis=0)
+    assert len(pairs) == len(np.unique(comp)) == len(np.unique(ref))
+    # ids in the order of each component's lowest node
+    first = np.unique(comp, return_index=True)[1]
+    assert np.array_equal(comp[np.sort(first)], np.arange(len(first)))
 
 
 def test_cube_by_normals_is_valid_polycube():
