@@ -132,9 +132,10 @@ class _Entities:
                 rows = np.flatnonzero(places == decimals)
                 reals[rows] = np.array(step_fixed_reals(xyz[rows], decimals),
                                        dtype=object).reshape(-1, d)
+        # every line in one formatting pass over the flat literals (a list per row costs more)
+        line = "CARTESIAN_POINT('',(" + ",".join(["%s"] * d) + "))\n"
         ids = []
-        for row in reals.tolist():
-            text = f"CARTESIAN_POINT('',({','.join(row)}))"
+        for text in ((line * len(reals)) % tuple(reals.reshape(-1).tolist())).split("\n")[:-1]:
             known = self.point_ids.get(text)
             if known is None:
                 known = self.point_ids[text] = self.add(text)
