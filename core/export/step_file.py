@@ -58,7 +58,9 @@ def step_fixed_reals(values, decimals=POINT_DECIMALS):
     """STEP REAL literals of a float array rounded to ``decimals`` decimals, without trailing
     zeros (``-1.25``, ``3.``, ``0.``). Returns a list of str."""
     flat = np.round(np.asarray(values, dtype=np.float64).reshape(-1), decimals) + 0.0
-    text = ((f"%.{decimals}f," * len(flat)) % tuple(flat.tolist())).split(",")[:-1]
+    # a decimal point in every literal: the zeros stripped are decimals only ("30." not "3")
+    form = f"%.{decimals}f," if decimals > 0 else "%.0f.,"
+    text = ((form * len(flat)) % tuple(flat.tolist())).split(",")[:-1]
     return [t.rstrip("0") for t in text]
 
 

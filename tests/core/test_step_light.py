@@ -8,7 +8,7 @@ import pytest
 
 from core.export.g1_patches import g1_surface_patches
 from core.export.step_file import (LIGHT_NORMAL_TURN, LIGHT_POINT_STEP, POINT_DECIMALS,
-                                   light_point_decimals, step_text)
+                                   light_point_decimals, step_fixed_reals, step_text)
 from core.subdivision import sample_cages
 from core.tolerances import BREP_MM
 
@@ -64,3 +64,11 @@ def test_light_text_is_shorter_with_the_same_entities(light):
     assert len(texts[1]) < 0.97 * len(texts[0])
     for entity in ("ADVANCED_FACE(", "EDGE_CURVE(", "VERTEX_POINT(", "PCURVE("):
         assert texts[0].count(entity) == texts[1].count(entity)
+
+
+def test_whole_millimetre_literals_keep_their_digits():
+    # a point rounded to no decimals (a very large model) still reads back as itself
+    literals = step_fixed_reals([30.0, -120.4, 0.0, 1e6], 0)
+    assert literals == ["30.", "-120.", "0.", "1000000."]
+    assert [float(text) for text in literals] == [30.0, -120.0, 0.0, 1e6]
+    assert step_fixed_reals([30.0, 0.25], 2) == ["30.", "0.25"]
