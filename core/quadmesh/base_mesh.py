@@ -139,12 +139,9 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
     Charts whose integer polygon overlaps itself are cut at the reflex corners next to the
     overlap (:mod:`core.quadmesh.polycube.overlap_cuts`; only those charts, so the others keep their
     freedom), and the quantization is repeated at the same scale; a chart that still overlaps
-    is cut at more corners. Corners at the end of a collapsible side are not cut at first (the
-    piece they would start is at least one unit wide across a sliver that may vanish): where
-    only those are left, the crossings are kept apart as with ``separate``, and a chart gets its
-    full rectangular refinement only where no separation is left to try (a chart whose
-    refinement makes the program infeasible stays whole). Where the cuts made the layout larger
-    than ``give_up_faces``, the scale is searched again with them.
+    is cut at more corners, up to its full rectangular refinement (a chart whose refinement
+    makes the program infeasible stays whole). Where the cuts made the layout larger than
+    ``give_up_faces``, the scale is searched again with them.
 
     Before a program is solved, a linear lower bound on the quads of every layout it could
     lead to (:func:`core.quadmesh.polycube.quantize.minimum_faces`) ends an attempt that cannot stay
@@ -228,17 +225,9 @@ def _layout_on_target(V, F, complex_, tables, target_faces, max_base_faces, coll
                     scale = polycube.scale
                     continue
             last = _cut_overlapping_chart(complex_, tables, polycube, exc.charts, refine, cuts,
-                                          unrefinable, collapsible)
+                                          unrefinable)
             if last is None:
-                # no corner left to cut but at slivers: keep the crossings apart, and split a
-                # chart whole (its sliver corners too) only where no separation is left either
-                added = _next_separations(tables, polycube, exc.charts, separations, rejected)
-                separations = separations + added
-                if not added:
-                    last = _cut_overlapping_chart(complex_, tables, polycube, exc.charts, refine,
-                                                  cuts, unrefinable)
-                if last is None and not added:
-                    raise
+                raise
             scale = polycube.scale
             continue
         if scale is None or abs(polycube.faces - target_faces) <= BUDGET_TOLERANCE * target_faces:
@@ -362,28 +351,22 @@ def _with_corners(complex_, tables, refinement, polycube, collapsible, least, se
     return []
 
 
-def _cut_overlapping_chart(complex_, tables, polycube, charts, refine, cuts, unrefinable,
-                           collapsible=None):
+def _cut_overlapping_chart(complex_, tables, polycube, charts, refine, cuts, unrefinable):
     """Cut one more overlapping chart, or cut one further; returns it (None: none left).
 
     The first of ``charts`` that is not split into rectangles yet gets the reflex corners next
     to its overlapping cells cut (:func:`core.quadmesh.polycube.overlap_cuts.corners_to_cut`), added
     to those it has in ``cuts``; where none is left to cut, all of them (``cuts`` loses the chart).
-    With ``collapsible`` ((s,) bool sides that may have length zero), corners at the end of a
-    collapsible side are never cut, and a chart with no other corner left to cut is passed
-    over instead of split whole. ``refine`` and ``cuts`` are updated in place.
+    ``refine`` and ``cuts`` are updated in place.
     """
     orientation = chart_orientation(complex_, tables, polycube.corner_uv)
     for chart in charts:
         if chart in unrefinable or (chart in refine and chart not in cuts):
             continue
         done = cuts.get(chart, set())
-        more = corners_to_cut(tables, polycube.corner_uv, chart, int(orientation[chart]), done,
-                              collapsible)
+        more = corners_to_cut(tables, polycube.corner_uv, chart, int(orientation[chart]), done)
         if more:
             cuts[chart] = done | more
-        elif collapsible is not None:
-            continue  # only corners at slivers are left to cut
         else:
             cuts.pop(chart, None)
         refine.setdefault(chart, REFINEMENTS[0])

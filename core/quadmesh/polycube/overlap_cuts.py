@@ -10,19 +10,13 @@ hooked arm of rectangles reaching over another), but every rectangle then needs 
 holes, cut open by slits, has dozens of reflex corners, and its rectangles make the layout several
 times larger than its features need.
 
-A partial refinement extends only a few reflex corners: those next to the cells that overlap,
-and not those at the end of a side that may collapse (a sliver of the labeling, a step of a
-staircase along a slanted strut): the cut such a corner starts is an edge of at least one unit
-across the sliver, so the sliver could no longer vanish, and the cuts of a staircase would hold
-the layout at several times the size its features need.
-
+A partial refinement extends only a few reflex corners: those next to the cells that overlap.
 Each extension is a cut across the chart to the side ahead of the corner; the pieces on either
 side close as polygons of their own, which ties the overlapping part of the boundary to the
 far side of the chart (a hole's walk to the plate's rim), the relation the whole-chart closure
 lacked. Where the chart still overlaps, the next quantization cuts at the corners next to the
 new overlap; once every reflex corner is cut the pieces are Tamassia's rectangles, so the
-escalation ends at the full refinement (which the base-mesh stage reaches only after the
-separations below, where every corner left is at a sliver).
+escalation ends at the full refinement.
 
 Cuts tie a chart into rectangles of at least one unit each, which can make a layout much larger
 than the overlap needs. A lighter remedy separates the two boundary segments that cross
@@ -79,7 +73,7 @@ def overlapping_cells(tables, corner_uv, walk, orientation):
     return cells[(winding < 0) | (winding > 1)]
 
 
-def corners_to_cut(tables, corner_uv, chart, orientation, already_cut, collapsible=None):
+def corners_to_cut(tables, corner_uv, chart, orientation, already_cut):
     """References whose reflex start corners should be cut next in an overlapping chart.
 
     Parameters
@@ -88,21 +82,15 @@ def corners_to_cut(tables, corner_uv, chart, orientation, already_cut, collapsib
     chart : int, a chart whose polygon overlaps itself; orientation : +1 or -1 its loop's
         turning sense in ``(u, v)`` (:func:`core.quadmesh.polycube.lattice.chart_orientation`).
     already_cut : set of references cut already.
-    collapsible : (s,) bool sides that may have length zero, or None: corners at either end of
-        such a side are never returned (module docstring).
 
     Returns
     -------
     set of int: the uncut reflex corners next to the overlapping cells (module docstring), or
     the uncut ones nearest to them where none is next to them; empty when every reflex corner
-    (but those at collapsible sides) is cut or no cell overlaps.
+    is cut or no cell overlaps.
     """
     walk = chart_walk(tables, chart)
-    reflex = reflex_references(tables, walk)
-    if collapsible is not None:
-        sliver = np.asarray(collapsible, dtype=bool)[tables.ref_side[walk]]
-        reflex &= ~(sliver | np.roll(sliver, 1))
-    candidates = walk[reflex]
+    candidates = walk[reflex_references(tables, walk)]
     candidates = np.array([r for r in candidates.tolist() if r not in already_cut],
                           dtype=np.int64)
     cells = overlapping_cells(tables, corner_uv, walk, orientation)
