@@ -1055,7 +1055,12 @@ def _polycube_base_mesh(target, face_part, face_label, face_frame, part_frames, 
     complex_ = layout_complex
     within = abs(polycube.faces - target_faces) <= BUDGET_TOLERANCE * target_faces
     minimum_reason = None
-    if not within and polycube.faces > target_faces:
+    if not within and polycube.faces > target_faces and corner_cost > 0:
+        # the corner terms, not the sides' least lengths, set this layout's size
+        minimum_reason = (f"the layout quantized with the corners of its drifting charts near "
+                          f"their measured places has {polycube.faces} quads "
+                          f"({complex_.n_charts} charts)")
+    elif not within and polycube.faces > target_faces:
         minimum_reason = (f"{complex_.n_sides} sides of at least one unit each around "
                           f"{complex_.n_charts} charts need at least about {polycube.faces} quads")
     info = {
