@@ -121,20 +121,6 @@ def find_charts(topology, face_part, face_label):
                    np.ascontiguousarray(face_label, dtype=np.int64))
 
 
-@keeps_interrupts
-def components_by_first(a, b, n):
-    """(n,) int64 connected component of each node of the graph with edges ``a[i] - b[i]``,
-    components numbered in the order of their lowest node.
-
-    Parameters
-    ----------
-    a, b : (k,) int node pairs, nodes 0..n-1.
-    n : int number of nodes.
-    """
-    return _components_by_first(np.ascontiguousarray(a, dtype=np.int64),
-                                np.ascontiguousarray(b, dtype=np.int64), int(n))
-
-
 @numba.njit(inline="always")
 def _root(parent, x):
     """Root of ``x`` in the union-find forest ``parent``, halving the path on the way."""
@@ -168,15 +154,6 @@ def _number_by_first(parent):
             count += 1
         comp[v] = comp[r]
     return comp
-
-
-@numba.njit(cache=True, nogil=True)
-def _components_by_first(a, b, n):
-    """:func:`components_by_first` by union-find."""
-    parent = np.arange(n)
-    for i in range(len(a)):
-        _join(parent, a[i], b[i])
-    return _number_by_first(parent)
 
 
 @numba.njit(cache=True, nogil=True)

@@ -7,8 +7,8 @@ import trimesh
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from core.segmentation.charts import (boundary_chains, build_topology, components_by_first,
-                                      extract_layout)
+from core.segmentation.charts import (boundary_chains, build_topology, extract_layout,
+                                      find_charts)
 from core.segmentation.labeling import face_normals, nearest_direction_labels
 from core.segmentation.validity import check_validity, corner_axes_valid
 
@@ -38,21 +38,25 @@ def judge(V, F, labels, parts=None, **kw):
     return check_validity(V, F, parts, labels, frames(m), **kw)
 
 
-@pytest.mark.parametrize("n, k", [(0, 0), (7, 0), (300, 150), (3000, 2900)])
-def test_components_by_first_matches_scipy_renumbered_by_lowest_node(n, k):
-    rng = np.random.default_rng(n + k)
-    a, b = rng.integers(0, max(n, 1), (2, k))
-    comp = components_by_first(a, b, n)
-    assert comp.shape == (n,) and comp.dtype == np.int64
-    if not n:
-        return
-    _, ref = connected_components(coo_matrix((np.ones(k), (a, b)), shape=(n, n)), directed=False)
-    # same partition: the two labelings map one to one
-    pairs = np.unique(np.stack([comp, ref], axis=1), axis=0)
-    assert len(pairs) == len(np.unique(comp)) == len(np.unique(ref))
-    # ids in the order of each component's lowest node
-    first = np.unique(comp, return_index=True)[1]
-    assert np.array_equal(comp[np.sort(first)], np.arange(len(first)))
+@pytest.mark.parametrize("n_labels, n_parts", [(1, 1), (2, 1), (6, 2), (6, 5)])
+def test_charts_match_scipy_components_numbered_by_lowest_face(n_labels, n_parts):
+    V, F = cube(3)
+    rng = np.random.default_rng(10 * n_labels + n_parts)
+    labels = rng.integers(0, n_labels, len(F))
+    parts = rng.integers(0, n_parts, len(F))
+    topology = build_topology(F, len(V))
+    chart = find_charts(topology, parts, labels)
+    assert chart.shape == (len(F),) and chart.dtype == np.int64
+    f, g = topology.edge_faces.T
+    same = (f >= 0) & (g >= 0) & (labels[f] == labels[g]) & (parts[f] == parts[g])
+    graph = coo_matrix((np.ones(same.sum()), (f[same], g[same])), shape=(len(F), len(F)))
+    _, ref = connected_components(graph, directed=False)
+    # same partition: the two numberings map one to one
+    pairs = np.unique(np.stack([chart, ref], axis=1), axis=0)
+    assert len(pairs) == len(np.unique(chart)) == len(np.unique(ref))
+    # ids in the order of each chart's lowest face
+    first = np.unique(chart, return_index=True)[1]
+    assert np.array_equal(chart[np.sort(first)], np.arange(len(first)))
 
 
 def test_cube_by_normals_is_valid_polycube():
