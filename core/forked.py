@@ -2,15 +2,15 @@
 """Work computed ahead in a forked process, on another core, while this one goes on.
 
 Some work of a stage is independent of what the stage does meanwhile and much of the time
-needed after it: the paired decimation of the target while the polycube layout is tried
-(:class:`core.quadmesh.base_mesh.DecimationCache`), the STEP text of a solid while the
-solid is built and checked (``polycube_wb.step_io.step_text_ahead``), one measure while
-another is taken (the exact export's normal jumps, a fit's distances). A thread would not
-help where the other work holds the interpreter (the layout's mixed-integer programs, the
-BREP text, numpy's many small operations),
-so :class:`Ahead` forks a child that runs the function and sends its pickled result back
-through a pipe. The child runs the same code on a copy of the same memory, so the result is
-the one the parent would compute, bit for bit. A child that fails sends nothing, and the
+needed after it: the paired decimation of the target while the labeling is made and the
+polycube layout tried (:class:`core.quadmesh.base_mesh.DecimationCache`), the STEP text of a
+solid while the solid is built and checked (``polycube_wb.step_io.step_text_ahead``), one
+measure while another is taken (the exact export's normal jumps, a fit's distances). A thread
+would not help where the other work holds the interpreter (the labeling, the layout's
+mixed-integer programs, the BREP text, numpy's many small operations), so :class:`Ahead`
+forks a child that runs the function and sends its pickled result back through a pipe. The
+child runs the same code on a copy of the same memory, so the result is the one the parent
+would compute, bit for bit. A child that fails sends nothing, and the
 caller computes the result itself (raising what the child met); a result not needed is
 never waited for: :meth:`Ahead.cancel` ends the child. Where the platform cannot fork, or
 the process may use one core only (:func:`core.threads.usable_cores`), nothing is started and

@@ -18,7 +18,7 @@ import numpy as np
 from core.errors import ParameterError, PolycubeInputError
 from core.params import ReconstructionParams
 from core.progress import NO_PROGRESS, SubProgress
-from core.stages.basemesh import run_basemesh
+from core.stages.basemesh import run_basemesh, start_basemesh_ahead
 from core.stages.fit import run_fit
 from core.stages.frames import run_frames
 from core.stages.intake import run_intake
@@ -37,12 +37,16 @@ class Stage:
     run : ``run(*inputs, params, progress) -> result`` (a ``core.types`` stage result).
     inputs : names of the ``PipelineState`` fields passed to ``run``, in order.
     report_key : key of the stage's section in the run report.
+    ahead : ``(inputs, start)`` or None: ``start(*inputs, params)`` begins work of the stage
+        that needs only the results ``inputs`` (a subset of its own) and returns an object
+        with ``close()``, passed to ``run`` as ``ahead=`` and closed once the stage is done.
     """
 
     name: str
     run: object
     inputs: tuple
     report_key: str
+    ahead: tuple = None
 
 
 STAGES = (
@@ -50,7 +54,8 @@ STAGES = (
     Stage("parts", run_parts, ("intake",), "parts"),
     Stage("frames", run_frames, ("intake", "parts"), "frames"),
     Stage("labeling", run_labeling, ("intake", "parts", "frames"), "labeling"),
-    Stage("basemesh", run_basemesh, ("intake", "parts", "frames", "labeling"), "base_mesh"),
+    Stage("basemesh", run_basemesh, ("intake", "parts", "frames", "labeling"), "base_mesh",
+          (("intake",), start_basemesh_ahead)),
     Stage("fit", run_fit, ("intake", "basemesh"), "fit"),
     Stage("patches", run_patches, ("fit",), "patches"),
 )
@@ -116,7 +121,10 @@ def run_stages(state, stages, params, progress=NO_PROGRESS, report=None):
     """Run ``stages`` (names, in order) on ``state``; returns ``(state, report, failed)``.
 
     The stages run with one BLAS / OpenMP thread (:func:`core.threads.single_threaded`), so
-    a run's results do not depend on the machine's core count.
+    a run's results do not depend on the machine's core count. The ``Stage.ahead`` work of a
+    stage of ``stages`` starts as soon as the results it needs are in ``state`` (the base
+    mesh's paired decimation once the intake is done, so it is built on another core while the
+    labeling runs) and ends once that stage is done or the run stops.
 
     Parameters
     ----------
@@ -145,33 +153,58 @@ def run_stages(state, stages, params, progress=NO_PROGRESS, report=None):
     report.setdefault("stages", {})
     blocked_by = None
     failed = None
-    for index, name in enumerate(stages):
-        if blocked_by is not None:
-            report["stages"][name] = {"status": "skipped", "seconds": 0.0,
-                                      "message": f"needs the '{blocked_by}' stage"}
-            continue
-        stage = STAGE_BY_NAME[name]
-        progress.check_cancel()
-        progress.report(name, index / len(stages))
-        share = SubProgress(progress, index / len(stages), (index + 1) / len(stages))
-        start, cpu_start = time.perf_counter(), time.process_time()
-        try:
-            result = stage.run(*(getattr(state, field) for field in stage.inputs), params, share)
-        except PolycubeInputError:
-            raise
-        except Exception as exc:  # recorded, then reported as an internal failure
-            entry = {"status": "failed", "message": f"{type(exc).__name__}: {exc}"}
-            blocked_by, failed = name, exc
-        else:
-            entry = {"status": "ok", "message": result.message}
-            setattr(state, name, result)
-            report[stage.report_key] = result.report
-        entry["seconds"] = round(time.perf_counter() - start, 4)
-        entry["cpu_seconds"] = round(time.process_time() - cpu_start, 4)  # what load does not add
-        entry["peak_memory_mb"] = round(peak_memory_mb(), 1)  # of the process, so far
-        report["stages"][name] = entry
+    ahead = {}  # stage name -> its work started ahead (Stage.ahead), until the stage is done
+    try:
+        for index, name in enumerate(stages):
+            _start_ahead(state, stages[index:], params, ahead)
+            if blocked_by is not None:
+                report["stages"][name] = {"status": "skipped", "seconds": 0.0,
+                                          "message": f"needs the '{blocked_by}' stage"}
+                continue
+            stage = STAGE_BY_NAME[name]
+            progress.check_cancel()
+            progress.report(name, index / len(stages))
+            share = SubProgress(progress, index / len(stages), (index + 1) / len(stages))
+            extra = {"ahead": ahead[name]} if name in ahead else {}
+            start, cpu_start = time.perf_counter(), time.process_time()
+            try:
+                result = stage.run(*(getattr(state, field) for field in stage.inputs), params,
+                                   share, **extra)
+            except PolycubeInputError:
+                raise
+            except Exception as exc:  # recorded, then reported as an internal failure
+                entry = {"status": "failed", "message": f"{type(exc).__name__}: {exc}"}
+                blocked_by, failed = name, exc
+            else:
+                entry = {"status": "ok", "message": result.message}
+                setattr(state, name, result)
+                report[stage.report_key] = result.report
+            finally:
+                if name in ahead:
+                    ahead.pop(name).close()
+            entry["seconds"] = round(time.perf_counter() - start, 4)
+            # what load does not add
+            entry["cpu_seconds"] = round(time.process_time() - cpu_start, 4)
+            entry["peak_memory_mb"] = round(peak_memory_mb(), 1)  # of the process, so far
+            report["stages"][name] = entry
+    finally:
+        for work in ahead.values():  # the run stopped before their stages
+            work.close()
     progress.report("done", 1.0)
     return state, report, failed
+
+
+def _start_ahead(state, stages, params, ahead):
+    """Start the ``Stage.ahead`` work of those of ``stages`` (names, the rest of the run) whose
+    results it needs are in ``state`` now, adding it to ``ahead`` (name -> work)."""
+    for name in stages:
+        stage = STAGE_BY_NAME[name]
+        if stage.ahead is None or name in ahead:
+            continue
+        inputs, start = stage.ahead
+        results = [getattr(state, field) for field in inputs]
+        if all(result is not None for result in results):
+            ahead[name] = start(*results, params)
 
 
 def reconstruct(input_path, params=None, progress=NO_PROGRESS, stop_after="solid"):

@@ -599,7 +599,8 @@ class DecimationCache:
     and the one-part labeling, :func:`core.stages.basemesh.run_basemesh`) share it.
     ``build`` has the signature of the decimation fallback inside :func:`build_base_mesh`.
     :meth:`start` builds it ahead on another core (:class:`core.forked.Ahead`) while the
-    polycube layout is tried; :meth:`close` ends that work when it was not asked for.
+    labeling is made and the polycube layout tried (``core.stages.basemesh``); :meth:`close`
+    ends that work when it was not asked for.
     """
 
     def __init__(self):

@@ -9,7 +9,35 @@ import numpy as np
 from core.types import BaseMeshResult, Segmentation
 
 
-def run_basemesh(intake, parts, frames, labeling, params, progress):
+def start_basemesh_ahead(intake, params):
+    """The base mesh's work that needs the target only, started on another core.
+
+    In ``auto`` the paired decimation of the target is built ahead
+    (``core.quadmesh.base_mesh.DecimationCache.start``): it needs no labeling, and where the
+    polycube layout fails (quickly, on a labeling that is no polycube) the stage would
+    otherwise wait for it. Started when the intake is done, it is built while the parts,
+    frames and labeling are; the same decimation as the stage builds itself, bit for bit.
+
+    Parameters
+    ----------
+    intake : core.types.IntakeResult; params : core.params.ReconstructionParams
+        (``base_mesh_method``, ``target_faces``, ``max_base_faces``).
+
+    Returns
+    -------
+    core.quadmesh.base_mesh.DecimationCache for :func:`run_basemesh`'s ``ahead`` (started only
+    in ``auto``); its ``close`` ends the work when the stage did not ask for it.
+    """
+    from core.quadmesh.base_mesh import DecimationCache
+
+    decimation = DecimationCache()
+    if params.base_mesh_method == "auto":
+        decimation.start(intake.surface.vertices, intake.surface.faces, params.target_faces,
+                         params.max_base_faces)
+    return decimation
+
+
+def run_basemesh(intake, parts, frames, labeling, params, progress, ahead=None):
     """Quantize the labeling's polycube and lay its unit quads on the target, or decimate.
 
     With ``base_mesh_method="auto"`` an invalid labeling, or a layout that fails, needs
@@ -36,6 +64,8 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
         ``base_mesh_method``, ``fit_mode``, ``subdivision_levels``; for the one-part labeling
         also those of the frames and labeling stages).
     progress : core.progress.Progress; cancellable before the layout starts.
+    ahead : the :func:`start_basemesh_ahead` of ``intake`` and ``params`` (the caller closes
+        it), or None: the stage starts the decimation itself and ends it when done.
 
     Returns
     -------
@@ -53,9 +83,9 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
     (a user error) when ``base_mesh_method="polycube"`` and the layout needs more faces than
     ``max_base_faces``.
     """
-    from core.quadmesh.base_mesh import DecimationCache
-
-    decimation = DecimationCache()
+    if ahead is not None:
+        return _basemesh(intake, parts, frames, labeling, params, progress, ahead)
+    decimation = start_basemesh_ahead(intake, params)
     try:
         return _basemesh(intake, parts, frames, labeling, params, progress, decimation)
     finally:
@@ -63,15 +93,12 @@ def run_basemesh(intake, parts, frames, labeling, params, progress):
 
 
 def _basemesh(intake, parts, frames, labeling, params, progress, decimation):
-    """The work of :func:`run_basemesh`, with the target's ``DecimationCache``: in ``auto`` the
-    decimation is built ahead on another core (``DecimationCache.start``) while the layout is
-    tried, since most designs the layout fails on need it."""
+    """The work of :func:`run_basemesh`, with the target's ``DecimationCache`` (in ``auto``
+    started ahead on another core, :func:`start_basemesh_ahead`, since most designs the layout
+    fails on need it)."""
     from core.errors import LabelingError
     from core.progress import SubProgress
 
-    if params.base_mesh_method == "auto":
-        decimation.start(intake.surface.vertices, intake.surface.faces, params.target_faces,
-                         params.max_base_faces)
     n_parts = int(parts.face_part.max()) + 1 if len(parts.face_part) else 0
     cage, info = _layout(intake, parts, frames, labeling, params, decimation,
                          SubProgress(progress, 0.0, 0.5))

@@ -131,3 +131,56 @@ def test_fit_mode_and_thickness_reach_the_fit():
     _, report, failed = run_stages(_box_state(), ["fit"],
                                    ReconstructionParams(fit_iterations=2, fit_mode="best-fit"))
     assert failed is None and report["fit"]["mode"] == "best-fit"
+
+
+class _Work:
+    """Work started ahead: logs its start and its end."""
+
+    def __init__(self, log, intake):
+        self.log = log
+        log.append(("started", intake is not None))
+
+    def close(self):
+        self.log.append("closed")
+
+
+def _with_work_ahead(monkeypatch, log, run=None):
+    """The base-mesh stage with logged work ahead (and ``run`` in place of its own)."""
+    import dataclasses
+
+    import core.pipeline as pipeline
+
+    stage = pipeline.STAGE_BY_NAME["basemesh"]
+    changed = dataclasses.replace(stage, run=run or stage.run,
+                                  ahead=(("intake",), lambda intake, params: _Work(log, intake)))
+    monkeypatch.setitem(pipeline.STAGE_BY_NAME, "basemesh", changed)
+
+
+def test_work_ahead_starts_after_the_intake_and_ends_when_the_run_stops(monkeypatch):
+    box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    source = MeshSource("box", (np.asarray(box.vertices), np.asarray(box.faces)))
+    log = []
+    _with_work_ahead(monkeypatch, log)
+    progress = Recorder(stage="labeling", cancel_after=2)
+    _, report, failed = run_stages(PipelineState(source=source),
+                                   ["intake", "parts", "frames", "labeling", "basemesh"],
+                                   ReconstructionParams(), progress)
+    assert isinstance(failed, Cancelled) and report["stages"]["basemesh"]["status"] == "skipped"
+    assert log == [("started", True), "closed"]
+
+
+def test_work_ahead_reaches_its_stage_and_ends_with_it(monkeypatch):
+    box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    source = MeshSource("box", (np.asarray(box.vertices), np.asarray(box.faces)))
+    log = []
+
+    def run(intake, parts, frames, labeling, params, progress, ahead=None):
+        log.append(("run", isinstance(ahead, _Work) and "closed" not in log))
+        raise ValueError("stops the run here")
+
+    _with_work_ahead(monkeypatch, log, run)
+    _, report, failed = run_stages(PipelineState(source=source),
+                                   ["intake", "parts", "frames", "labeling", "basemesh"],
+                                   ReconstructionParams())
+    assert isinstance(failed, ValueError) and report["stages"]["basemesh"]["status"] == "failed"
+    assert log == [("started", True), ("run", True), "closed"]
