@@ -12,9 +12,10 @@ forks a child that runs the function and sends its pickled result back through a
 child runs the same code on a copy of the same memory, so the result is the one the parent
 would compute, bit for bit. A child that fails sends nothing, and the
 caller computes the result itself (raising what the child met); a result not needed is
-never waited for: :meth:`Ahead.cancel` ends the child. Where the platform cannot fork, or
-the process may use one core only (:func:`core.threads.usable_cores`), nothing is started and
-every caller computes its result itself.
+never waited for: :meth:`Ahead.cancel` ends the child. Where the platform cannot fork, the
+fork fails (no process or memory left for a child), or the process may use one core only
+(:func:`core.threads.usable_cores`), nothing is started and every caller computes its result
+itself.
 """
 import os
 import pickle
@@ -36,8 +37,16 @@ class Ahead:
         self._pid = self._read = None
         if not hasattr(os, "fork") or usable_cores() < 2:
             return
-        read, write = os.pipe()
-        pid = os.fork()
+        try:
+            read, write = os.pipe()
+        except OSError:  # no descriptors left: the caller computes the result itself
+            return
+        try:
+            pid = os.fork()
+        except OSError:  # no process or memory for a child: likewise
+            os.close(read)
+            os.close(write)
+            return
         if pid == 0:  # pragma: no cover (the child; its result is checked in the parent)
             os.close(read)
             try:

@@ -55,6 +55,23 @@ def test_nothing_is_forked_where_the_process_may_use_one_core(monkeypatch):
         assert usable_cores() == len(os.sched_getaffinity(0))
 
 
+def test_a_fork_that_fails_starts_nothing_and_leaks_no_descriptor(monkeypatch):
+    """A fork refused by the system (no process or memory left) leaves the caller to compute
+    the result itself, with both ends of the pipe closed."""
+    monkeypatch.setenv(CORES_VARIABLE, "2")
+    if usable_cores() < 2 or not hasattr(os, "fork"):
+        pytest.skip("needs fork and two usable cores")
+
+    def refused():
+        raise OSError("Resource temporarily unavailable")
+
+    monkeypatch.setattr(os, "fork", refused)
+    open_before = len(os.listdir("/proc/self/fd"))
+    ahead = Ahead(_arrays, 10, 1.0)
+    assert ahead.result() is None
+    assert len(os.listdir("/proc/self/fd")) == open_before
+
+
 @pytest.mark.slow
 def test_the_decimation_built_ahead_is_the_one_built_here():
     """The paired decimation of a small design taken from the child equals the one the
