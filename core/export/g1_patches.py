@@ -22,9 +22,11 @@ Method
   in each direction (``h`` = :data:`EV_SPAN`; 8 x 8 poles, C1 inside), of which it keeps
   only those at the ends of a direction with a *special* corner (an EV, a dart, a corner of
   three or more creases, or a crease vertex with a sector whose connection is not C1,
-  :func:`_special_vertices`): elsewhere it is one cubic across the knot (linear conditions
-  below), and the knot is removed from the result (6 x 6 poles at one such corner, 4 x 4
-  without, as next to a valence-4 crease vertex with two faces on each side). Its poles are the solution of one
+  :func:`_special_vertices`; a corner in a two-face sector of a crease vertex counts only
+  when the direction's other end has a special corner too, :func:`_kept_knots`): elsewhere
+  it is one cubic across the knot (linear conditions below), and the knot is removed from
+  the result (6 x 6 poles at one such corner, 4 x 4 without, as next to a valence-4 crease
+  vertex with two faces on each side). Its poles are the solution of one
   sparse least-squares problem over all free patches: they fit exact limit points (the
   squared distance integrated by 4 x 4 Gauss points per pair of knot spans) subject to
 
@@ -508,14 +510,45 @@ def _special_vertices(quads, topo, crease, cosine):
     return special
 
 
-def _kept_knots(quads, free, special):
+def _two_face_sectors(quads, topo, crease, cosine):
+    """(m, 4) bool: patch corners in a sector of two faces between the two crease edges of a
+    crease vertex (one spoke a crease edge, the other one with connection ``cosine`` (4 m,)
+    0, :func:`_corner_cosines`). Such a sector's refinement involves only its own vertices
+    and the crease's, by the rules of a regular grid reflected across the crease, whatever
+    the vertex's other sector holds: the limit surface is a bicubic B-spline there and the
+    patches join C1 along the spoke between the sector's two faces."""
+    fv = quads.face_vertices
+    n_crease = vertex_crease_counts(topo, crease, len(quads.vertices))
+    corner = np.arange(len(fv))
+    other = topo.twin[topo.prev_corner[corner]]  # the patch's other spoke out of its corner
+    spoke_crease = crease[topo.corner_edge]
+    inner_cosine = np.where(spoke_crease, cosine[other], cosine[corner])
+    return ((n_crease[fv] == 2) & (spoke_crease != spoke_crease[other])
+            & (inner_cosine == 0.0)).reshape(-1, 4)
+
+
+def _end_corners(corners):
+    """(m, 2, 2) bool: whether any of ``corners`` (m, 4) bool lies at end ``e`` of direction
+    ``d`` of each patch (:data:`END_CORNERS`)."""
+    ends = np.array([[corners[:, pair].any(axis=1) for pair in pairs] for pairs in END_CORNERS])
+    return ends.transpose(2, 0, 1)
+
+
+def _kept_knots(quads, free, special, two_face):
     """(m, 2, 2) bool: free patch ``f`` keeps its double knot in direction ``d`` (0: ``u``,
     1: ``v``) at end ``e`` (0: ``h``, 1: ``1 - h``) iff a corner at that end of that direction
     is ``special`` (n_vertices,) bool: an extraordinary vertex or one with crease edges;
-    elsewhere the G1 connection is C1 and the patch need not depart from one cubic there."""
-    ev = special[quads.face_vertices].reshape(-1, 4)
-    keep = np.array([[ev[:, ends].any(axis=1) for ends in pair] for pair in END_CORNERS])
-    return keep.transpose(2, 0, 1) & free[:, None, None]
+    elsewhere the G1 connection is C1 and the patch need not depart from one cubic there.
+    A direction whose only special corners lie in two-face sectors of crease vertices
+    (``two_face`` (m, 4) bool, :func:`_two_face_sectors`) at one end and none at the other keeps
+    no knot: the connection is C1 and the limit surface bicubic at both ends, as across a
+    regular quad. With a special corner at the other end, the knot stays: it lets the patch
+    bend between its two ends where the limit surface is no single cubic."""
+    at_vertex = special[quads.face_vertices].reshape(-1, 4)
+    at_end = _end_corners(at_vertex)
+    departing = _end_corners(at_vertex & ~two_face)
+    keep = np.where(at_end[:, :, ::-1], at_end, departing)
+    return keep & free[:, None, None]
 
 
 def _knot_free_system(layout, free, keep):
@@ -786,7 +819,7 @@ def g1_quad_patches(base, measure=True):
         evaluator = ctx.evaluator  # the limit of ``quads`` itself: it is all quads
         cosine = _corner_cosines(quads, topo, crease, evaluator)
         special = _special_vertices(quads, topo, crease, cosine)
-        keep = _kept_knots(quads, free, special)
+        keep = _kept_knots(quads, free, special, _two_face_sectors(quads, topo, crease, cosine))
         growth = corner_growth(topo, spoke_growth(quads, topo, crease, special))
         H, rhs, centre = _fit_system(layout, evaluator, free_faces, growth[free_faces])
         A_g1, y_g1 = _g1_system(layout, quads, topo, free, cosine, crease)

@@ -188,6 +188,30 @@ def test_regular_crease_needs_no_knots():
     assert ps.info["normal_jump_max_deg"] <= 0.01
 
 
+def test_two_face_crease_sector_needs_no_knot_towards_a_regular_end():
+    """The once-refined cube with its top rim creased: each rim vertex (valence 3) has a sector
+    of one face on top and one of two faces on the sides, whose limit surface is the reflected
+    bicubic grid. The eight side quads there, whose other corners are regular, are single
+    bicubics (16 poles), the surface stays G1 off the creases and close to the limit; the
+    six-face cube, whose side quads reach extraordinary vertices at their other end, keeps
+    its knots and stays as close to the limit as without creases."""
+    cube = sample_cages.cube()
+    fv = cube.face_vertices.reshape(-1, 4)
+    top = fv[np.argmax(cube.vertices[fv, 2].min(axis=1))]
+    rim = np.stack([top, np.roll(top, -1)], axis=1).astype(np.int64)
+    creased = dataclasses.replace(cube, creases=rim)
+    refined = build_hierarchy(creased, 1).meshes[1]
+    ps = g1_surface_patches(refined)
+    quads = refined.face_vertices.reshape(-1, 4)
+    at_rim = np.isin(quads, top).any(axis=1)
+    sizes = np.array([p.poles.shape[0] * p.poles.shape[1] for p in ps.patches])
+    assert (sizes[at_rim] == 16).sum() == 8
+    assert ps.info["normal_jump_max_deg"] <= 0.01
+    assert ps.info["max_error_rel"] <= 1e-3
+    coarse = g1_surface_patches(creased)
+    assert coarse.info["max_error_rel"] <= 1.2 * g1_surface_patches(cube).info["max_error_rel"]
+
+
 def test_pipeline_patches_stage_builds_the_g1_form_on_request():
     """``reconstruct --export g1``: the patches stage exports the fitted cage in the G1 form;
     an unknown form is refused by the parameters."""
