@@ -613,8 +613,9 @@ def _untangled(base, setup, vertices, rounds, seed, refit_local=True):
     them). With ``refit_local=False`` (the inside fit) there are no refits when at most
     ``FIT.spread_crossings`` of the base vertices influence the first fit's crossings. If the fit
     still crosses and the cage's limit surface does not, the fit is held back towards the
-    cage there (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses
-    itself is no reference to hold back to (nearly every base vertex would go back).
+    cage there (:func:`core.fitting.crossings.hold_back_crossings`) and refitted around the
+    vertices held back (:func:`_fitted_around`); a cage that crosses itself is no reference
+    to hold back to (nearly every base vertex would go back).
 
     Parameters
     ----------
@@ -654,9 +655,37 @@ def _untangled(base, setup, vertices, rounds, seed, refit_local=True):
         if cage == 0:
             vertices, crossings, held = _held_back(base.vertices, 0, vertices, limit_map, T,
                                                    untangled.pairs)
+            if held:
+                vertices, crossings = _fitted_around(base, setup, vertices,
+                                                     (vertices != untangled.vertices).any(axis=1),
+                                                     seed)
     return Untangling(vertices, crossings, untangled.stiffness, untangled.refits,
                       untangled.counts, cold_counts, int((untangled.stiffness > 1).sum()),
                       held, cage)
+
+
+def _fitted_around(base, setup, vertices, held, seed):
+    """The least-squares fit ``vertices``, held back at the base vertices ``held`` ((n,)
+    bool), refitted around them: ``FIT.fine_rounds`` rounds with those vertices fixed, held
+    back towards ``vertices`` where the refit crosses itself.
+
+    A held-back vertex sits between the cage and the fit, and the surface its neighbours
+    fitted around its full move kinks there, partly outside the target; the pull inside
+    then drags the whole member in with it, and the inside fit does not grow it back. Fitted
+    again around the held-back vertices, the neighbours follow the target as far as those
+    allow.
+
+    Returns
+    -------
+    vertices : (n, 3) float64; crossings : int, crossing pairs of their fine mesh (0: the
+    held-back fit is clean, and so is what is kept of the refit).
+    """
+    refitted = best_fit(base, setup.limit_map, setup.triangles, setup.target,
+                        rounds=FIT.fine_rounds, seed=seed, start=vertices, refit=True,
+                        fixed=held).vertices
+    vertices, crossings, _ = _held_back(vertices, 0, refitted, setup.limit_map,
+                                        setup.triangles)
+    return vertices, crossings
 
 
 def _held_back(reference, crossings, moved, mapping, T, moved_pairs=None):
