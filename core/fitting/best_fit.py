@@ -52,10 +52,6 @@ class BestFitSettings:
     (:func:`compatibility`)."""
     compatible_ramp: float = 0.15
     """Half width of the dot products over which a pair's weight ramps from 0 to 1."""
-    fixed_damping: float = 1e8
-    """Damping of the base vertices a fit keeps where they are (:func:`best_fit`'s
-    ``fixed``), relative to the data term: so stiff that they move by a rounding error,
-    which the fit then undoes."""
 
 
 BEST_FIT = BestFitSettings()
@@ -81,8 +77,7 @@ class BestFitResult:
 
 
 def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, damping=1e-3,
-             tol=5e-3, samples=None, seed=0, start=None, stiffness=None, refit=False,
-             fixed=None):
+             tol=5e-3, samples=None, seed=0, start=None, stiffness=None, refit=False):
     """Fit the cage's limit surface to the target in the two-sided least-squares sense.
 
     Parameters
@@ -105,21 +100,16 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
     refit : bool, ``start`` is a fit with other smoothness weights: it is not a candidate
         for the result (its RMS distance is lower than any fit with stiffer weights can
         reach), the first solved round is.
-    fixed : (n,) bool or None, base vertices kept at their ``start`` positions; the others
-        are fitted around them.
 
     Returns
     -------
     BestFitResult
     """
-    if fixed is not None:
-        damping = np.where(fixed, BEST_FIT.fixed_damping, damping)
     system = NormalEquations(base, mapping, smoothness, damping, stiffness)
     n_fine = system.n_fine
     count = max(n_fine, 2000) if samples is None else int(samples)
     points, sample_normal = target.samples(count, seed)
     V = system.V_init.copy() if start is None else np.array(start, dtype=np.float64)
-    kept = None if fixed is None else V[fixed]
     own, ones = np.arange(n_fine)[:, None], np.ones((n_fine, 1))
     rms = []
     best = (np.inf, V)
@@ -147,8 +137,6 @@ def best_fit(base, mapping, triangles, target, rounds=10, smoothness=1e-2, dampi
                               plane_offset * keep_f, n_fine),
                              (sample_normal * keep_b[:, None], triangles[back.face], back.bary,
                               _dot(sample_normal, points) * keep_b, count)])
-        if fixed is not None:
-            V[fixed] = kept
     return BestFitResult(best[1], len(rms) - 1, rms, stopped)
 
 
@@ -237,9 +225,7 @@ class NormalEquations:
     ----------
     base : PolyMesh, the cage (``V_init`` = its vertices).
     mapping : (n_fine, n_base) sparse
-    smoothness : float, ``lam``.
-    damping : float or (n_base,) float64, ``mu``, or one per base vertex (the term is then
-        ``s sum_v mu_v |V_v - V_prev,v|^2``).
+    smoothness, damping : float, ``lam`` and ``mu``.
     stiffness : (n_base,) float64 or None, per-vertex weights ``w`` of the smoothness
         rows: the term is ``lam s |W^(1/2) D (V - V_init)|^2`` (None: all ones).
     """
@@ -253,14 +239,14 @@ class NormalEquations:
             laplacian = sp.diags(np.sqrt(np.asarray(stiffness, dtype=np.float64))) @ laplacian
         self.smooth = (laplacian.T @ laplacian).tocsr()
         self.smooth_init = (self.smooth @ self.V_init).T.reshape(-1)
-        self.smoothness = float(smoothness)
-        self.damping = np.broadcast_to(np.asarray(damping, dtype=np.float64), (self.n_base,))
+        self.smoothness, self.damping = float(smoothness), float(damping)
         self._mapping_t = self.mapping.T.tocsr()
         # complex copies for the paired products of _data_blocks (their imaginary parts are 0)
         self._mapping_c, self._mapping_t_c = (_complex(self.mapping), _complex(self._mapping_t))
 
     def solve(self, V, terms):
         """(n_base, 3) float64 minimiser for the data ``terms`` and the previous ``V``."""
+        n = self.n_base
         fine_rhs = sum(scatter_add(corners.reshape(-1),
                                    ((normal * (b / count)[:, None])[:, None, :]
                                     * weights[:, :, None]).reshape(-1, 3), self.n_fine)
@@ -269,9 +255,9 @@ class NormalEquations:
         piece = self._data_blocks(terms)
         scale = float(np.mean([piece[a, a].diagonal().mean() for a in range(3)]))
         rhs = (rhs + (self.smoothness * scale) * self.smooth_init
-               + np.tile(self.damping * scale, 3) * V.T.reshape(-1))
+               + (self.damping * scale) * V.T.reshape(-1))
         regular = ((self.smoothness * scale) * self.smooth
-                   + sp.diags(self.damping * scale, format="csr"))
+                   + sp.identity(n, format="csr") * (self.damping * scale))
         # the upper triangle of blocks (``piece`` holds those with a <= c; the solver reads
         # no entry below the diagonal)
         blocks = [[None] * 3 for _ in range(3)]

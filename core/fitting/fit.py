@@ -92,12 +92,6 @@ class FitSettings:
     """Stiffer pulls inside of a fit from ``WARM_START`` (:func:`_pulled_inside`)."""
     distance_samples: int = 20000
     """Target samples of the target-to-surface figures (:func:`_distances`)."""
-    local_hold_back: float = 0.1
-    """Largest fraction of the base vertices the least-squares fit may have held back for it
-    to be refitted around them (:func:`_fitted_around`): a few members the cage cannot
-    follow. Where much of the cage was held back (many thin members under a coarse cage),
-    the refit moves most of the rest too, and on the designs tried the inside fit from it
-    left more of the volume outside."""
     near_touch: float = 0.01
     """Thinnest wall of the inside start, times the mean base edge, below which the default
     ``t_min`` is 0 (the thickness constraint left off, :func:`_default_t_min`)."""
@@ -619,10 +613,8 @@ def _untangled(base, setup, vertices, rounds, seed, refit_local=True):
     them). With ``refit_local=False`` (the inside fit) there are no refits when at most
     ``FIT.spread_crossings`` of the base vertices influence the first fit's crossings. If the fit
     still crosses and the cage's limit surface does not, the fit is held back towards the
-    cage there (:func:`core.fitting.crossings.hold_back_crossings`) and, where that held back
-    few base vertices (``FIT.local_hold_back``), refitted around them
-    (:func:`_fitted_around`); a cage that crosses itself is no reference to hold back to
-    (nearly every base vertex would go back).
+    cage there (:func:`core.fitting.crossings.hold_back_crossings`); a cage that crosses
+    itself is no reference to hold back to (nearly every base vertex would go back).
 
     Parameters
     ----------
@@ -662,37 +654,9 @@ def _untangled(base, setup, vertices, rounds, seed, refit_local=True):
         if cage == 0:
             vertices, crossings, held = _held_back(base.vertices, 0, vertices, limit_map, T,
                                                    untangled.pairs)
-            if 0 < held <= FIT.local_hold_back * len(vertices):
-                vertices, crossings = _fitted_around(base, setup, vertices,
-                                                     (vertices != untangled.vertices).any(axis=1),
-                                                     seed)
     return Untangling(vertices, crossings, untangled.stiffness, untangled.refits,
                       untangled.counts, cold_counts, int((untangled.stiffness > 1).sum()),
                       held, cage)
-
-
-def _fitted_around(base, setup, vertices, held, seed):
-    """The least-squares fit ``vertices``, held back at the base vertices ``held`` ((n,)
-    bool), refitted around them: ``FIT.fine_rounds`` rounds with those vertices fixed, held
-    back towards ``vertices`` where the refit crosses itself.
-
-    A held-back vertex sits between the cage and the fit, and the surface its neighbours
-    fitted around its full move kinks there, partly outside the target; the pull inside
-    then drags the whole member in with it, and the inside fit does not grow it back. Fitted
-    again around the held-back vertices, the neighbours follow the target as far as those
-    allow.
-
-    Returns
-    -------
-    vertices : (n, 3) float64; crossings : int, crossing pairs of their fine mesh (0: the
-    held-back fit is clean, and so is what is kept of the refit).
-    """
-    refitted = best_fit(base, setup.limit_map, setup.triangles, setup.target,
-                        rounds=FIT.fine_rounds, seed=seed, start=vertices, refit=True,
-                        fixed=held).vertices
-    vertices, crossings, _ = _held_back(vertices, 0, refitted, setup.limit_map,
-                                        setup.triangles)
-    return vertices, crossings
 
 
 def _held_back(reference, crossings, moved, mapping, T, moved_pairs=None):

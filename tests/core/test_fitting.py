@@ -10,8 +10,6 @@ from core.errors import InvalidMeshError, ParameterError
 from core.fitting import TargetSurface, fit_base_mesh
 from core.fitting.records import WarmStart
 from core.fitting.best_fit import NormalEquations, _FineEntries, _umbrella, best_fit
-from core.fitting.crossings import count_crossings
-from core.fitting.fit import _fitted_around, _prepare
 from core.fitting.responses import (InsideBounds, packaging, thickness, thickness_constraint,
                                     volume)
 from core.geometry import triangulate
@@ -361,12 +359,10 @@ def test_hold_back_crossings_undoes_only_the_crossing_move():
     assert kept.sum() == len(V) - count         # every other vertex keeps its whole move
 
 
-@pytest.mark.parametrize("per_vertex", [False, True])
-def test_normal_equations_solve_the_dense_least_squares_problem(per_vertex):
+def test_normal_equations_solve_the_dense_least_squares_problem():
     # two data terms (one row per fine point; one through three corners with barycentric
     # weights) solved by the fine-level assembly against the same problem written out as
-    # a dense least-squares system with an explicit Jacobian; the damping one number or
-    # one per base vertex
+    # a dense least-squares system with an explicit Jacobian
     base = grid_sphere(2)
     h, fine, T = fine_mesh(base, 2)
     M = (limit_matrices(fine)[0] @ h.composite(1)).tocsr()
@@ -382,8 +378,7 @@ def test_normal_equations_solve_the_dense_least_squares_problem(per_vertex):
     b_b = rng.normal(size=k)
     stiffness = np.where(np.arange(n) % 3 == 0, 10.0, 1.0)
     V_prev = base.vertices + 0.01 * rng.normal(size=base.vertices.shape)
-    damping = np.where(np.arange(n) % 4 == 1, 0.5, 1e-3) if per_vertex else 1e-3
-    system = NormalEquations(base, M, 1e-2, damping, stiffness)
+    system = NormalEquations(base, M, 1e-2, 1e-3, stiffness)
     solved = system.solve(V_prev, [(normal_f, np.arange(n_f)[:, None], np.ones((n_f, 1)),
                                     b_f, n_f), (normal_b, corners, weights, b_b, k)])
     Md = M.toarray()
@@ -395,11 +390,10 @@ def test_normal_equations_solve_the_dense_least_squares_problem(per_vertex):
     scale = np.diag(data).mean()
     D = _umbrella(base, n).toarray() * np.sqrt(stiffness)[:, None]
     smooth = np.kron(np.eye(3), D.T @ D)
-    mu = np.tile(np.broadcast_to(damping, (n,)), 3)
-    lhs = data + 1e-2 * scale * smooth + scale * np.diag(mu)
+    lhs = data + 1e-2 * scale * smooth + 1e-3 * scale * np.eye(3 * n)
     rhs = (J_f.T @ (b_f / np.sqrt(n_f)) + J_b.T @ (b_b / np.sqrt(k))
            + 1e-2 * scale * smooth @ base.vertices.T.reshape(-1)
-           + scale * mu * V_prev.T.reshape(-1))
+           + 1e-3 * scale * V_prev.T.reshape(-1))
     expected = np.linalg.solve(lhs, rhs).reshape(3, -1).T
     np.testing.assert_allclose(solved, expected, atol=1e-9 * np.abs(expected).max())
 
@@ -475,42 +469,6 @@ def test_a_refit_does_not_return_its_start():
     assert refit.rounds >= 2 and not np.array_equal(refit.vertices, first.vertices)
     kept = best_fit(base, M, T, surface, rounds=2, start=first.vertices, stiffness=stiff)
     np.testing.assert_array_equal(kept.vertices, first.vertices)   # without the flag
-
-
-def test_a_fit_with_fixed_vertices_keeps_them_and_fits_the_others_around_them():
-    # half the cage's vertices kept where the cage has them (inside the target sphere): they
-    # stay bit for bit, and the others still bring the surface closer to the target
-    base = grid_sphere(3)
-    h, fine, T = fine_mesh(base, 2)
-    M = (limit_matrices(fine)[0] @ h.composite(1)).tocsr()
-    target = sphere_target(1.3)
-    surface = TargetSurface(target.vertices, target.faces)
-    fixed = base.vertices[:, 0] > 0
-    fitted = best_fit(base, M, T, surface, rounds=4, fixed=fixed)
-    np.testing.assert_array_equal(fitted.vertices[fixed], base.vertices[fixed])
-    assert np.linalg.norm(fitted.vertices[~fixed] - base.vertices[~fixed], axis=1).min() > 0
-    assert fitted.rms[-1] < 0.8 * fitted.rms[0]
-    free = best_fit(base, M, T, surface, rounds=4)
-    assert free.rms[-1] < fitted.rms[-1]              # fixing vertices costs distance
-
-
-def test_a_held_back_fit_refitted_around_its_held_vertices_comes_closer_and_keeps_them():
-    # a least-squares fit with some vertices put back where the cage has them (as a hold-back
-    # leaves it): refitted around them, those stay, nothing crosses and the rest comes closer
-    base = grid_sphere(3)
-    target = sphere_target(1.3)
-    setup = _prepare(base, target, 2, "limit")
-    fitted = best_fit(base, setup.limit_map, setup.triangles, setup.target, rounds=6).vertices
-    held = base.vertices[:, 2] > 0.5
-    start = np.where(held[:, None], base.vertices, fitted)
-    vertices, crossings = _fitted_around(base, setup, start, held, seed=0)
-    np.testing.assert_array_equal(vertices[held], base.vertices[held])
-    assert crossings == 0 == count_crossings(setup.limit_map, setup.triangles, vertices)
-
-    def rms(V):
-        return np.sqrt(np.mean(setup.target.closest(setup.limit_map @ V).distance ** 2))
-
-    assert rms(vertices) < 0.93 * rms(start)
 
 
 def test_nudge_inside_moves_only_the_vertices_under_outside_points_and_stays_clean():
